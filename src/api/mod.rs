@@ -1,0 +1,1 @@
+//! HTTP API: routes, handlers, problem+json errors and the OpenAPI document.

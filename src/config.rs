@@ -1,0 +1,1 @@
+//! Layered configuration: `config.toml`, then `CHOREO_*` environment, then CLI flags.

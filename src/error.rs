@@ -1,0 +1,1 @@
+//! The crate error, wrapping each module's error.

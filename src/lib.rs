@@ -1,0 +1,30 @@
+//! choreo: a service that turns a song into a dance.
+//!
+//! # The life of a job
+//! Data flows one way, and each step lives in its own module:
+//!
+//! 1. **upload** (`api`): `POST /v1/songs` stores the bytes under the data dir, named by their
+//!    id, after `audio` has proved them decodable. An `analyze` job is queued for the song.
+//! 2. **queue** (`queue`): jobs are rows in SQLite. A worker claims one in a single atomic
+//!    `UPDATE … RETURNING`, holds a lease and heartbeats; expired leases are requeued.
+//! 3. **decode → features** (`audio`): symphonia decodes, rubato resamples, and the feature
+//!    sets each paper used are computed to match librosa.
+//! 4. **model** (`models`): one file per paper; libtorch runs on the worker's blocking thread.
+//! 5. **motion** (`motion`): the model's poses become a rigid skeleton with rotations.
+//! 6. **export + report** (`motion` exporters, `metrics`, `report`): BVH, JSON, glb, and the
+//!    report of how well it dances.
+//!
+//! # Who owns libtorch
+//! Only worker threads (tokio blocking threads) and the CLI's `train`/`generate`/`eval` call into
+//! libtorch. Each worker runs with one intra-op thread, so N workers never oversubscribe the cores.
+pub mod api;
+pub mod audio;
+pub mod config;
+pub mod error;
+pub mod metrics;
+pub mod models;
+pub mod motion;
+pub mod queue;
+pub mod report;
+pub mod telemetry;
+pub mod worker;

@@ -1,0 +1,1 @@
+//! Dance quality metrics, each with its formula and source.

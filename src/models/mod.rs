@@ -1,0 +1,96 @@
+//! The dance models, one file per paper, behind one trait the worker calls.
+//!
+//! CONTRACT (lead owns this folder): the worker builds a [`GenerateRequest`], calls
+//! [`DanceModel::generate`] on a blocking thread, and gets a [`Motion`] back. Models report
+//! progress through [`Progress`], which also carries cancellation.
+use crate::audio::DecodedAudio;
+use crate::motion::{KeyPose, Motion};
+use serde::{Deserialize, Serialize};
+
+/// A model's stable id, as used by the API (`"dance-revolution"`, `"keypose-transformer"`).
+#[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(transparent)]
+pub struct ModelId(pub String);
+
+/// What a model can take besides the song.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct Capabilities {
+    pub key_poses: bool,
+    pub seed_motion: bool,
+    pub style: bool,
+}
+
+/// One model as `GET /v1/models` lists it.
+#[derive(Clone, Debug, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct ModelInfo {
+    pub id: ModelId,
+    pub paper: String,
+    pub capabilities: Capabilities,
+}
+
+/// Everything a model needs for one dance.
+pub struct GenerateRequest<'a> {
+    pub audio: &'a DecodedAudio,
+    /// Seeds every random draw, so the same seed gives the same dance.
+    pub seed: u64,
+    pub key_poses: &'a [KeyPose],
+    pub seed_motion: Option<&'a Motion>,
+}
+
+/// Returned by [`Progress::report`] when the job was cancelled.
+#[derive(Debug, Clone, Copy, thiserror::Error)]
+#[error("cancelled")]
+pub struct Cancelled;
+
+/// Receives progress; returning `Err(Cancelled)` stops the model at this checkpoint.
+pub trait Progress {
+    /// `stage` is a short name ("features", "encode", "decode"); `fraction` is 0..=1 within it.
+    fn report(&mut self, stage: &str, fraction: f32) -> Result<(), Cancelled>;
+}
+
+/// Errors a model can raise.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    #[error("cancelled")]
+    Cancelled(#[from] Cancelled),
+    #[error("model {0} does not take {1}")]
+    Unsupported(String, &'static str),
+    #[error("weights for model {0} not found at {1}")]
+    MissingWeights(String, String),
+    #[error("audio: {0}")]
+    Audio(#[from] crate::audio::AudioError),
+    #[error("libtorch: {0}")]
+    Torch(#[from] tch::TchError),
+    #[error("invalid input: {0}")]
+    Invalid(String),
+}
+
+/// A trained model, ready to dance.
+pub trait DanceModel: Send + Sync {
+    fn info(&self) -> ModelInfo;
+    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Motion, ModelError>;
+}
+
+/// The models found under the models dir (`models/<id>/`), loaded once at start-up.
+#[derive(Default, Clone)]
+pub struct Registry {
+    models: Vec<std::sync::Arc<dyn DanceModel>>,
+}
+
+impl Registry {
+    /// Loads every model whose weights are present under `dir`; a model without weights is left out.
+    pub fn load(dir: &std::path::Path) -> Result<Self, ModelError> {
+        let _ = dir; // each model file adds its loader here as it lands
+        Ok(Self::default())
+    }
+
+    /// The models available, in a stable order.
+    pub fn list(&self) -> Vec<ModelInfo> {
+        self.models.iter().map(|m| m.info()).collect()
+    }
+
+    /// The model with this id, if it is available.
+    pub fn get(&self, id: &ModelId) -> Option<std::sync::Arc<dyn DanceModel>> {
+        self.models.iter().find(|m| &m.info().id == id).cloned()
+    }
+}

@@ -1,0 +1,1 @@
+//! The per-job report: every metric that applies to a generated dance.

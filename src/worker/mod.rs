@@ -1,0 +1,1 @@
+//! Workers: claim jobs, run them on blocking threads, heartbeat, report progress.
