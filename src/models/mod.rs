@@ -7,6 +7,9 @@ use crate::audio::DecodedAudio;
 use crate::motion::{KeyPose, Motion};
 use serde::{Deserialize, Serialize};
 
+pub mod dance_revolution;
+pub mod norm;
+
 /// A model's stable id, as used by the API (`"dance-revolution"`, `"keypose-transformer"`).
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(transparent)]

@@ -1,0 +1,456 @@
+//! DanceRevolution: Huang, Hu, Wang, Sun, Chen, Tan, "Dance Revolution: Long-Term Dance
+//! Generation with Music via Curriculum Learning", ICLR 2021.
+//!
+//! - §3.1 **music encoder**: a linear embedding of the acoustic features to `d_z`, sinusoidal
+//!   positions, then `N` transformer encoder layers whose self-attention is *local*: position i
+//!   attends only to the `k` positions around it. [`LocalSelfAttention`] gathers each window with
+//!   `unfold`, so memory is O(n·k), never an n×n mask.
+//! - §3.2 **dance decoder**: a multi-layer LSTM fed the previous pose; the pose is read out as
+//!   `ŷ_i = [h_i; z_i]·W + b`. The initial state `h_0` is drawn from N(0, I) per dance, from the
+//!   request's seed, which makes the output varied across seeds and fixed for one seed.
+//! - §3.3 **dynamic auto-condition** (curriculum): during training the decoder input alternates
+//!   `p` ground-truth frames with `q` of its own predictions, `q = ⌊λ·epoch⌋` (the linear schedule
+//!   the paper found best). See [`DanceRevolution::forward_curriculum`].
+//!
+//! Sized for CPU: the paper's d_z = 1024 and a 3×1024 LSTM become the [`Config`] defaults below.
+use rand::SeedableRng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+use tch::nn::{self, RNN};
+use tch::{Device, Kind, Tensor};
+
+use super::norm::Normalizer;
+
+/// Hyper-parameters, with the paper's symbols.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Config {
+    /// Input music feature width (438 for the DanceRevolution feature set).
+    pub music_dim: i64,
+    /// Pose vector width (the motion module's model representation).
+    pub pose_dim: i64,
+    /// `d_z`: music encoder width (paper: 1024).
+    pub d_z: i64,
+    /// `N`: encoder layers (paper: 2).
+    pub n_layers: i64,
+    /// Attention heads (paper: 8).
+    pub n_heads: i64,
+    /// `k`: local attention window, in frames, centred on each position (paper: 100).
+    pub k: i64,
+    /// Position-wise FFN width.
+    pub d_ff: i64,
+    /// LSTM hidden width (paper: 1024).
+    pub hidden: i64,
+    /// LSTM layers (paper: 3).
+    pub lstm_layers: i64,
+    /// Dropout in the encoder during training.
+    pub dropout: f64,
+}
+
+impl Config {
+    /// The configuration the committed weights were trained with: small enough for 2 CPU cores.
+    pub fn cpu() -> Self {
+        Self {
+            music_dim: 438,
+            pose_dim: 0,
+            d_z: 128,
+            n_layers: 2,
+            n_heads: 8,
+            k: 100,
+            d_ff: 256,
+            hidden: 256,
+            lstm_layers: 3,
+            dropout: 0.1,
+        }
+    }
+
+    /// A tiny configuration for tests: same blocks, a fraction of the width.
+    pub fn tiny(music_dim: i64, pose_dim: i64) -> Self {
+        Self { music_dim, pose_dim, d_z: 16, n_layers: 1, n_heads: 2, k: 8, d_ff: 32, hidden: 32, lstm_layers: 2, dropout: 0.0 }
+    }
+}
+
+/// Sinusoidal position encoding `[n, d]` starting at position `start`.
+pub fn sinusoid(start: i64, n: i64, d: i64, device: Device) -> Tensor {
+    let mut data = vec![0f32; (n * d) as usize];
+    for t in 0..n {
+        let pos = (start + t) as f64;
+        for i in 0..d {
+            let rate = 1.0 / 10000f64.powf((2 * (i / 2)) as f64 / d as f64);
+            let v = if i % 2 == 0 { (pos * rate).sin() } else { (pos * rate).cos() };
+            data[(t * d + i) as usize] = v as f32;
+        }
+    }
+    Tensor::from_slice(&data).view([n, d]).to_device(device)
+}
+
+/// Multi-head self-attention restricted to a window of `k` neighbours (paper §3.1).
+#[derive(Debug)]
+struct LocalSelfAttention {
+    qkv: nn::Linear,
+    out: nn::Linear,
+    n_heads: i64,
+    half: i64,
+}
+
+impl LocalSelfAttention {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        Self {
+            qkv: nn::linear(&p / "qkv", c.d_z, 3 * c.d_z, Default::default()),
+            out: nn::linear(&p / "out", c.d_z, c.d_z, Default::default()),
+            n_heads: c.n_heads,
+            half: c.k / 2,
+        }
+    }
+
+    /// `x`: `[b, n, d]` → `[b, n, d]`.
+    fn forward(&self, x: &Tensor) -> Tensor {
+        let (b, n, d) = x.size3().expect("encoder input is [b, n, d]");
+        let (h, w) = (self.n_heads, self.half);
+        let dh = d / h;
+        let win = 2 * w + 1;
+        let qkv = x.apply(&self.qkv).view([b, n, 3, h, dh]);
+        let q = qkv.select(2, 0); // [b, n, h, dh]
+        // Pad the time axis by w on both sides, then view each position's window: [b, n, h, dh, win].
+        let pad = |t: Tensor| t.constant_pad_nd([0, 0, 0, 0, w, w]).unfold(1, win, 1);
+        let k = pad(qkv.select(2, 1));
+        let v = pad(qkv.select(2, 2));
+        let scores = q.unsqueeze(3).matmul(&k) / (dh as f64).sqrt(); // [b, n, h, 1, win]
+        // Window slots that fall before the start or past the end of the sequence.
+        let idx = Tensor::arange(n, (Kind::Int64, x.device())).unsqueeze(1)
+            + Tensor::arange(win, (Kind::Int64, x.device())).unsqueeze(0)
+            - w;
+        let outside = idx.lt(0).logical_or(&idx.ge(n)).view([1, n, 1, 1, win]);
+        let attn = scores.masked_fill(&outside, f64::NEG_INFINITY).softmax(-1, Kind::Float);
+        let y = attn.matmul(&v.transpose(-1, -2)); // [b, n, h, 1, dh]
+        y.view([b, n, d]).apply(&self.out)
+    }
+}
+
+/// One encoder layer: local attention and a position-wise FFN, each with residual + layer norm.
+#[derive(Debug)]
+struct EncoderLayer {
+    attn: LocalSelfAttention,
+    norm1: nn::LayerNorm,
+    ff1: nn::Linear,
+    ff2: nn::Linear,
+    norm2: nn::LayerNorm,
+    dropout: f64,
+}
+
+impl EncoderLayer {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        Self {
+            attn: LocalSelfAttention::new(&p / "attn", c),
+            norm1: nn::layer_norm(&p / "norm1", vec![c.d_z], Default::default()),
+            ff1: nn::linear(&p / "ff1", c.d_z, c.d_ff, Default::default()),
+            ff2: nn::linear(&p / "ff2", c.d_ff, c.d_z, Default::default()),
+            norm2: nn::layer_norm(&p / "norm2", vec![c.d_z], Default::default()),
+            dropout: c.dropout,
+        }
+    }
+
+    fn forward(&self, x: &Tensor, train: bool) -> Tensor {
+        let a = self.attn.forward(x).dropout(self.dropout, train);
+        let x = (x + a).apply(&self.norm1);
+        let f = x.apply(&self.ff1).relu().apply(&self.ff2).dropout(self.dropout, train);
+        (x + f).apply(&self.norm2)
+    }
+}
+
+/// The music encoder (§3.1): features `[b, n, music_dim]` → `z` `[b, n, d_z]`.
+#[derive(Debug)]
+pub struct MusicEncoder {
+    embed: nn::Linear,
+    layers: Vec<EncoderLayer>,
+    d_z: i64,
+    k: i64,
+}
+
+impl MusicEncoder {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        Self {
+            embed: nn::linear(&p / "embed", c.music_dim, c.d_z, Default::default()),
+            layers: (0..c.n_layers).map(|i| EncoderLayer::new(&p / "layers" / i, c)).collect(),
+            d_z: c.d_z,
+            k: c.k,
+        }
+    }
+
+    /// Encodes a window whose first frame is song frame `start` (for the position encoding).
+    pub fn forward(&self, music: &Tensor, start: i64, train: bool) -> Tensor {
+        let n = music.size()[1];
+        let mut x = music.apply(&self.embed) + sinusoid(start, n, self.d_z, music.device()).unsqueeze(0);
+        for layer in &self.layers {
+            x = layer.forward(&x, train);
+        }
+        x
+    }
+
+    /// Encodes a whole song `[1, n, music_dim]` in overlapping chunks so memory stays bounded.
+    /// Each chunk carries `k` frames of context on each side, which covers every window that an
+    /// `N`-layer stack of local attention can see (`N·k/2` per side for `N` ≤ 2).
+    pub fn forward_chunked(&self, music: &Tensor, chunk: i64, mut on_chunk: impl FnMut(f32) -> bool) -> Option<Tensor> {
+        let n = music.size()[1];
+        let ctx = self.k * (self.layers.len() as i64).max(1) / 2 + 1;
+        let mut parts = Vec::new();
+        let mut s = 0;
+        while s < n {
+            let e = (s + chunk).min(n);
+            let (cs, ce) = ((s - ctx).max(0), (e + ctx).min(n));
+            let z = self.forward(&music.narrow(1, cs, ce - cs), cs, false);
+            parts.push(z.narrow(1, s - cs, e - s));
+            s = e;
+            if !on_chunk(s as f32 / n as f32) {
+                return None;
+            }
+        }
+        Some(Tensor::cat(&parts, 1))
+    }
+}
+
+/// The dance decoder (§3.2): an LSTM over the previous pose, read out with `[h_i; z_i]·W + b`.
+#[derive(Debug)]
+pub struct DanceDecoder {
+    lstm: nn::LSTM,
+    readout: nn::Linear,
+    layers: i64,
+    hidden: i64,
+}
+
+impl DanceDecoder {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        let cfg = nn::RNNConfig { num_layers: c.lstm_layers, batch_first: true, ..Default::default() };
+        Self {
+            lstm: nn::lstm(&p / "lstm", c.pose_dim, c.hidden, cfg),
+            readout: nn::linear(&p / "readout", c.hidden + c.d_z, c.pose_dim, Default::default()),
+            layers: c.lstm_layers,
+            hidden: c.hidden,
+        }
+    }
+
+    /// `h_0 ~ N(0, I)`, `c_0 = 0`, drawn from `seed` (not libtorch's global generator, which
+    /// workers share).
+    pub fn initial_state(&self, batch: i64, seed: u64, device: Device) -> nn::LSTMState {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let n = (self.layers * batch * self.hidden) as usize;
+        let h: Vec<f32> = (0..n).map(|_| StandardNormal.sample(&mut rng)).collect();
+        let h = Tensor::from_slice(&h).view([self.layers, batch, self.hidden]).to_device(device);
+        let c = Tensor::zeros([self.layers, batch, self.hidden], (Kind::Float, device));
+        nn::LSTMState((h, c))
+    }
+
+    /// Runs `inputs` `[b, t, pose]` (poses *before* each output frame) against `z` `[b, t, d_z]`.
+    fn run(&self, inputs: &Tensor, z: &Tensor, state: &nn::LSTMState) -> (Tensor, nn::LSTMState) {
+        let (h, state) = self.lstm.seq_init(inputs, state);
+        (Tensor::cat(&[h, z.shallow_clone()], 2).apply(&self.readout), state)
+    }
+}
+
+/// The whole model.
+#[derive(Debug)]
+pub struct DanceRevolution {
+    pub config: Config,
+    pub encoder: MusicEncoder,
+    pub decoder: DanceDecoder,
+}
+
+impl DanceRevolution {
+    /// Builds the model's variables under `p` (checkpoint keys `encoder.*`, `decoder.*`).
+    pub fn new(p: &nn::Path, config: Config) -> Self {
+        Self { encoder: MusicEncoder::new(p / "encoder", &config), decoder: DanceDecoder::new(p / "decoder", &config), config }
+    }
+
+    /// Training forward pass with the dynamic auto-condition curriculum (§3.3).
+    ///
+    /// `music` `[b, t, music_dim]`, `poses` `[b, t + 1, pose]`: frame 0 is the pose before the
+    /// window and is only ever an input. Returns predictions for frames 1..=t. Inputs follow the
+    /// pattern: `p` ground-truth frames, then `q` of the model's own previous outputs, repeated.
+    /// With `q = 0` the whole window is teacher-forced in one LSTM call.
+    pub fn forward_curriculum(&self, music: &Tensor, poses: &Tensor, p: i64, q: i64, seed: u64, train: bool) -> Tensor {
+        let (b, t, _) = music.size3().expect("music is [b, t, music_dim]");
+        let z = self.encoder.forward(music, 0, train);
+        let mut state = self.decoder.initial_state(b, seed, music.device());
+        let mut outputs: Vec<Tensor> = Vec::new();
+        let mut i = 0;
+        while i < t {
+            // Ground-truth segment: inputs are the true poses before frames i..i+p.
+            let len = p.min(t - i);
+            if len > 0 {
+                let (y, s) = self.decoder.run(&poses.narrow(1, i, len), &z.narrow(1, i, len), &state);
+                state = s;
+                outputs.push(y);
+                i += len;
+            }
+            // Auto-conditioned segment: each input is the previous prediction.
+            let free = if p == 0 { t - i } else { q.min(t - i) };
+            for _ in 0..free {
+                let prev = match outputs.last() {
+                    Some(y) => y.narrow(1, -1, 1),
+                    None => poses.narrow(1, 0, 1),
+                };
+                let (y, s) = self.decoder.run(&prev, &z.narrow(1, i, 1), &state);
+                state = s;
+                outputs.push(y);
+                i += 1;
+            }
+        }
+        Tensor::cat(&outputs, 1)
+    }
+
+    /// Generates `z.size(1)` frames autoregressively from encoded music `z` `[1, n, d_z]`.
+    ///
+    /// `seed_poses` `[1, s, pose]` (normalised), if given, are fed as ground truth for the first
+    /// frames, so the dance continues from them; otherwise the first input is the mean pose (0).
+    /// `on_step` is called every `report_every` frames with the fraction done and may stop the loop.
+    pub fn decode(
+        &self,
+        z: &Tensor,
+        seed: u64,
+        seed_poses: Option<&Tensor>,
+        report_every: i64,
+        mut on_step: impl FnMut(f32) -> bool,
+    ) -> Option<Tensor> {
+        let n = z.size()[1];
+        let device = z.device();
+        let mut state = self.decoder.initial_state(1, seed, device);
+        let mut out = Vec::with_capacity(n as usize);
+        let mut prev = Tensor::zeros([1, 1, self.config.pose_dim], (Kind::Float, device));
+        let seeded = seed_poses.map(|s| s.size()[1].min(n)).unwrap_or(0);
+        if let Some(s) = seed_poses.filter(|_| seeded > 0) {
+            // Teacher-force the seed frames: inputs are [mean, s_0 .. s_{m-2}], outputs replaced by s.
+            let inputs = Tensor::cat(&[prev.shallow_clone(), s.narrow(1, 0, seeded - 1)], 1);
+            let (_, st) = self.decoder.run(&inputs, &z.narrow(1, 0, seeded), &state);
+            state = st;
+            let seg = s.narrow(1, 0, seeded);
+            prev = seg.narrow(1, seeded - 1, 1);
+            out.push(seg);
+        }
+        for i in seeded..n {
+            let (y, st) = self.decoder.run(&prev, &z.narrow(1, i, 1), &state);
+            state = st;
+            prev = y.shallow_clone();
+            out.push(y);
+            if report_every > 0 && (i + 1) % report_every == 0 && !on_step((i + 1) as f32 / n as f32) {
+                return None;
+            }
+        }
+        Some(Tensor::cat(&out, 1))
+    }
+}
+
+/// The model folder's description file.
+pub const MODEL_FILE: &str = "model.json";
+/// The model folder's weights (safetensors, keys `encoder.*` and `decoder.*`).
+pub const WEIGHTS_FILE: &str = "weights.safetensors";
+/// The API id.
+pub const ID: &str = "dance-revolution";
+
+/// How the committed weights were trained, stored beside them.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrainingRecord {
+    pub epochs: usize,
+    pub window: usize,
+    pub p: i64,
+    pub lambda: f64,
+    pub q_max: i64,
+    pub lr: f64,
+    pub batch: usize,
+    pub seed: u64,
+    pub final_train_loss: f64,
+    pub minutes: f64,
+}
+
+/// `model.json`: the configuration and the train-split normalisation the weights expect.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ModelFile {
+    pub config: Config,
+    pub music_norm: Normalizer,
+    pub pose_norm: Normalizer,
+    pub fps: f64,
+    pub training: TrainingRecord,
+}
+
+/// `q = ⌊λ·epoch⌋`, the linear schedule of §3.3.
+pub fn curriculum_q(lambda: f64, epoch: usize) -> i64 {
+    (lambda * epoch as f64).floor() as i64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tch::nn::OptimizerConfig;
+
+    fn model(seed: i64) -> (nn::VarStore, DanceRevolution) {
+        tch::manual_seed(seed);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let m = DanceRevolution::new(&vs.root(), Config::tiny(6, 5));
+        (vs, m)
+    }
+
+    #[test]
+    fn local_attention_sees_only_its_window() {
+        let (_vs, m) = model(0);
+        let x = Tensor::randn([1, 40, 16], (Kind::Float, Device::Cpu));
+        let attn = &m.encoder.layers[0].attn;
+        let y0 = attn.forward(&x);
+        // Changing frame 39 must not change frame 0 when the window (k = 8) cannot reach it.
+        let x2 = x.copy();
+        let _ = x2.narrow(1, 39, 1).fill_(5.0);
+        let y1 = attn.forward(&x2);
+        let d0 = (y0.narrow(1, 0, 1) - y1.narrow(1, 0, 1)).abs().max().double_value(&[]);
+        let d39 = (y0.narrow(1, 39, 1) - y1.narrow(1, 39, 1)).abs().max().double_value(&[]);
+        assert!(d0 < 1e-6, "frame 0 moved by {d0}");
+        assert!(d39 > 1e-3, "frame 39 did not move");
+    }
+
+    #[test]
+    fn chunked_encoding_equals_whole() {
+        let (_vs, m) = model(1);
+        let x = Tensor::randn([1, 50, 6], (Kind::Float, Device::Cpu));
+        let whole = m.encoder.forward(&x, 0, false);
+        let chunked = m.encoder.forward_chunked(&x, 7, |_| true).unwrap();
+        let d = (whole - chunked).abs().max().double_value(&[]);
+        assert!(d < 1e-5, "chunked encoder differs by {d}");
+    }
+
+    #[test]
+    fn same_seed_same_dance_other_seed_other_dance() {
+        let (_vs, m) = model(2);
+        let x = Tensor::randn([1, 30, 6], (Kind::Float, Device::Cpu));
+        let z = m.encoder.forward(&x, 0, false);
+        let a = m.decode(&z, 7, None, 0, |_| true).unwrap();
+        let b = m.decode(&z, 7, None, 0, |_| true).unwrap();
+        let c = m.decode(&z, 8, None, 0, |_| true).unwrap();
+        assert_eq!(a.size(), vec![1, 30, 5]);
+        assert!((a.shallow_clone() - b).abs().max().double_value(&[]) == 0.0);
+        assert!((a - c).abs().max().double_value(&[]) > 1e-4);
+    }
+
+    #[test]
+    fn curriculum_with_q_zero_is_teacher_forcing() {
+        let (_vs, m) = model(3);
+        let x = Tensor::randn([2, 25, 6], (Kind::Float, Device::Cpu));
+        let y = Tensor::randn([2, 26, 5], (Kind::Float, Device::Cpu));
+        let a = m.forward_curriculum(&x, &y, 10, 0, 1, false);
+        let b = m.forward_curriculum(&x, &y, 25, 0, 1, false);
+        assert_eq!(a.size(), vec![2, 25, 5]);
+        assert!((a - b).abs().max().double_value(&[]) < 1e-5);
+        let c = m.forward_curriculum(&x, &y, 10, 5, 1, false);
+        assert_eq!(c.size(), vec![2, 25, 5]);
+    }
+
+    #[test]
+    fn loss_falls_on_a_few_batches() {
+        let (vs, m) = model(4);
+        let mut opt = nn::Adam::default().build(&vs, 3e-3).unwrap();
+        let x = Tensor::randn([4, 20, 6], (Kind::Float, Device::Cpu));
+        let y = Tensor::randn([4, 21, 5], (Kind::Float, Device::Cpu)).cumsum(1, Kind::Float) * 0.1;
+        let loss = |m: &DanceRevolution| (m.forward_curriculum(&x, &y, 10, 2, 9, true) - y.narrow(1, 1, 20)).abs().mean(Kind::Float);
+        let first = loss(&m).double_value(&[]);
+        for _ in 0..40 {
+            opt.backward_step(&loss(&m));
+        }
+        let last = loss(&m).double_value(&[]);
+        assert!(last < 0.8 * first, "loss {first} -> {last}");
+    }
+}
