@@ -1,8 +1,18 @@
 //! Motion core: the 23-joint skeleton, the real dataset, representations, and exporters.
 //!
-//! CONTRACT STUB (lead): the names below are what the rest of the crate calls; the motion
-//! owner fills in the rest and may add fields, not rename.
+//! - [`skeleton`]: joint names, hierarchy, mirror pairs, identified from the data.
+//! - [`dataset`]: the dance-with-melody dances, their split, music alignment, normalisation.
+//! - [`repr`]: what the models predict (root-relative poses + root velocity in the facing
+//!   frame) with its exact inverse, and foot-contact labels.
+//!
+//! Units everywhere: metres, seconds, y up, right-handed.
+use std::path::PathBuf;
+
 use ndarray::Array3;
+
+pub mod dataset;
+pub mod repr;
+pub mod skeleton;
 
 /// Frame rate of the dance-with-melody data.
 pub const MOTION_FPS: f64 = 25.0;
@@ -16,10 +26,95 @@ pub struct Motion {
     pub positions: Array3<f32>,
 }
 
+impl Motion {
+    /// Number of frames.
+    pub fn num_frames(&self) -> usize {
+        self.positions.shape()[0]
+    }
+
+    /// Duration in seconds (frames / fps).
+    pub fn duration_s(&self) -> f64 {
+        self.num_frames() as f64 / self.fps
+    }
+}
+
 /// A key pose a user fixes: root-relative joint positions in metres at a time in the song.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct KeyPose {
     pub time_s: f64,
     /// `J × [x, y, z]`, metres, root-relative, in `joint_names` order.
     pub joints: Vec<[f64; 3]>,
+}
+
+/// Everything that can go wrong reading, converting, validating or exporting motion.
+#[derive(Debug, thiserror::Error)]
+pub enum MotionError {
+    #[error("dataset not found at {path}: expected ../shared/data/dance-with-melody (the shared data folder next to the repository)")]
+    DatasetMissing { path: PathBuf },
+    #[error("unknown dance {id:?} (not a folder of the dataset)")]
+    UnknownDance { id: String },
+    #[error("cannot read {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("malformed {path}: {reason}")]
+    Malformed { path: PathBuf, reason: String },
+    #[error("motion has the wrong shape: {0}")]
+    Shape(String),
+    #[error("invalid input: {0}")]
+    Invalid(String),
+    #[error("BVH parse error at line {line}: {reason}")]
+    Bvh { line: usize, reason: String },
+    #[error("export failed: {0}")]
+    Export(String),
+}
+
+impl MotionError {
+    /// Stable kebab-case name of the failure.
+    pub fn code(&self) -> &'static str {
+        match self {
+            MotionError::DatasetMissing { .. } => "dataset-missing",
+            MotionError::UnknownDance { .. } => "unknown-dance",
+            MotionError::Io { .. } => "motion-io",
+            MotionError::Malformed { .. } => "malformed-data",
+            MotionError::Shape(_) => "motion-shape",
+            MotionError::Invalid(_) => "invalid-motion",
+            MotionError::Bvh { .. } => "invalid-bvh",
+            MotionError::Export(_) => "export-failed",
+        }
+    }
+
+    /// Whether the error is the caller's input (an API maps these to 422).
+    pub fn is_client_error(&self) -> bool {
+        match self {
+            MotionError::Invalid(_) | MotionError::Bvh { .. } | MotionError::Shape(_) => true,
+            MotionError::UnknownDance { .. } => true,
+            MotionError::DatasetMissing { .. }
+            | MotionError::Io { .. }
+            | MotionError::Malformed { .. }
+            | MotionError::Export(_) => false,
+        }
+    }
+
+    /// Whether trying again later may succeed.
+    pub fn is_retryable(&self) -> bool {
+        match self {
+            MotionError::Io { .. } | MotionError::Export(_) => true,
+            MotionError::DatasetMissing { .. }
+            | MotionError::UnknownDance { .. }
+            | MotionError::Malformed { .. }
+            | MotionError::Shape(_)
+            | MotionError::Invalid(_)
+            | MotionError::Bvh { .. } => false,
+        }
+    }
+
+    pub(crate) fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        MotionError::Io {
+            path: path.into(),
+            source,
+        }
+    }
 }
