@@ -1,1 +1,285 @@
 //! Layered configuration: `config.toml`, then `CHOREO_*` environment, then CLI flags.
+//!
+//! Every setting is documented in the repository's `config.toml`. The names `bind`,
+//! `data_dir` (`--bind`, `--data-dir`, `CHOREO_BIND`, `CHOREO_DATA_DIR`) are fixed because tools
+//! outside the project rely on them.
+use figment::providers::{Env, Format, Serialized, Toml};
+use figment::Figment;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// The default config file, read from the working directory when present.
+pub const DEFAULT_CONFIG_FILE: &str = "config.toml";
+/// Prefix of every environment override (`CHOREO_BIND`, `CHOREO_DATA_DIR`, ...).
+pub const ENV_PREFIX: &str = "CHOREO_";
+/// The settings, by name; only these are read from `CHOREO_*`, so other tools' variables that
+/// share the prefix do not break start-up.
+pub const SETTINGS: &[&str] = &[
+    "bind", "data_dir", "models_dir", "workers", "max_upload_bytes", "max_duration_s", "cors_origins",
+    "auth_token", "log_format", "log_level", "lease_s", "heartbeat_s", "max_attempts", "retry_backoff_s",
+    "poll_s",
+];
+
+/// Errors from loading or checking the configuration.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("configuration: {0}")]
+    Load(#[from] Box<figment::Error>),
+    #[error("configuration: {field}: {message}")]
+    Invalid { field: &'static str, message: String },
+}
+
+/// A secret that never prints: `Debug` and `Display` show `[redacted]`.
+#[derive(Clone, Deserialize, PartialEq, Eq)]
+#[serde(transparent)]
+pub struct Secret(String);
+
+impl Secret {
+    /// Wraps a secret value.
+    pub fn new(value: impl Into<String>) -> Self {
+        Self(value.into())
+    }
+    /// The secret itself; call only where it is compared or sent.
+    pub fn expose(&self) -> &str {
+        &self.0
+    }
+}
+
+impl fmt::Debug for Secret {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("[redacted]")
+    }
+}
+
+impl fmt::Display for Secret {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str("[redacted]")
+    }
+}
+
+/// How log lines are written.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum LogFormat {
+    /// Human-readable lines.
+    #[default]
+    Pretty,
+    /// One JSON object per line, for log collectors.
+    Json,
+}
+
+/// The whole service configuration.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Address the HTTP server listens on; port 0 picks a free port.
+    pub bind: String,
+    /// Where the database, songs and results live.
+    pub data_dir: PathBuf,
+    /// Where trained models live (`<models_dir>/<model id>/`).
+    pub models_dir: PathBuf,
+    /// Worker count; 0 means one per CPU core.
+    pub workers: usize,
+    /// Largest accepted upload, in bytes.
+    pub max_upload_bytes: u64,
+    /// Longest accepted song, in seconds.
+    pub max_duration_s: f64,
+    /// Origins allowed by CORS; `["*"]` allows any, `[]` none.
+    pub cors_origins: Vec<String>,
+    /// When set, every `/v1` route needs `Authorization: Bearer <token>`.
+    pub auth_token: Option<Secret>,
+    /// `pretty` or `json`.
+    pub log_format: LogFormat,
+    /// Tracing filter when `RUST_LOG` is unset.
+    pub log_level: String,
+    /// How long a claimed job's lease lasts without a heartbeat, in seconds.
+    pub lease_s: f64,
+    /// How often a running job heartbeats, in seconds.
+    pub heartbeat_s: f64,
+    /// Attempts before a job whose lease keeps expiring is failed.
+    pub max_attempts: u32,
+    /// First retry delay in seconds; doubles each attempt.
+    pub retry_backoff_s: f64,
+    /// How often idle workers look for new jobs, in seconds.
+    pub poll_s: f64,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            bind: "127.0.0.1:8080".into(),
+            data_dir: PathBuf::from("data"),
+            models_dir: PathBuf::from("models"),
+            workers: 0,
+            max_upload_bytes: 50 * 1024 * 1024,
+            max_duration_s: 15.0 * 60.0,
+            cors_origins: Vec::new(),
+            auth_token: None,
+            log_format: LogFormat::Pretty,
+            log_level: "info".into(),
+            lease_s: 30.0,
+            heartbeat_s: 2.0,
+            max_attempts: 3,
+            retry_backoff_s: 1.0,
+            poll_s: 0.5,
+        }
+    }
+}
+
+/// The settings CLI flags may override; `None` leaves the lower layers alone.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Overrides {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub bind: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub data_dir: Option<PathBuf>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub models_dir: Option<PathBuf>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub workers: Option<usize>,
+}
+
+/// Serializable mirror of the defaults, the bottom layer of the figment.
+#[derive(Serialize)]
+struct Defaults {
+    bind: String,
+    data_dir: PathBuf,
+    models_dir: PathBuf,
+    workers: usize,
+    max_upload_bytes: u64,
+    max_duration_s: f64,
+    cors_origins: Vec<String>,
+    log_format: LogFormat,
+    log_level: String,
+    lease_s: f64,
+    heartbeat_s: f64,
+    max_attempts: u32,
+    retry_backoff_s: f64,
+    poll_s: f64,
+}
+
+impl Defaults {
+    fn new() -> Self {
+        let d = Config::default();
+        Self {
+            bind: d.bind,
+            data_dir: d.data_dir,
+            models_dir: d.models_dir,
+            workers: d.workers,
+            max_upload_bytes: d.max_upload_bytes,
+            max_duration_s: d.max_duration_s,
+            cors_origins: d.cors_origins,
+            log_format: d.log_format,
+            log_level: d.log_level,
+            lease_s: d.lease_s,
+            heartbeat_s: d.heartbeat_s,
+            max_attempts: d.max_attempts,
+            retry_backoff_s: d.retry_backoff_s,
+            poll_s: d.poll_s,
+        }
+    }
+}
+
+impl Config {
+    /// Loads defaults, then `file` (if it exists), then `CHOREO_*`, then `overrides`.
+    pub fn load(file: Option<&Path>, overrides: &Overrides) -> Result<Self, ConfigError> {
+        let file = file.unwrap_or(Path::new(DEFAULT_CONFIG_FILE));
+        let config: Config = Figment::from(Serialized::defaults(Defaults::new()))
+            .merge(Toml::file(file))
+            .merge(Env::prefixed(ENV_PREFIX).filter(|key| SETTINGS.contains(&key.as_str())))
+            .merge(Serialized::defaults(overrides))
+            .extract()
+            .map_err(Box::new)?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    /// Checks ranges that serde cannot.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let invalid = |field, message: &str| Err(ConfigError::Invalid { field, message: message.into() });
+        if self.bind.parse::<std::net::SocketAddr>().is_err() {
+            return invalid("bind", "must be an IP:port address such as 127.0.0.1:8080");
+        }
+        if self.max_upload_bytes == 0 {
+            return invalid("max_upload_bytes", "must be positive");
+        }
+        if !(self.max_duration_s.is_finite() && self.max_duration_s > 0.0) {
+            return invalid("max_duration_s", "must be a positive number of seconds");
+        }
+        if !(self.lease_s.is_finite() && self.lease_s > 0.0) {
+            return invalid("lease_s", "must be a positive number of seconds");
+        }
+        if !(self.heartbeat_s.is_finite() && self.heartbeat_s > 0.0 && self.heartbeat_s < self.lease_s) {
+            return invalid("heartbeat_s", "must be positive and shorter than lease_s");
+        }
+        if self.max_attempts == 0 {
+            return invalid("max_attempts", "must be at least 1");
+        }
+        if !(self.retry_backoff_s.is_finite() && self.retry_backoff_s >= 0.0) {
+            return invalid("retry_backoff_s", "must be zero or a positive number of seconds");
+        }
+        if !(self.poll_s.is_finite() && self.poll_s > 0.0) {
+            return invalid("poll_s", "must be a positive number of seconds");
+        }
+        if let Some(token) = &self.auth_token {
+            if token.expose().is_empty() {
+                return invalid("auth_token", "must not be empty; leave it unset to turn auth off");
+            }
+        }
+        Ok(())
+    }
+
+    /// The worker count with 0 resolved to the number of cores.
+    pub fn worker_count(&self) -> usize {
+        if self.workers > 0 {
+            self.workers
+        } else {
+            std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+        }
+    }
+
+    /// The SQLite database file.
+    pub fn database_path(&self) -> PathBuf {
+        self.data_dir.join("choreo.sqlite")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn secret_never_prints() {
+        let config = Config { auth_token: Some(Secret::new("hunter2")), ..Config::default() };
+        let shown = format!("{config:?} {}", Secret::new("hunter2"));
+        assert!(!shown.contains("hunter2"), "{shown}");
+        assert!(shown.contains("[redacted]"));
+    }
+
+    #[test]
+    fn layers_file_then_env_then_flags() {
+        figment::Jail::expect_with(|jail| {
+            jail.create_file("c.toml", "bind = \"127.0.0.1:1\"\nworkers = 3\nmax_attempts = 7\n")?;
+            jail.set_env("CHOREO_BIND", "127.0.0.1:2");
+            jail.set_env("CHOREO_DATA_DIR", "/tmp/x");
+            let overrides = Overrides { data_dir: Some("/tmp/y".into()), ..Overrides::default() };
+            let c = Config::load(Some(Path::new("c.toml")), &overrides).map_err(|e| e.to_string())?;
+            assert_eq!(c.bind, "127.0.0.1:2");
+            assert_eq!(c.data_dir, PathBuf::from("/tmp/y"));
+            assert_eq!(c.workers, 3);
+            assert_eq!(c.max_attempts, 7);
+            Ok(())
+        });
+    }
+
+    #[test]
+    fn rejects_a_bad_bind_address() {
+        figment::Jail::expect_with(|jail| {
+            jail.set_env("CHOREO_BIND", "not an address");
+            let err = Config::load(Some(Path::new("missing.toml")), &Overrides::default()).unwrap_err();
+            assert!(err.to_string().contains("bind"), "{err}");
+            Ok(())
+        });
+    }
+}

@@ -1,1 +1,151 @@
 //! Tracing set-up and metric names.
+//!
+//! Metrics go through the `metrics` facade into one process-wide Prometheus recorder, rendered
+//! by `GET /metrics`. Names are constants here so the worker, the API and the tests agree.
+use crate::config::LogFormat;
+use metrics_exporter_prometheus::{Matcher, PrometheusBuilder, PrometheusHandle};
+use std::sync::OnceLock;
+use std::time::Instant;
+use tracing_subscriber::EnvFilter;
+
+/// Gauge: jobs by `status` label, refreshed from the database at each scrape.
+pub const JOBS: &str = "choreo_jobs";
+/// Gauge: jobs waiting to be claimed.
+pub const QUEUE_DEPTH: &str = "choreo_queue_depth";
+/// Gauge: workers running a job right now.
+pub const BUSY_WORKERS: &str = "choreo_busy_workers";
+/// Counter: jobs that reached a terminal state, by `kind` and `status`.
+pub const JOBS_FINISHED: &str = "choreo_jobs_finished_total";
+/// Histogram: wall time of one job attempt, seconds, by `kind`.
+pub const JOB_DURATION: &str = "choreo_job_duration_seconds";
+/// Histogram: wall time of one stage of a job, seconds, by `kind` and `stage`.
+pub const STAGE_DURATION: &str = "choreo_stage_duration_seconds";
+/// Counter: HTTP responses, by `status` class.
+pub const HTTP_RESPONSES: &str = "choreo_http_responses_total";
+
+/// Buckets for job and stage durations: from 10 ms to 10 minutes.
+const DURATION_BUCKETS: &[f64] = &[0.01, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0];
+
+static PROMETHEUS: OnceLock<PrometheusHandle> = OnceLock::new();
+
+/// Installs the process-wide Prometheus recorder once and returns its handle.
+pub fn prometheus() -> PrometheusHandle {
+    PROMETHEUS
+        .get_or_init(|| {
+            let builder = PrometheusBuilder::new()
+                .set_buckets_for_metric(Matcher::Suffix("_seconds".into()), DURATION_BUCKETS)
+                .expect("duration buckets are a non-empty constant");
+            // Another recorder may already be installed (a library user's); then build ours
+            // unregistered so `/metrics` still renders, just without facade-fed values.
+            let recorder = builder.build_recorder();
+            let handle = recorder.handle();
+            if metrics::set_global_recorder(recorder).is_err() {
+                tracing::warn!("a metrics recorder was already installed; /metrics will be sparse");
+            }
+            describe();
+            handle
+        })
+        .clone()
+}
+
+fn describe() {
+    metrics::describe_gauge!(JOBS, "Jobs by status");
+    metrics::describe_gauge!(QUEUE_DEPTH, "Jobs waiting to be claimed");
+    metrics::describe_gauge!(BUSY_WORKERS, "Workers running a job");
+    metrics::describe_counter!(JOBS_FINISHED, "Jobs that reached a terminal state");
+    metrics::describe_histogram!(JOB_DURATION, metrics::Unit::Seconds, "Wall time of one job attempt");
+    metrics::describe_histogram!(STAGE_DURATION, metrics::Unit::Seconds, "Wall time of one job stage");
+    metrics::describe_counter!(HTTP_RESPONSES, "HTTP responses by status class");
+}
+
+/// Starts the global tracing subscriber; a second call (tests) is a no-op.
+pub fn init_tracing(format: LogFormat, default_level: &str) {
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_level));
+    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    let _ = match format {
+        LogFormat::Pretty => builder.try_init(),
+        LogFormat::Json => builder.json().flatten_event(true).try_init(),
+    };
+}
+
+/// Records how long a stage took when dropped, so early returns are timed too.
+pub struct StageTimer {
+    kind: &'static str,
+    stage: &'static str,
+    start: Instant,
+}
+
+impl StageTimer {
+    /// Starts timing `stage` of a job of `kind`.
+    pub fn start(kind: &'static str, stage: &'static str) -> Self {
+        Self { kind, stage, start: Instant::now() }
+    }
+}
+
+impl Drop for StageTimer {
+    fn drop(&mut self) {
+        metrics::histogram!(STAGE_DURATION, "kind" => self.kind, "stage" => self.stage)
+            .record(self.start.elapsed().as_secs_f64());
+    }
+}
+
+/// The libtorch this binary was built against (`LIBTORCH` at build time).
+const LIBTORCH_AT_BUILD: Option<&str> = option_env!("LIBTORCH");
+
+/// The torch version of the wheel libtorch came from, read from its `version.py`.
+fn torch_version() -> String {
+    let Some(dir) = LIBTORCH_AT_BUILD else { return "unknown (LIBTORCH was not set at build time)".into() };
+    let file = std::path::Path::new(dir).join("version.py");
+    match std::fs::read_to_string(&file) {
+        Ok(text) => text
+            .lines()
+            .find_map(|l| l.strip_prefix("__version__ = ").map(|v| v.trim_matches(['\'', '"']).to_string()))
+            .unwrap_or_else(|| format!("unknown (no __version__ in {})", file.display())),
+        Err(e) => format!("unknown ({}: {e})", file.display()),
+    }
+}
+
+/// The libtorch shared library this process actually loaded.
+fn loaded_libtorch() -> String {
+    std::fs::read_to_string("/proc/self/maps")
+        .ok()
+        .and_then(|maps| maps.lines().find(|l| l.contains("libtorch_cpu.so")).and_then(|l| l.split_whitespace().last()).map(str::to_string))
+        .unwrap_or_else(|| "not mapped (or /proc unavailable)".into())
+}
+
+/// What `choreo doctor` prints: libtorch, threads, data dir, models. Runs a tensor op to prove
+/// libtorch loads.
+pub fn doctor(config: &crate::config::Config) -> Vec<(&'static str, String)> {
+    let sum = tch::Tensor::from_slice(&[1.0f32, 2.0, 3.0]).sum(tch::Kind::Float).double_value(&[]);
+    let models = match crate::models::Registry::load(&config.models_dir) {
+        Ok(registry) => {
+            let ids: Vec<String> = registry.list().into_iter().map(|m| m.id.0).collect();
+            if ids.is_empty() { "none (train one first)".to_string() } else { ids.join(", ") }
+        }
+        Err(e) => format!("error: {e}"),
+    };
+    let env = |name: &str| std::env::var(name).unwrap_or_else(|_| "unset".into());
+    let data_dir = match std::fs::metadata(&config.data_dir) {
+        Ok(m) if m.is_dir() => format!("{} (exists)", config.data_dir.display()),
+        Ok(_) => format!("{} (NOT A DIRECTORY)", config.data_dir.display()),
+        Err(_) => format!("{} (will be created)", config.data_dir.display()),
+    };
+    vec![
+        ("choreo", env!("CARGO_PKG_VERSION").to_string()),
+        ("torch", torch_version()),
+        ("libtorch built against", LIBTORCH_AT_BUILD.unwrap_or("unknown").to_string()),
+        ("libtorch loaded", loaded_libtorch()),
+        ("libtorch works", format!("sum([1, 2, 3]) = {sum}")),
+        ("openmp / mkl / mkldnn", format!("{} / {} / {}", tch::utils::has_openmp(), tch::utils::has_mkl(), tch::utils::has_mkldnn())),
+        ("intra-op threads (main thread)", tch::get_num_threads().to_string()),
+        ("intra-op threads per worker", "1 (set on each worker thread)".to_string()),
+        ("OMP_NUM_THREADS / OMP_WAIT_POLICY", format!("{} / {}", env("OMP_NUM_THREADS"), env("OMP_WAIT_POLICY"))),
+        ("cores", std::thread::available_parallelism().map_or(0, |n| n.get()).to_string()),
+        ("workers", config.worker_count().to_string()),
+        ("bind", config.bind.clone()),
+        ("data dir", data_dir),
+        ("models dir", config.models_dir.display().to_string()),
+        ("models found", models),
+        ("auth", if config.auth_token.is_some() { "bearer token required on /v1" } else { "off" }.to_string()),
+    ]
+}

@@ -1,1 +1,278 @@
 //! HTTP API: routes, handlers, problem+json errors and the OpenAPI document.
+//!
+//! [`Server::start`] is the whole service: it opens the data dir and database, requeues the
+//! jobs of a previous process whose leases expired, loads the models, starts the workers and
+//! serves HTTP. Tests start it on port 0; `choreo serve` starts it on the configured address.
+use crate::config::Config;
+use crate::models::Registry;
+use crate::queue::{DataDir, SqliteStore, Store};
+use crate::telemetry;
+use axum::extract::{Request, State};
+use axum::http::{header, HeaderName, Method};
+use axum::middleware::{self, Next};
+use axum::response::{IntoResponse, Response};
+use axum::routing::get;
+use axum::Router;
+use metrics_exporter_prometheus::PrometheusHandle;
+use std::net::SocketAddr;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::{Notify, Semaphore};
+use tokio::task::JoinHandle;
+use tokio_util::sync::CancellationToken;
+use tower_http::cors::{AllowOrigin, CorsLayer};
+use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::trace::TraceLayer;
+use utoipa::OpenApi;
+use utoipa_swagger_ui::SwaggerUi;
+
+pub mod bench;
+pub mod extract;
+pub mod jobs;
+pub mod openapi;
+pub mod problem;
+pub mod songs;
+pub mod system;
+
+pub use problem::ApiError;
+
+/// The request-id header, set when the client sends none and echoed on the response.
+pub const REQUEST_ID: HeaderName = HeaderName::from_static("x-request-id");
+/// Room for multipart boundaries and headers above the file size limit.
+const MULTIPART_OVERHEAD: u64 = 64 * 1024;
+
+/// What every handler shares.
+#[derive(Clone)]
+pub struct AppState {
+    pub store: Arc<dyn Store>,
+    pub registry: Arc<Registry>,
+    pub data: DataDir,
+    pub config: Arc<Config>,
+    /// Wakes idle workers when a job is registered.
+    pub wake: Arc<Notify>,
+    pub metrics: PrometheusHandle,
+    /// Bounds concurrent upload decodes, so memory stays bounded under many uploads.
+    pub decode_permits: Arc<Semaphore>,
+    pub workers_running: Arc<AtomicBool>,
+}
+
+/// Errors from starting the service.
+#[derive(Debug, thiserror::Error)]
+pub enum StartError {
+    #[error("data dir {path}: {source}")]
+    DataDir { path: String, source: std::io::Error },
+    #[error("binding {bind}: {source}")]
+    Bind { bind: String, source: std::io::Error },
+    #[error(transparent)]
+    Queue(#[from] crate::queue::QueueError),
+    #[error("loading models: {0}")]
+    Models(#[from] crate::models::ModelError),
+}
+
+/// All routes, with auth on `/v1`, CORS, request ids and tracing.
+pub fn router(state: AppState) -> Router {
+    let v1 = Router::new()
+        .route("/songs", axum::routing::post(songs::upload))
+        .route("/songs/{id}", get(songs::get))
+        .route("/jobs", get(jobs::list).post(jobs::create))
+        .route("/jobs/{id}", get(jobs::get).delete(jobs::cancel))
+        .route("/jobs/{id}/{file}", get(jobs::result))
+        .route("/models", get(system::models))
+        .layer(axum::extract::DefaultBodyLimit::max(
+            usize::try_from(state.config.max_upload_bytes + MULTIPART_OVERHEAD).unwrap_or(usize::MAX),
+        ))
+        .route_layer(middleware::from_fn_with_state(state.clone(), require_bearer));
+
+    let request_span = |req: &Request| {
+        let id = req.headers().get(REQUEST_ID).and_then(|v| v.to_str().ok()).unwrap_or("-");
+        tracing::info_span!("request", method = %req.method(), path = %req.uri().path(), request_id = %id)
+    };
+    Router::new()
+        .nest("/v1", v1)
+        .route("/healthz", get(system::healthz))
+        .route("/readyz", get(system::readyz))
+        .route("/metrics", get(system::metrics))
+        .merge(SwaggerUi::new("/docs").url("/openapi.json", openapi::ApiDoc::openapi()))
+        .fallback(|| async { ApiError::NoRoute })
+        .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
+        .layer(middleware::from_fn(count_responses))
+        .layer(cors(&state.config))
+        .layer(PropagateRequestIdLayer::new(REQUEST_ID))
+        .layer(TraceLayer::new_for_http().make_span_with(request_span))
+        .layer(SetRequestIdLayer::new(REQUEST_ID, MakeRequestUuid))
+        .with_state(state)
+}
+
+fn cors(config: &Config) -> CorsLayer {
+    let origins = if config.cors_origins.iter().any(|o| o == "*") {
+        AllowOrigin::any()
+    } else {
+        AllowOrigin::list(config.cors_origins.iter().filter_map(|o| o.parse().ok()))
+    };
+    CorsLayer::new()
+        .allow_origin(origins)
+        .allow_methods([Method::GET, Method::POST, Method::DELETE])
+        .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE, jobs::IDEMPOTENCY_KEY])
+        .expose_headers([REQUEST_ID, header::LOCATION, jobs::IDEMPOTENT_REPLAYED])
+        .max_age(Duration::from_secs(3600))
+}
+
+/// Demands `Authorization: Bearer <token>` when a token is configured.
+async fn require_bearer(State(state): State<AppState>, req: Request, next: Next) -> Response {
+    let Some(token) = &state.config.auth_token else {
+        return next.run(req).await;
+    };
+    let given = req
+        .headers()
+        .get(header::AUTHORIZATION)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.strip_prefix("Bearer "))
+        .unwrap_or("");
+    if constant_time_eq(given.as_bytes(), token.expose().as_bytes()) {
+        next.run(req).await
+    } else {
+        ApiError::Unauthorized.into_response()
+    }
+}
+
+/// Compares without an early exit, so timing does not reveal how much of a token matched.
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    let mut diff = u8::from(a.len() != b.len());
+    for (i, x) in a.iter().enumerate() {
+        diff |= x ^ b.get(i % b.len().max(1)).copied().unwrap_or(0);
+    }
+    diff == 0
+}
+
+async fn count_responses(req: Request, next: Next) -> Response {
+    let response = next.run(req).await;
+    let class = match response.status().as_u16() {
+        100..=199 => "1xx",
+        200..=299 => "2xx",
+        300..=399 => "3xx",
+        400..=499 => "4xx",
+        _ => "5xx",
+    };
+    metrics::counter!(telemetry::HTTP_RESPONSES, "class" => class).increment(1);
+    response
+}
+
+/// The running service: HTTP server, workers and lease reaper.
+pub struct Server {
+    addr: SocketAddr,
+    state: AppState,
+    shutdown: CancellationToken,
+    http: JoinHandle<std::io::Result<()>>,
+    workers: Vec<JoinHandle<()>>,
+    upkeep: JoinHandle<()>,
+}
+
+impl Server {
+    /// Starts everything; `config.bind` may use port 0.
+    pub async fn start(config: Config) -> Result<Self, StartError> {
+        let data_err = |source| StartError::DataDir { path: config.data_dir.display().to_string(), source };
+        let data = DataDir::create(&config.data_dir).map_err(data_err)?;
+        let stale = data.clean_tmp().map_err(data_err)?;
+        if stale > 0 {
+            tracing::info!(files = stale, "removed uploads cut off by a previous process");
+        }
+        let store: Arc<dyn Store> = Arc::new(SqliteStore::open(&config.database_path()).await?);
+        let registry = Arc::new(Registry::load(&config.models_dir)?);
+        let workers = config.worker_count();
+        tracing::info!(
+            data_dir = %config.data_dir.display(),
+            models = ?registry.list().iter().map(|m| m.id.0.clone()).collect::<Vec<_>>(),
+            workers,
+            "starting"
+        );
+
+        let ctx = crate::worker::context(store.clone(), registry.clone(), data.clone(), &config);
+        let recovered = crate::worker::recover(store.as_ref(), ctx.policy).await?;
+        if recovered != crate::queue::Requeued::default() {
+            tracing::warn!(?recovered, "recovered jobs of a previous process whose leases had expired");
+        }
+        let metrics = telemetry::prometheus();
+        let shutdown = CancellationToken::new();
+        let state = AppState {
+            store,
+            registry,
+            data,
+            config: Arc::new(config.clone()),
+            wake: ctx.wake.clone(),
+            metrics: metrics.clone(),
+            decode_permits: Arc::new(Semaphore::new(std::thread::available_parallelism().map_or(1, |n| n.get()))),
+            workers_running: Arc::new(AtomicBool::new(false)),
+        };
+
+        let listener = tokio::net::TcpListener::bind(&config.bind)
+            .await
+            .map_err(|source| StartError::Bind { bind: config.bind.clone(), source })?;
+        let addr = listener.local_addr().map_err(|source| StartError::Bind { bind: config.bind.clone(), source })?;
+
+        let worker_handles = crate::worker::start(ctx, workers, shutdown.clone());
+        state.workers_running.store(true, Ordering::Relaxed);
+        let upkeep = tokio::spawn({
+            let shutdown = shutdown.clone();
+            async move {
+                // Histograms are drained into their buckets only at upkeep.
+                loop {
+                    tokio::select! {
+                        _ = shutdown.cancelled() => return,
+                        _ = tokio::time::sleep(Duration::from_secs(5)) => metrics.run_upkeep(),
+                    }
+                }
+            }
+        });
+        let app = router(state.clone());
+        let http = tokio::spawn({
+            let shutdown = shutdown.clone();
+            async move { axum::serve(listener, app).with_graceful_shutdown(shutdown.cancelled_owned()).await }
+        });
+        tracing::info!(%addr, "listening");
+        Ok(Self { addr, state, shutdown, http, workers: worker_handles, upkeep })
+    }
+
+    /// The address actually bound (resolves port 0).
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// The shared state (store, data dir), for tools and tests that inspect the service.
+    pub fn state(&self) -> &AppState {
+        &self.state
+    }
+
+    /// Stops taking requests and jobs; running jobs stop at their next checkpoint and are requeued.
+    pub async fn stop(self) {
+        self.shutdown.cancel();
+        self.state.workers_running.store(false, Ordering::Relaxed);
+        match self.http.await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => tracing::error!(error = %e, "http server ended with an error"),
+            Err(e) => tracing::error!(error = %e, "http server task failed"),
+        }
+        for worker in self.workers {
+            if let Err(e) = worker.await {
+                tracing::error!(error = %e, "worker task failed");
+            }
+        }
+        if let Err(e) = self.upkeep.await {
+            tracing::error!(error = %e, "metrics upkeep task failed");
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::constant_time_eq;
+
+    #[test]
+    fn token_comparison_is_exact() {
+        assert!(constant_time_eq(b"abc", b"abc"));
+        assert!(!constant_time_eq(b"abc", b"abd"));
+        assert!(!constant_time_eq(b"ab", b"abc"));
+        assert!(!constant_time_eq(b"abcd", b"abc"));
+        assert!(!constant_time_eq(b"", b"abc"));
+    }
+}

@@ -1,1 +1,405 @@
 //! The durable job queue: the job model, the `JobStore` trait and its SQLite store.
+//!
+//! A job is domain data the API queries (status, stage, progress, options, results), so it is a
+//! row in our own `jobs` table rather than an opaque message in a queue library. The verbs are
+//! [`JobStore::register`], [`JobStore::claim`], [`JobStore::heartbeat`], [`JobStore::complete`],
+//! [`JobStore::fail`] and [`JobStore::cancel`]; [`JobStore::requeue_expired`] returns the jobs of
+//! dead workers to the queue. Every status change is appended to `job_events` by a trigger, so
+//! the history of a job cannot drift from its row.
+//!
+//! Handlers and workers see only the traits, so a Postgres store (`FOR UPDATE SKIP LOCKED`)
+//! can be added beside `sqlite.rs` without touching them.
+use crate::audio::{Analysis, AudioFormat};
+use crate::models::ModelId;
+use crate::motion::KeyPose;
+use chrono::{DateTime, Utc};
+use futures::future::BoxFuture;
+use serde::{Deserialize, Serialize};
+use std::fmt;
+use std::str::FromStr;
+use std::time::Duration;
+use uuid::Uuid;
+
+pub mod files;
+pub mod sqlite;
+
+pub use files::DataDir;
+pub use sqlite::SqliteStore;
+
+/// Errors from the job and song store.
+#[derive(Debug, thiserror::Error)]
+pub enum QueueError {
+    #[error("database: {0}")]
+    Database(#[from] sqlx::Error),
+    #[error("database migration: {0}")]
+    Migrate(#[from] sqlx::migrate::MigrateError),
+    #[error("stored row is corrupt: {0}")]
+    Corrupt(String),
+    #[error("song {0} not found")]
+    SongNotFound(SongId),
+    #[error("job {0} not found")]
+    JobNotFound(JobId),
+    #[error("the Idempotency-Key was already used for a different request (job {0})")]
+    IdempotencyConflict(JobId),
+}
+
+impl QueueError {
+    /// Stable kebab-case name of the failure.
+    pub fn code(&self) -> &'static str {
+        match self {
+            QueueError::Database(_) => "database",
+            QueueError::Migrate(_) => "database-migration",
+            QueueError::Corrupt(_) => "corrupt-row",
+            QueueError::SongNotFound(_) => "song-not-found",
+            QueueError::JobNotFound(_) => "job-not-found",
+            QueueError::IdempotencyConflict(_) => "idempotency-key-reused",
+        }
+    }
+
+    /// Whether trying again later may succeed.
+    pub fn is_retryable(&self) -> bool {
+        match self {
+            QueueError::Database(_) => true,
+            QueueError::Migrate(_) => false,
+            QueueError::Corrupt(_) => false,
+            QueueError::SongNotFound(_) => false,
+            QueueError::JobNotFound(_) => false,
+            QueueError::IdempotencyConflict(_) => false,
+        }
+    }
+}
+
+macro_rules! typed_id {
+    ($(#[$doc:meta])* $name:ident) => {
+        $(#[$doc])*
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash, Serialize, Deserialize, utoipa::ToSchema)]
+        #[serde(transparent)]
+        #[schema(value_type = String, format = Uuid)]
+        pub struct $name(pub Uuid);
+
+        impl $name {
+            /// A fresh, time-ordered (v7) id.
+            pub fn new() -> Self {
+                Self(Uuid::now_v7())
+            }
+        }
+
+        impl Default for $name {
+            fn default() -> Self {
+                Self::new()
+            }
+        }
+
+        impl fmt::Display for $name {
+            fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+                self.0.hyphenated().fmt(f)
+            }
+        }
+
+        impl FromStr for $name {
+            type Err = uuid::Error;
+            fn from_str(s: &str) -> Result<Self, Self::Err> {
+                Uuid::parse_str(s).map(Self)
+            }
+        }
+    };
+}
+
+typed_id!(
+    /// A job's id: a UUID v7, so ids sort by creation time.
+    JobId
+);
+typed_id!(
+    /// A song's id: a UUID v7; the stored file is named by it, never by the upload's name.
+    SongId
+);
+
+/// Where a job is in its life.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Status {
+    Queued,
+    Running,
+    Succeeded,
+    Failed,
+    Cancelled,
+}
+
+impl Status {
+    /// Every status, in life order.
+    pub const ALL: [Status; 5] = [Status::Queued, Status::Running, Status::Succeeded, Status::Failed, Status::Cancelled];
+
+    /// The lowercase name stored in the database and shown by the API.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Status::Queued => "queued",
+            Status::Running => "running",
+            Status::Succeeded => "succeeded",
+            Status::Failed => "failed",
+            Status::Cancelled => "cancelled",
+        }
+    }
+
+    /// Whether the job will never change again.
+    pub fn is_terminal(self) -> bool {
+        match self {
+            Status::Queued | Status::Running => false,
+            Status::Succeeded | Status::Failed | Status::Cancelled => true,
+        }
+    }
+}
+
+impl fmt::Display for Status {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A status name that is not one of [`Status::ALL`].
+#[derive(Debug, thiserror::Error)]
+#[error("unknown status {0:?}; use one of queued, running, succeeded, failed, cancelled")]
+pub struct UnknownStatus(pub String);
+
+impl FromStr for Status {
+    type Err = UnknownStatus;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Status::ALL.into_iter().find(|status| status.as_str() == s).ok_or_else(|| UnknownStatus(s.to_string()))
+    }
+}
+
+/// A motion a dance should continue from: world joint positions in metres, y up.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct SeedMotion {
+    /// Frames per second of `positions`.
+    pub fps: f64,
+    /// `T × J × [x, y, z]`, in the skeleton's joint order.
+    pub positions: Vec<Vec<[f64; 3]>>,
+}
+
+/// The options of a generate job, as submitted.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct GenerateOptions {
+    pub song_id: SongId,
+    pub model: ModelId,
+    /// Seeds every random draw of the model.
+    pub seed: u64,
+    #[serde(default)]
+    pub key_poses: Vec<KeyPose>,
+    #[serde(default)]
+    pub seed_motion: Option<SeedMotion>,
+}
+
+/// What a job does; each kind carries its own options.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "lowercase")]
+pub enum JobKind {
+    /// Tempo, beats and downbeats of a newly uploaded song.
+    Analyze { song_id: SongId },
+    /// A dance for a song from a model.
+    Generate(GenerateOptions),
+}
+
+impl JobKind {
+    /// The kind's name, as stored and labelled in metrics.
+    pub fn name(&self) -> &'static str {
+        match self {
+            JobKind::Analyze { .. } => "analyze",
+            JobKind::Generate(_) => "generate",
+        }
+    }
+
+    /// The song the job works on.
+    pub fn song_id(&self) -> SongId {
+        match self {
+            JobKind::Analyze { song_id } => *song_id,
+            JobKind::Generate(options) => options.song_id,
+        }
+    }
+
+    /// The model a generate job uses.
+    pub fn model(&self) -> Option<&ModelId> {
+        match self {
+            JobKind::Analyze { .. } => None,
+            JobKind::Generate(options) => Some(&options.model),
+        }
+    }
+}
+
+/// The files a succeeded generate job wrote, relative to its result dir.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct JobFiles {
+    pub files: Vec<String>,
+}
+
+/// What a job produced when it succeeded.
+#[derive(Clone, Debug)]
+pub enum Outcome {
+    /// An analyze job's result, stored on its song.
+    Analysis(Analysis),
+    /// A generate job's result files.
+    Files(JobFiles),
+}
+
+/// One job, as stored.
+#[derive(Clone, Debug)]
+pub struct Job {
+    pub id: JobId,
+    pub kind: JobKind,
+    pub status: Status,
+    /// Short name of what the job is doing now.
+    pub stage: Option<String>,
+    /// 0..=1 within the whole job.
+    pub progress: f64,
+    pub priority: i64,
+    pub attempts: u32,
+    pub max_attempts: u32,
+    pub cancel_requested: bool,
+    /// The last error, kept across retries.
+    pub error: Option<String>,
+    pub files: JobFiles,
+    pub created_at: DateTime<Utc>,
+    pub started_at: Option<DateTime<Utc>>,
+    pub finished_at: Option<DateTime<Utc>>,
+}
+
+/// A job to be registered.
+#[derive(Clone, Debug)]
+pub struct NewJob {
+    pub kind: JobKind,
+    pub priority: i64,
+    pub max_attempts: u32,
+    /// The client's `Idempotency-Key` and a hash of its request.
+    pub idempotency: Option<Idempotency>,
+}
+
+/// An `Idempotency-Key` with the hash of the request it was first used for.
+#[derive(Clone, Debug)]
+pub struct Idempotency {
+    pub key: String,
+    pub request_hash: String,
+}
+
+/// Whether [`JobStore::register`] made a new job or found the one an idempotency key named.
+#[derive(Clone, Debug)]
+pub enum Registered {
+    Created(Job),
+    Existing(Job),
+}
+
+impl Registered {
+    /// The job, new or existing.
+    pub fn job(&self) -> &Job {
+        match self {
+            Registered::Created(job) | Registered::Existing(job) => job,
+        }
+    }
+}
+
+/// What a heartbeat learned.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Beat {
+    /// Still ours; `cancel_requested` tells the worker to stop at its next checkpoint.
+    Held { cancel_requested: bool },
+    /// The lease expired and the job went back to the queue (or elsewhere); stop working on it.
+    Lost,
+}
+
+/// The filter and page of `GET /v1/jobs`.
+#[derive(Clone, Debug, Default)]
+pub struct JobFilter {
+    pub status: Option<Status>,
+    pub model: Option<String>,
+    /// Return jobs older than this one (the cursor).
+    pub before: Option<JobId>,
+    pub limit: u32,
+}
+
+/// What [`JobStore::requeue_expired`] did.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Requeued {
+    pub requeued: Vec<JobId>,
+    pub failed: Vec<JobId>,
+    pub cancelled: Vec<JobId>,
+}
+
+/// How long a lease lasts and how retries back off.
+#[derive(Clone, Copy, Debug)]
+pub struct LeasePolicy {
+    pub lease: Duration,
+    /// First retry delay; doubles each attempt.
+    pub backoff: Duration,
+}
+
+/// An uploaded song, as stored.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Song {
+    pub id: SongId,
+    /// The upload's own name, for display only.
+    pub filename: String,
+    pub format: AudioFormat,
+    pub duration_s: f64,
+    pub sample_rate: u32,
+    pub channels: u16,
+    pub sha256: String,
+    pub size_bytes: u64,
+    pub analysis: Option<Analysis>,
+    pub created_at: DateTime<Utc>,
+}
+
+/// A future returned by a store.
+pub type StoreFuture<'a, T> = BoxFuture<'a, Result<T, QueueError>>;
+
+/// The job queue.
+pub trait JobStore: Send + Sync {
+    /// Creates a queued job, or returns the one its idempotency key already made.
+    fn register(&self, job: NewJob) -> StoreFuture<'_, Registered>;
+    /// Atomically takes the next runnable job, leasing it to `owner`.
+    fn claim<'a>(&'a self, owner: &'a str, policy: LeasePolicy) -> StoreFuture<'a, Option<Job>>;
+    /// Extends `owner`'s lease and records progress.
+    fn heartbeat<'a>(
+        &'a self,
+        id: JobId,
+        owner: &'a str,
+        stage: &'a str,
+        progress: f64,
+        policy: LeasePolicy,
+    ) -> StoreFuture<'a, Beat>;
+    /// Marks the job succeeded; `false` when `owner` no longer holds it (nothing changes then).
+    fn complete<'a>(&'a self, id: JobId, owner: &'a str, outcome: Outcome) -> StoreFuture<'a, bool>;
+    /// Records a failed attempt: requeued with backoff when `retry` and attempts remain,
+    /// failed otherwise. `false` when `owner` no longer holds the job.
+    fn fail<'a>(&'a self, id: JobId, owner: &'a str, error: &'a str, retry: bool, policy: LeasePolicy) -> StoreFuture<'a, bool>;
+    /// Marks a running job cancelled after its worker stopped at a checkpoint.
+    fn finish_cancelled<'a>(&'a self, id: JobId, owner: &'a str) -> StoreFuture<'a, bool>;
+    /// Cancels a queued job at once, or asks a running one to stop; returns the job after.
+    fn cancel(&self, id: JobId) -> StoreFuture<'_, Job>;
+    /// Requeues (or fails, past `max_attempts`) running jobs whose lease has expired.
+    fn requeue_expired(&self, policy: LeasePolicy) -> StoreFuture<'_, Requeued>;
+    /// One job.
+    fn job(&self, id: JobId) -> StoreFuture<'_, Job>;
+    /// Jobs, newest first.
+    fn jobs(&self, filter: JobFilter) -> StoreFuture<'_, Vec<Job>>;
+    /// Job counts by status.
+    fn counts(&self) -> StoreFuture<'_, Vec<(Status, u64)>>;
+    /// Whether the database answers.
+    fn ping(&self) -> StoreFuture<'_, ()>;
+}
+
+/// The song catalogue.
+pub trait SongStore: Send + Sync {
+    /// Stores a new song with its analyze job in one transaction; when a song with the same
+    /// sha256 exists, returns it and stores nothing (`false`).
+    fn add_song(&self, song: Song, analyze: NewJob) -> StoreFuture<'_, (Song, bool)>;
+    /// One song.
+    fn song(&self, id: SongId) -> StoreFuture<'_, Song>;
+    /// The song with these bytes, if uploaded before.
+    fn song_by_sha256<'a>(&'a self, sha256: &'a str) -> StoreFuture<'a, Option<Song>>;
+    /// The latest analyze job of a song.
+    fn analyze_job(&self, song: SongId) -> StoreFuture<'_, Option<Job>>;
+}
+
+/// Everything the service stores.
+pub trait Store: JobStore + SongStore {}
+
+impl<T: JobStore + SongStore> Store for T {}

@@ -1,1 +1,363 @@
 //! Workers: claim jobs, run them on blocking threads, heartbeat, report progress.
+//!
+//! Each of the N workers is a tokio task that loops: claim a job (one atomic statement), run
+//! its [`Execute`] on a blocking thread with one libtorch intra-op thread, and write the outcome
+//! back. While the job runs, a heartbeat task extends the lease, copies stage and progress to
+//! the job row, and reads back `cancel_requested`; the job sees that flag at its next
+//! [`Progress::report`] checkpoint. A panic inside a job fails that job and the worker goes on.
+use crate::audio::AudioError;
+use crate::models::{Cancelled, ModelError, ModelId, Progress, Registry};
+use crate::queue::{Beat, DataDir, Job, JobStore, LeasePolicy, Outcome, QueueError, Song, Store};
+use crate::telemetry;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use tokio::sync::Notify;
+use tokio::task::JoinHandle;
+use tokio_util::sync::CancellationToken;
+use tracing::Instrument;
+
+pub mod pipeline;
+
+pub use pipeline::Pipeline;
+
+/// Errors that end a job attempt.
+#[derive(Debug, thiserror::Error)]
+pub enum WorkerError {
+    #[error("queue: {0}")]
+    Queue(#[from] QueueError),
+    #[error("audio: {0}")]
+    Audio(#[from] AudioError),
+    #[error("model: {0}")]
+    Model(ModelError),
+    #[error("model {} is not available on this server", .0.0)]
+    ModelUnavailable(ModelId),
+    #[error("invalid job options: {0}")]
+    InvalidOptions(String),
+    #[error("writing results: {0}")]
+    Io(#[from] std::io::Error),
+    #[error("{0}")]
+    Export(String),
+    #[error("cancelled")]
+    Cancelled,
+    #[error("the job panicked: {0}")]
+    Panicked(String),
+}
+
+impl From<ModelError> for WorkerError {
+    fn from(e: ModelError) -> Self {
+        match e {
+            ModelError::Cancelled(_) => WorkerError::Cancelled,
+            other => WorkerError::Model(other),
+        }
+    }
+}
+
+impl From<Cancelled> for WorkerError {
+    fn from(_: Cancelled) -> Self {
+        WorkerError::Cancelled
+    }
+}
+
+impl WorkerError {
+    /// Stable kebab-case name of the failure.
+    pub fn code(&self) -> &'static str {
+        match self {
+            WorkerError::Queue(e) => e.code(),
+            WorkerError::Audio(e) => e.code(),
+            WorkerError::Model(_) => "model-failed",
+            WorkerError::ModelUnavailable(_) => "model-unavailable",
+            WorkerError::InvalidOptions(_) => "invalid-job-options",
+            WorkerError::Io(_) => "result-io",
+            WorkerError::Export(_) => "export-failed",
+            WorkerError::Cancelled => "cancelled",
+            WorkerError::Panicked(_) => "job-panicked",
+        }
+    }
+
+    /// Whether another attempt may succeed; deterministic failures are not retried.
+    pub fn is_retryable(&self) -> bool {
+        match self {
+            WorkerError::Queue(e) => e.is_retryable(),
+            WorkerError::Audio(e) => !e.is_client_error(),
+            WorkerError::Model(_) => false,
+            WorkerError::ModelUnavailable(_) => false,
+            WorkerError::InvalidOptions(_) => false,
+            WorkerError::Io(_) => true,
+            WorkerError::Export(_) => false,
+            WorkerError::Cancelled => false,
+            WorkerError::Panicked(_) => false,
+        }
+    }
+}
+
+/// Runs one job's work on a blocking thread. The service uses [`Pipeline`].
+pub trait Execute: Send + Sync + 'static {
+    /// Does the work of `job` on `song`, reporting through `progress`.
+    fn execute(&self, job: &Job, song: &Song, progress: &mut dyn Progress) -> Result<Outcome, WorkerError>;
+}
+
+/// What every worker shares.
+#[derive(Clone)]
+pub struct Context {
+    pub store: Arc<dyn Store>,
+    pub executor: Arc<dyn Execute>,
+    pub policy: LeasePolicy,
+    /// How often a running job heartbeats and flushes progress.
+    pub heartbeat: Duration,
+    /// How often an idle worker looks for work when not woken.
+    pub poll: Duration,
+    /// Woken when a job is registered, so idle workers claim it at once.
+    pub wake: Arc<Notify>,
+}
+
+/// The live state of one running job, shared by its blocking thread and its heartbeat task.
+#[derive(Debug, Default)]
+struct JobState {
+    stage_progress: Mutex<(String, f64)>,
+    cancel: AtomicBool,
+    lease_lost: AtomicBool,
+}
+
+impl JobState {
+    fn snapshot(&self) -> (String, f64) {
+        match self.stage_progress.lock() {
+            Ok(guard) => guard.clone(),
+            Err(poisoned) => poisoned.into_inner().clone(),
+        }
+    }
+}
+
+/// The worker's [`Progress`]: records stage and overall progress, answers cancellation.
+pub struct JobProgress {
+    state: Arc<JobState>,
+}
+
+impl Progress for JobProgress {
+    fn report(&mut self, stage: &str, fraction: f32) -> Result<(), Cancelled> {
+        {
+            let mut guard = match self.state.stage_progress.lock() {
+                Ok(guard) => guard,
+                Err(poisoned) => poisoned.into_inner(),
+            };
+            guard.0.clear();
+            guard.0.push_str(stage);
+            // Stages report their own 0..1; the job's progress never goes backwards.
+            let fraction = f64::from(fraction);
+            if fraction.is_finite() {
+                guard.1 = guard.1.max(fraction.clamp(0.0, 1.0));
+            }
+        }
+        if self.state.cancel.load(Ordering::Relaxed) {
+            Err(Cancelled)
+        } else {
+            Ok(())
+        }
+    }
+}
+
+/// A unique name for this process's workers, stored as the lease owner.
+fn owner_prefix() -> String {
+    format!("{}-{}", std::process::id(), &uuid::Uuid::now_v7().simple().to_string()[24..])
+}
+
+/// Starts `count` workers and the lease reaper; they stop when `shutdown` is cancelled.
+pub fn start(ctx: Context, count: usize, shutdown: CancellationToken) -> Vec<JoinHandle<()>> {
+    let prefix = owner_prefix();
+    let mut handles: Vec<JoinHandle<()>> = (0..count)
+        .map(|n| {
+            let owner = format!("{prefix}-w{n}");
+            let span = tracing::info_span!("worker", worker = %owner);
+            tokio::spawn(worker_loop(ctx.clone(), owner, shutdown.clone()).instrument(span))
+        })
+        .collect();
+    handles.push(tokio::spawn(reaper(ctx, shutdown)));
+    handles
+}
+
+/// Requeues jobs whose lease expired (their worker died), every half lease.
+async fn reaper(ctx: Context, shutdown: CancellationToken) {
+    let every = (ctx.policy.lease / 2).max(Duration::from_millis(100));
+    loop {
+        tokio::select! {
+            _ = shutdown.cancelled() => return,
+            _ = tokio::time::sleep(every) => {}
+        }
+        match ctx.store.requeue_expired(ctx.policy).await {
+            Ok(done) => {
+                if !done.requeued.is_empty() {
+                    tracing::warn!(jobs = ?done.requeued, "requeued jobs whose lease expired");
+                    ctx.wake.notify_waiters();
+                }
+                if !done.failed.is_empty() {
+                    tracing::warn!(jobs = ?done.failed, "failed jobs whose lease expired on their last attempt");
+                }
+            }
+            Err(e) => tracing::error!(error = %e, "requeueing expired leases failed; retrying next round"),
+        }
+    }
+}
+
+async fn worker_loop(ctx: Context, owner: String, shutdown: CancellationToken) {
+    tracing::debug!("worker started");
+    while !shutdown.is_cancelled() {
+        // Register interest before claiming, so a job registered in between still wakes us.
+        let woken = ctx.wake.notified();
+        match ctx.store.claim(&owner, ctx.policy).await {
+            Ok(Some(job)) => {
+                let span = tracing::info_span!("job", job_id = %job.id, kind = job.kind.name(), attempt = job.attempts);
+                run_job(&ctx, &owner, job, &shutdown).instrument(span).await;
+            }
+            Ok(None) => {
+                tokio::select! {
+                    _ = shutdown.cancelled() => {}
+                    _ = woken => {}
+                    _ = tokio::time::sleep(ctx.poll) => {}
+                }
+            }
+            Err(e) => {
+                tracing::error!(error = %e, "claiming a job failed; retrying after the poll interval");
+                tokio::select! {
+                    _ = shutdown.cancelled() => {}
+                    _ = tokio::time::sleep(ctx.poll) => {}
+                }
+            }
+        }
+    }
+    tracing::debug!("worker stopped");
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    if let Some(s) = payload.downcast_ref::<&str>() {
+        (*s).to_string()
+    } else if let Some(s) = payload.downcast_ref::<String>() {
+        s.clone()
+    } else {
+        "a panic without a message".to_string()
+    }
+}
+
+async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationToken) {
+    let started = Instant::now();
+    let kind = job.kind.name();
+    metrics::gauge!(telemetry::BUSY_WORKERS).increment(1.0);
+    tracing::info!("job started");
+
+    let state = Arc::new(JobState::default());
+    let done = CancellationToken::new();
+    let heartbeat = tokio::spawn(heartbeat_loop(ctx.clone(), owner.to_string(), job.id, state.clone(), done.clone(), shutdown.clone()));
+
+    let result = match ctx.store.song(job.kind.song_id()).await {
+        Err(e) => Err(WorkerError::Queue(e)),
+        Ok(song) => {
+            let executor = ctx.executor.clone();
+            let mut progress = JobProgress { state: state.clone() };
+            let job = job.clone();
+            let work = tokio::task::spawn_blocking(move || {
+                // One intra-op thread per worker, so N workers never oversubscribe N cores.
+                tch::set_num_threads(1);
+                executor.execute(&job, &song, &mut progress)
+            });
+            match work.await {
+                Ok(result) => result,
+                Err(e) if e.is_panic() => Err(WorkerError::Panicked(panic_message(e.into_panic().as_ref()))),
+                Err(e) => Err(WorkerError::Panicked(format!("the job's thread was cancelled: {e}"))),
+            }
+        }
+    };
+    done.cancel();
+    if let Err(e) = heartbeat.await {
+        tracing::error!(error = %e, "heartbeat task ended abnormally");
+    }
+
+    let lost = state.lease_lost.load(Ordering::Relaxed);
+    let cancel_requested = state.cancel.load(Ordering::Relaxed) && !shutdown.is_cancelled();
+    let write = match &result {
+        Ok(outcome) => ctx.store.complete(job.id, owner, outcome.clone()).await.map(|held| (held, "succeeded")),
+        Err(WorkerError::Cancelled) if cancel_requested || lost => {
+            ctx.store.finish_cancelled(job.id, owner).await.map(|held| (held, "cancelled"))
+        }
+        Err(WorkerError::Cancelled) => ctx
+            .store
+            .fail(job.id, owner, "interrupted by a server shutdown", true, ctx.policy)
+            .await
+            .map(|held| (held, "interrupted")),
+        Err(e) => {
+            let message = format!("{} ({})", e, e.code());
+            ctx.store.fail(job.id, owner, &message, e.is_retryable(), ctx.policy).await.map(|held| (held, "failed"))
+        }
+    };
+    metrics::gauge!(telemetry::BUSY_WORKERS).decrement(1.0);
+    metrics::histogram!(telemetry::JOB_DURATION, "kind" => kind).record(started.elapsed().as_secs_f64());
+    match write {
+        Ok((true, outcome)) => {
+            metrics::counter!(telemetry::JOBS_FINISHED, "kind" => kind, "status" => outcome).increment(1);
+            match &result {
+                Ok(_) => tracing::info!(seconds = started.elapsed().as_secs_f64(), "job succeeded"),
+                Err(e) => tracing::warn!(error = %e, outcome, "job did not succeed"),
+            }
+        }
+        Ok((false, _)) => tracing::warn!("lease lost before the outcome was written; the queue owns the job now"),
+        Err(e) => tracing::error!(error = %e, "writing the job outcome failed; its lease will expire and it will be retried"),
+    }
+}
+
+async fn heartbeat_loop(
+    ctx: Context,
+    owner: String,
+    id: crate::queue::JobId,
+    state: Arc<JobState>,
+    done: CancellationToken,
+    shutdown: CancellationToken,
+) {
+    loop {
+        tokio::select! {
+            _ = done.cancelled() => return,
+            _ = shutdown.cancelled() => {
+                // Stop the job at its next checkpoint; it is requeued for the next start.
+                state.cancel.store(true, Ordering::Relaxed);
+                done.cancelled().await;
+                return;
+            }
+            _ = tokio::time::sleep(ctx.heartbeat) => {}
+        }
+        let (stage, progress) = state.snapshot();
+        match ctx.store.heartbeat(id, &owner, &stage, progress, ctx.policy).await {
+            Ok(Beat::Held { cancel_requested }) => {
+                if cancel_requested {
+                    state.cancel.store(true, Ordering::Relaxed);
+                }
+            }
+            Ok(Beat::Lost) => {
+                tracing::warn!("lease lost; stopping the job");
+                state.lease_lost.store(true, Ordering::Relaxed);
+                state.cancel.store(true, Ordering::Relaxed);
+                return;
+            }
+            Err(e) => tracing::warn!(error = %e, "heartbeat failed; the lease expires unless a later one succeeds"),
+        }
+    }
+}
+
+/// Builds the service's worker context.
+pub fn context(store: Arc<dyn Store>, registry: Arc<Registry>, data: DataDir, config: &crate::config::Config) -> Context {
+    Context {
+        store,
+        executor: Arc::new(Pipeline::new(registry, data)),
+        policy: LeasePolicy {
+            lease: Duration::from_secs_f64(config.lease_s),
+            backoff: Duration::from_secs_f64(config.retry_backoff_s),
+        },
+        heartbeat: Duration::from_secs_f64(config.heartbeat_s),
+        poll: Duration::from_secs_f64(config.poll_s),
+        wake: Arc::new(Notify::new()),
+    }
+}
+
+/// Requeues expired leases once; call at start-up before the workers begin.
+pub async fn recover(store: &dyn JobStore, policy: LeasePolicy) -> Result<crate::queue::Requeued, QueueError> {
+    store.requeue_expired(policy).await
+}
+
+#[cfg(test)]
+mod tests;

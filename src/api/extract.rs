@@ -1,0 +1,86 @@
+//! Extractors whose rejections are problem+json bodies naming the field at fault.
+use super::problem::ApiError;
+use axum::body::Bytes;
+use axum::extract::{FromRequest, FromRequestParts, Request};
+use axum::http::{header, request::Parts};
+use serde::de::DeserializeOwned;
+
+/// A JSON body; malformed JSON is a 400, a wrong field a 422 that names it.
+pub struct ApiJson<T>(pub T);
+
+/// Turns a serde error at `path` into the API error that names the field.
+pub fn json_error(path: String, error: serde_json::Error) -> ApiError {
+    use serde_json::error::Category;
+    match error.classify() {
+        Category::Syntax | Category::Eof | Category::Io => ApiError::MalformedJson(error.to_string()),
+        Category::Data => {
+            let message = error.to_string();
+            // serde names the offending key in backticks: "unknown field `x`, expected ...".
+            let quoted = message.split('`').nth(1).map(str::to_string);
+            let prefix = if path == "." { String::new() } else { format!("{path}.") };
+            if message.starts_with("unknown field") {
+                ApiError::UnknownField(format!("{prefix}{}", quoted.unwrap_or_default()))
+            } else if message.starts_with("missing field") {
+                ApiError::MissingField(format!("{prefix}{}", quoted.unwrap_or_default()))
+            } else {
+                // Drop serde_json's " at line 1 column 9" position suffix; the field is named.
+                let message = message.split(" at line ").next().unwrap_or(&message).to_string();
+                ApiError::InvalidField { field: path, message }
+            }
+        }
+    }
+}
+
+/// Parses JSON bytes into `T`, naming the field at fault on error.
+pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let value: T = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+        let path = e.path().to_string();
+        json_error(path, e.into_inner())
+    })?;
+    de.end().map_err(|e| ApiError::MalformedJson(e.to_string()))?;
+    Ok(value)
+}
+
+impl<S, T> FromRequest<S> for ApiJson<T>
+where
+    S: Send + Sync,
+    T: DeserializeOwned,
+{
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
+        let is_json = req
+            .headers()
+            .get(header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.split(';').next())
+            .is_some_and(|mime| {
+                let mime = mime.trim().to_ascii_lowercase();
+                mime == "application/json" || (mime.starts_with("application/") && mime.ends_with("+json"))
+            });
+        if !is_json {
+            return Err(ApiError::NotJson);
+        }
+        let bytes = Bytes::from_request(req, state).await.map_err(|e| ApiError::MalformedJson(e.body_text()))?;
+        parse_json(&bytes).map(ApiJson)
+    }
+}
+
+/// A query string; an unknown or malformed parameter is a 400 that says which.
+pub struct ApiQuery<T>(pub T);
+
+impl<S, T> FromRequestParts<S> for ApiQuery<T>
+where
+    S: Send + Sync,
+    T: DeserializeOwned,
+{
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, Self::Rejection> {
+        axum::extract::Query::<T>::from_request_parts(parts, state)
+            .await
+            .map(|q| ApiQuery(q.0))
+            .map_err(|e| ApiError::InvalidQuery(e.body_text()))
+    }
+}

@@ -1,0 +1,398 @@
+//! `/v1/jobs`: submit, read, list, cancel, and the result files.
+use super::extract::{ApiJson, ApiQuery};
+use super::problem::{ApiError, Problem};
+use super::AppState;
+use crate::models::ModelId;
+use crate::motion::{KeyPose, NUM_JOINTS};
+use crate::queue::files::RESULT_FILES;
+use crate::queue::{
+    GenerateOptions, Idempotency, Job, JobFilter, JobId, JobKind, NewJob, QueueError, Registered, SeedMotion, SongId, Status,
+};
+use axum::body::Body;
+use axum::extract::{Path, State};
+use axum::http::{header, HeaderMap, HeaderName, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use chrono::{DateTime, Utc};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::str::FromStr;
+
+/// The header that makes a submission safe to retry.
+pub const IDEMPOTENCY_KEY: HeaderName = HeaderName::from_static("idempotency-key");
+/// Set on a response that replays an earlier submission.
+pub const IDEMPOTENT_REPLAYED: HeaderName = HeaderName::from_static("idempotent-replayed");
+/// Default and largest page of `GET /v1/jobs`.
+const DEFAULT_LIMIT: u32 = 20;
+const MAX_LIMIT: u32 = 100;
+/// Priority bounds a client may ask for.
+const PRIORITY_RANGE: std::ops::RangeInclusive<i64> = -100..=100;
+/// Highest seed-motion frame rate accepted.
+const MAX_SEED_FPS: f64 = 240.0;
+
+/// A request for a dance.
+#[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
+pub struct CreateJob {
+    pub song_id: SongId,
+    /// A model id from `GET /v1/models`.
+    pub model: String,
+    /// Seeds every random draw; the same seed gives the same dance. Random when absent.
+    #[serde(default)]
+    pub seed: Option<u64>,
+    /// Poses the dance must pass through (models with the `key_poses` capability).
+    #[serde(default)]
+    pub key_poses: Vec<KeyPose>,
+    /// A motion to continue from (models with the `seed_motion` capability).
+    #[serde(default)]
+    pub seed_motion: Option<SeedMotion>,
+    /// Higher runs first; -100..=100, default 0.
+    #[serde(default)]
+    pub priority: Option<i64>,
+}
+
+/// Where to find a job and its results.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct Links {
+    #[serde(rename = "self")]
+    pub self_: String,
+    pub song: String,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motion_bvh: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motion_json: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub motion_glb: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub report: Option<String>,
+}
+
+/// A job as the API shows it.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct JobView {
+    pub id: JobId,
+    /// `analyze` or `generate`.
+    pub kind: String,
+    pub song_id: SongId,
+    pub model: Option<String>,
+    pub seed: Option<u64>,
+    pub status: Status,
+    /// What the job is doing now (`decode`, `analyze`, `model`, `export`, `done`).
+    pub stage: Option<String>,
+    /// 0..=1.
+    pub progress: f64,
+    pub priority: i64,
+    pub attempts: u32,
+    pub max_attempts: u32,
+    /// A cancel was asked for; a running job stops at its next checkpoint.
+    pub cancel_requested: bool,
+    /// The last error.
+    pub error: Option<String>,
+    pub created_at: DateTime<Utc>,
+    pub started_at: Option<DateTime<Utc>>,
+    pub finished_at: Option<DateTime<Utc>>,
+    pub links: Links,
+}
+
+impl From<Job> for JobView {
+    fn from(job: Job) -> Self {
+        let base = format!("/v1/jobs/{}", job.id);
+        let file = |name: &str| matches!(job.kind, JobKind::Generate(_)).then(|| format!("{base}/{name}"));
+        let links = Links {
+            song: format!("/v1/songs/{}", job.kind.song_id()),
+            motion_bvh: file("motion.bvh"),
+            motion_json: file("motion.json"),
+            motion_glb: file("motion.glb"),
+            report: file("report.json"),
+            self_: base.clone(),
+        };
+        let (model, seed) = match &job.kind {
+            JobKind::Analyze { .. } => (None, None),
+            JobKind::Generate(options) => (Some(options.model.0.clone()), Some(options.seed)),
+        };
+        JobView {
+            id: job.id,
+            kind: job.kind.name().to_string(),
+            song_id: job.kind.song_id(),
+            model,
+            seed,
+            status: job.status,
+            stage: job.stage,
+            progress: job.progress,
+            priority: job.priority,
+            attempts: job.attempts,
+            max_attempts: job.max_attempts,
+            cancel_requested: job.cancel_requested,
+            error: job.error,
+            created_at: job.created_at,
+            started_at: job.started_at,
+            finished_at: job.finished_at,
+            links,
+        }
+    }
+}
+
+/// A page of jobs.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct JobPage {
+    pub items: Vec<JobView>,
+    /// Pass as `cursor` for the next page; absent on the last page.
+    pub next_cursor: Option<String>,
+}
+
+/// Filters and page of `GET /v1/jobs`.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct ListQuery {
+    /// queued, running, succeeded, failed or cancelled.
+    pub status: Option<String>,
+    /// A model id.
+    pub model: Option<String>,
+    /// 1..=100, default 20.
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page.
+    pub cursor: Option<String>,
+}
+
+fn invalid(field: &str, message: impl Into<String>) -> ApiError {
+    ApiError::InvalidField { field: field.into(), message: message.into() }
+}
+
+fn check_key_poses(poses: &[KeyPose], duration_s: f64) -> Result<(), ApiError> {
+    for (i, pose) in poses.iter().enumerate() {
+        if !(pose.time_s.is_finite() && (0.0..=duration_s).contains(&pose.time_s)) {
+            return Err(invalid(&format!("key_poses[{i}].time_s"), format!("must be within the song, 0..={duration_s:.2} s")));
+        }
+        if pose.joints.len() != NUM_JOINTS {
+            return Err(invalid(&format!("key_poses[{i}].joints"), format!("must list {NUM_JOINTS} joints, got {}", pose.joints.len())));
+        }
+        if pose.joints.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(invalid(&format!("key_poses[{i}].joints"), "must be finite numbers"));
+        }
+    }
+    Ok(())
+}
+
+fn check_seed_motion(seed: &SeedMotion) -> Result<(), ApiError> {
+    if !(seed.fps.is_finite() && seed.fps > 0.0 && seed.fps <= MAX_SEED_FPS) {
+        return Err(invalid("seed_motion.fps", format!("must be in (0, {MAX_SEED_FPS}]")));
+    }
+    if seed.positions.is_empty() {
+        return Err(invalid("seed_motion.positions", "must have at least one frame"));
+    }
+    for (t, frame) in seed.positions.iter().enumerate() {
+        if frame.len() != NUM_JOINTS {
+            return Err(invalid(&format!("seed_motion.positions[{t}]"), format!("must list {NUM_JOINTS} joints, got {}", frame.len())));
+        }
+        if frame.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(invalid(&format!("seed_motion.positions[{t}]"), "must be finite numbers"));
+        }
+    }
+    Ok(())
+}
+
+fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempotency>, ApiError> {
+    let Some(value) = headers.get(&IDEMPOTENCY_KEY) else { return Ok(None) };
+    let key = value.to_str().map_err(|_| ApiError::InvalidIdempotencyKey)?;
+    if key.is_empty() || key.len() > 255 || !key.bytes().all(|b| b.is_ascii_graphic()) {
+        return Err(ApiError::InvalidIdempotencyKey);
+    }
+    let canonical = serde_json::to_vec(request).map_err(|e| ApiError::Internal(e.to_string()))?;
+    Ok(Some(Idempotency { key: key.to_string(), request_hash: hex::encode(Sha256::digest(&canonical)) }))
+}
+
+/// Submit a dance.
+///
+/// Returns 202 with the queued job. With an `Idempotency-Key`, the same key and body return
+/// the same job (with `Idempotent-Replayed: true`); the same key with another body is a 422.
+#[utoipa::path(
+    post,
+    path = "/v1/jobs",
+    tag = "jobs",
+    request_body = CreateJob,
+    params(("Idempotency-Key" = Option<String>, Header, description = "Makes retries safe: one job per key")),
+    responses(
+        (status = 202, description = "Job queued (or replayed)", body = JobView),
+        (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field is invalid, the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn create(
+    State(state): State<AppState>,
+    headers: HeaderMap,
+    ApiJson(mut request): ApiJson<CreateJob>,
+) -> Result<Response, ApiError> {
+    let idempotency = idempotency(&headers, &request)?;
+    let model_id = ModelId(request.model.clone());
+    let Some(model) = state.registry.get(&model_id) else {
+        let available = state.registry.list().into_iter().map(|m| m.id.0).collect();
+        return Err(ApiError::UnknownModel { model: request.model, available });
+    };
+    let song = match state.store.song(request.song_id).await {
+        Ok(song) => song,
+        Err(QueueError::SongNotFound(id)) => return Err(invalid("song_id", format!("song {id} does not exist; upload it first"))),
+        Err(e) => return Err(e.into()),
+    };
+    let capabilities = model.info().capabilities;
+    if !request.key_poses.is_empty() && !capabilities.key_poses {
+        return Err(invalid("key_poses", format!("model `{}` does not take key poses", request.model)));
+    }
+    if request.seed_motion.is_some() && !capabilities.seed_motion {
+        return Err(invalid("seed_motion", format!("model `{}` does not take a seed motion", request.model)));
+    }
+    check_key_poses(&request.key_poses, song.duration_s)?;
+    if let Some(seed) = &request.seed_motion {
+        check_seed_motion(seed)?;
+    }
+    let priority = request.priority.unwrap_or(0);
+    if !PRIORITY_RANGE.contains(&priority) {
+        return Err(invalid("priority", "must be within -100..=100"));
+    }
+    let seed = request.seed.unwrap_or_else(rand::random);
+    let job = NewJob {
+        kind: JobKind::Generate(GenerateOptions {
+            song_id: request.song_id,
+            model: model_id,
+            seed,
+            key_poses: std::mem::take(&mut request.key_poses),
+            seed_motion: request.seed_motion.take(),
+        }),
+        priority,
+        max_attempts: state.config.max_attempts,
+        idempotency,
+    };
+    let registered = state.store.register(job).await?;
+    let replayed = matches!(registered, Registered::Existing(_));
+    if !replayed {
+        state.wake.notify_waiters();
+    }
+    let job = match registered {
+        Registered::Created(job) | Registered::Existing(job) => job,
+    };
+    let mut response = (StatusCode::ACCEPTED, Json(JobView::from(job))).into_response();
+    if replayed {
+        response.headers_mut().insert(IDEMPOTENT_REPLAYED, HeaderValue::from_static("true"));
+    }
+    Ok(response)
+}
+
+fn parse_job_id(id: &str) -> Result<JobId, ApiError> {
+    JobId::from_str(id).map_err(|_| ApiError::JobNotFound(format!("{id:?} is not a job id")))
+}
+
+/// A job's status, stage and progress.
+#[utoipa::path(
+    get,
+    path = "/v1/jobs/{id}",
+    tag = "jobs",
+    params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The job", body = JobView),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn get(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<JobView>, ApiError> {
+    let job = state.store.job(parse_job_id(&id)?).await?;
+    Ok(Json(job.into()))
+}
+
+/// Jobs, newest first, filtered by status and model, a page at a time.
+#[utoipa::path(
+    get,
+    path = "/v1/jobs",
+    tag = "jobs",
+    params(ListQuery),
+    responses(
+        (status = 200, description = "A page of jobs", body = JobPage),
+        (status = 400, description = "Bad query parameter", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Bad filter value", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn list(State(state): State<AppState>, ApiQuery(query): ApiQuery<ListQuery>) -> Result<Json<JobPage>, ApiError> {
+    let status = query.status.as_deref().map(Status::from_str).transpose().map_err(|e| invalid("status", e.to_string()))?;
+    let limit = query.limit.unwrap_or(DEFAULT_LIMIT);
+    if !(1..=MAX_LIMIT).contains(&limit) {
+        return Err(invalid("limit", format!("must be within 1..={MAX_LIMIT}")));
+    }
+    let before = query
+        .cursor
+        .as_deref()
+        .map(JobId::from_str)
+        .transpose()
+        .map_err(|_| invalid("cursor", "must be the next_cursor of a previous page"))?;
+    // One extra row tells whether another page exists.
+    let mut jobs = state.store.jobs(JobFilter { status, model: query.model, before, limit: limit + 1 }).await?;
+    let more = jobs.len() > limit as usize;
+    jobs.truncate(limit as usize);
+    let next_cursor = if more { jobs.last().map(|j| j.id.to_string()) } else { None };
+    Ok(Json(JobPage { items: jobs.into_iter().map(JobView::from).collect(), next_cursor }))
+}
+
+/// Cancel a job: a queued one at once, a running one at its next progress checkpoint.
+#[utoipa::path(
+    delete,
+    path = "/v1/jobs/{id}",
+    tag = "jobs",
+    params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 202, description = "Cancelled, or cancellation requested (status running, cancel_requested true)", body = JobView),
+        (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "The job already succeeded or failed", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn cancel(State(state): State<AppState>, Path(id): Path<String>) -> Result<(StatusCode, Json<JobView>), ApiError> {
+    let job = state.store.cancel(parse_job_id(&id)?).await?;
+    match job.status {
+        Status::Succeeded | Status::Failed => Err(ApiError::AlreadyFinished { id: job.id, status: job.status }),
+        Status::Queued | Status::Running | Status::Cancelled => Ok((StatusCode::ACCEPTED, Json(job.into()))),
+    }
+}
+
+fn content_type(file: &str) -> &'static str {
+    match file.rsplit('.').next() {
+        Some("json") => "application/json",
+        Some("glb") => "model/gltf-binary",
+        _ => "text/plain; charset=utf-8",
+    }
+}
+
+/// A result file of a succeeded generate job.
+#[utoipa::path(
+    get,
+    path = "/v1/jobs/{id}/{file}",
+    tag = "jobs",
+    params(
+        ("id" = String, Path, description = "Job id"),
+        ("file" = String, Path, description = "motion.bvh, motion.json, motion.glb or report.json"),
+    ),
+    responses(
+        (status = 200, description = "The file"),
+        (status = 404, description = "No such job or file", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "The job has not succeeded (yet); the body gives its status", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn result(State(state): State<AppState>, Path((id, file)): Path<(String, String)>) -> Result<Response, ApiError> {
+    let Some(name) = RESULT_FILES.iter().find(|f| **f == file) else {
+        return Err(ApiError::ResultNotFound(format!("no result named {file:?}; jobs have {}", RESULT_FILES.join(", "))));
+    };
+    let job = state.store.job(parse_job_id(&id)?).await?;
+    if let JobKind::Analyze { song_id } = job.kind {
+        return Err(ApiError::ResultNotFound(format!("analyze jobs write no files; the analysis is on /v1/songs/{song_id}")));
+    }
+    if job.status != Status::Succeeded {
+        return Err(ApiError::JobNotFinished { id: job.id, status: job.status });
+    }
+    if !job.files.files.iter().any(|f| f == name) {
+        return Err(ApiError::ResultNotFound(format!("job {} did not write {name}", job.id)));
+    }
+    let path = state.data.job_dir(job.id).join(name);
+    let bytes = tokio::fs::read(&path).await.map_err(|e| ApiError::Internal(format!("reading {name} of job {}: {e}", job.id)))?;
+    Ok(([(header::CONTENT_TYPE, content_type(name))], Body::from(bytes)).into_response())
+}

@@ -1,0 +1,225 @@
+//! RFC 9457 problem+json errors: every failure has a stable `code` and says what to fix.
+use crate::audio::AudioError;
+use crate::queue::{JobId, QueueError, Status};
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use serde::Serialize;
+
+/// The media type of problem bodies.
+pub const PROBLEM_JSON: &str = "application/problem+json";
+
+/// An RFC 9457 problem body.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct Problem {
+    /// Always `about:blank`: `code` names the problem.
+    #[serde(rename = "type")]
+    pub type_: String,
+    /// The HTTP status phrase.
+    pub title: String,
+    pub status: u16,
+    /// What went wrong and what to fix.
+    pub detail: String,
+    /// Stable kebab-case name of the problem, for clients to match on.
+    pub code: String,
+    /// The request field at fault, when there is one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+    /// The job's status, for results asked for too early.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub job_status: Option<Status>,
+    /// The models this server has, for an unknown model.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub available_models: Option<Vec<String>>,
+}
+
+/// Every error the API answers with.
+#[derive(Debug, thiserror::Error)]
+pub enum ApiError {
+    #[error("the body is not valid JSON: {0}")]
+    MalformedJson(String),
+    #[error("send the body as JSON with `Content-Type: application/json`")]
+    NotJson,
+    #[error("`{field}`: {message}")]
+    InvalidField { field: String, message: String },
+    #[error("unknown field `{0}`; remove it")]
+    UnknownField(String),
+    #[error("missing field `{0}`")]
+    MissingField(String),
+    #[error("invalid query string: {0}")]
+    InvalidQuery(String),
+    #[error("the upload is not a valid multipart/form-data body: {0}")]
+    InvalidMultipart(String),
+    #[error("send the song as a multipart/form-data field named `file`")]
+    MissingFile,
+    #[error("unexpected multipart field `{0}`; send only one field, named `file`")]
+    UnexpectedField(String),
+    #[error("the uploaded file is empty")]
+    EmptyFile,
+    #[error("the file is larger than the {limit} byte limit")]
+    FileTooLarge { limit: u64 },
+    #[error("the song is {seconds:.1} s long; the limit is {limit:.0} s")]
+    SongTooLong { seconds: f64, limit: f64 },
+    #[error("the file name {0:?} is not allowed: give a plain name without path separators, `..` or control characters")]
+    InvalidFilename(String),
+    #[error("{0}")]
+    Audio(AudioError),
+    #[error("song {0} does not exist")]
+    SongNotFound(String),
+    #[error("{0}")]
+    JobNotFound(String),
+    #[error("model `{model}` is not available; use one of the available models")]
+    UnknownModel { model: String, available: Vec<String> },
+    #[error("job {id} is {status}; results exist once it has succeeded")]
+    JobNotFinished { id: JobId, status: Status },
+    #[error("{0}")]
+    ResultNotFound(String),
+    #[error("job {id} already {status}; it can no longer be cancelled")]
+    AlreadyFinished { id: JobId, status: Status },
+    #[error("the Idempotency-Key was already used for a different request (job {0}); use a new key")]
+    IdempotencyConflict(JobId),
+    #[error("the Idempotency-Key header must be 1 to 255 visible ASCII characters")]
+    InvalidIdempotencyKey,
+    #[error("send `Authorization: Bearer <token>` with the server's token")]
+    Unauthorized,
+    #[error("no route for this path; see /docs")]
+    NoRoute,
+    #[error("this method is not allowed on this path; see /docs")]
+    MethodNotAllowed,
+    #[error("the server is not ready: {0}")]
+    NotReady(String),
+    #[error("internal error: {0}")]
+    Internal(String),
+}
+
+impl ApiError {
+    /// Stable kebab-case code.
+    pub fn code(&self) -> &str {
+        match self {
+            ApiError::MalformedJson(_) => "malformed-json",
+            ApiError::NotJson => "not-json",
+            ApiError::InvalidField { .. } => "invalid-field",
+            ApiError::UnknownField(_) => "unknown-field",
+            ApiError::MissingField(_) => "missing-field",
+            ApiError::InvalidQuery(_) => "invalid-query",
+            ApiError::InvalidMultipart(_) => "invalid-multipart",
+            ApiError::MissingFile => "missing-file-field",
+            ApiError::UnexpectedField(_) => "unexpected-multipart-field",
+            ApiError::EmptyFile => "empty-file",
+            ApiError::FileTooLarge { .. } => "file-too-large",
+            ApiError::SongTooLong { .. } => "song-too-long",
+            ApiError::InvalidFilename(_) => "invalid-filename",
+            ApiError::Audio(e) => e.code(),
+            ApiError::SongNotFound(_) => "song-not-found",
+            ApiError::JobNotFound(_) => "job-not-found",
+            ApiError::UnknownModel { .. } => "unknown-model",
+            ApiError::JobNotFinished { .. } => "job-not-finished",
+            ApiError::ResultNotFound(_) => "result-not-found",
+            ApiError::AlreadyFinished { .. } => "job-already-finished",
+            ApiError::IdempotencyConflict(_) => "idempotency-key-reused",
+            ApiError::InvalidIdempotencyKey => "invalid-idempotency-key",
+            ApiError::Unauthorized => "unauthorized",
+            ApiError::NoRoute => "not-found",
+            ApiError::MethodNotAllowed => "method-not-allowed",
+            ApiError::NotReady(_) => "not-ready",
+            ApiError::Internal(_) => "internal",
+        }
+    }
+
+    /// The HTTP status.
+    pub fn status(&self) -> StatusCode {
+        match self {
+            ApiError::MalformedJson(_) => StatusCode::BAD_REQUEST,
+            ApiError::NotJson => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            ApiError::InvalidField { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::UnknownField(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::MissingField(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::InvalidQuery(_) => StatusCode::BAD_REQUEST,
+            ApiError::InvalidMultipart(_) => StatusCode::BAD_REQUEST,
+            ApiError::MissingFile => StatusCode::BAD_REQUEST,
+            ApiError::UnexpectedField(_) => StatusCode::BAD_REQUEST,
+            ApiError::EmptyFile => StatusCode::BAD_REQUEST,
+            ApiError::FileTooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            ApiError::SongTooLong { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::InvalidFilename(_) => StatusCode::BAD_REQUEST,
+            ApiError::Audio(AudioError::Undecodable(_)) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            ApiError::Audio(e) if e.is_client_error() => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::Audio(_) => StatusCode::INTERNAL_SERVER_ERROR,
+            ApiError::SongNotFound(_) => StatusCode::NOT_FOUND,
+            ApiError::JobNotFound(_) => StatusCode::NOT_FOUND,
+            ApiError::UnknownModel { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::JobNotFinished { .. } => StatusCode::CONFLICT,
+            ApiError::ResultNotFound(_) => StatusCode::NOT_FOUND,
+            ApiError::AlreadyFinished { .. } => StatusCode::CONFLICT,
+            ApiError::IdempotencyConflict(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::InvalidIdempotencyKey => StatusCode::BAD_REQUEST,
+            ApiError::Unauthorized => StatusCode::UNAUTHORIZED,
+            ApiError::NoRoute => StatusCode::NOT_FOUND,
+            ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
+            ApiError::NotReady(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+        }
+    }
+
+    /// The problem body.
+    pub fn problem(&self) -> Problem {
+        let status = self.status();
+        let mut problem = Problem {
+            type_: "about:blank".into(),
+            title: status.canonical_reason().unwrap_or("Error").into(),
+            status: status.as_u16(),
+            detail: self.to_string(),
+            code: self.code().into(),
+            field: None,
+            job_status: None,
+            available_models: None,
+        };
+        match self {
+            ApiError::InvalidField { field, .. } | ApiError::UnknownField(field) | ApiError::MissingField(field) => {
+                problem.field = Some(field.clone());
+            }
+            ApiError::MissingFile | ApiError::EmptyFile | ApiError::InvalidFilename(_) => problem.field = Some("file".into()),
+            ApiError::UnknownModel { available, .. } => {
+                problem.field = Some("model".into());
+                problem.available_models = Some(available.clone());
+                problem.detail = format!(
+                    "{self}: [{}]{}",
+                    available.join(", "),
+                    if available.is_empty() { " (no model is trained on this server yet)" } else { "" }
+                );
+            }
+            ApiError::JobNotFinished { status, .. } | ApiError::AlreadyFinished { status, .. } => {
+                problem.job_status = Some(*status);
+            }
+            _ => {}
+        }
+        problem
+    }
+}
+
+impl From<QueueError> for ApiError {
+    fn from(e: QueueError) -> Self {
+        match e {
+            QueueError::SongNotFound(id) => ApiError::SongNotFound(id.to_string()),
+            QueueError::JobNotFound(id) => ApiError::JobNotFound(format!("job {id} does not exist")),
+            QueueError::IdempotencyConflict(id) => ApiError::IdempotencyConflict(id),
+            other @ (QueueError::Database(_) | QueueError::Migrate(_) | QueueError::Corrupt(_)) => {
+                ApiError::Internal(other.to_string())
+            }
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let status = self.status();
+        if status.is_server_error() {
+            tracing::error!(code = self.code(), error = %self, "request failed");
+        }
+        let mut response = (status, axum::Json(self.problem())).into_response();
+        response.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
+        if matches!(self, ApiError::Unauthorized) {
+            response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+        }
+        response
+    }
+}

@@ -1,0 +1,265 @@
+//! `POST /v1/songs` and `GET /v1/songs/{id}`.
+//!
+//! An upload streams to a temp file inside the data dir while its size is checked and its
+//! sha256 computed; it is decoded with symphonia (the format comes from decoding, never the
+//! name), renamed into place under its id, and an analyze job is queued in the same transaction
+//! that records the song.
+use super::problem::{ApiError, Problem};
+use super::AppState;
+use crate::audio::{self, Analysis, AudioFormat};
+use crate::queue::{JobKind, NewJob, Song, SongId, Status};
+use axum::extract::multipart::{Field, Multipart, MultipartRejection};
+use axum::extract::{Path, State};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
+use axum::Json;
+use chrono::{DateTime, Utc};
+use serde::Serialize;
+use sha2::{Digest, Sha256};
+use std::str::FromStr;
+use tokio::io::AsyncWriteExt;
+
+/// Longest accepted upload file name, in bytes.
+const MAX_FILENAME_BYTES: usize = 255;
+
+/// A song and, once its analyze job is done, its analysis.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct SongView {
+    pub id: SongId,
+    /// The upload's file name, for display.
+    pub filename: String,
+    /// Found by decoding.
+    pub format: AudioFormat,
+    pub duration_s: f64,
+    /// Native sample rate, Hz.
+    pub sample_rate: u32,
+    pub channels: u16,
+    pub sha256: String,
+    pub size_bytes: u64,
+    pub created_at: DateTime<Utc>,
+    /// Status of the song's analyze job.
+    pub analysis_status: Option<Status>,
+    /// Why the analysis failed, if it did.
+    pub analysis_error: Option<String>,
+    /// Tempo, beats and downbeats (seconds), once the analyze job has succeeded.
+    pub analysis: Option<Analysis>,
+}
+
+/// The multipart form of an upload.
+#[derive(utoipa::ToSchema)]
+#[allow(dead_code)]
+pub struct UploadForm {
+    /// The song: mp3, wav, flac, ogg/vorbis or m4a/aac.
+    #[schema(value_type = String, format = Binary)]
+    file: Vec<u8>,
+}
+
+async fn view(state: &AppState, song: Song) -> Result<SongView, ApiError> {
+    let job = state.store.analyze_job(song.id).await?;
+    Ok(SongView {
+        id: song.id,
+        filename: song.filename,
+        format: song.format,
+        duration_s: song.duration_s,
+        sample_rate: song.sample_rate,
+        channels: song.channels,
+        sha256: song.sha256,
+        size_bytes: song.size_bytes,
+        created_at: song.created_at,
+        analysis_status: job.as_ref().map(|j| j.status),
+        analysis_error: job.and_then(|j| j.error),
+        analysis: song.analysis,
+    })
+}
+
+/// Accepts a plain file name; anything that could name a path is refused.
+fn check_filename(name: Option<&str>) -> Result<String, ApiError> {
+    let Some(name) = name else { return Ok("upload".into()) };
+    let bad = name.is_empty()
+        || name.len() > MAX_FILENAME_BYTES
+        || name == "."
+        || name == ".."
+        || name.contains(['/', '\\'])
+        || name.contains("..")
+        || name.chars().any(char::is_control);
+    if bad {
+        Err(ApiError::InvalidFilename(name.chars().take(80).collect()))
+    } else {
+        Ok(name.to_string())
+    }
+}
+
+/// An upload streamed to disk.
+struct Received {
+    file: tempfile::NamedTempFile,
+    filename: String,
+    size: u64,
+    sha256: String,
+}
+
+async fn receive(state: &AppState, mut field: Field<'_>) -> Result<Received, ApiError> {
+    let filename = check_filename(field.file_name())?;
+    let limit = state.config.max_upload_bytes;
+    let tmp = state.data.temp_file().map_err(|e| ApiError::Internal(format!("temp file: {e}")))?;
+    let std_file = tmp.as_file().try_clone().map_err(|e| ApiError::Internal(format!("temp file: {e}")))?;
+    let mut out = tokio::fs::File::from_std(std_file);
+    let mut hasher = Sha256::new();
+    let mut size: u64 = 0;
+    loop {
+        let chunk = match field.chunk().await {
+            Ok(Some(chunk)) => chunk,
+            Ok(None) => break,
+            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => return Err(ApiError::FileTooLarge { limit }),
+            Err(e) => return Err(ApiError::InvalidMultipart(e.body_text())),
+        };
+        size += chunk.len() as u64;
+        if size > limit {
+            return Err(ApiError::FileTooLarge { limit });
+        }
+        hasher.update(&chunk);
+        out.write_all(&chunk).await.map_err(|e| ApiError::Internal(format!("writing upload: {e}")))?;
+    }
+    out.flush().await.map_err(|e| ApiError::Internal(format!("writing upload: {e}")))?;
+    out.sync_all().await.map_err(|e| ApiError::Internal(format!("writing upload: {e}")))?;
+    if size == 0 {
+        return Err(ApiError::EmptyFile);
+    }
+    Ok(Received { file: tmp, filename, size, sha256: hex::encode(hasher.finalize()) })
+}
+
+/// Upload a song.
+///
+/// The same bytes uploaded again return the existing song (200). A new song (201) gets an
+/// analyze job; its analysis appears on `GET /v1/songs/{id}` when that job is done.
+#[utoipa::path(
+    post,
+    path = "/v1/songs",
+    tag = "songs",
+    request_body(content = UploadForm, content_type = "multipart/form-data"),
+    responses(
+        (status = 201, description = "Song stored; analysis queued", body = SongView),
+        (status = 200, description = "These bytes were uploaded before", body = SongView),
+        (status = 400, description = "Empty file, wrong field, bad file name or bad multipart", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Over the size limit", body = Problem, content_type = "application/problem+json"),
+        (status = 415, description = "Not audio, or not decodable", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Over the duration limit, or unusable audio", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn upload(
+    State(state): State<AppState>,
+    multipart: Result<Multipart, MultipartRejection>,
+) -> Result<(StatusCode, HeaderMap, Json<SongView>), ApiError> {
+    let mut multipart = multipart.map_err(|e| ApiError::InvalidMultipart(e.body_text()))?;
+    let mut received = None;
+    loop {
+        let field = match multipart.next_field().await {
+            Ok(Some(field)) => field,
+            Ok(None) => break,
+            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+                return Err(ApiError::FileTooLarge { limit: state.config.max_upload_bytes });
+            }
+            Err(e) => return Err(ApiError::InvalidMultipart(e.body_text())),
+        };
+        match field.name() {
+            Some("file") if received.is_none() => received = Some(receive(&state, field).await?),
+            Some("file") => return Err(ApiError::UnexpectedField("file (a second one)".into())),
+            Some(other) => return Err(ApiError::UnexpectedField(other.chars().take(80).collect())),
+            None => return Err(ApiError::UnexpectedField("(unnamed)".into())),
+        }
+    }
+    let received = received.ok_or(ApiError::MissingFile)?;
+
+    if let Some(existing) = state.store.song_by_sha256(&received.sha256).await? {
+        return Ok((StatusCode::OK, location(existing.id), Json(view(&state, existing).await?)));
+    }
+
+    // Decode fully: that is the only proof the bytes are audio we can use. Bounded in parallel,
+    // so many uploads at once cannot hold many decoded songs in memory.
+    let decoded = {
+        let _permit = state.decode_permits.acquire().await.map_err(|e| ApiError::Internal(e.to_string()))?;
+        let path = received.file.path().to_path_buf();
+        tokio::task::spawn_blocking(move || audio::decode_path(&path))
+            .await
+            .map_err(|e| ApiError::Internal(format!("decoder thread: {e}")))?
+            .map_err(ApiError::Audio)?
+    };
+    if decoded.duration_s > state.config.max_duration_s {
+        return Err(ApiError::SongTooLong { seconds: decoded.duration_s, limit: state.config.max_duration_s });
+    }
+
+    let id = SongId::new();
+    let path = state.data.song_path(id, decoded.format);
+    received.file.persist(&path).map_err(|e| ApiError::Internal(format!("storing song: {}", e.error)))?;
+    let song = Song {
+        id,
+        filename: received.filename,
+        format: decoded.format,
+        duration_s: decoded.duration_s,
+        sample_rate: decoded.sample_rate,
+        channels: decoded.channels,
+        sha256: received.sha256,
+        size_bytes: received.size,
+        analysis: None,
+        created_at: Utc::now(),
+    };
+    let analyze = NewJob {
+        kind: JobKind::Analyze { song_id: id },
+        priority: ANALYZE_PRIORITY,
+        max_attempts: state.config.max_attempts,
+        idempotency: None,
+    };
+    let (stored, created) = state.store.add_song(song, analyze).await?;
+    if !created {
+        // Another upload of the same bytes won the race; keep its file, drop ours.
+        if let Err(e) = std::fs::remove_file(&path) {
+            tracing::warn!(error = %e, path = %path.display(), "could not remove a duplicate upload");
+        }
+        return Ok((StatusCode::OK, location(stored.id), Json(view(&state, stored).await?)));
+    }
+    state.wake.notify_waiters();
+    tracing::info!(song_id = %stored.id, format = ?stored.format, duration_s = stored.duration_s, "song stored");
+    Ok((StatusCode::CREATED, location(stored.id), Json(view(&state, stored).await?)))
+}
+
+/// Analysis is quick and everything else needs it, so it runs before dances.
+const ANALYZE_PRIORITY: i64 = 10;
+
+fn location(id: SongId) -> HeaderMap {
+    let mut headers = HeaderMap::new();
+    if let Ok(value) = HeaderValue::from_str(&format!("/v1/songs/{id}")) {
+        headers.insert(header::LOCATION, value);
+    }
+    headers
+}
+
+/// A song, with its analysis once done.
+#[utoipa::path(
+    get,
+    path = "/v1/songs/{id}",
+    tag = "songs",
+    params(("id" = String, Path, description = "Song id")),
+    responses(
+        (status = 200, description = "The song", body = SongView),
+        (status = 404, description = "No such song", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn get(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<SongView>, ApiError> {
+    let id = SongId::from_str(&id).map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
+    let song = state.store.song(id).await?;
+    Ok(Json(view(&state, song).await?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn file_names_that_could_name_a_path_are_refused() {
+        for bad in ["../x.mp3", "..", "a/b.mp3", "a\\b.mp3", "x\0.mp3", "..\\..\\evil.wav", ""] {
+            assert!(check_filename(Some(bad)).is_err(), "{bad:?}");
+        }
+        assert_eq!(check_filename(Some("My Song (live).mp3")).ok().as_deref(), Some("My Song (live).mp3"));
+        assert_eq!(check_filename(None).ok().as_deref(), Some("upload"));
+    }
+}

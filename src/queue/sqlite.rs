@@ -1,0 +1,564 @@
+//! The SQLite store: WAL mode, `synchronous=NORMAL`, one atomic `UPDATE … RETURNING` per claim.
+//!
+//! SQLite has a single writer, so a claim that selects and updates in one statement cannot hand
+//! the same job to two workers. Every write transaction starts with its write, so a waiting
+//! writer is handled by the busy timeout and never surfaces as `SQLITE_BUSY`.
+use super::{
+    Beat, Idempotency, Job, JobFiles, JobFilter, JobId, JobKind, JobStore, LeasePolicy, NewJob, Outcome, QueueError,
+    Registered, Requeued, Song, SongId, SongStore, Status, StoreFuture,
+};
+use chrono::{DateTime, TimeZone, Utc};
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteRow, SqliteSynchronous};
+use sqlx::{Row, SqlitePool};
+use std::path::Path;
+use std::str::FromStr;
+use std::time::Duration;
+
+/// How long a writer waits for the lock before SQLite gives up.
+const BUSY_TIMEOUT: Duration = Duration::from_secs(30);
+/// Connections in the pool; SQLite serialises writers anyway, readers run in parallel in WAL.
+const MAX_CONNECTIONS: u32 = 8;
+/// Cap on the backoff exponent, so `1 << n` cannot overflow.
+const MAX_BACKOFF_DOUBLINGS: i64 = 16;
+
+const JOB_COLUMNS: &str = "id, options, status, stage, progress, priority, attempts, max_attempts, cancel_requested, \
+     error, result, created_at, started_at, finished_at";
+const SONG_COLUMNS: &str =
+    "id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, analysis, created_at";
+
+/// The jobs and songs of one SQLite file.
+#[derive(Clone, Debug)]
+pub struct SqliteStore {
+    pool: SqlitePool,
+}
+
+fn now_ms() -> i64 {
+    Utc::now().timestamp_millis()
+}
+
+fn to_time(ms: i64) -> Result<DateTime<Utc>, QueueError> {
+    Utc.timestamp_millis_opt(ms).single().ok_or_else(|| QueueError::Corrupt(format!("timestamp {ms}")))
+}
+
+fn opt_time(ms: Option<i64>) -> Result<Option<DateTime<Utc>>, QueueError> {
+    ms.map(to_time).transpose()
+}
+
+fn ms(d: Duration) -> i64 {
+    i64::try_from(d.as_millis()).unwrap_or(i64::MAX)
+}
+
+fn corrupt(what: &str, e: impl std::fmt::Display) -> QueueError {
+    QueueError::Corrupt(format!("{what}: {e}"))
+}
+
+fn job_from_row(row: &SqliteRow) -> Result<Job, QueueError> {
+    let id: String = row.try_get("id")?;
+    let options: String = row.try_get("options")?;
+    let status: String = row.try_get("status")?;
+    let result: Option<String> = row.try_get("result")?;
+    Ok(Job {
+        id: JobId::from_str(&id).map_err(|e| corrupt("job id", e))?,
+        kind: serde_json::from_str::<JobKind>(&options).map_err(|e| corrupt("job options", e))?,
+        status: Status::from_str(&status).map_err(|e| corrupt("job status", e))?,
+        stage: row.try_get("stage")?,
+        progress: row.try_get("progress")?,
+        priority: row.try_get("priority")?,
+        attempts: row.try_get::<i64, _>("attempts")?.try_into().map_err(|e| corrupt("attempts", e))?,
+        max_attempts: row.try_get::<i64, _>("max_attempts")?.try_into().map_err(|e| corrupt("max_attempts", e))?,
+        cancel_requested: row.try_get::<i64, _>("cancel_requested")? != 0,
+        error: row.try_get("error")?,
+        files: match result {
+            Some(json) => serde_json::from_str(&json).map_err(|e| corrupt("job result", e))?,
+            None => JobFiles::default(),
+        },
+        created_at: to_time(row.try_get("created_at")?)?,
+        started_at: opt_time(row.try_get("started_at")?)?,
+        finished_at: opt_time(row.try_get("finished_at")?)?,
+    })
+}
+
+fn song_from_row(row: &SqliteRow) -> Result<Song, QueueError> {
+    let id: String = row.try_get("id")?;
+    let format: String = row.try_get("format")?;
+    let analysis: Option<String> = row.try_get("analysis")?;
+    Ok(Song {
+        id: SongId::from_str(&id).map_err(|e| corrupt("song id", e))?,
+        filename: row.try_get("filename")?,
+        format: serde_json::from_value(serde_json::Value::String(format)).map_err(|e| corrupt("song format", e))?,
+        duration_s: row.try_get("duration_s")?,
+        sample_rate: row.try_get::<i64, _>("sample_rate")?.try_into().map_err(|e| corrupt("sample_rate", e))?,
+        channels: row.try_get::<i64, _>("channels")?.try_into().map_err(|e| corrupt("channels", e))?,
+        sha256: row.try_get("sha256")?,
+        size_bytes: row.try_get::<i64, _>("size_bytes")?.try_into().map_err(|e| corrupt("size_bytes", e))?,
+        analysis: analysis.map(|json| serde_json::from_str(&json)).transpose().map_err(|e| corrupt("analysis", e))?,
+        created_at: to_time(row.try_get("created_at")?)?,
+    })
+}
+
+fn format_name(song: &Song) -> Result<String, QueueError> {
+    match serde_json::to_value(song.format).map_err(|e| corrupt("song format", e))? {
+        serde_json::Value::String(s) => Ok(s),
+        other => Err(corrupt("song format", other)),
+    }
+}
+
+impl SqliteStore {
+    /// Opens (creating if needed) the database file and runs the migrations.
+    pub async fn open(path: &Path) -> Result<Self, QueueError> {
+        let options = SqliteConnectOptions::new()
+            .filename(path)
+            .create_if_missing(true)
+            .journal_mode(SqliteJournalMode::Wal)
+            .synchronous(SqliteSynchronous::Normal)
+            .busy_timeout(BUSY_TIMEOUT)
+            .foreign_keys(true);
+        let pool = SqlitePoolOptions::new()
+            .max_connections(MAX_CONNECTIONS)
+            .acquire_timeout(BUSY_TIMEOUT)
+            .connect_with(options)
+            .await?;
+        sqlx::migrate!("./migrations").run(&pool).await?;
+        Ok(Self { pool })
+    }
+
+    /// The pool, for tests and tools that inspect the file.
+    pub fn pool(&self) -> &SqlitePool {
+        &self.pool
+    }
+
+    async fn insert_job<'e, E>(executor: E, job: &NewJob, now: i64) -> Result<Option<Job>, QueueError>
+    where
+        E: sqlx::Executor<'e, Database = sqlx::Sqlite>,
+    {
+        let id = JobId::new();
+        let options = serde_json::to_string(&job.kind).map_err(|e| corrupt("job options", e))?;
+        let (key, hash) = match &job.idempotency {
+            Some(Idempotency { key, request_hash }) => (Some(key.as_str()), Some(request_hash.as_str())),
+            None => (None, None),
+        };
+        let sql = format!(
+            "INSERT INTO jobs (id, kind, song_id, model, options, status, priority, max_attempts, run_after, \
+             idempotency_key, request_hash, created_at) VALUES (?, ?, ?, ?, ?, 'queued', ?, ?, ?, ?, ?, ?) \
+             ON CONFLICT (idempotency_key) DO NOTHING RETURNING {JOB_COLUMNS}"
+        );
+        let row = sqlx::query(&sql)
+            .bind(id.to_string())
+            .bind(job.kind.name())
+            .bind(job.kind.song_id().to_string())
+            .bind(job.kind.model().map(|m| m.0.clone()))
+            .bind(options)
+            .bind(job.priority)
+            .bind(i64::from(job.max_attempts))
+            .bind(now)
+            .bind(key)
+            .bind(hash)
+            .bind(now)
+            .fetch_optional(executor)
+            .await?;
+        row.as_ref().map(job_from_row).transpose()
+    }
+}
+
+impl JobStore for SqliteStore {
+    fn register(&self, job: NewJob) -> StoreFuture<'_, Registered> {
+        Box::pin(async move {
+            let song = job.kind.song_id();
+            let exists = sqlx::query("SELECT 1 FROM songs WHERE id = ?").bind(song.to_string()).fetch_optional(&self.pool).await?;
+            if exists.is_none() {
+                return Err(QueueError::SongNotFound(song));
+            }
+            if let Some(created) = Self::insert_job(&self.pool, &job, now_ms()).await? {
+                return Ok(Registered::Created(created));
+            }
+            // Only the idempotency key can conflict: the id is fresh.
+            let Some(idem) = &job.idempotency else {
+                return Err(QueueError::Corrupt("insert of a job without idempotency key returned nothing".into()));
+            };
+            let sql = format!("SELECT {JOB_COLUMNS}, request_hash FROM jobs WHERE idempotency_key = ?");
+            let row = sqlx::query(&sql).bind(&idem.key).fetch_one(&self.pool).await?;
+            let existing = job_from_row(&row)?;
+            let hash: Option<String> = row.try_get("request_hash")?;
+            if hash.as_deref() == Some(idem.request_hash.as_str()) {
+                Ok(Registered::Existing(existing))
+            } else {
+                Err(QueueError::IdempotencyConflict(existing.id))
+            }
+        })
+    }
+
+    fn claim<'a>(&'a self, owner: &'a str, policy: LeasePolicy) -> StoreFuture<'a, Option<Job>> {
+        Box::pin(async move {
+            let now = now_ms();
+            let sql = format!(
+                "UPDATE jobs SET status = 'running', attempts = attempts + 1, lease_owner = ?1, \
+                 lease_expires_at = ?2, heartbeat_at = ?3, started_at = COALESCE(started_at, ?3), \
+                 stage = 'claimed', progress = 0 \
+                 WHERE id = (SELECT id FROM jobs WHERE status = 'queued' AND run_after <= ?3 \
+                             ORDER BY priority DESC, run_after, id LIMIT 1) \
+                 RETURNING {JOB_COLUMNS}"
+            );
+            let row = sqlx::query(&sql)
+                .bind(owner)
+                .bind(now + ms(policy.lease))
+                .bind(now)
+                .fetch_optional(&self.pool)
+                .await?;
+            row.as_ref().map(job_from_row).transpose()
+        })
+    }
+
+    fn heartbeat<'a>(
+        &'a self,
+        id: JobId,
+        owner: &'a str,
+        stage: &'a str,
+        progress: f64,
+        policy: LeasePolicy,
+    ) -> StoreFuture<'a, Beat> {
+        Box::pin(async move {
+            let now = now_ms();
+            let row = sqlx::query(
+                "UPDATE jobs SET heartbeat_at = ?1, lease_expires_at = ?2, stage = ?3, progress = ?4 \
+                 WHERE id = ?5 AND lease_owner = ?6 AND status = 'running' RETURNING cancel_requested",
+            )
+            .bind(now)
+            .bind(now + ms(policy.lease))
+            .bind(stage)
+            .bind(progress.clamp(0.0, 1.0))
+            .bind(id.to_string())
+            .bind(owner)
+            .fetch_optional(&self.pool)
+            .await?;
+            Ok(match row {
+                Some(row) => Beat::Held { cancel_requested: row.try_get::<i64, _>(0)? != 0 },
+                None => Beat::Lost,
+            })
+        })
+    }
+
+    fn complete<'a>(&'a self, id: JobId, owner: &'a str, outcome: Outcome) -> StoreFuture<'a, bool> {
+        Box::pin(async move {
+            let files = match &outcome {
+                Outcome::Files(files) => Some(serde_json::to_string(files).map_err(|e| corrupt("job result", e))?),
+                Outcome::Analysis(_) => None,
+            };
+            let mut tx = self.pool.begin().await?;
+            // The first statement writes, so this transaction takes the write lock at once.
+            let row = sqlx::query(
+                "UPDATE jobs SET status = 'succeeded', stage = 'done', progress = 1, result = ?1, error = NULL, \
+                 finished_at = ?2, lease_owner = NULL, lease_expires_at = NULL \
+                 WHERE id = ?3 AND lease_owner = ?4 AND status = 'running' RETURNING song_id",
+            )
+            .bind(files)
+            .bind(now_ms())
+            .bind(id.to_string())
+            .bind(owner)
+            .fetch_optional(&mut *tx)
+            .await?;
+            let Some(row) = row else {
+                tx.rollback().await?;
+                return Ok(false);
+            };
+            if let Outcome::Analysis(analysis) = &outcome {
+                let song_id: String = row.try_get(0)?;
+                let json = serde_json::to_string(analysis).map_err(|e| corrupt("analysis", e))?;
+                sqlx::query("UPDATE songs SET analysis = ? WHERE id = ?").bind(json).bind(song_id).execute(&mut *tx).await?;
+            }
+            tx.commit().await?;
+            Ok(true)
+        })
+    }
+
+    fn fail<'a>(&'a self, id: JobId, owner: &'a str, error: &'a str, retry: bool, policy: LeasePolicy) -> StoreFuture<'a, bool> {
+        Box::pin(async move {
+            let now = now_ms();
+            let done = sqlx::query(
+                "UPDATE jobs SET \
+                   status = CASE WHEN ?1 AND attempts < max_attempts AND NOT cancel_requested THEN 'queued' \
+                                 WHEN cancel_requested THEN 'cancelled' ELSE 'failed' END, \
+                   finished_at = CASE WHEN ?1 AND attempts < max_attempts AND NOT cancel_requested THEN NULL ELSE ?2 END, \
+                   run_after = ?2 + ?3 * (1 << MIN(attempts - 1, ?4)), \
+                   error = ?5, lease_owner = NULL, lease_expires_at = NULL \
+                 WHERE id = ?6 AND lease_owner = ?7 AND status = 'running'",
+            )
+            .bind(retry)
+            .bind(now)
+            .bind(ms(policy.backoff))
+            .bind(MAX_BACKOFF_DOUBLINGS)
+            .bind(error)
+            .bind(id.to_string())
+            .bind(owner)
+            .execute(&self.pool)
+            .await?;
+            Ok(done.rows_affected() == 1)
+        })
+    }
+
+    fn finish_cancelled<'a>(&'a self, id: JobId, owner: &'a str) -> StoreFuture<'a, bool> {
+        Box::pin(async move {
+            let done = sqlx::query(
+                "UPDATE jobs SET status = 'cancelled', finished_at = ?1, lease_owner = NULL, lease_expires_at = NULL \
+                 WHERE id = ?2 AND lease_owner = ?3 AND status = 'running'",
+            )
+            .bind(now_ms())
+            .bind(id.to_string())
+            .bind(owner)
+            .execute(&self.pool)
+            .await?;
+            Ok(done.rows_affected() == 1)
+        })
+    }
+
+    fn cancel(&self, id: JobId) -> StoreFuture<'_, Job> {
+        Box::pin(async move {
+            // In SQLite's SET, every column reference reads the row as it was before the update.
+            let sql = format!(
+                "UPDATE jobs SET \
+                   status = CASE WHEN status = 'queued' THEN 'cancelled' ELSE status END, \
+                   finished_at = CASE WHEN status = 'queued' THEN ?1 ELSE finished_at END, \
+                   cancel_requested = CASE WHEN status IN ('queued', 'running') THEN 1 ELSE cancel_requested END \
+                 WHERE id = ?2 RETURNING {JOB_COLUMNS}"
+            );
+            let row = sqlx::query(&sql).bind(now_ms()).bind(id.to_string()).fetch_optional(&self.pool).await?;
+            match row {
+                Some(row) => job_from_row(&row),
+                None => Err(QueueError::JobNotFound(id)),
+            }
+        })
+    }
+
+    fn requeue_expired(&self, policy: LeasePolicy) -> StoreFuture<'_, Requeued> {
+        Box::pin(async move {
+            let now = now_ms();
+            let rows = sqlx::query(
+                "UPDATE jobs SET \
+                   status = CASE WHEN cancel_requested THEN 'cancelled' \
+                                 WHEN attempts >= max_attempts THEN 'failed' ELSE 'queued' END, \
+                   finished_at = CASE WHEN cancel_requested OR attempts >= max_attempts THEN ?1 ELSE NULL END, \
+                   error = 'lease expired on attempt ' || attempts || ' of ' || max_attempts || \
+                           ' (the worker died or hung)' || COALESCE('; last error: ' || error, ''), \
+                   run_after = ?1 + ?2 * (1 << MIN(attempts - 1, ?3)), \
+                   lease_owner = NULL, lease_expires_at = NULL \
+                 WHERE status = 'running' AND lease_expires_at < ?1 RETURNING id, status",
+            )
+            .bind(now)
+            .bind(ms(policy.backoff))
+            .bind(MAX_BACKOFF_DOUBLINGS)
+            .fetch_all(&self.pool)
+            .await?;
+            let mut out = Requeued::default();
+            for row in rows {
+                let id = JobId::from_str(row.try_get::<&str, _>(0)?).map_err(|e| corrupt("job id", e))?;
+                match Status::from_str(row.try_get::<&str, _>(1)?).map_err(|e| corrupt("job status", e))? {
+                    Status::Queued => out.requeued.push(id),
+                    Status::Failed => out.failed.push(id),
+                    Status::Cancelled => out.cancelled.push(id),
+                    other @ (Status::Running | Status::Succeeded) => {
+                        return Err(corrupt("requeue", format!("job {id} became {other}")));
+                    }
+                }
+            }
+            Ok(out)
+        })
+    }
+
+    fn job(&self, id: JobId) -> StoreFuture<'_, Job> {
+        Box::pin(async move {
+            let sql = format!("SELECT {JOB_COLUMNS} FROM jobs WHERE id = ?");
+            match sqlx::query(&sql).bind(id.to_string()).fetch_optional(&self.pool).await? {
+                Some(row) => job_from_row(&row),
+                None => Err(QueueError::JobNotFound(id)),
+            }
+        })
+    }
+
+    fn jobs(&self, filter: JobFilter) -> StoreFuture<'_, Vec<Job>> {
+        Box::pin(async move {
+            let sql = format!(
+                "SELECT {JOB_COLUMNS} FROM jobs WHERE (?1 IS NULL OR status = ?1) AND (?2 IS NULL OR model = ?2) \
+                 AND (?3 IS NULL OR id < ?3) ORDER BY id DESC LIMIT ?4"
+            );
+            let rows = sqlx::query(&sql)
+                .bind(filter.status.map(Status::as_str))
+                .bind(filter.model)
+                .bind(filter.before.map(|id| id.to_string()))
+                .bind(i64::from(filter.limit))
+                .fetch_all(&self.pool)
+                .await?;
+            rows.iter().map(job_from_row).collect()
+        })
+    }
+
+    fn counts(&self) -> StoreFuture<'_, Vec<(Status, u64)>> {
+        Box::pin(async move {
+            let rows = sqlx::query("SELECT status, COUNT(*) FROM jobs GROUP BY status").fetch_all(&self.pool).await?;
+            let mut counts: Vec<(Status, u64)> = Status::ALL.iter().map(|s| (*s, 0)).collect();
+            for row in rows {
+                let status = Status::from_str(row.try_get::<&str, _>(0)?).map_err(|e| corrupt("job status", e))?;
+                let n: i64 = row.try_get(1)?;
+                if let Some(slot) = counts.iter_mut().find(|(s, _)| *s == status) {
+                    slot.1 = u64::try_from(n).unwrap_or(0);
+                }
+            }
+            Ok(counts)
+        })
+    }
+
+    fn ping(&self) -> StoreFuture<'_, ()> {
+        Box::pin(async move {
+            sqlx::query("SELECT 1").execute(&self.pool).await?;
+            Ok(())
+        })
+    }
+}
+
+impl SongStore for SqliteStore {
+    fn add_song(&self, song: Song, analyze: NewJob) -> StoreFuture<'_, (Song, bool)> {
+        Box::pin(async move {
+            let now = now_ms();
+            let mut tx = self.pool.begin().await?;
+            // The first statement writes, so this transaction takes the write lock at once.
+            let sql = format!(
+                "INSERT INTO songs (id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, created_at) \
+                 VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?) ON CONFLICT (sha256) DO NOTHING RETURNING {SONG_COLUMNS}"
+            );
+            let inserted = sqlx::query(&sql)
+                .bind(song.id.to_string())
+                .bind(&song.filename)
+                .bind(format_name(&song)?)
+                .bind(song.duration_s)
+                .bind(i64::from(song.sample_rate))
+                .bind(i64::from(song.channels))
+                .bind(&song.sha256)
+                .bind(i64::try_from(song.size_bytes).map_err(|e| corrupt("size_bytes", e))?)
+                .bind(now)
+                .fetch_optional(&mut *tx)
+                .await?;
+            let Some(row) = inserted else {
+                let sql = format!("SELECT {SONG_COLUMNS} FROM songs WHERE sha256 = ?");
+                let row = sqlx::query(&sql).bind(&song.sha256).fetch_one(&mut *tx).await?;
+                let existing = song_from_row(&row)?;
+                tx.commit().await?;
+                return Ok((existing, false));
+            };
+            let stored = song_from_row(&row)?;
+            if Self::insert_job(&mut *tx, &analyze, now).await?.is_none() {
+                return Err(QueueError::Corrupt("analyze job insert returned nothing".into()));
+            }
+            tx.commit().await?;
+            Ok((stored, true))
+        })
+    }
+
+    fn song(&self, id: SongId) -> StoreFuture<'_, Song> {
+        Box::pin(async move {
+            let sql = format!("SELECT {SONG_COLUMNS} FROM songs WHERE id = ?");
+            match sqlx::query(&sql).bind(id.to_string()).fetch_optional(&self.pool).await? {
+                Some(row) => song_from_row(&row),
+                None => Err(QueueError::SongNotFound(id)),
+            }
+        })
+    }
+
+    fn song_by_sha256<'a>(&'a self, sha256: &'a str) -> StoreFuture<'a, Option<Song>> {
+        Box::pin(async move {
+            let sql = format!("SELECT {SONG_COLUMNS} FROM songs WHERE sha256 = ?");
+            let row = sqlx::query(&sql).bind(sha256).fetch_optional(&self.pool).await?;
+            row.as_ref().map(song_from_row).transpose()
+        })
+    }
+
+    fn analyze_job(&self, song: SongId) -> StoreFuture<'_, Option<Job>> {
+        Box::pin(async move {
+            let sql = format!("SELECT {JOB_COLUMNS} FROM jobs WHERE song_id = ? AND kind = 'analyze' ORDER BY id DESC LIMIT 1");
+            let row = sqlx::query(&sql).bind(song.to_string()).fetch_optional(&self.pool).await?;
+            row.as_ref().map(job_from_row).transpose()
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::audio::AudioFormat;
+
+    fn policy() -> LeasePolicy {
+        LeasePolicy { lease: Duration::from_millis(50), backoff: Duration::ZERO }
+    }
+
+    async fn store_with_song(dir: &Path) -> (SqliteStore, SongId) {
+        let store = SqliteStore::open(&dir.join("q.sqlite")).await.expect("open store");
+        let song = Song {
+            id: SongId::new(),
+            filename: "a.ogg".into(),
+            format: AudioFormat::Ogg,
+            duration_s: 1.0,
+            sample_rate: 44_100,
+            channels: 2,
+            sha256: "00".into(),
+            size_bytes: 1,
+            analysis: None,
+            created_at: Utc::now(),
+        };
+        let analyze = NewJob { kind: JobKind::Analyze { song_id: song.id }, priority: 0, max_attempts: 2, idempotency: None };
+        let (song, created) = store.add_song(song, analyze).await.expect("add song");
+        assert!(created);
+        (store, song.id)
+    }
+
+    #[tokio::test]
+    async fn claim_is_exclusive_and_expired_leases_retry_then_fail() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let (store, _) = store_with_song(dir.path()).await;
+        let first = store.claim("w1", policy()).await.expect("claim").expect("a job");
+        assert_eq!(first.attempts, 1);
+        assert!(store.claim("w2", policy()).await.expect("claim").is_none(), "one job, claimed once");
+        tokio::time::sleep(Duration::from_millis(80)).await;
+        let requeued = store.requeue_expired(policy()).await.expect("requeue");
+        assert_eq!(requeued.requeued, vec![first.id]);
+        // The dead worker can no longer finish it.
+        assert!(!store.complete(first.id, "w1", Outcome::Files(JobFiles::default())).await.expect("complete"));
+        let second = store.claim("w2", policy()).await.expect("claim").expect("requeued job");
+        assert_eq!((second.id, second.attempts), (first.id, 2));
+        tokio::time::sleep(Duration::from_millis(80)).await;
+        let requeued = store.requeue_expired(policy()).await.expect("requeue");
+        assert_eq!(requeued.failed, vec![first.id], "max_attempts = 2 reached");
+        let job = store.job(first.id).await.expect("job");
+        assert_eq!(job.status, Status::Failed);
+        assert!(job.error.as_deref().is_some_and(|e| e.contains("lease expired on attempt 2 of 2")), "{:?}", job.error);
+    }
+
+    #[tokio::test]
+    async fn cancel_queued_is_immediate_and_running_is_requested() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let (store, song) = store_with_song(dir.path()).await;
+        let running = store.claim("w", policy()).await.expect("claim").expect("job");
+        let queued = NewJob { kind: JobKind::Analyze { song_id: song }, priority: 0, max_attempts: 1, idempotency: None };
+        let queued = store.register(queued).await.expect("register").job().clone();
+        assert_eq!(store.cancel(queued.id).await.expect("cancel").status, Status::Cancelled);
+        let after = store.cancel(running.id).await.expect("cancel");
+        assert_eq!((after.status, after.cancel_requested), (Status::Running, true));
+        let beat = store.heartbeat(running.id, "w", "x", 0.5, LeasePolicy { lease: Duration::from_secs(5), ..policy() }).await;
+        assert_eq!(beat.expect("beat"), Beat::Held { cancel_requested: true });
+        assert!(store.finish_cancelled(running.id, "w").await.expect("finish"));
+        assert_eq!(store.job(running.id).await.expect("job").status, Status::Cancelled);
+    }
+
+    #[tokio::test]
+    async fn idempotency_key_returns_the_same_job_or_conflicts() {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let (store, song) = store_with_song(dir.path()).await;
+        let job = |hash: &str| NewJob {
+            kind: JobKind::Analyze { song_id: song },
+            priority: 0,
+            max_attempts: 1,
+            idempotency: Some(Idempotency { key: "k".into(), request_hash: hash.into() }),
+        };
+        let a = store.register(job("h1")).await.expect("register");
+        let b = store.register(job("h1")).await.expect("register again");
+        assert!(matches!(a, Registered::Created(_)) && matches!(b, Registered::Existing(_)));
+        assert_eq!(a.job().id, b.job().id);
+        assert!(matches!(store.register(job("h2")).await, Err(QueueError::IdempotencyConflict(id)) if id == a.job().id));
+    }
+}

@@ -1,0 +1,120 @@
+//! The work of each job kind: decode → analyse, or decode → model → export + report.
+use super::{Execute, WorkerError};
+use crate::audio::{self, DecodedAudio};
+use crate::models::{Cancelled, GenerateRequest, Progress, Registry};
+use crate::motion::Motion;
+use crate::queue::{DataDir, GenerateOptions, Job, JobFiles, JobKind, Outcome, SeedMotion, Song};
+use crate::telemetry::StageTimer;
+use std::path::Path;
+use std::sync::Arc;
+
+/// Share of a generate job's progress spent before the model starts (decoding).
+const MODEL_START: f32 = 0.1;
+/// Share of a generate job's progress done when the model finishes; the rest is export.
+const MODEL_END: f32 = 0.85;
+
+/// The service's [`Execute`]: real decoding, analysis, models and exporters.
+pub struct Pipeline {
+    registry: Arc<Registry>,
+    data: DataDir,
+}
+
+impl Pipeline {
+    /// A pipeline over the loaded models, writing results under `data`.
+    pub fn new(registry: Arc<Registry>, data: DataDir) -> Self {
+        Self { registry, data }
+    }
+
+    #[tracing::instrument(skip_all, fields(song_id = %song.id))]
+    fn decode(&self, kind: &'static str, song: &Song) -> Result<DecodedAudio, WorkerError> {
+        let _timer = StageTimer::start(kind, "decode");
+        Ok(audio::decode_path(&self.data.song_path(song.id, song.format))?)
+    }
+
+    #[tracing::instrument(skip_all, fields(job_id = %job.id))]
+    fn analyze(&self, job: &Job, song: &Song, progress: &mut dyn Progress) -> Result<Outcome, WorkerError> {
+        progress.report("decode", 0.0)?;
+        let decoded = self.decode("analyze", song)?;
+        progress.report("analyze", 0.5)?;
+        let _timer = StageTimer::start("analyze", "analyze");
+        Ok(Outcome::Analysis(audio::analyze(&decoded)?))
+    }
+
+    #[tracing::instrument(skip_all, fields(job_id = %job.id, model = %options.model.0))]
+    fn generate(
+        &self,
+        job: &Job,
+        song: &Song,
+        options: &GenerateOptions,
+        progress: &mut dyn Progress,
+    ) -> Result<Outcome, WorkerError> {
+        let model = self.registry.get(&options.model).ok_or_else(|| WorkerError::ModelUnavailable(options.model.clone()))?;
+        progress.report("decode", 0.0)?;
+        let decoded = self.decode("generate", song)?;
+        let seed_motion = options.seed_motion.as_ref().map(seed_motion).transpose()?;
+        progress.report("model", MODEL_START)?;
+        let motion = {
+            let _timer = StageTimer::start("generate", "model");
+            let request = GenerateRequest {
+                audio: &decoded,
+                seed: options.seed,
+                key_poses: &options.key_poses,
+                seed_motion: seed_motion.as_ref(),
+            };
+            model.generate(&request, &mut Scaled { inner: progress, from: MODEL_START, to: MODEL_END })?
+        };
+        progress.report("export", MODEL_END)?;
+        let _timer = StageTimer::start("generate", "export");
+        let files = export(&self.data.job_dir(job.id), &motion, &decoded)?;
+        Ok(Outcome::Files(files))
+    }
+}
+
+impl Execute for Pipeline {
+    fn execute(&self, job: &Job, song: &Song, progress: &mut dyn Progress) -> Result<Outcome, WorkerError> {
+        match &job.kind {
+            JobKind::Analyze { .. } => self.analyze(job, song, progress),
+            JobKind::Generate(options) => self.generate(job, song, options, progress),
+        }
+    }
+}
+
+/// Maps a model's own 0..1 into a slice of the job's progress.
+struct Scaled<'a> {
+    inner: &'a mut dyn Progress,
+    from: f32,
+    to: f32,
+}
+
+impl Progress for Scaled<'_> {
+    fn report(&mut self, stage: &str, fraction: f32) -> Result<(), Cancelled> {
+        let fraction = if fraction.is_finite() { fraction.clamp(0.0, 1.0) } else { 0.0 };
+        self.inner.report(stage, self.from + (self.to - self.from) * fraction)
+    }
+}
+
+/// Turns the API's seed motion into the model's `Motion`, checking its shape.
+fn seed_motion(seed: &SeedMotion) -> Result<Motion, WorkerError> {
+    let frames = seed.positions.len();
+    let joints = seed.positions.first().map_or(0, Vec::len);
+    if frames == 0 || joints != crate::motion::NUM_JOINTS || seed.positions.iter().any(|f| f.len() != joints) {
+        return Err(WorkerError::InvalidOptions(format!(
+            "seed_motion.positions must be T × {} × 3 with T ≥ 1",
+            crate::motion::NUM_JOINTS
+        )));
+    }
+    let flat: Vec<f32> = seed.positions.iter().flatten().flat_map(|p| p.iter().map(|&v| v as f32)).collect();
+    let positions = ndarray::Array3::from_shape_vec((frames, joints, 3), flat)
+        .map_err(|e| WorkerError::InvalidOptions(format!("seed_motion: {e}")))?;
+    Ok(Motion { fps: seed.fps, positions })
+}
+
+/// Writes a dance's result files into `dir` (each atomically) and names them.
+///
+/// TODO(motion, report): the BVH/JSON/glb exporters (issue 7) and the per-job report (issue 4)
+/// are not in the crate yet; until they are, a generate job fails here with a clear error
+/// instead of writing files that are not what their names promise.
+fn export(dir: &Path, _motion: &Motion, _audio: &DecodedAudio) -> Result<JobFiles, WorkerError> {
+    std::fs::create_dir_all(dir)?;
+    Err(WorkerError::Export("this build has no motion exporters yet (motion.bvh, motion.json, report.json)".into()))
+}
