@@ -1,15 +1,45 @@
 //! Music analysis: decode, resample, and librosa-grade features.
 //!
-//! CONTRACT STUB (lead): the names below are what the rest of the crate calls; the audio
-//! owner replaces the bodies and may add fields, not rename.
+//! The flow is `decode` (symphonia, mono downmix, encoder-delay trim, rubato resampling while
+//! streaming) → `dsp` (STFT, Slaney mel, MFCC, delta: librosa 0.11 defaults) → `onset`,
+//! `rhythm` (onset strength, tempogram, tempo, the Ellis dynamic-programming beat tracker,
+//! downbeats) and `chroma` (chroma_stft, constant-Q chroma) → `features` (one named feature set
+//! per model, frame i = music at time i/fps). `reference` compares against librosa fixtures.
+//!
+//! Every function here returns `AudioError` for bad input and never panics on user audio.
 use serde::{Deserialize, Serialize};
+
+// pub mod bench;
+pub mod chroma;
+pub mod decode;
+pub mod dsp;
+pub mod features;
+pub mod onset;
+pub mod rhythm;
+
+pub use decode::{decode_bytes, decode_path_at, resample};
+
+/// Sample rate of `analyze` (librosa's default `sr`).
+pub const ANALYSIS_SR: u32 = 22_050;
+/// STFT hop in samples, librosa's default.
+pub const HOP_LENGTH: usize = 512;
+/// STFT window length in samples, librosa's default.
+pub const N_FFT: usize = 2048;
+/// Number of mel bands, librosa's default.
+pub const N_MELS: usize = 128;
+/// Longest song accepted, in seconds (memory stays bounded below this).
+pub const MAX_DURATION_S: f64 = 30.0 * 60.0;
+/// Lowest native sample rate accepted.
+pub const MIN_SAMPLE_RATE: u32 = 4_000;
+/// Highest native sample rate accepted.
+pub const MAX_SAMPLE_RATE: u32 = 384_000;
 
 /// The container/codec a song was decoded as, found by decoding, never by extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "lowercase")]
 pub enum AudioFormat { Mp3, Wav, Flac, Ogg, M4a }
 
-/// A decoded song, downmixed to mono at its native sample rate.
+/// A decoded song, downmixed to mono at `sample_rate` (native unless resampled while decoding).
 #[derive(Clone, Debug)]
 pub struct DecodedAudio {
     pub format: AudioFormat,
@@ -34,10 +64,55 @@ pub enum AudioError {
     Undecodable(String),
     #[error("i/o error: {0}")]
     Io(#[from] std::io::Error),
+    #[error("the file decodes to no audio samples")]
+    Empty,
+    #[error("the song is {seconds:.0} s long; the limit is {limit:.0} s")]
+    TooLong { seconds: f64, limit: f64 },
+    #[error("sample rate {0} Hz is outside the supported {MIN_SAMPLE_RATE}..={MAX_SAMPLE_RATE} Hz")]
+    UnsupportedSampleRate(u32),
+    #[error("audio contains non-finite samples")]
+    NonFinite,
+    #[error("invalid feature parameters: {0}")]
+    InvalidParameter(String),
+    #[error("resampling failed: {0}")]
+    Resample(String),
 }
 
-/// Decodes a file (any supported format) to mono.
-pub fn decode_path(_path: &std::path::Path) -> Result<DecodedAudio, AudioError> { todo!("audio owner") }
+impl AudioError {
+    /// Stable kebab-case code for API problem responses.
+    pub fn code(&self) -> &'static str {
+        match self {
+            AudioError::Undecodable(_) => "audio-undecodable",
+            AudioError::Io(_) => "audio-io",
+            AudioError::Empty => "audio-empty",
+            AudioError::TooLong { .. } => "audio-too-long",
+            AudioError::UnsupportedSampleRate(_) => "audio-unsupported-sample-rate",
+            AudioError::NonFinite => "audio-non-finite",
+            AudioError::InvalidParameter(_) => "audio-invalid-parameter",
+            AudioError::Resample(_) => "audio-resample",
+        }
+    }
 
-/// Tempo, beats and downbeats of a song.
-pub fn analyze(_audio: &DecodedAudio) -> Result<Analysis, AudioError> { todo!("audio owner") }
+    /// True when the error is the client's audio (4xx), false when it is ours (5xx).
+    pub fn is_client_error(&self) -> bool {
+        match self {
+            AudioError::Undecodable(_)
+            | AudioError::Empty
+            | AudioError::TooLong { .. }
+            | AudioError::UnsupportedSampleRate(_)
+            | AudioError::NonFinite => true,
+            AudioError::Io(_) | AudioError::InvalidParameter(_) | AudioError::Resample(_) => false,
+        }
+    }
+}
+
+/// Decodes a file (any supported format) to mono at its native sample rate.
+pub fn decode_path(path: &std::path::Path) -> Result<DecodedAudio, AudioError> {
+    decode::decode_path_at(path, None)
+}
+
+/// Tempo, beats and downbeats of a song (librosa `beat_track` at 22 050 Hz, hop 512).
+pub fn analyze(audio: &DecodedAudio) -> Result<Analysis, AudioError> {
+    let y = resample(&audio.samples, audio.sample_rate, ANALYSIS_SR)?;
+    rhythm::analyze_mono(&y, ANALYSIS_SR, HOP_LENGTH)
+}

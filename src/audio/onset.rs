@@ -1,0 +1,203 @@
+//! Onset strength (librosa `onset.onset_strength`) and harmonic/percussive separation of the
+//! signal (librosa `effects.hpss`), whose percussive part gives the percussive onset envelope.
+use ndarray::Array2;
+
+use super::dsp::{self, median, Stft};
+
+/// How the per-band flux is pooled into one value per frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Aggregate {
+    /// `np.mean`, the default of `onset_strength`.
+    Mean,
+    /// `np.median`, what `beat_track` uses.
+    Median,
+}
+
+/// Onset strength from a mel spectrogram in dB `[frames, bands]`, lag 1, max_size 1, centred:
+/// `env[t] = agg_f max(0, S[t-2, f] - S[t-3, f])` (the shift `1 + n_fft / (2 hop)` counters
+/// framing), zero for the first frames, same length as `S`.
+pub fn onset_strength_from_db(s_db: &Array2<f32>, n_fft: usize, hop: usize, agg: Aggregate) -> Vec<f32> {
+    let t_n = s_db.nrows();
+    let pad = 1 + n_fft / (2 * hop);
+    let mut env = vec![0.0f32; t_n];
+    let mut flux = vec![0.0f32; s_db.ncols()];
+    for j in 0..t_n.saturating_sub(1) {
+        let t = j + pad;
+        if t >= t_n {
+            break;
+        }
+        let (prev, cur) = (s_db.row(j), s_db.row(j + 1));
+        for ((f, &a), &b) in flux.iter_mut().zip(cur.iter()).zip(prev.iter()) {
+            *f = (a - b).max(0.0);
+        }
+        env[t] = match agg {
+            Aggregate::Mean => flux.iter().map(|&v| v as f64).sum::<f64>() as f32 / flux.len().max(1) as f32,
+            Aggregate::Median => median(&mut flux),
+        };
+    }
+    env
+}
+
+/// Onset strength of a signal: mel (128 bands, fmax sr/2) → dB → flux (librosa defaults).
+pub fn onset_strength(y: &[f32], sr: u32, n_fft: usize, hop: usize, agg: Aggregate) -> Vec<f32> {
+    let mut mel = dsp::melspectrogram(y, sr, n_fft, hop, super::N_MELS);
+    dsp::power_to_db_inplace(&mut mel);
+    onset_strength_from_db(&mel, n_fft, hop, agg)
+}
+
+/// A window of `2·half + 1` values kept sorted, for sliding medians.
+struct SortedWindow {
+    v: Vec<f32>,
+}
+
+impl SortedWindow {
+    fn new(mut init: Vec<f32>) -> Self {
+        init.sort_unstable_by(|a, b| a.total_cmp(b));
+        Self { v: init }
+    }
+
+    fn replace(&mut self, old: f32, new: f32) {
+        let i = self.v.partition_point(|x| x.total_cmp(&old).is_lt());
+        if i < self.v.len() {
+            self.v.remove(i);
+        }
+        let j = self.v.partition_point(|x| x.total_cmp(&new).is_lt());
+        self.v.insert(j, new);
+    }
+
+    fn median(&self) -> f32 {
+        self.v[self.v.len() / 2]
+    }
+}
+
+/// scipy `mode='reflect'` index (d c b a | a b c d), folded until in range.
+fn reflect(mut j: isize, n: usize) -> usize {
+    let n = n as isize;
+    loop {
+        if j < 0 {
+            j = -j - 1;
+        } else if j >= n {
+            j = 2 * n - j - 1;
+        } else {
+            return j as usize;
+        }
+    }
+}
+
+/// Sliding median of width `2·half + 1` over a contiguous lane, reflect boundaries.
+fn sliding_median(x: &[f32], half: usize, out: &mut [f32]) {
+    let n = x.len();
+    if n == 0 {
+        return;
+    }
+    let ext = |j: isize| x[reflect(j, n)];
+    let mut w = SortedWindow::new((-(half as isize)..=half as isize).map(ext).collect());
+    out[0] = w.median();
+    for i in 1..n {
+        let i = i as isize;
+        w.replace(ext(i - half as isize - 1), ext(i + half as isize));
+        out[i as usize] = w.median();
+    }
+}
+
+/// librosa `effects.hpss(y)`: STFT (2048/512, Hann) → median filters (31 frames along time
+/// for the harmonic part, 31 bins along frequency for the percussive part) → soft masks
+/// (power 2, margin 1) → inverse STFT. Streams over frames: memory is 31 frames plus the
+/// two output signals.
+pub fn hpss_signal(y: &[f32], n_fft: usize, hop: usize) -> (Vec<f32>, Vec<f32>) {
+    let len = y.len();
+    let t_n = dsp::n_frames(len, hop);
+    let half = 15usize;
+    let mut stft = Stft::new(n_fft, hop);
+    let nb = stft.n_bins();
+    // Cache of (spectrum, magnitude) for the frames a window needs.
+    let mut cache: std::collections::BTreeMap<usize, (Vec<rustfft::num_complex::Complex32>, Vec<f32>)> =
+        std::collections::BTreeMap::new();
+    let mut get = |t: usize, cache: &mut std::collections::BTreeMap<usize, (Vec<rustfft::num_complex::Complex32>, Vec<f32>)>| {
+        if !cache.contains_key(&t) {
+            let spec = stft.frame(y, t).to_vec();
+            let mag = spec.iter().map(|c| c.norm()).collect();
+            cache.insert(t, (spec, mag));
+        }
+    };
+    let ext = |j: isize| reflect(j, t_n);
+    for j in -(half as isize)..=half as isize {
+        get(ext(j), &mut cache);
+    }
+    let mut windows: Vec<SortedWindow> = (0..nb)
+        .map(|k| SortedWindow::new((-(half as isize)..=half as isize).map(|j| cache[&ext(j)].1[k]).collect()))
+        .collect();
+    let window = dsp::hann_periodic(n_fft);
+    let inv = realfft::RealFftPlanner::<f32>::new().plan_fft_inverse(n_fft);
+    let mut ispec = inv.make_input_vec();
+    let mut frame_out = inv.make_output_vec();
+    let mut iscratch = inv.make_scratch_vec();
+    let mut harm_y = vec![0.0f32; len];
+    let mut perc_y = vec![0.0f32; len];
+    let mut perc_med = vec![0.0f32; nb];
+    let mut mask_h = vec![0.0f32; nb];
+    let mut mask_p = vec![0.0f32; nb];
+    for t in 0..t_n {
+        if t > 0 {
+            let (old, new) = (ext(t as isize - half as isize - 1), ext((t + half) as isize));
+            get(new, &mut cache);
+            for (k, w) in windows.iter_mut().enumerate() {
+                w.replace(cache[&old].1[k], cache[&new].1[k]);
+            }
+            // Frames older than the window (and not needed for end reflection) can go.
+            let keep_from = t.saturating_sub(half + 1);
+            while let Some((&first, _)) = cache.iter().next() {
+                if first < keep_from && first + 2 * half + 2 < t_n { cache.remove(&first); } else { break; }
+            }
+        }
+        let (spec, mag) = &cache[&t];
+        sliding_median(mag, half, &mut perc_med);
+        for k in 0..nb {
+            let (h, p) = (windows[k].median(), perc_med[k]);
+            let z = h.max(p);
+            let (mh, mp) = if z < f32::MIN_POSITIVE {
+                (0.5, 0.5)
+            } else {
+                let (hh, pp) = ((h / z).powi(2), (p / z).powi(2));
+                (hh / (hh + pp), pp / (hh + pp))
+            };
+            mask_h[k] = mh;
+            mask_p[k] = mp;
+        }
+        let start = (t * hop) as isize - (n_fft / 2) as isize;
+        for (mask, out) in [(&mask_h, &mut harm_y), (&mask_p, &mut perc_y)] {
+            for (k, c) in ispec.iter_mut().enumerate() {
+                *c = spec[k] * mask[k];
+            }
+            // The inverse real FFT needs purely real DC and Nyquist bins.
+            ispec[0].im = 0.0;
+            ispec[nb - 1].im = 0.0;
+            let _ = inv.process_with_scratch(&mut ispec, &mut frame_out, &mut iscratch);
+            for (i, (v, w)) in frame_out.iter().zip(&window).enumerate() {
+                let idx = start + i as isize;
+                if idx >= 0 && (idx as usize) < len {
+                    out[idx as usize] += v * w / n_fft as f32;
+                }
+            }
+        }
+    }
+    // Divide by the window's sum of squares over the (at most n_fft / hop) overlapping frames.
+    let half_fft = (n_fft / 2) as isize;
+    for (idx, (h, p)) in harm_y.iter_mut().zip(perc_y.iter_mut()).enumerate() {
+        let pos = idx as isize + half_fft;
+        let t_hi = ((pos / hop as isize) as usize).min(t_n - 1);
+        let t_lo = ((pos - n_fft as isize + 1).max(0) as usize).div_ceil(hop);
+        let mut w = 0.0f32;
+        for t in t_lo..=t_hi {
+            let off = pos - (t * hop) as isize;
+            if (0..n_fft as isize).contains(&off) {
+                w += window[off as usize] * window[off as usize];
+            }
+        }
+        if w > f32::MIN_POSITIVE {
+            *h /= w;
+            *p /= w;
+        }
+    }
+    (harm_y, perc_y)
+}
