@@ -1,1 +1,63 @@
-//! The per-job report: every metric that applies to a generated dance.
+//! The per-job report: every metric that applies to a generated dance, with the series a web
+//! tool plots (music and kinematic beat times, the windowed FID_k curve, motion energy).
+//!
+//! The worker calls [`build`] once the dance exists and [`write`] to store `report.json`; the
+//! schema is [`Report`], documented in the OpenAPI spec through `utoipa::ToSchema`.
+use crate::audio::Analysis;
+use crate::metrics::reference::ReferenceStats;
+use crate::metrics::score::{fid_k_curve, score_dance, CurvePoint, DanceScores, KinematicBeats};
+use crate::metrics::kinematics::Freezing;
+use crate::metrics::MetricsError;
+use crate::motion::{KeyPose, Motion};
+
+/// Version of the report schema; bumped when a field changes meaning.
+pub const REPORT_VERSION: u32 = 1;
+
+/// How well a dance dances, as `report.json` stores it.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct Report {
+    pub version: u32,
+    /// Frame rate of the dance.
+    pub fps: f64,
+    /// Frames in the dance.
+    pub frames: usize,
+    /// Duration in seconds.
+    pub duration_s: f64,
+    /// Music beat times (s) within the dance, from the audio analysis.
+    pub music_beat_times: Vec<f64>,
+    /// Kinematic beat times (s), both published variants.
+    pub kinematic_beat_times: KinematicBeats,
+    /// Every per-dance score (BAS in both conventions, FID_k/FID_g, diversity, smoothness, foot
+    /// skating, freezing ratio, plausibility, key-pose error).
+    pub scores: DanceScores,
+    /// FID_k over consecutive 4-s windows.
+    pub fid_k_curve: Vec<CurvePoint>,
+    /// Motion energy per second, to see a dance that freezes.
+    pub freezing: Freezing,
+    /// What the FID and plausibility compare against.
+    pub reference: String,
+}
+
+/// Builds the report of `motion` danced to the song `analysis` describes (motion frame 0 at song
+/// time 0), with the key poses the user fixed (may be empty).
+pub fn build(motion: &Motion, analysis: &Analysis, key_poses: &[KeyPose], reference: &ReferenceStats) -> Result<Report, MetricsError> {
+    let scored = score_dance(motion, &analysis.beat_times, key_poses, reference)?;
+    Ok(Report {
+        version: REPORT_VERSION,
+        fps: motion.fps,
+        frames: motion.positions.dim().0,
+        duration_s: motion.positions.dim().0 as f64 / motion.fps,
+        music_beat_times: scored.music_beats,
+        kinematic_beat_times: scored.kinematic_beats,
+        scores: scored.scores,
+        fid_k_curve: fid_k_curve(motion, reference),
+        freezing: scored.freezing,
+        reference: format!("{} ({} dances)", reference.source, reference.dances.len()),
+    })
+}
+
+/// Writes the report as pretty JSON to `path`.
+pub fn write(report: &Report, path: &std::path::Path) -> Result<(), MetricsError> {
+    let text = serde_json::to_string_pretty(report)?;
+    std::fs::write(path, text).map_err(|source| MetricsError::Io { path: path.display().to_string(), source })
+}

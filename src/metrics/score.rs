@@ -1,0 +1,237 @@
+//! Every metric of one dance, and of a set of dances (a row of `choreo eval`).
+use super::beats::{beats_within, kinematic_beats_bailando, kinematic_beats_fact, rhythm_scores, RhythmScores};
+use super::fid::{frechet_distance, mean_pairwise_distance, Gaussian};
+use super::kinematics::{foot_skating, freezing, key_pose_error_cm, smoothness_cv, FootSkating, Freezing};
+use super::plausibility::{plausibility, Plausibility};
+use super::reference::{geometric_windows, kinetic_windows, FeatureStats, ReferenceStats, CURVE_WINDOW_S};
+use super::MetricsError;
+use crate::motion::{skeleton as sk, KeyPose, Motion, NUM_JOINTS};
+
+/// The raw window features of one dance (5-s windows every 1 s).
+#[derive(Clone, Debug, Default)]
+pub struct WindowFeatures {
+    pub kinetic: Vec<Vec<f64>>,
+    pub geometric: Vec<Vec<f64>>,
+}
+
+/// Kinematic beat times (seconds from the first frame).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct KinematicBeats {
+    /// FACT variant: minima of summed joint speed, order 10 at 60 fps scaled.
+    pub fact: Vec<f64>,
+    /// Bailando variant: minima of Gaussian-smoothed (σ = 5 frames at 60 fps) mean joint speed.
+    pub bailando: Vec<f64>,
+}
+
+/// Every per-dance number.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct DanceScores {
+    pub rhythm: RhythmScores,
+    /// FID_k of this dance's 5-s windows against the real train windows.
+    pub fid_k: f64,
+    /// FID_g, likewise with geometric features.
+    pub fid_g: f64,
+    /// Div_k: mean pairwise distance of this dance's z-normalised kinetic windows.
+    pub div_k: f64,
+    /// Div_g: likewise with geometric features.
+    pub div_g: f64,
+    /// Smoothness S_cv (lower is smoother).
+    pub smoothness_cv: f64,
+    pub foot_skating: FootSkating,
+    /// Motion energy in the last 30 s over the first 30 s.
+    pub freezing_ratio: f64,
+    pub plausibility: Plausibility,
+    /// Key-pose consistency error (cm), when key poses were given.
+    pub key_pose_error_cm: Option<f64>,
+}
+
+/// One dance scored, with the series a report plots and the features a set-level FID pools.
+#[derive(Clone, Debug)]
+pub struct ScoredDance {
+    pub scores: DanceScores,
+    /// Music beats within the dance's span (seconds from the first frame).
+    pub music_beats: Vec<f64>,
+    pub kinematic_beats: KinematicBeats,
+    pub freezing: Freezing,
+    pub features: WindowFeatures,
+}
+
+fn check(motion: &Motion) -> Result<(), MetricsError> {
+    let dim = motion.positions.dim();
+    if dim.1 != NUM_JOINTS || dim.2 != 3 {
+        return Err(MetricsError::JointCount { got: dim.1, want: NUM_JOINTS });
+    }
+    if dim.0 < 2 || !(motion.fps.is_finite() && motion.fps > 0.0) {
+        return Err(MetricsError::NotEnoughData(format!("{} frames at {} fps", dim.0, motion.fps)));
+    }
+    if motion.positions.iter().any(|v| !v.is_finite()) {
+        return Err(MetricsError::NotEnoughData("non-finite positions".into()));
+    }
+    Ok(())
+}
+
+/// FID of raw window features against the real statistics (`NaN` without windows).
+pub fn fid_against(stats: &FeatureStats, raw: &[Vec<f64>]) -> f64 {
+    let normed: Vec<Vec<f64>> = raw.iter().map(|r| stats.normalise(r)).collect();
+    match Gaussian::fit(&normed) {
+        Some(g) => frechet_distance(&g, &stats.gaussian),
+        None => f64::NAN,
+    }
+}
+
+/// Mean pairwise distance of z-normalised window features.
+pub fn diversity(stats: &FeatureStats, raw: &[Vec<f64>]) -> f64 {
+    let normed: Vec<Vec<f64>> = raw.iter().map(|r| stats.normalise(r)).collect();
+    mean_pairwise_distance(&normed)
+}
+
+/// Scores one dance. `music_beats` are on the dance's clock (motion frame 0 at 0 s); beats outside
+/// the dance are ignored.
+pub fn score_dance(motion: &Motion, music_beats: &[f64], key_poses: &[KeyPose], reference: &ReferenceStats) -> Result<ScoredDance, MetricsError> {
+    check(motion)?;
+    let p = motion.positions.view();
+    let fps = motion.fps;
+    let music = beats_within(music_beats, (p.dim().0 - 1) as f64 / fps);
+    let kb = KinematicBeats { fact: kinematic_beats_fact(p, fps), bailando: kinematic_beats_bailando(p, fps) };
+    let features = WindowFeatures {
+        kinetic: kinetic_windows(motion, reference.kinetic.window_s, reference.kinetic.stride_s),
+        geometric: geometric_windows(motion, &reference.body_scale, reference.geometric.window_s, reference.geometric.stride_s),
+    };
+    let fr = freezing(p, fps);
+    let scores = DanceScores {
+        rhythm: rhythm_scores(&music, &kb.fact, &kb.bailando),
+        fid_k: fid_against(&reference.kinetic, &features.kinetic),
+        fid_g: fid_against(&reference.geometric, &features.geometric),
+        div_k: diversity(&reference.kinetic, &features.kinetic),
+        div_g: diversity(&reference.geometric, &features.geometric),
+        smoothness_cv: smoothness_cv(p, fps),
+        foot_skating: foot_skating(p, fps, &sk::FOOT_POINTS),
+        freezing_ratio: fr.last_first_ratio,
+        plausibility: plausibility(p, fps, &reference.angle_limits),
+        key_pose_error_cm: key_pose_error_cm(p, fps, key_poses),
+    };
+    Ok(ScoredDance { scores, music_beats: music, kinematic_beats: kb, freezing: fr, features })
+}
+
+/// One point of the windowed FID_k curve.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct CurvePoint {
+    pub start_s: f64,
+    pub end_s: f64,
+    pub fid_k: f64,
+}
+
+/// FID_k over consecutive 4-s windows (DanceRevolution Fig. 4). Each window is one feature
+/// vector, a Gaussian with zero covariance, so a point is `|x − μ_real|² + tr Σ_real`: the
+/// constant `tr Σ_real` (≈ the feature count, as features are z-normalised) is the floor, and
+/// the distance above it shows where a long dance drifts from real motion.
+pub fn fid_k_curve(motion: &Motion, reference: &ReferenceStats) -> Vec<CurvePoint> {
+    let stats = &reference.kinetic_curve;
+    let len = (CURVE_WINDOW_S * motion.fps).round() as usize;
+    let t = motion.positions.dim().0;
+    let mut out = Vec::new();
+    let mut s0 = 0;
+    while s0 + len <= t {
+        let clip = Motion { fps: motion.fps, positions: motion.positions.slice(ndarray::s![s0..s0 + len, .., ..]).to_owned() };
+        let raw = kinetic_windows(&clip, CURVE_WINDOW_S, CURVE_WINDOW_S);
+        out.push(CurvePoint { start_s: s0 as f64 / motion.fps, end_s: (s0 + len) as f64 / motion.fps, fid_k: fid_against(stats, &raw) });
+        s0 += len;
+    }
+    out
+}
+
+/// Means of the per-dance scores over a set, with FID and diversity recomputed on the pooled
+/// windows of the whole set (the way papers report a model).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct SetScores {
+    /// Dances in the set.
+    pub dances: usize,
+    /// Per-dance scores averaged (their `fid_*`/`div_*` are per-dance means).
+    pub mean: DanceScores,
+    /// FID_k of all windows of the set pooled.
+    pub fid_k: f64,
+    /// FID_g of all windows pooled.
+    pub fid_g: f64,
+    /// Div_k over all windows pooled.
+    pub div_k: f64,
+    /// Div_g over all windows pooled.
+    pub div_g: f64,
+}
+
+fn mean_of(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    if n == 0 {
+        f64::NAN
+    } else {
+        s / n as f64
+    }
+}
+
+/// Aggregates scored dances into set scores.
+pub fn score_set(dances: &[ScoredDance], reference: &ReferenceStats) -> SetScores {
+    let d = || dances.iter().map(|s| &s.scores);
+    let r = || d().map(|s| &s.rhythm);
+    let kin: Vec<Vec<f64>> = dances.iter().flat_map(|s| s.features.kinetic.iter().cloned()).collect();
+    let geo: Vec<Vec<f64>> = dances.iter().flat_map(|s| s.features.geometric.iter().cloned()).collect();
+    let kp: Vec<f64> = d().filter_map(|s| s.key_pose_error_cm).collect();
+    let mean = DanceScores {
+        rhythm: RhythmScores {
+            bas_fact: mean_of(r().map(|x| x.bas_fact)),
+            bas_bailando: mean_of(r().map(|x| x.bas_bailando)),
+            beat_coverage: mean_of(r().map(|x| x.beat_coverage)),
+            beat_hit_rate: mean_of(r().map(|x| x.beat_hit_rate)),
+            rhythm_hit: mean_of(r().map(|x| x.rhythm_hit)),
+            f_measure: mean_of(r().map(|x| x.f_measure)),
+            cemgil: mean_of(r().map(|x| x.cemgil)),
+            p_score: mean_of(r().map(|x| x.p_score)),
+        },
+        fid_k: mean_of(d().map(|s| s.fid_k)),
+        fid_g: mean_of(d().map(|s| s.fid_g)),
+        div_k: mean_of(d().map(|s| s.div_k)),
+        div_g: mean_of(d().map(|s| s.div_g)),
+        smoothness_cv: mean_of(d().map(|s| s.smoothness_cv)),
+        foot_skating: FootSkating {
+            contact_share: mean_of(d().map(|s| s.foot_skating.contact_share)),
+            skate_ratio: mean_of(d().map(|s| s.foot_skating.skate_ratio)),
+            mean_contact_speed_m_s: mean_of(d().map(|s| s.foot_skating.mean_contact_speed_m_s)),
+        },
+        freezing_ratio: mean_of(d().map(|s| s.freezing_ratio)),
+        plausibility: Plausibility {
+            authenticity: mean_of(d().map(|s| s.plausibility.authenticity)),
+            coherence: mean_of(d().map(|s| s.plausibility.coherence)),
+        },
+        key_pose_error_cm: if kp.is_empty() { None } else { Some(mean_of(kp.into_iter())) },
+    };
+    SetScores {
+        dances: dances.len(),
+        mean,
+        fid_k: fid_against(&reference.kinetic, &kin),
+        fid_g: fid_against(&reference.geometric, &geo),
+        div_k: diversity(&reference.kinetic, &kin),
+        div_g: diversity(&reference.geometric, &geo),
+    }
+}
+
+/// Multimodality: for each song, the mean pairwise distance between the mean z-normalised kinetic
+/// features of dances generated with different seeds; averaged over songs with ≥ 2 dances.
+pub fn multimodality(per_song: &[Vec<&ScoredDance>], reference: &ReferenceStats) -> Option<f64> {
+    let vals: Vec<f64> = per_song
+        .iter()
+        .filter(|v| v.len() >= 2)
+        .map(|v| {
+            let means: Vec<Vec<f64>> = v
+                .iter()
+                .filter_map(|s| {
+                    let normed: Vec<Vec<f64>> = s.features.kinetic.iter().map(|r| reference.kinetic.normalise(r)).collect();
+                    Gaussian::fit(&normed).map(|g| g.mean)
+                })
+                .collect();
+            mean_pairwise_distance(&means)
+        })
+        .collect();
+    if vals.is_empty() {
+        None
+    } else {
+        Some(mean_of(vals.into_iter()))
+    }
+}
