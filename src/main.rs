@@ -25,6 +25,8 @@ enum Command {
     },
     /// Print the libtorch version, thread settings, data dir and the models found.
     Doctor(ServiceArgs),
+    /// Score Real, Mismatched-real and models on the test split (Markdown table + JSON).
+    Eval(choreo::metrics::eval::EvalArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -97,6 +99,7 @@ fn main() -> anyhow::Result<()> {
             Ok(())
         }
         Command::Bench { what: BenchCommand::Http(args) } => bench_http(args, load(&args.service)?),
+        Command::Eval(args) => choreo::metrics::eval::run(args).context("choreo eval"),
     }
 }
 

@@ -77,6 +77,9 @@ pub struct ReferenceStats {
     pub angle_limits: AngleLimits,
 }
 
+/// The committed statistics, compiled into the binary.
+const BUILTIN: &str = include_str!("reference_train.json");
+
 /// Raw kinetic features of windows of `window_s` every `stride_s` (augmented positions).
 pub fn kinetic_windows(motion: &Motion, window_s: f64, stride_s: f64) -> Vec<Vec<f64>> {
     let aug = augment(motion.positions.view());
@@ -154,10 +157,7 @@ pub fn angle_limits(motions: &[Motion]) -> AngleLimits {
 impl ReferenceStats {
     /// The statistics committed in `src/metrics/reference_train.json`.
     pub fn builtin() -> Result<Self, MetricsError> {
-        // BOOTSTRAP: becomes include_str! once the file is generated.
-        let text = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/src/metrics/reference_train.json"))
-            .map_err(|source| MetricsError::Io { path: "reference_train.json".into(), source })?;
-        Ok(serde_json::from_str(&text)?)
+        Ok(serde_json::from_str(BUILTIN)?)
     }
 
     /// Computes the statistics from real dances (the train split; `names` label them).
