@@ -12,6 +12,7 @@ use ndarray::Array3;
 
 pub mod dataset;
 pub mod repr;
+pub mod rig;
 pub mod skeleton;
 
 /// Frame rate of the dance-with-melody data.

@@ -29,7 +29,8 @@
 //!
 //! # Hierarchy
 //! The root is the body centre (`center.npy`), which is not one of the 23 joints: exports add
-//! it as joint 0 of a 24-joint rigid skeleton (see [`crate::motion::rig`]). In the 23-joint
+//! it as joint 0 of the rigid skeleton, plus two branch joints (pelvis, neck) that give the hips
+//! and the head their own rotations (see [`crate::motion::rig`]). In the 23-joint
 //! index space, [`PARENTS`] gives `None` for the joints hanging from the body centre.
 //! ```text
 //! body_centre ─ spine(2) ┬ head_left(1) ─ head_right(0)
