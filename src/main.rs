@@ -27,11 +27,22 @@ enum Command {
     Doctor(ServiceArgs),
     /// Score Real, Mismatched-real and models on the test split (Markdown table + JSON).
     Eval(choreo::metrics::eval::EvalArgs),
+    /// Train a model on the train split of dance-with-melody and write its folder under models/.
+    Train {
+        #[command(subcommand)]
+        model: TrainCommand,
+    },
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
         what: BenchCommand,
     },
+}
+
+#[derive(Subcommand)]
+enum TrainCommand {
+    /// DanceRevolution (Huang et al., ICLR 2021).
+    DanceRevolution(choreo::models::train::dance_revolution::Options),
 }
 
 #[derive(Subcommand)]
@@ -96,6 +107,12 @@ fn main() -> anyhow::Result<()> {
             for (name, value) in choreo::telemetry::doctor(&load(args)?) {
                 println!("{name:<34} {value}");
             }
+            Ok(())
+        }
+        Command::Train { model: TrainCommand::DanceRevolution(opts) } => {
+            choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "info");
+            let logs = choreo::models::train::dance_revolution::train(opts).context("training dance-revolution")?;
+            println!("trained {} epochs into {}", logs.len(), opts.out.display());
             Ok(())
         }
         Command::Bench { what: BenchCommand::Http(args) } => bench_http(args, load(&args.service)?),

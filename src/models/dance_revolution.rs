@@ -19,7 +19,13 @@ use serde::{Deserialize, Serialize};
 use tch::nn;
 use tch::{Device, Kind, Tensor};
 
-use super::norm::Normalizer;
+use std::path::Path;
+
+use super::{Cancelled, Capabilities, DanceModel, GenerateRequest, ModelError, ModelId, ModelInfo, Progress};
+use crate::motion::dataset::NormStats;
+use crate::motion::repr::RootStart;
+use crate::motion::Motion;
+
 
 /// Hyper-parameters, with the paper's symbols.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -414,10 +420,121 @@ pub struct TrainingRecord {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ModelFile {
     pub config: Config,
-    pub music_norm: Normalizer,
-    pub pose_norm: Normalizer,
+    pub music_norm: NormStats,
+    pub pose_norm: NormStats,
     pub fps: f64,
     pub training: TrainingRecord,
+}
+
+/// One loaded copy of the network. libtorch tensors are `Send` but not `Sync`, so each
+/// concurrent generation borrows its own copy from [`Served`]'s pool.
+struct Instance {
+    model: DanceRevolution,
+    _vs: nn::VarStore,
+}
+
+impl Instance {
+    fn load(dir: &Path, config: &Config) -> Result<Self, ModelError> {
+        let mut vs = nn::VarStore::new(Device::Cpu);
+        let model = DanceRevolution::new(&vs.root(), config.clone());
+        vs.load(dir.join(WEIGHTS_FILE))?;
+        Ok(Self { model, _vs: vs })
+    }
+}
+
+/// A trained DanceRevolution, ready to serve.
+pub struct Served {
+    dir: std::path::PathBuf,
+    file: ModelFile,
+    pool: std::sync::Mutex<Vec<Instance>>,
+}
+
+impl Served {
+    /// Loads `dir/model.json` and `dir/weights.safetensors`.
+    pub fn load(dir: &Path) -> Result<Self, ModelError> {
+        let missing = || ModelError::MissingWeights(ID.into(), dir.display().to_string());
+        let text = std::fs::read_to_string(dir.join(MODEL_FILE)).map_err(|_| missing())?;
+        let file: ModelFile = serde_json::from_str(&text).map_err(|e| ModelError::Invalid(format!("{MODEL_FILE}: {e}")))?;
+        // Load one copy now so a bad weights file fails at start-up, not on the first job.
+        let first = Instance::load(dir, &file.config)?;
+        Ok(Self { dir: dir.to_owned(), file, pool: std::sync::Mutex::new(vec![first]) })
+    }
+
+    fn checkout(&self) -> Result<Instance, ModelError> {
+        let pooled = self.pool.lock().unwrap_or_else(|p| p.into_inner()).pop();
+        match pooled {
+            Some(i) => Ok(i),
+            None => Instance::load(&self.dir, &self.file.config),
+        }
+    }
+
+    fn checkin(&self, instance: Instance) {
+        self.pool.lock().unwrap_or_else(|p| p.into_inner()).push(instance);
+    }
+
+    /// Music features of a whole song, normalised, as `[1, n, F]`.
+    fn music(&self, audio: &crate::audio::DecodedAudio, n: usize) -> Result<Tensor, ModelError> {
+        let feats = crate::audio::features::dance_revolution(audio, self.file.fps, n)?;
+        Ok(to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0))
+    }
+}
+
+/// `[r, c]` ndarray → tensor.
+fn to_tensor(m: &ndarray::Array2<f32>) -> Tensor {
+    let (r, c) = m.dim();
+    Tensor::from_slice(m.as_standard_layout().as_slice().expect("standard layout")).view([r as i64, c as i64])
+}
+
+impl DanceModel for Served {
+    fn info(&self) -> ModelInfo {
+        ModelInfo {
+            id: ModelId(ID.into()),
+            paper: "Huang et al., Dance Revolution: Long-Term Dance Generation with Music via Curriculum Learning, ICLR 2021".into(),
+            capabilities: Capabilities { key_poses: false, seed_motion: true, style: false },
+        }
+    }
+
+    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Motion, ModelError> {
+        if !req.key_poses.is_empty() {
+            return Err(ModelError::Unsupported(ID.into(), "key poses"));
+        }
+        let fps = self.file.fps;
+        let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
+        progress.report("features", 0.0)?;
+        let music = self.music(req.audio, n)?;
+        progress.report("features", 1.0)?;
+        let seed_poses = match req.seed_motion {
+            Some(m) => {
+                let root = crate::motion::skeleton::body_centre_track(m.positions.view());
+                let (f, _) = crate::motion::repr::to_features(m.positions.view(), root.view())?;
+                Some(to_tensor(&self.file.pose_norm.normalize(&f)?).unsqueeze(0))
+            }
+            None => None,
+        };
+        let instance = self.checkout()?;
+        let model = &instance.model;
+        let out = tch::no_grad(|| -> Result<Tensor, ModelError> {
+            let mut cancelled = false;
+            let z = model.encoder.forward_chunked(&music, 1000, |f| {
+                cancelled = progress.report("encode", f).is_err();
+                !cancelled
+            });
+            let z = z.ok_or(Cancelled)?;
+            let y = model.decode(&z, req.seed, seed_poses.as_ref(), 250, |f| {
+                cancelled = progress.report("decode", f).is_err();
+                !cancelled
+            });
+            y.ok_or(ModelError::Cancelled(Cancelled))
+        });
+        self.checkin(instance);
+        let y = out?.squeeze_dim(0);
+        let (r, c) = (y.size()[0] as usize, y.size()[1] as usize);
+        let data: Vec<f32> = Vec::<f32>::try_from(y.contiguous().view([-1]))?;
+        let poses = ndarray::Array2::from_shape_vec((r, c), data).map_err(|e| ModelError::Invalid(e.to_string()))?;
+        let poses = self.file.pose_norm.denormalize(&poses)?;
+        let (motion, _root) = crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
+        Ok(motion)
+    }
 }
 
 /// `q = ⌊λ·epoch⌋`, the linear schedule of §3.3.

@@ -8,7 +8,7 @@ use crate::motion::{KeyPose, Motion};
 use serde::{Deserialize, Serialize};
 
 pub mod dance_revolution;
-pub mod norm;
+pub mod train;
 
 /// A model's stable id, as used by the API (`"dance-revolution"`, `"keypose-transformer"`).
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
@@ -66,6 +66,8 @@ pub enum ModelError {
     Torch(#[from] tch::TchError),
     #[error("invalid input: {0}")]
     Invalid(String),
+    #[error("motion: {0}")]
+    Motion(#[from] crate::motion::MotionError),
 }
 
 /// A trained model, ready to dance.
@@ -83,8 +85,12 @@ pub struct Registry {
 impl Registry {
     /// Loads every model whose weights are present under `dir`; a model without weights is left out.
     pub fn load(dir: &std::path::Path) -> Result<Self, ModelError> {
-        let _ = dir; // each model file adds its loader here as it lands
-        Ok(Self::default())
+        let mut models: Vec<std::sync::Arc<dyn DanceModel>> = Vec::new();
+        let dr = dir.join(dance_revolution::ID);
+        if dr.join(dance_revolution::WEIGHTS_FILE).exists() {
+            models.push(std::sync::Arc::new(dance_revolution::Served::load(&dr)?));
+        }
+        Ok(Self { models })
     }
 
     /// The models available, in a stable order.
