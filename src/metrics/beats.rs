@@ -157,6 +157,33 @@ pub fn bas_bailando(music_beats: &[f64], motion_beats: &[f64]) -> f64 {
         / music_beats.len() as f64
 }
 
+/// The FACT-convention BAS that motion beats placed uniformly at random over `[0, duration_s]`
+/// would score on average: the mean of `exp(−d²/2σ²)` over the span, `d` the distance to the
+/// nearest music beat (a 1-ms grid). About `σ√(2π)/P` for beat period `P`: 0.18 at 86 bpm, so
+/// a BAS near this says the kinematic beats ignore the music. 0 without music beats.
+pub fn bas_fact_chance(music_beats: &[f64], duration_s: f64) -> f64 {
+    if music_beats.is_empty() || duration_s <= 0.0 {
+        return 0.0;
+    }
+    let mut sorted = music_beats.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let n = (duration_s / 1e-3).round().max(1.0) as usize;
+    let mut sum = 0.0;
+    for i in 0..n {
+        let t = (i as f64 + 0.5) * duration_s / n as f64;
+        let k = sorted.partition_point(|&b| b < t);
+        let mut d = f64::INFINITY;
+        if k < sorted.len() {
+            d = d.min(sorted[k] - t);
+        }
+        if k > 0 {
+            d = d.min(t - sorted[k - 1]);
+        }
+        sum += (-(d * d) / (2.0 * BAS_SIGMA_S * BAS_SIGMA_S)).exp();
+    }
+    sum / n as f64
+}
+
 /// Whether some element of `others` lies within `tol` seconds of `t`.
 fn has_within(t: f64, others: &[f64], tol: f64) -> bool {
     others.iter().any(|o| (o - t).abs() <= tol)
@@ -285,6 +312,8 @@ pub struct RhythmScores {
     pub bas_fact: f64,
     /// BAS, Bailando convention (mean over music beats; Bailando kinematic beats).
     pub bas_bailando: f64,
+    /// What `bas_fact` would be for kinematic beats at random times (see [`bas_fact_chance`]).
+    pub bas_fact_chance: f64,
     /// DanceRevolution beat coverage B_k / B_m (FACT kinematic beats).
     pub beat_coverage: f64,
     /// DanceRevolution beat hit rate B_a / B_k, ±0.1 s (FACT kinematic beats).
@@ -300,10 +329,12 @@ pub struct RhythmScores {
 }
 
 /// Scores a dance's kinematic beats against music beats already clipped to the dance's span.
-pub fn rhythm_scores(music_beats: &[f64], fact_beats: &[f64], bailando_beats: &[f64]) -> RhythmScores {
+/// `duration_s` is the dance's span (for the chance level).
+pub fn rhythm_scores(music_beats: &[f64], fact_beats: &[f64], bailando_beats: &[f64], duration_s: f64) -> RhythmScores {
     RhythmScores {
         bas_fact: bas_fact(music_beats, fact_beats),
         bas_bailando: bas_bailando(music_beats, bailando_beats),
+        bas_fact_chance: bas_fact_chance(music_beats, duration_s),
         beat_coverage: beat_coverage(music_beats, fact_beats),
         beat_hit_rate: beat_hit_rate(music_beats, fact_beats),
         rhythm_hit: rhythm_hit(music_beats, fact_beats),

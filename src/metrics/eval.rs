@@ -253,7 +253,7 @@ fn f(x: f64) -> String {
 /// The Markdown table `choreo eval` prints.
 pub fn markdown(result: &EvalResult) -> String {
     let mut out = String::from(
-        "| Motion | n | BAS FACT ↑ | BAS Bailando ↑ | Coverage | Hit rate ↑ | Rhythm hit ↑ | Beat F ↑ | FID_k ↓ | FID_g ↓ | Div_k | Div_g | S_cv ↓ | Skate ↓ | Freeze L/F | Authentic ↑ | Coherent ↑ | Multimodality |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| Motion | n | BAS FACT ↑ | (chance) | BAS Bailando ↑ | Coverage | Hit rate ↑ | Rhythm hit ↑ | Beat F ↑ | FID_k ↓ | FID_g ↓ | Div_k | Div_g | S_cv ↓ | Skate ↓ | Freeze L/F | Authentic ↑ | Coherent ↑ | Multimodality |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in &result.rows {
         let m = &r.scores.mean;
@@ -261,6 +261,7 @@ pub fn markdown(result: &EvalResult) -> String {
             r.name.clone(),
             r.scores.dances.to_string(),
             f(m.rhythm.bas_fact),
+            f(m.rhythm.bas_fact_chance),
             f(m.rhythm.bas_bailando),
             f(m.rhythm.beat_coverage),
             f(m.rhythm.beat_hit_rate),

@@ -91,7 +91,8 @@ pub fn score_dance(motion: &Motion, music_beats: &[f64], key_poses: &[KeyPose], 
     check(motion)?;
     let p = motion.positions.view();
     let fps = motion.fps;
-    let music = beats_within(music_beats, (p.dim().0 - 1) as f64 / fps);
+    let span = (p.dim().0 - 1) as f64 / fps;
+    let music = beats_within(music_beats, span);
     let kb = KinematicBeats { fact: kinematic_beats_fact(p, fps), bailando: kinematic_beats_bailando(p, fps) };
     let features = WindowFeatures {
         kinetic: kinetic_windows(motion, reference.kinetic.window_s, reference.kinetic.stride_s),
@@ -99,7 +100,7 @@ pub fn score_dance(motion: &Motion, music_beats: &[f64], key_poses: &[KeyPose], 
     };
     let fr = freezing(p, fps);
     let scores = DanceScores {
-        rhythm: rhythm_scores(&music, &kb.fact, &kb.bailando),
+        rhythm: rhythm_scores(&music, &kb.fact, &kb.bailando, span),
         fid_k: fid_against(&reference.kinetic, &features.kinetic),
         fid_g: fid_against(&reference.geometric, &features.geometric),
         div_k: diversity(&reference.kinetic, &features.kinetic),
@@ -178,6 +179,7 @@ pub fn score_set(dances: &[ScoredDance], reference: &ReferenceStats) -> SetScore
         rhythm: RhythmScores {
             bas_fact: mean_of(r().map(|x| x.bas_fact)),
             bas_bailando: mean_of(r().map(|x| x.bas_bailando)),
+            bas_fact_chance: mean_of(r().map(|x| x.bas_fact_chance)),
             beat_coverage: mean_of(r().map(|x| x.beat_coverage)),
             beat_hit_rate: mean_of(r().map(|x| x.beat_hit_rate)),
             rhythm_hit: mean_of(r().map(|x| x.rhythm_hit)),
