@@ -27,6 +27,8 @@ enum Command {
     Doctor(ServiceArgs),
     /// Score Real, Mismatched-real and models on the test split (Markdown table + JSON).
     Eval(choreo::metrics::eval::EvalArgs),
+    /// Generate a dance for a song: motion.bvh, motion.json, motion.glb and report.json.
+    Generate(choreo::worker::standalone::GenerateArgs),
     /// Train a model on the train split of dance-with-melody and write its folder under models/.
     Train {
         #[command(subcommand)]
@@ -47,6 +49,8 @@ enum TrainCommand {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// Seconds per minute of music for each model, split by stage (decode → report).
+    Generate(choreo::worker::standalone::BenchArgs),
     /// Throughput and p99 of GET /v1/jobs/{id} on loopback while the workers are busy.
     Http(HttpBenchArgs),
 }
@@ -107,6 +111,19 @@ fn main() -> anyhow::Result<()> {
             for (name, value) in choreo::telemetry::doctor(&load(args)?) {
                 println!("{name:<34} {value}");
             }
+            Ok(())
+        }
+        Command::Generate(args) => {
+            let g = choreo::worker::standalone::generate(args).context("choreo generate")?;
+            for (stage, d) in &g.stages {
+                eprintln!("{stage:<14} {:>8.3} s", d.as_secs_f64());
+            }
+            println!("{}", serde_json::to_string_pretty(&g.files)?);
+            println!("report: {}", g.report_path.display());
+            Ok(())
+        }
+        Command::Bench { what: BenchCommand::Generate(args) } => {
+            println!("{}", choreo::worker::standalone::bench(args).context("choreo bench generate")?);
             Ok(())
         }
         Command::Train { model: TrainCommand::DanceRevolution(opts) } => {

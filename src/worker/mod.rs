@@ -18,6 +18,7 @@ use tokio_util::sync::CancellationToken;
 use tracing::Instrument;
 
 pub mod pipeline;
+pub mod standalone;
 
 pub use pipeline::Pipeline;
 
@@ -38,6 +39,10 @@ pub enum WorkerError {
     Io(#[from] std::io::Error),
     #[error("{0}")]
     Export(String),
+    #[error("motion: {0}")]
+    Motion(#[from] crate::motion::MotionError),
+    #[error("report: {0}")]
+    Metrics(#[from] crate::metrics::MetricsError),
     #[error("cancelled")]
     Cancelled,
     #[error("the job panicked: {0}")]
@@ -70,6 +75,8 @@ impl WorkerError {
             WorkerError::InvalidOptions(_) => "invalid-job-options",
             WorkerError::Io(_) => "result-io",
             WorkerError::Export(_) => "export-failed",
+            WorkerError::Motion(e) => e.code(),
+            WorkerError::Metrics(_) => "report-failed",
             WorkerError::Cancelled => "cancelled",
             WorkerError::Panicked(_) => "job-panicked",
         }
@@ -85,6 +92,8 @@ impl WorkerError {
             WorkerError::InvalidOptions(_) => false,
             WorkerError::Io(_) => true,
             WorkerError::Export(_) => false,
+            WorkerError::Motion(e) => e.is_retryable(),
+            WorkerError::Metrics(_) => false,
             WorkerError::Cancelled => false,
             WorkerError::Panicked(_) => false,
         }

@@ -1,0 +1,217 @@
+//! The generate pipeline outside the queue: `choreo generate` and `choreo bench generate` run
+//! exactly the stages a job runs (decode → model → export + report), with a terminal progress
+//! bar or a stage clock instead of a job row.
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use crate::audio::{self, DecodedAudio};
+use crate::metrics::reference::ReferenceStats;
+use crate::models::{Cancelled, GenerateRequest, ModelId, Progress, Registry};
+use crate::motion::{export, KeyPose, Motion};
+
+use super::WorkerError;
+
+/// `choreo generate` arguments.
+#[derive(Clone, Debug, clap::Args)]
+pub struct GenerateArgs {
+    /// An mp3, wav, flac, ogg or m4a file.
+    pub song: PathBuf,
+    /// The model id (see `choreo doctor` or `GET /v1/models`).
+    #[arg(long, default_value = "dance-revolution")]
+    pub model: String,
+    /// Output folder for motion.bvh, motion.json, motion.glb and report.json.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Seeds every random draw: the same seed gives the same dance.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// A JSON file with key poses `[{time_s, joints}]` (models that take them).
+    #[arg(long)]
+    pub key_poses: Option<PathBuf>,
+    /// Where trained models live.
+    #[arg(long, default_value = "models")]
+    pub models_dir: PathBuf,
+}
+
+/// What one generation produced and how long each stage took.
+#[derive(Debug)]
+pub struct Generated {
+    pub motion: Motion,
+    pub files: export::ExportPaths,
+    pub report_path: PathBuf,
+    /// `(stage, duration)` in pipeline order.
+    pub stages: Vec<(String, Duration)>,
+}
+
+/// Times each stage a model reports, and forwards fractions to an optional callback.
+struct StageClock<'a> {
+    current: Option<(String, Instant)>,
+    done: Vec<(String, Duration)>,
+    on_progress: &'a mut dyn FnMut(&str, f32),
+}
+
+impl StageClock<'_> {
+    fn enter(&mut self, stage: &str) {
+        if self.current.as_ref().is_some_and(|(s, _)| s == stage) {
+            return;
+        }
+        if let Some((s, t)) = self.current.take() {
+            self.done.push((s, t.elapsed()));
+        }
+        self.current = Some((stage.to_owned(), Instant::now()));
+    }
+
+    fn finish(mut self) -> Vec<(String, Duration)> {
+        if let Some((s, t)) = self.current.take() {
+            self.done.push((s, t.elapsed()));
+        }
+        self.done
+    }
+}
+
+impl Progress for StageClock<'_> {
+    fn report(&mut self, stage: &str, fraction: f32) -> Result<(), Cancelled> {
+        self.enter(stage);
+        (self.on_progress)(stage, fraction);
+        Ok(())
+    }
+}
+
+/// Runs model → export → report on a decoded song into `out`, timing every stage.
+pub fn generate_decoded(
+    registry: &Registry,
+    model: &ModelId,
+    audio: &DecodedAudio,
+    seed: u64,
+    key_poses: &[KeyPose],
+    out: &Path,
+    on_progress: &mut dyn FnMut(&str, f32),
+) -> Result<Generated, WorkerError> {
+    let model = registry.get(model).ok_or_else(|| WorkerError::ModelUnavailable(model.clone()))?;
+    let mut clock = StageClock { current: None, done: Vec::new(), on_progress };
+    let request = GenerateRequest { audio, seed, key_poses, seed_motion: None };
+    let motion = model.generate(&request, &mut clock)?;
+    clock.enter("export");
+    std::fs::create_dir_all(out)?;
+    let files = export::write_all(&motion, out)?;
+    clock.enter("report");
+    let analysis = audio::analyze(audio)?;
+    let reference = ReferenceStats::builtin()?;
+    let report = crate::report::build(&motion, &analysis, key_poses, &reference)?;
+    let report_path = out.join("report.json");
+    crate::report::write(&report, &report_path)?;
+    Ok(Generated { motion, files, report_path, stages: clock.finish() })
+}
+
+/// `choreo generate`: a dance for one song, with a progress bar on stderr.
+pub fn generate(args: &GenerateArgs) -> Result<Generated, WorkerError> {
+    tch::set_num_threads(std::thread::available_parallelism().map(|n| n.get() as i32).unwrap_or(1));
+    let registry = Registry::load(&args.models_dir)?;
+    let key_poses: Vec<KeyPose> = match &args.key_poses {
+        Some(p) => serde_json::from_str(&std::fs::read_to_string(p)?)
+            .map_err(|e| WorkerError::InvalidOptions(format!("{}: {e}", p.display())))?,
+        None => Vec::new(),
+    };
+    let bar = indicatif::ProgressBar::new(1000);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{spinner} {msg:>9} [{bar:40}] {percent:>3}% {elapsed}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_message("decode");
+    let t0 = Instant::now();
+    let audio = audio::decode_path(&args.song)?;
+    let decode = t0.elapsed();
+    // Progress over the whole run: decode 0–5%, features 5–25%, encode 25–35%, decode loop 35–90%.
+    let span = |stage: &str| match stage {
+        "features" => (0.05, 0.25),
+        "encode" => (0.25, 0.35),
+        "decode" | "generate" => (0.35, 0.90),
+        _ => (0.90, 0.95),
+    };
+    let mut on_progress = |stage: &str, f: f32| {
+        let (a, b) = span(stage);
+        bar.set_message(stage.to_owned());
+        bar.set_position(((a + (b - a) * f64::from(f)) * 1000.0) as u64);
+    };
+    let mut g = generate_decoded(&registry, &ModelId(args.model.clone()), &audio, args.seed, &key_poses, &args.out, &mut on_progress)?;
+    g.stages.insert(0, ("decode audio".into(), decode));
+    bar.finish_with_message("done");
+    Ok(g)
+}
+
+/// `choreo bench generate` arguments.
+#[derive(Clone, Debug, clap::Args)]
+pub struct BenchArgs {
+    /// Models to time (default: every model found).
+    #[arg(long)]
+    pub model: Vec<String>,
+    /// Songs to time; a 3-minute song made by joining them is always added.
+    #[arg(long, default_values = ["../shared/audio/vibe_ace.ogg", "../shared/audio/sugar_plum_fairy.ogg", "../shared/audio/lets_go_fishin.ogg"])]
+    pub songs: Vec<PathBuf>,
+    #[arg(long, default_value = "models")]
+    pub models_dir: PathBuf,
+    /// libtorch intra-op threads (the service uses 1 per worker).
+    #[arg(long, default_value_t = 1)]
+    pub threads: i32,
+}
+
+/// The seconds `choreo bench generate` aims for on a 3-minute song (decode → BVH + report).
+pub const TARGET_3MIN_S: f64 = 5.0;
+
+/// `choreo bench generate`: seconds per minute of music, split by stage, for each model.
+pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
+    tch::set_num_threads(args.threads);
+    let registry = Registry::load(&args.models_dir)?;
+    let models: Vec<ModelId> = if args.model.is_empty() {
+        registry.list().into_iter().map(|m| m.id).collect()
+    } else {
+        args.model.iter().cloned().map(ModelId).collect()
+    };
+    let mut songs = Vec::new();
+    for p in &args.songs {
+        let t = Instant::now();
+        let a = audio::decode_path(p)?;
+        songs.push((p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(), a, t.elapsed()));
+    }
+    // A 3-minute song: the given songs joined (at the first one's rate) and cut to 180 s.
+    if let Some((_, first, _)) = songs.first() {
+        let sr = first.sample_rate;
+        let mut samples = Vec::new();
+        for (_, a, _) in &songs {
+            if a.sample_rate == sr {
+                samples.extend_from_slice(&a.samples);
+            }
+        }
+        samples.truncate(180 * sr as usize);
+        let secs = samples.len() as f64 / f64::from(sr);
+        let decode_share: Duration = songs.iter().map(|(_, _, d)| *d).sum::<Duration>().mul_f64(secs / songs.iter().map(|(_, a, _)| a.duration_s).sum::<f64>());
+        let joined = DecodedAudio { format: first.format, sample_rate: sr, channels: first.channels, duration_s: secs, samples };
+        songs.push((format!("joined {:.0} s", secs), joined, decode_share));
+    }
+    let stage_names = ["decode audio", "features", "encode", "decode", "export", "report"];
+    let mut table = format!(
+        "| model | song | music s | {} | total s | s per music min | 3-min target |\n|---|---|---|{}---|---|---|\n",
+        stage_names.join(" | "),
+        "---|".repeat(stage_names.len())
+    );
+    let out = tempfile::tempdir()?;
+    for model in &models {
+        for (name, audio, decode) in &songs {
+            let g = generate_decoded(&registry, model, audio, 0, &[], out.path(), &mut |_, _| {})?;
+            let mut stages = vec![("decode audio".to_string(), *decode)];
+            stages.extend(g.stages);
+            let get = |s: &str| stages.iter().filter(|(n, _)| n == s).map(|(_, d)| d.as_secs_f64()).sum::<f64>();
+            let total: f64 = stages.iter().map(|(_, d)| d.as_secs_f64()).sum();
+            let per_min = total / (audio.duration_s / 60.0);
+            let target = if (audio.duration_s - 180.0).abs() < 1.0 {
+                format!("{:.2}× of {TARGET_3MIN_S} s", total / TARGET_3MIN_S)
+            } else {
+                "-".into()
+            };
+            let cells: Vec<String> = stage_names.iter().map(|s| format!("{:.2}", get(s))).collect();
+            table += &format!("| {} | {name} | {:.0} | {} | {total:.2} | {per_min:.2} | {target} |\n", model.0, audio.duration_s, cells.join(" | "));
+        }
+    }
+    Ok(table)
+}
