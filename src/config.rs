@@ -119,7 +119,7 @@ impl Default for Config {
             log_format: LogFormat::Pretty,
             log_level: "info".into(),
             lease_s: 30.0,
-            heartbeat_s: 2.0,
+            heartbeat_s: 1.0,
             max_attempts: 3,
             retry_backoff_s: 1.0,
             poll_s: 0.5,
@@ -187,7 +187,7 @@ impl Config {
         let file = file.unwrap_or(Path::new(DEFAULT_CONFIG_FILE));
         let config: Config = Figment::from(Serialized::defaults(Defaults::new()))
             .merge(Toml::file(file))
-            .merge(Env::prefixed(ENV_PREFIX).filter(|key| SETTINGS.contains(&key.as_str())))
+            .merge(Env::prefixed(ENV_PREFIX).filter(|key| SETTINGS.contains(&key.as_str().to_ascii_lowercase().as_str())))
             .merge(Serialized::defaults(overrides))
             .extract()
             .map_err(Box::new)?;

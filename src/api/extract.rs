@@ -19,7 +19,10 @@ pub fn json_error(path: String, error: serde_json::Error) -> ApiError {
             let quoted = message.split('`').nth(1).map(str::to_string);
             let prefix = if path == "." { String::new() } else { format!("{path}.") };
             if message.starts_with("unknown field") {
-                ApiError::UnknownField(format!("{prefix}{}", quoted.unwrap_or_default()))
+                // The path already ends at the unknown key, unless it is at the top level.
+                let name = quoted.unwrap_or_default();
+                let field = if path == "." { name } else if path.ends_with(&name) { path } else { format!("{prefix}{name}") };
+                ApiError::UnknownField(field)
             } else if message.starts_with("missing field") {
                 ApiError::MissingField(format!("{prefix}{}", quoted.unwrap_or_default()))
             } else {

@@ -226,15 +226,15 @@ pub async fn create(
     ApiJson(mut request): ApiJson<CreateJob>,
 ) -> Result<Response, ApiError> {
     let idempotency = idempotency(&headers, &request)?;
-    let model_id = ModelId(request.model.clone());
-    let Some(model) = state.registry.get(&model_id) else {
-        let available = state.registry.list().into_iter().map(|m| m.id.0).collect();
-        return Err(ApiError::UnknownModel { model: request.model, available });
-    };
     let song = match state.store.song(request.song_id).await {
         Ok(song) => song,
         Err(QueueError::SongNotFound(id)) => return Err(invalid("song_id", format!("song {id} does not exist; upload it first"))),
         Err(e) => return Err(e.into()),
+    };
+    let model_id = ModelId(request.model.clone());
+    let Some(model) = state.registry.get(&model_id) else {
+        let available = state.registry.list().into_iter().map(|m| m.id.0).collect();
+        return Err(ApiError::UnknownModel { model: request.model, available });
     };
     let capabilities = model.info().capabilities;
     if !request.key_poses.is_empty() && !capabilities.key_poses {

@@ -63,6 +63,8 @@ pub enum ApiError {
     InvalidFilename(String),
     #[error("{0}")]
     Audio(AudioError),
+    #[error("the file is cut short: its header declares {declared_s:.1} s of audio but only {decoded_s:.1} s decode; upload the whole file")]
+    Truncated { declared_s: f64, decoded_s: f64 },
     #[error("song {0} does not exist")]
     SongNotFound(String),
     #[error("{0}")]
@@ -109,6 +111,7 @@ impl ApiError {
             ApiError::SongTooLong { .. } => "song-too-long",
             ApiError::InvalidFilename(_) => "invalid-filename",
             ApiError::Audio(e) => e.code(),
+            ApiError::Truncated { .. } => "audio-truncated",
             ApiError::SongNotFound(_) => "song-not-found",
             ApiError::JobNotFound(_) => "job-not-found",
             ApiError::UnknownModel { .. } => "unknown-model",
@@ -144,6 +147,7 @@ impl ApiError {
             ApiError::Audio(AudioError::Undecodable(_)) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             ApiError::Audio(e) if e.is_client_error() => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::Audio(_) => StatusCode::INTERNAL_SERVER_ERROR,
+            ApiError::Truncated { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::SongNotFound(_) => StatusCode::NOT_FOUND,
             ApiError::JobNotFound(_) => StatusCode::NOT_FOUND,
             ApiError::UnknownModel { .. } => StatusCode::UNPROCESSABLE_ENTITY,
@@ -177,7 +181,9 @@ impl ApiError {
             ApiError::InvalidField { field, .. } | ApiError::UnknownField(field) | ApiError::MissingField(field) => {
                 problem.field = Some(field.clone());
             }
-            ApiError::MissingFile | ApiError::EmptyFile | ApiError::InvalidFilename(_) => problem.field = Some("file".into()),
+            ApiError::MissingFile | ApiError::EmptyFile | ApiError::InvalidFilename(_) | ApiError::Truncated { .. } => {
+                problem.field = Some("file".into());
+            }
             ApiError::UnknownModel { available, .. } => {
                 problem.field = Some("model".into());
                 problem.available_models = Some(available.clone());

@@ -18,6 +18,9 @@ use sha2::{Digest, Sha256};
 use std::str::FromStr;
 use tokio::io::AsyncWriteExt;
 
+/// How much shorter than its header declares a decoded file may be before it counts as cut
+/// short (encoder delay and padding account for a few tens of milliseconds).
+const TRUNCATION_TOLERANCE_S: f64 = 0.5;
 /// Longest accepted upload file name, in bytes.
 const MAX_FILENAME_BYTES: usize = 255;
 
@@ -175,14 +178,19 @@ pub async fn upload(
 
     // Decode fully: that is the only proof the bytes are audio we can use. Bounded in parallel,
     // so many uploads at once cannot hold many decoded songs in memory.
-    let decoded = {
+    let (decoded, declared_s) = {
         let _permit = state.decode_permits.acquire().await.map_err(|e| ApiError::Internal(e.to_string()))?;
         let path = received.file.path().to_path_buf();
-        tokio::task::spawn_blocking(move || audio::decode_path(&path))
+        tokio::task::spawn_blocking(move || audio::decode_path(&path).map(|d| (d, declared_duration(&path))))
             .await
             .map_err(|e| ApiError::Internal(format!("decoder thread: {e}")))?
             .map_err(ApiError::Audio)?
     };
+    if let Some(declared_s) = declared_s {
+        if decoded.duration_s + TRUNCATION_TOLERANCE_S < declared_s {
+            return Err(ApiError::Truncated { declared_s, decoded_s: decoded.duration_s });
+        }
+    }
     if decoded.duration_s > state.config.max_duration_s {
         return Err(ApiError::SongTooLong { seconds: decoded.duration_s, limit: state.config.max_duration_s });
     }
@@ -230,6 +238,27 @@ fn location(id: SongId) -> HeaderMap {
         headers.insert(header::LOCATION, value);
     }
     headers
+}
+
+/// The duration a file's header declares (Xing/Info frame count, WAV data size, FLAC
+/// STREAMINFO, MP4 track duration), when it declares one.
+///
+/// symphonia decodes a cut-off stream up to the cut without error, so comparing the decoded
+/// length with the declared one is what tells a truncated upload from a short song.
+fn declared_duration(path: &std::path::Path) -> Option<f64> {
+    use symphonia::core::formats::FormatOptions;
+    use symphonia::core::io::MediaSourceStream;
+    use symphonia::core::meta::MetadataOptions;
+    use symphonia::core::probe::Hint;
+    let file = std::fs::File::open(path).ok()?;
+    let stream = MediaSourceStream::new(Box::new(file), Default::default());
+    let probed = symphonia::default::get_probe()
+        .format(&Hint::new(), stream, &FormatOptions::default(), &MetadataOptions::default())
+        .ok()?;
+    let track = probed.format.default_track()?;
+    let frames = track.codec_params.n_frames?;
+    let rate = track.codec_params.sample_rate?;
+    (rate > 0).then(|| frames as f64 / f64::from(rate))
 }
 
 /// A song, with its analysis once done.

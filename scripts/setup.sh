@@ -1,0 +1,98 @@
+#!/usr/bin/env bash
+# Installs what choreo needs, and only what is missing, so running it again is a no-op:
+#   - Debian packages to build (a C++ compiler for torch-sys) and to make the torch venv;
+#   - the Rust toolchain (rustup) when cargo is absent;
+#   - libtorch: the PyPI torch wheel in .torchenv, with .torchenv/libtorch -> its torch/ folder
+#     (.cargo/config.toml points LIBTORCH there; build.rs gives the binary an rpath to it).
+# With --test it also installs what the test suite uses: ffmpeg and sox (fixtures in other
+# formats are made from ../shared/audio at test time), blender and python3-numpy (the motion
+# exporters' round-trip test).
+#
+# Usage: scripts/setup.sh [--test]
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+TORCH="torch==2.13.0"
+CUDA_RUNTIME="nvidia-cuda-runtime==13.0.96.*"
+CUPTI="nvidia-cuda-cupti==13.0.85.*"
+VENV=.torchenv
+
+with_tests=0
+case "${1:-}" in
+  --test) with_tests=1 ;;
+  "") ;;
+  *) echo "usage: $0 [--test]" >&2; exit 2 ;;
+esac
+
+log() { echo "setup: $*" >&2; }
+
+as_root() {
+  if [[ $(id -u) -eq 0 ]]; then "$@"
+  elif command -v sudo >/dev/null 2>&1; then sudo "$@"
+  else log "root is needed to run: $*"; exit 1
+  fi
+}
+
+apt_updated=0
+apt_install() {
+  local missing=() pkg
+  for pkg in "$@"; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+  done
+  [[ ${#missing[@]} -eq 0 ]] && return 0
+  if ! command -v apt-get >/dev/null 2>&1; then
+    log "missing ${missing[*]} and there is no apt-get; install them with your package manager"; exit 1
+  fi
+  log "installing ${missing[*]}"
+  if [[ $apt_updated -eq 0 ]]; then
+    as_root env DEBIAN_FRONTEND=noninteractive apt-get update -qq
+    apt_updated=1
+  fi
+  as_root env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}"
+}
+
+# A compiler for torch-sys's C++ shim, and curl for rustup.
+command -v c++ >/dev/null 2>&1 || apt_install build-essential
+command -v curl >/dev/null 2>&1 || apt_install curl ca-certificates
+
+# Python with venv and pip, for the torch wheel.
+if ! command -v python3 >/dev/null 2>&1; then apt_install python3; fi
+if ! python3 -c 'import venv, ensurepip' >/dev/null 2>&1; then apt_install python3-venv; fi
+
+# Rust.
+if ! command -v cargo >/dev/null 2>&1 && [[ ! -x "$HOME/.cargo/bin/cargo" ]]; then
+  log "installing the Rust toolchain with rustup"
+  curl --proto '=https' --tlsv1.2 -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal
+fi
+
+# libtorch from the PyPI torch wheel. Checked by the installed dist-info, not by importing
+# torch (slow), so an already correct venv is left exactly as it is.
+torch_ok() {
+  local site
+  site=$(ls -d "$VENV"/lib/python3*/site-packages 2>/dev/null | head -n1) || return 1
+  [[ -n "$site" ]] &&
+    [[ -d "$site/torch-2.13.0.dist-info" ]] &&
+    compgen -G "$site/nvidia_cuda_runtime-13.0.96*.dist-info" >/dev/null &&
+    compgen -G "$site/nvidia_cuda_cupti-13.0.85*.dist-info" >/dev/null &&
+    [[ -f "$site/torch/lib/libtorch_cpu.so" ]]
+}
+if ! torch_ok; then
+  [[ -x "$VENV/bin/pip" ]] || python3 -m venv "$VENV"
+  log "installing $TORCH into $VENV (a large download, once)"
+  "$VENV/bin/pip" install --quiet --no-deps "$TORCH" "$CUDA_RUNTIME" "$CUPTI"
+  torch_ok || { log "torch is still not installed correctly in $VENV"; exit 1; }
+fi
+pyver=$("$VENV/bin/python" -c 'import sys; print(f"python{sys.version_info[0]}.{sys.version_info[1]}")')
+target="lib/$pyver/site-packages/torch"
+if [[ "$(readlink "$VENV/libtorch" 2>/dev/null || true)" != "$target" ]]; then
+  ln -sfn "$target" "$VENV/libtorch"
+  log "linked $VENV/libtorch -> $target"
+fi
+
+if [[ $with_tests -eq 1 ]]; then
+  apt_install ffmpeg sox blender python3-numpy
+  if [[ ! -d ../shared/audio ]]; then
+    log "warning: ../shared/audio is missing; the upload tests need it"
+  fi
+fi
+log "ok"

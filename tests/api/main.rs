@@ -1,0 +1,11 @@
+//! API tests: the real service on port 0, real HTTP (reqwest), a real SQLite file on disk.
+//! One module per endpoint or concern; `helpers::spawn_app()` starts the service.
+mod bad_input;
+mod concurrency;
+mod crash;
+mod health;
+mod helpers;
+mod jobs;
+mod models;
+mod openapi;
+mod songs;
