@@ -118,8 +118,9 @@ fn main() -> anyhow::Result<()> {
             for (stage, d) in &g.stages {
                 eprintln!("{stage:<14} {:>8.3} s", d.as_secs_f64());
             }
-            println!("{}", serde_json::to_string_pretty(&g.files)?);
-            println!("report: {}", g.report_path.display());
+            for file in &g.files {
+                println!("{}", file.display());
+            }
             Ok(())
         }
         Command::Bench { what: BenchCommand::Generate(args) } => {

@@ -2,7 +2,7 @@
 use super::{Execute, WorkerError};
 use crate::audio::{self, DecodedAudio};
 use crate::models::{Cancelled, GenerateRequest, Progress, Registry};
-use crate::motion::Motion;
+use crate::motion::{KeyPose, Motion};
 use crate::queue::{DataDir, GenerateOptions, Job, JobFiles, JobKind, Outcome, SeedMotion, Song};
 use crate::telemetry::StageTimer;
 use std::path::Path;
@@ -65,7 +65,7 @@ impl Pipeline {
         };
         progress.report("export", MODEL_END)?;
         let _timer = StageTimer::start("generate", "export");
-        let files = export(&self.data.job_dir(job.id), &motion, &decoded)?;
+        let files = render(&self.data.job_dir(job.id), &motion, &decoded, &options.key_poses, &mut |_| {})?;
         Ok(Outcome::Files(files))
     }
 }
@@ -109,12 +109,27 @@ fn seed_motion(seed: &SeedMotion) -> Result<Motion, WorkerError> {
     Ok(Motion { fps: seed.fps, positions })
 }
 
-/// Writes a dance's result files into `dir` (each atomically) and names them.
-///
-/// TODO(motion, report): the BVH/JSON/glb exporters (issue 7) and the per-job report (issue 4)
-/// are not in the crate yet; until they are, a generate job fails here with a clear error
-/// instead of writing files that are not what their names promise.
-fn export(dir: &Path, _motion: &Motion, _audio: &DecodedAudio) -> Result<JobFiles, WorkerError> {
+/// File name of a generate job's report.
+pub const REPORT_FILE: &str = "report.json";
+
+/// The last two stages of a dance, shared by jobs and the CLI: export (BVH, JSON, glb) and the
+/// report, each file written atomically into `dir`. `on_stage` hears each stage as it starts.
+pub fn render(
+    dir: &Path,
+    motion: &Motion,
+    audio: &DecodedAudio,
+    key_poses: &[KeyPose],
+    on_stage: &mut dyn FnMut(&str),
+) -> Result<JobFiles, WorkerError> {
+    use crate::motion::export::{write_all, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
     std::fs::create_dir_all(dir)?;
-    Err(WorkerError::Export("this build has no motion exporters yet (motion.bvh, motion.json, report.json)".into()))
+    on_stage("export");
+    write_all(motion, dir)?;
+    on_stage("report");
+    let analysis = audio::analyze(audio)?;
+    let reference = crate::metrics::reference::ReferenceStats::builtin()?;
+    let report = crate::report::build(motion, &analysis, key_poses, &reference)?;
+    let text = serde_json::to_vec_pretty(&report).map_err(|e| WorkerError::Export(format!("report.json: {e}")))?;
+    write_atomic(&dir.join(REPORT_FILE), &text)?;
+    Ok(JobFiles { files: [BVH_FILE, JSON_FILE, GLB_FILE, REPORT_FILE].map(String::from).to_vec() })
 }

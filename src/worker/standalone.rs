@@ -5,9 +5,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use crate::audio::{self, DecodedAudio};
-use crate::metrics::reference::ReferenceStats;
 use crate::models::{Cancelled, GenerateRequest, ModelId, Progress, Registry};
-use crate::motion::{export, KeyPose, Motion};
+use crate::motion::{KeyPose, Motion};
 
 use super::WorkerError;
 
@@ -37,8 +36,8 @@ pub struct GenerateArgs {
 #[derive(Debug)]
 pub struct Generated {
     pub motion: Motion,
-    pub files: export::ExportPaths,
-    pub report_path: PathBuf,
+    /// motion.bvh, motion.json, motion.glb and report.json.
+    pub files: Vec<PathBuf>,
     /// `(stage, duration)` in pipeline order.
     pub stages: Vec<(String, Duration)>,
 }
@@ -91,16 +90,8 @@ pub fn generate_decoded(
     let mut clock = StageClock { current: None, done: Vec::new(), on_progress };
     let request = GenerateRequest { audio, seed, key_poses, seed_motion: None };
     let motion = model.generate(&request, &mut clock)?;
-    clock.enter("export");
-    std::fs::create_dir_all(out)?;
-    let files = export::write_all(&motion, out)?;
-    clock.enter("report");
-    let analysis = audio::analyze(audio)?;
-    let reference = ReferenceStats::builtin()?;
-    let report = crate::report::build(&motion, &analysis, key_poses, &reference)?;
-    let report_path = out.join("report.json");
-    crate::report::write(&report, &report_path)?;
-    Ok(Generated { motion, files, report_path, stages: clock.finish() })
+    let files = super::pipeline::render(out, &motion, audio, key_poses, &mut |stage| clock.enter(stage))?;
+    Ok(Generated { motion, files: files.files.iter().map(|f| out.join(f)).collect(), stages: clock.finish() })
 }
 
 /// `choreo generate`: a dance for one song, with a progress bar on stderr.
