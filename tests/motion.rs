@@ -68,3 +68,194 @@ fn rigid_fit_error_over_every_dance() {
     eprintln!("per-dance mean error: p50 {:.2} cm, p95 {:.2} cm, max {:.2} cm",
         percentile(&mut means, 50.0) * 100.0, percentile(&mut means, 95.0) * 100.0, percentile(&mut means, 100.0) * 100.0);
 }
+
+/// World positions `[T][J][3]` from a glb: node hierarchy + animated root translation and rotations.
+fn glb_world_positions(bytes: &[u8]) -> (Vec<String>, Vec<Vec<[f64; 3]>>) {
+    use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+    assert_eq!(&bytes[0..4], b"glTF");
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let json = &bytes[20..20 + json_len];
+    let bin_start = 20 + json_len + 8;
+    let bin = &bytes[bin_start..];
+    let root: gltf_json::Root = gltf_json::Root::from_slice(json).expect("glTF JSON");
+    let read = |acc: &gltf_json::Accessor| -> Vec<f32> {
+        let view = &root.buffer_views[acc.buffer_view.expect("view").value()];
+        let off = view.byte_offset.map_or(0, |o| o.0 as usize);
+        let len = view.byte_length.0 as usize;
+        bin[off..off + len].chunks(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect()
+    };
+    let n = root.nodes.len();
+    let mut parent = vec![None; n];
+    for (i, node) in root.nodes.iter().enumerate() {
+        for c in node.children.iter().flatten() {
+            parent[c.value()] = Some(i);
+        }
+    }
+    let anim = &root.animations[0];
+    let mut t_len = 0;
+    let mut rot_tracks: Vec<Option<Vec<f32>>> = vec![None; n];
+    let mut trans_tracks: Vec<Option<Vec<f32>>> = vec![None; n];
+    for ch in &anim.channels {
+        let s = &anim.samplers[ch.sampler.value()];
+        let out = read(&root.accessors[s.output.value()]);
+        t_len = root.accessors[s.input.value()].count.0 as usize;
+        let node = ch.target.node.value();
+        match ch.target.path {
+            gltf_json::validation::Checked::Valid(gltf_json::animation::Property::Rotation) => rot_tracks[node] = Some(out),
+            gltf_json::validation::Checked::Valid(gltf_json::animation::Property::Translation) => trans_tracks[node] = Some(out),
+            _ => panic!("unexpected channel"),
+        }
+    }
+    // Parents before children: depth first from the scene root.
+    let mut order = Vec::new();
+    let mut stack: Vec<usize> = (0..n).filter(|&j| parent[j].is_none()).collect();
+    while let Some(j) = stack.pop() {
+        order.push(j);
+        for c in root.nodes[j].children.iter().flatten() {
+            stack.push(c.value());
+        }
+    }
+    let mut frames = Vec::with_capacity(t_len);
+    for t in 0..t_len {
+        let mut pos = vec![Vector3::zeros(); n];
+        let mut world = vec![UnitQuaternion::identity(); n];
+        for &j in &order {
+            let node = &root.nodes[j];
+            let tr = match &trans_tracks[j] {
+                Some(v) => Vector3::new(v[3 * t], v[3 * t + 1], v[3 * t + 2]),
+                None => Vector3::from(node.translation.unwrap_or([0.0; 3])),
+            }
+            .cast::<f64>();
+            let q = match &rot_tracks[j] {
+                Some(v) => [v[4 * t], v[4 * t + 1], v[4 * t + 2], v[4 * t + 3]],
+                None => node.rotation.map_or([0.0, 0.0, 0.0, 1.0], |r| r.0),
+            };
+            let q = UnitQuaternion::from_quaternion(Quaternion::new(
+                f64::from(q[3]), f64::from(q[0]), f64::from(q[1]), f64::from(q[2]),
+            ));
+            match parent[j] {
+                None => {
+                    pos[j] = tr;
+                    world[j] = q;
+                }
+                Some(p) => {
+                    pos[j] = pos[p] + world[p] * tr;
+                    world[j] = world[p] * q;
+                }
+            }
+        }
+        frames.push(pos.iter().map(|p| [p.x, p.y, p.z]).collect());
+    }
+    let names = root.nodes.iter().map(|n| n.name.clone().unwrap_or_default()).collect();
+    (names, frames)
+}
+
+#[test]
+fn bvh_json_and_glb_agree_within_a_millimetre() {
+    use choreo::motion::bvh::Bvh;
+    use choreo::motion::export::{self, MotionJson};
+    let Some(ds) = dataset() else { return };
+    let dance = ds.load("DANCE_W_3").expect("load");
+    let m = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
+    let json: MotionJson = serde_json::from_str(&export::json_string(&m).expect("json")).expect("parse json");
+    let t_len = dance.motion.num_frames();
+    assert_eq!(json.num_frames, t_len);
+    assert_eq!(json.positions.len(), t_len);
+    assert_eq!(json.joint_names.len(), rig::RIG_JOINTS);
+
+    // BVH, read back by our reader.
+    let bvh = Bvh::parse(&export::bvh_string(&m).expect("bvh")).expect("read bvh");
+    assert_eq!(bvh.frames.len(), t_len);
+    assert!((bvh.fps() - 25.0).abs() < 1e-6);
+    let bw = bvh.world_positions();
+    let mut worst_bvh = 0.0f64;
+    for t in 0..t_len {
+        for (j, name) in json.joint_names.iter().enumerate() {
+            let k = bvh.names.iter().position(|n| n == name).expect("joint in BVH");
+            for c in 0..3 {
+                worst_bvh = worst_bvh.max((bw[[t, k, c]] - f64::from(json.positions[t][j][c])).abs());
+            }
+        }
+    }
+    // glb, read back by hand.
+    let (names, gw) = glb_world_positions(&export::glb_bytes(&m).expect("glb"));
+    assert_eq!(gw.len(), t_len);
+    let mut worst_glb = 0.0f64;
+    for t in 0..t_len {
+        for (j, name) in json.joint_names.iter().enumerate() {
+            let k = names.iter().position(|n| n == name).expect("joint in glb");
+            for c in 0..3 {
+                worst_glb = worst_glb.max((gw[t][k][c] - f64::from(json.positions[t][j][c])).abs());
+            }
+        }
+    }
+    eprintln!("max coordinate difference vs JSON: BVH {:.4} mm, glb {:.4} mm", worst_bvh * 1e3, worst_glb * 1e3);
+    assert!(worst_bvh < 1e-3, "BVH differs from JSON by {worst_bvh} m");
+    assert!(worst_glb < 1e-3, "glb differs from JSON by {worst_glb} m");
+
+    // The BVH maps back onto the 23 joints, and its root is the body centre exactly.
+    let back = bvh.to_motion().expect("to motion");
+    let e = joint_errors(back.positions.view(), dance.motion.positions.view());
+    let mean = e.mean().unwrap_or(f32::NAN);
+    assert!(mean < 0.03, "BVH read back is {mean} m from the data on average");
+    let rm = bvh.to_rig_motion().expect("rig motion");
+    for t in 0..t_len {
+        for c in 0..3 {
+            assert!((rm.root_translation[t][c] as f32 - dance.center[[t, c]]).abs() < 2e-6);
+        }
+    }
+}
+
+/// Makes sure Debian's `blender` is installed (installing it and python3-numpy if missing).
+fn ensure_blender() {
+    let ok = |cmd: &mut std::process::Command| cmd.output().map(|o| o.status.success()).unwrap_or(false);
+    if ok(std::process::Command::new("blender").arg("--version")) {
+        return;
+    }
+    eprintln!("blender missing: apt-get install -y blender python3-numpy (large, takes minutes)");
+    let _ = std::process::Command::new("apt-get").arg("update").status();
+    let status = std::process::Command::new("apt-get")
+        .args(["install", "-y", "-o", "DPkg::Lock::Timeout=1200", "blender", "python3-numpy"])
+        .status()
+        .expect("run apt-get");
+    assert!(status.success(), "apt-get install blender failed");
+    assert!(ok(std::process::Command::new("blender").arg("--version")), "blender still missing");
+}
+
+#[test]
+fn blender_imports_bvh_and_glb_of_a_dataset_dance() {
+    use choreo::motion::export;
+    let Some(ds) = dataset() else { return };
+    ensure_blender();
+    let dance = ds.load("DANCE_W_3").expect("load");
+    let m = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
+    let dir = tempfile::tempdir().expect("tempdir");
+    let paths = export::write_all_rig(&m, dir.path()).expect("export");
+    let result = dir.path().join("result.json");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/blender/check_import.py");
+    let out = std::process::Command::new("blender")
+        .args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
+        .arg(&script)
+        .arg("--")
+        .args([&paths.bvh, &paths.glb, &paths.json, &result])
+        .output()
+        .expect("run blender");
+    let log = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "blender failed:\n{log}");
+    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&result).expect("result")).expect("result json");
+    eprintln!("{}", serde_json::to_string_pretty(&r).unwrap_or_default());
+    let t_len = dance.motion.num_frames() as u64;
+    for kind in ["bvh", "glb"] {
+        let k = &r[kind];
+        assert!(k.get("error").is_none(), "{kind} import raised: {}", k["error"]);
+        assert_eq!(k["status"], serde_json::json!(["FINISHED"]), "{kind} import status");
+        assert_eq!(k["frames"].as_u64(), Some(t_len), "{kind} frame count");
+        assert_eq!(k["joints"].as_u64(), Some(rig::RIG_JOINTS as u64), "{kind} joint count");
+        for t in [0, t_len / 2, t_len - 1] {
+            let c = &k["checks"][t.to_string()];
+            assert_eq!(c["missing"], serde_json::json!([]), "{kind} frame {t}: joints missing");
+            let e = c["max_error_m"].as_f64().expect("error");
+            assert!(e < 0.01, "{kind} frame {t}: joint {} is {e} m from our JSON", c["worst_joint"]);
+        }
+    }
+}

@@ -10,7 +10,9 @@ use std::path::PathBuf;
 
 use ndarray::Array3;
 
+pub mod bvh;
 pub mod dataset;
+pub mod export;
 pub mod repr;
 pub mod rig;
 pub mod skeleton;

@@ -552,6 +552,10 @@ mod tests {
                 }
             })
             .collect();
+        let mut offsets = offsets;
+        // Branch joints sit on the spine.
+        offsets[NUM_JOINTS + 1] = offsets[rig_index(super::super::skeleton::SPINE)];
+        offsets[NUM_JOINTS + 2] = Vector3::zeros();
         let rig = Rig { names, parents, offsets };
         let t_len = 20;
         let mut root = Array2::zeros((t_len, 3));

@@ -1,0 +1,439 @@
+//! BVH, written and read by hand (the `bvh_anim` crate depends on a crate flagged unsound,
+//! RUSTSEC-2023-0086).
+//!
+//! What we write: one `ROOT` (the body centre) with 6 channels
+//! (`Xposition Yposition Zposition Zrotation Yrotation Xrotation`), every other joint with
+//! `Zrotation Yrotation Xrotation`, offsets in **metres** (y up) from the rig's median bone
+//! lengths, `Frame Time` = 1 / fps. Rotations are intrinsic ZYX Euler angles in degrees:
+//! `R = Rz · Ry · Rx`, the usual BVH reading of the channel order. Leaf joints get an `End Site`
+//! 5 cm further along their bone so tools draw them a bone.
+//!
+//! What we read: any BVH with 3 or 6 channels per joint in any axis order (position channels are
+//! honoured on every joint), `End Site`s skipped. [`Bvh::to_motion`] maps a file that uses our
+//! joint names onto the 23-joint skeleton.
+use std::fmt::Write as _;
+
+use nalgebra::{UnitQuaternion, Vector3};
+use ndarray::Array3;
+
+use super::rig::{Rig, RigMotion};
+use super::skeleton::JOINT_NAMES;
+use super::{Motion, MotionError, NUM_JOINTS};
+
+/// Length of the end site drawn past each leaf joint, metres.
+const END_SITE_M: f64 = 0.05;
+
+/// Writes a rig motion as BVH text.
+pub fn write_bvh(m: &RigMotion) -> Result<String, MotionError> {
+    if m.fps <= 0.0 || !m.fps.is_finite() {
+        return Err(MotionError::Export(format!("invalid fps {}", m.fps)));
+    }
+    let rig = &m.rig;
+    let order = rig.order();
+    let mut out = String::with_capacity(64 * 1024 + m.num_frames() * rig.names.len() * 40);
+    out.push_str("HIERARCHY\n");
+    write_joint(&mut out, rig, order[0], 0);
+    let _ = writeln!(out, "MOTION\nFrames: {}", m.num_frames());
+    let _ = writeln!(out, "Frame Time: {:.8}", 1.0 / m.fps);
+    for (t, locals) in m.rotations.iter().enumerate() {
+        let r = m.root_translation[t];
+        let mut line = String::with_capacity(rig.names.len() * 40);
+        let _ = write!(line, "{:.6} {:.6} {:.6}", r.x, r.y, r.z);
+        for &j in &order {
+            let [z, y, x] = euler_zyx_deg(&locals[j]);
+            let _ = write!(line, " {z:.6} {y:.6} {x:.6}");
+        }
+        out.push_str(&line);
+        out.push('\n');
+    }
+    Ok(out)
+}
+
+fn write_joint(out: &mut String, rig: &Rig, j: usize, depth: usize) {
+    let pad = "  ".repeat(depth);
+    let o = rig.offsets[j];
+    if rig.parents[j].is_none() {
+        let _ = writeln!(out, "{pad}ROOT {}", rig.names[j]);
+    } else {
+        let _ = writeln!(out, "{pad}JOINT {}", rig.names[j]);
+    }
+    let _ = writeln!(out, "{pad}{{");
+    let _ = writeln!(out, "{pad}  OFFSET {:.6} {:.6} {:.6}", o.x, o.y, o.z);
+    if rig.parents[j].is_none() {
+        let _ = writeln!(
+            out,
+            "{pad}  CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation"
+        );
+    } else {
+        let _ = writeln!(out, "{pad}  CHANNELS 3 Zrotation Yrotation Xrotation");
+    }
+    let kids = rig.children(j);
+    if kids.is_empty() {
+        let e = o.try_normalize(1e-9).unwrap_or_else(Vector3::y) * END_SITE_M;
+        let _ = writeln!(out, "{pad}  End Site\n{pad}  {{");
+        let _ = writeln!(out, "{pad}    OFFSET {:.6} {:.6} {:.6}", e.x, e.y, e.z);
+        let _ = writeln!(out, "{pad}  }}");
+    }
+    for c in kids {
+        write_joint(out, rig, c, depth + 1);
+    }
+    let _ = writeln!(out, "{pad}}}");
+}
+
+/// Intrinsic ZYX Euler angles `[z, y, x]` in degrees with `R = Rz(z) · Ry(y) · Rx(x)`.
+pub fn euler_zyx_deg(q: &UnitQuaternion<f64>) -> [f64; 3] {
+    let m = q.to_rotation_matrix();
+    let m = m.matrix();
+    let sy = (-m[(2, 0)]).clamp(-1.0, 1.0);
+    let y = sy.asin();
+    let (z, x) = if sy.abs() < 1.0 - 1e-9 {
+        (m[(1, 0)].atan2(m[(0, 0)]), m[(2, 1)].atan2(m[(2, 2)]))
+    } else {
+        // Gimbal lock: only z − x (or z + x) is defined; put it all in z.
+        ((-m[(0, 1)]).atan2(m[(1, 1)]), 0.0)
+    };
+    [z.to_degrees(), y.to_degrees(), x.to_degrees()]
+}
+
+/// One channel of a BVH joint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Channel {
+    Xposition,
+    Yposition,
+    Zposition,
+    Xrotation,
+    Yrotation,
+    Zrotation,
+}
+
+/// A parsed BVH file.
+#[derive(Clone, Debug)]
+pub struct Bvh {
+    pub names: Vec<String>,
+    pub parents: Vec<Option<usize>>,
+    pub offsets: Vec<Vector3<f64>>,
+    pub channels: Vec<Vec<Channel>>,
+    pub frame_time: f64,
+    /// `[T][total channels]`, in the file's joint order.
+    pub frames: Vec<Vec<f64>>,
+}
+
+/// Largest BVH we parse (bytes): an hour at 60 fps of a 100-joint skeleton fits well within.
+pub const MAX_BVH_BYTES: usize = 256 * 1024 * 1024;
+
+impl Bvh {
+    /// Parses BVH text.
+    pub fn parse(text: &str) -> Result<Bvh, MotionError> {
+        if text.len() > MAX_BVH_BYTES {
+            return Err(MotionError::Bvh {
+                line: 0,
+                reason: format!("file larger than {MAX_BVH_BYTES} bytes"),
+            });
+        }
+        let mut tokens = Tokens::new(text);
+        tokens.expect("HIERARCHY")?;
+        let mut bvh = Bvh {
+            names: Vec::new(),
+            parents: Vec::new(),
+            offsets: Vec::new(),
+            channels: Vec::new(),
+            frame_time: 0.0,
+            frames: Vec::new(),
+        };
+        let kw = tokens.next_token()?;
+        if kw != "ROOT" {
+            return Err(tokens.error(format!("expected ROOT, found {kw:?}")));
+        }
+        parse_joint(&mut tokens, &mut bvh, None, 0)?;
+        tokens.expect("MOTION")?;
+        tokens.expect("Frames:")?;
+        let n_frames: usize = tokens.parse_num()?;
+        tokens.expect("Frame")?;
+        tokens.expect("Time:")?;
+        bvh.frame_time = tokens.parse_num()?;
+        if !(bvh.frame_time > 0.0 && bvh.frame_time.is_finite()) {
+            return Err(tokens.error(format!("invalid frame time {}", bvh.frame_time)));
+        }
+        let width: usize = bvh.channels.iter().map(Vec::len).sum();
+        // Refuse frame counts the text cannot hold before allocating for them.
+        if n_frames.saturating_mul(width) > text.len() {
+            return Err(tokens.error(format!("{n_frames} frames cannot fit in the file")));
+        }
+        bvh.frames.reserve(n_frames);
+        for _ in 0..n_frames {
+            let mut row = Vec::with_capacity(width);
+            for _ in 0..width {
+                let v: f64 = tokens.parse_num()?;
+                if !v.is_finite() {
+                    return Err(tokens.error("non-finite channel value".into()));
+                }
+                row.push(v);
+            }
+            bvh.frames.push(row);
+        }
+        Ok(bvh)
+    }
+
+    /// Frames per second (1 / frame time).
+    pub fn fps(&self) -> f64 {
+        1.0 / self.frame_time
+    }
+
+    /// Local rotation and translation (offset plus any position channels) of each joint at frame `t`.
+    pub fn local_pose(&self, t: usize) -> (Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>) {
+        let mut trans = self.offsets.clone();
+        let mut rots = vec![UnitQuaternion::identity(); self.names.len()];
+        let row = &self.frames[t];
+        let mut k = 0;
+        for (j, chans) in self.channels.iter().enumerate() {
+            let mut q = UnitQuaternion::identity();
+            for ch in chans {
+                let v = row[k];
+                k += 1;
+                match ch {
+                    Channel::Xposition => trans[j].x = self.offsets[j].x + v,
+                    Channel::Yposition => trans[j].y = self.offsets[j].y + v,
+                    Channel::Zposition => trans[j].z = self.offsets[j].z + v,
+                    Channel::Xrotation => q *= UnitQuaternion::from_axis_angle(&Vector3::x_axis(), v.to_radians()),
+                    Channel::Yrotation => q *= UnitQuaternion::from_axis_angle(&Vector3::y_axis(), v.to_radians()),
+                    Channel::Zrotation => q *= UnitQuaternion::from_axis_angle(&Vector3::z_axis(), v.to_radians()),
+                }
+            }
+            rots[j] = q;
+        }
+        (trans, rots)
+    }
+
+    /// World positions of every joint, `[T, J, 3]` (forward kinematics).
+    pub fn world_positions(&self) -> Array3<f64> {
+        let n = self.names.len();
+        let mut out = Array3::zeros((self.frames.len(), n, 3));
+        for t in 0..self.frames.len() {
+            let (trans, rots) = self.local_pose(t);
+            let mut pos = vec![Vector3::zeros(); n];
+            let mut world = vec![UnitQuaternion::identity(); n];
+            // Joints are stored parent first, as the file nests them.
+            for j in 0..n {
+                match self.parents[j] {
+                    None => {
+                        pos[j] = trans[j];
+                        world[j] = rots[j];
+                    }
+                    Some(p) => {
+                        pos[j] = pos[p] + world[p] * trans[j];
+                        world[j] = world[p] * rots[j];
+                    }
+                }
+                for c in 0..3 {
+                    out[[t, j, c]] = pos[j][c];
+                }
+            }
+        }
+        out
+    }
+
+    /// The motion of the 23 dataset joints, for a BVH that names them as we do (metres, y up).
+    pub fn to_motion(&self) -> Result<Motion, MotionError> {
+        let idx: Vec<usize> = JOINT_NAMES
+            .iter()
+            .map(|name| {
+                self.names.iter().position(|n| n == name).ok_or_else(|| {
+                    MotionError::Invalid(format!("BVH has no joint named {name:?}"))
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        let world = self.world_positions();
+        let mut positions = Array3::zeros((self.frames.len(), NUM_JOINTS, 3));
+        for t in 0..self.frames.len() {
+            for (j, &k) in idx.iter().enumerate() {
+                for c in 0..3 {
+                    positions[[t, j, c]] = world[[t, k, c]] as f32;
+                }
+            }
+        }
+        Ok(Motion {
+            fps: self.fps(),
+            positions,
+        })
+    }
+
+    /// The file as a rig motion, when it has one 6-channel root and 3 rotation channels elsewhere.
+    pub fn to_rig_motion(&self) -> Result<RigMotion, MotionError> {
+        let rig = Rig {
+            names: self.names.clone(),
+            parents: self.parents.clone(),
+            offsets: self.offsets.clone(),
+        };
+        let mut root_translation = Vec::with_capacity(self.frames.len());
+        let mut rotations = Vec::with_capacity(self.frames.len());
+        for t in 0..self.frames.len() {
+            let (trans, rots) = self.local_pose(t);
+            for j in 1..self.names.len() {
+                if (trans[j] - self.offsets[j]).norm() > 0.0 {
+                    return Err(MotionError::Invalid(format!(
+                        "joint {} has position channels; only the root may",
+                        self.names[j]
+                    )));
+                }
+            }
+            let root = self.parents.iter().position(Option::is_none).unwrap_or(0);
+            root_translation.push(trans[root] - rig.offsets[root]);
+            rotations.push(rots);
+        }
+        Ok(RigMotion {
+            rig,
+            fps: self.fps(),
+            root_translation,
+            rotations,
+        })
+    }
+}
+
+fn parse_joint(
+    tokens: &mut Tokens<'_>,
+    bvh: &mut Bvh,
+    parent: Option<usize>,
+    depth: usize,
+) -> Result<(), MotionError> {
+    // Deeply nested input would only exhaust the stack.
+    const MAX_DEPTH: usize = 256;
+    if depth > MAX_DEPTH {
+        return Err(tokens.error("hierarchy nested too deeply".into()));
+    }
+    let name = tokens.next_token()?.to_string();
+    let j = bvh.names.len();
+    bvh.names.push(name);
+    bvh.parents.push(parent);
+    bvh.offsets.push(Vector3::zeros());
+    bvh.channels.push(Vec::new());
+    tokens.expect("{")?;
+    loop {
+        let tok = tokens.next_token()?;
+        match tok {
+            "OFFSET" => {
+                let x = tokens.parse_num()?;
+                let y = tokens.parse_num()?;
+                let z = tokens.parse_num()?;
+                bvh.offsets[j] = Vector3::new(x, y, z);
+            }
+            "CHANNELS" => {
+                let n: usize = tokens.parse_num()?;
+                if n > 6 {
+                    return Err(tokens.error(format!("{n} channels on one joint")));
+                }
+                for _ in 0..n {
+                    let c = match tokens.next_token()? {
+                        "Xposition" => Channel::Xposition,
+                        "Yposition" => Channel::Yposition,
+                        "Zposition" => Channel::Zposition,
+                        "Xrotation" => Channel::Xrotation,
+                        "Yrotation" => Channel::Yrotation,
+                        "Zrotation" => Channel::Zrotation,
+                        other => return Err(tokens.error(format!("unknown channel {other:?}"))),
+                    };
+                    bvh.channels[j].push(c);
+                }
+            }
+            "JOINT" => parse_joint(tokens, bvh, Some(j), depth + 1)?,
+            "End" => {
+                tokens.expect("Site")?;
+                tokens.expect("{")?;
+                tokens.expect("OFFSET")?;
+                for _ in 0..3 {
+                    let _: f64 = tokens.parse_num()?;
+                }
+                tokens.expect("}")?;
+            }
+            "}" => return Ok(()),
+            other => return Err(tokens.error(format!("unexpected {other:?}"))),
+        }
+    }
+}
+
+struct Tokens<'a> {
+    iter: std::iter::Peekable<std::str::Lines<'a>>,
+    current: std::str::SplitWhitespace<'a>,
+    line: usize,
+}
+
+impl<'a> Tokens<'a> {
+    fn new(text: &'a str) -> Self {
+        Tokens {
+            iter: text.lines().peekable(),
+            current: "".split_whitespace(),
+            line: 0,
+        }
+    }
+
+    fn next_token(&mut self) -> Result<&'a str, MotionError> {
+        loop {
+            if let Some(t) = self.current.next() {
+                return Ok(t);
+            }
+            match self.iter.next() {
+                Some(l) => {
+                    self.line += 1;
+                    self.current = l.split_whitespace();
+                }
+                None => return Err(self.error("unexpected end of file".into())),
+            }
+        }
+    }
+
+    fn expect(&mut self, want: &str) -> Result<(), MotionError> {
+        let got = self.next_token()?;
+        if got == want {
+            Ok(())
+        } else {
+            Err(self.error(format!("expected {want:?}, found {got:?}")))
+        }
+    }
+
+    fn parse_num<T: std::str::FromStr>(&mut self) -> Result<T, MotionError> {
+        let tok = self.next_token()?;
+        tok.parse()
+            .map_err(|_| self.error(format!("expected a number, found {tok:?}")))
+    }
+
+    fn error(&self, reason: String) -> MotionError {
+        MotionError::Bvh {
+            line: self.line,
+            reason,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn euler_zyx_round_trips() {
+        for (a, b, c) in [(0.3, -0.4, 1.2), (-2.0, 1.0, 0.1), (0.0, 1.5707, 0.4)] {
+            let q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a)
+                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), b)
+                * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), c);
+            let [z, y, x] = euler_zyx_deg(&q);
+            let back = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), z.to_radians())
+                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), y.to_radians())
+                * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), x.to_radians());
+            assert!(back.angle_to(&q) < 1e-6, "{a} {b} {c}");
+        }
+    }
+
+    #[test]
+    fn parses_a_small_file_and_rejects_broken_ones() {
+        let text = "HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n JOINT b\n {\n  OFFSET 0 1 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n  End Site\n  {\n   OFFSET 0 1 0\n  }\n }\n}\nMOTION\nFrames: 2\nFrame Time: 0.04\n1 2 3 0 0 0 0 0 0\n1 2 3 90 0 0 0 0 0\n";
+        let b = Bvh::parse(text).expect("parse");
+        assert_eq!(b.names, vec!["a", "b"]);
+        assert_eq!(b.frames.len(), 2);
+        let w = b.world_positions();
+        assert!((w[[0, 1, 1]] - 3.0).abs() < 1e-9);
+        // Rotating the root 90° about z takes the child's +y offset to −x.
+        assert!((w[[1, 1, 0]] - 0.0).abs() < 1e-9, "{}", w[[1, 1, 0]]);
+        assert!(Bvh::parse(&text.replace("Frames: 2", "Frames: 3")).is_err());
+        assert!(Bvh::parse(&text.replace("CHANNELS 3", "CHANNELS 4")).is_err());
+        assert!(Bvh::parse(&text.replace("90", "nan")).is_err());
+        assert!(Bvh::parse("HIERARCHY\nROOT").is_err());
+    }
+}
