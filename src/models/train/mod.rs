@@ -119,7 +119,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
     std::fs::create_dir_all(dir).map_err(io)?;
     let tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
     std::fs::write(tmp.path(), bytes).map_err(io)?;
+    // Temp files are created 0600; model files are read by other users (the service's).
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(tmp.path(), std::fs::Permissions::from_mode(0o644)).map_err(io)?;
+    }
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
 }
 pub mod dance_revolution;
+pub mod keypose_transformer;
