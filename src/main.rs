@@ -53,6 +53,8 @@ enum BenchCommand {
     Generate(choreo::worker::standalone::BenchArgs),
     /// Throughput and p99 of GET /v1/jobs/{id} on loopback while the workers are busy.
     Http(HttpBenchArgs),
+    /// Decode + DanceRevolution features per song vs librosa (one thread each), peak memory.
+    Audio(choreo::audio::bench::BenchArgs),
 }
 
 /// Flags that override the config file and `CHOREO_*` environment.
@@ -134,6 +136,7 @@ fn main() -> anyhow::Result<()> {
             Ok(())
         }
         Command::Bench { what: BenchCommand::Http(args) } => bench_http(args, load(&args.service)?),
+        Command::Bench { what: BenchCommand::Audio(args) } => args.run().map(|_| ()).context("choreo bench audio"),
         Command::Eval(args) => choreo::metrics::eval::run(args).context("choreo eval"),
     }
 }

@@ -9,7 +9,7 @@
 //! Every function here returns `AudioError` for bad input and never panics on user audio.
 use serde::{Deserialize, Serialize};
 
-// pub mod bench;
+pub mod bench;
 pub mod chroma;
 pub mod decode;
 pub mod dsp;
@@ -76,6 +76,8 @@ pub enum AudioError {
     InvalidParameter(String),
     #[error("resampling failed: {0}")]
     Resample(String),
+    #[error("librosa reference run failed: {0}")]
+    Reference(String),
 }
 
 impl AudioError {
@@ -90,6 +92,7 @@ impl AudioError {
             AudioError::NonFinite => "audio-non-finite",
             AudioError::InvalidParameter(_) => "audio-invalid-parameter",
             AudioError::Resample(_) => "audio-resample",
+            AudioError::Reference(_) => "audio-reference",
         }
     }
 
@@ -101,7 +104,10 @@ impl AudioError {
             | AudioError::TooLong { .. }
             | AudioError::UnsupportedSampleRate(_)
             | AudioError::NonFinite => true,
-            AudioError::Io(_) | AudioError::InvalidParameter(_) | AudioError::Resample(_) => false,
+            AudioError::Io(_)
+            | AudioError::InvalidParameter(_)
+            | AudioError::Resample(_)
+            | AudioError::Reference(_) => false,
         }
     }
 }
