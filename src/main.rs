@@ -45,6 +45,8 @@ enum Command {
 enum TrainCommand {
     /// DanceRevolution (Huang et al., ICLR 2021).
     DanceRevolution(choreo::models::train::dance_revolution::Options),
+    /// Key-pose controllable cross-modal transformer (issue 6).
+    KeyposeTransformer(choreo::models::train::keypose_transformer::Options),
 }
 
 #[derive(Subcommand)]
@@ -132,6 +134,12 @@ fn main() -> anyhow::Result<()> {
         Command::Train { model: TrainCommand::DanceRevolution(opts) } => {
             choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "info");
             let logs = choreo::models::train::dance_revolution::train(opts).context("training dance-revolution")?;
+            println!("trained {} epochs into {}", logs.len(), opts.out.display());
+            Ok(())
+        }
+        Command::Train { model: TrainCommand::KeyposeTransformer(opts) } => {
+            choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "info");
+            let logs = choreo::models::train::keypose_transformer::train(opts).context("training keypose-transformer")?;
             println!("trained {} epochs into {}", logs.len(), opts.out.display());
             Ok(())
         }

@@ -8,6 +8,7 @@ use crate::motion::{KeyPose, Motion};
 use serde::{Deserialize, Serialize};
 
 pub mod dance_revolution;
+pub mod keypose_transformer;
 pub mod train;
 
 /// A model's stable id, as used by the API (`"dance-revolution"`, `"keypose-transformer"`).
@@ -89,6 +90,10 @@ impl Registry {
         let dr = dir.join(dance_revolution::ID);
         if dr.join(dance_revolution::WEIGHTS_FILE).exists() {
             models.push(std::sync::Arc::new(dance_revolution::Served::load(&dr)?));
+        }
+        let kp = dir.join(keypose_transformer::ID);
+        if kp.join(keypose_transformer::WEIGHTS_FILE).exists() {
+            models.push(std::sync::Arc::new(keypose_transformer::Served::load(&kp)?));
         }
         Ok(Self { models })
     }

@@ -1,0 +1,894 @@
+//! Key-pose controllable cross-modal transformer: "Controllable music-driven dance generation
+//! with key-pose constraints" (the seed paper of issue 6; its architecture §3, loss §3.4).
+//!
+//! - **Music transformer encoder** over the 15-d key-pose feature set (chroma 12, beat and
+//!   downbeat 2, onset 1): [`MusicEncoder`].
+//! - **Motion transformer encoder** over the seed motion, the first `T′` frames: [`MotionEncoder`].
+//! - **Key-pose embedding** `E_k`: a linear map of the pose, zero on frames without a key pose:
+//!   [`KeyPoseEmbedding`].
+//! - **Local neighbour position embedding**: for frame t, the sinusoidal encodings of
+//!   `|t − t_left|` and `|t − t_right|` (nearest key poses on either side), concatenated:
+//!   [`local_position_embedding`].
+//! - **Cross-modal transformer** over the time-concatenated `[motion; music]` tokens; music tokens
+//!   also carry the key-pose embedding, the local position embedding and the ordinary position
+//!   encoding: [`CrossModalTransformer`]. A linear **head** reads the poses off the music tokens.
+//! - **Loss** (§3.4): reconstruction weighted by `ω(t) = 1 + λ·Σ_i exp(−(t − t_i)² / 2σ²)`:
+//!   [`loss_weights`].
+//!
+//! Pose representation: the motion module's 73-d features (23 root-relative joint positions in
+//! the facing frame, root velocity, height, yaw velocity), not the paper's 6-D rotations; the
+//! model card says why. Whole songs are generated in overlapping windows, each seeded with the
+//! tail of the previous one ([`KeyposeTransformer::generate_long`]); the result is then pulled
+//! exactly through every key pose by a local C¹ blend of the residual ([`pass_through_keys`]).
+use std::path::Path;
+
+use ndarray::{Array2, ArrayView2};
+use serde::{Deserialize, Serialize};
+use tch::nn;
+use tch::{Device, Kind, Tensor};
+
+use super::{Cancelled, Capabilities, DanceModel, GenerateRequest, ModelError, ModelId, ModelInfo, Progress};
+use crate::motion::dataset::NormStats;
+use crate::motion::repr::{self, RootStart, POSE_DIM, YAW_VEL};
+use crate::motion::{KeyPose, Motion, NUM_JOINTS};
+
+/// Hyper-parameters, with the paper's symbols.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Config {
+    /// Music feature width (15: chroma 12, beat/downbeat 2, onset 1).
+    pub music_dim: i64,
+    /// Pose vector width (73: the motion module's features).
+    pub pose_dim: i64,
+    /// Key-pose width: the local joint positions only, no global translation (69).
+    pub key_dim: i64,
+    /// `d`: model width (paper's light model: 256).
+    pub d: i64,
+    /// Attention heads (paper: 4).
+    pub n_heads: i64,
+    /// Music encoder layers.
+    pub music_layers: i64,
+    /// Motion (seed) encoder layers.
+    pub motion_layers: i64,
+    /// Cross-modal transformer layers (paper's light model: 8 in all).
+    pub cross_layers: i64,
+    /// Position-wise FFN width.
+    pub d_ff: i64,
+    /// `T`: frames per generated window.
+    pub window: i64,
+    /// `T′`: seed-motion frames at the start of each window.
+    pub seed_len: i64,
+    /// Dropout during training.
+    pub dropout: f64,
+    /// `λ`: weight of the key-pose terms in ω(t).
+    pub lambda: f64,
+    /// `σ`: width of each key-pose term in ω(t), frames.
+    pub sigma: f64,
+}
+
+impl Config {
+    /// The configuration the committed weights were trained with: small enough for CPU.
+    pub fn cpu() -> Self {
+        Self {
+            music_dim: crate::audio::features::KEYPOSE_DIM as i64,
+            pose_dim: repr::FEATURE_DIM as i64,
+            key_dim: POSE_DIM as i64,
+            d: 128,
+            n_heads: 4,
+            music_layers: 2,
+            motion_layers: 1,
+            cross_layers: 3,
+            d_ff: 256,
+            window: 100,
+            seed_len: 25,
+            dropout: 0.1,
+            lambda: 3.0,
+            sigma: 3.0,
+        }
+    }
+
+    /// A tiny configuration for tests: same blocks, a fraction of the width.
+    pub fn tiny(music_dim: i64, pose_dim: i64, key_dim: i64) -> Self {
+        Self {
+            music_dim,
+            pose_dim,
+            key_dim,
+            d: 16,
+            n_heads: 2,
+            music_layers: 1,
+            motion_layers: 1,
+            cross_layers: 1,
+            d_ff: 32,
+            window: 20,
+            seed_len: 5,
+            dropout: 0.0,
+            lambda: 3.0,
+            sigma: 2.0,
+        }
+    }
+}
+
+/// Sinusoidal encodings `[n, d]` of the (possibly fractional) positions `pos`.
+pub fn sinusoid_of(pos: &[f64], d: i64) -> Vec<f32> {
+    let mut data = vec![0f32; pos.len() * d as usize];
+    for (t, &p) in pos.iter().enumerate() {
+        for i in 0..d {
+            let rate = 1.0 / 10000f64.powf((2 * (i / 2)) as f64 / d as f64);
+            let v = if i % 2 == 0 { (p * rate).sin() } else { (p * rate).cos() };
+            data[t * d as usize + i as usize] = v as f32;
+        }
+    }
+    data
+}
+
+/// Ordinary position encoding `[n, d]` of positions `0..n`.
+pub fn position_encoding(n: i64, d: i64, device: Device) -> Tensor {
+    let pos: Vec<f64> = (0..n).map(|t| t as f64).collect();
+    Tensor::from_slice(&sinusoid_of(&pos, d)).view([n, d]).to_device(device)
+}
+
+/// Distance used when a frame has no key pose on one side: far beyond any window.
+const NO_KEY_DISTANCE: f64 = 1000.0;
+
+/// The local neighbour position embedding `[n, d]` for key frames `keys` (sorted or not):
+/// `[PE(|t − t_left|); PE(|t − t_right|)]`, each half `d/2` wide.
+pub fn local_position_embedding(n: i64, keys: &[i64], d: i64) -> Vec<f32> {
+    let half = d / 2;
+    let mut left = Vec::with_capacity(n as usize);
+    let mut right = Vec::with_capacity(n as usize);
+    for t in 0..n {
+        let l = keys.iter().filter(|&&k| k <= t).map(|&k| (t - k) as f64).fold(NO_KEY_DISTANCE, f64::min);
+        let r = keys.iter().filter(|&&k| k >= t).map(|&k| (k - t) as f64).fold(NO_KEY_DISTANCE, f64::min);
+        left.push(l);
+        right.push(r);
+    }
+    let (a, b) = (sinusoid_of(&left, half), sinusoid_of(&right, d - half));
+    let mut out = Vec::with_capacity((n * d) as usize);
+    for t in 0..n as usize {
+        out.extend_from_slice(&a[t * half as usize..(t + 1) * half as usize]);
+        out.extend_from_slice(&b[t * (d - half) as usize..(t + 1) * (d - half) as usize]);
+    }
+    out
+}
+
+/// `ω(t) = 1 + λ·Σ_i exp(−(t − t_i)² / 2σ²)` for `t in 0..n` (§3.4).
+pub fn loss_weights(n: i64, keys: &[i64], lambda: f64, sigma: f64) -> Vec<f32> {
+    (0..n)
+        .map(|t| {
+            let s: f64 = keys.iter().map(|&k| (-((t - k) as f64).powi(2) / (2.0 * sigma * sigma)).exp()).sum();
+            (1.0 + lambda * s) as f32
+        })
+        .collect()
+}
+
+/// Multi-head self-attention over the whole sequence.
+#[derive(Debug)]
+struct MultiHeadAttention {
+    qkv: nn::Linear,
+    out: nn::Linear,
+    n_heads: i64,
+}
+
+impl MultiHeadAttention {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        Self {
+            qkv: nn::linear(&p / "qkv", c.d, 3 * c.d, Default::default()),
+            out: nn::linear(&p / "out", c.d, c.d, Default::default()),
+            n_heads: c.n_heads,
+        }
+    }
+
+    /// `x`: `[b, n, d]` → `[b, n, d]`.
+    fn forward(&self, x: &Tensor) -> Tensor {
+        let (b, n, d) = x.size3().expect("attention input is [b, n, d]");
+        let h = self.n_heads;
+        let dh = d / h;
+        // [b, n, 3, h, dh] → [3, b, h, n, dh]
+        let qkv = x.apply(&self.qkv).view([b, n, 3, h, dh]).permute([2, 0, 3, 1, 4]);
+        let (q, k, v) = (qkv.get(0), qkv.get(1), qkv.get(2));
+        let attn = (q.matmul(&k.transpose(-1, -2)) / (dh as f64).sqrt()).softmax(-1, Kind::Float); // [b, h, n, n]
+        attn.matmul(&v).permute([0, 2, 1, 3]).contiguous().view([b, n, d]).apply(&self.out)
+    }
+}
+
+/// One pre-norm transformer layer: attention and FFN, each with a residual.
+#[derive(Debug)]
+struct EncoderLayer {
+    norm1: nn::LayerNorm,
+    attn: MultiHeadAttention,
+    norm2: nn::LayerNorm,
+    ff1: nn::Linear,
+    ff2: nn::Linear,
+    dropout: f64,
+}
+
+impl EncoderLayer {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        Self {
+            norm1: nn::layer_norm(&p / "norm1", vec![c.d], Default::default()),
+            attn: MultiHeadAttention::new(&p / "attn", c),
+            norm2: nn::layer_norm(&p / "norm2", vec![c.d], Default::default()),
+            ff1: nn::linear(&p / "ff1", c.d, c.d_ff, Default::default()),
+            ff2: nn::linear(&p / "ff2", c.d_ff, c.d, Default::default()),
+            dropout: c.dropout,
+        }
+    }
+
+    fn forward(&self, x: &Tensor, train: bool) -> Tensor {
+        let x = x + self.attn.forward(&x.apply(&self.norm1)).dropout(self.dropout, train);
+        let f = x.apply(&self.norm2).apply(&self.ff1).gelu("none").apply(&self.ff2).dropout(self.dropout, train);
+        x + f
+    }
+}
+
+/// A stack of [`EncoderLayer`]s with a final layer norm.
+#[derive(Debug)]
+struct Stack {
+    layers: Vec<EncoderLayer>,
+    norm: nn::LayerNorm,
+}
+
+impl Stack {
+    fn new(p: nn::Path, c: &Config, n: i64) -> Self {
+        Self { layers: (0..n).map(|i| EncoderLayer::new(&p / "layers" / i, c)).collect(), norm: nn::layer_norm(&p / "norm", vec![c.d], Default::default()) }
+    }
+
+    fn forward(&self, x: &Tensor, train: bool) -> Tensor {
+        let mut x = x.shallow_clone();
+        for l in &self.layers {
+            x = l.forward(&x, train);
+        }
+        x.apply(&self.norm)
+    }
+}
+
+/// Music transformer encoder: `[b, T, music_dim]` → `[b, T, d]`.
+#[derive(Debug)]
+pub struct MusicEncoder {
+    embed: nn::Linear,
+    stack: Stack,
+    d: i64,
+}
+
+impl MusicEncoder {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        Self { embed: nn::linear(&p / "embed", c.music_dim, c.d, Default::default()), stack: Stack::new(&p / "encoder", c, c.music_layers), d: c.d }
+    }
+
+    pub fn forward(&self, music: &Tensor, train: bool) -> Tensor {
+        let n = music.size()[1];
+        self.stack.forward(&(music.apply(&self.embed) + position_encoding(n, self.d, music.device()).unsqueeze(0)), train)
+    }
+}
+
+/// Motion transformer encoder over the seed motion: `[b, T′, pose_dim]` → `[b, T′, d]`.
+#[derive(Debug)]
+pub struct MotionEncoder {
+    embed: nn::Linear,
+    stack: Stack,
+    d: i64,
+}
+
+impl MotionEncoder {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        Self { embed: nn::linear(&p / "embed", c.pose_dim, c.d, Default::default()), stack: Stack::new(&p / "encoder", c, c.motion_layers), d: c.d }
+    }
+
+    pub fn forward(&self, seed: &Tensor, train: bool) -> Tensor {
+        let n = seed.size()[1];
+        self.stack.forward(&(seed.apply(&self.embed) + position_encoding(n, self.d, seed.device()).unsqueeze(0)), train)
+    }
+}
+
+/// Key-pose embedding: `E_k = mask · (W_k·k + b_k)`, zero where no key pose is given.
+#[derive(Debug)]
+pub struct KeyPoseEmbedding {
+    proj: nn::Linear,
+}
+
+impl KeyPoseEmbedding {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        Self { proj: nn::linear(&p / "proj", c.key_dim, c.d, Default::default()) }
+    }
+
+    /// `keys` `[b, T, key_dim]`, `mask` `[b, T]` (1 on key frames) → `[b, T, d]`.
+    pub fn forward(&self, keys: &Tensor, mask: &Tensor) -> Tensor {
+        keys.apply(&self.proj) * mask.unsqueeze(-1)
+    }
+}
+
+/// Cross-modal transformer over `[motion; music]` tokens, with a learned segment embedding so
+/// the two modalities stay distinguishable when they share a time index.
+#[derive(Debug)]
+pub struct CrossModalTransformer {
+    segment: Tensor,
+    stack: Stack,
+    d: i64,
+}
+
+impl CrossModalTransformer {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        Self { segment: p.var("segment", &[2, c.d], nn::Init::Randn { mean: 0.0, stdev: 0.02 }), stack: Stack::new(&p / "encoder", c, c.cross_layers), d: c.d }
+    }
+
+    /// `motion` `[b, T′, d]`, `music` `[b, T, d]` (already carrying key-pose and local position
+    /// embeddings) → the music tokens after mixing, `[b, T, d]`.
+    pub fn forward(&self, motion: &Tensor, music: &Tensor, train: bool) -> Tensor {
+        let (ts, t) = (motion.size()[1], music.size()[1]);
+        let dev = music.device();
+        let m = motion + position_encoding(ts, self.d, dev).unsqueeze(0) + self.segment.get(0);
+        let a = music + position_encoding(t, self.d, dev).unsqueeze(0) + self.segment.get(1);
+        self.stack.forward(&Tensor::cat(&[m, a], 1), train).narrow(1, ts, t)
+    }
+}
+
+/// The inputs of one window, all normalised.
+pub struct WindowInput {
+    /// `[b, T, music_dim]`.
+    pub music: Tensor,
+    /// `[b, T′, pose_dim]`.
+    pub seed: Tensor,
+    /// `[b, T, key_dim]`, zero where no key pose.
+    pub keys: Tensor,
+    /// `[b, T]`, 1 on key frames.
+    pub key_mask: Tensor,
+    /// `[b, T, d]`, from [`local_position_embedding`].
+    pub local_pos: Tensor,
+}
+
+/// The whole model.
+#[derive(Debug)]
+pub struct KeyposeTransformer {
+    pub config: Config,
+    pub music: MusicEncoder,
+    pub motion: MotionEncoder,
+    pub key_embed: KeyPoseEmbedding,
+    pub cross: CrossModalTransformer,
+    head: nn::Linear,
+}
+
+impl KeyposeTransformer {
+    /// Builds the variables under `p` (keys `music.*`, `motion.*`, `key_embed.*`, `cross.*`, `head.*`).
+    pub fn new(p: &nn::Path, config: Config) -> Self {
+        Self {
+            music: MusicEncoder::new(p / "music", &config),
+            motion: MotionEncoder::new(p / "motion", &config),
+            key_embed: KeyPoseEmbedding::new(p / "key_embed", &config),
+            cross: CrossModalTransformer::new(p / "cross", &config),
+            head: nn::linear(p / "head", config.d, config.pose_dim, Default::default()),
+            config,
+        }
+    }
+
+    /// One window → poses `[b, T, pose_dim]` (normalised).
+    pub fn forward(&self, x: &WindowInput, train: bool) -> Tensor {
+        let music = self.music.forward(&x.music, train) + self.key_embed.forward(&x.keys, &x.key_mask) + &x.local_pos;
+        let motion = self.motion.forward(&x.seed, train);
+        self.cross.forward(&motion, &music, train).apply(&self.head)
+    }
+
+    /// Builds one window's inputs (batch 1) from rows and key frames local to the window.
+    pub fn window_input(&self, music: &Tensor, seed: &Tensor, keys: &[(i64, Vec<f32>)]) -> WindowInput {
+        let c = &self.config;
+        let t = music.size()[0];
+        let mut k = vec![0f32; (t * c.key_dim) as usize];
+        let mut mask = vec![0f32; t as usize];
+        for (f, pose) in keys {
+            let f = *f as usize;
+            k[f * c.key_dim as usize..(f + 1) * c.key_dim as usize].copy_from_slice(pose);
+            mask[f] = 1.0;
+        }
+        let frames: Vec<i64> = keys.iter().map(|(f, _)| *f).collect();
+        WindowInput {
+            music: music.unsqueeze(0),
+            seed: seed.unsqueeze(0),
+            keys: Tensor::from_slice(&k).view([1, t, c.key_dim]),
+            key_mask: Tensor::from_slice(&mask).view([1, t]),
+            local_pos: Tensor::from_slice(&local_position_embedding(t, &frames, c.d)).view([1, t, c.d]),
+        }
+    }
+
+    /// Generates `n` frames from music `[n, music_dim]` in overlapping windows of `T` frames,
+    /// each seeded with the last `T′` frames so far (the first with `seed` `[T′, pose_dim]`, or
+    /// the mean pose). Key poses `(frame, [key_dim])` (normalised) go to every window that
+    /// contains them. `on_window(done, total)` may stop the loop. Returns `[n, pose_dim]`.
+    pub fn generate_long(&self, music: &Tensor, seed: Option<&Tensor>, keys: &[(i64, Vec<f32>)], mut on_window: impl FnMut(usize, usize) -> bool) -> Option<Tensor> {
+        let c = &self.config;
+        let (w, ts) = (c.window, c.seed_len);
+        let n = music.size()[0];
+        let dev = music.device();
+        // Pad short songs with the mean (zero) music to one whole window.
+        let total = n.max(w);
+        let music = if total > n { Tensor::cat(&[music.shallow_clone(), Tensor::zeros([total - n, c.music_dim], (Kind::Float, dev))], 0) } else { music.shallow_clone() };
+        let mut starts = Vec::new();
+        let mut s = 0;
+        loop {
+            starts.push(s.min(total - w));
+            if s + w >= total {
+                break;
+            }
+            s += w - ts;
+        }
+        let out = Tensor::zeros([total, c.pose_dim], (Kind::Float, dev));
+        let mut written = 0i64; // frames [0, written) are final
+        let seeded = seed.is_some();
+        for (i, &s) in starts.iter().enumerate() {
+            let seed_rows = if i == 0 {
+                match seed {
+                    Some(sd) => sd.shallow_clone(),
+                    None => Tensor::zeros([ts, c.pose_dim], (Kind::Float, dev)),
+                }
+            } else {
+                out.narrow(0, s, ts)
+            };
+            let local: Vec<(i64, Vec<f32>)> = keys.iter().filter(|(f, _)| *f >= s && *f < s + w).map(|(f, p)| (f - s, p.clone())).collect();
+            let y = self.forward(&self.window_input(&music.narrow(0, s, w), &seed_rows, &local), false).squeeze_dim(0);
+            // Keep what earlier windows (or the given seed) fixed; write the rest.
+            let keep = if i == 0 && seeded {
+                out.narrow(0, 0, ts).copy_(&seed_rows);
+                ts
+            } else {
+                (written - s).max(0)
+            };
+            out.narrow(0, s + keep, w - keep).copy_(&y.narrow(0, keep, w - keep));
+            written = s + w;
+            if !on_window(i + 1, starts.len()) {
+                return None;
+            }
+        }
+        Some(out.narrow(0, 0, n))
+    }
+}
+
+/// Cubic Hermite fall-off `(1 − u)²(1 + 2u)` on `[0, 1)`, 0 beyond: C¹, 1 at 0, 0 at 1.
+fn falloff(u: f64) -> f64 {
+    if u >= 1.0 {
+        0.0
+    } else {
+        (1.0 - u) * (1.0 - u) * (1.0 + 2.0 * u)
+    }
+}
+
+/// Adds to each column of `x` `[n, c]` a smooth correction that makes row `t_i` equal `target_i`
+/// exactly. Each key's residual fades out over `radius` frames, never reaching a neighbouring key
+/// (the radius shrinks to the gap), so every key frame gets exactly its own residual.
+pub fn pass_through_keys(x: &mut Array2<f32>, cols: std::ops::Range<usize>, keys: &[(usize, Vec<f32>)], radius: f64) {
+    let mut sorted: Vec<&(usize, Vec<f32>)> = keys.iter().collect();
+    sorted.sort_by_key(|k| k.0);
+    let n = x.nrows();
+    let residuals: Vec<Vec<f32>> = sorted.iter().map(|(f, target)| cols.clone().zip(target).map(|(c, v)| v - x[[*f, c]]).collect()).collect();
+    for (i, (f, _)) in sorted.iter().enumerate() {
+        let left = if i > 0 { (f - sorted[i - 1].0) as f64 } else { radius }.min(radius).max(1.0);
+        let right = if i + 1 < sorted.len() { (sorted[i + 1].0 - f) as f64 } else { radius }.min(radius).max(1.0);
+        let lo = f.saturating_sub(left.ceil() as usize);
+        let hi = (f + right.ceil() as usize).min(n - 1);
+        for t in lo..=hi {
+            let u = if t <= *f { (f - t) as f64 / left } else { (t - f) as f64 / right };
+            let w = falloff(u) as f32;
+            if w == 0.0 {
+                continue;
+            }
+            for (k, c) in cols.clone().enumerate() {
+                x[[t, c]] += w * residuals[i][k];
+            }
+        }
+    }
+}
+
+/// Turns the integrated yaw so that frame `t_i` faces `yaw_i` (radians), blending the
+/// correction like [`pass_through_keys`]; returns the start yaw to integrate from.
+fn pass_through_yaws(features: &mut Array2<f32>, start_yaw: f32, keys: &[(usize, f32)], radius: f64) -> f32 {
+    let n = features.nrows();
+    // Integrated (unwrapped) yaw per frame.
+    let mut yaw = Array2::<f32>::zeros((n, 1));
+    let mut acc = start_yaw;
+    for t in 0..n {
+        if t > 0 {
+            acc += features[[t, YAW_VEL]];
+        }
+        yaw[[t, 0]] = acc;
+    }
+    let targets: Vec<(usize, Vec<f32>)> = keys
+        .iter()
+        .map(|&(f, k)| {
+            let d = (k - yaw[[f, 0]]).rem_euclid(std::f32::consts::TAU);
+            let d = if d > std::f32::consts::PI { d - std::f32::consts::TAU } else { d };
+            (f, vec![yaw[[f, 0]] + d])
+        })
+        .collect();
+    pass_through_keys(&mut yaw, 0..1, &targets, radius);
+    for t in 1..n {
+        features[[t, YAW_VEL]] = yaw[[t, 0]] - yaw[[t - 1, 0]];
+    }
+    if n > 0 {
+        yaw[[0, 0]]
+    } else {
+        start_yaw
+    }
+}
+
+/// A key pose mapped into pose space: its frame, its 69 local coordinates (facing frame,
+/// metres) and its facing yaw.
+#[derive(Clone, Debug)]
+pub struct LocalKey {
+    pub frame: usize,
+    pub local: Vec<f32>,
+    pub yaw: f32,
+}
+
+/// Checks key poses against a song of `n` frames at `fps` and maps them into pose space.
+/// Errors (422 at the API): wrong joint count, non-finite values, a time outside the song, two
+/// keys on the same frame, more keys than frames.
+pub fn local_keys(keys: &[KeyPose], n: usize, fps: f64) -> Result<Vec<LocalKey>, ModelError> {
+    if keys.len() > n {
+        return Err(ModelError::Invalid(format!("{} key poses for a song of {n} frames", keys.len())));
+    }
+    let mut out: Vec<LocalKey> = Vec::with_capacity(keys.len());
+    for (i, k) in keys.iter().enumerate() {
+        if k.joints.len() != NUM_JOINTS {
+            return Err(ModelError::Invalid(format!("key pose {i}: {} joints, expected {NUM_JOINTS}", k.joints.len())));
+        }
+        if !k.time_s.is_finite() || k.joints.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(ModelError::Invalid(format!("key pose {i}: not a finite number")));
+        }
+        let f = (k.time_s * fps).round();
+        if k.time_s < 0.0 || f < 0.0 || f >= n as f64 {
+            return Err(ModelError::Invalid(format!("key pose {i}: time {} s is outside the song (0 to {:.2} s)", k.time_s, n as f64 / fps)));
+        }
+        let frame = f as usize;
+        if out.iter().any(|o| o.frame == frame) {
+            return Err(ModelError::Invalid(format!("key pose {i}: closer than one frame to another key pose (frame {frame})")));
+        }
+        let mut joints = Array2::<f32>::zeros((NUM_JOINTS, 3));
+        for (j, p) in k.joints.iter().enumerate() {
+            for a in 0..3 {
+                joints[[j, a]] = p[a] as f32;
+            }
+        }
+        let (local, yaw) = to_local(joints.view());
+        out.push(LocalKey { frame, local, yaw });
+    }
+    Ok(out)
+}
+
+/// Root-relative joints `[J, 3]` → facing-frame coordinates (69) and the facing yaw, exactly as
+/// [`repr::to_features`] computes columns `0..69`.
+pub fn to_local(joints: ArrayView2<'_, f32>) -> (Vec<f32>, f32) {
+    let yaw = repr::facing_yaw(joints);
+    let (s, c) = (-f64::from(yaw)).sin_cos();
+    let mut local = Vec::with_capacity(POSE_DIM);
+    for j in 0..NUM_JOINTS {
+        let (x, y, z) = (f64::from(joints[[j, 0]]), f64::from(joints[[j, 1]]), f64::from(joints[[j, 2]]));
+        local.push((c * x + s * z) as f32);
+        local.push(y as f32);
+        local.push((-s * x + c * z) as f32);
+    }
+    (local, yaw)
+}
+
+/// Mean per-joint distance (cm) between each key pose and the motion's root-relative joints at
+/// its frame, where `root` `[T, 3]` is the root track the motion was built around.
+pub fn key_pose_error_cm(motion: &Motion, root: ArrayView2<'_, f32>, keys: &[KeyPose]) -> Option<f64> {
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    for k in keys {
+        let f = (k.time_s * motion.fps).round() as usize;
+        if f >= motion.num_frames() {
+            return None;
+        }
+        for (j, p) in k.joints.iter().enumerate() {
+            let d: f64 = (0..3).map(|a| (f64::from(motion.positions[[f, j, a]] - root[[f, a]]) - p[a]).powi(2)).sum();
+            sum += d.sqrt();
+            count += 1;
+        }
+    }
+    (count > 0).then(|| 100.0 * sum / count as f64)
+}
+
+/// The model folder's description file.
+pub const MODEL_FILE: &str = "model.json";
+/// The model folder's weights (safetensors).
+pub const WEIGHTS_FILE: &str = "weights.safetensors";
+/// The API id.
+pub const ID: &str = "keypose-transformer";
+/// Frames over which a key pose's residual is blended in after generation (0.5 s at 25 fps).
+pub const BLEND_RADIUS: f64 = 12.0;
+
+/// How the committed weights were trained, stored beside them.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrainingRecord {
+    pub epochs: usize,
+    pub steps: usize,
+    pub lr: f64,
+    pub batch: usize,
+    pub max_keys: usize,
+    pub seed: u64,
+    pub final_train_loss: f64,
+    pub minutes: f64,
+}
+
+/// `model.json`: the configuration and the train-split normalisation the weights expect.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ModelFile {
+    pub config: Config,
+    pub music_norm: NormStats,
+    pub pose_norm: NormStats,
+    pub fps: f64,
+    pub training: TrainingRecord,
+}
+
+/// `[r, c]` ndarray → tensor.
+pub fn to_tensor(m: &Array2<f32>) -> Tensor {
+    let (r, c) = m.dim();
+    Tensor::from_slice(m.as_standard_layout().as_slice().expect("standard layout")).view([r as i64, c as i64])
+}
+
+/// `[r, c]` tensor → ndarray.
+pub fn to_array(t: &Tensor) -> Result<Array2<f32>, ModelError> {
+    let (r, c) = t.size2()?;
+    let data: Vec<f32> = Vec::<f32>::try_from(t.contiguous().view([-1]))?;
+    Array2::from_shape_vec((r as usize, c as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))
+}
+
+/// Normalises a key's 69 local coordinates with the pose statistics' first 69 columns.
+pub fn normalize_key(norm: &NormStats, local: &[f32]) -> Vec<f32> {
+    local.iter().enumerate().map(|(i, v)| (v - norm.mean[i]) / norm.std[i]).collect()
+}
+
+/// Generation on normalised inputs plus the exact key-pose pass: returns denormalised features
+/// `[n, 73]` and the root start. Shared by serving and the model card's evaluation.
+pub fn generate_features(
+    model: &KeyposeTransformer,
+    file: &ModelFile,
+    music: &Tensor,
+    seed: Option<(&Array2<f32>, RootStart)>,
+    keys: &[LocalKey],
+    mut on_window: impl FnMut(usize, usize) -> bool,
+) -> Result<Option<(Array2<f32>, Array2<f32>, RootStart)>, ModelError> {
+    let ts = file.config.seed_len as usize;
+    let seed_norm = match seed {
+        Some((f, _)) => {
+            // The last T′ frames, front-padded by repeating the first when the seed is shorter.
+            let m = f.nrows();
+            let mut rows = Array2::<f32>::zeros((ts, f.ncols()));
+            for i in 0..ts {
+                let src = (m + i).saturating_sub(ts);
+                rows.row_mut(i).assign(&f.row(src.min(m.saturating_sub(1))));
+            }
+            Some(to_tensor(&file.pose_norm.normalize(&rows)?))
+        }
+        None => None,
+    };
+    let nkeys: Vec<(i64, Vec<f32>)> = keys.iter().map(|k| (k.frame as i64, normalize_key(&file.pose_norm, &k.local))).collect();
+    let y = tch::no_grad(|| model.generate_long(music, seed_norm.as_ref(), &nkeys, &mut on_window));
+    let Some(y) = y else { return Ok(None) };
+    let raw = file.pose_norm.denormalize(&to_array(&y)?)?;
+    let mut out = raw.clone();
+    let targets: Vec<(usize, Vec<f32>)> = keys.iter().map(|k| (k.frame, k.local.clone())).collect();
+    pass_through_keys(&mut out, 0..POSE_DIM, &targets, BLEND_RADIUS);
+    let mut start = seed.map(|(_, s)| s).unwrap_or_default();
+    let yaws: Vec<(usize, f32)> = keys.iter().map(|k| (k.frame, k.yaw)).collect();
+    if !yaws.is_empty() {
+        start.yaw = pass_through_yaws(&mut out, start.yaw, &yaws, BLEND_RADIUS);
+    }
+    Ok(Some((raw, out, start)))
+}
+
+/// One loaded copy of the network (tensors are `Send` but not `Sync`: one per generation).
+struct Instance {
+    model: KeyposeTransformer,
+    _vs: nn::VarStore,
+}
+
+impl Instance {
+    fn load(dir: &Path, config: &Config) -> Result<Self, ModelError> {
+        let mut vs = nn::VarStore::new(Device::Cpu);
+        let model = KeyposeTransformer::new(&vs.root(), config.clone());
+        vs.load(dir.join(WEIGHTS_FILE))?;
+        Ok(Self { model, _vs: vs })
+    }
+}
+
+/// A trained key-pose transformer, ready to serve.
+pub struct Served {
+    dir: std::path::PathBuf,
+    file: ModelFile,
+    pool: std::sync::Mutex<Vec<Instance>>,
+}
+
+impl Served {
+    /// Loads `dir/model.json` and `dir/weights.safetensors`.
+    pub fn load(dir: &Path) -> Result<Self, ModelError> {
+        let missing = || ModelError::MissingWeights(ID.into(), dir.display().to_string());
+        let text = std::fs::read_to_string(dir.join(MODEL_FILE)).map_err(|_| missing())?;
+        let file: ModelFile = serde_json::from_str(&text).map_err(|e| ModelError::Invalid(format!("{MODEL_FILE}: {e}")))?;
+        // Load one copy now so a bad weights file fails at start-up, not on the first job.
+        let first = Instance::load(dir, &file.config)?;
+        Ok(Self { dir: dir.to_owned(), file, pool: std::sync::Mutex::new(vec![first]) })
+    }
+
+    /// The model's description file.
+    pub fn file(&self) -> &ModelFile {
+        &self.file
+    }
+
+    fn checkout(&self) -> Result<Instance, ModelError> {
+        let pooled = self.pool.lock().unwrap_or_else(|p| p.into_inner()).pop();
+        match pooled {
+            Some(i) => Ok(i),
+            None => Instance::load(&self.dir, &self.file.config),
+        }
+    }
+
+    fn checkin(&self, instance: Instance) {
+        self.pool.lock().unwrap_or_else(|p| p.into_inner()).push(instance);
+    }
+}
+
+impl DanceModel for Served {
+    fn info(&self) -> ModelInfo {
+        ModelInfo {
+            id: ModelId(ID.into()),
+            paper: "Controllable music-driven dance generation with key-pose constraints (key-pose controllable cross-modal transformer)".into(),
+            capabilities: Capabilities { key_poses: true, seed_motion: true, style: false },
+        }
+    }
+
+    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Motion, ModelError> {
+        let fps = self.file.fps;
+        let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
+        let keys = local_keys(req.key_poses, n, fps)?;
+        progress.report("features", 0.0)?;
+        let feats = crate::audio::features::keypose(req.audio, fps, 0.0, n)?;
+        let music = to_tensor(&self.file.music_norm.normalize(&feats)?);
+        progress.report("features", 1.0)?;
+        let seed = match req.seed_motion {
+            Some(m) if m.num_frames() > 0 => {
+                let root = crate::motion::skeleton::body_centre_track(m.positions.view());
+                Some(repr::to_features(m.positions.view(), root.view())?)
+            }
+            _ => None,
+        };
+        let instance = self.checkout()?;
+        let mut cancelled = false;
+        let out = generate_features(&instance.model, &self.file, &music, seed.as_ref().map(|(f, s)| (f, *s)), &keys, |done, total| {
+            cancelled = progress.report("decode", done as f32 / total as f32).is_err();
+            !cancelled
+        });
+        self.checkin(instance);
+        let Some((_, features, start)) = out? else { return Err(Cancelled.into()) };
+        let (motion, _root) = repr::from_features(features.view(), start, fps)?;
+        Ok(motion)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tch::nn::OptimizerConfig;
+
+    fn model(seed: i64) -> (nn::VarStore, KeyposeTransformer) {
+        tch::manual_seed(seed);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let m = KeyposeTransformer::new(&vs.root(), Config::tiny(4, 7, 6));
+        (vs, m)
+    }
+
+    #[test]
+    fn window_shapes() {
+        let (_vs, m) = model(0);
+        let x = m.window_input(&Tensor::randn([20, 4], (Kind::Float, Device::Cpu)), &Tensor::randn([5, 7], (Kind::Float, Device::Cpu)), &[(7, vec![0.5; 6])]);
+        assert_eq!(m.forward(&x, false).size(), vec![1, 20, 7]);
+    }
+
+    #[test]
+    fn long_generation_is_deterministic_and_covers_the_song() {
+        let (_vs, m) = model(1);
+        let music = Tensor::randn([53, 4], (Kind::Float, Device::Cpu));
+        let keys = vec![(30i64, vec![1.0f32; 6])];
+        let mut windows = 0;
+        let a = m.generate_long(&music, None, &keys, |_, _| { windows += 1; true }).unwrap();
+        let b = m.generate_long(&music, None, &keys, |_, _| true).unwrap();
+        assert_eq!(a.size(), vec![53, 7]);
+        assert_eq!(windows, 4, "windows of 20 with 5 seed frames over 53 frames");
+        assert_eq!((&a - &b).abs().max().double_value(&[]), 0.0);
+        // The key pose is an input: removing it changes the dance near it.
+        let c = m.generate_long(&music, None, &[], |_, _| true).unwrap();
+        assert!((&a - &c).abs().max().double_value(&[]) > 1e-5);
+        // A given seed is kept verbatim at the start.
+        let seed = Tensor::randn([5, 7], (Kind::Float, Device::Cpu));
+        let d = m.generate_long(&music, Some(&seed), &keys, |_, _| true).unwrap();
+        assert!((d.narrow(0, 0, 5) - &seed).abs().max().double_value(&[]) < 1e-6);
+        // Cancelling stops it.
+        assert!(m.generate_long(&music, None, &keys, |i, _| i < 2).is_none());
+    }
+
+    #[test]
+    fn local_position_embedding_tracks_nearest_keys() {
+        let e = local_position_embedding(10, &[2, 7], 8);
+        let pe = |d: f64| sinusoid_of(&[d], 4);
+        // Frame 4: left key 2 (distance 2), right key 7 (distance 3).
+        assert_eq!(&e[4 * 8..4 * 8 + 4], pe(2.0).as_slice());
+        assert_eq!(&e[4 * 8 + 4..5 * 8], pe(3.0).as_slice());
+        // Frame 9: no key to the right.
+        assert_eq!(&e[9 * 8 + 4..10 * 8], pe(NO_KEY_DISTANCE).as_slice());
+    }
+
+    #[test]
+    fn loss_weights_peak_at_keys() {
+        let w = loss_weights(10, &[3], 2.0, 1.0);
+        assert!((w[3] - 3.0).abs() < 1e-6);
+        assert!((w[0] - 1.0).abs() < 0.03);
+        assert_eq!(loss_weights(4, &[], 5.0, 1.0), vec![1.0; 4]);
+    }
+
+    #[test]
+    fn pass_through_hits_every_key_and_leaves_far_frames() {
+        let mut x = Array2::<f32>::zeros((60, 3));
+        let keys = vec![(10usize, vec![1.0, 2.0, 3.0]), (12, vec![-1.0, 0.0, 0.5]), (40, vec![0.3, 0.3, 0.3])];
+        pass_through_keys(&mut x, 0..3, &keys, 8.0);
+        for (f, t) in &keys {
+            for c in 0..3 {
+                assert!((x[[*f, c]] - t[c]).abs() < 1e-6);
+            }
+        }
+        assert_eq!(x.row(25).to_vec(), vec![0.0; 3]);
+        assert_eq!(x.row(59).to_vec(), vec![0.0; 3]);
+    }
+
+    #[test]
+    fn key_pose_honoured_through_features() {
+        // A real-shaped pose through to_local → pass_through → from_features comes back within 1 mm.
+        let n = 40;
+        let features = Array2::<f32>::zeros((n, repr::FEATURE_DIM));
+        let mut joints = Vec::new();
+        for j in 0..NUM_JOINTS {
+            joints.push([0.1 * (j as f64 % 5.0) - 0.2, 0.05 * j as f64 - 0.5, 0.03 * (j as f64 % 3.0)]);
+        }
+        let key = KeyPose { time_s: 20.0 / 25.0, joints };
+        let lk = local_keys(std::slice::from_ref(&key), n, 25.0).unwrap();
+        let mut out = features.clone();
+        pass_through_keys(&mut out, 0..POSE_DIM, &[(lk[0].frame, lk[0].local.clone())], BLEND_RADIUS);
+        let yaw0 = pass_through_yaws(&mut out, 0.0, &[(lk[0].frame, lk[0].yaw)], BLEND_RADIUS);
+        let (motion, root) = repr::from_features(out.view(), RootStart { yaw: yaw0, ..Default::default() }, 25.0).unwrap();
+        let err = key_pose_error_cm(&motion, root.view(), &[key]).unwrap();
+        assert!(err < 0.1, "key pose error {err} cm");
+    }
+
+    #[test]
+    fn bad_key_poses_are_rejected() {
+        let ok = KeyPose { time_s: 1.0, joints: vec![[0.0; 3]; NUM_JOINTS] };
+        assert!(local_keys(std::slice::from_ref(&ok), 50, 25.0).is_ok());
+        let outside = KeyPose { time_s: 3.0, ..ok.clone() };
+        assert!(local_keys(&[outside], 50, 25.0).is_err());
+        let nan = KeyPose { joints: vec![[f64::NAN, 0.0, 0.0]; NUM_JOINTS], ..ok.clone() };
+        assert!(local_keys(&[nan], 50, 25.0).is_err());
+        let short = KeyPose { joints: vec![[0.0; 3]; 5], ..ok.clone() };
+        assert!(local_keys(&[short], 50, 25.0).is_err());
+        let near = KeyPose { time_s: 1.01, ..ok.clone() };
+        assert!(local_keys(&[ok.clone(), near], 50, 25.0).is_err());
+        assert!(local_keys(&[ok.clone(), ok.clone()], 1, 25.0).is_err());
+    }
+
+    #[test]
+    fn loss_falls_on_a_few_batches() {
+        let (vs, m) = model(4);
+        let mut opt = nn::Adam::default().build(&vs, 3e-3).unwrap();
+        let music = Tensor::randn([4, 20, 4], (Kind::Float, Device::Cpu));
+        let poses = Tensor::randn([4, 20, 7], (Kind::Float, Device::Cpu)).cumsum(1, Kind::Float) * 0.2;
+        let x = WindowInput {
+            music,
+            seed: poses.narrow(1, 0, 5),
+            keys: poses.narrow(2, 0, 6) * Tensor::zeros([4, 20, 1], (Kind::Float, Device::Cpu)),
+            key_mask: Tensor::zeros([4, 20], (Kind::Float, Device::Cpu)),
+            local_pos: Tensor::zeros([4, 20, 16], (Kind::Float, Device::Cpu)),
+        };
+        let w = Tensor::from_slice(&loss_weights(20, &[10], 3.0, 2.0)).view([1, 20, 1]);
+        let loss = |m: &KeyposeTransformer| ((m.forward(&x, true) - &poses).abs() * &w).mean(Kind::Float);
+        let first = loss(&m).double_value(&[]);
+        for _ in 0..40 {
+            opt.backward_step(&loss(&m));
+        }
+        let last = loss(&m).double_value(&[]);
+        assert!(last < 0.7 * first, "loss {first} -> {last}");
+    }
+}

@@ -1,0 +1,295 @@
+//! `choreo train keypose-transformer`: the key-pose weighted reconstruction loss (ω(t), §3.4),
+//! key poses sampled from the ground truth at random counts and frames, the seed motion taken as
+//! each window's first `T′` frames, Adam, on the train split of dance-with-melody. After training
+//! it measures the key-pose consistency error on the test split (whole dances, overlapping
+//! windows, the served code path) and writes it to `eval.json` for the model card.
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use ndarray::{s, Array2};
+use rand::rngs::StdRng;
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+use tch::nn::{self, OptimizerConfig};
+use tch::{Device, Kind, Tensor};
+
+use super::{append_log, batch_tensor, fit_normalizers, load_sequences, window_starts, write_atomic, EpochLog, Sequence, TrainError};
+use crate::models::keypose_transformer::{
+    generate_features, local_position_embedding, loss_weights, to_local, to_tensor, Config, KeyposeTransformer, LocalKey, ModelFile,
+    TrainingRecord, WindowInput, MODEL_FILE, WEIGHTS_FILE,
+};
+use crate::motion::dataset::Dataset;
+use crate::motion::repr::{self, POSE_DIM};
+use crate::motion::{KeyPose, NUM_JOINTS};
+
+/// Options of one training run; the defaults reproduce the committed weights.
+#[derive(Clone, Debug, clap::Args)]
+pub struct Options {
+    /// The dance-with-melody folder.
+    #[arg(long, default_value = "../shared/data/dance-with-melody")]
+    pub data: PathBuf,
+    /// Where model.json, weights.safetensors, train_log.jsonl and eval.json go.
+    #[arg(long, default_value = "models/keypose-transformer")]
+    pub out: PathBuf,
+    #[arg(long, default_value_t = 200)]
+    pub epochs: usize,
+    #[arg(long, default_value_t = 32)]
+    pub batch: usize,
+    /// Stride between training window starts, in frames.
+    #[arg(long, default_value_t = 10)]
+    pub stride: usize,
+    #[arg(long, default_value_t = 5e-4)]
+    pub lr: f64,
+    /// `λ`: weight of the key-pose terms in ω(t).
+    #[arg(long, default_value_t = 3.0)]
+    pub lambda: f64,
+    /// `σ`: width of each key-pose term in ω(t), frames.
+    #[arg(long, default_value_t = 3.0)]
+    pub sigma: f64,
+    /// Key poses per training window are drawn uniformly from 0..=max_keys.
+    #[arg(long, default_value_t = 6)]
+    pub max_keys: usize,
+    /// Key poses per test dance in the consistency evaluation.
+    #[arg(long, default_value_t = 4)]
+    pub eval_keys: usize,
+    #[arg(long, default_value_t = 2023)]
+    pub seed: u64,
+    /// libtorch intra-op threads.
+    #[arg(long, default_value_t = 1)]
+    pub threads: i32,
+    /// Stop after this many minutes even if epochs remain (the weights are saved either way).
+    #[arg(long)]
+    pub max_minutes: Option<f64>,
+    /// Use the tiny test configuration (for smoke runs, never for committed weights).
+    #[arg(long)]
+    pub tiny: bool,
+}
+
+/// Key-pose consistency on the test split, written to `eval.json`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct KeyPoseEval {
+    pub dances: usize,
+    pub keys_per_dance: usize,
+    /// Mean per-joint error at key frames of the network alone (before the exact pass), cm.
+    pub network_error_cm: f64,
+    /// The same after the served pass-through blend, measured on the exported world motion, cm.
+    pub served_error_cm: f64,
+    /// Mean per-joint error of the whole generated dance against the real one (root-relative), cm.
+    pub dance_error_cm: f64,
+    /// Mean per-joint error with no key poses (seed only), for comparison, cm.
+    pub dance_error_no_keys_cm: f64,
+}
+
+/// Trains and writes the model folder; returns the per-epoch log.
+pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
+    tch::set_num_threads(opts.threads);
+    tch::manual_seed(opts.seed as i64);
+    let started = Instant::now();
+    let ds = Dataset::open(&opts.data)?;
+    let features: super::FeatureFn = crate::audio::features::keypose;
+    let train_raw = load_sequences(&ds, ds.train_ids(), features)?;
+    let test_raw = load_sequences(&ds, ds.test_ids(), features)?;
+    let (music_norm, pose_norm) = fit_normalizers(&train_raw)?;
+    let norm = |seqs: &[Sequence]| -> Result<Vec<Sequence>, TrainError> {
+        seqs.iter()
+            .map(|s| Ok(Sequence { music: music_norm.normalize(&s.music)?, poses: pose_norm.normalize(&s.poses)?, id: s.id.clone() }))
+            .collect()
+    };
+    let (train, test) = (norm(&train_raw)?, norm(&test_raw)?);
+    tracing::info!(seconds = started.elapsed().as_secs_f64(), "data ready");
+
+    let base = if opts.tiny { Config::tiny(0, 0, 0) } else { Config::cpu() };
+    let config = Config { music_dim: music_norm.dim() as i64, pose_dim: pose_norm.dim() as i64, key_dim: POSE_DIM as i64, lambda: opts.lambda, sigma: opts.sigma, ..base };
+    let vs = nn::VarStore::new(Device::Cpu);
+    let model = KeyposeTransformer::new(&vs.root(), config.clone());
+    let mut opt = nn::Adam::default().build(&vs, opts.lr)?;
+    std::fs::create_dir_all(&opts.out).map_err(|source| TrainError::Io { path: opts.out.clone(), source })?;
+    let log_path = opts.out.join("train_log.jsonl");
+    let _ = std::fs::remove_file(&log_path);
+
+    let len = config.window as usize;
+    let mut logs = Vec::new();
+    let mut steps = 0usize;
+    let record = |epochs: usize, steps: usize, logs: &[EpochLog]| TrainingRecord {
+        epochs,
+        steps,
+        lr: opts.lr,
+        batch: opts.batch,
+        max_keys: opts.max_keys,
+        seed: opts.seed,
+        final_train_loss: logs.last().map(|l| l.train_loss).unwrap_or(f64::NAN),
+        minutes: started.elapsed().as_secs_f64() / 60.0,
+    };
+    for epoch in 0..opts.epochs {
+        let t0 = Instant::now();
+        let starts = window_starts(&train, len, opts.stride, opts.seed + epoch as u64);
+        if starts.is_empty() {
+            return Err(TrainError::NoWindows(len));
+        }
+        let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
+        let (mut total, mut batches) = (0.0, 0);
+        let mut out_of_time = false;
+        for chunk in starts.chunks(opts.batch) {
+            let loss = window_loss(&model, &config, &train, chunk, opts.max_keys, &mut rng, true);
+            opt.backward_step_clip(&loss, 1.0);
+            total += loss.double_value(&[]);
+            batches += 1;
+            steps += 1;
+            out_of_time = opts.max_minutes.is_some_and(|m| started.elapsed().as_secs_f64() > m * 60.0);
+            if out_of_time {
+                break;
+            }
+        }
+        let test_loss = tch::no_grad(|| {
+            let mut rng = StdRng::seed_from_u64(7);
+            let starts = window_starts(&test, len, len, 0);
+            let losses: Vec<f64> = starts.chunks(opts.batch).map(|c| window_loss(&model, &config, &test, c, opts.max_keys, &mut rng, false).double_value(&[])).collect();
+            (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
+        });
+        let line = EpochLog { epoch, train_loss: total / batches.max(1) as f64, test_loss, note: format!("steps={steps} λ={} σ={}", opts.lambda, opts.sigma), seconds: t0.elapsed().as_secs_f64() };
+        tracing::info!(epoch, train_loss = line.train_loss, test_loss = ?line.test_loss, steps, seconds = line.seconds, "epoch");
+        append_log(&log_path, &line)?;
+        logs.push(line);
+        if epoch % 2 == 1 || epoch + 1 == opts.epochs || out_of_time {
+            save(&vs, &opts.out, &ModelFile { config: config.clone(), music_norm: music_norm.clone(), pose_norm: pose_norm.clone(), fps: crate::motion::MOTION_FPS, training: record(epoch + 1, steps, &logs) })?;
+        }
+        if out_of_time {
+            tracing::warn!(epoch, "stopping: --max-minutes reached");
+            break;
+        }
+    }
+    let file = ModelFile { config, music_norm, pose_norm, fps: crate::motion::MOTION_FPS, training: record(logs.len(), steps, &logs) };
+    save(&vs, &opts.out, &file)?;
+    let eval = evaluate(&model, &file, &ds, &test_raw, opts.eval_keys, opts.seed)?;
+    tracing::info!(?eval, "key-pose consistency on the test split");
+    write_atomic(&opts.out.join("eval.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
+    Ok(logs)
+}
+
+/// Draws 0..=max_keys distinct key frames in `[T′, T)` (the seed already fixes the first frames).
+fn sample_keys(rng: &mut StdRng, c: &Config, max_keys: usize) -> Vec<i64> {
+    let count = rng.gen_range(0..=max_keys);
+    let mut frames: Vec<i64> = (c.seed_len..c.window).collect();
+    frames.shuffle(rng);
+    frames.truncate(count);
+    frames.sort_unstable();
+    frames
+}
+
+/// Weighted L1 between one batch's predictions and the ground truth, with ω(t) from the sampled
+/// key frames (§3.4).
+fn window_loss(model: &KeyposeTransformer, c: &Config, seqs: &[Sequence], starts: &[(usize, usize)], max_keys: usize, rng: &mut StdRng, train: bool) -> Tensor {
+    let len = c.window as usize;
+    let music = batch_tensor(seqs, starts, len, |s| &s.music, Device::Cpu);
+    let poses = batch_tensor(seqs, starts, len, |s| &s.poses, Device::Cpu); // [b, T, pose]
+    let b = starts.len() as i64;
+    let (t, d, kd) = (c.window, c.d, c.key_dim);
+    let mut mask = vec![0f32; (b * t) as usize];
+    let mut local = Vec::with_capacity((b * t * d) as usize);
+    let mut weights = Vec::with_capacity((b * t) as usize);
+    for i in 0..b as usize {
+        let keys = sample_keys(rng, c, max_keys);
+        for &k in &keys {
+            mask[i * t as usize + k as usize] = 1.0;
+        }
+        local.extend(local_position_embedding(t, &keys, d));
+        weights.extend(loss_weights(t, &keys, c.lambda, c.sigma));
+    }
+    let key_mask = Tensor::from_slice(&mask).view([b, t]);
+    let x = WindowInput {
+        keys: poses.narrow(2, 0, kd) * key_mask.unsqueeze(-1),
+        key_mask,
+        seed: poses.narrow(1, 0, c.seed_len),
+        music,
+        local_pos: Tensor::from_slice(&local).view([b, t, d]),
+    };
+    let w = Tensor::from_slice(&weights).view([b, t, 1]);
+    let err = (model.forward(&x, train) - &poses).abs() * &w;
+    err.sum(Kind::Float) / (w.sum(Kind::Float) * c.pose_dim as f64)
+}
+
+/// Key-pose consistency on whole test dances through the served path: each dance is seeded with
+/// its first `T′` real frames and given `keys` real poses at random frames after the seed.
+pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test: &[Sequence], keys: usize, seed: u64) -> Result<KeyPoseEval, TrainError> {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let ts = file.config.seed_len as usize;
+    let (mut net, mut served, mut dance, mut dance_free, mut n) = (0.0, 0.0, 0.0, 0.0, 0usize);
+    for seq in test {
+        let t = seq.poses.nrows();
+        if t <= ts + keys {
+            continue;
+        }
+        let d = ds.load(&seq.id)?;
+        let rel = d.root_relative();
+        let mut frames: Vec<usize> = (ts..t).collect();
+        frames.shuffle(&mut rng);
+        frames.truncate(keys);
+        frames.sort_unstable();
+        let key_poses: Vec<KeyPose> = frames
+            .iter()
+            .map(|&f| KeyPose { time_s: f as f64 / file.fps, joints: (0..NUM_JOINTS).map(|j| [0, 1, 2].map(|a| f64::from(rel[[f, j, a]]))).collect() })
+            .collect();
+        let local: Vec<LocalKey> = key_poses
+            .iter()
+            .zip(&frames)
+            .map(|(k, &f)| {
+                let joints = Array2::from_shape_fn((NUM_JOINTS, 3), |(j, a)| k.joints[j][a] as f32);
+                let (local, yaw) = to_local(joints.view());
+                LocalKey { frame: f, local, yaw }
+            })
+            .collect();
+        let music = to_tensor(&file.music_norm.normalize(&seq.music)?);
+        let (seed_feats, start) = repr::to_features(d.motion.positions.view(), d.center.view())?;
+        let seed_rows = seed_feats.slice(s![0..ts, ..]).to_owned();
+        let gen = |keys: &[LocalKey]| {
+            generate_features(model, file, &music, Some((&seed_rows, start)), keys, |_, _| true)
+                .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?
+                .ok_or(TrainError::NoWindows(0))
+        };
+        let (raw, out, start2) = gen(&local)?;
+        let (_, free, _) = gen(&[])?;
+        for (k, lk) in frames.iter().zip(&local) {
+            net += joint_error_cm(&raw.row(*k).to_vec(), &lk.local);
+        }
+        let (motion, root) = repr::from_features(out.view(), start2, file.fps)?;
+        served += crate::models::keypose_transformer::key_pose_error_cm(&motion, root.view(), &key_poses).unwrap_or(f64::NAN) * keys as f64;
+        dance += mean_rows_error_cm(&out, &seed_feats);
+        dance_free += mean_rows_error_cm(&free, &seed_feats);
+        n += 1;
+        tracing::info!(dance = %seq.id, frames = t, "evaluated");
+    }
+    let k = (n * keys).max(1) as f64;
+    Ok(KeyPoseEval { dances: n, keys_per_dance: keys, network_error_cm: net / k, served_error_cm: served / k, dance_error_cm: dance / n.max(1) as f64, dance_error_no_keys_cm: dance_free / n.max(1) as f64 })
+}
+
+/// Mean per-joint distance (cm) between two 69-long local pose vectors.
+fn joint_error_cm(a: &[f32], b: &[f32]) -> f64 {
+    (0..NUM_JOINTS).map(|j| (0..3).map(|k| f64::from(a[3 * j + k] - b[3 * j + k]).powi(2)).sum::<f64>().sqrt()).sum::<f64>() * 100.0 / NUM_JOINTS as f64
+}
+
+/// Mean per-joint distance (cm) over all frames of two feature matrices' local poses.
+fn mean_rows_error_cm(a: &Array2<f32>, b: &Array2<f32>) -> f64 {
+    let n = a.nrows().min(b.nrows());
+    (0..n).map(|t| joint_error_cm(&a.row(t).to_vec(), &b.row(t).to_vec())).sum::<f64>() / n.max(1) as f64
+}
+
+/// Re-runs the test-split evaluation for a trained folder (`model.json` + weights).
+pub fn evaluate_folder(dir: &Path, data: &Path, keys: usize, seed: u64) -> Result<KeyPoseEval, TrainError> {
+    let text = std::fs::read_to_string(dir.join(MODEL_FILE)).map_err(|source| TrainError::Io { path: dir.join(MODEL_FILE), source })?;
+    let file: ModelFile = serde_json::from_str(&text)?;
+    let mut vs = nn::VarStore::new(Device::Cpu);
+    let model = KeyposeTransformer::new(&vs.root(), file.config.clone());
+    vs.load(dir.join(WEIGHTS_FILE))?;
+    let ds = Dataset::open(data)?;
+    let test = load_sequences(&ds, ds.test_ids(), crate::audio::features::keypose)?;
+    evaluate(&model, &file, &ds, &test, keys, seed)
+}
+
+fn save(vs: &nn::VarStore, dir: &Path, file: &ModelFile) -> Result<(), TrainError> {
+    let tmp = dir.join(format!("{WEIGHTS_FILE}.tmp.safetensors"));
+    vs.save(&tmp)?;
+    std::fs::rename(&tmp, dir.join(WEIGHTS_FILE)).map_err(|source| TrainError::Io { path: dir.to_owned(), source })?;
+    write_atomic(&dir.join(MODEL_FILE), serde_json::to_string_pretty(file)?.as_bytes())
+}
+
