@@ -236,6 +236,22 @@ async fn worker_loop(ctx: Context, owner: String, shutdown: CancellationToken) {
     tracing::debug!("worker stopped");
 }
 
+/// Niceness of job threads: model work yields the cores to the HTTP server, so API latency
+/// stays low while every worker is busy.
+const JOB_NICE: i32 = 10;
+
+/// Lowers the calling thread's scheduling priority (Linux sets niceness per thread).
+fn lower_priority() {
+    #[cfg(target_os = "linux")]
+    {
+        // SAFETY: gettid has no preconditions; setpriority only reads its arguments.
+        let rc = unsafe { libc::setpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t, JOB_NICE) };
+        if rc != 0 {
+            tracing::debug!(error = %std::io::Error::last_os_error(), "could not lower the job thread's priority");
+        }
+    }
+}
+
 fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
     if let Some(s) = payload.downcast_ref::<&str>() {
         (*s).to_string()
@@ -262,15 +278,22 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
             let executor = ctx.executor.clone();
             let mut progress = JobProgress { state: state.clone() };
             let job = job.clone();
-            let work = tokio::task::spawn_blocking(move || {
+            let (done_tx, done_rx) = tokio::sync::oneshot::channel();
+            // A thread of its own per job, so its settings (threads, priority) touch no other work.
+            let spawned = std::thread::Builder::new().name(format!("job-{}", job.id)).spawn(move || {
                 // One intra-op thread per worker, so N workers never oversubscribe N cores.
                 tch::set_num_threads(1);
-                executor.execute(&job, &song, &mut progress)
+                lower_priority();
+                let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| executor.execute(&job, &song, &mut progress)));
+                let _ = done_tx.send(result);
             });
-            match work.await {
-                Ok(result) => result,
-                Err(e) if e.is_panic() => Err(WorkerError::Panicked(panic_message(e.into_panic().as_ref()))),
-                Err(e) => Err(WorkerError::Panicked(format!("the job's thread was cancelled: {e}"))),
+            match spawned {
+                Err(e) => Err(WorkerError::Io(e)),
+                Ok(_) => match done_rx.await {
+                    Ok(Ok(result)) => result,
+                    Ok(Err(panic)) => Err(WorkerError::Panicked(panic_message(panic.as_ref()))),
+                    Err(_) => Err(WorkerError::Panicked("the job's thread ended without a result".into())),
+                },
             }
         }
     };
