@@ -16,6 +16,7 @@ pub mod export;
 pub mod repr;
 pub mod rig;
 pub mod skeleton;
+pub mod validate;
 
 /// Frame rate of the dance-with-melody data.
 pub const MOTION_FPS: f64 = 25.0;
@@ -72,6 +73,8 @@ pub enum MotionError {
     Bvh { line: usize, reason: String },
     #[error("export failed: {0}")]
     Export(String),
+    #[error(transparent)]
+    Input(#[from] validate::InputError),
 }
 
 impl MotionError {
@@ -86,13 +89,17 @@ impl MotionError {
             MotionError::Invalid(_) => "invalid-motion",
             MotionError::Bvh { .. } => "invalid-bvh",
             MotionError::Export(_) => "export-failed",
+            MotionError::Input(e) => e.code(),
         }
     }
 
     /// Whether the error is the caller's input (an API maps these to 422).
     pub fn is_client_error(&self) -> bool {
         match self {
-            MotionError::Invalid(_) | MotionError::Bvh { .. } | MotionError::Shape(_) => true,
+            MotionError::Invalid(_)
+            | MotionError::Bvh { .. }
+            | MotionError::Shape(_)
+            | MotionError::Input(_) => true,
             MotionError::UnknownDance { .. } => true,
             MotionError::DatasetMissing { .. }
             | MotionError::Io { .. }
@@ -110,6 +117,7 @@ impl MotionError {
             | MotionError::Malformed { .. }
             | MotionError::Shape(_)
             | MotionError::Invalid(_)
+            | MotionError::Input(_)
             | MotionError::Bvh { .. } => false,
         }
     }
