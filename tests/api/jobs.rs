@@ -162,3 +162,51 @@ async fn a_job_for_an_unknown_model_lists_the_available_ones() {
     }
     app.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_dance_job_runs_to_its_files_and_honours_idempotency() {
+    // The committed dance-revolution weights: a real model, run on CPU.
+    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
+    let app = spawn_app_with(|c| c.models_dir = models).await;
+    let listed: Value = app.get("/v1/models").await.json().await.expect("json");
+    assert!(listed.as_array().expect("array").iter().any(|m| m["id"] == "dance-revolution"), "{listed}");
+    let song = app.upload_ok(&short_song()).await;
+    let request = json!({"song_id": song["id"], "model": "dance-revolution", "seed": 7});
+
+    let first = app.post_job(&request, Some("dance-1")).await;
+    assert_eq!(first.status(), StatusCode::ACCEPTED);
+    assert!(first.headers().get("idempotent-replayed").is_none());
+    let job: Value = first.json().await.expect("json");
+    let id = job["id"].as_str().expect("id").to_string();
+    assert_eq!((job["kind"].as_str(), job["model"].as_str(), job["seed"].as_u64()), (Some("generate"), Some("dance-revolution"), Some(7)));
+    assert_eq!(job["links"]["motion_bvh"], format!("/v1/jobs/{id}/motion.bvh"));
+
+    let again = app.post_job(&request, Some("dance-1")).await;
+    assert_eq!(again.status(), StatusCode::ACCEPTED);
+    assert_eq!(again.headers().get("idempotent-replayed").and_then(|v| v.to_str().ok()), Some("true"));
+    let again: Value = again.json().await.expect("json");
+    assert_eq!(again["id"], id.as_str(), "the same key and body give the same job");
+    let other = json!({"song_id": song["id"], "model": "dance-revolution", "seed": 8});
+    expect_problem(app.post_job(&other, Some("dance-1")).await, StatusCode::UNPROCESSABLE_ENTITY, "idempotency-key-reused").await;
+
+    // Until it succeeds, results answer 409 with the job's status.
+    let early = app.get(&format!("/v1/jobs/{id}/motion.bvh")).await;
+    if early.status() != StatusCode::OK {
+        let body = expect_problem(early, StatusCode::CONFLICT, "job-not-finished").await;
+        assert!(["queued", "running"].contains(&body["job_status"].as_str().unwrap_or("")), "{body}");
+    }
+
+    let done = app.wait_job(&id).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    let bvh = app.get(&format!("/v1/jobs/{id}/motion.bvh")).await.text().await.expect("bvh");
+    assert!(bvh.starts_with("HIERARCHY"), "{}", &bvh[..bvh.len().min(80)]);
+    let motion: Value = app.get(&format!("/v1/jobs/{id}/motion.json")).await.json().await.expect("motion json");
+    assert!(motion.is_object());
+    let report: Value = app.get(&format!("/v1/jobs/{id}/report.json")).await.json().await.expect("report json");
+    assert!(report.is_object());
+    let glb = app.get(&format!("/v1/jobs/{id}/motion.glb")).await.bytes().await.expect("glb");
+    assert_eq!(&glb[..4], b"glTF");
+    let jobs: Value = app.get("/v1/jobs?model=dance-revolution").await.json().await.expect("page");
+    assert_eq!(jobs["items"].as_array().map(Vec::len), Some(1), "one job despite the retry");
+    app.stop().await;
+}
