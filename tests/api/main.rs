@@ -3,6 +3,7 @@
 mod bad_input;
 mod concurrency;
 mod crash;
+mod generate;
 mod health;
 mod helpers;
 mod jobs;

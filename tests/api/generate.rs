@@ -1,0 +1,79 @@
+//! A generate job end to end with the committed dance-revolution weights: a real song through
+//! the real decoder, the trained model, and the exporters; the BVH read back by our reader.
+use crate::helpers::{expect_problem, short_song, spawn_app_with};
+use reqwest::StatusCode;
+use serde_json::{json, Value};
+use std::path::Path;
+
+fn models_dir() -> std::path::PathBuf {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
+    assert!(dir.join("dance-revolution/weights.safetensors").is_file(), "the committed weights are missing from {}", dir.display());
+    dir
+}
+
+async fn generate(app: &crate::helpers::TestApp, song_id: &str, seed: u64) -> String {
+    let response = app.post_job(&json!({"song_id": song_id, "model": "dance-revolution", "seed": seed}), None).await;
+    assert_eq!(response.status(), StatusCode::ACCEPTED);
+    let job: Value = response.json().await.expect("job");
+    let id = job["id"].as_str().expect("job id").to_string();
+    let done = app.wait_job(&id).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    id
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn dance_revolution_dances_a_real_song_through_the_api() {
+    let app = spawn_app_with(|c| c.models_dir = models_dir()).await;
+    let models: Value = app.get("/v1/models").await.json().await.expect("models");
+    let dr = models.as_array().or_else(|| models["models"].as_array()).expect("model list")
+        .iter().find(|m| m["id"] == "dance-revolution").cloned().expect("dance-revolution is listed");
+    assert_eq!(dr["capabilities"]["key_poses"], false);
+
+    let song = app.upload_ok(&short_song()).await;
+    let song_id = song["id"].as_str().expect("song id");
+    let duration = song["duration_s"].as_f64().expect("duration");
+    let job = generate(&app, song_id, 7).await;
+
+    let bvh = app.get(&format!("/v1/jobs/{job}/motion.bvh")).await;
+    assert_eq!(bvh.status(), StatusCode::OK);
+    let bvh = choreo::motion::bvh::Bvh::parse(&bvh.text().await.expect("bvh text")).expect("our reader reads the BVH");
+    let frames = (duration * 25.0).floor() as usize;
+    assert_eq!(bvh.frames.len(), frames, "one BVH frame per 1/25 s of music");
+    assert!((bvh.frame_time - 0.04).abs() < 1e-6);
+
+    let motion: Value = app.get(&format!("/v1/jobs/{job}/motion.json")).await.json().await.expect("motion json");
+    assert_eq!(motion["fps"], 25.0);
+    // The exported rig is the 23 dataset joints plus the branch joints the motion module adds.
+    let names: Vec<&str> = motion["joint_names"].as_array().expect("joint_names").iter().filter_map(Value::as_str).collect();
+    for joint in choreo::motion::skeleton::JOINT_NAMES {
+        assert!(names.contains(&joint), "{joint} missing from {names:?}");
+    }
+    let joints = names.len();
+    let positions = motion["positions"].as_array().expect("positions");
+    assert_eq!(positions.len(), frames);
+    let values = || positions.iter().filter_map(Value::as_array).flatten().filter_map(Value::as_array).flatten();
+    assert_eq!(values().count(), frames * joints * 3);
+    assert!(values().all(|v| v.as_f64().is_some_and(f64::is_finite)), "positions are finite numbers");
+
+    let report: Value = app.get(&format!("/v1/jobs/{job}/report.json")).await.json().await.expect("report");
+    assert_eq!(report["frames"], frames);
+    assert!(report["scores"]["fid_k"].as_f64().is_some_and(f64::is_finite), "{report}");
+    assert!(report["music_beat_times"].as_array().is_some_and(|b| !b.is_empty()));
+
+    // The same seed gives the same dance; another seed another one.
+    let again = generate(&app, song_id, 7).await;
+    let other = generate(&app, song_id, 8).await;
+    let text = |id: String| {
+        let app = &app;
+        async move { app.get(&format!("/v1/jobs/{id}/motion.json")).await.text().await.expect("text") }
+    };
+    let (a, b, c) = (text(job).await, text(again).await, text(other).await);
+    assert_eq!(a, b, "same seed, same dance");
+    assert_ne!(a, c, "another seed, another dance");
+
+    // A model that cannot honour key poses says so instead of ignoring them.
+    let pose = json!({"time_s": 1.0, "joints": vec![[0.0, 0.0, 0.0]; 23]});
+    let refused = app.post_job(&json!({"song_id": song_id, "model": "dance-revolution", "key_poses": [pose]}), None).await;
+    expect_problem(refused, StatusCode::UNPROCESSABLE_ENTITY, "invalid-field").await;
+    app.stop().await;
+}
