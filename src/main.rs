@@ -34,6 +34,8 @@ enum Command {
         #[command(subcommand)]
         model: TrainCommand,
     },
+    /// Write a dataset dance as BVH, JSON or glb through the exporter generated dances use.
+    Export(choreo::motion::export::ExportArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -146,6 +148,7 @@ fn main() -> anyhow::Result<()> {
         Command::Bench { what: BenchCommand::Http(args) } => bench_http(args, load(&args.service)?),
         Command::Bench { what: BenchCommand::Audio(args) } => args.run().map(|_| ()).context("choreo bench audio"),
         Command::Eval(args) => choreo::metrics::eval::run(args).context("choreo eval"),
+        Command::Export(args) => args.run().context("choreo export"),
     }
 }
 

@@ -380,6 +380,14 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), MotionError> {
     let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| MotionError::io(dir, e))?;
     tmp.write_all(bytes).map_err(|e| MotionError::io(path, e))?;
     tmp.as_file().sync_all().map_err(|e| MotionError::io(path, e))?;
+    // Temporary files are private (0600); results are ordinary readable files.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt as _;
+        tmp.as_file()
+            .set_permissions(std::fs::Permissions::from_mode(0o644))
+            .map_err(|e| MotionError::io(path, e))?;
+    }
     tmp.persist(path).map_err(|e| MotionError::io(path, e.error))?;
     Ok(())
 }
@@ -450,4 +458,29 @@ pub fn export_dance(
     let dance = ds.load(id)?;
     let m = prepare_with_root(&dance.motion, dance.center.view())?;
     write_atomic(out, &render(&m, format)?)
+}
+
+/// `choreo export DANCE_ID --format bvh|json|glb --out FILE`: a dataset dance through the same
+/// exporter generated dances use.
+#[derive(Clone, Debug, clap::Args)]
+pub struct ExportArgs {
+    /// Dataset dance id, e.g. DANCE_W_3.
+    pub dance_id: String,
+    /// Output format: bvh, json or glb.
+    #[arg(long, value_parser = ["bvh", "json", "glb"])]
+    pub format: String,
+    /// Output file.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// The dance-with-melody folder.
+    #[arg(long, default_value = super::dataset::DEFAULT_ROOT)]
+    pub dataset: PathBuf,
+}
+
+impl ExportArgs {
+    /// Runs the export.
+    pub fn run(&self) -> Result<(), MotionError> {
+        let format: Format = self.format.parse()?;
+        export_dance(&self.dataset, &self.dance_id, format, &self.out)
+    }
 }
