@@ -56,13 +56,26 @@ impl SortedWindow {
         Self { v: init }
     }
 
+    /// Swaps one occurrence of `old` for `new`, shifting only the elements between them.
     fn replace(&mut self, old: f32, new: f32) {
-        let i = self.v.partition_point(|x| x.total_cmp(&old).is_lt());
-        if i < self.v.len() {
-            self.v.remove(i);
+        let v = &mut self.v;
+        let i = v.partition_point(|x| x.total_cmp(&old).is_lt()).min(v.len() - 1);
+        if new.total_cmp(&old).is_ge() {
+            // Move left the elements in (i, j) that are smaller than `new`.
+            let mut j = i;
+            while j + 1 < v.len() && v[j + 1].total_cmp(&new).is_lt() {
+                v[j] = v[j + 1];
+                j += 1;
+            }
+            v[j] = new;
+        } else {
+            let mut j = i;
+            while j > 0 && v[j - 1].total_cmp(&new).is_gt() {
+                v[j] = v[j - 1];
+                j -= 1;
+            }
+            v[j] = new;
         }
-        let j = self.v.partition_point(|x| x.total_cmp(&new).is_lt());
-        self.v.insert(j, new);
     }
 
     fn median(&self) -> f32 {
@@ -141,8 +154,9 @@ pub fn hpss_signal(y: &[f32], n_fft: usize, hop: usize) -> (Vec<f32>, Vec<f32>) 
         if t > 0 {
             let (old, new) = (ext(t as isize - half as isize - 1), ext((t + half) as isize));
             get(new, &mut cache);
-            for (k, w) in windows.iter_mut().enumerate() {
-                w.replace(cache[&old].1[k], cache[&new].1[k]);
+            let (old_mag, new_mag) = (&cache[&old].1, &cache[&new].1);
+            for ((w, &o), &n) in windows.iter_mut().zip(old_mag).zip(new_mag) {
+                w.replace(o, n);
             }
             // Frames older than the window (and not needed for end reflection) can go.
             let keep_from = t.saturating_sub(half + 1);
