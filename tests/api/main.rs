@@ -7,6 +7,7 @@ mod generate;
 mod health;
 mod helpers;
 mod jobs;
+mod keypose;
 mod models;
 mod openapi;
 mod songs;
