@@ -159,17 +159,13 @@ fn invalid(field: &str, message: impl Into<String>) -> ApiError {
     ApiError::InvalidField { field: field.into(), message: message.into() }
 }
 
+/// Key poses checked by the motion module's rules (finite, 23 joints, plausible bone lengths in
+/// metres, inside the song, no two within half a frame), and no more of them than frames.
 fn check_key_poses(poses: &[KeyPose], duration_s: f64) -> Result<(), ApiError> {
-    for (i, pose) in poses.iter().enumerate() {
-        if !(pose.time_s.is_finite() && (0.0..=duration_s).contains(&pose.time_s)) {
-            return Err(invalid(&format!("key_poses[{i}].time_s"), format!("must be within the song, 0..={duration_s:.2} s")));
-        }
-        if pose.joints.len() != NUM_JOINTS {
-            return Err(invalid(&format!("key_poses[{i}].joints"), format!("must list {NUM_JOINTS} joints, got {}", pose.joints.len())));
-        }
-        if pose.joints.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(invalid(&format!("key_poses[{i}].joints"), "must be finite numbers"));
-        }
+    crate::motion::validate::validate_key_poses(poses, duration_s).map_err(|e| invalid("key_poses", e.to_string()))?;
+    let frames = (duration_s * crate::motion::MOTION_FPS).floor() as usize;
+    if poses.len() > frames {
+        return Err(invalid("key_poses", format!("{} key poses for a song of {frames} frames", poses.len())));
     }
     Ok(())
 }
