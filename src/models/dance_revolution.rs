@@ -21,7 +21,7 @@ use tch::{Device, Kind, Tensor};
 
 use std::path::Path;
 
-use super::{Cancelled, Capabilities, DanceModel, GenerateRequest, ModelError, ModelId, ModelInfo, Progress};
+use super::{read_model_file, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::dataset::NormStats;
 use crate::motion::repr::RootStart;
 use crate::motion::Motion;
@@ -426,51 +426,21 @@ pub struct ModelFile {
     pub training: TrainingRecord,
 }
 
-/// One loaded copy of the network. libtorch tensors are `Send` but not `Sync`, so each
-/// concurrent generation borrows its own copy from [`Served`]'s pool.
-struct Instance {
-    model: DanceRevolution,
-    _vs: nn::VarStore,
-}
-
-impl Instance {
-    fn load(dir: &Path, config: &Config) -> Result<Self, ModelError> {
-        let mut vs = nn::VarStore::new(Device::Cpu);
-        let model = DanceRevolution::new(&vs.root(), config.clone());
-        vs.load(dir.join(WEIGHTS_FILE))?;
-        Ok(Self { model, _vs: vs })
-    }
-}
-
 /// A trained DanceRevolution, ready to serve.
 pub struct Served {
-    dir: std::path::PathBuf,
     file: ModelFile,
-    pool: std::sync::Mutex<Vec<Instance>>,
+    pool: InstancePool<DanceRevolution>,
 }
 
 impl Served {
     /// Loads `dir/model.json` and `dir/weights.safetensors`.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let missing = || ModelError::MissingWeights(ID.into(), dir.display().to_string());
-        let text = std::fs::read_to_string(dir.join(MODEL_FILE)).map_err(|_| missing())?;
-        let file: ModelFile = serde_json::from_str(&text).map_err(|e| ModelError::Invalid(format!("{MODEL_FILE}: {e}")))?;
-        // Load one copy now so a bad weights file fails at start-up, not on the first job.
-        let first = Instance::load(dir, &file.config)?;
-        Ok(Self { dir: dir.to_owned(), file, pool: std::sync::Mutex::new(vec![first]) })
+        let file: ModelFile = read_model_file(dir, ID, MODEL_FILE)?;
+        let config = file.config.clone();
+        let pool = InstancePool::new(dir.join(WEIGHTS_FILE), move |p| DanceRevolution::new(p, config.clone()))?;
+        Ok(Self { file, pool })
     }
 
-    fn checkout(&self) -> Result<Instance, ModelError> {
-        let pooled = self.pool.lock().unwrap_or_else(|p| p.into_inner()).pop();
-        match pooled {
-            Some(i) => Ok(i),
-            None => Instance::load(&self.dir, &self.file.config),
-        }
-    }
-
-    fn checkin(&self, instance: Instance) {
-        self.pool.lock().unwrap_or_else(|p| p.into_inner()).push(instance);
-    }
 
     /// Music features of a whole song, normalised, as `[1, n, F]`.
     fn music(&self, audio: &crate::audio::DecodedAudio, n: usize) -> Result<Tensor, ModelError> {
@@ -511,9 +481,7 @@ impl DanceModel for Served {
             }
             None => None,
         };
-        let instance = self.checkout()?;
-        let model = &instance.model;
-        let out = tch::no_grad(|| -> Result<Tensor, ModelError> {
+        let out = self.pool.with(|model| tch::no_grad(|| -> Result<Tensor, ModelError> {
             let mut cancelled = false;
             let z = model.encoder.forward_chunked(&music, 1000, |f| {
                 cancelled = progress.report("encode", f).is_err();
@@ -525,8 +493,7 @@ impl DanceModel for Served {
                 !cancelled
             });
             y.ok_or(ModelError::Cancelled(Cancelled))
-        });
-        self.checkin(instance);
+        }))?;
         let y = out?.squeeze_dim(0);
         let (r, c) = (y.size()[0] as usize, y.size()[1] as usize);
         let data: Vec<f32> = Vec::<f32>::try_from(y.contiguous().view([-1]))?;

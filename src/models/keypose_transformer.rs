@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 use tch::nn;
 use tch::{Device, Kind, Tensor};
 
-use super::{Cancelled, Capabilities, DanceModel, GenerateRequest, ModelError, ModelId, ModelInfo, Progress};
+use super::{read_model_file, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::dataset::NormStats;
 use crate::motion::repr::{self, RootStart, POSE_DIM, YAW_VEL};
 use crate::motion::{KeyPose, Motion, NUM_JOINTS};
@@ -673,37 +673,19 @@ pub fn generate_features(
     Ok(Some((raw, out, start)))
 }
 
-/// One loaded copy of the network (tensors are `Send` but not `Sync`: one per generation).
-struct Instance {
-    model: KeyposeTransformer,
-    _vs: nn::VarStore,
-}
-
-impl Instance {
-    fn load(dir: &Path, config: &Config) -> Result<Self, ModelError> {
-        let mut vs = nn::VarStore::new(Device::Cpu);
-        let model = KeyposeTransformer::new(&vs.root(), config.clone());
-        vs.load(dir.join(WEIGHTS_FILE))?;
-        Ok(Self { model, _vs: vs })
-    }
-}
-
 /// A trained key-pose transformer, ready to serve.
 pub struct Served {
-    dir: std::path::PathBuf,
     file: ModelFile,
-    pool: std::sync::Mutex<Vec<Instance>>,
+    pool: InstancePool<KeyposeTransformer>,
 }
 
 impl Served {
     /// Loads `dir/model.json` and `dir/weights.safetensors`.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let missing = || ModelError::MissingWeights(ID.into(), dir.display().to_string());
-        let text = std::fs::read_to_string(dir.join(MODEL_FILE)).map_err(|_| missing())?;
-        let file: ModelFile = serde_json::from_str(&text).map_err(|e| ModelError::Invalid(format!("{MODEL_FILE}: {e}")))?;
-        // Load one copy now so a bad weights file fails at start-up, not on the first job.
-        let first = Instance::load(dir, &file.config)?;
-        Ok(Self { dir: dir.to_owned(), file, pool: std::sync::Mutex::new(vec![first]) })
+        let file: ModelFile = read_model_file(dir, ID, MODEL_FILE)?;
+        let config = file.config.clone();
+        let pool = InstancePool::new(dir.join(WEIGHTS_FILE), move |p| KeyposeTransformer::new(p, config.clone()))?;
+        Ok(Self { file, pool })
     }
 
     /// The model's description file.
@@ -711,17 +693,6 @@ impl Served {
         &self.file
     }
 
-    fn checkout(&self) -> Result<Instance, ModelError> {
-        let pooled = self.pool.lock().unwrap_or_else(|p| p.into_inner()).pop();
-        match pooled {
-            Some(i) => Ok(i),
-            None => Instance::load(&self.dir, &self.file.config),
-        }
-    }
-
-    fn checkin(&self, instance: Instance) {
-        self.pool.lock().unwrap_or_else(|p| p.into_inner()).push(instance);
-    }
 }
 
 impl DanceModel for Served {
@@ -748,13 +719,11 @@ impl DanceModel for Served {
             }
             _ => None,
         };
-        let instance = self.checkout()?;
-        let mut cancelled = false;
-        let out = generate_features(&instance.model, &self.file, &music, seed.as_ref().map(|(f, s)| (f, *s)), &keys, |done, total| {
-            cancelled = progress.report("decode", done as f32 / total as f32).is_err();
-            !cancelled
-        });
-        self.checkin(instance);
+        let out = self.pool.with(|model| {
+            generate_features(model, &self.file, &music, seed.as_ref().map(|(f, s)| (f, *s)), &keys, |done, total| {
+                progress.report("decode", done as f32 / total as f32).is_ok()
+            })
+        })?;
         let Some((_, features, start)) = out? else { return Err(Cancelled.into()) };
         let (motion, _root) = repr::from_features(features.view(), start, fps)?;
         Ok(motion)

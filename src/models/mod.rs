@@ -108,3 +108,46 @@ impl Registry {
         self.models.iter().find(|m| &m.info().id == id).cloned()
     }
 }
+
+/// Loaded copies of one network. libtorch tensors are `Send` but not `Sync`, so each concurrent
+/// generation borrows a copy of its own; a copy is loaded when none is free and returned after.
+pub struct InstancePool<M> {
+    weights: std::path::PathBuf,
+    build: Box<dyn Fn(&tch::nn::Path) -> M + Send + Sync>,
+    free: std::sync::Mutex<Vec<(M, tch::nn::VarStore)>>,
+}
+
+impl<M: Send> InstancePool<M> {
+    /// Loads one copy now, so a bad weights file fails at start-up rather than on the first job.
+    pub fn new(weights: std::path::PathBuf, build: impl Fn(&tch::nn::Path) -> M + Send + Sync + 'static) -> Result<Self, ModelError> {
+        let pool = Self { weights, build: Box::new(build), free: std::sync::Mutex::new(Vec::new()) };
+        let first = pool.load()?;
+        pool.free.lock().unwrap_or_else(|p| p.into_inner()).push(first);
+        Ok(pool)
+    }
+
+    fn load(&self) -> Result<(M, tch::nn::VarStore), ModelError> {
+        let mut vs = tch::nn::VarStore::new(tch::Device::Cpu);
+        let model = (self.build)(&vs.root());
+        vs.load(&self.weights)?;
+        Ok((model, vs))
+    }
+
+    /// Runs `f` on a free copy of the network.
+    pub fn with<R>(&self, f: impl FnOnce(&M) -> R) -> Result<R, ModelError> {
+        let pooled = self.free.lock().unwrap_or_else(|p| p.into_inner()).pop();
+        let instance = match pooled {
+            Some(i) => i,
+            None => self.load()?,
+        };
+        let out = f(&instance.0);
+        self.free.lock().unwrap_or_else(|p| p.into_inner()).push(instance);
+        Ok(out)
+    }
+}
+
+/// Reads a model folder's description file, or says the model is missing.
+pub fn read_model_file<T: serde::de::DeserializeOwned>(dir: &std::path::Path, id: &str, name: &str) -> Result<T, ModelError> {
+    let text = std::fs::read_to_string(dir.join(name)).map_err(|_| ModelError::MissingWeights(id.into(), dir.display().to_string()))?;
+    serde_json::from_str(&text).map_err(|e| ModelError::Invalid(format!("{name}: {e}")))
+}
