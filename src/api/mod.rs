@@ -80,7 +80,8 @@ pub fn router(state: AppState) -> Router {
         .route("/jobs/{id}/{file}", get(jobs::result))
         .route("/models", get(system::models))
         .layer(axum::extract::DefaultBodyLimit::max(
-            usize::try_from(state.config.max_upload_bytes + MULTIPART_OVERHEAD).unwrap_or(usize::MAX),
+            // Room to read and drop the rest of a refused upload (songs::read_form).
+            usize::try_from(state.config.max_upload_bytes + MULTIPART_OVERHEAD + songs::DRAIN_LIMIT_BYTES).unwrap_or(usize::MAX),
         ))
         .route_layer(middleware::from_fn_with_state(state.clone(), require_bearer));
 

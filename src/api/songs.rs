@@ -129,6 +129,104 @@ async fn receive(state: &AppState, mut field: Field<'_>) -> Result<Received, Api
     Ok(Received { file: tmp, filename, size, sha256: hex::encode(hasher.finalize()) })
 }
 
+/// Reads the form to its end: the one `file` field streamed to disk, or `None` if there was none.
+///
+/// When the form is refused part-way (too large, a wrong field), the rest of the body is read and
+/// dropped, within [`DRAIN_LIMIT_BYTES`] and [`DRAIN_TIMEOUT`], so the client gets the error
+/// response on a connection it can keep using. A client still sending when the server answers
+/// and closes would otherwise see a broken pipe instead of the answer.
+async fn read_form(state: &AppState, multipart: Result<Multipart, MultipartRejection>) -> Result<Option<Received>, UploadError> {
+    let mut multipart = multipart.map_err(|e| UploadError::before_body_end(ApiError::InvalidMultipart(e.body_text())))?;
+    match read_fields(state, &mut multipart).await {
+        Ok(received) => Ok(received),
+        Err(error) => {
+            let drained = drain(&mut multipart).await;
+            Err(UploadError { error, body_unread: !drained })
+        }
+    }
+}
+
+async fn read_fields(state: &AppState, multipart: &mut Multipart) -> Result<Option<Received>, ApiError> {
+    let mut received = None;
+    loop {
+        let field = match multipart.next_field().await {
+            Ok(Some(field)) => field,
+            Ok(None) => return Ok(received),
+            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
+                return Err(ApiError::FileTooLarge { limit: state.config.max_upload_bytes });
+            }
+            Err(e) => return Err(ApiError::InvalidMultipart(e.body_text())),
+        };
+        match field.name() {
+            Some("file") if received.is_none() => received = Some(receive(state, field).await?),
+            Some("file") => return Err(ApiError::UnexpectedField("file (a second one)".into())),
+            Some(other) => return Err(ApiError::UnexpectedField(other.chars().take(80).collect())),
+            None => return Err(ApiError::UnexpectedField("(unnamed)".into())),
+        }
+    }
+}
+
+/// The most bytes of a refused upload read past the point of refusal before giving up on it.
+pub const DRAIN_LIMIT_BYTES: u64 = 16 * 1024 * 1024;
+/// The longest a refused upload is read for.
+const DRAIN_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Reads and drops the rest of a multipart body; true when it ended within the limits.
+async fn drain(multipart: &mut Multipart) -> bool {
+    let work = async {
+        let mut budget = DRAIN_LIMIT_BYTES;
+        loop {
+            // multer skips what is left of an unfinished field when asked for the next one; the
+            // body limit (the upload limit plus DRAIN_LIMIT_BYTES) bounds that skip.
+            let mut field = match multipart.next_field().await {
+                Ok(Some(field)) => field,
+                Ok(None) => return true,
+                Err(_) => return false,
+            };
+            loop {
+                match field.chunk().await {
+                    Ok(Some(chunk)) if (chunk.len() as u64) <= budget => budget -= chunk.len() as u64,
+                    Ok(Some(_)) | Err(_) => return false,
+                    Ok(None) => break,
+                }
+            }
+        }
+    };
+    tokio::time::timeout(DRAIN_TIMEOUT, work).await.unwrap_or(false)
+}
+
+/// An upload's error response.
+///
+/// One whose body could not be read to its end says `Connection: close`: hyper drops such a
+/// connection after the response, and a keep-alive client must not send its next request into it.
+#[derive(Debug)]
+pub struct UploadError {
+    error: ApiError,
+    body_unread: bool,
+}
+
+impl UploadError {
+    fn before_body_end(error: ApiError) -> Self {
+        Self { error, body_unread: true }
+    }
+}
+
+impl From<ApiError> for UploadError {
+    fn from(error: ApiError) -> Self {
+        Self { error, body_unread: false }
+    }
+}
+
+impl axum::response::IntoResponse for UploadError {
+    fn into_response(self) -> axum::response::Response {
+        let mut response = self.error.into_response();
+        if self.body_unread {
+            response.headers_mut().insert(header::CONNECTION, HeaderValue::from_static("close"));
+        }
+        response
+    }
+}
+
 /// Upload a song.
 ///
 /// The same bytes uploaded again return the existing song (200). A new song (201) gets an
@@ -151,28 +249,11 @@ async fn receive(state: &AppState, mut field: Field<'_>) -> Result<Received, Api
 pub async fn upload(
     State(state): State<AppState>,
     multipart: Result<Multipart, MultipartRejection>,
-) -> Result<(StatusCode, HeaderMap, Json<SongView>), ApiError> {
-    let mut multipart = multipart.map_err(|e| ApiError::InvalidMultipart(e.body_text()))?;
-    let mut received = None;
-    loop {
-        let field = match multipart.next_field().await {
-            Ok(Some(field)) => field,
-            Ok(None) => break,
-            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
-                return Err(ApiError::FileTooLarge { limit: state.config.max_upload_bytes });
-            }
-            Err(e) => return Err(ApiError::InvalidMultipart(e.body_text())),
-        };
-        match field.name() {
-            Some("file") if received.is_none() => received = Some(receive(&state, field).await?),
-            Some("file") => return Err(ApiError::UnexpectedField("file (a second one)".into())),
-            Some(other) => return Err(ApiError::UnexpectedField(other.chars().take(80).collect())),
-            None => return Err(ApiError::UnexpectedField("(unnamed)".into())),
-        }
-    }
+) -> Result<(StatusCode, HeaderMap, Json<SongView>), UploadError> {
+    let received = read_form(&state, multipart).await?;
     let received = received.ok_or(ApiError::MissingFile)?;
 
-    if let Some(existing) = state.store.song_by_sha256(&received.sha256).await? {
+    if let Some(existing) = state.store.song_by_sha256(&received.sha256).await.map_err(ApiError::from)? {
         return Ok((StatusCode::OK, location(existing.id), Json(view(&state, existing).await?)));
     }
 
@@ -188,11 +269,11 @@ pub async fn upload(
     };
     if let Some(declared_s) = declared_s {
         if decoded.duration_s + TRUNCATION_TOLERANCE_S < declared_s {
-            return Err(ApiError::Truncated { declared_s, decoded_s: decoded.duration_s });
+            return Err(ApiError::Truncated { declared_s, decoded_s: decoded.duration_s }.into());
         }
     }
     if decoded.duration_s > state.config.max_duration_s {
-        return Err(ApiError::SongTooLong { seconds: decoded.duration_s, limit: state.config.max_duration_s });
+        return Err(ApiError::SongTooLong { seconds: decoded.duration_s, limit: state.config.max_duration_s }.into());
     }
 
     let id = SongId::new();
@@ -216,7 +297,7 @@ pub async fn upload(
         max_attempts: state.config.max_attempts,
         idempotency: None,
     };
-    let (stored, created) = state.store.add_song(song, analyze).await?;
+    let (stored, created) = state.store.add_song(song, analyze).await.map_err(ApiError::from)?;
     if !created {
         // Another upload of the same bytes won the race; keep its file, drop ours.
         if let Err(e) = std::fs::remove_file(&path) {
