@@ -142,7 +142,11 @@ fn main() -> anyhow::Result<()> {
         Command::Train { model: TrainCommand::KeyposeTransformer(opts) } => {
             choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "info");
             let logs = choreo::models::train::keypose_transformer::train(opts).context("training keypose-transformer")?;
-            println!("trained {} epochs into {}", logs.len(), opts.out.display());
+            if opts.eval_only {
+                println!("evaluated {} (eval.json rewritten)", opts.out.display());
+            } else {
+                println!("trained {} epochs into {}", logs.len(), opts.out.display());
+            }
             Ok(())
         }
         Command::Bench { what: BenchCommand::Http(args) } => bench_http(args, load(&args.service)?),

@@ -335,6 +335,44 @@ pub struct WindowInput {
     pub local_pos: Tensor,
 }
 
+/// Frames over which a window's output crossfades into the previous window's: `T′`, or less
+/// when the window is too short to hold a seed, a crossfade and new frames.
+pub fn crossfade_len(w: i64, ts: i64) -> i64 {
+    ts.min((w - ts) / 2).max(0)
+}
+
+/// Start frames of the overlapping windows [`KeyposeTransformer::generate_long`] uses for `total`
+/// frames (at least one window long): windows of `w` frames advance by `w − T′ − crossfade`, so
+/// each is seeded with `T′` final frames and then overlaps the previous window's output by the
+/// crossfade; the last window is aligned to the end.
+pub fn generation_windows(total: i64, w: i64, ts: i64) -> Vec<i64> {
+    let advance = (w - ts - crossfade_len(w, ts)).max(1);
+    let mut starts = Vec::new();
+    let mut s = 0;
+    loop {
+        starts.push(s.min(total - w));
+        if s + w >= total {
+            break;
+        }
+        s += advance;
+    }
+    starts
+}
+
+/// The centre of each crossfade in an `n`-frame generation, where one window's output takes
+/// over from the previous one's.
+pub fn join_frames(n: usize, config: &Config) -> Vec<usize> {
+    let (w, ts) = (config.window, config.seed_len);
+    let starts = generation_windows((n as i64).max(w), w, ts);
+    starts.windows(2).map(|p| ((p[1] + ts + p[0] + w) / 2) as usize).filter(|&f| f < n).collect()
+}
+
+/// `3u² − 2u³`: a C¹ ramp from 0 to 1 on `[0, 1]`.
+fn smoothstep(u: f64) -> f64 {
+    let u = u.clamp(0.0, 1.0);
+    u * u * (3.0 - 2.0 * u)
+}
+
 /// The whole model.
 #[derive(Debug)]
 pub struct KeyposeTransformer {
@@ -387,9 +425,9 @@ impl KeyposeTransformer {
         }
     }
 
-    /// Generates `n` frames from music `[n, music_dim]` in overlapping windows of `T` frames,
-    /// each seeded with the last `T′` frames so far (the first with `seed` `[T′, pose_dim]`, or
-    /// the mean pose). Key poses `(frame, [key_dim])` (normalised) go to every window that
+    /// Generates `n` frames from music `[n, music_dim]` in overlapping windows of `T` frames
+    /// ([`generation_windows`]), each seeded with `T′` final frames (the first with `seed`
+    /// `[T′, pose_dim]`, or the mean pose) and crossfaded into the previous window's output. Key poses `(frame, [key_dim])` (normalised) go to every window that
     /// contains them. `on_window(done, total)` may stop the loop. Returns `[n, pose_dim]`.
     pub fn generate_long(&self, music: &Tensor, seed: Option<&Tensor>, keys: &[(i64, Vec<f32>)], mut on_window: impl FnMut(usize, usize) -> bool) -> Option<Tensor> {
         let c = &self.config;
@@ -399,17 +437,9 @@ impl KeyposeTransformer {
         // Pad short songs with the mean (zero) music to one whole window.
         let total = n.max(w);
         let music = if total > n { Tensor::cat(&[music.shallow_clone(), Tensor::zeros([total - n, c.music_dim], (Kind::Float, dev))], 0) } else { music.shallow_clone() };
-        let mut starts = Vec::new();
-        let mut s = 0;
-        loop {
-            starts.push(s.min(total - w));
-            if s + w >= total {
-                break;
-            }
-            s += w - ts;
-        }
+        let starts = generation_windows(total, w, ts);
         let out = Tensor::zeros([total, c.pose_dim], (Kind::Float, dev));
-        let mut written = 0i64; // frames [0, written) are final
+        let mut written = 0i64; // frames [0, written) have output
         let seeded = seed.is_some();
         for (i, &s) in starts.iter().enumerate() {
             let seed_rows = if i == 0 {
@@ -422,14 +452,29 @@ impl KeyposeTransformer {
             };
             let local: Vec<(i64, Vec<f32>)> = keys.iter().filter(|(f, _)| *f >= s && *f < s + w).map(|(f, p)| (f - s, p.clone())).collect();
             let y = self.forward(&self.window_input(&music.narrow(0, s, w), &seed_rows, &local), false).squeeze_dim(0);
-            // Keep what earlier windows (or the given seed) fixed; write the rest.
-            let keep = if i == 0 && seeded {
-                out.narrow(0, 0, ts).copy_(&seed_rows);
-                ts
+            if i == 0 {
+                // The given seed stays as it is; the network writes the rest of the window.
+                let keep = if seeded { ts } else { 0 };
+                if seeded {
+                    out.narrow(0, 0, ts).copy_(&seed_rows);
+                }
+                out.narrow(0, keep, w - keep).copy_(&y.narrow(0, keep, w - keep));
             } else {
-                (written - s).max(0)
-            };
-            out.narrow(0, s + keep, w - keep).copy_(&y.narrow(0, keep, w - keep));
+                // [s, s + T′) is this window's seed. Over [s + T′, written) the previous window
+                // has output too: crossfade from it to this one, so the join has no jump; write
+                // the rest as it is.
+                let (b0, l) = (s + ts, written - s - ts);
+                if l > 0 {
+                    let ramp: Vec<f32> = (1..=l).map(|k| smoothstep(k as f64 / (l + 1) as f64) as f32).collect();
+                    let ramp = Tensor::from_slice(&ramp).view([l, 1]).to_device(dev);
+                    let blended = out.narrow(0, b0, l) * (1.0 - &ramp) + y.narrow(0, ts, l) * &ramp;
+                    out.narrow(0, b0, l).copy_(&blended);
+                }
+                let new = s + w - written.max(b0);
+                if new > 0 {
+                    out.narrow(0, s + w - new, new).copy_(&y.narrow(0, w - new, new));
+                }
+            }
             written = s + w;
             if !on_window(i + 1, starts.len()) {
                 return None;
@@ -592,6 +637,10 @@ pub const WEIGHTS_FILE: &str = "weights.safetensors";
 pub const ID: &str = "keypose-transformer";
 /// Frames over which a key pose's residual is blended in after generation (0.5 s at 25 fps).
 pub const BLEND_RADIUS: f64 = 12.0;
+/// Frames over which a key pose's facing (yaw) residual is blended in (2 s at 25 fps): the
+/// network's integrated facing can be far from a key's, and turning the body that far within
+/// half a second would be a spin that no dancer made.
+pub const YAW_BLEND_RADIUS: f64 = 50.0;
 
 /// How the committed weights were trained, stored beside them.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -668,7 +717,7 @@ pub fn generate_features(
     let mut start = seed.map(|(_, s)| s).unwrap_or_default();
     let yaws: Vec<(usize, f32)> = keys.iter().map(|k| (k.frame, k.yaw)).collect();
     if !yaws.is_empty() {
-        start.yaw = pass_through_yaws(&mut out, start.yaw, &yaws, BLEND_RADIUS);
+        start.yaw = pass_through_yaws(&mut out, start.yaw, &yaws, YAW_BLEND_RADIUS);
     }
     Ok(Some((raw, out, start)))
 }
@@ -750,6 +799,23 @@ mod tests {
     }
 
     #[test]
+    fn windows_seed_from_final_frames_and_overlap_for_the_crossfade() {
+        for (total, w, ts) in [(100, 100, 25), (101, 100, 25), (1234, 100, 25), (53, 20, 5), (20, 20, 5)] {
+            let starts = generation_windows(total, w, ts);
+            assert_eq!(starts[0], 0);
+            assert_eq!(*starts.last().unwrap() + w, total, "{total} {w} {ts}");
+            for p in starts.windows(2) {
+                assert!(p[1] > p[0], "{starts:?}");
+                // The seed lies inside what the previous window wrote, and some frames are new.
+                assert!(p[1] + ts <= p[0] + w && p[1] + w > p[0] + w, "{starts:?}");
+            }
+        }
+        assert_eq!(crossfade_len(100, 25), 25);
+        let c = Config { window: 100, seed_len: 25, ..Config::tiny(4, 7, 6) };
+        assert_eq!(join_frames(300, &c), vec![87, 137, 187, 237]);
+    }
+
+    #[test]
     fn long_generation_is_deterministic_and_covers_the_song() {
         let (_vs, m) = model(1);
         let music = Tensor::randn([53, 4], (Kind::Float, Device::Cpu));
@@ -758,7 +824,7 @@ mod tests {
         let a = m.generate_long(&music, None, &keys, |_, _| { windows += 1; true }).unwrap();
         let b = m.generate_long(&music, None, &keys, |_, _| true).unwrap();
         assert_eq!(a.size(), vec![53, 7]);
-        assert_eq!(windows, 4, "windows of 20 with 5 seed frames over 53 frames");
+        assert_eq!(windows, 5, "windows of 20 advancing by 10 (5 seed + 5 crossfade frames) over 53 frames");
         assert_eq!((&a - &b).abs().max().double_value(&[]), 0.0);
         // The key pose is an input: removing it changes the dance near it.
         let c = m.generate_long(&music, None, &[], |_, _| true).unwrap();

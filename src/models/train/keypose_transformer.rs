@@ -64,6 +64,10 @@ pub struct Options {
     /// Use the tiny test configuration (for smoke runs, never for committed weights).
     #[arg(long)]
     pub tiny: bool,
+    /// Do not train: re-run the test-split evaluation of the model already in `--out` and rewrite
+    /// its `eval.json`.
+    #[arg(long)]
+    pub eval_only: bool,
 }
 
 /// Key-pose consistency on the test split, written to `eval.json`.
@@ -79,12 +83,60 @@ pub struct KeyPoseEval {
     pub dance_error_cm: f64,
     /// Mean per-joint error with no key poses (seed only), for comparison, cm.
     pub dance_error_no_keys_cm: f64,
+    /// Smoothness `S_cv` of the whole dances (lower is smoother): the real test dances, the network's
+    /// output alone, and the served output (after the exact key-pose pass).
+    #[serde(default)]
+    pub scv_real: f64,
+    #[serde(default)]
+    pub scv_network: f64,
+    #[serde(default)]
+    pub scv_served: f64,
+    /// Mean `S_cv` of the served output on 1-s segments centred on the frames where one window's
+    /// output takes over from the previous one's, and on 1-s segments midway between joins.
+    #[serde(default)]
+    pub scv_at_joins: f64,
+    #[serde(default)]
+    pub scv_within_windows: f64,
+    /// The same two segment sets measured on the real dances (which have no joins), for scale.
+    #[serde(default)]
+    pub scv_real_at_joins: f64,
+    #[serde(default)]
+    pub scv_real_within_windows: f64,
+}
+
+/// Half the length of the segments `S_cv` is compared on at and between window joins (0.5 s).
+const SEGMENT_HALF: usize = 12;
+
+/// Segments of `2·half` frames centred on `centres`, those that fit in `n` frames.
+fn segments(centres: &[usize], half: usize, n: usize) -> Vec<std::ops::Range<usize>> {
+    centres.iter().filter(|&&c| c >= half && c + half <= n).map(|&c| c - half..c + half).collect()
+}
+
+/// The centres midway between consecutive joins (and between the seed's end and the first join,
+/// and the last join and the end).
+fn mid_window_centres(joins: &[usize], first: usize, n: usize) -> Vec<usize> {
+    let mut bounds = vec![first];
+    bounds.extend_from_slice(joins);
+    bounds.push(n);
+    bounds.windows(2).filter(|p| p[1] > p[0] + 2 * SEGMENT_HALF).map(|p| (p[0] + p[1]) / 2).collect()
+}
+
+/// Sums of `S_cv` over the segments of a motion, and their count.
+fn segment_scv(positions: ndarray::ArrayView3<'_, f32>, segs: &[std::ops::Range<usize>], fps: f64) -> (f64, usize) {
+    let sum = segs.iter().map(|r| crate::metrics::kinematics::smoothness_cv(positions.slice(s![r.clone(), .., ..]), fps)).sum();
+    (sum, segs.len())
 }
 
 /// Trains and writes the model folder; returns the per-epoch log.
 pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     tch::set_num_threads(opts.threads);
     tch::manual_seed(opts.seed as i64);
+    if opts.eval_only {
+        let eval = evaluate_folder(&opts.out, &opts.data, opts.eval_keys, opts.seed)?;
+        tracing::info!(?eval, "key-pose consistency on the test split");
+        write_atomic(&opts.out.join("eval.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
+        return Ok(Vec::new());
+    }
     let started = Instant::now();
     let ds = Dataset::open(&opts.data)?;
     let features: super::FeatureFn = crate::audio::features::keypose;
@@ -215,6 +267,9 @@ pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test
     let mut rng = StdRng::seed_from_u64(seed);
     let ts = file.config.seed_len as usize;
     let (mut net, mut served, mut dance, mut dance_free, mut n) = (0.0, 0.0, 0.0, 0.0, 0usize);
+    let (mut scv_real, mut scv_network, mut scv_served) = (0.0, 0.0, 0.0);
+    // (sum, count) of segment S_cv: served at joins, served within, real at joins, real within.
+    let mut seg = [(0.0, 0usize); 4];
     for seq in test {
         let t = seq.poses.nrows();
         if t <= ts + keys {
@@ -254,13 +309,43 @@ pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test
         }
         let (motion, root) = repr::from_features(out.view(), start2, file.fps)?;
         served += crate::models::keypose_transformer::key_pose_error_cm(&motion, root.view(), &key_poses).unwrap_or(f64::NAN) * keys as f64;
+        let fps = file.fps;
+        let smooth = crate::metrics::kinematics::smoothness_cv;
+        let (net_motion, _) = repr::from_features(raw.view(), start2, fps)?;
+        scv_real += smooth(d.motion.positions.view(), fps);
+        scv_network += smooth(net_motion.positions.view(), fps);
+        scv_served += smooth(motion.positions.view(), fps);
+        let joins = crate::models::keypose_transformer::join_frames(t, &file.config);
+        let at = segments(&joins, SEGMENT_HALF, t);
+        let within = segments(&mid_window_centres(&joins, ts, t), SEGMENT_HALF, t);
+        for (slot, (pos, segs)) in [(&motion.positions, &at), (&motion.positions, &within), (&d.motion.positions, &at), (&d.motion.positions, &within)].into_iter().enumerate() {
+            let (sum, count) = segment_scv(pos.view(), segs, fps);
+            seg[slot].0 += sum;
+            seg[slot].1 += count;
+        }
         dance += mean_rows_error_cm(&out, &seed_feats);
         dance_free += mean_rows_error_cm(&free, &seed_feats);
         n += 1;
         tracing::info!(dance = %seq.id, frames = t, "evaluated");
     }
     let k = (n * keys).max(1) as f64;
-    Ok(KeyPoseEval { dances: n, keys_per_dance: keys, network_error_cm: net / k, served_error_cm: served / k, dance_error_cm: dance / n.max(1) as f64, dance_error_no_keys_cm: dance_free / n.max(1) as f64 })
+    let per_dance = |x: f64| x / n.max(1) as f64;
+    let mean = |(sum, count): (f64, usize)| if count == 0 { f64::NAN } else { sum / count as f64 };
+    Ok(KeyPoseEval {
+        dances: n,
+        keys_per_dance: keys,
+        network_error_cm: net / k,
+        served_error_cm: served / k,
+        dance_error_cm: per_dance(dance),
+        dance_error_no_keys_cm: per_dance(dance_free),
+        scv_real: per_dance(scv_real),
+        scv_network: per_dance(scv_network),
+        scv_served: per_dance(scv_served),
+        scv_at_joins: mean(seg[0]),
+        scv_within_windows: mean(seg[1]),
+        scv_real_at_joins: mean(seg[2]),
+        scv_real_within_windows: mean(seg[3]),
+    })
 }
 
 /// Mean per-joint distance (cm) between two 69-long local pose vectors.
