@@ -9,6 +9,12 @@
 //! over the song, summed, and for each meter m ∈ {3, 4} and phase p < m we average the score
 //! of the beats k ≡ p (mod m). The meter and phase with the largest contrast (mean of the
 //! chosen beats minus mean of the others) win; downbeats are those beats. Ties prefer 4/4.
+//!
+//! Measured accuracy: on synthetic bars (accented first beats, 3/4 and 4/4) downbeat F > 0.9; on
+//! the 43 real songs of dance-with-melody, whose style fixes the meter, the meter is right for 40
+//! (waltz 27 of 30 in 3/4; cha-cha, rumba and tango 13 of 13 in 4/4). The three misses are
+//! waltzes read as 4/4, two of them at a doubled tempo (172 BPM). The bar phase is not
+//! measured on real music: nothing here annotates it. (`tests/audio.rs`, `downbeat_*`.)
 use std::sync::Arc;
 
 use ndarray::Array2;
