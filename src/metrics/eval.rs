@@ -25,7 +25,7 @@ use super::MetricsError;
 use crate::audio::{self, DecodedAudio};
 use crate::models::{Cancelled, GenerateRequest, ModelId, Progress, Registry};
 use crate::motion::dataset::{Dance, Dataset};
-use crate::motion::Motion;
+use crate::motion::{KeyPose, Motion, MOTION_FPS};
 
 /// Where `--write-reference` writes by default (the committed, compiled-in file).
 pub const REFERENCE_PATH: &str = "src/metrics/reference_train.json";
@@ -56,6 +56,11 @@ pub struct EvalArgs {
     /// Dances generated per song and model (seeds seed..seed+N); ≥ 2 gives multimodality.
     #[arg(long, default_value_t = 2)]
     pub seeds: u64,
+    /// Key poses given to models that take them, on each test song: this many poses of the real
+    /// test dance (root-relative) at frames drawn by the seed after its first second. Extra songs
+    /// get none. The key-pose error column then shows how closely the dances pass through them.
+    #[arg(long, default_value_t = 0)]
+    pub key_poses: usize,
     /// Train dances paired with each test song in the Mismatched-real row.
     #[arg(long, default_value_t = 1)]
     pub mismatch_per_song: usize,
@@ -227,23 +232,48 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
             let model = registry
                 .get(&ModelId(id.clone()))
                 .ok_or_else(|| MetricsError::Reference(format!("model {id} not found under {}", args.models_dir.display())))?;
+            let keyed = args.key_poses > 0 && model.info().capabilities.key_poses;
             let mut scored = Vec::new();
             let mut per_song = Vec::new();
-            for s in songs.iter().chain(&extra) {
+            for (i, s) in songs.iter().chain(&extra).enumerate() {
+                let keys = match eval_dances.get(i) {
+                    Some(d) if keyed => key_poses_of(d, args.key_poses, args.seed + i as u64),
+                    _ => Vec::new(),
+                };
                 let mut group = Vec::new();
                 for seed in args.seed..args.seed + args.seeds.max(1) {
-                    let req = GenerateRequest { audio: &s.audio, seed, key_poses: &[], seed_motion: None };
+                    let req = GenerateRequest { audio: &s.audio, seed, key_poses: &keys, seed_motion: None };
                     let m = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?;
-                    let sc = score_dance(&m, &s.beats, &[], &reference)?;
+                    let sc = score_dance(&m, &s.beats, &keys, &reference)?;
                     group.push(scored.len());
                     scored.push((EvalDance { song: s.name.clone(), motion: format!("{id}@{seed}"), seconds: m.duration_s(), scores: sc.scores.clone() }, sc));
                 }
                 per_song.push(group);
             }
-            rows.push(row(id, scored, Some(per_song), &reference));
+            let name = if keyed { format!("{id} + {} key poses", args.key_poses) } else { id.clone() };
+            rows.push(row(&name, scored, Some(per_song), &reference));
         }
     }
     Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows })
+}
+
+/// `n` poses of a real dance (root-relative, metres) at distinct frames after its first second,
+/// drawn by `seed`, in time order.
+fn key_poses_of(d: &Dance, n: usize, seed: u64) -> Vec<KeyPose> {
+    let rel = d.root_relative();
+    let first = MOTION_FPS as usize;
+    let mut frames: Vec<usize> = (first..d.motion.num_frames()).collect();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    frames.shuffle(&mut rng);
+    frames.truncate(n);
+    frames.sort_unstable();
+    frames
+        .into_iter()
+        .map(|f| KeyPose {
+            time_s: f as f64 / d.motion.fps,
+            joints: (0..rel.dim().1).map(|j| [0, 1, 2].map(|a| f64::from(rel[[f, j, a]]))).collect(),
+        })
+        .collect()
 }
 
 fn f(x: f64) -> String {
@@ -257,7 +287,7 @@ fn f(x: f64) -> String {
 /// The Markdown table `choreo eval` prints.
 pub fn markdown(result: &EvalResult) -> String {
     let mut out = String::from(
-        "| Motion | n | BAS FACT ↑ | (chance) | BAS Bailando ↑ | Coverage | Hit rate ↑ | Rhythm hit ↑ | Beat F ↑ | FID_k ↓ | FID_g ↓ | Div_k | Div_g | S_cv ↓ | Skate ↓ | Freeze L/F | Authentic ↑ | Coherent ↑ | Multimodality |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| Motion | n | BAS FACT ↑ | (chance) | BAS Bailando ↑ | Coverage | Hit rate ↑ | Rhythm hit ↑ | Beat F ↑ | FID_k ↓ | FID_g ↓ | Div_k | Div_g | S_cv ↓ | Skate ↓ | Freeze L/F | Authentic ↑ | Coherent ↑ | Multimodality | Key err cm ↓ |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in &result.rows {
         let m = &r.scores.mean;
@@ -281,6 +311,7 @@ pub fn markdown(result: &EvalResult) -> String {
             f(m.plausibility.authenticity),
             f(m.plausibility.coherence),
             r.multimodality.map(f).unwrap_or_else(|| "–".into()),
+            m.key_pose_error_cm.map(f).unwrap_or_else(|| "–".into()),
         ];
         out.push_str(&format!("| {} |\n", cells.join(" | ")));
     }
