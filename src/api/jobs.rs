@@ -46,6 +46,10 @@ pub struct CreateJob {
     /// A motion to continue from (models with the `seed_motion` capability).
     #[serde(default)]
     pub seed_motion: Option<SeedMotion>,
+    /// Hold the supporting foot in place so feet do not skate, by moving the whole body (the pose
+    /// and key poses are kept). Default true; false returns the model's motion as it came.
+    #[serde(default)]
+    pub plant_feet: Option<bool>,
     /// Higher runs first; -100..=100, default 0.
     #[serde(default)]
     pub priority: Option<i64>,
@@ -255,6 +259,7 @@ pub async fn create(
             seed,
             key_poses: std::mem::take(&mut request.key_poses),
             seed_motion: request.seed_motion.take(),
+            plant_feet: request.plant_feet.unwrap_or(true),
         }),
         priority,
         max_attempts: state.config.max_attempts,

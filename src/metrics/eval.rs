@@ -61,6 +61,10 @@ pub struct EvalArgs {
     /// get none. The key-pose error column then shows how closely the dances pass through them.
     #[arg(long, default_value_t = 0)]
     pub key_poses: usize,
+    /// Score generated dances as the model made them, without the foot planting that jobs and
+    /// `choreo generate` apply by default (`motion::feet`).
+    #[arg(long)]
+    pub no_plant_feet: bool,
     /// Train dances paired with each test song in the Mismatched-real row.
     #[arg(long, default_value_t = 1)]
     pub mismatch_per_song: usize,
@@ -243,14 +247,21 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
                 let mut group = Vec::new();
                 for seed in args.seed..args.seed + args.seeds.max(1) {
                     let req = GenerateRequest { audio: &s.audio, seed, key_poses: &keys, seed_motion: None };
-                    let m = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?;
+                    let mut m = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?;
+                    if !args.no_plant_feet {
+                        // What a job serves (worker::pipeline::finish_motion); metrics stay below the worker.
+                        crate::motion::feet::plant_feet(m.positions.view_mut());
+                    }
                     let sc = score_dance(&m, &s.beats, &keys, &reference)?;
                     group.push(scored.len());
                     scored.push((EvalDance { song: s.name.clone(), motion: format!("{id}@{seed}"), seconds: m.duration_s(), scores: sc.scores.clone() }, sc));
                 }
                 per_song.push(group);
             }
-            let name = if keyed { format!("{id} + {} key poses", args.key_poses) } else { id.clone() };
+            let mut name = if keyed { format!("{id} + {} key poses", args.key_poses) } else { id.clone() };
+            if args.no_plant_feet {
+                name += " (feet not planted)";
+            }
             rows.push(row(&name, scored, Some(per_song), &reference));
         }
     }

@@ -41,8 +41,9 @@ pub fn smoothness_cv(positions: ArrayView3<'_, f32>, fps: f64) -> f64 {
 pub const CONTACT_HEIGHT_M: f64 = 0.05;
 /// A foot in contact skates when its horizontal speed exceeds this (m/s).
 pub const SKATE_SPEED_M_S: f64 = 0.2;
-/// The floor is this percentile of the per-frame lowest foot height, robust to a few noisy frames.
-pub const FLOOR_PERCENTILE: f64 = 1.0;
+/// The floor is this percentile of the per-frame lowest foot height, robust to a few noisy frames
+/// (the motion module's floor, which foot planting uses too).
+pub const FLOOR_PERCENTILE: f64 = crate::motion::feet::FLOOR_PERCENTILE;
 
 /// Foot skating over a dance.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
@@ -77,10 +78,7 @@ pub fn foot_skating(positions: ArrayView3<'_, f32>, fps: f64, feet: &[usize]) ->
     if t < 2 || feet.is_empty() {
         return FootSkating::default();
     }
-    let lowest: Vec<f64> = (0..t)
-        .map(|f| feet.iter().map(|&j| positions[[f, j, 1]] as f64).fold(f64::INFINITY, f64::min))
-        .collect();
-    let floor = percentile(&lowest, FLOOR_PERCENTILE);
+    let floor = crate::motion::feet::floor_height(positions, feet);
     let (mut steps, mut contact, mut skate, mut speed_sum) = (0usize, 0usize, 0usize, 0.0f64);
     for f in 1..t {
         for &j in feet {

@@ -13,6 +13,7 @@ use ndarray::Array3;
 pub mod bvh;
 pub mod dataset;
 pub mod export;
+pub mod feet;
 pub mod repr;
 pub mod rig;
 pub mod skeleton;

@@ -188,6 +188,14 @@ pub struct GenerateOptions {
     pub key_poses: Vec<KeyPose>,
     #[serde(default)]
     pub seed_motion: Option<SeedMotion>,
+    /// Plant the feet of the model's motion (`motion::feet`); jobs stored before the option
+    /// existed read as true, what they would get now.
+    #[serde(default = "planted")]
+    pub plant_feet: bool,
+}
+
+fn planted() -> bool {
+    true
 }
 
 /// What a job does; each kind carries its own options.

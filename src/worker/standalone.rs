@@ -30,6 +30,9 @@ pub struct GenerateArgs {
     /// Where trained models live.
     #[arg(long, default_value = "models")]
     pub models_dir: PathBuf,
+    /// Keep the model's motion as it came: do not plant the feet (`motion::feet`).
+    #[arg(long)]
+    pub no_plant_feet: bool,
 }
 
 /// What one generation produced and how long each stage took.
@@ -80,17 +83,15 @@ impl Progress for StageClock<'_> {
 pub fn generate_decoded(
     registry: &Registry,
     model: &ModelId,
-    audio: &DecodedAudio,
-    seed: u64,
-    key_poses: &[KeyPose],
+    request: &GenerateRequest<'_>,
+    plant_feet: bool,
     out: &Path,
     on_progress: &mut dyn FnMut(&str, f32),
 ) -> Result<Generated, WorkerError> {
     let model = registry.get(model).ok_or_else(|| WorkerError::ModelUnavailable(model.clone()))?;
     let mut clock = StageClock { current: None, done: Vec::new(), on_progress };
-    let request = GenerateRequest { audio, seed, key_poses, seed_motion: None };
-    let motion = model.generate(&request, &mut clock)?;
-    let files = super::pipeline::render(out, &motion, audio, key_poses, &mut |stage| clock.enter(stage))?;
+    let motion = super::pipeline::finish_motion(model.generate(request, &mut clock)?, plant_feet);
+    let files = super::pipeline::render(out, &motion, request.audio, request.key_poses, &mut |stage| clock.enter(stage))?;
     Ok(Generated { motion, files: files.files.iter().map(|f| out.join(f)).collect(), stages: clock.finish() })
 }
 
@@ -125,7 +126,8 @@ pub fn generate(args: &GenerateArgs) -> Result<Generated, WorkerError> {
         bar.set_message(stage.to_owned());
         bar.set_position(((a + (b - a) * f64::from(f)) * 1000.0) as u64);
     };
-    let mut g = generate_decoded(&registry, &ModelId(args.model.clone()), &audio, args.seed, &key_poses, &args.out, &mut on_progress)?;
+    let request = GenerateRequest { audio: &audio, seed: args.seed, key_poses: &key_poses, seed_motion: None };
+    let mut g = generate_decoded(&registry, &ModelId(args.model.clone()), &request, !args.no_plant_feet, &args.out, &mut on_progress)?;
     g.stages.insert(0, ("decode audio".into(), decode));
     bar.finish_with_message("done");
     Ok(g)
@@ -189,10 +191,19 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
     let out = tempfile::tempdir()?;
     for model in &models {
         for (name, audio, decode) in &songs {
-            let g = generate_decoded(&registry, model, audio, 0, &[], out.path(), &mut |_, _| {})?;
+            let request = GenerateRequest { audio, seed: 0, key_poses: &[], seed_motion: None };
+            let g = generate_decoded(&registry, model, &request, true, out.path(), &mut |_, _| {})?;
             let mut stages = vec![("decode audio".to_string(), *decode)];
             stages.extend(g.stages);
-            let get = |s: &str| stages.iter().filter(|(n, _)| n == s).map(|(_, d)| d.as_secs_f64()).sum::<f64>();
+            // "–" for a stage this model does not have (the key-pose transformer has no separate encode).
+            let get = |s: &str| {
+                let times: Vec<f64> = stages.iter().filter(|(n, _)| n == s).map(|(_, d)| d.as_secs_f64()).collect();
+                if times.is_empty() {
+                    "–".to_string()
+                } else {
+                    format!("{:.2}", times.iter().sum::<f64>())
+                }
+            };
             let total: f64 = stages.iter().map(|(_, d)| d.as_secs_f64()).sum();
             let per_min = total / (audio.duration_s / 60.0);
             let target = if (audio.duration_s - 180.0).abs() < 1.0 {
@@ -200,7 +211,7 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
             } else {
                 "-".into()
             };
-            let cells: Vec<String> = stage_names.iter().map(|s| format!("{:.2}", get(s))).collect();
+            let cells: Vec<String> = stage_names.iter().map(|s| get(s)).collect();
             table += &format!("| {} | {name} | {:.0} | {} | {total:.2} | {per_min:.2} | {target} |\n", model.0, audio.duration_s, cells.join(" | "));
         }
     }

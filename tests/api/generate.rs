@@ -12,7 +12,11 @@ fn models_dir() -> std::path::PathBuf {
 }
 
 async fn generate(app: &crate::helpers::TestApp, song_id: &str, seed: u64) -> String {
-    let response = app.post_job(&json!({"song_id": song_id, "model": "dance-revolution", "seed": seed}), None).await;
+    generate_with(app, json!({"song_id": song_id, "model": "dance-revolution", "seed": seed})).await
+}
+
+async fn generate_with(app: &crate::helpers::TestApp, body: Value) -> String {
+    let response = app.post_job(&body, None).await;
     assert_eq!(response.status(), StatusCode::ACCEPTED);
     let job: Value = response.json().await.expect("job");
     let id = job["id"].as_str().expect("job id").to_string();
@@ -67,9 +71,45 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
         let app = &app;
         async move { app.get(&format!("/v1/jobs/{id}/motion.json")).await.text().await.expect("text") }
     };
+    let a_id = job.clone();
     let (a, b, c) = (text(job).await, text(again).await, text(other).await);
     assert_eq!(a, b, "same seed, same dance");
     assert_ne!(a, c, "another seed, another dance");
+
+    // Feet are planted by default; `plant_feet: false` gives the model's motion as it came: the
+    // same poses, moved only horizontally, and feet that skate at least as much.
+    let raw = generate_with(&app, json!({"song_id": song_id, "model": "dance-revolution", "seed": 7, "plant_feet": false})).await;
+    let json_of = |id: &str| {
+        let app = &app;
+        let id = id.to_string();
+        async move { app.get(&format!("/v1/jobs/{id}/motion.json")).await.json::<Value>().await.expect("motion json") }
+    };
+    let (planted, unplanted) = (json_of(&a_id).await, json_of(&raw).await);
+    let frame = |m: &Value, f: usize| -> Vec<[f64; 3]> {
+        m["positions"][f].as_array().expect("frame").iter().map(|p| [0, 1, 2].map(|c| p[c].as_f64().expect("number"))).collect()
+    };
+    let mut moved = 0.0f64;
+    for f in 0..frames {
+        let (p, r) = (frame(&planted, f), frame(&unplanted, f));
+        for j in 0..p.len() {
+            assert!((p[j][1] - r[j][1]).abs() < 1e-4, "heights are kept");
+            for c in [0, 2] {
+                let relative = |m: &[[f64; 3]]| m[j][c] - m[0][c];
+                assert!((relative(&p) - relative(&r)).abs() < 1e-3, "the pose is kept (frame {f}, joint {j})");
+            }
+        }
+        moved = moved.max((p[0][0] - r[0][0]).abs().max((p[0][2] - r[0][2]).abs()));
+    }
+    let skate = |id: String| {
+        let app = &app;
+        async move {
+            let r: Value = app.get(&format!("/v1/jobs/{id}/report.json")).await.json().await.expect("report");
+            r["scores"]["foot_skating"]["skate_ratio"].as_f64().expect("skate ratio")
+        }
+    };
+    let (skate_planted, skate_raw) = (skate(a_id.clone()).await, skate(raw.clone()).await);
+    assert!(skate_planted <= skate_raw, "planted {skate_planted} vs raw {skate_raw}");
+    eprintln!("plant_feet: skate ratio {skate_raw:.3} → {skate_planted:.3}, body moved up to {moved:.3} m");
 
     // A model that cannot honour key poses says so instead of ignoring them.
     let pose = json!({"time_s": 1.0, "joints": vec![[0.0, 0.0, 0.0]; 23]});

@@ -1,0 +1,150 @@
+//! Foot planting: a foot that bears weight does not slide.
+//!
+//! An autoregressive model predicts where the body travels and what the legs do as separate
+//! numbers, and they disagree: the body glides while a foot on the floor slides under it (foot
+//! skating, `metrics::kinematics::foot_skating`). A dancer travels by pushing off a planted foot.
+//! [`plant_feet`] holds the supporting foot in place: on every frame step where a foot point is
+//! within [`SUPPORT_HEIGHT_M`] of the floor, the lowest such point is the support, and the whole
+//! body is shifted horizontally by minus that point's horizontal step. The shift is a translation
+//! accumulated step by step, so positions stay continuous, the skeleton stays rigid and the pose
+//! relative to the body centre is unchanged (key poses, which are root-relative, still hold).
+//! What is left of travel is what the legs do. This follows the idea of footskate clean-up
+//! (Kovar, Schreiner and Gleicher, SCA 2002) with a translation in place of their IK.
+use ndarray::{ArrayView3, ArrayViewMut3};
+
+use super::skeleton::FOOT_POINTS;
+
+/// A foot point this close to the floor (metres) can bear weight.
+pub const SUPPORT_HEIGHT_M: f64 = 0.05;
+/// The floor is this percentile (0–100) of the lowest foot point's height per frame, so a few
+/// noisy frames below it do not lower it.
+pub const FLOOR_PERCENTILE: f64 = 1.0;
+
+/// The floor height (metres, y) under a motion `[T, J, 3]`: the [`FLOOR_PERCENTILE`]th
+/// percentile of the per-frame lowest of `feet`, linearly interpolated as numpy does; NaN for
+/// an empty motion.
+pub fn floor_height(positions: ArrayView3<'_, f32>, feet: &[usize]) -> f64 {
+    let mut lowest: Vec<f64> = (0..positions.dim().0)
+        .map(|f| feet.iter().map(|&j| f64::from(positions[[f, j, 1]])).fold(f64::INFINITY, f64::min))
+        .collect();
+    if lowest.is_empty() {
+        return f64::NAN;
+    }
+    lowest.sort_by(f64::total_cmp);
+    let pos = FLOOR_PERCENTILE / 100.0 * (lowest.len() - 1) as f64;
+    let (lo, hi) = (pos.floor() as usize, pos.ceil() as usize);
+    lowest[lo] + (lowest[hi] - lowest[lo]) * (pos - lo as f64)
+}
+
+/// The two feet as (heel, toe) points: right, left.
+const FEET: [[usize; 2]; 2] = [[FOOT_POINTS[0], FOOT_POINTS[1]], [FOOT_POINTS[2], FOOT_POINTS[3]]];
+
+/// Holds the supporting foot in place (see the module doc), in place on world positions
+/// `[T, J, 3]` in metres, y up. Returns the number of frame steps that had a support.
+///
+/// A foot supports on a step when one of its points (heel, toe) is within
+/// [`SUPPORT_HEIGHT_M`] of the floor on both frames. The support stays with the same foot while
+/// it touches (a dancer's weight does not flicker between feet), and passes to the other foot,
+/// or to the lower one when both touch, only when it lifts. The body moves by minus the mean
+/// horizontal step of the support's touching points.
+pub fn plant_feet(mut positions: ArrayViewMut3<'_, f32>) -> usize {
+    let t = positions.dim().0;
+    if t < 2 {
+        return 0;
+    }
+    let floor = floor_height(positions.view(), &FOOT_POINTS);
+    let (mut ox, mut oz) = (0.0f32, 0.0f32);
+    let mut supported = 0;
+    let mut support: Option<usize> = None;
+    for f in 1..t {
+        // The current frame, moved by the offset so far (frame f − 1 already is).
+        for mut joint in positions.slice_mut(ndarray::s![f, .., ..]).outer_iter_mut() {
+            joint[0] += ox;
+            joint[2] += oz;
+        }
+        let touching = |foot: usize| -> Vec<usize> {
+            FEET[foot]
+                .iter()
+                .copied()
+                .filter(|&j| {
+                    f64::from(positions[[f - 1, j, 1]]) - floor < SUPPORT_HEIGHT_M
+                        && f64::from(positions[[f, j, 1]]) - floor < SUPPORT_HEIGHT_M
+                })
+                .collect()
+        };
+        let low = |foot: usize| FEET[foot].iter().map(|&j| positions[[f, j, 1]]).fold(f32::INFINITY, f32::min);
+        let points = [touching(0), touching(1)];
+        support = match support {
+            Some(foot) if !points[foot].is_empty() => Some(foot),
+            _ => match (points[0].is_empty(), points[1].is_empty()) {
+                (true, true) => None,
+                (false, true) => Some(0),
+                (true, false) => Some(1),
+                (false, false) => Some(if low(0) <= low(1) { 0 } else { 1 }),
+            },
+        };
+        let Some(foot) = support else { continue };
+        let n = points[foot].len() as f32;
+        let dx = points[foot].iter().map(|&j| positions[[f, j, 0]] - positions[[f - 1, j, 0]]).sum::<f32>() / n;
+        let dz = points[foot].iter().map(|&j| positions[[f, j, 2]] - positions[[f - 1, j, 2]]).sum::<f32>() / n;
+        for mut joint in positions.slice_mut(ndarray::s![f, .., ..]).outer_iter_mut() {
+            joint[0] -= dx;
+            joint[2] -= dz;
+        }
+        ox -= dx;
+        oz -= dz;
+        supported += 1;
+    }
+    supported
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::NUM_JOINTS;
+    use ndarray::Array3;
+
+    /// A body whose foot points touch the floor while it glides along x at 1 m/s.
+    fn gliding(frames: usize, lift: impl Fn(usize) -> f32) -> Array3<f32> {
+        Array3::from_shape_fn((frames, NUM_JOINTS, 3), |(f, j, c)| match c {
+            0 => f as f32 * 0.04 + j as f32 * 0.01,
+            1 => {
+                if FOOT_POINTS.contains(&j) {
+                    lift(f)
+                } else {
+                    1.0
+                }
+            }
+            _ => 0.1 * j as f32,
+        })
+    }
+
+    #[test]
+    fn a_gliding_planted_body_stops_and_keeps_its_pose() {
+        let mut p = gliding(50, |_| 0.0);
+        let before = p.clone();
+        assert_eq!(plant_feet(p.view_mut()), 49);
+        for f in 0..50 {
+            for j in 0..NUM_JOINTS {
+                // The body no longer travels; the pose relative to joint 0 is unchanged.
+                assert!((p[[f, j, 0]] - before[[0, j, 0]]).abs() < 1e-5);
+                assert_eq!(p[[f, j, 1]], before[[f, j, 1]]);
+                assert!(((p[[f, j, 0]] - p[[f, 0, 0]]) - (before[[f, j, 0]] - before[[f, 0, 0]])).abs() < 1e-5);
+            }
+        }
+    }
+
+    #[test]
+    fn feet_in_the_air_travel_freely() {
+        // On the floor for frames 0..10, then 30 cm up: only the first 9 steps are planted.
+        let mut p = gliding(40, |f| if f < 10 { 0.0 } else { 0.3 });
+        let before = p.clone();
+        assert_eq!(plant_feet(p.view_mut()), 9);
+        let shift = p[[39, 0, 0]] - before[[39, 0, 0]];
+        assert!((shift + 9.0 * 0.04).abs() < 1e-4, "{shift}");
+        // Continuous: no step is larger than the original 4 cm.
+        for f in 1..40 {
+            assert!((p[[f, 0, 0]] - p[[f - 1, 0, 0]]).abs() <= 0.04 + 1e-5);
+        }
+    }
+}
