@@ -218,6 +218,7 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<BenchRow>, AudioError> {
 fn print_table(rows: &[BenchRow], fps: f64) {
     let f = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |x| format!("{x:.p$}"));
     println!("decode + DanceRevolution features (438-d, {fps} fps), one thread each");
+    println!("peak MB: growth of this process's resident memory while the song is processed (0 when it fits in memory an earlier song freed)");
     println!(
         "| {:<28} | {:>7} | {:>9} | {:>10} | {:>9} | {:>10} | {:>7} | {:>10} |",
         "song", "len s", "decode s", "features s", "choreo s", "librosa s", "speedup", "peak MB"

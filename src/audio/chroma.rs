@@ -106,7 +106,7 @@ pub fn estimate_tuning(y: &[f32], sr: u32, bins_per_octave: usize) -> f64 {
     let mut mag = vec![0.0f32; stft.n_bins()];
     for t in 0..dsp::n_frames(y.len(), n_fft / 4) {
         for (m, c) in mag.iter_mut().zip(stft.frame(y, t)) {
-            *m = c.norm();
+            *m = dsp::magnitude(*c);
         }
         piptrack_frame(&mag, sr, n_fft, &mut peaks);
     }
@@ -369,7 +369,7 @@ pub fn cqt_magnitude(
                 for (wk, sk) in w.iter().zip(&spec[*first..*first + w.len()]) {
                     acc += wk * sk;
                 }
-                resp[[t, b]] = acc.norm();
+                resp[[t, b]] = dsp::magnitude(acc);
             }
         }
         responses.push(resp);
