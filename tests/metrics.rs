@@ -382,6 +382,8 @@ mod real_data {
             models_dir: "models".into(),
             seed: 0,
             seeds: 2,
+            key_poses: 0,
+            no_plant_feet: false,
             mismatch_per_song: 3,
             write_reference: false,
             reference_out: "unused".into(),
