@@ -100,16 +100,18 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
         }
         moved = moved.max((p[0][0] - r[0][0]).abs().max((p[0][2] - r[0][2]).abs()));
     }
-    let skate = |id: String| {
+    let skating = |id: String| {
         let app = &app;
         async move {
             let r: Value = app.get(&format!("/v1/jobs/{id}/report.json")).await.json().await.expect("report");
-            r["scores"]["foot_skating"]["skate_ratio"].as_f64().expect("skate ratio")
+            let s = &r["scores"]["foot_skating"];
+            (s["skate_ratio"].as_f64().expect("skate ratio"), s["mean_contact_speed_m_s"].as_f64().expect("contact speed"))
         }
     };
-    let (skate_planted, skate_raw) = (skate(a_id.clone()).await, skate(raw.clone()).await);
-    assert!(skate_planted <= skate_raw, "planted {skate_planted} vs raw {skate_raw}");
-    eprintln!("plant_feet: skate ratio {skate_raw:.3} → {skate_planted:.3}, body moved up to {moved:.3} m");
+    let ((ratio_planted, speed_planted), (ratio_raw, speed_raw)) = (skating(a_id.clone()).await, skating(raw.clone()).await);
+    eprintln!("plant_feet: skate ratio {ratio_raw:.3} → {ratio_planted:.3}, contact speed {speed_raw:.3} → {speed_planted:.3} m/s, body moved up to {moved:.3} m");
+    assert!(moved > 0.01, "planting moved the body");
+    assert!(speed_planted < speed_raw, "feet on the floor slide slower when planted: {speed_planted} vs {speed_raw}");
 
     // A model that cannot honour key poses says so instead of ignoring them.
     let pose = json!({"time_s": 1.0, "joints": vec![[0.0, 0.0, 0.0]; 23]});
