@@ -133,8 +133,25 @@ async fn require_bearer(State(state): State<AppState>, req: Request, next: Next)
     if constant_time_eq(given.as_bytes(), token.expose().as_bytes()) {
         next.run(req).await
     } else {
-        ApiError::Unauthorized.into_response()
+        let mut response = ApiError::Unauthorized.into_response();
+        // An unauthenticated body is not read. hyper drops a connection with unread bytes after
+        // the answer, so say so, or a keep-alive client sends its next request into it.
+        if has_body(&req) {
+            response.headers_mut().insert(header::CONNECTION, axum::http::HeaderValue::from_static("close"));
+        }
+        response
     }
+}
+
+/// Whether a request announces a body (a non-zero `Content-Length`, or chunked).
+fn has_body(req: &Request) -> bool {
+    let headers = req.headers();
+    headers.contains_key(header::TRANSFER_ENCODING)
+        || headers
+            .get(header::CONTENT_LENGTH)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.parse::<u64>().ok())
+            .is_some_and(|n| n > 0)
 }
 
 /// Compares without an early exit, so timing does not reveal how much of a token matched.

@@ -79,6 +79,8 @@ async fn a_configured_token_guards_every_v1_route() {
         expect_problem(wrong, StatusCode::UNAUTHORIZED, "unauthorized").await;
     }
     let upload = app.client.post(app.url("/v1/songs")).body("x").send().await.expect("POST");
+    // Its body is never read, so the connection is not for reuse, and the answer says so.
+    assert_eq!(upload.headers().get("connection").and_then(|v| v.to_str().ok()), Some("close"));
     expect_problem(upload, StatusCode::UNAUTHORIZED, "unauthorized").await;
     // The helper sends the right token.
     assert_eq!(app.get("/v1/models").await.status(), StatusCode::OK);
