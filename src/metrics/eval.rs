@@ -247,11 +247,9 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
                 let mut group = Vec::new();
                 for seed in args.seed..args.seed + args.seeds.max(1) {
                     let req = GenerateRequest { audio: &s.audio, seed, key_poses: &keys, seed_motion: None };
-                    let mut m = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?;
-                    if !args.no_plant_feet {
-                        // What a job serves (worker::pipeline::finish_motion); metrics stay below the worker.
-                        crate::motion::feet::plant_feet(m.positions.view_mut());
-                    }
+                    let m = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?;
+                    // The motion stage every job runs, so the scores are those of what is served.
+                    let m = crate::motion::finish(m, !args.no_plant_feet);
                     let sc = score_dance(&m, &s.beats, &keys, &reference)?;
                     group.push(scored.len());
                     scored.push((EvalDance { song: s.name.clone(), motion: format!("{id}@{seed}"), seconds: m.duration_s(), scores: sc.scores.clone() }, sc));

@@ -427,8 +427,8 @@ impl KeyposeTransformer {
 
     /// Generates `n` frames from music `[n, music_dim]` in overlapping windows of `T` frames
     /// ([`generation_windows`]), each seeded with `T′` final frames (the first with `seed`
-    /// `[T′, pose_dim]`, or the mean pose) and crossfaded into the previous window's output. Key poses `(frame, [key_dim])` (normalised) go to every window that
-    /// contains them. `on_window(done, total)` may stop the loop. Returns `[n, pose_dim]`.
+    /// `[T′, pose_dim]`, or the mean pose) and crossfaded into the previous window's output. Key
+    /// poses `(frame, [key_dim])` (normalised) go to every window that contains them. `on_window(done, total)` may stop the loop. Returns `[n, pose_dim]`.
     pub fn generate_long(&self, music: &Tensor, seed: Option<&Tensor>, keys: &[(i64, Vec<f32>)], mut on_window: impl FnMut(usize, usize) -> bool) -> Option<Tensor> {
         let c = &self.config;
         let (w, ts) = (c.window, c.seed_len);
@@ -454,10 +454,12 @@ impl KeyposeTransformer {
             let y = self.forward(&self.window_input(&music.narrow(0, s, w), &seed_rows, &local), false).squeeze_dim(0);
             if i == 0 {
                 // The given seed stays as it is; the network writes the rest of the window.
-                let keep = if seeded { ts } else { 0 };
-                if seeded {
+                let keep = if seeded {
                     out.narrow(0, 0, ts).copy_(&seed_rows);
-                }
+                    ts
+                } else {
+                    0
+                };
                 out.narrow(0, keep, w - keep).copy_(&y.narrow(0, keep, w - keep));
             } else {
                 // [s, s + T′) is this window's seed. Over [s + T′, written) the previous window

@@ -31,6 +31,16 @@ pub struct Motion {
     pub positions: Array3<f32>,
 }
 
+/// The motion stage after any model, before export: the feet planted ([`feet::plant_feet`]) unless
+/// the caller asked for the model's motion as it came. Jobs, `choreo generate` and `choreo eval`
+/// all go through it.
+pub fn finish(mut motion: Motion, plant_feet: bool) -> Motion {
+    if plant_feet {
+        feet::plant_feet(motion.positions.view_mut());
+    }
+    motion
+}
+
 impl Motion {
     /// Number of frames.
     pub fn num_frames(&self) -> usize {

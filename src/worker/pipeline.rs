@@ -63,20 +63,12 @@ impl Pipeline {
             };
             model.generate(&request, &mut Scaled { inner: progress, from: MODEL_START, to: MODEL_END })?
         };
-        let motion = finish_motion(motion, options.plant_feet);
+        let motion = crate::motion::finish(motion, options.plant_feet);
         progress.report("export", MODEL_END)?;
         let _timer = StageTimer::start("generate", "export");
         let files = render(&self.data.job_dir(job.id), &motion, &decoded, &options.key_poses, &mut |_| {})?;
         Ok(Outcome::Files(files))
     }
-}
-
-/// The motion stage after any model: feet planted unless the job asked for the raw motion.
-pub fn finish_motion(mut motion: Motion, plant_feet: bool) -> Motion {
-    if plant_feet {
-        crate::motion::feet::plant_feet(motion.positions.view_mut());
-    }
-    motion
 }
 
 impl Execute for Pipeline {

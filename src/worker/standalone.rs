@@ -90,7 +90,7 @@ pub fn generate_decoded(
 ) -> Result<Generated, WorkerError> {
     let model = registry.get(model).ok_or_else(|| WorkerError::ModelUnavailable(model.clone()))?;
     let mut clock = StageClock { current: None, done: Vec::new(), on_progress };
-    let motion = super::pipeline::finish_motion(model.generate(request, &mut clock)?, plant_feet);
+    let motion = crate::motion::finish(model.generate(request, &mut clock)?, plant_feet);
     let files = super::pipeline::render(out, &motion, request.audio, request.key_poses, &mut |stage| clock.enter(stage))?;
     Ok(Generated { motion, files: files.files.iter().map(|f| out.join(f)).collect(), stages: clock.finish() })
 }
