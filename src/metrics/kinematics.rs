@@ -182,6 +182,26 @@ pub fn key_pose_error_cm(positions: ArrayView3<'_, f32>, fps: f64, key_poses: &[
     }
 }
 
+/// Mean per-joint distance (cm) between each key pose and the motion's root-relative joints at
+/// its frame, where `root` `[T, 3]` is the root track the motion was built around.
+pub fn key_pose_error_root_cm(motion: &crate::motion::Motion, root: ndarray::ArrayView2<'_, f32>, keys: &[crate::motion::KeyPose]) -> Option<f64> {
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    for k in keys {
+        let f = (k.time_s * motion.fps).round() as usize;
+        if f >= motion.num_frames() {
+            return None;
+        }
+        for (j, p) in k.joints.iter().enumerate() {
+            let d: f64 = (0..3).map(|a| (f64::from(motion.positions[[f, j, a]] - root[[f, a]]) - p[a]).powi(2)).sum();
+            sum += d.sqrt();
+            count += 1;
+        }
+    }
+    (count > 0).then(|| 100.0 * sum / count as f64)
+}
+
+
 /// Start frames of windows of `len` frames taken every `stride` frames; one window starting at 0
 /// covering everything when the motion is shorter than `len` (but at least 2 frames).
 pub fn window_starts(frames: usize, len: usize, stride: usize) -> Vec<usize> {

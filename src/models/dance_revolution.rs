@@ -75,6 +75,9 @@ impl Config {
     }
 }
 
+/// The last song frame a served song can reach: 15 minutes at 25 fps (the upload limit's length).
+pub const MAX_POSITION: i64 = 15 * 60 * 25;
+
 /// Sinusoidal position encoding `[n, d]` starting at position `start`.
 pub fn sinusoid(start: i64, n: i64, d: i64, device: Device) -> Tensor {
     let mut data = vec![0f32; (n * d) as usize];
@@ -327,10 +330,14 @@ impl DanceRevolution {
     /// `music` `[b, t, music_dim]`, `poses` `[b, t + 1, pose]`: frame 0 is the pose before the
     /// window and is only ever an input. Returns predictions for frames 1..=t. Inputs follow the
     /// pattern: `p` ground-truth frames, then `q` of the model's own previous outputs, repeated.
-    /// With `q = 0` the whole window is teacher-forced in one LSTM call.
-    pub fn forward_curriculum(&self, music: &Tensor, poses: &Tensor, p: i64, q: i64, seed: u64, train: bool) -> Tensor {
+    /// With `q = 0` the whole window is teacher-forced in one LSTM call. `start` is the song frame
+    /// the window begins at, for the encoder's position encoding: training draws it over every
+    /// position a served song can reach ([`MAX_POSITION`]), so training and serving see the same
+    /// encodings.
+    #[allow(clippy::too_many_arguments)]
+    pub fn forward_curriculum(&self, music: &Tensor, poses: &Tensor, start: i64, p: i64, q: i64, seed: u64, train: bool) -> Tensor {
         let (b, t, _) = music.size3().expect("music is [b, t, music_dim]");
-        let z = self.encoder.forward(music, 0, train);
+        let z = self.encoder.forward(music, start, train);
         let mut state = self.decoder.initial_state(b, seed, music.device());
         let mut outputs: Vec<Tensor> = Vec::new();
         let mut i = 0;
@@ -565,11 +572,11 @@ mod tests {
         let (_vs, m) = model(3);
         let x = Tensor::randn([2, 25, 6], (Kind::Float, Device::Cpu));
         let y = Tensor::randn([2, 26, 5], (Kind::Float, Device::Cpu));
-        let a = m.forward_curriculum(&x, &y, 10, 0, 1, false);
-        let b = m.forward_curriculum(&x, &y, 25, 0, 1, false);
+        let a = m.forward_curriculum(&x, &y, 0, 10, 0, 1, false);
+        let b = m.forward_curriculum(&x, &y, 0, 25, 0, 1, false);
         assert_eq!(a.size(), vec![2, 25, 5]);
         assert!((a - b).abs().max().double_value(&[]) < 1e-5);
-        let c = m.forward_curriculum(&x, &y, 10, 5, 1, false);
+        let c = m.forward_curriculum(&x, &y, 0, 10, 5, 1, false);
         assert_eq!(c.size(), vec![2, 25, 5]);
     }
 
@@ -579,7 +586,7 @@ mod tests {
         let mut opt = nn::Adam::default().build(&vs, 3e-3).unwrap();
         let x = Tensor::randn([4, 20, 6], (Kind::Float, Device::Cpu));
         let y = Tensor::randn([4, 21, 5], (Kind::Float, Device::Cpu)).cumsum(1, Kind::Float) * 0.1;
-        let loss = |m: &DanceRevolution| (m.forward_curriculum(&x, &y, 10, 2, 9, true) - y.narrow(1, 1, 20)).abs().mean(Kind::Float);
+        let loss = |m: &DanceRevolution| (m.forward_curriculum(&x, &y, 0, 10, 2, 9, true) - y.narrow(1, 1, 20)).abs().mean(Kind::Float);
         let first = loss(&m).double_value(&[]);
         for _ in 0..40 {
             opt.backward_step(&loss(&m));

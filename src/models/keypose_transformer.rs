@@ -16,21 +16,27 @@
 //!   [`loss_weights`].
 //!
 //! Pose representation: the motion module's 73-d features (23 root-relative joint positions in
-//! the facing frame, root velocity, height, yaw velocity), not the paper's 6-D rotations; the
-//! model card says why. Whole songs are generated in overlapping windows, each seeded with the
-//! tail of the previous one ([`KeyposeTransformer::generate_long`]); the result is then pulled
-//! exactly through every key pose by a local C¹ blend of the residual ([`pass_through_keys`]).
-use std::path::Path;
+//! the facing frame, root velocity, yaw velocity), not the paper's 6-D rotations (the model card
+//! says why), with the root height replaced by the lowest foot's clearance above the floor
+//! ([`crate::motion::repr::height_to_clearance`]), so the height follows from the legs. Whole
+//! songs are generated in overlapping windows, each seeded with the tail of the previous one
+//! ([`KeyposeTransformer::generate_long`]).
+//!
+//! This file holds the network. [`keys`] maps key poses into pose space and pulls the result
+//! through them; [`scaffold`] draws the seed motion and the scaffold of real poses that make the
+//! seed matter; [`served`] loads a trained folder and serves it.
+pub mod keys;
+pub mod scaffold;
+pub mod served;
 
-use ndarray::{Array2, ArrayView2};
+pub use keys::{local_keys, pass_through_keys, to_local, LocalKey};
+pub use served::{generate_features, Generation, ModelFile, Served, TrainingRecord, ID, MODEL_FILE, WEIGHTS_FILE};
+
 use serde::{Deserialize, Serialize};
 use tch::nn;
 use tch::{Device, Kind, Tensor};
 
-use super::{read_model_file, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
-use crate::motion::dataset::NormStats;
-use crate::motion::repr::{self, RootStart, POSE_DIM, YAW_VEL};
-use crate::motion::{KeyPose, Motion, NUM_JOINTS};
+use crate::motion::repr::{self, POSE_DIM};
 
 /// Hyper-parameters, with the paper's symbols.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -486,300 +492,6 @@ impl KeyposeTransformer {
     }
 }
 
-/// Cubic Hermite fall-off `(1 − u)²(1 + 2u)` on `[0, 1)`, 0 beyond: C¹, 1 at 0, 0 at 1.
-fn falloff(u: f64) -> f64 {
-    if u >= 1.0 {
-        0.0
-    } else {
-        (1.0 - u) * (1.0 - u) * (1.0 + 2.0 * u)
-    }
-}
-
-/// Adds to each column of `x` `[n, c]` a smooth correction that makes row `t_i` equal `target_i`
-/// exactly. Each key's residual fades out over `radius` frames, never reaching a neighbouring key
-/// (the radius shrinks to the gap), so every key frame gets exactly its own residual.
-pub fn pass_through_keys(x: &mut Array2<f32>, cols: std::ops::Range<usize>, keys: &[(usize, Vec<f32>)], radius: f64) {
-    let mut sorted: Vec<&(usize, Vec<f32>)> = keys.iter().collect();
-    sorted.sort_by_key(|k| k.0);
-    let n = x.nrows();
-    let residuals: Vec<Vec<f32>> = sorted.iter().map(|(f, target)| cols.clone().zip(target).map(|(c, v)| v - x[[*f, c]]).collect()).collect();
-    for (i, (f, _)) in sorted.iter().enumerate() {
-        let left = if i > 0 { (f - sorted[i - 1].0) as f64 } else { radius }.min(radius).max(1.0);
-        let right = if i + 1 < sorted.len() { (sorted[i + 1].0 - f) as f64 } else { radius }.min(radius).max(1.0);
-        let lo = f.saturating_sub(left.ceil() as usize);
-        let hi = (f + right.ceil() as usize).min(n - 1);
-        for t in lo..=hi {
-            let u = if t <= *f { (f - t) as f64 / left } else { (t - f) as f64 / right };
-            let w = falloff(u) as f32;
-            if w == 0.0 {
-                continue;
-            }
-            for (k, c) in cols.clone().enumerate() {
-                x[[t, c]] += w * residuals[i][k];
-            }
-        }
-    }
-}
-
-/// Turns the integrated yaw so that frame `t_i` faces `yaw_i` (radians), blending the
-/// correction like [`pass_through_keys`]; returns the start yaw to integrate from.
-fn pass_through_yaws(features: &mut Array2<f32>, start_yaw: f32, keys: &[(usize, f32)], radius: f64) -> f32 {
-    let n = features.nrows();
-    // Integrated (unwrapped) yaw per frame.
-    let mut yaw = Array2::<f32>::zeros((n, 1));
-    let mut acc = start_yaw;
-    for t in 0..n {
-        if t > 0 {
-            acc += features[[t, YAW_VEL]];
-        }
-        yaw[[t, 0]] = acc;
-    }
-    let targets: Vec<(usize, Vec<f32>)> = keys
-        .iter()
-        .map(|&(f, k)| {
-            let d = (k - yaw[[f, 0]]).rem_euclid(std::f32::consts::TAU);
-            let d = if d > std::f32::consts::PI { d - std::f32::consts::TAU } else { d };
-            (f, vec![yaw[[f, 0]] + d])
-        })
-        .collect();
-    pass_through_keys(&mut yaw, 0..1, &targets, radius);
-    for t in 1..n {
-        features[[t, YAW_VEL]] = yaw[[t, 0]] - yaw[[t - 1, 0]];
-    }
-    if n > 0 {
-        yaw[[0, 0]]
-    } else {
-        start_yaw
-    }
-}
-
-/// A key pose mapped into pose space: its frame, its 69 local coordinates (facing frame,
-/// metres) and its facing yaw.
-#[derive(Clone, Debug)]
-pub struct LocalKey {
-    pub frame: usize,
-    pub local: Vec<f32>,
-    pub yaw: f32,
-}
-
-/// Checks key poses against a song of `n` frames at `fps` and maps them into pose space.
-/// Errors (422 at the API): wrong joint count, non-finite values, a time outside the song, two
-/// keys on the same frame, more keys than frames.
-pub fn local_keys(keys: &[KeyPose], n: usize, fps: f64) -> Result<Vec<LocalKey>, ModelError> {
-    if keys.len() > n {
-        return Err(ModelError::Invalid(format!("{} key poses for a song of {n} frames", keys.len())));
-    }
-    let mut out: Vec<LocalKey> = Vec::with_capacity(keys.len());
-    for (i, k) in keys.iter().enumerate() {
-        if k.joints.len() != NUM_JOINTS {
-            return Err(ModelError::Invalid(format!("key pose {i}: {} joints, expected {NUM_JOINTS}", k.joints.len())));
-        }
-        if !k.time_s.is_finite() || k.joints.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(ModelError::Invalid(format!("key pose {i}: not a finite number")));
-        }
-        let f = (k.time_s * fps).round();
-        if k.time_s < 0.0 || f < 0.0 || f >= n as f64 {
-            return Err(ModelError::Invalid(format!("key pose {i}: time {} s is outside the song (0 to {:.2} s)", k.time_s, n as f64 / fps)));
-        }
-        let frame = f as usize;
-        if out.iter().any(|o| o.frame == frame) {
-            return Err(ModelError::Invalid(format!("key pose {i}: closer than one frame to another key pose (frame {frame})")));
-        }
-        let mut joints = Array2::<f32>::zeros((NUM_JOINTS, 3));
-        for (j, p) in k.joints.iter().enumerate() {
-            for a in 0..3 {
-                joints[[j, a]] = p[a] as f32;
-            }
-        }
-        let (local, yaw) = to_local(joints.view());
-        out.push(LocalKey { frame, local, yaw });
-    }
-    Ok(out)
-}
-
-/// Root-relative joints `[J, 3]` → facing-frame coordinates (69) and the facing yaw, exactly as
-/// [`repr::to_features`] computes columns `0..69`.
-pub fn to_local(joints: ArrayView2<'_, f32>) -> (Vec<f32>, f32) {
-    let yaw = repr::facing_yaw(joints);
-    let (s, c) = (-f64::from(yaw)).sin_cos();
-    let mut local = Vec::with_capacity(POSE_DIM);
-    for j in 0..NUM_JOINTS {
-        let (x, y, z) = (f64::from(joints[[j, 0]]), f64::from(joints[[j, 1]]), f64::from(joints[[j, 2]]));
-        local.push((c * x + s * z) as f32);
-        local.push(y as f32);
-        local.push((-s * x + c * z) as f32);
-    }
-    (local, yaw)
-}
-
-/// Mean per-joint distance (cm) between each key pose and the motion's root-relative joints at
-/// its frame, where `root` `[T, 3]` is the root track the motion was built around.
-pub fn key_pose_error_cm(motion: &Motion, root: ArrayView2<'_, f32>, keys: &[KeyPose]) -> Option<f64> {
-    let mut sum = 0.0;
-    let mut count = 0usize;
-    for k in keys {
-        let f = (k.time_s * motion.fps).round() as usize;
-        if f >= motion.num_frames() {
-            return None;
-        }
-        for (j, p) in k.joints.iter().enumerate() {
-            let d: f64 = (0..3).map(|a| (f64::from(motion.positions[[f, j, a]] - root[[f, a]]) - p[a]).powi(2)).sum();
-            sum += d.sqrt();
-            count += 1;
-        }
-    }
-    (count > 0).then(|| 100.0 * sum / count as f64)
-}
-
-/// The model folder's description file.
-pub const MODEL_FILE: &str = "model.json";
-/// The model folder's weights (safetensors).
-pub const WEIGHTS_FILE: &str = "weights.safetensors";
-/// The API id.
-pub const ID: &str = "keypose-transformer";
-/// Frames over which a key pose's residual is blended in after generation (0.5 s at 25 fps).
-pub const BLEND_RADIUS: f64 = 12.0;
-/// Frames over which a key pose's facing (yaw) residual is blended in (2 s at 25 fps): the
-/// network's integrated facing can be far from a key's, and turning the body that far within
-/// half a second would be a spin that no dancer made.
-pub const YAW_BLEND_RADIUS: f64 = 50.0;
-
-/// How the committed weights were trained, stored beside them.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct TrainingRecord {
-    pub epochs: usize,
-    pub steps: usize,
-    pub lr: f64,
-    pub batch: usize,
-    pub max_keys: usize,
-    pub seed: u64,
-    pub final_train_loss: f64,
-    pub minutes: f64,
-}
-
-/// `model.json`: the configuration and the train-split normalisation the weights expect.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ModelFile {
-    pub config: Config,
-    pub music_norm: NormStats,
-    pub pose_norm: NormStats,
-    pub fps: f64,
-    pub training: TrainingRecord,
-}
-
-/// `[r, c]` ndarray → tensor.
-pub fn to_tensor(m: &Array2<f32>) -> Tensor {
-    let (r, c) = m.dim();
-    Tensor::from_slice(m.as_standard_layout().as_slice().expect("standard layout")).view([r as i64, c as i64])
-}
-
-/// `[r, c]` tensor → ndarray.
-pub fn to_array(t: &Tensor) -> Result<Array2<f32>, ModelError> {
-    let (r, c) = t.size2()?;
-    let data: Vec<f32> = Vec::<f32>::try_from(t.contiguous().view([-1]))?;
-    Array2::from_shape_vec((r as usize, c as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))
-}
-
-/// Normalises a key's 69 local coordinates with the pose statistics' first 69 columns.
-pub fn normalize_key(norm: &NormStats, local: &[f32]) -> Vec<f32> {
-    local.iter().enumerate().map(|(i, v)| (v - norm.mean[i]) / norm.std[i]).collect()
-}
-
-/// Generation on normalised inputs plus the exact key-pose pass: returns denormalised features
-/// `[n, 73]` and the root start. Shared by serving and the model card's evaluation.
-pub fn generate_features(
-    model: &KeyposeTransformer,
-    file: &ModelFile,
-    music: &Tensor,
-    seed: Option<(&Array2<f32>, RootStart)>,
-    keys: &[LocalKey],
-    mut on_window: impl FnMut(usize, usize) -> bool,
-) -> Result<Option<(Array2<f32>, Array2<f32>, RootStart)>, ModelError> {
-    let ts = file.config.seed_len as usize;
-    let seed_norm = match seed {
-        Some((f, _)) => {
-            // The last T′ frames, front-padded by repeating the first when the seed is shorter.
-            let m = f.nrows();
-            let mut rows = Array2::<f32>::zeros((ts, f.ncols()));
-            for i in 0..ts {
-                let src = (m + i).saturating_sub(ts);
-                rows.row_mut(i).assign(&f.row(src.min(m.saturating_sub(1))));
-            }
-            Some(to_tensor(&file.pose_norm.normalize(&rows)?))
-        }
-        None => None,
-    };
-    let nkeys: Vec<(i64, Vec<f32>)> = keys.iter().map(|k| (k.frame as i64, normalize_key(&file.pose_norm, &k.local))).collect();
-    let y = tch::no_grad(|| model.generate_long(music, seed_norm.as_ref(), &nkeys, &mut on_window));
-    let Some(y) = y else { return Ok(None) };
-    let raw = file.pose_norm.denormalize(&to_array(&y)?)?;
-    let mut out = raw.clone();
-    let targets: Vec<(usize, Vec<f32>)> = keys.iter().map(|k| (k.frame, k.local.clone())).collect();
-    pass_through_keys(&mut out, 0..POSE_DIM, &targets, BLEND_RADIUS);
-    let mut start = seed.map(|(_, s)| s).unwrap_or_default();
-    let yaws: Vec<(usize, f32)> = keys.iter().map(|k| (k.frame, k.yaw)).collect();
-    if !yaws.is_empty() {
-        start.yaw = pass_through_yaws(&mut out, start.yaw, &yaws, YAW_BLEND_RADIUS);
-    }
-    Ok(Some((raw, out, start)))
-}
-
-/// A trained key-pose transformer, ready to serve.
-pub struct Served {
-    file: ModelFile,
-    pool: InstancePool<KeyposeTransformer>,
-}
-
-impl Served {
-    /// Loads `dir/model.json` and `dir/weights.safetensors`.
-    pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let file: ModelFile = read_model_file(dir, ID, MODEL_FILE)?;
-        let config = file.config.clone();
-        let pool = InstancePool::new(dir.join(WEIGHTS_FILE), move |p| KeyposeTransformer::new(p, config.clone()))?;
-        Ok(Self { file, pool })
-    }
-
-    /// The model's description file.
-    pub fn file(&self) -> &ModelFile {
-        &self.file
-    }
-
-}
-
-impl DanceModel for Served {
-    fn info(&self) -> ModelInfo {
-        ModelInfo {
-            id: ModelId(ID.into()),
-            paper: "Controllable music-driven dance generation with key-pose constraints (key-pose controllable cross-modal transformer)".into(),
-            capabilities: Capabilities { key_poses: true, seed_motion: true, style: false },
-        }
-    }
-
-    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Motion, ModelError> {
-        let fps = self.file.fps;
-        let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
-        let keys = local_keys(req.key_poses, n, fps)?;
-        progress.report("features", 0.0)?;
-        let feats = crate::audio::features::keypose(req.audio, fps, 0.0, n)?;
-        let music = to_tensor(&self.file.music_norm.normalize(&feats)?);
-        progress.report("features", 1.0)?;
-        let seed = match req.seed_motion {
-            Some(m) if m.num_frames() > 0 => {
-                let root = crate::motion::skeleton::body_centre_track(m.positions.view());
-                Some(repr::to_features(m.positions.view(), root.view())?)
-            }
-            _ => None,
-        };
-        let out = self.pool.with(|model| {
-            generate_features(model, &self.file, &music, seed.as_ref().map(|(f, s)| (f, *s)), &keys, |done, total| {
-                progress.report("decode", done as f32 / total as f32).is_ok()
-            })
-        })?;
-        let Some((_, features, start)) = out? else { return Err(Cancelled.into()) };
-        let (motion, _root) = repr::from_features(features.view(), start, fps)?;
-        Ok(motion)
-    }
-}
 
 #[cfg(test)]
 mod tests {
@@ -856,54 +568,6 @@ mod tests {
         assert!((w[3] - 3.0).abs() < 1e-6);
         assert!((w[0] - 1.0).abs() < 0.03);
         assert_eq!(loss_weights(4, &[], 5.0, 1.0), vec![1.0; 4]);
-    }
-
-    #[test]
-    fn pass_through_hits_every_key_and_leaves_far_frames() {
-        let mut x = Array2::<f32>::zeros((60, 3));
-        let keys = vec![(10usize, vec![1.0, 2.0, 3.0]), (12, vec![-1.0, 0.0, 0.5]), (40, vec![0.3, 0.3, 0.3])];
-        pass_through_keys(&mut x, 0..3, &keys, 8.0);
-        for (f, t) in &keys {
-            for c in 0..3 {
-                assert!((x[[*f, c]] - t[c]).abs() < 1e-6);
-            }
-        }
-        assert_eq!(x.row(25).to_vec(), vec![0.0; 3]);
-        assert_eq!(x.row(59).to_vec(), vec![0.0; 3]);
-    }
-
-    #[test]
-    fn key_pose_honoured_through_features() {
-        // A real-shaped pose through to_local → pass_through → from_features comes back within 1 mm.
-        let n = 40;
-        let features = Array2::<f32>::zeros((n, repr::FEATURE_DIM));
-        let mut joints = Vec::new();
-        for j in 0..NUM_JOINTS {
-            joints.push([0.1 * (j as f64 % 5.0) - 0.2, 0.05 * j as f64 - 0.5, 0.03 * (j as f64 % 3.0)]);
-        }
-        let key = KeyPose { time_s: 20.0 / 25.0, joints };
-        let lk = local_keys(std::slice::from_ref(&key), n, 25.0).unwrap();
-        let mut out = features.clone();
-        pass_through_keys(&mut out, 0..POSE_DIM, &[(lk[0].frame, lk[0].local.clone())], BLEND_RADIUS);
-        let yaw0 = pass_through_yaws(&mut out, 0.0, &[(lk[0].frame, lk[0].yaw)], BLEND_RADIUS);
-        let (motion, root) = repr::from_features(out.view(), RootStart { yaw: yaw0, ..Default::default() }, 25.0).unwrap();
-        let err = key_pose_error_cm(&motion, root.view(), &[key]).unwrap();
-        assert!(err < 0.1, "key pose error {err} cm");
-    }
-
-    #[test]
-    fn bad_key_poses_are_rejected() {
-        let ok = KeyPose { time_s: 1.0, joints: vec![[0.0; 3]; NUM_JOINTS] };
-        assert!(local_keys(std::slice::from_ref(&ok), 50, 25.0).is_ok());
-        let outside = KeyPose { time_s: 3.0, ..ok.clone() };
-        assert!(local_keys(&[outside], 50, 25.0).is_err());
-        let nan = KeyPose { joints: vec![[f64::NAN, 0.0, 0.0]; NUM_JOINTS], ..ok.clone() };
-        assert!(local_keys(&[nan], 50, 25.0).is_err());
-        let short = KeyPose { joints: vec![[0.0; 3]; 5], ..ok.clone() };
-        assert!(local_keys(&[short], 50, 25.0).is_err());
-        let near = KeyPose { time_s: 1.01, ..ok.clone() };
-        assert!(local_keys(&[ok.clone(), near], 50, 25.0).is_err());
-        assert!(local_keys(&[ok.clone(), ok.clone()], 1, 25.0).is_err());
     }
 
     #[test]

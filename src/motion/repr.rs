@@ -226,6 +226,39 @@ pub(crate) fn percentile(values: &[f32], p: f64) -> f32 {
     v[lo] * (1.0 - w) + v[hi] * w
 }
 
+/// Height of the lowest foot point ([`FOOT_POINTS`]) relative to the root, from one feature row's
+/// local pose (metres; negative: the feet are below the body centre).
+pub fn lowest_foot_local_y(row: ndarray::ArrayView1<'_, f32>) -> f32 {
+    FOOT_POINTS.iter().map(|&j| row[3 * j + 1]).fold(f32::INFINITY, f32::min)
+}
+
+/// Replaces the root height (column [`ROOT_Y`]) by the lowest foot's clearance above `floor`
+/// (metres), in place. A model that predicts clearance instead of an absolute height cannot put the
+/// dancer in the air or under the floor by getting the height wrong while the legs are right: the
+/// height follows from the legs ([`clearance_to_height`]).
+pub fn height_to_clearance(features: &mut Array2<f32>, floor: f32) {
+    for mut row in features.rows_mut() {
+        let low = lowest_foot_local_y(row.view());
+        row[ROOT_Y] += low - floor;
+    }
+}
+
+/// Inverse of [`height_to_clearance`] with the floor at `y = 0`; a clearance below 0 (a foot under
+/// the floor) is raised to 0.
+pub fn clearance_to_height(features: &mut Array2<f32>) {
+    for mut row in features.rows_mut() {
+        let low = lowest_foot_local_y(row.view());
+        row[ROOT_Y] = row[ROOT_Y].max(0.0) - low;
+    }
+}
+
+/// The floor of a dance in feature form: the 1st percentile of the lowest foot's world height
+/// (the floor foot planting and the metrics use, `motion::feet::FLOOR_PERCENTILE`).
+pub fn floor_of_features(features: ndarray::ArrayView2<'_, f32>) -> f32 {
+    let lows: Vec<f32> = features.rows().into_iter().map(|r| r[ROOT_Y] + lowest_foot_local_y(r)).collect();
+    percentile(&lows, super::feet::FLOOR_PERCENTILE)
+}
+
 /// End-effector positions `[T, 5, 3]`: right wrist, left wrist, right toe, left toe, and the
 /// head (midpoint of the two head markers).
 pub fn end_effectors(positions: ArrayView3<'_, f32>) -> Result<Array3<f32>, MotionError> {
@@ -301,6 +334,28 @@ mod tests {
             .mapv(f32::abs)
             .fold(0.0f32, |a, &b| a.max(b));
         assert!(d < 1e-5);
+    }
+
+    #[test]
+    fn clearance_round_trips_and_grounds() {
+        let (pos, root) = walker(20);
+        let (f, _) = to_features(pos.view(), root.view()).expect("features");
+        let floor = floor_of_features(f.view());
+        let mut g = f.clone();
+        height_to_clearance(&mut g, floor);
+        // The walker's lowest foot is at the same height on every frame: clearance 0 there.
+        assert!(g.column(ROOT_Y).iter().all(|v| v.abs() < 1e-5));
+        clearance_to_height(&mut g);
+        // With the floor moved to 0, the lowest foot now stands exactly on it.
+        for t in 0..20 {
+            assert!((g[[t, ROOT_Y]] + lowest_foot_local_y(g.row(t))).abs() < 1e-5);
+            assert!((g[[t, ROOT_Y]] - (f[[t, ROOT_Y]] - floor)).abs() < 1e-5);
+        }
+        // A foot predicted under the floor is raised onto it.
+        let mut h = g.clone();
+        h[[3, ROOT_Y]] = -0.3;
+        clearance_to_height(&mut h);
+        assert!((h[[3, ROOT_Y]] + lowest_foot_local_y(h.row(3))).abs() < 1e-6);
     }
 
     #[test]

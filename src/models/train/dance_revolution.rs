@@ -45,6 +45,16 @@ pub struct Options {
     /// libtorch intra-op threads.
     #[arg(long, default_value_t = 2)]
     pub threads: i32,
+    /// Start from these weights (same configuration), e.g. to continue a committed run; the log
+    /// is then appended to, not replaced.
+    #[arg(long)]
+    pub init: Option<PathBuf>,
+    /// The curriculum epoch the first epoch of this run counts as (continuing a run).
+    #[arg(long, default_value_t = 0)]
+    pub first_epoch: usize,
+    /// Train the encoder at position offsets drawn over a whole 15-minute song (default), or at 0 only.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub random_positions: bool,
     /// Stop after this many minutes even if epochs remain (the weights are saved either way).
     #[arg(long)]
     pub max_minutes: Option<f64>,
@@ -73,17 +83,23 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
 
     let base = if opts.tiny { Config::tiny(0, 0) } else { Config::cpu() };
     let config = Config { music_dim: music_norm.dim() as i64, pose_dim: pose_norm.dim() as i64, ..base };
-    let vs = nn::VarStore::new(Device::Cpu);
+    let mut vs = nn::VarStore::new(Device::Cpu);
     let model = DanceRevolution::new(&vs.root(), config.clone());
+    if let Some(init) = &opts.init {
+        vs.load(init)?;
+        tracing::info!(from = %init.display(), "initialised from earlier weights");
+    }
     let mut opt = nn::Adam::default().build(&vs, opts.lr)?;
     std::fs::create_dir_all(&opts.out).map_err(|source| TrainError::Io { path: opts.out.clone(), source })?;
     let log_path = opts.out.join("train_log.jsonl");
-    let _ = std::fs::remove_file(&log_path);
+    if opts.init.is_none() {
+        let _ = std::fs::remove_file(&log_path);
+    }
 
     // Windows hold window + 1 frames: frame 0 is only the decoder's first input.
     let len = opts.window + 1;
     let mut logs = Vec::new();
-    for epoch in 0..opts.epochs {
+    for epoch in opts.first_epoch..opts.first_epoch + opts.epochs {
         let t0 = Instant::now();
         let q = curriculum_q(opts.lambda, epoch).min(opts.q_max);
         let starts = window_starts(&train, len, opts.stride, opts.seed + epoch as u64);
@@ -93,7 +109,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         let mut total = 0.0;
         let mut batches = 0;
         for (bi, chunk) in starts.chunks(opts.batch).enumerate() {
-            let loss = window_loss(&model, &train, chunk, len, opts.p, q, opts.seed ^ ((epoch * 100_003 + bi) as u64), true);
+            let loss = window_loss(&model, &train, chunk, len, opts.p, q, opts.seed ^ ((epoch * 100_003 + bi) as u64), true, opts.random_positions);
             opt.backward_step_clip(&loss, 1.0);
             total += loss.double_value(&[]);
             batches += 1;
@@ -102,16 +118,16 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             let starts = window_starts(&test, len, opts.window, 0);
             let losses: Vec<f64> = starts
                 .chunks(opts.batch)
-                .map(|c| window_loss(&model, &test, c, len, opts.p, q, 7, false).double_value(&[]))
+                .map(|c| window_loss(&model, &test, c, len, opts.p, q, 7, false, opts.random_positions).double_value(&[]))
                 .collect();
             (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
         });
-        let line = EpochLog { epoch, train_loss: total / batches as f64, test_loss, note: format!("p={} q={q}", opts.p), seconds: t0.elapsed().as_secs_f64() };
+        let line = EpochLog { epoch, train_loss: total / batches as f64, test_loss, note: format!("p={} q={q} random_positions={}", opts.p, opts.random_positions), seconds: t0.elapsed().as_secs_f64() };
         tracing::info!(epoch, train_loss = line.train_loss, test_loss = ?line.test_loss, q, seconds = line.seconds, "epoch");
         append_log(&log_path, &line)?;
         logs.push(line);
         let out_of_time = opts.max_minutes.is_some_and(|m| started.elapsed().as_secs_f64() > m * 60.0);
-        if epoch % 5 == 4 || epoch + 1 == opts.epochs || out_of_time {
+        if epoch % 5 == 4 || epoch + 1 == opts.first_epoch + opts.epochs || out_of_time {
             save(&vs, &opts.out, ModelFile {
                 config: config.clone(),
                 music_norm: music_norm.clone(),
@@ -129,10 +145,13 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
 }
 
 /// Mean L1 between the curriculum forward pass and the ground truth over a batch of windows.
-fn window_loss(model: &DanceRevolution, seqs: &[Sequence], starts: &[(usize, usize)], len: usize, p: i64, q: i64, seed: u64, train: bool) -> Tensor {
+#[allow(clippy::too_many_arguments)]
+fn window_loss(model: &DanceRevolution, seqs: &[Sequence], starts: &[(usize, usize)], len: usize, p: i64, q: i64, seed: u64, train: bool, random_positions: bool) -> Tensor {
     let music = batch_tensor(seqs, starts, len, |s| &s.music, Device::Cpu).narrow(1, 1, len as i64 - 1);
     let poses = batch_tensor(seqs, starts, len, |s| &s.poses, Device::Cpu);
-    let pred = model.forward_curriculum(&music, &poses, p, q, seed, train);
+    // A position offset drawn per batch over the whole range a served song uses (issue 10 §5).
+    let start = if random_positions { (seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11) as i64 % (crate::models::dance_revolution::MAX_POSITION - len as i64).max(1) } else { 0 };
+    let pred = model.forward_curriculum(&music, &poses, start, p, q, seed, train);
     (pred - poses.narrow(1, 1, len as i64 - 1)).abs().mean(Kind::Float)
 }
 

@@ -15,9 +15,11 @@ use tch::nn::{self, OptimizerConfig};
 use tch::{Device, Kind, Tensor};
 
 use super::{append_log, batch_tensor, fit_normalizers, load_sequences, window_starts, write_atomic, EpochLog, Sequence, TrainError};
+use crate::models::keypose_transformer::scaffold::{PoseBank, POSE_BANK_FILE};
+use crate::models::keypose_transformer::served::{to_tensor, RootHeight};
 use crate::models::keypose_transformer::{
-    generate_features, local_position_embedding, loss_weights, to_local, to_tensor, Config, KeyposeTransformer, LocalKey, ModelFile,
-    TrainingRecord, WindowInput, MODEL_FILE, WEIGHTS_FILE,
+    generate_features, local_position_embedding, loss_weights, to_local, Config, KeyposeTransformer, LocalKey, ModelFile, TrainingRecord,
+    WindowInput, MODEL_FILE, WEIGHTS_FILE,
 };
 use crate::motion::dataset::Dataset;
 use crate::motion::repr::{self, POSE_DIM};
@@ -47,6 +49,18 @@ pub struct Options {
     /// `σ`: width of each key-pose term in ω(t), frames.
     #[arg(long, default_value_t = 3.0)]
     pub sigma: f64,
+    /// Weight of the L1 on frame differences (velocities) beside the pose term: the pose term alone
+    /// lets a regression average fast motion away.
+    #[arg(long, default_value_t = 5.0)]
+    pub velocity_weight: f64,
+    /// Frames between the scaffold poses the served model draws (0: none); see the scaffold module.
+    #[arg(long, default_value_t = 25)]
+    pub scaffold_spacing: usize,
+    /// Clips of the served pose bank, and their length in frames.
+    #[arg(long, default_value_t = 32)]
+    pub bank_clips: usize,
+    #[arg(long, default_value_t = 200)]
+    pub bank_frames: usize,
     /// Key poses per training window are drawn uniformly from 0..=max_keys.
     #[arg(long, default_value_t = 6)]
     pub max_keys: usize,
@@ -61,6 +75,9 @@ pub struct Options {
     /// Stop after this many minutes even if epochs remain (the weights are saved either way).
     #[arg(long)]
     pub max_minutes: Option<f64>,
+    /// Start from these weights (same configuration) instead of a random initialisation.
+    #[arg(long)]
+    pub init: Option<PathBuf>,
     /// Use the tiny test configuration (for smoke runs, never for committed weights).
     #[arg(long)]
     pub tiny: bool,
@@ -140,8 +157,11 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     let started = Instant::now();
     let ds = Dataset::open(&opts.data)?;
     let features: super::FeatureFn = crate::audio::features::keypose;
-    let train_raw = load_sequences(&ds, ds.train_ids(), features)?;
-    let test_raw = load_sequences(&ds, ds.test_ids(), features)?;
+    let mut train_raw = load_sequences(&ds, ds.train_ids(), features)?;
+    let mut test_raw = load_sequences(&ds, ds.test_ids(), features)?;
+    for seq in train_raw.iter_mut().chain(test_raw.iter_mut()) {
+        to_clearance(&mut seq.poses);
+    }
     let (music_norm, pose_norm) = fit_normalizers(&train_raw)?;
     let norm = |seqs: &[Sequence]| -> Result<Vec<Sequence>, TrainError> {
         seqs.iter()
@@ -155,6 +175,11 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     let config = Config { music_dim: music_norm.dim() as i64, pose_dim: pose_norm.dim() as i64, key_dim: POSE_DIM as i64, lambda: opts.lambda, sigma: opts.sigma, ..base };
     let vs = nn::VarStore::new(Device::Cpu);
     let model = KeyposeTransformer::new(&vs.root(), config.clone());
+    let mut vs = vs;
+    if let Some(init) = &opts.init {
+        vs.load(init)?;
+        tracing::info!(from = %init.display(), "initialised from earlier weights");
+    }
     let mut opt = nn::Adam::default().build(&vs, opts.lr)?;
     std::fs::create_dir_all(&opts.out).map_err(|source| TrainError::Io { path: opts.out.clone(), source })?;
     let log_path = opts.out.join("train_log.jsonl");
@@ -172,7 +197,21 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         seed: opts.seed,
         final_train_loss: logs.last().map(|l| l.train_loss).unwrap_or(f64::NAN),
         minutes: started.elapsed().as_secs_f64() / 60.0,
+        velocity_weight: opts.velocity_weight,
     };
+    let model_file = |training: TrainingRecord| ModelFile {
+        config: config.clone(),
+        music_norm: music_norm.clone(),
+        pose_norm: pose_norm.clone(),
+        fps: crate::motion::MOTION_FPS,
+        training,
+        root_height: RootHeight::FootClearance,
+        scaffold_spacing: opts.scaffold_spacing,
+    };
+    std::fs::create_dir_all(&opts.out).map_err(|source| TrainError::Io { path: opts.out.clone(), source })?;
+    pose_bank(&train_raw, opts.bank_clips, opts.bank_frames, opts.seed)?
+        .save(&opts.out.join(POSE_BANK_FILE))
+        .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?;
     for epoch in 0..opts.epochs {
         let t0 = Instant::now();
         let starts = window_starts(&train, len, opts.stride, opts.seed + epoch as u64);
@@ -183,7 +222,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         let (mut total, mut batches) = (0.0, 0);
         let mut out_of_time = false;
         for chunk in starts.chunks(opts.batch) {
-            let loss = window_loss(&model, &config, &train, chunk, opts.max_keys, &mut rng, true);
+            let loss = window_loss(&model, &config, &train, chunk, opts.max_keys, opts.velocity_weight, &mut rng, true);
             opt.backward_step_clip(&loss, 1.0);
             total += loss.double_value(&[]);
             batches += 1;
@@ -196,7 +235,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         let test_loss = tch::no_grad(|| {
             let mut rng = StdRng::seed_from_u64(7);
             let starts = window_starts(&test, len, len, 0);
-            let losses: Vec<f64> = starts.chunks(opts.batch).map(|c| window_loss(&model, &config, &test, c, opts.max_keys, &mut rng, false).double_value(&[])).collect();
+            let losses: Vec<f64> = starts.chunks(opts.batch).map(|c| window_loss(&model, &config, &test, c, opts.max_keys, opts.velocity_weight, &mut rng, false).double_value(&[])).collect();
             (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
         });
         let line = EpochLog { epoch, train_loss: total / batches.max(1) as f64, test_loss, note: format!("steps={steps} λ={} σ={}", opts.lambda, opts.sigma), seconds: t0.elapsed().as_secs_f64() };
@@ -204,19 +243,51 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         append_log(&log_path, &line)?;
         logs.push(line);
         if epoch % 2 == 1 || epoch + 1 == opts.epochs || out_of_time {
-            save(&vs, &opts.out, &ModelFile { config: config.clone(), music_norm: music_norm.clone(), pose_norm: pose_norm.clone(), fps: crate::motion::MOTION_FPS, training: record(epoch + 1, steps, &logs) })?;
+            save(&vs, &opts.out, &model_file(record(epoch + 1, steps, &logs)))?;
         }
         if out_of_time {
             tracing::warn!(epoch, "stopping: --max-minutes reached");
             break;
         }
     }
-    let file = ModelFile { config, music_norm, pose_norm, fps: crate::motion::MOTION_FPS, training: record(logs.len(), steps, &logs) };
+    let file = model_file(record(logs.len(), steps, &logs));
     save(&vs, &opts.out, &file)?;
     let eval = evaluate(&model, &file, &ds, &test_raw, opts.eval_keys, opts.seed)?;
     tracing::info!(?eval, "key-pose consistency on the test split");
     write_atomic(&opts.out.join("eval.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
     Ok(logs)
+}
+
+/// Replaces a dance's root heights by its lowest foot's clearance above the dance's own floor.
+fn to_clearance(poses: &mut Array2<f32>) {
+    let floor = repr::floor_of_features(poses.view());
+    repr::height_to_clearance(poses, floor);
+}
+
+/// `clips` clips of `frames` frames from the train dances (features as the model predicts them,
+/// denormalised), at seeded starts spread over the dances in proportion to their length.
+fn pose_bank(train: &[Sequence], clips: usize, frames: usize, seed: u64) -> Result<PoseBank, TrainError> {
+    let mut rng = StdRng::seed_from_u64(seed ^ 0xBA_4C);
+    let long: Vec<&Sequence> = train.iter().filter(|s| s.poses.nrows() >= frames).collect();
+    let total: usize = long.iter().map(|s| s.poses.nrows() - frames + 1).sum();
+    if long.is_empty() || clips == 0 {
+        return Err(TrainError::NoWindows(frames));
+    }
+    let width = long[0].poses.ncols();
+    let mut bank = ndarray::Array3::<f32>::zeros((clips, frames, width));
+    for c in 0..clips {
+        // Stratified over the concatenated start positions, jittered within each stratum.
+        let mut at = (c * total) / clips + rng.gen_range(0..(total / clips).max(1));
+        for seq in &long {
+            let n = seq.poses.nrows() - frames + 1;
+            if at < n {
+                bank.slice_mut(s![c, .., ..]).assign(&seq.poses.slice(s![at..at + frames, ..]));
+                break;
+            }
+            at -= n;
+        }
+    }
+    PoseBank::new(bank).map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))
 }
 
 /// Draws 0..=max_keys distinct key frames in `[T′, T)` (the seed already fixes the first frames).
@@ -231,7 +302,8 @@ fn sample_keys(rng: &mut StdRng, c: &Config, max_keys: usize) -> Vec<i64> {
 
 /// Weighted L1 between one batch's predictions and the ground truth, with ω(t) from the sampled
 /// key frames (§3.4).
-fn window_loss(model: &KeyposeTransformer, c: &Config, seqs: &[Sequence], starts: &[(usize, usize)], max_keys: usize, rng: &mut StdRng, train: bool) -> Tensor {
+#[allow(clippy::too_many_arguments)]
+fn window_loss(model: &KeyposeTransformer, c: &Config, seqs: &[Sequence], starts: &[(usize, usize)], max_keys: usize, velocity_weight: f64, rng: &mut StdRng, train: bool) -> Tensor {
     let len = c.window as usize;
     let music = batch_tensor(seqs, starts, len, |s| &s.music, Device::Cpu);
     let poses = batch_tensor(seqs, starts, len, |s| &s.poses, Device::Cpu); // [b, T, pose]
@@ -257,8 +329,14 @@ fn window_loss(model: &KeyposeTransformer, c: &Config, seqs: &[Sequence], starts
         local_pos: Tensor::from_slice(&local).view([b, t, d]),
     };
     let w = Tensor::from_slice(&weights).view([b, t, 1]);
-    let err = (model.forward(&x, train) - &poses).abs() * &w;
-    err.sum(Kind::Float) / (w.sum(Kind::Float) * c.pose_dim as f64)
+    let pred = model.forward(&x, train);
+    let err = (&pred - &poses).abs() * &w;
+    let pose_term = err.sum(Kind::Float) / (w.sum(Kind::Float) * c.pose_dim as f64);
+    // Frame differences after the seed: [b, T − T′ − 1, pose].
+    let (from, len) = (c.seed_len, c.window - c.seed_len);
+    let (p, y) = (pred.narrow(1, from - 1, len + 1), poses.narrow(1, from - 1, len + 1));
+    let vel = (p.diff(1, 1, None::<Tensor>, None::<Tensor>) - y.diff(1, 1, None::<Tensor>, None::<Tensor>)).abs().mean(Kind::Float);
+    pose_term + vel * velocity_weight
 }
 
 /// Key-pose consistency on whole test dances through the served path: each dance is seeded with
@@ -295,20 +373,22 @@ pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test
             })
             .collect();
         let music = to_tensor(&file.music_norm.normalize(&seq.music)?);
-        let (seed_feats, start) = repr::to_features(d.motion.positions.view(), d.center.view())?;
+        let (mut seed_feats, start) = repr::to_features(d.motion.positions.view(), d.center.view())?;
+        to_clearance(&mut seed_feats);
         let seed_rows = seed_feats.slice(s![0..ts, ..]).to_owned();
         let gen = |keys: &[LocalKey]| {
-            generate_features(model, file, &music, Some((&seed_rows, start)), keys, |_, _| true)
+            generate_features(model, file, &music, Some((&seed_rows, start)), keys, &[], |_, _| true)
                 .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?
                 .ok_or(TrainError::NoWindows(0))
         };
-        let (raw, out, start2) = gen(&local)?;
-        let (_, free, _) = gen(&[])?;
+        let g = gen(&local)?;
+        let (raw, out, start2) = (g.network, g.served, g.start);
+        let free = gen(&[])?.served;
         for (k, lk) in frames.iter().zip(&local) {
             net += joint_error_cm(&raw.row(*k).to_vec(), &lk.local);
         }
         let (motion, root) = repr::from_features(out.view(), start2, file.fps)?;
-        served += crate::models::keypose_transformer::key_pose_error_cm(&motion, root.view(), &key_poses).unwrap_or(f64::NAN) * keys as f64;
+        served += crate::metrics::kinematics::key_pose_error_root_cm(&motion, root.view(), &key_poses).unwrap_or(f64::NAN) * keys as f64;
         let fps = file.fps;
         let smooth = crate::metrics::kinematics::smoothness_cv;
         let (net_motion, _) = repr::from_features(raw.view(), start2, fps)?;

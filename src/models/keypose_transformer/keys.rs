@@ -1,0 +1,199 @@
+//! Key poses in pose space: a user's key pose (root-relative joints in world axes) becomes the
+//! 69 local coordinates the network takes plus a facing yaw ([`local_keys`], [`to_local`]), and
+//! the generated features are pulled exactly through every key by a smooth local correction
+//! ([`pass_through_keys`], [`pass_through_yaws`]) that spreads over at least half a second.
+use ndarray::{Array2, ArrayView2};
+
+use crate::models::ModelError;
+use crate::motion::dataset::NormStats;
+use crate::motion::repr::{self, POSE_DIM, YAW_VEL};
+use crate::motion::{KeyPose, NUM_JOINTS};
+
+/// Quintic fall-off `1 − (10u³ − 15u⁴ + 6u⁵)` on `[0, 1)`, 0 beyond: 1 at 0, 0 at 1, with first
+/// and second derivatives 0 at both ends, so a correction adds no jump in velocity *or*
+/// acceleration (a cubic's acceleration steps where it starts, which reads as a pop).
+fn falloff(u: f64) -> f64 {
+    if u >= 1.0 {
+        0.0
+    } else {
+        1.0 - u * u * u * (10.0 - 15.0 * u + 6.0 * u * u)
+    }
+}
+
+/// Adds to each column of `x` `[n, c]` a smooth correction that makes row `t_i` equal `target_i`
+/// exactly. Each key's residual fades out over `radius` frames, never reaching a neighbouring key
+/// (the radius shrinks to the gap), so every key frame gets exactly its own residual.
+pub fn pass_through_keys(x: &mut Array2<f32>, cols: std::ops::Range<usize>, keys: &[(usize, Vec<f32>)], radius: f64) {
+    let mut sorted: Vec<&(usize, Vec<f32>)> = keys.iter().collect();
+    sorted.sort_by_key(|k| k.0);
+    let n = x.nrows();
+    let residuals: Vec<Vec<f32>> = sorted.iter().map(|(f, target)| cols.clone().zip(target).map(|(c, v)| v - x[[*f, c]]).collect()).collect();
+    for (i, (f, _)) in sorted.iter().enumerate() {
+        let left = if i > 0 { (f - sorted[i - 1].0) as f64 } else { radius }.min(radius).max(1.0);
+        let right = if i + 1 < sorted.len() { (sorted[i + 1].0 - f) as f64 } else { radius }.min(radius).max(1.0);
+        let lo = f.saturating_sub(left.ceil() as usize);
+        let hi = (f + right.ceil() as usize).min(n - 1);
+        for t in lo..=hi {
+            let u = if t <= *f { (f - t) as f64 / left } else { (t - f) as f64 / right };
+            let w = falloff(u) as f32;
+            if w == 0.0 {
+                continue;
+            }
+            for (k, c) in cols.clone().enumerate() {
+                x[[t, c]] += w * residuals[i][k];
+            }
+        }
+    }
+}
+
+/// Turns the integrated yaw so that frame `t_i` faces `yaw_i` (radians), blending the
+/// correction like [`pass_through_keys`]; returns the start yaw to integrate from.
+pub fn pass_through_yaws(features: &mut Array2<f32>, start_yaw: f32, keys: &[(usize, f32)], radius: f64) -> f32 {
+    let n = features.nrows();
+    // Integrated (unwrapped) yaw per frame.
+    let mut yaw = Array2::<f32>::zeros((n, 1));
+    let mut acc = start_yaw;
+    for t in 0..n {
+        if t > 0 {
+            acc += features[[t, YAW_VEL]];
+        }
+        yaw[[t, 0]] = acc;
+    }
+    let targets: Vec<(usize, Vec<f32>)> = keys
+        .iter()
+        .map(|&(f, k)| {
+            let d = (k - yaw[[f, 0]]).rem_euclid(std::f32::consts::TAU);
+            let d = if d > std::f32::consts::PI { d - std::f32::consts::TAU } else { d };
+            (f, vec![yaw[[f, 0]] + d])
+        })
+        .collect();
+    pass_through_keys(&mut yaw, 0..1, &targets, radius);
+    for t in 1..n {
+        features[[t, YAW_VEL]] = yaw[[t, 0]] - yaw[[t - 1, 0]];
+    }
+    if n > 0 {
+        yaw[[0, 0]]
+    } else {
+        start_yaw
+    }
+}
+
+/// A key pose mapped into pose space: its frame, its 69 local coordinates (facing frame,
+/// metres) and its facing yaw.
+#[derive(Clone, Debug)]
+pub struct LocalKey {
+    pub frame: usize,
+    pub local: Vec<f32>,
+    pub yaw: f32,
+}
+
+/// Checks key poses against a song of `n` frames at `fps` and maps them into pose space.
+/// Errors (422 at the API): wrong joint count, non-finite values, a time outside the song, two
+/// keys on the same frame, more keys than frames.
+pub fn local_keys(keys: &[KeyPose], n: usize, fps: f64) -> Result<Vec<LocalKey>, ModelError> {
+    if keys.len() > n {
+        return Err(ModelError::Invalid(format!("{} key poses for a song of {n} frames", keys.len())));
+    }
+    let mut out: Vec<LocalKey> = Vec::with_capacity(keys.len());
+    for (i, k) in keys.iter().enumerate() {
+        if k.joints.len() != NUM_JOINTS {
+            return Err(ModelError::Invalid(format!("key pose {i}: {} joints, expected {NUM_JOINTS}", k.joints.len())));
+        }
+        if !k.time_s.is_finite() || k.joints.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(ModelError::Invalid(format!("key pose {i}: not a finite number")));
+        }
+        let f = (k.time_s * fps).round();
+        if k.time_s < 0.0 || f < 0.0 || f >= n as f64 {
+            return Err(ModelError::Invalid(format!("key pose {i}: time {} s is outside the song (0 to {:.2} s)", k.time_s, n as f64 / fps)));
+        }
+        let frame = f as usize;
+        if out.iter().any(|o| o.frame == frame) {
+            return Err(ModelError::Invalid(format!("key pose {i}: closer than one frame to another key pose (frame {frame})")));
+        }
+        let mut joints = Array2::<f32>::zeros((NUM_JOINTS, 3));
+        for (j, p) in k.joints.iter().enumerate() {
+            for a in 0..3 {
+                joints[[j, a]] = p[a] as f32;
+            }
+        }
+        let (local, yaw) = to_local(joints.view());
+        out.push(LocalKey { frame, local, yaw });
+    }
+    Ok(out)
+}
+
+/// Root-relative joints `[J, 3]` → facing-frame coordinates (69) and the facing yaw, exactly as
+/// [`repr::to_features`] computes columns `0..69`.
+pub fn to_local(joints: ArrayView2<'_, f32>) -> (Vec<f32>, f32) {
+    let yaw = repr::facing_yaw(joints);
+    let (s, c) = (-f64::from(yaw)).sin_cos();
+    let mut local = Vec::with_capacity(POSE_DIM);
+    for j in 0..NUM_JOINTS {
+        let (x, y, z) = (f64::from(joints[[j, 0]]), f64::from(joints[[j, 1]]), f64::from(joints[[j, 2]]));
+        local.push((c * x + s * z) as f32);
+        local.push(y as f32);
+        local.push((-s * x + c * z) as f32);
+    }
+    (local, yaw)
+}
+
+/// Normalises a key's 69 local coordinates with the pose statistics' first 69 columns.
+pub fn normalize_key(norm: &NormStats, local: &[f32]) -> Vec<f32> {
+    local.iter().enumerate().map(|(i, v)| (v - norm.mean[i]) / norm.std[i]).collect()
+}
+
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::models::keypose_transformer::served::BLEND_RADIUS;
+    use crate::motion::repr::RootStart;
+
+    #[test]
+    fn pass_through_hits_every_key_and_leaves_far_frames() {
+        let mut x = Array2::<f32>::zeros((60, 3));
+        let keys = vec![(10usize, vec![1.0, 2.0, 3.0]), (12, vec![-1.0, 0.0, 0.5]), (40, vec![0.3, 0.3, 0.3])];
+        pass_through_keys(&mut x, 0..3, &keys, 8.0);
+        for (f, t) in &keys {
+            for c in 0..3 {
+                assert!((x[[*f, c]] - t[c]).abs() < 1e-6);
+            }
+        }
+        assert_eq!(x.row(25).to_vec(), vec![0.0; 3]);
+        assert_eq!(x.row(59).to_vec(), vec![0.0; 3]);
+    }
+
+    #[test]
+    fn key_pose_honoured_through_features() {
+        // A real-shaped pose through to_local → pass_through → from_features comes back within 1 mm.
+        let n = 40;
+        let features = Array2::<f32>::zeros((n, repr::FEATURE_DIM));
+        let mut joints = Vec::new();
+        for j in 0..NUM_JOINTS {
+            joints.push([0.1 * (j as f64 % 5.0) - 0.2, 0.05 * j as f64 - 0.5, 0.03 * (j as f64 % 3.0)]);
+        }
+        let key = KeyPose { time_s: 20.0 / 25.0, joints };
+        let lk = local_keys(std::slice::from_ref(&key), n, 25.0).unwrap();
+        let mut out = features.clone();
+        pass_through_keys(&mut out, 0..POSE_DIM, &[(lk[0].frame, lk[0].local.clone())], BLEND_RADIUS);
+        let yaw0 = pass_through_yaws(&mut out, 0.0, &[(lk[0].frame, lk[0].yaw)], BLEND_RADIUS);
+        let (motion, root) = repr::from_features(out.view(), RootStart { yaw: yaw0, ..Default::default() }, 25.0).unwrap();
+        let err = crate::metrics::kinematics::key_pose_error_root_cm(&motion, root.view(), &[key]).unwrap();
+        assert!(err < 0.1, "key pose error {err} cm");
+    }
+
+    #[test]
+    fn bad_key_poses_are_rejected() {
+        let ok = KeyPose { time_s: 1.0, joints: vec![[0.0; 3]; NUM_JOINTS] };
+        assert!(local_keys(std::slice::from_ref(&ok), 50, 25.0).is_ok());
+        let outside = KeyPose { time_s: 3.0, ..ok.clone() };
+        assert!(local_keys(&[outside], 50, 25.0).is_err());
+        let nan = KeyPose { joints: vec![[f64::NAN, 0.0, 0.0]; NUM_JOINTS], ..ok.clone() };
+        assert!(local_keys(&[nan], 50, 25.0).is_err());
+        let short = KeyPose { joints: vec![[0.0; 3]; 5], ..ok.clone() };
+        assert!(local_keys(&[short], 50, 25.0).is_err());
+        let near = KeyPose { time_s: 1.01, ..ok.clone() };
+        assert!(local_keys(&[ok.clone(), near], 50, 25.0).is_err());
+        assert!(local_keys(&[ok.clone(), ok.clone()], 1, 25.0).is_err());
+    }
+}

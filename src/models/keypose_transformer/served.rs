@@ -1,0 +1,218 @@
+//! A trained key-pose transformer folder (`model.json`, `weights.safetensors`, `pose_bank.safetensors`)
+//! and the served generation path: seed and scaffold drawn by the job's seed ([`super::scaffold`]),
+//! the network over overlapping windows, root height from the predicted foot clearance, and the
+//! exact pass through the user's key poses ([`super::keys`]).
+use std::path::Path;
+
+use ndarray::Array2;
+use serde::{Deserialize, Serialize};
+use tch::Tensor;
+
+use super::keys::{normalize_key, pass_through_keys, pass_through_yaws, local_keys, LocalKey};
+use super::scaffold::{PoseBank, Scaffold, POSE_BANK_FILE};
+use super::{Config, KeyposeTransformer};
+use crate::models::{read_model_file, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
+use crate::motion::dataset::NormStats;
+use crate::motion::repr::{self, RootStart, POSE_DIM};
+use crate::motion::Motion;
+
+/// The model folder's description file.
+pub const MODEL_FILE: &str = "model.json";
+/// The model folder's weights (safetensors).
+pub const WEIGHTS_FILE: &str = "weights.safetensors";
+/// The API id.
+pub const ID: &str = "keypose-transformer";
+/// Frames over which a key pose's residual is blended in after the network (1 s at 25 fps, and
+/// never less than half a second unless two keys are closer than that): a correction faster
+/// than that is a visible pop.
+pub const BLEND_RADIUS: f64 = 25.0;
+/// Frames over which a key pose's facing (yaw) residual is blended in (2 s at 25 fps): the
+/// network's integrated facing can be far from a key's, and turning the body that far within
+/// half a second would be a spin that no dancer made.
+pub const YAW_BLEND_RADIUS: f64 = 50.0;
+
+/// How the committed weights were trained, stored beside them.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrainingRecord {
+    pub epochs: usize,
+    pub steps: usize,
+    pub lr: f64,
+    pub batch: usize,
+    pub max_keys: usize,
+    pub seed: u64,
+    pub final_train_loss: f64,
+    pub minutes: f64,
+    /// Weight of the frame-difference (velocity) L1 term beside the ω(t)-weighted pose term.
+    #[serde(default)]
+    pub velocity_weight: f64,
+}
+
+/// What column [`repr::ROOT_Y`] of the pose features holds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RootHeight {
+    /// The root's height above the floor (the motion module's features as they are).
+    #[default]
+    Absolute,
+    /// The lowest foot's clearance above the dance's floor ([`repr::height_to_clearance`]).
+    FootClearance,
+}
+
+/// `model.json`: the configuration and the train-split normalisation the weights expect.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ModelFile {
+    pub config: Config,
+    pub music_norm: NormStats,
+    pub pose_norm: NormStats,
+    pub fps: f64,
+    pub training: TrainingRecord,
+    /// What the root-height column means.
+    #[serde(default)]
+    pub root_height: RootHeight,
+    /// Frames between scaffold poses when serving ([`super::scaffold`]); 0 turns the scaffold off.
+    #[serde(default)]
+    pub scaffold_spacing: usize,
+}
+
+/// `[r, c]` ndarray → tensor.
+pub fn to_tensor(m: &Array2<f32>) -> Tensor {
+    let (r, c) = m.dim();
+    let m = m.as_standard_layout();
+    Tensor::from_slice(m.as_slice().unwrap_or(&[])).view([r as i64, c as i64])
+}
+
+/// `[r, c]` tensor → ndarray.
+pub fn to_array(t: &Tensor) -> Result<Array2<f32>, ModelError> {
+    let (r, c) = t.size2()?;
+    let data: Vec<f32> = Vec::<f32>::try_from(t.contiguous().view([-1]))?;
+    Array2::from_shape_vec((r as usize, c as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))
+}
+
+/// One generation: the network's features and the served ones (after the exact key pass), both
+/// with absolute root heights, and where the root starts.
+pub struct Generation {
+    pub network: Array2<f32>,
+    pub served: Array2<f32>,
+    pub start: RootStart,
+}
+
+/// Generation on normalised music plus the exact key-pose pass. `seed` is denormalised features
+/// (in the model's root-height representation) and the root start; `keys` are the user's key
+/// poses (passed exactly); `scaffold` are poses `(frame, 69 local coordinates)` the network is
+/// given as key poses but not held to. Shared by serving and the model card's evaluation.
+pub fn generate_features(
+    model: &KeyposeTransformer,
+    file: &ModelFile,
+    music: &Tensor,
+    seed: Option<(&Array2<f32>, RootStart)>,
+    keys: &[LocalKey],
+    scaffold: &[(usize, Vec<f32>)],
+    mut on_window: impl FnMut(usize, usize) -> bool,
+) -> Result<Option<Generation>, ModelError> {
+    let ts = file.config.seed_len as usize;
+    let seed_norm = match seed {
+        Some((f, _)) => {
+            // The last T′ frames, front-padded by repeating the first when the seed is shorter.
+            let m = f.nrows();
+            let mut rows = Array2::<f32>::zeros((ts, f.ncols()));
+            for i in 0..ts {
+                let src = (m + i).saturating_sub(ts);
+                rows.row_mut(i).assign(&f.row(src.min(m.saturating_sub(1))));
+            }
+            Some(to_tensor(&file.pose_norm.normalize(&rows)?))
+        }
+        None => None,
+    };
+    let mut nkeys: Vec<(i64, Vec<f32>)> = keys.iter().map(|k| (k.frame as i64, normalize_key(&file.pose_norm, &k.local))).collect();
+    nkeys.extend(scaffold.iter().map(|(f, local)| (*f as i64, normalize_key(&file.pose_norm, local))));
+    let y = tch::no_grad(|| model.generate_long(music, seed_norm.as_ref(), &nkeys, &mut on_window));
+    let Some(y) = y else { return Ok(None) };
+    let mut network = file.pose_norm.denormalize(&to_array(&y)?)?;
+    let mut served = network.clone();
+    let targets: Vec<(usize, Vec<f32>)> = keys.iter().map(|k| (k.frame, k.local.clone())).collect();
+    pass_through_keys(&mut served, 0..POSE_DIM, &targets, BLEND_RADIUS);
+    if file.root_height == RootHeight::FootClearance {
+        // After the key pass, so a key pose's legs set the height at its frame.
+        repr::clearance_to_height(&mut network);
+        repr::clearance_to_height(&mut served);
+    }
+    let mut start = seed.map(|(_, s)| s).unwrap_or_default();
+    let yaws: Vec<(usize, f32)> = keys.iter().map(|k| (k.frame, k.yaw)).collect();
+    if !yaws.is_empty() {
+        start.yaw = pass_through_yaws(&mut served, start.yaw, &yaws, YAW_BLEND_RADIUS);
+    }
+    Ok(Some(Generation { network, served, start }))
+}
+
+/// A trained key-pose transformer, ready to serve.
+pub struct Served {
+    file: ModelFile,
+    bank: Option<PoseBank>,
+    pool: InstancePool<KeyposeTransformer>,
+}
+
+impl Served {
+    /// Loads `dir/model.json`, `dir/weights.safetensors` and, when present, `dir/pose_bank.safetensors`.
+    pub fn load(dir: &Path) -> Result<Self, ModelError> {
+        let file: ModelFile = read_model_file(dir, ID, MODEL_FILE)?;
+        let config = file.config.clone();
+        let pool = InstancePool::new(dir.join(WEIGHTS_FILE), move |p| KeyposeTransformer::new(p, config.clone()))?;
+        let bank_path = dir.join(POSE_BANK_FILE);
+        let bank = if bank_path.exists() { Some(PoseBank::load(&bank_path)?) } else { None };
+        Ok(Self { file, bank, pool })
+    }
+
+    /// The model's description file.
+    pub fn file(&self) -> &ModelFile {
+        &self.file
+    }
+
+    /// The seed rows and scaffold the job's seed draws, or none without a pose bank.
+    pub fn scaffold(&self, seed: u64, frames: usize, keys: &[LocalKey]) -> Option<Scaffold> {
+        self.bank.as_ref().map(|b| b.scaffold(seed, frames, self.file.config.seed_len as usize, self.file.scaffold_spacing, keys))
+    }
+}
+
+impl DanceModel for Served {
+    fn info(&self) -> ModelInfo {
+        ModelInfo {
+            id: ModelId(ID.into()),
+            paper: "Controllable music-driven dance generation with key-pose constraints (key-pose controllable cross-modal transformer)".into(),
+            capabilities: Capabilities { key_poses: true, seed_motion: true, style: false },
+        }
+    }
+
+    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Motion, ModelError> {
+        let fps = self.file.fps;
+        let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
+        let keys = local_keys(req.key_poses, n, fps)?;
+        progress.report("features", 0.0)?;
+        let feats = crate::audio::features::keypose(req.audio, fps, 0.0, n)?;
+        let music = to_tensor(&self.file.music_norm.normalize(&feats)?);
+        progress.report("features", 1.0)?;
+        let given = match req.seed_motion {
+            Some(m) if m.num_frames() > 0 => {
+                let root = crate::motion::skeleton::body_centre_track(m.positions.view());
+                let (mut f, start) = repr::to_features(m.positions.view(), root.view())?;
+                if self.file.root_height == RootHeight::FootClearance {
+                    let floor = repr::floor_of_features(f.view());
+                    repr::height_to_clearance(&mut f, floor);
+                }
+                Some((f, start))
+            }
+            _ => None,
+        };
+        let plan = self.scaffold(req.seed, n, &keys);
+        // A given seed motion wins over the drawn one; the scaffold stays either way.
+        let seed = given.or_else(|| plan.as_ref().map(|p| (p.seed.clone(), RootStart::default())));
+        let scaffold = plan.map(|p| p.poses).unwrap_or_default();
+        let out = self.pool.with(|model| {
+            generate_features(model, &self.file, &music, seed.as_ref().map(|(f, s)| (f, *s)), &keys, &scaffold, |done, total| {
+                progress.report("decode", done as f32 / total as f32).is_ok()
+            })
+        })?;
+        let Some(g) = out? else { return Err(Cancelled.into()) };
+        let (motion, _root) = repr::from_features(g.served.view(), g.start, fps)?;
+        Ok(motion)
+    }
+}
