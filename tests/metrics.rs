@@ -338,6 +338,13 @@ fn report_of_a_synthetic_dance_round_trips_through_json() {
     assert!(report.music_beat_times.iter().all(|&b| b <= 16.0));
     assert!(report.scores.fid_k.is_finite() && report.scores.fid_k > 0.0);
     assert!(report.scores.key_pose_error_cm.is_none());
+    // The physical numbers and their verdict are part of every report: the feet stand at 0 m
+    // (rest pose) give or take the 5-cm vertical sway, and every joint moves.
+    let ph = &report.scores.physical;
+    assert!((ph.lowest_foot_m.median - 0.0).abs() < 0.06 && ph.mean_speed_m_s > 0.1, "{ph:?}");
+    assert!(ph.acceleration_m_s2.max.is_finite() && ph.key_pose_pops_m_s2.is_empty());
+    assert_eq!(report.scores.verdict.criteria.len(), 7);
+    assert!(report.scores.verdict.get("seed-distance").is_some_and(|c| c.pass.is_none()), "one dance: no seed pair");
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("report.json");
     choreo::report::write(&report, &path).expect("write");
@@ -425,6 +432,39 @@ mod real_data {
         assert!(real.scores.mean.verdict.pass, "{:?}", real.scores.mean.verdict);
         assert_eq!(real.scores.dances_passing, 6);
         assert!(a.extra_rows.is_empty() && a.rows.len() == 2, "no models, no extra songs");
+    }
+
+    #[test]
+    fn eval_generates_once_finishes_both_ways_and_keeps_extra_songs_apart() {
+        let Some(root) = data_root() else { return };
+        let song = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/audio/trumpet_loop_90bpm.ogg");
+        assert!(song.is_file(), "{} is missing (the shared songs are part of ../shared)", song.display());
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::copy(&song, dir.path().join("trumpet_loop_90bpm.ogg")).expect("copy song");
+        let mut a = args(root);
+        a.real_only = false;
+        a.models = vec!["dance-revolution".into()];
+        a.models_dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models");
+        a.songs = vec![dir.path().to_path_buf()];
+        let r = evaluate(&a).expect("eval");
+        let names: Vec<&str> = r.rows.iter().map(|x| x.name.as_str()).collect();
+        assert_eq!(names, ["Real", "Mismatched real", "dance-revolution", "dance-revolution (raw network output, feet not planted)"]);
+        assert_eq!(r.extra_songs, ["trumpet_loop_90bpm.ogg"]);
+        assert_eq!(r.extra_rows.len(), 2, "the extra song has its own rows");
+        assert!(r.rows.iter().all(|x| x.dances.iter().all(|d| d.song != "trumpet_loop_90bpm.ogg")), "test rows hold test songs only");
+        for pair in [&r.rows[2..4], &r.extra_rows[..]] {
+            let (served, raw) = (&pair[0], &pair[1]);
+            assert_eq!(served.scores.dances, raw.scores.dances);
+            assert_eq!(served.scores.dances, 2 * served.dances.iter().map(|d| &d.song).collect::<std::collections::BTreeSet<_>>().len(), "two seeds per song");
+            // One dance per seed, finished twice: planting moves whole frames sideways, so the
+            // heights and the root-relative poses (hence the seed distance) are the same.
+            let (a, b) = (served.seed_distance_m.expect("seed pairs"), raw.seed_distance_m.expect("seed pairs"));
+            assert!((a - b).abs() < 1e-4, "{a} vs {b}");
+            let (p, q) = (&served.scores.mean.physical, &raw.scores.mean.physical);
+            assert!((p.lowest_foot_m.median - q.lowest_foot_m.median).abs() < 1e-6, "{p:?} vs {q:?}");
+            assert!(served.scores.mean.verdict.get("seed-distance").is_some_and(|c| c.pass.is_some()));
+            assert!(served.scores.fid_k_dance.is_finite() && served.scores.fid_k_window.is_finite());
+        }
     }
 
     #[test]

@@ -488,12 +488,14 @@ fn scores_table(rows: &[EvalRow]) -> String {
     out
 }
 
-const PHYSICAL_HEADER: &str = "| Motion | n | Lowest foot p5 / median / p95 m | Below −5 cm | Deepest m | Accel median / p99 / p99.9 / max m/s² | Key pop max m/s² ↓ | Speed m/s | × real | Freeze L/F | Seed Δ m (min) | Key err cm ↓ | Verdict | Dances passing |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+const PHYSICAL_HEADER: &str = "| Motion | n | Lowest foot p5 / median / p95 m | Below −5 cm | Deepest m | Accel median / p99 / p99.9 / max m/s² | Key pop max m/s² ↓ | Speed m/s | × real | Freeze L/F | Seed Δ m (min) | Key err cm (worst) ↓ | Verdict | Dances passing |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 
-fn physical_cells(name: &str, n: String, p: &PhysicalScores, freeze: f64, seeds: String, key_err: Option<f64>, verdict: String, passing: String) -> String {
+/// One line of the physical table: `tail` is the seed distance, key error, verdict and passing cells.
+fn physical_cells(name: &str, n: usize, p: &PhysicalScores, freeze: f64, tail: [String; 4]) -> String {
+    let [seeds, key_err, verdict, passing] = tail;
     let cells = [
         name.to_string(),
-        n,
+        n.to_string(),
         format!("{} / {} / {}", f2(p.lowest_foot_m.p5), f2(p.lowest_foot_m.median), f2(p.lowest_foot_m.p95)),
         format!("{:.1} %", 100.0 * p.below_floor_share),
         f2(p.deepest_m),
@@ -503,7 +505,7 @@ fn physical_cells(name: &str, n: String, p: &PhysicalScores, freeze: f64, seeds:
         f2(p.speed_ratio),
         f(freeze),
         seeds,
-        key_err.map(f2).unwrap_or_else(|| "–".into()),
+        key_err,
         verdict,
         passing,
     ];
@@ -516,7 +518,7 @@ fn physical_table(rows: &[EvalRow], reference: Option<&ReferenceStats>) -> Strin
     if let Some(r) = reference {
         let p = &r.physical;
         let name = format!("Real train (reference; speed per dance {:.2}–{:.2})", p.mean_speed_range_m_s[0], p.mean_speed_range_m_s[1]);
-        out.push_str(&physical_cells(&name, r.dances.len().to_string(), &p.pooled, f64::NAN, "–".into(), None, "–".into(), "–".into()));
+        out.push_str(&physical_cells(&name, r.dances.len(), &p.pooled, f64::NAN, ["–".into(), "–".into(), "–".into(), "–".into()]));
     }
     for r in rows {
         let m = &r.scores.mean;
@@ -525,7 +527,8 @@ fn physical_table(rows: &[EvalRow], reference: Option<&ReferenceStats>) -> Strin
             _ => "–".into(),
         };
         let passing = format!("{}/{}", r.scores.dances_passing, r.scores.dances);
-        out.push_str(&physical_cells(&r.name, r.scores.dances.to_string(), &m.physical, m.freezing_ratio, seeds, worst_key_error(r), verdict_cell(&m.verdict), passing));
+        let key_err = worst_key_error(r).map(f2).unwrap_or_else(|| "–".into());
+        out.push_str(&physical_cells(&r.name, r.scores.dances, &m.physical, m.freezing_ratio, [seeds, key_err, verdict_cell(&m.verdict), passing]));
     }
     out
 }
