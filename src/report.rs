@@ -28,7 +28,8 @@ pub struct Report {
     /// Kinematic beat times (s), both published variants.
     pub kinematic_beat_times: KinematicBeats,
     /// Every per-dance score (BAS in both conventions, FID_k/FID_g, diversity, smoothness, foot
-    /// skating, freezing ratio, plausibility, key-pose error).
+    /// skating, freezing ratio, plausibility, key-pose error), the physical-plausibility numbers
+    /// (floor contact, ground penetration, pops, speed) and their pass/fail verdict.
     pub scores: DanceScores,
     /// FID_k over consecutive 4-s windows.
     pub fid_k_curve: Vec<CurvePoint>,

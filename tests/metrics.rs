@@ -338,6 +338,13 @@ fn report_of_a_synthetic_dance_round_trips_through_json() {
     assert!(report.music_beat_times.iter().all(|&b| b <= 16.0));
     assert!(report.scores.fid_k.is_finite() && report.scores.fid_k > 0.0);
     assert!(report.scores.key_pose_error_cm.is_none());
+    // The physical numbers and their verdict are part of every report: the feet stand at 0 m
+    // (rest pose) give or take the 5-cm vertical sway, and every joint moves.
+    let ph = &report.scores.physical;
+    assert!((ph.lowest_foot_m.median - 0.0).abs() < 0.06 && ph.mean_speed_m_s > 0.1, "{ph:?}");
+    assert!(ph.acceleration_m_s2.max.is_finite() && ph.key_pose_pops_m_s2.is_empty());
+    assert_eq!(report.scores.verdict.criteria.len(), 7);
+    assert!(report.scores.verdict.get("seed-distance").is_some_and(|c| c.pass.is_none()), "one dance: no seed pair");
     let dir = tempfile::tempdir().expect("tempdir");
     let path = dir.path().join("report.json");
     choreo::report::write(&report, &path).expect("write");
@@ -375,15 +382,16 @@ mod real_data {
     fn args(root: PathBuf) -> EvalArgs {
         EvalArgs {
             models: vec![],
+            real_only: true,
             split: "test".into(),
-            songs: None,
+            songs: vec![],
+            no_shared_songs: true,
             json: None,
             data: root,
             models_dir: "models".into(),
             seed: 0,
             seeds: 2,
             key_poses: 0,
-            no_plant_feet: false,
             mismatch_per_song: 3,
             write_reference: false,
             reference_out: "unused".into(),
@@ -417,7 +425,46 @@ mod real_data {
         // Real test dances are within the real limits most of the time (each of 15 angles excludes 1 %).
         assert!(real.scores.mean.plausibility.authenticity > 0.75, "{:?}", real.scores.mean.plausibility);
         assert!(real.scores.mean.plausibility.coherence > 0.75, "{:?}", real.scores.mean.plausibility);
-        assert!(real.scores.fid_k.is_finite() && real.scores.fid_g.is_finite());
+        assert!(real.scores.fid_k_window.is_finite() && real.scores.fid_g_window.is_finite());
+        assert!(real.scores.fid_k_dance.is_finite() && real.scores.fid_g_dance.is_finite());
+        // Real dances stand on the floor, move, and do not pop: the verdict passes (the seed
+        // and key-pose criteria do not apply to them).
+        assert!(real.scores.mean.verdict.pass, "{:?}", real.scores.mean.verdict);
+        assert_eq!(real.scores.dances_passing, 6);
+        assert!(a.extra_rows.is_empty() && a.rows.len() == 2, "no models, no extra songs");
+    }
+
+    #[test]
+    fn eval_generates_once_finishes_both_ways_and_keeps_extra_songs_apart() {
+        let Some(root) = data_root() else { return };
+        let song = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/audio/trumpet_loop_90bpm.ogg");
+        assert!(song.is_file(), "{} is missing (the shared songs are part of ../shared)", song.display());
+        let dir = tempfile::tempdir().expect("tempdir");
+        std::fs::copy(&song, dir.path().join("trumpet_loop_90bpm.ogg")).expect("copy song");
+        let mut a = args(root);
+        a.real_only = false;
+        a.models = vec!["dance-revolution".into()];
+        a.models_dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models");
+        a.songs = vec![dir.path().to_path_buf()];
+        let r = evaluate(&a).expect("eval");
+        let names: Vec<&str> = r.rows.iter().map(|x| x.name.as_str()).collect();
+        assert_eq!(names, ["Real", "Mismatched real", "dance-revolution", "dance-revolution (raw network output, feet not planted)"]);
+        assert_eq!(r.extra_songs, ["trumpet_loop_90bpm.ogg"]);
+        assert_eq!(r.extra_rows.len(), 2, "the extra song has its own rows");
+        assert!(r.rows.iter().all(|x| x.dances.iter().all(|d| d.song != "trumpet_loop_90bpm.ogg")), "test rows hold test songs only");
+        for pair in [&r.rows[2..4], &r.extra_rows[..]] {
+            let (served, raw) = (&pair[0], &pair[1]);
+            assert_eq!(served.scores.dances, raw.scores.dances);
+            assert_eq!(served.scores.dances, 2 * served.dances.iter().map(|d| &d.song).collect::<std::collections::BTreeSet<_>>().len(), "two seeds per song");
+            // One dance per seed, finished twice: planting moves whole frames sideways, so the
+            // heights and the root-relative poses (hence the seed distance) are the same.
+            let (a, b) = (served.seed_distance_m.expect("seed pairs"), raw.seed_distance_m.expect("seed pairs"));
+            assert!((a - b).abs() < 1e-4, "{a} vs {b}");
+            let (p, q) = (&served.scores.mean.physical, &raw.scores.mean.physical);
+            assert!((p.lowest_foot_m.median - q.lowest_foot_m.median).abs() < 1e-6, "{p:?} vs {q:?}");
+            assert!(served.scores.mean.verdict.get("seed-distance").is_some_and(|c| c.pass.is_some()));
+            assert!(served.scores.fid_k_dance.is_finite() && served.scores.fid_k_window.is_finite());
+        }
     }
 
     #[test]
@@ -435,3 +482,141 @@ mod real_data {
         assert!(real.scores.rhythm.bas_fact > mean_mism + 0.03, "real {} vs mismatched {mean_mism}", real.scores.rhythm.bas_fact);
     }
 }
+
+/// Issue 10's physical measures on the real dances and on bad motions made from them.
+mod physical_real {
+    use super::*;
+    use choreo::metrics::physical::{names, seed_distance_m, PhysicalReference, Verdict};
+    use choreo::metrics::score::score_dance;
+    use choreo::motion::dataset::{Dance, Dataset};
+    use std::path::PathBuf;
+
+    fn dataset() -> Option<Dataset> {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(choreo::motion::dataset::DEFAULT_ROOT);
+        if root.is_dir() {
+            return Some(Dataset::open(&root).expect("dataset opens"));
+        }
+        if std::env::var("CI").as_deref() == Ok("true") {
+            panic!("../shared/data/dance-with-melody is missing; the physical-plausibility tests need it under CI=true");
+        }
+        eprintln!("skipping: {} not found", root.display());
+        None
+    }
+
+    /// Four key poses of a dance (root-relative, its own poses) at 10 %, 30 %, 55 % and 80 %.
+    fn own_keys(d: &Dance) -> Vec<KeyPose> {
+        let rel = d.root_relative();
+        let t = d.motion.num_frames();
+        [0.1, 0.3, 0.55, 0.8]
+            .iter()
+            .map(|q| {
+                let f = (q * t as f64) as usize;
+                KeyPose { time_s: f as f64 / d.motion.fps, joints: (0..NUM_JOINTS).map(|j| [0, 1, 2].map(|c| f64::from(rel[[f, j, c]]))).collect() }
+            })
+            .collect()
+    }
+
+    /// The verdict of `m` with `keys`, and the seed criterion against `other` when given.
+    fn judge(m: &Motion, keys: &[KeyPose], other: Option<&Motion>) -> Verdict {
+        let reference = ReferenceStats::builtin().expect("reference");
+        let v = score_dance(m, &[], keys, &reference).expect("scores").scores.verdict;
+        match other {
+            Some(o) => v.with_seed_distance(Some(seed_distance_m(m, o))),
+            None => v,
+        }
+    }
+
+    fn fails(v: &Verdict, name: &str) -> bool {
+        v.get(name).and_then(|c| c.pass) == Some(false)
+    }
+
+    #[test]
+    fn real_dances_measure_as_the_issue_reports() {
+        let Some(ds) = dataset() else { return };
+        let all: Vec<Motion> = ds.load_all(&ds.all_ids()).expect("dances").into_iter().map(|d| d.motion).collect();
+        assert_eq!(all.len(), 43);
+        let r = PhysicalReference::compute(&all);
+        let p = &r.pooled;
+        // The floor is y = 0: the lowest foot point touches it, and rarely goes through.
+        assert!((p.lowest_foot_m.p5 - 0.01).abs() < 0.01, "{p:?}");
+        assert!((p.lowest_foot_m.median - 0.16).abs() < 0.02, "{p:?}");
+        // Below −5 cm in 1.4 % of frames, all of two dances (DANCE_C_8, DANCE_T_5) whose floor
+        // sits a few centimetres low.
+        assert!(p.below_floor_share < 0.02 && p.deepest_m > -0.15, "{p:?}");
+        assert!((p.acceleration_m_s2.median - 3.3).abs() < 0.3, "{p:?}");
+        assert!((p.acceleration_m_s2.p99_9 - 56.0).abs() < 6.0, "{p:?}");
+        assert!((r.mean_speed_range_m_s[0] - 0.63).abs() < 0.02 && (r.mean_speed_range_m_s[1] - 1.80).abs() < 0.02, "{r:?}");
+        assert!((p.speed_ratio - 1.0).abs() < 1e-12);
+        // The committed train figures are of the same data.
+        let builtin = ReferenceStats::builtin().expect("reference").physical;
+        assert!((builtin.pooled.lowest_foot_m.median - p.lowest_foot_m.median).abs() < 0.02, "{builtin:?}");
+    }
+
+    #[test]
+    fn every_real_test_dance_passes_and_each_made_up_fault_is_caught() {
+        let Some(ds) = dataset() else { return };
+        let dances = ds.load_all(ds.test_ids()).expect("test dances");
+        for (i, d) in dances.iter().enumerate() {
+            // Another real dance stands in for a second seed: different dances differ.
+            let other = &dances[(i + 1) % dances.len()].motion;
+            let v = judge(&d.motion, &own_keys(d), Some(other));
+            assert!(v.pass, "{}: {:?}", d.id, v.failures());
+            assert!(v.criteria.iter().all(|c| c.pass.is_some()), "{}: every criterion applies: {v:?}", d.id);
+        }
+
+        let d = &dances[0];
+        let keys = own_keys(d);
+        let with_y = |dy: f32| {
+            let mut m = d.motion.clone();
+            m.positions.slice_mut(ndarray::s![.., .., 1]).mapv_inplace(|y| y + dy);
+            m
+        };
+        // Floating a metre up and sunk 0.4 m: the floor criteria, and nothing else.
+        for (what, m) in [("floating", with_y(1.0)), ("sinking", with_y(-0.4))] {
+            let v = judge(&m, &keys, None);
+            assert_eq!(v.failures(), vec![names::FOOT_MEDIAN, names::FOOT_P5], "{what}: {v:?}");
+        }
+
+        // Popping: at each key frame the whole pose snaps, for one frame, to the pose 2 s later
+        // (kept on this frame's body centre), as a model that jumps to its key poses does.
+        let rel = d.root_relative();
+        let mut snapped = d.motion.clone();
+        let frames: Vec<usize> = keys.iter().map(|k| (k.time_s * d.motion.fps).round() as usize).collect();
+        for &f in &frames {
+            for j in 0..NUM_JOINTS {
+                for c in 0..3 {
+                    snapped.positions[[f, j, c]] = d.center[[f, c]] + rel[[f + 50, j, c]];
+                }
+            }
+        }
+        let v = judge(&snapped, &keys, None);
+        assert!(fails(&v, names::KEY_POPS), "whole-pose snap: {v:?}");
+        // One joint jumping 2 m for one frame, 0.2 s after a key (the measure averages 23
+        // joints, so a single joint registers above 84 m/s² only beyond ~1.5 m).
+        let mut jump = d.motion.clone();
+        jump.positions[[frames[1] + 5, sk::WRISTS[0], 0]] += 2.0;
+        let v = judge(&jump, &keys, None);
+        assert_eq!(v.failures(), vec![names::KEY_POPS], "one-joint jump: {v:?}");
+
+        // Frozen: the first pose held for the whole dance.
+        let mut held = d.motion.clone();
+        let first = d.motion.positions.slice(ndarray::s![0, .., ..]).to_owned();
+        for mut frame in held.positions.outer_iter_mut() {
+            frame.assign(&first);
+        }
+        let v = judge(&held, &[], None);
+        assert_eq!(v.failures(), vec![names::SPEED], "held pose: {v:?}");
+
+        // Identical seeds: the same dance twice, even carried 3 m elsewhere on the floor.
+        let mut moved = d.motion.clone();
+        moved.positions.slice_mut(ndarray::s![.., .., 0]).mapv_inplace(|x| x + 3.0);
+        let v = judge(&d.motion, &keys, Some(&moved));
+        assert_eq!(v.failures(), vec![names::SEEDS], "identical seeds: {v:?}");
+        assert!(v.get(names::SEEDS).and_then(|c| c.value).is_some_and(|x| x < 1e-4));
+
+        // Key poses of another dance are missed.
+        let v = judge(&d.motion, &own_keys(&dances[1]), None);
+        assert!(fails(&v, names::KEY_POSES), "foreign key poses: {v:?}");
+    }
+}
+

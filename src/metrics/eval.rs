@@ -1,16 +1,26 @@
-//! `choreo eval`: every model judged by the same numbers on the test split.
+//! `choreo eval`: every model judged by the same numbers, on the test split and on whole songs.
 //!
-//! Rows of the table:
-//! - **Real**: the test dances, with their own songs.
-//! - **Mismatched real**: each test song paired with a real *train* dance (chosen by the seed),
-//!   cropped to the test dance's length: real motion that ignores this music. A rhythm metric
-//!   that cannot tell Real from Mismatched real measures nothing.
-//! - one row per model named: a dance generated for each test song's segment (and each extra
-//!   song), with seeds `seed, seed+1, …` (`--seeds`), so the same seeds give the same numbers.
+//! Two sections, never mixed:
+//! - **Test split**: the test dances' songs, each cut to the span its dance covers.
+//!   - **Real**: the test dances, with their own songs.
+//!   - **Mismatched real**: each test song paired with a real *train* dance (chosen by the seed),
+//!     cropped to the test dance's length: real motion that ignores this music. A rhythm metric
+//!     that cannot tell Real from Mismatched real measures nothing.
+//!   - two rows per served model: as served (after [`crate::motion::finish`], feet planted) and
+//!     the network's raw output; each dance is generated once and finished both ways.
+//! - **Extra songs**: every audio file of `../shared/audio` (and of each `--songs` folder), whole,
+//!   danced by each model; no real dance exists for them, so only model rows.
 //!
-//! FID is biased by sample size (a Gaussian fitted to few, overlapping windows): the
-//! Mismatched-real row with one train dance per song scores FID_k 38.9, with 40 per song 2.0.
-//! Compare rows of similar size (`--seeds 1` gives a model row the size of Real).
+//! Every model dances every song with seeds `seed, seed+1, …` (`--seeds`, default 2), so the same
+//! seeds give the same numbers and the seed sensitivity ([`super::physical::seed_distance_m`],
+//! per song pair, averaged) is measured. Every row carries the physical-plausibility numbers of
+//! [`super::physical`] and issue 10's verdict (each criterion as the row's worst dance has it).
+//!
+//! FID in two protocols: `fid_*_window` fits a Gaussian to every 5-s window of the row (biased
+//! by sample size: the Mismatched-real row with one train dance per song scores FID_k 38.9, with
+//! 40 per song 2.0); `fid_*_dance` to one whole-dance vector per dance (Bailando's protocol;
+//! with 6–12 dances against 37 train dances its covariance is singular, so compare rows of the
+//! same size only).
 //!
 //! Music beats come from [`crate::audio::analyze`] on the whole song and are moved onto the
 //! dance's clock (motion frame 0 = song time `start_position / 25`).
@@ -19,6 +29,7 @@ use std::path::{Path, PathBuf};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 
+use super::physical::{seed_distance_m, Criterion, PhysicalScores, Verdict};
 use super::reference::ReferenceStats;
 use super::score::{multimodality, score_dance, score_set, ScoredDance, SetScores};
 use super::MetricsError;
@@ -29,18 +40,28 @@ use crate::motion::{KeyPose, Motion, MOTION_FPS};
 
 /// Where `--write-reference` writes by default (the committed, compiled-in file).
 pub const REFERENCE_PATH: &str = "src/metrics/reference_train.json";
+/// The songs every model dances besides the test split (relative to the repository root).
+pub const SHARED_SONGS: &str = "../shared/audio";
 
 /// Arguments of `choreo eval`.
 #[derive(Clone, Debug, clap::Args)]
 pub struct EvalArgs {
-    /// Model ids to evaluate (e.g. dance-revolution); none prints Real and Mismatched real only.
+    /// Model ids to evaluate (e.g. dance-revolution); none means every model served from
+    /// --models-dir.
     pub models: Vec<String>,
+    /// Real and Mismatched real only: no model is run.
+    #[arg(long)]
+    pub real_only: bool,
     /// Dataset split whose songs are evaluated.
     #[arg(long, default_value = "test")]
     pub split: String,
-    /// Extra songs (every audio file in this folder) danced by each model.
+    /// More folders of songs (every audio file in each), danced whole by each model beside
+    /// ../shared/audio.
     #[arg(long)]
-    pub songs: Option<PathBuf>,
+    pub songs: Vec<PathBuf>,
+    /// Leave out ../shared/audio (the test split and --songs only).
+    #[arg(long)]
+    pub no_shared_songs: bool,
     /// Write the full results as JSON here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -53,7 +74,8 @@ pub struct EvalArgs {
     /// First seed (mismatch pairing and generation).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Dances generated per song and model (seeds seed..seed+N); ≥ 2 gives multimodality.
+    /// Dances generated per song and model (seeds seed..seed+N); ≥ 2 gives multimodality and
+    /// the seed sensitivity.
     #[arg(long, default_value_t = 2)]
     pub seeds: u64,
     /// Key poses given to models that take them, on each test song: this many poses of the real
@@ -61,10 +83,6 @@ pub struct EvalArgs {
     /// get none. The key-pose error column then shows how closely the dances pass through them.
     #[arg(long, default_value_t = 0)]
     pub key_poses: usize,
-    /// Score generated dances as the model made them, without the foot planting that jobs and
-    /// `choreo generate` apply by default (`motion::feet`).
-    #[arg(long)]
-    pub no_plant_feet: bool,
     /// Train dances paired with each test song in the Mismatched-real row.
     #[arg(long, default_value_t = 1)]
     pub mismatch_per_song: usize,
@@ -81,9 +99,15 @@ pub struct EvalArgs {
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct EvalRow {
     pub name: String,
+    /// The set's scores; `scores.mean.verdict` is the row's verdict, with the seed criterion.
     pub scores: SetScores,
     /// Mean over songs of the distance between dances from different seeds.
     pub multimodality: Option<f64>,
+    /// Seed sensitivity: the root-relative distance (m) between dances of the same song from
+    /// different seeds, per song pair, averaged.
+    pub seed_distance_m: Option<f64>,
+    /// The smallest seed distance of any song pair (the verdict's value).
+    pub seed_distance_min_m: Option<f64>,
     /// Per-dance detail: what was danced to what.
     pub dances: Vec<EvalDance>,
 }
@@ -104,7 +128,12 @@ pub struct EvalDance {
 pub struct EvalResult {
     pub split: String,
     pub seed: u64,
+    /// Test-split rows: the test songs only.
     pub rows: Vec<EvalRow>,
+    /// The extra songs (file names), danced whole.
+    pub extra_songs: Vec<String>,
+    /// Model rows on the extra songs.
+    pub extra_rows: Vec<EvalRow>,
 }
 
 /// A song on a dance's clock: the audio of the segment and the beats within it.
@@ -154,13 +183,42 @@ fn crop(m: &Motion, frames: usize) -> Motion {
     Motion { fps: m.fps, positions: m.positions.slice(ndarray::s![..n, .., ..]).to_owned() }
 }
 
-fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: Option<Vec<Vec<usize>>>, reference: &ReferenceStats) -> EvalRow {
+/// A row of scored dances; `per_song` groups the indices of dances of one song (different
+/// seeds), with their motions, for multimodality and the seed distance.
+fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: Option<Vec<Vec<(usize, Motion)>>>, reference: &ReferenceStats) -> EvalRow {
     let dances: Vec<ScoredDance> = scored.iter().map(|(_, s)| s.clone()).collect();
-    let multimodality = per_song.and_then(|groups| {
-        let g: Vec<Vec<&ScoredDance>> = groups.iter().map(|ix| ix.iter().map(|&i| &dances[i]).collect()).collect();
-        multimodality(&g, reference)
-    });
-    EvalRow { name: name.into(), scores: score_set(&dances, reference), multimodality, dances: scored.into_iter().map(|(e, _)| e).collect() }
+    let mut scores = score_set(&dances, reference);
+    let (mut multimodality_v, mut seed_mean, mut seed_min) = (None, None, None);
+    if let Some(groups) = per_song {
+        let g: Vec<Vec<&ScoredDance>> = groups.iter().map(|ix| ix.iter().map(|(i, _)| &dances[*i]).collect()).collect();
+        multimodality_v = multimodality(&g, reference);
+        let per_pair: Vec<f64> = groups
+            .iter()
+            .flat_map(|grp| {
+                let mut d = Vec::new();
+                for a in 0..grp.len() {
+                    for b in a + 1..grp.len() {
+                        d.push(seed_distance_m(&grp[a].1, &grp[b].1));
+                    }
+                }
+                d
+            })
+            .filter(|x| !x.is_nan())
+            .collect();
+        if !per_pair.is_empty() {
+            seed_mean = Some(per_pair.iter().sum::<f64>() / per_pair.len() as f64);
+            seed_min = per_pair.iter().copied().reduce(f64::min);
+        }
+        scores.mean.verdict = scores.mean.verdict.clone().with_seed_distance(seed_min);
+    }
+    EvalRow {
+        name: name.into(),
+        scores,
+        multimodality: multimodality_v,
+        seed_distance_m: seed_mean,
+        seed_distance_min_m: seed_min,
+        dances: scored.into_iter().map(|(e, _)| e).collect(),
+    }
 }
 
 /// Recomputes the reference statistics from the train split and writes them.
@@ -174,7 +232,95 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, Metric
     Ok(stats)
 }
 
-/// Runs the evaluation and returns the rows (printing nothing).
+/// The audio files of a folder, sorted by name.
+fn songs_in(dir: &Path) -> Result<Vec<PathBuf>, MetricsError> {
+    let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
+        .map_err(|source| MetricsError::Io { path: dir.display().to_string(), source })?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.is_file() && audio::decode_path(p).is_ok())
+        .collect();
+    paths.sort();
+    Ok(paths)
+}
+
+/// The rows of one model: as served (feet planted) and as the network made them, on the test
+/// songs and on the extra songs. Each dance is generated once and finished both ways.
+struct ModelRows {
+    test: [EvalRow; 2],
+    extra: Option<[EvalRow; 2]>,
+}
+
+/// A model's dances of a list of songs, finished both ways, grouped by song.
+#[derive(Default)]
+struct Danced {
+    scored: [Vec<(EvalDance, ScoredDance)>; 2],
+    per_song: [Vec<Vec<(usize, Motion)>>; 2],
+}
+
+fn dance_songs(
+    model: &dyn crate::models::DanceModel,
+    id: &str,
+    songs: &[Song],
+    keys_of: impl Fn(usize) -> Vec<KeyPose>,
+    args: &EvalArgs,
+    reference: &ReferenceStats,
+) -> Result<Danced, MetricsError> {
+    let mut out = Danced::default();
+    for (i, s) in songs.iter().enumerate() {
+        let keys = keys_of(i);
+        let mut groups: [Vec<(usize, Motion)>; 2] = Default::default();
+        for seed in args.seed..args.seed + args.seeds.max(1) {
+            let req = GenerateRequest { audio: &s.audio, seed, key_poses: &keys, seed_motion: None };
+            let raw = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?;
+            // The motion stage every job runs (feet planted), and the network's motion as it came.
+            let finished = [crate::motion::finish(raw.clone(), true), crate::motion::finish(raw, false)];
+            for (v, m) in finished.into_iter().enumerate() {
+                let sc = score_dance(&m, &s.beats, &keys, reference)?;
+                groups[v].push((out.scored[v].len(), m.clone()));
+                let e = EvalDance { song: s.name.clone(), motion: format!("{id}@{seed}"), seconds: m.duration_s(), scores: sc.scores.clone() };
+                out.scored[v].push((e, sc));
+            }
+        }
+        for (v, g) in groups.into_iter().enumerate() {
+            out.per_song[v].push(g);
+        }
+    }
+    Ok(out)
+}
+
+/// Names of the two rows of a model.
+fn row_names(base: &str) -> [String; 2] {
+    [base.to_string(), format!("{base} (raw network output, feet not planted)")]
+}
+
+fn rows_of(d: Danced, names: &[String; 2], reference: &ReferenceStats) -> [EvalRow; 2] {
+    let Danced { scored: [s0, s1], per_song: [g0, g1] } = d;
+    [row(&names[0], s0, Some(g0), reference), row(&names[1], s1, Some(g1), reference)]
+}
+
+fn model_rows(
+    model: &dyn crate::models::DanceModel,
+    id: &str,
+    test: (&[Song], &[Dance]),
+    extra: &[Song],
+    args: &EvalArgs,
+    reference: &ReferenceStats,
+) -> Result<ModelRows, MetricsError> {
+    let keyed = args.key_poses > 0 && model.info().capabilities.key_poses;
+    let (songs, dances) = test;
+    let keys_of = |i: usize| if keyed { key_poses_of(&dances[i], args.key_poses, args.seed + i as u64) } else { Vec::new() };
+    let base = if keyed { format!("{id} + {} key poses", args.key_poses) } else { id.to_string() };
+    let test_rows = rows_of(dance_songs(model, id, songs, keys_of, args, reference)?, &row_names(&base), reference);
+    let extra_rows = if extra.is_empty() {
+        None
+    } else {
+        Some(rows_of(dance_songs(model, id, extra, |_| Vec::new(), args, reference)?, &row_names(id), reference))
+    };
+    Ok(ModelRows { test: test_rows, extra: extra_rows })
+}
+
+/// Runs the evaluation and returns the rows (printing nothing but a note for a missing
+/// ../shared/audio).
 pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
     let reference = ReferenceStats::builtin()?;
     let ds = Dataset::open(&args.data).map_err(|e| MetricsError::Reference(e.to_string()))?;
@@ -217,53 +363,41 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
     }
     rows.push(row("Mismatched real", mism, None, &reference));
 
-    // Models.
-    if !args.models.is_empty() {
+    // Models, on the test songs and on the extra songs.
+    let mut extra_rows = Vec::new();
+    let mut extra_names = Vec::new();
+    if !args.real_only {
         let registry = Registry::load(&args.models_dir).map_err(|e| MetricsError::Reference(format!("loading models: {e}")))?;
+        let mut folders: Vec<PathBuf> = Vec::new();
+        if !args.no_shared_songs {
+            let shared = PathBuf::from(SHARED_SONGS);
+            if shared.is_dir() {
+                folders.push(shared);
+            } else {
+                eprintln!("note: {SHARED_SONGS} not found; the extra-song section covers --songs only");
+            }
+        }
+        folders.extend(args.songs.iter().cloned());
         let mut extra = Vec::new();
-        if let Some(dir) = &args.songs {
-            let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
-                .map_err(|source| MetricsError::Io { path: dir.display().to_string(), source })?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|p| p.is_file() && audio::decode_path(p).is_ok())
-                .collect();
-            paths.sort();
-            for p in paths {
+        for dir in &folders {
+            for p in songs_in(dir)? {
                 extra.push(whole_song(&p)?);
             }
         }
-        for id in &args.models {
+        extra_names = extra.iter().map(|s| s.name.clone()).collect();
+        let ids: Vec<String> = if args.models.is_empty() { registry.list().into_iter().map(|m| m.id.0).collect() } else { args.models.clone() };
+        for id in &ids {
             let model = registry
                 .get(&ModelId(id.clone()))
                 .ok_or_else(|| MetricsError::Reference(format!("model {id} not found under {}", args.models_dir.display())))?;
-            let keyed = args.key_poses > 0 && model.info().capabilities.key_poses;
-            let mut scored = Vec::new();
-            let mut per_song = Vec::new();
-            for (i, s) in songs.iter().chain(&extra).enumerate() {
-                let keys = match eval_dances.get(i) {
-                    Some(d) if keyed => key_poses_of(d, args.key_poses, args.seed + i as u64),
-                    _ => Vec::new(),
-                };
-                let mut group = Vec::new();
-                for seed in args.seed..args.seed + args.seeds.max(1) {
-                    let req = GenerateRequest { audio: &s.audio, seed, key_poses: &keys, seed_motion: None };
-                    let m = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?;
-                    // The motion stage every job runs, so the scores are those of what is served.
-                    let m = crate::motion::finish(m, !args.no_plant_feet);
-                    let sc = score_dance(&m, &s.beats, &keys, &reference)?;
-                    group.push(scored.len());
-                    scored.push((EvalDance { song: s.name.clone(), motion: format!("{id}@{seed}"), seconds: m.duration_s(), scores: sc.scores.clone() }, sc));
-                }
-                per_song.push(group);
+            let r = model_rows(model.as_ref(), id, (&songs, &eval_dances), &extra, args, &reference)?;
+            rows.extend(r.test);
+            if let Some(e) = r.extra {
+                extra_rows.extend(e);
             }
-            let mut name = if keyed { format!("{id} + {} key poses", args.key_poses) } else { id.clone() };
-            if args.no_plant_feet {
-                name += " (feet not planted)";
-            }
-            rows.push(row(&name, scored, Some(per_song), &reference));
         }
     }
-    Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows })
+    Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows, extra_songs: extra_names, extra_rows })
 }
 
 /// `n` poses of a real dance (root-relative, metres) at distinct frames after its first second,
@@ -293,12 +427,39 @@ fn f(x: f64) -> String {
     }
 }
 
-/// The Markdown table `choreo eval` prints.
-pub fn markdown(result: &EvalResult) -> String {
+fn f2(x: f64) -> String {
+    if x.is_nan() {
+        "–".into()
+    } else {
+        format!("{x:.2}")
+    }
+}
+
+fn opt(x: Option<f64>) -> String {
+    x.map(f).unwrap_or_else(|| "–".into())
+}
+
+/// The failing criteria with their values, or "pass".
+fn verdict_cell(v: &Verdict) -> String {
+    let fails: Vec<String> = v
+        .criteria
+        .iter()
+        .filter(|c: &&Criterion| c.pass == Some(false))
+        .map(|c| format!("✗ {} {}", c.name, c.value.map(f2).unwrap_or_default()))
+        .collect();
+    if fails.is_empty() {
+        "pass".into()
+    } else {
+        fails.join("; ")
+    }
+}
+
+/// The scores table of a set of rows.
+fn scores_table(rows: &[EvalRow]) -> String {
     let mut out = String::from(
-        "| Motion | n | BAS FACT ↑ | (chance) | BAS Bailando ↑ | Coverage | Hit rate ↑ | Rhythm hit ↑ | Beat F ↑ | FID_k ↓ | FID_g ↓ | Div_k | Div_g | S_cv ↓ | Skate ↓ | Freeze L/F | Authentic ↑ | Coherent ↑ | Multimodality | Key err cm ↓ |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| Motion | n | BAS FACT ↑ | (chance) | BAS Bailando ↑ | Coverage | Hit rate ↑ | Rhythm hit ↑ | Beat F ↑ | FID_k window ↓ | FID_g window ↓ | FID_k dance ↓ | FID_g dance ↓ | Div_k | Div_g | S_cv ↓ | Skate ↓ | Authentic ↑ | Coherent ↑ | Multimodality |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
-    for r in &result.rows {
+    for r in rows {
         let m = &r.scores.mean;
         let cells = [
             r.name.clone(),
@@ -310,19 +471,87 @@ pub fn markdown(result: &EvalResult) -> String {
             f(m.rhythm.beat_hit_rate),
             f(m.rhythm.rhythm_hit),
             f(m.rhythm.f_measure),
-            f(r.scores.fid_k),
-            f(r.scores.fid_g),
+            f(r.scores.fid_k_window),
+            f(r.scores.fid_g_window),
+            f(r.scores.fid_k_dance),
+            f(r.scores.fid_g_dance),
             f(r.scores.div_k),
             f(r.scores.div_g),
             f(m.smoothness_cv),
             f(m.foot_skating.skate_ratio),
-            f(m.freezing_ratio),
             f(m.plausibility.authenticity),
             f(m.plausibility.coherence),
-            r.multimodality.map(f).unwrap_or_else(|| "–".into()),
-            m.key_pose_error_cm.map(f).unwrap_or_else(|| "–".into()),
+            opt(r.multimodality),
         ];
         out.push_str(&format!("| {} |\n", cells.join(" | ")));
+    }
+    out
+}
+
+const PHYSICAL_HEADER: &str = "| Motion | n | Lowest foot p5 / median / p95 m | Below −5 cm | Deepest m | Accel median / p99 / p99.9 / max m/s² | Key pop max m/s² ↓ | Speed m/s | × real | Freeze L/F | Seed Δ m (min) | Key err cm (worst) ↓ | Verdict | Dances passing |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+
+/// One line of the physical table: `tail` is the seed distance, key error, verdict and passing cells.
+fn physical_cells(name: &str, n: usize, p: &PhysicalScores, freeze: f64, tail: [String; 4]) -> String {
+    let [seeds, key_err, verdict, passing] = tail;
+    let cells = [
+        name.to_string(),
+        n.to_string(),
+        format!("{} / {} / {}", f2(p.lowest_foot_m.p5), f2(p.lowest_foot_m.median), f2(p.lowest_foot_m.p95)),
+        format!("{:.1} %", 100.0 * p.below_floor_share),
+        f2(p.deepest_m),
+        format!("{} / {} / {} / {}", f2(p.acceleration_m_s2.median), f2(p.acceleration_m_s2.p99), f2(p.acceleration_m_s2.p99_9), f2(p.acceleration_m_s2.max)),
+        p.key_pose_pops_m_s2.iter().copied().reduce(f64::max).map(f2).unwrap_or_else(|| "–".into()),
+        f2(p.mean_speed_m_s),
+        f2(p.speed_ratio),
+        f(freeze),
+        seeds,
+        key_err,
+        verdict,
+        passing,
+    ];
+    format!("| {} |\n", cells.join(" | "))
+}
+
+/// The physical-plausibility table of a set of rows, under the real train figures.
+fn physical_table(rows: &[EvalRow], reference: Option<&ReferenceStats>) -> String {
+    let mut out = String::from(PHYSICAL_HEADER);
+    if let Some(r) = reference {
+        let p = &r.physical;
+        let name = format!("Real train (reference; speed per dance {:.2}–{:.2})", p.mean_speed_range_m_s[0], p.mean_speed_range_m_s[1]);
+        out.push_str(&physical_cells(&name, r.dances.len(), &p.pooled, f64::NAN, ["–".into(), "–".into(), "–".into(), "–".into()]));
+    }
+    for r in rows {
+        let m = &r.scores.mean;
+        let seeds = match (r.seed_distance_m, r.seed_distance_min_m) {
+            (Some(a), Some(b)) => format!("{} ({})", f2(a), f2(b)),
+            _ => "–".into(),
+        };
+        let passing = format!("{}/{}", r.scores.dances_passing, r.scores.dances);
+        let key_err = worst_key_error(r).map(f2).unwrap_or_else(|| "–".into());
+        out.push_str(&physical_cells(&r.name, r.scores.dances, &m.physical, m.freezing_ratio, [seeds, key_err, verdict_cell(&m.verdict), passing]));
+    }
+    out
+}
+
+/// The row's worst key-pose error (cm), from its verdict.
+fn worst_key_error(r: &EvalRow) -> Option<f64> {
+    r.scores.mean.verdict.get(super::physical::names::KEY_POSES).and_then(|c| c.value)
+}
+
+/// The Markdown `choreo eval` prints: per section, a scores table and a physical-plausibility
+/// table (the verdict: each criterion as the row's worst dance has it; the values beside it are
+/// every frame of the row pooled).
+pub fn markdown(result: &EvalResult) -> String {
+    let reference = ReferenceStats::builtin().ok();
+    let mut out = format!("## {} split ({} songs, each cut to its dance)\n\n### Scores\n\n", result.split, result.rows.first().map_or(0, |r| r.scores.dances));
+    out += &scores_table(&result.rows);
+    out += "\n### Physical plausibility\n\n";
+    out += &physical_table(&result.rows, reference.as_ref());
+    if !result.extra_rows.is_empty() {
+        out += &format!("\n## Extra songs, whole ({})\n\n### Scores\n\n", result.extra_songs.join(", "));
+        out += &scores_table(&result.extra_rows);
+        out += "\n### Physical plausibility\n\n";
+        out += &physical_table(&result.extra_rows, reference.as_ref());
     }
     out
 }
@@ -338,6 +567,20 @@ pub fn run(args: &EvalArgs) -> Result<(), MetricsError> {
             s.kinetic.gaussian.count,
             s.geometric.gaussian.count,
             s.body_scale
+        );
+        let p = &s.physical;
+        println!(
+            "train physical: lowest foot p5 {:.3} / median {:.3} / p95 {:.3} m; acceleration median {:.2}, p99 {:.2}, p99.9 {:.2}, max {:.2} m/s²; mean joint speed {:.3} m/s (per dance {:.2}–{:.2})",
+            p.pooled.lowest_foot_m.p5,
+            p.pooled.lowest_foot_m.median,
+            p.pooled.lowest_foot_m.p95,
+            p.pooled.acceleration_m_s2.median,
+            p.pooled.acceleration_m_s2.p99,
+            p.pooled.acceleration_m_s2.p99_9,
+            p.pooled.acceleration_m_s2.max,
+            p.pooled.mean_speed_m_s,
+            p.mean_speed_range_m_s[0],
+            p.mean_speed_range_m_s[1]
         );
         return Ok(());
     }

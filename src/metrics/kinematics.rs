@@ -160,6 +160,16 @@ pub fn freezing(positions: ArrayView3<'_, f32>, fps: f64) -> Freezing {
 /// root-relative and a generated dance carries no body centre, so centring both is the one root
 /// they share); averaged over key poses. `None` when no key pose applies.
 pub fn key_pose_error_cm(positions: ArrayView3<'_, f32>, fps: f64, key_poses: &[crate::motion::KeyPose]) -> Option<f64> {
+    let errs = key_pose_errors_cm(positions, fps, key_poses);
+    if errs.is_empty() {
+        None
+    } else {
+        Some(errs.iter().sum::<f64>() / errs.len() as f64)
+    }
+}
+
+/// The error (cm) of each key pose that applies, as [`key_pose_error_cm`] measures it, in order.
+pub fn key_pose_errors_cm(positions: ArrayView3<'_, f32>, fps: f64, key_poses: &[crate::motion::KeyPose]) -> Vec<f64> {
     let (t, j, _) = positions.dim();
     let mut errs = Vec::new();
     for kp in key_poses {
@@ -175,11 +185,7 @@ pub fn key_pose_error_cm(positions: ArrayView3<'_, f32>, fps: f64, key_poses: &[
             .sum();
         errs.push(100.0 * sum / j as f64);
     }
-    if errs.is_empty() {
-        None
-    } else {
-        Some(errs.iter().sum::<f64>() / errs.len() as f64)
-    }
+    errs
 }
 
 /// Mean per-joint distance (cm) between each key pose and the motion's root-relative joints at

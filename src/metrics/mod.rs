@@ -5,7 +5,9 @@
 //!   coverage / hit rate (DanceRevolution), rhythm hit (DanceNet), and `mir_eval`'s beat metrics.
 //! - [`features`]: AIST++ kinetic and geometric features; [`fid`]: FID and diversity.
 //! - [`kinematics`]: smoothness, foot skating, freezing, key-pose error; [`plausibility`]:
-//!   authenticity and coherence against real joint-angle limits.
+//!   authenticity and coherence against real joint-angle limits (TSMT).
+//! - [`physical`]: floor contact, ground penetration, pops, liveliness, seed sensitivity, and
+//!   issue 10's pass/fail verdict on them.
 //! - [`reference`]: the committed train-split statistics; [`score`]: one dance and a set;
 //!   [`eval`]: `choreo eval`; [`skeleton_map`]: AIST++ joints on our 23-joint skeleton.
 //!
@@ -27,6 +29,7 @@ pub mod eval;
 pub mod features;
 pub mod fid;
 pub mod kinematics;
+pub mod physical;
 pub mod plausibility;
 pub mod reference;
 pub mod score;

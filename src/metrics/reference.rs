@@ -1,6 +1,9 @@
 //! Reference statistics of the real train dances: the z-normalisation and Gaussians FID compares
 //! against, the body scale of the geometric thresholds, and the plausibility limits.
 //!
+//! FID comes in two protocols, kept apart by name: windows (5-s windows every 1 s, pooled; our
+//! `fid_*_window`) and whole dances (one feature vector per dance, Bailando's `fid_*_dance`).
+//!
 //! Committed as `src/metrics/reference_train.json` and compiled in ([`ReferenceStats::builtin`]);
 //! regenerate with `choreo eval --write-reference` (train split only, never the test split).
 use ndarray::ArrayView3;
@@ -8,6 +11,7 @@ use ndarray::ArrayView3;
 use super::features::{geometric_features, kinetic_features, BodyScale};
 use super::fid::{Gaussian, ZNorm};
 use super::kinematics::{percentile, window_starts};
+use super::physical::PhysicalReference;
 use super::plausibility::{angular_velocities, joint_angles, AngleLimits, LIMIT_PERCENTILES};
 use super::skeleton_map::{angle_triples, augment, kinetic_view, GEOMETRIC_JOINTS};
 use super::MetricsError;
@@ -22,6 +26,8 @@ pub const CURVE_WINDOW_S: f64 = 4.0;
 /// A feature whose train standard deviation is below this carries no information and is left out
 /// of FID (z-normalising it would divide by ~1e-10 and let one stray value dominate).
 pub const MIN_FEATURE_STD: f64 = 1e-8;
+/// The `window_s` (and `stride_s`) recorded for whole-dance features: one vector per dance.
+pub const WHOLE_DANCE: f64 = 0.0;
 
 
 /// Statistics of one feature kind over the real train windows.
@@ -75,6 +81,12 @@ pub struct ReferenceStats {
     pub kinetic_curve: FeatureStats,
     /// Joint-angle and angular-velocity limits (0.5–99.5 percentiles).
     pub angle_limits: AngleLimits,
+    /// Kinetic features of each whole train dance, one vector per dance (Bailando's FID_k).
+    pub kinetic_dance: FeatureStats,
+    /// Geometric features of each whole train dance (Bailando's FID_g).
+    pub geometric_dance: FeatureStats,
+    /// Floor contact, pops and speed of the train dances ([`super::physical`]).
+    pub physical: PhysicalReference,
 }
 
 /// The committed statistics, compiled into the binary.
@@ -107,6 +119,14 @@ pub fn geometric_windows(motion: &Motion, scale: &BodyScale, window_s: f64, stri
             geometric_features(aug.slice(ndarray::s![s0..end, .., ..]), motion.fps, &GEOMETRIC_JOINTS, scale)
         })
         .collect()
+}
+
+/// Raw kinetic and geometric features of a whole dance, one vector each: the AIST++ features
+/// computed over every frame, as Bailando's evaluation computes one per dance.
+pub fn dance_features(motion: &Motion, scale: &BodyScale) -> (Vec<f64>, Vec<f64>) {
+    let aug = augment(motion.positions.view());
+    let kin = kinetic_view(&aug);
+    (kinetic_features(kin.view(), motion.fps), geometric_features(aug.view(), motion.fps, &GEOMETRIC_JOINTS, scale))
 }
 
 fn dist(p: ArrayView3<'_, f32>, f: usize, a: usize, b: usize) -> f64 {
@@ -170,7 +190,11 @@ impl ReferenceStats {
         let mut kin = Vec::new();
         let mut geo = Vec::new();
         let mut curve = Vec::new();
+        let (mut kin_dance, mut geo_dance) = (Vec::new(), Vec::new());
         for m in motions {
+            let (k, g) = dance_features(m, &body_scale);
+            kin_dance.push(k);
+            geo_dance.push(g);
             kin.extend(kinetic_windows(m, FID_WINDOW_S, FID_STRIDE_S));
             geo.extend(geometric_windows(m, &body_scale, FID_WINDOW_S, FID_STRIDE_S));
             curve.extend(kinetic_windows(m, CURVE_WINDOW_S, FID_STRIDE_S));
@@ -184,6 +208,9 @@ impl ReferenceStats {
             geometric: FeatureStats::fit(FID_WINDOW_S, FID_STRIDE_S, &geo)?,
             kinetic_curve: FeatureStats::fit(CURVE_WINDOW_S, FID_STRIDE_S, &curve)?,
             angle_limits: angle_limits(motions),
+            kinetic_dance: FeatureStats::fit(WHOLE_DANCE, WHOLE_DANCE, &kin_dance)?,
+            geometric_dance: FeatureStats::fit(WHOLE_DANCE, WHOLE_DANCE, &geo_dance)?,
+            physical: PhysicalReference::compute(motions),
         })
     }
 

@@ -1,9 +1,10 @@
 //! Every metric of one dance, and of a set of dances (a row of `choreo eval`).
 use super::beats::{beats_within, kinematic_beats_bailando, kinematic_beats_fact, rhythm_scores, RhythmScores};
 use super::fid::{frechet_distance, mean_pairwise_distance, Gaussian};
-use super::kinematics::{foot_skating, freezing, key_pose_error_cm, smoothness_cv, FootSkating, Freezing};
+use super::kinematics::{foot_skating, freezing, key_pose_errors_cm, smoothness_cv, FootSkating, Freezing};
+use super::physical::{physical_series, verdict, PhysicalScores, PhysicalSeries, Verdict};
 use super::plausibility::{plausibility, Plausibility};
-use super::reference::{geometric_windows, kinetic_windows, FeatureStats, ReferenceStats, CURVE_WINDOW_S};
+use super::reference::{dance_features, geometric_windows, kinetic_windows, FeatureStats, ReferenceStats, CURVE_WINDOW_S};
 use super::MetricsError;
 use crate::motion::{skeleton as sk, KeyPose, Motion, NUM_JOINTS};
 
@@ -12,6 +13,10 @@ use crate::motion::{skeleton as sk, KeyPose, Motion, NUM_JOINTS};
 pub struct WindowFeatures {
     pub kinetic: Vec<Vec<f64>>,
     pub geometric: Vec<Vec<f64>>,
+    /// The whole dance's kinetic features (one vector, Bailando's protocol).
+    pub kinetic_dance: Vec<f64>,
+    /// The whole dance's geometric features.
+    pub geometric_dance: Vec<f64>,
 }
 
 /// Kinematic beat times (seconds from the first frame).
@@ -43,6 +48,10 @@ pub struct DanceScores {
     pub plausibility: Plausibility,
     /// Key-pose consistency error (cm), when key poses were given.
     pub key_pose_error_cm: Option<f64>,
+    /// Floor contact, ground penetration, pops and speed ([`super::physical`]).
+    pub physical: PhysicalScores,
+    /// Issue 10's thresholds applied (the seed criterion only where two seeds are compared).
+    pub verdict: Verdict,
 }
 
 /// One dance scored, with the series a report plots and the features a set-level FID pools.
@@ -54,6 +63,8 @@ pub struct ScoredDance {
     pub kinematic_beats: KinematicBeats,
     pub freezing: Freezing,
     pub features: WindowFeatures,
+    /// The per-frame series behind `scores.physical`, for pooling a set.
+    pub physical: PhysicalSeries,
 }
 
 fn check(motion: &Motion) -> Result<(), MetricsError> {
@@ -94,11 +105,17 @@ pub fn score_dance(motion: &Motion, music_beats: &[f64], key_poses: &[KeyPose], 
     let span = (p.dim().0 - 1) as f64 / fps;
     let music = beats_within(music_beats, span);
     let kb = KinematicBeats { fact: kinematic_beats_fact(p, fps), bailando: kinematic_beats_bailando(p, fps) };
+    let (kinetic_dance, geometric_dance) = dance_features(motion, &reference.body_scale);
     let features = WindowFeatures {
         kinetic: kinetic_windows(motion, reference.kinetic.window_s, reference.kinetic.stride_s),
         geometric: geometric_windows(motion, &reference.body_scale, reference.geometric.window_s, reference.geometric.stride_s),
+        kinetic_dance,
+        geometric_dance,
     };
     let fr = freezing(p, fps);
+    let series = physical_series(motion, key_poses);
+    let physical = series.scores(reference.physical.pooled.mean_speed_m_s);
+    let key_errors = key_pose_errors_cm(p, fps, key_poses);
     let scores = DanceScores {
         rhythm: rhythm_scores(&music, &kb.fact, &kb.bailando, span),
         fid_k: fid_against(&reference.kinetic, &features.kinetic),
@@ -109,9 +126,11 @@ pub fn score_dance(motion: &Motion, music_beats: &[f64], key_poses: &[KeyPose], 
         foot_skating: foot_skating(p, fps, &sk::FOOT_POINTS),
         freezing_ratio: fr.last_first_ratio,
         plausibility: plausibility(p, fps, &reference.angle_limits),
-        key_pose_error_cm: key_pose_error_cm(p, fps, key_poses),
+        key_pose_error_cm: if key_errors.is_empty() { None } else { Some(key_errors.iter().sum::<f64>() / key_errors.len() as f64) },
+        verdict: verdict(&physical, &key_errors, None),
+        physical,
     };
-    Ok(ScoredDance { scores, music_beats: music, kinematic_beats: kb, freezing: fr, features })
+    Ok(ScoredDance { scores, music_beats: music, kinematic_beats: kb, freezing: fr, features, physical: series })
 }
 
 /// One point of the windowed FID_k curve.
@@ -142,17 +161,26 @@ pub fn fid_k_curve(motion: &Motion, reference: &ReferenceStats) -> Vec<CurvePoin
 }
 
 /// Means of the per-dance scores over a set, with FID and diversity recomputed on the pooled
-/// windows of the whole set (the way papers report a model).
+/// windows of the whole set (the way papers report a model), FID also on one vector per dance
+/// (Bailando's protocol), and the physical numbers on every frame of the set pooled.
 #[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct SetScores {
     /// Dances in the set.
     pub dances: usize,
-    /// Per-dance scores averaged (their `fid_*`/`div_*` are per-dance means).
+    /// Per-dance scores averaged (their `fid_*`/`div_*` are per-dance means), except `physical`
+    /// (every frame of the set pooled) and `verdict` (each criterion as the worst dance has it).
     pub mean: DanceScores,
-    /// FID_k of all windows of the set pooled.
-    pub fid_k: f64,
+    /// FID_k of all 5-s windows of the set pooled.
+    pub fid_k_window: f64,
     /// FID_g of all windows pooled.
-    pub fid_g: f64,
+    pub fid_g_window: f64,
+    /// FID_k of one whole-dance kinetic vector per dance against the train dances' (Bailando's
+    /// protocol; few dances give a singular covariance, so compare sets of similar size).
+    pub fid_k_dance: f64,
+    /// FID_g likewise with whole-dance geometric vectors.
+    pub fid_g_dance: f64,
+    /// Dances whose own verdict passes.
+    pub dances_passing: usize,
     /// Div_k over all windows pooled.
     pub div_k: f64,
     /// Div_g over all windows pooled.
@@ -203,12 +231,19 @@ pub fn score_set(dances: &[ScoredDance], reference: &ReferenceStats) -> SetScore
             coherence: mean_of(d().map(|s| s.plausibility.coherence)),
         },
         key_pose_error_cm: if kp.is_empty() { None } else { Some(mean_of(kp.into_iter())) },
+        physical: PhysicalSeries::pooled(dances.iter().map(|s| &s.physical)).scores(reference.physical.pooled.mean_speed_m_s),
+        verdict: Verdict::worst(d().map(|s| &s.verdict)),
     };
+    let kin_dance: Vec<Vec<f64>> = dances.iter().map(|s| s.features.kinetic_dance.clone()).collect();
+    let geo_dance: Vec<Vec<f64>> = dances.iter().map(|s| s.features.geometric_dance.clone()).collect();
     SetScores {
         dances: dances.len(),
         mean,
-        fid_k: fid_against(&reference.kinetic, &kin),
-        fid_g: fid_against(&reference.geometric, &geo),
+        fid_k_window: fid_against(&reference.kinetic, &kin),
+        fid_g_window: fid_against(&reference.geometric, &geo),
+        fid_k_dance: fid_against(&reference.kinetic_dance, &kin_dance),
+        fid_g_dance: fid_against(&reference.geometric_dance, &geo_dance),
+        dances_passing: d().filter(|s| s.verdict.pass).count(),
         div_k: diversity(&reference.kinetic, &kin),
         div_g: diversity(&reference.geometric, &geo),
     }

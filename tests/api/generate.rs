@@ -62,6 +62,10 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
     let report: Value = app.get(&format!("/v1/jobs/{job}/report.json")).await.json().await.expect("report");
     assert_eq!(report["frames"], frames);
     assert!(report["scores"]["fid_k"].as_f64().is_some_and(f64::is_finite), "{report}");
+    // Issue 10's physical numbers and their verdict ride in every report.
+    assert!(report["scores"]["physical"]["lowest_foot_m"]["median"].as_f64().is_some_and(f64::is_finite), "{report}");
+    assert!(report["scores"]["physical"]["mean_speed_m_s"].as_f64().is_some_and(|v| v > 0.0), "{report}");
+    assert_eq!(report["scores"]["verdict"]["criteria"].as_array().map(Vec::len), Some(7), "{report}");
     assert!(report["music_beat_times"].as_array().is_some_and(|b| !b.is_empty()));
 
     // The same seed gives the same dance; another seed another one.
