@@ -384,6 +384,7 @@ mod real_data {
             seeds: 2,
             key_poses: 0,
             no_plant_feet: false,
+            previews: None,
             mismatch_per_song: 3,
             write_reference: false,
             reference_out: "unused".into(),

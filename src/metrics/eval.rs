@@ -65,6 +65,10 @@ pub struct EvalArgs {
     /// `choreo generate` apply by default (`motion::feet`).
     #[arg(long)]
     pub no_plant_feet: bool,
+    /// Write each generated dance's contact sheet here as `<model>_<song>_seed<seed>.png`
+    /// (the picture jobs serve as preview.png).
+    #[arg(long, value_name = "DIR")]
+    pub previews: Option<PathBuf>,
     /// Train dances paired with each test song in the Mismatched-real row.
     #[arg(long, default_value_t = 1)]
     pub mismatch_per_song: usize,
@@ -250,6 +254,9 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
                     let m = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?;
                     // The motion stage every job runs, so the scores are those of what is served.
                     let m = crate::motion::finish(m, !args.no_plant_feet);
+                    if let Some(dir) = &args.previews {
+                        write_preview(dir, id, s, seed, &m, &keys)?;
+                    }
                     let sc = score_dance(&m, &s.beats, &keys, &reference)?;
                     group.push(scored.len());
                     scored.push((EvalDance { song: s.name.clone(), motion: format!("{id}@{seed}"), seconds: m.duration_s(), scores: sc.scores.clone() }, sc));
@@ -264,6 +271,22 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
         }
     }
     Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows })
+}
+
+/// Writes the contact sheet of `model`'s dance to `song` with `seed` into `dir`.
+fn write_preview(dir: &Path, model: &str, song: &Song, seed: u64, motion: &Motion, keys: &[KeyPose]) -> Result<(), MetricsError> {
+    use crate::report::preview::{write_png, Caption, Sheet};
+    let stem = song.name.rsplit_once('.').map_or(song.name.as_str(), |(stem, _)| stem);
+    let name: String = format!("{model}_{stem}_seed{seed}.png")
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' })
+        .collect();
+    std::fs::create_dir_all(dir).map_err(|source| MetricsError::Io { path: dir.display().to_string(), source })?;
+    let caption = Caption { model: model.to_string(), seed, song: Some(song.name.clone()) };
+    let key_pose_times: Vec<f64> = keys.iter().map(|k| k.time_s).collect();
+    let sheet = Sheet { motion, beat_times: &song.beats, key_pose_times: &key_pose_times, song_duration_s: song.audio.duration_s, caption: &caption };
+    let path = dir.join(name);
+    write_png(&path, &sheet).map_err(|e| MetricsError::Io { path: path.display().to_string(), source: std::io::Error::other(e) })
 }
 
 /// `n` poses of a real dance (root-relative, metres) at distinct frames after its first second,
