@@ -25,7 +25,8 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::motion::feet::SUPPORT_HEIGHT_M;
-use crate::motion::skeleton::{body_centre, ANATOMICAL, FOOT_POINTS, HEAD, HIPS, PARENTS, SHOULDERS};
+use crate::motion::feet::floor_height;
+use crate::motion::skeleton::{body_centre, ANATOMICAL, FOOT_POINTS, HEAD, HIPS, PARENTS, SHOULDERS, SPINE};
 use crate::motion::{Motion, NUM_JOINTS};
 
 /// File name of the picture next to a dance's other results.
@@ -49,6 +50,8 @@ const ROW_LEFT: i32 = 96;
 const SPEED_H: u32 = 230;
 /// Smoothing window of the speed curve drawn over the raw one, seconds.
 const SMOOTH_S: f64 = 0.5;
+/// Radius of the head circle, metres.
+const HEAD_RADIUS_M: f64 = 0.1;
 
 const FONT_FAMILY: &str = "sans-serif";
 /// DejaVu Sans (see the module doc for why it is compiled in).
@@ -175,7 +178,7 @@ pub fn render_rgb(sheet: &Sheet<'_>) -> Result<Vec<u8>, PreviewError> {
         rows.draw(&front, motion, View::Front)?;
         rows.draw(&side, motion, View::Side)?;
         draw_speed(&speed, sheet, &series, &rows.frames)?;
-        draw_feet(&feet, &series, motion.duration_s())?;
+        draw_feet(&feet, &series, motion.duration_s(), floor_height(motion.positions.view(), &FOOT_POINTS))?;
         root.present()?;
     }
     Ok(rgb)
@@ -324,17 +327,26 @@ impl FigureRows {
                 let (x, y) = points[k];
                 (x.is_finite() && y.is_finite()).then(|| (centre_x + (x * ppm).round() as i32, row_y(y)))
             };
-            // Torso lines first, then limbs, so the limbs' sides stay visible.
+            // Torso lines first, then limbs, so the limbs' sides stay visible. The two head
+            // markers become one head (a circle at their midpoint) on a neck from the spine.
             let mut segments: Vec<(usize, usize, RGBColor)> = vec![(HIPS[0], HIPS[1], CENTRE), (SHOULDERS[0], SHOULDERS[1], CENTRE)];
-            segments.extend((0..NUM_JOINTS).filter_map(|c| PARENTS[c].map(|p| (p, c, side_colour(c)))));
+            segments.extend((0..NUM_JOINTS).filter(|c| !HEAD.contains(c)).filter_map(|c| PARENTS[c].map(|p| (p, c, side_colour(c)))));
             for (a, b, colour) in segments {
                 if let (Some(pa), Some(pb)) = (px(a), px(b)) {
                     area.draw(&PathElement::new(vec![pa, pb], colour.stroke_width(3)))?;
                 }
             }
-            if let (Some(a), Some(b)) = (px(HEAD[0]), px(HEAD[1])) {
-                let centre = ((a.0 + b.0) / 2, (a.1 + b.1) / 2);
-                area.draw(&Circle::new(centre, (0.1 * ppm).round() as i32, CENTRE.stroke_width(2)))?;
+            if let (Some(a), Some(b), Some(spine)) = (px(HEAD[0]), px(HEAD[1]), px(SPINE)) {
+                let head = ((a.0 + b.0) / 2, (a.1 + b.1) / 2);
+                let radius = (HEAD_RADIUS_M * ppm).round().max(2.0);
+                // The neck stops at the circle.
+                let (dx, dy) = (f64::from(spine.0 - head.0), f64::from(spine.1 - head.1));
+                let len = dx.hypot(dy);
+                if len > radius {
+                    let rim = (head.0 + (dx / len * radius).round() as i32, head.1 + (dy / len * radius).round() as i32);
+                    area.draw(&PathElement::new(vec![spine, rim], CENTRE.stroke_width(3)))?;
+                }
+                area.draw(&Circle::new(head, radius as i32, CENTRE.stroke_width(2)))?;
             }
             let seconds = f as f64 / motion.fps;
             area.draw_text(&format!("{seconds:.1} s"), &font(15).pos(Pos::new(HPos::Center, VPos::Bottom)), (centre_x, h - 2))?;
@@ -447,7 +459,9 @@ fn draw_speed<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, sheet: &Sheet<'
     Ok(())
 }
 
-fn draw_feet<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, series: &Series, duration: f64) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+/// The lowest foot's height over time; `rest` is where the dance's own floor is
+/// ([`floor_height`]: feet rest there, whatever y = 0 says).
+fn draw_feet<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, series: &Series, duration: f64, rest: f64) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let duration = duration.max(1e-3);
     let heights = || series.lowest_foot.iter().map(|p| p.1);
     let lo = heights().fold(f64::INFINITY, f64::min);
@@ -455,13 +469,21 @@ fn draw_feet<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, series: &Series,
     let (lo, hi) = if lo.is_finite() && hi.is_finite() { ((lo - 0.05).min(-0.1), (hi + 0.05).max(0.4)) } else { (-0.1, 0.4) };
     let on_floor = heights().filter(|y| y.abs() <= SUPPORT_HEIGHT_M).count() as f64 / series.lowest_foot.len().max(1) as f64;
     let caption = format!(
-        "lowest foot point height (m) · brown: the floor (y = 0) · within {:.0} cm of it {:.0} % of the time",
+        "lowest foot point height (m) · brown: the floor (y = 0), within {:.0} cm of it {:.0} % of the time · grey dashes: where this dance's feet rest ({:+.1} cm)",
         SUPPORT_HEIGHT_M * 100.0,
-        on_floor * 100.0
+        on_floor * 100.0,
+        rest * 100.0
     );
     let mut chart = plot(area, &caption, 0.0..duration, lo..hi)?;
     chart.draw_series(std::iter::once(Rectangle::new([(0.0, lo), (duration, 0.0)], GROUND.filled())))?;
     chart.draw_series(std::iter::once(PathElement::new(vec![(0.0, 0.0), (duration, 0.0)], FLOOR.stroke_width(2))))?;
+    if rest.is_finite() {
+        let dash = duration / 150.0;
+        chart.draw_series((0..150).step_by(2).map(|i| {
+            let t = i as f64 * dash;
+            PathElement::new(vec![(t, rest), (t + dash, rest)], RGBColor(110, 110, 110).stroke_width(2))
+        }))?;
+    }
     chart.draw_series(LineSeries::new(series.lowest_foot.iter().map(|&(t, y)| (t, y.min(hi))), CENTRE.stroke_width(1)))?;
     Ok(())
 }
