@@ -403,6 +403,12 @@ pub async fn result(State(state): State<AppState>, Path((id, file)): Path<(Strin
     Ok(([(header::CONTENT_TYPE, content_type(name))], Body::from(bytes)).into_response())
 }
 
+/// The bytes of a PNG image.
+// For the OpenAPI document only: a bare `Vec<u8>` would read there as an array of integers.
+#[derive(utoipa::ToSchema)]
+#[schema(value_type = String, format = Binary)]
+pub struct Png(pub Vec<u8>);
+
 /// A succeeded generate job's contact sheet.
 ///
 /// One PNG to judge the dance at a glance: stick figures at about a dozen instants (front and
@@ -415,7 +421,7 @@ pub async fn result(State(state): State<AppState>, Path((id, file)): Path<(Strin
     tag = "jobs",
     params(("id" = String, Path, description = "Job id")),
     responses(
-        (status = 200, description = "The contact sheet", content_type = "image/png", body = Vec<u8>),
+        (status = 200, description = "The contact sheet", content_type = "image/png", body = inline(Png)),
         (status = 404, description = "No such job, or a job from before previews", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The job has not succeeded (yet); the body gives its status", body = Problem, content_type = "application/problem+json"),
     ),
