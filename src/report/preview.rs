@@ -476,7 +476,8 @@ fn draw_feet<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, series: &Series,
         "lowest foot point height (m) · brown: the floor (y = 0), within {:.0} cm of it {:.0} % of the time · grey dashes: where this dance's feet rest ({:+.1} cm)",
         SUPPORT_HEIGHT_M * 100.0,
         on_floor * 100.0,
-        rest * 100.0
+        // Rounded first, so a floor 0.3 mm below zero does not print as "-0.0".
+        (rest * 1000.0).round() / 10.0 + 0.0
     );
     let mut chart = plot(area, &caption, 0.0..duration, lo..hi)?;
     chart.draw_series(std::iter::once(Rectangle::new([(0.0, lo), (duration, 0.0)], GROUND.filled())))?;
