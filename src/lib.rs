@@ -11,8 +11,8 @@
 //!    sets each paper used are computed to match librosa.
 //! 4. **model** (`models`): one file per paper; libtorch runs on the worker's blocking thread.
 //! 5. **motion** (`motion`): the model's poses become a rigid skeleton with rotations.
-//! 6. **export + report** (`motion` exporters, `metrics`, `report`): BVH, JSON, glb, and the
-//!    report of how well it dances.
+//! 6. **export + report** (`motion` exporters, `metrics`, `report`): BVH, JSON, glb, the
+//!    report of how well it dances, and `preview.png`, a contact sheet to see it at a glance.
 //!
 //! # Who owns libtorch
 //! Only worker threads (tokio blocking threads) and the CLI's `train`/`generate`/`eval` call into

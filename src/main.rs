@@ -27,7 +27,7 @@ enum Command {
     Doctor(ServiceArgs),
     /// Score Real, Mismatched-real and models on the test split (Markdown table + JSON).
     Eval(choreo::metrics::eval::EvalArgs),
-    /// Generate a dance for a song: motion.bvh, motion.json, motion.glb and report.json.
+    /// Generate a dance for a song: motion.bvh, motion.json, motion.glb, report.json and preview.png.
     Generate(choreo::worker::standalone::GenerateArgs),
     /// Train a model on the train split of dance-with-melody and write its folder under models/.
     Train {

@@ -10,6 +10,8 @@ use crate::metrics::kinematics::Freezing;
 use crate::metrics::MetricsError;
 use crate::motion::{KeyPose, Motion};
 
+pub mod preview;
+
 /// Version of the report schema; bumped when a field changes meaning.
 pub const REPORT_VERSION: u32 = 1;
 

@@ -392,6 +392,7 @@ mod real_data {
             seed: 0,
             seeds: 2,
             key_poses: 0,
+            previews: None,
             mismatch_per_song: 3,
             write_reference: false,
             reference_out: "unused".into(),

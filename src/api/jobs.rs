@@ -69,6 +69,9 @@ pub struct Links {
     pub motion_glb: Option<String>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub report: Option<String>,
+    /// The contact sheet: stick figures over the floor, speed and foot height over time (PNG).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub preview: Option<String>,
 }
 
 /// A job as the API shows it.
@@ -108,6 +111,7 @@ impl From<Job> for JobView {
             motion_json: file("motion.json"),
             motion_glb: file("motion.glb"),
             report: file("report.json"),
+            preview: file("preview.png"),
             self_: base.clone(),
         };
         let (model, seed) = match &job.kind {
@@ -359,6 +363,7 @@ fn content_type(file: &str) -> &'static str {
     match file.rsplit('.').next() {
         Some("json") => "application/json",
         Some("glb") => "model/gltf-binary",
+        Some("png") => "image/png",
         _ => "text/plain; charset=utf-8",
     }
 }
@@ -370,7 +375,7 @@ fn content_type(file: &str) -> &'static str {
     tag = "jobs",
     params(
         ("id" = String, Path, description = "Job id"),
-        ("file" = String, Path, description = "motion.bvh, motion.json, motion.glb or report.json"),
+        ("file" = String, Path, description = "motion.bvh, motion.json, motion.glb, report.json or preview.png"),
     ),
     responses(
         (status = 200, description = "The file"),
@@ -396,4 +401,32 @@ pub async fn result(State(state): State<AppState>, Path((id, file)): Path<(Strin
     let path = state.data.job_dir(job.id).join(name);
     let bytes = tokio::fs::read(&path).await.map_err(|e| ApiError::Internal(format!("reading {name} of job {}: {e}", job.id)))?;
     Ok(([(header::CONTENT_TYPE, content_type(name))], Body::from(bytes)).into_response())
+}
+
+/// The bytes of a PNG image.
+// For the OpenAPI document only: a bare `Vec<u8>` would read there as an array of integers.
+#[derive(utoipa::ToSchema)]
+#[schema(value_type = String, format = Binary)]
+pub struct Png(pub Vec<u8>);
+
+/// A succeeded generate job's contact sheet.
+///
+/// One PNG to judge the dance at a glance: stick figures at about a dozen instants (front and
+/// side), drawn to one scale over the floor line (y = 0) so a floating or sinking dancer shows;
+/// mean joint speed over time with the music's beats and the key-pose times marked; the lowest
+/// foot's height over time against the floor; a title with model, seed, song and mean speed.
+#[utoipa::path(
+    get,
+    path = "/v1/jobs/{id}/preview.png",
+    tag = "jobs",
+    params(("id" = String, Path, description = "Job id")),
+    responses(
+        (status = 200, description = "The contact sheet", content_type = "image/png", body = inline(Png)),
+        (status = 404, description = "No such job, or a job from before previews", body = Problem, content_type = "application/problem+json"),
+        (status = 409, description = "The job has not succeeded (yet); the body gives its status", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn preview(state: State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
+    result(state, Path((id, crate::report::preview::PREVIEW_FILE.to_string()))).await
 }

@@ -77,6 +77,7 @@ pub fn router(state: AppState) -> Router {
         .route("/songs/{id}", get(songs::get))
         .route("/jobs", get(jobs::list).post(jobs::create))
         .route("/jobs/{id}", get(jobs::get).delete(jobs::cancel))
+        .route("/jobs/{id}/preview.png", get(jobs::preview))
         .route("/jobs/{id}/{file}", get(jobs::result))
         .route("/models", get(system::models))
         .layer(axum::extract::DefaultBodyLimit::max(

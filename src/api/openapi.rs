@@ -17,6 +17,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
         super::jobs::get,
         super::jobs::cancel,
         super::jobs::result,
+        super::jobs::preview,
         super::system::models,
         super::system::healthz,
         super::system::readyz,

@@ -83,6 +83,10 @@ pub struct EvalArgs {
     /// get none. The key-pose error column then shows how closely the dances pass through them.
     #[arg(long, default_value_t = 0)]
     pub key_poses: usize,
+    /// Write each generated dance's contact sheet (as served) here as
+    /// `<model>_<song>_seed<seed>.png` (the picture jobs serve as preview.png).
+    #[arg(long, value_name = "DIR")]
+    pub previews: Option<PathBuf>,
     /// Train dances paired with each test song in the Mismatched-real row.
     #[arg(long, default_value_t = 1)]
     pub mismatch_per_song: usize,
@@ -274,6 +278,9 @@ fn dance_songs(
             let raw = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?;
             // The motion stage every job runs (feet planted), and the network's motion as it came.
             let finished = [crate::motion::finish(raw.clone(), true), crate::motion::finish(raw, false)];
+            if let Some(dir) = &args.previews {
+                write_preview(dir, id, s, seed, &finished[0], &keys)?;
+            }
             for (v, m) in finished.into_iter().enumerate() {
                 let sc = score_dance(&m, &s.beats, &keys, reference)?;
                 groups[v].push((out.scored[v].len(), m.clone()));
@@ -398,6 +405,22 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
         }
     }
     Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows, extra_songs: extra_names, extra_rows })
+}
+
+/// Writes the contact sheet of `model`'s dance to `song` with `seed` into `dir`.
+fn write_preview(dir: &Path, model: &str, song: &Song, seed: u64, motion: &Motion, keys: &[KeyPose]) -> Result<(), MetricsError> {
+    use crate::report::preview::{write_png, Caption, Sheet};
+    let stem = song.name.rsplit_once('.').map_or(song.name.as_str(), |(stem, _)| stem);
+    let name: String = format!("{model}_{stem}_seed{seed}.png")
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' })
+        .collect();
+    std::fs::create_dir_all(dir).map_err(|source| MetricsError::Io { path: dir.display().to_string(), source })?;
+    let caption = Caption { model: model.to_string(), seed, song: Some(song.name.clone()) };
+    let key_pose_times: Vec<f64> = keys.iter().map(|k| k.time_s).collect();
+    let sheet = Sheet { motion, beat_times: &song.beats, key_pose_times: &key_pose_times, song_duration_s: song.audio.duration_s, caption: &caption };
+    let path = dir.join(name);
+    write_png(&path, &sheet).map_err(|e| MetricsError::Io { path: path.display().to_string(), source: std::io::Error::other(e) })
 }
 
 /// `n` poses of a real dance (root-relative, metres) at distinct frames after its first second,

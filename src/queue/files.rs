@@ -3,7 +3,7 @@
 //! ```text
 //! <data_dir>/choreo.sqlite        jobs, songs, job_events
 //! <data_dir>/songs/<song id>.<format>
-//! <data_dir>/jobs/<job id>/motion.bvh, motion.json, motion.glb, report.json
+//! <data_dir>/jobs/<job id>/motion.bvh, motion.json, motion.glb, report.json, preview.png
 //! <data_dir>/tmp/                 uploads in flight; renamed into place when complete
 //! ```
 //! Names come from ids and the decoded format only, never from user input, so no upload can
@@ -14,7 +14,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// The result files a generate job may write, in the order the API lists them.
-pub const RESULT_FILES: &[&str] = &["motion.bvh", "motion.json", "motion.glb", "report.json"];
+pub const RESULT_FILES: &[&str] = &["motion.bvh", "motion.json", "motion.glb", "report.json", "preview.png"];
 
 /// The data dir and the paths inside it.
 #[derive(Clone, Debug)]

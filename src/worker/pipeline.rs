@@ -4,6 +4,7 @@ use crate::audio::{self, DecodedAudio};
 use crate::models::{Cancelled, GenerateRequest, Progress, Registry};
 use crate::motion::{KeyPose, Motion};
 use crate::queue::{DataDir, GenerateOptions, Job, JobFiles, JobKind, Outcome, SeedMotion, Song};
+use crate::report::preview::{self, Caption};
 use crate::telemetry::StageTimer;
 use std::path::Path;
 use std::sync::Arc;
@@ -66,7 +67,8 @@ impl Pipeline {
         let motion = crate::motion::finish(motion, options.plant_feet);
         progress.report("export", MODEL_END)?;
         let _timer = StageTimer::start("generate", "export");
-        let files = render(&self.data.job_dir(job.id), &motion, &decoded, &options.key_poses, &mut |_| {})?;
+        let caption = Caption { model: options.model.0.clone(), seed: options.seed, song: Some(song.filename.clone()) };
+        let files = render(&self.data.job_dir(job.id), &motion, &decoded, &options.key_poses, &caption, &mut |_| {})?;
         Ok(Outcome::Files(files))
     }
 }
@@ -114,12 +116,14 @@ fn seed_motion(seed: &SeedMotion) -> Result<Motion, WorkerError> {
 pub const REPORT_FILE: &str = "report.json";
 
 /// The last two stages of a dance, shared by jobs and the CLI: export (BVH, JSON, glb) and the
-/// report, each file written atomically into `dir`. `on_stage` hears each stage as it starts.
+/// report (report.json and the contact sheet preview.png, titled by `caption`), each file written
+/// atomically into `dir`. `on_stage` hears each stage as it starts.
 pub fn render(
     dir: &Path,
     motion: &Motion,
     audio: &DecodedAudio,
     key_poses: &[KeyPose],
+    caption: &Caption,
     on_stage: &mut dyn FnMut(&str),
 ) -> Result<JobFiles, WorkerError> {
     use crate::motion::export::{write_all, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
@@ -132,5 +136,15 @@ pub fn render(
     let report = crate::report::build(motion, &analysis, key_poses, &reference)?;
     let text = serde_json::to_vec_pretty(&report).map_err(|e| WorkerError::Export(format!("report.json: {e}")))?;
     write_atomic(&dir.join(REPORT_FILE), &text)?;
-    Ok(JobFiles { files: [BVH_FILE, JSON_FILE, GLB_FILE, REPORT_FILE].map(String::from).to_vec() })
+    let key_pose_times: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
+    let sheet = preview::Sheet {
+        motion,
+        beat_times: &report.music_beat_times,
+        key_pose_times: &key_pose_times,
+        song_duration_s: audio.duration_s,
+        caption,
+    };
+    let png = preview::render_png(&sheet).map_err(|e| WorkerError::Export(format!("{}: {e}", preview::PREVIEW_FILE)))?;
+    write_atomic(&dir.join(preview::PREVIEW_FILE), &png)?;
+    Ok(JobFiles { files: [BVH_FILE, JSON_FILE, GLB_FILE, REPORT_FILE, preview::PREVIEW_FILE].map(String::from).to_vec() })
 }

@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 use crate::audio::{self, DecodedAudio};
 use crate::models::{Cancelled, GenerateRequest, ModelId, Progress, Registry};
 use crate::motion::{KeyPose, Motion};
+use crate::report::preview::Caption;
 
 use super::WorkerError;
 
@@ -18,7 +19,7 @@ pub struct GenerateArgs {
     /// The model id (see `choreo doctor` or `GET /v1/models`).
     #[arg(long, default_value = "dance-revolution")]
     pub model: String,
-    /// Output folder for motion.bvh, motion.json, motion.glb and report.json.
+    /// Output folder for motion.bvh, motion.json, motion.glb, report.json and preview.png.
     #[arg(long)]
     pub out: PathBuf,
     /// Seeds every random draw: the same seed gives the same dance.
@@ -39,7 +40,7 @@ pub struct GenerateArgs {
 #[derive(Debug)]
 pub struct Generated {
     pub motion: Motion,
-    /// motion.bvh, motion.json, motion.glb and report.json.
+    /// motion.bvh, motion.json, motion.glb, report.json and preview.png.
     pub files: Vec<PathBuf>,
     /// `(stage, duration)` in pipeline order.
     pub stages: Vec<(String, Duration)>,
@@ -79,19 +80,22 @@ impl Progress for StageClock<'_> {
     }
 }
 
-/// Runs model → export → report on a decoded song into `out`, timing every stage.
+/// Runs model → export → report on a decoded song (named `song` in the preview's title) into
+/// `out`, timing every stage.
 pub fn generate_decoded(
     registry: &Registry,
     model: &ModelId,
+    song: Option<String>,
     request: &GenerateRequest<'_>,
     plant_feet: bool,
     out: &Path,
     on_progress: &mut dyn FnMut(&str, f32),
 ) -> Result<Generated, WorkerError> {
+    let caption = Caption { model: model.0.clone(), seed: request.seed, song };
     let model = registry.get(model).ok_or_else(|| WorkerError::ModelUnavailable(model.clone()))?;
     let mut clock = StageClock { current: None, done: Vec::new(), on_progress };
     let motion = crate::motion::finish(model.generate(request, &mut clock)?, plant_feet);
-    let files = super::pipeline::render(out, &motion, request.audio, request.key_poses, &mut |stage| clock.enter(stage))?;
+    let files = super::pipeline::render(out, &motion, request.audio, request.key_poses, &caption, &mut |stage| clock.enter(stage))?;
     Ok(Generated { motion, files: files.files.iter().map(|f| out.join(f)).collect(), stages: clock.finish() })
 }
 
@@ -127,7 +131,8 @@ pub fn generate(args: &GenerateArgs) -> Result<Generated, WorkerError> {
         bar.set_position(((a + (b - a) * f64::from(f)) * 1000.0) as u64);
     };
     let request = GenerateRequest { audio: &audio, seed: args.seed, key_poses: &key_poses, seed_motion: None };
-    let mut g = generate_decoded(&registry, &ModelId(args.model.clone()), &request, !args.no_plant_feet, &args.out, &mut on_progress)?;
+    let song = args.song.file_name().map(|n| n.to_string_lossy().into_owned());
+    let mut g = generate_decoded(&registry, &ModelId(args.model.clone()), song, &request, !args.no_plant_feet, &args.out, &mut on_progress)?;
     g.stages.insert(0, ("decode audio".into(), decode));
     bar.finish_with_message("done");
     Ok(g)
@@ -192,7 +197,7 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
     for model in &models {
         for (name, audio, decode) in &songs {
             let request = GenerateRequest { audio, seed: 0, key_poses: &[], seed_motion: None };
-            let g = generate_decoded(&registry, model, &request, true, out.path(), &mut |_, _| {})?;
+            let g = generate_decoded(&registry, model, Some(name.clone()), &request, true, out.path(), &mut |_, _| {})?;
             let mut stages = vec![("decode audio".to_string(), *decode)];
             stages.extend(g.stages);
             // "–" for a stage this model does not have (the key-pose transformer has no separate encode).
