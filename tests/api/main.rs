@@ -10,4 +10,5 @@ mod jobs;
 mod keypose;
 mod models;
 mod openapi;
+mod roundtrip;
 mod songs;
