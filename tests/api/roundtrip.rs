@@ -140,13 +140,22 @@ async fn a_result_goes_back_in_as_key_poses_and_seed_motion() {
     print_acceleration("motion.bvh keys", &result, &[35, 90, 110]);
 
     // A slice of its motion.json as seed motion, to the key-pose transformer, and its whole
-    // motion.bvh as seed motion, to dance-revolution.
-    let slice: Vec<Vec<[f64; 3]>> = (40..90).map(|f| frame(&source, f)).collect();
-    let seeded = run(&app, json!({"song_id": song_id, "model": "keypose-transformer", "seed": 4, "seed_motion": {"fps": FPS, "positions": slice}})).await;
-    let result = motion_json(&app, &seeded).await;
-    // The network keeps the seed's last frames as the first ones of the dance.
-    let kept: Vec<f64> = (0..5).map(|t| pose_error_cm(&frame(&result, t), &frame(&source, 65 + t))).collect();
-    eprintln!("motion.json slice as seed: first frames vs the seed's last (cm) {kept:.2?}");
+    // motion.bvh as seed motion, to dance-revolution. The transformer keeps the seed's last
+    // T′ = 25 frames as the first frames of the dance.
+    for (from, to) in [(65usize, 90usize), (40, 90)] {
+        let slice: Vec<Vec<[f64; 3]>> = (from..to).map(|f| frame(&source, f)).collect();
+        let seeded = run(&app, json!({"song_id": song_id, "model": "keypose-transformer", "seed": 4, "seed_motion": {"fps": FPS, "positions": slice}})).await;
+        let result = motion_json(&app, &seeded).await;
+        let kept: Vec<f64> = (0..25).map(|t| pose_error_cm(&frame(&result, t), &frame(&source, to - 25 + t))).collect();
+        let worst = kept.iter().copied().fold(0.0, f64::max);
+        eprintln!("motion.json frames {from}..{to} as seed: the dance's first 25 frames vs the seed's last 25, worst {worst:.2} cm");
+        // A seed of exactly T′ frames is kept (measured 1.03 cm). A longer one is turned by its
+        // change of facing since its first frame (measured 4.90 cm for 50 frames): the model
+        // starts the root at the seed's first frame, not at the first frame it keeps.
+        if to - from == 25 {
+            assert!(worst < KEY_POSE_TARGET_CM, "the seed's frames are not kept: {kept:.2?}");
+        }
+    }
     let seeded_bvh = run(&app, json!({"song_id": song_id, "model": "dance-revolution", "seed": 5, "seed_motion": {"bvh": source_bvh}})).await;
     let result = motion_json(&app, &seeded_bvh).await;
     eprintln!("motion.bvh as dance-revolution's seed: frame 0 vs the source's frame 0: {:.2} cm", pose_error_cm(&frame(&result, 0), &frame(&source, 0)));
