@@ -209,6 +209,9 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
 ///
 /// Returns 202 with the queued job. With an `Idempotency-Key`, the same key and body return
 /// the same job (with `Idempotent-Replayed: true`); the same key with another body is a 422.
+/// Key poses and seed motion are checked here by the rules the model applies, so a job queued
+/// with them is one the model serves; any frame of a result (motion.json or motion.bvh) can be
+/// sent back as either.
 #[utoipa::path(
     post,
     path = "/v1/jobs",
@@ -219,7 +222,7 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
         (status = 202, description = "Job queued (or replayed)", body = JobView),
         (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A field is invalid, the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set), the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
