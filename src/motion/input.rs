@@ -311,7 +311,7 @@ pub fn resample(motion: &Motion, fps: f64) -> Motion {
     }
     let last_s = (t_in - 1) as f64 / motion.fps;
     let t_out = (last_s * fps + 1e-9).floor() as usize + 1;
-    let mut out = Array3::zeros((t_out, NUM_JOINTS.min(motion.positions.shape()[1]), 3));
+    let mut out = Array3::zeros((t_out, motion.positions.shape()[1], 3));
     for (k, mut frame) in out.axis_iter_mut(Axis(0)).enumerate() {
         let x = k as f64 / fps * motion.fps;
         let a = (x.floor() as usize).min(t_in - 1);
