@@ -280,7 +280,7 @@ fn every_dataset_frame_passes_validation_and_bvh_inputs_load() {
     let text = export::bvh_string(&m).expect("bvh");
     let seed = seed_from_bvh(&text).expect("seed from BVH");
     assert_eq!(seed.num_frames(), dance.motion.num_frames());
-    let kp = key_pose_from_bvh(&text, 100, 5.0, 60.0).expect("key pose");
+    let kp = key_pose_from_bvh(&text, 100, 0, 5.0).expect("key pose");
     // Relative to the body centre: the data's own root-relative frame, up to the rigid fit.
     let rel = dance.root_relative();
     let err: f64 = (0..NUM_JOINTS)

@@ -3,7 +3,8 @@ use super::extract::{ApiJson, ApiQuery};
 use super::problem::{ApiError, Problem};
 use super::AppState;
 use crate::models::ModelId;
-use crate::motion::{KeyPose, NUM_JOINTS};
+use crate::motion::input::{KeyPoseInput, SeedMotionInput};
+use crate::motion::{validate, KeyPose, MOTION_FPS};
 use crate::queue::files::RESULT_FILES;
 use crate::queue::{
     GenerateOptions, Idempotency, Job, JobFilter, JobId, JobKind, NewJob, QueueError, Registered, SeedMotion, SongId, Status,
@@ -27,8 +28,6 @@ const DEFAULT_LIMIT: u32 = 20;
 const MAX_LIMIT: u32 = 100;
 /// Priority bounds a client may ask for.
 const PRIORITY_RANGE: std::ops::RangeInclusive<i64> = -100..=100;
-/// Highest seed-motion frame rate accepted.
-const MAX_SEED_FPS: f64 = 240.0;
 
 /// A request for a dance.
 #[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
@@ -40,12 +39,17 @@ pub struct CreateJob {
     /// Seeds every random draw; the same seed gives the same dance. Random when absent.
     #[serde(default)]
     pub seed: Option<u64>,
-    /// Poses the dance must pass through (models with the `key_poses` capability).
+    /// Poses the dance must pass through (models with the `key_poses` capability). Each is 26
+    /// joints in motion.json's `joint_names` order (any frame of a choreo result: `positions[t]`),
+    /// 23 in the dataset's order (`joint_set: "dataset"`, relative to the body centre), or a frame
+    /// of a BVH (`bvh: {text, frame}`, e.g. a job's motion.bvh). Its `time_s` must land on a frame
+    /// of the dance: `round(time_s × 25) < ⌊duration_s × 25⌋`.
     #[serde(default)]
-    pub key_poses: Vec<KeyPose>,
-    /// A motion to continue from (models with the `seed_motion` capability).
+    pub key_poses: Vec<KeyPoseInput>,
+    /// A motion to continue from (models with the `seed_motion` capability): `fps` and `positions`
+    /// in either joint set (a slice of motion.json's `positions` works as it is), or `bvh` text.
     #[serde(default)]
-    pub seed_motion: Option<SeedMotion>,
+    pub seed_motion: Option<SeedMotionInput>,
     /// Hold the supporting foot in place so feet do not skate, by moving the whole body (the pose
     /// and key poses are kept). Default true; false returns the model's motion as it came.
     #[serde(default)]
@@ -167,33 +171,32 @@ fn invalid(field: &str, message: impl Into<String>) -> ApiError {
     ApiError::InvalidField { field: field.into(), message: message.into() }
 }
 
-/// Key poses checked by the motion module's rules (finite, 23 joints, plausible bone lengths in
-/// metres, inside the song, no two within half a frame), and no more of them than frames.
-fn check_key_poses(poses: &[KeyPose], duration_s: f64) -> Result<(), ApiError> {
-    crate::motion::validate::validate_key_poses(poses, duration_s).map_err(|e| invalid("key_poses", e.to_string()))?;
-    let frames = (duration_s * crate::motion::MOTION_FPS).floor() as usize;
-    if poses.len() > frames {
-        return Err(invalid("key_poses", format!("{} key poses for a song of {frames} frames", poses.len())));
+/// The request's key poses and seed motion made canonical and validated by the motion module
+/// (`motion::input`), the rules the models apply: 422 here rather than a failed job later.
+/// BVH parsing and resampling are CPU work, so they run off the async threads.
+async fn motion_inputs(
+    key_poses: Vec<KeyPoseInput>,
+    seed_motion: Option<SeedMotionInput>,
+    duration_s: f64,
+) -> Result<(Vec<KeyPose>, Option<SeedMotion>), ApiError> {
+    if key_poses.is_empty() && seed_motion.is_none() {
+        return Ok((Vec::new(), None));
     }
-    Ok(())
-}
-
-fn check_seed_motion(seed: &SeedMotion) -> Result<(), ApiError> {
-    if !(seed.fps.is_finite() && seed.fps > 0.0 && seed.fps <= MAX_SEED_FPS) {
-        return Err(invalid("seed_motion.fps", format!("must be in (0, {MAX_SEED_FPS}]")));
-    }
-    if seed.positions.is_empty() {
-        return Err(invalid("seed_motion.positions", "must have at least one frame"));
-    }
-    for (t, frame) in seed.positions.iter().enumerate() {
-        if frame.len() != NUM_JOINTS {
-            return Err(invalid(&format!("seed_motion.positions[{t}]"), format!("must list {NUM_JOINTS} joints, got {}", frame.len())));
-        }
-        if frame.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(invalid(&format!("seed_motion.positions[{t}]"), "must be finite numbers"));
-        }
-    }
-    Ok(())
+    tokio::task::spawn_blocking(move || {
+        let frames = validate::song_frames(duration_s, MOTION_FPS);
+        let keys = crate::motion::input::key_poses(&key_poses, frames, MOTION_FPS).map_err(|e| invalid("key_poses", e.to_string()))?;
+        let seed = seed_motion
+            .map(|s| crate::motion::input::seed_motion(&s))
+            .transpose()
+            .map_err(|e| invalid("seed_motion", e.to_string()))?
+            .map(|m| SeedMotion {
+                fps: m.fps,
+                positions: m.positions.outer_iter().map(|f| f.outer_iter().map(|p| [0, 1, 2].map(|c| f64::from(p[c]))).collect()).collect(),
+            });
+        Ok((keys, seed))
+    })
+    .await
+    .map_err(|e| ApiError::Internal(format!("checking motion inputs: {e}")))?
 }
 
 fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempotency>, ApiError> {
@@ -210,6 +213,9 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
 ///
 /// Returns 202 with the queued job. With an `Idempotency-Key`, the same key and body return
 /// the same job (with `Idempotent-Replayed: true`); the same key with another body is a 422.
+/// Key poses and seed motion are checked here by the rules the model applies, so a job queued
+/// with them is one the model serves; any frame of a result (motion.json or motion.bvh) can be
+/// sent back as either.
 #[utoipa::path(
     post,
     path = "/v1/jobs",
@@ -220,7 +226,7 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
         (status = 202, description = "Job queued (or replayed)", body = JobView),
         (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A field is invalid, the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set), the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
@@ -247,22 +253,19 @@ pub async fn create(
     if request.seed_motion.is_some() && !capabilities.seed_motion {
         return Err(invalid("seed_motion", format!("model `{}` does not take a seed motion", request.model)));
     }
-    check_key_poses(&request.key_poses, song.duration_s)?;
-    if let Some(seed) = &request.seed_motion {
-        check_seed_motion(seed)?;
-    }
     let priority = request.priority.unwrap_or(0);
     if !PRIORITY_RANGE.contains(&priority) {
         return Err(invalid("priority", "must be within -100..=100"));
     }
+    let (key_poses, seed_motion) = motion_inputs(std::mem::take(&mut request.key_poses), request.seed_motion.take(), song.duration_s).await?;
     let seed = request.seed.unwrap_or_else(rand::random);
     let job = NewJob {
         kind: JobKind::Generate(GenerateOptions {
             song_id: request.song_id,
             model: model_id,
             seed,
-            key_poses: std::mem::take(&mut request.key_poses),
-            seed_motion: request.seed_motion.take(),
+            key_poses,
+            seed_motion,
             plant_feet: request.plant_feet.unwrap_or(true),
         }),
         priority,

@@ -204,50 +204,63 @@ impl Bvh {
         (trans, rots)
     }
 
+    /// World positions of every joint at frame `t` (forward kinematics).
+    pub fn world_frame(&self, t: usize) -> Vec<Vector3<f64>> {
+        let (trans, rots) = self.local_pose(t);
+        let n = self.names.len();
+        let mut pos = vec![Vector3::zeros(); n];
+        let mut world = vec![UnitQuaternion::identity(); n];
+        // Joints are stored parent first, as the file nests them.
+        for j in 0..n {
+            match self.parents[j] {
+                None => {
+                    pos[j] = trans[j];
+                    world[j] = rots[j];
+                }
+                Some(p) => {
+                    pos[j] = pos[p] + world[p] * trans[j];
+                    world[j] = world[p] * rots[j];
+                }
+            }
+        }
+        pos
+    }
+
     /// World positions of every joint, `[T, J, 3]` (forward kinematics).
     pub fn world_positions(&self) -> Array3<f64> {
         let n = self.names.len();
         let mut out = Array3::zeros((self.frames.len(), n, 3));
         for t in 0..self.frames.len() {
-            let (trans, rots) = self.local_pose(t);
-            let mut pos = vec![Vector3::zeros(); n];
-            let mut world = vec![UnitQuaternion::identity(); n];
-            // Joints are stored parent first, as the file nests them.
-            for j in 0..n {
-                match self.parents[j] {
-                    None => {
-                        pos[j] = trans[j];
-                        world[j] = rots[j];
-                    }
-                    Some(p) => {
-                        pos[j] = pos[p] + world[p] * trans[j];
-                        world[j] = world[p] * rots[j];
-                    }
-                }
+            for (j, p) in self.world_frame(t).iter().enumerate() {
                 for c in 0..3 {
-                    out[[t, j, c]] = pos[j][c];
+                    out[[t, j, c]] = p[c];
                 }
             }
         }
         out
     }
 
-    /// The motion of the 23 dataset joints, for a BVH that names them as we do (metres, y up).
-    pub fn to_motion(&self) -> Result<Motion, MotionError> {
-        let idx: Vec<usize> = JOINT_NAMES
+    /// The file's index of each of the 23 dataset joints, for a BVH that names them as we do.
+    pub fn dataset_joints(&self) -> Result<Vec<usize>, MotionError> {
+        JOINT_NAMES
             .iter()
             .map(|name| {
                 self.names.iter().position(|n| n == name).ok_or_else(|| {
                     MotionError::Invalid(format!("BVH has no joint named {name:?}"))
                 })
             })
-            .collect::<Result<_, _>>()?;
-        let world = self.world_positions();
+            .collect()
+    }
+
+    /// The motion of the 23 dataset joints, for a BVH that names them as we do (metres, y up).
+    pub fn to_motion(&self) -> Result<Motion, MotionError> {
+        let idx = self.dataset_joints()?;
         let mut positions = Array3::zeros((self.frames.len(), NUM_JOINTS, 3));
         for t in 0..self.frames.len() {
+            let world = self.world_frame(t);
             for (j, &k) in idx.iter().enumerate() {
                 for c in 0..3 {
-                    positions[[t, j, c]] = world[[t, k, c]] as f32;
+                    positions[[t, j, c]] = world[k][c] as f32;
                 }
             }
         }

@@ -4,6 +4,8 @@
 //! - [`dataset`]: the dance-with-melody dances, their split, music alignment, normalisation.
 //! - [`repr`]: what the models predict (root-relative poses + root velocity in the facing
 //!   frame) with its exact inverse, and foot-contact labels.
+//! - [`input`] and [`validate`]: key poses and seed motion as users send them (either joint set,
+//!   or BVH), made canonical and checked by the rules the API and the models share.
 //!
 //! Units everywhere: metres, seconds, y up, right-handed.
 use std::path::PathBuf;
@@ -14,6 +16,7 @@ pub mod bvh;
 pub mod dataset;
 pub mod export;
 pub mod feet;
+pub mod input;
 pub mod repr;
 pub mod rig;
 pub mod skeleton;
@@ -53,11 +56,14 @@ impl Motion {
     }
 }
 
-/// A key pose a user fixes: root-relative joint positions in metres at a time in the song.
-#[derive(Clone, Debug, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+/// A key pose in the canonical form the models take: 23 joint positions relative to the body
+/// centre, metres, in the dataset's order ([`skeleton::JOINT_NAMES`]), at a time in the song.
+/// What users send ([`input::KeyPoseInput`]) becomes one through [`input::key_poses`].
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct KeyPose {
+    /// Seconds from the song's start; lands on frame `round(time_s · fps)`.
     pub time_s: f64,
-    /// `J × [x, y, z]`, metres, root-relative, in `joint_names` order.
+    /// `23 × [x, y, z]`, metres, relative to the body centre, in [`skeleton::JOINT_NAMES`] order.
     pub joints: Vec<[f64; 3]>,
 }
 

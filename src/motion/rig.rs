@@ -137,6 +137,11 @@ pub fn fk_frame(
     (pos, rot)
 }
 
+/// Names of the rig's joints in rig order: motion.json's `joint_names`.
+pub fn joint_names() -> Vec<String> {
+    hierarchy().0
+}
+
 /// The rig's hierarchy (names, parents) with zero offsets; see [`Rig::fit`] for the offsets.
 fn hierarchy() -> (Vec<String>, Vec<Option<usize>>) {
     let mut names = vec![ROOT_NAME.to_string()];

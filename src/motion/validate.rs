@@ -1,13 +1,23 @@
 //! Validation of motion users send: key poses and seed motions (§6 of the motion issue).
 //!
-//! Formats the API takes:
+//! [`super::input`] turns what the API and the CLI accept (either joint set, or BVH) into the
+//! canonical forms checked here:
 //! - a **key pose** is [`KeyPose`] `{time_s, joints}`, `joints` 23 × `[x, y, z]` metres relative
-//!   to the body centre, in [`JOINT_NAMES`] order, or one frame of an uploaded BVH
-//!   ([`key_pose_from_bvh`]);
-//! - a **seed motion** is JSON frames (`[T][23][3]` world metres, y up) or a BVH ([`seed_from_bvh`])
-//!   that names its joints as we do (any file choreo exported does).
+//!   to the body centre, in [`JOINT_NAMES`] order; one frame of a BVH becomes one with
+//!   [`key_pose_from_bvh`];
+//! - a **seed motion** is a [`Motion`] of 23 world joints (metres, y up); a BVH that names its
+//!   joints as we do (any file choreo exported) becomes one with [`seed_from_bvh`].
 //!
-//! Every check returns an [`InputError`] the API maps to 422.
+//! Every check returns an [`InputError`] the API maps to 422. The models check key poses with
+//! [`key_frames`], which the API's [`validate_key_poses`] runs before its own plausibility checks,
+//! so a job the API accepted is never failed by its model for its key poses.
+//!
+//! # Which times a key pose may have
+//! A dance of a song of `d` seconds has `n = ⌊d · fps⌋` frames ([`song_frames`]; at least one). A key
+//! pose at `time_s` lands on frame `round(time_s · fps)` ([`key_frame`]), which must be one of
+//! them: `0 ≤ time_s` and `round(time_s · fps) < n`, i.e. `time_s < (n − ½) / fps`. A key in the
+//! song's last fraction of a frame therefore has no frame and is refused. Two key poses on the
+//! same frame are refused too.
 //!
 //! # Bone-length tolerance
 //! Motion capture itself is noisy: over all 69,262 frames of the dataset a bone's length strays
@@ -17,8 +27,9 @@
 //! outside [`TOTAL_RATIO`] = 0.5–1.5 × the dataset's (a collapsed or inflated skeleton, such as
 //! centimetres sent as metres). Every frame of the dataset passes (`tests/motion.rs`).
 use super::bvh::Bvh;
+use super::input::JointSet;
 use super::skeleton::{body_centre, JOINT_NAMES, PARENTS};
-use super::{KeyPose, Motion, MotionError, MOTION_FPS, NUM_JOINTS};
+use super::{KeyPose, Motion, MotionError, NUM_JOINTS};
 
 /// Median over the dataset of each joint's distance to its parent ([`PARENTS`]; the spine's to the
 /// body centre), metres.
@@ -30,21 +41,22 @@ pub const REFERENCE_BONE_M: [f32; NUM_JOINTS] = [
 pub const BONE_SLACK_M: f32 = 0.35;
 /// Allowed range of the sum of bone lengths, as a ratio of the reference sum.
 pub const TOTAL_RATIO: (f32, f32) = (0.5, 1.5);
-/// Two key poses closer than this in time are duplicates (half a motion frame), seconds.
-pub const DUPLICATE_TIME_S: f64 = 0.5 / MOTION_FPS;
 /// Longest seed motion accepted, frames (10 minutes at 25 fps).
 pub const MAX_SEED_FRAMES: usize = 15_000;
+/// Highest seed-motion frame rate accepted.
+pub const MAX_SEED_FPS: f64 = 240.0;
 
 /// Why user-supplied motion was refused (HTTP 422).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum InputError {
     #[error("{what} is not a finite number")]
     NonFinite { what: String },
-    #[error("{what} has {got} joints, expected {expected}")]
+    #[error("{what} has {got} joints; {}", joint_sets_wanted(*.asked))]
     WrongJointCount {
         what: String,
         got: usize,
-        expected: usize,
+        /// The joint set the input named, if it named one.
+        asked: Option<JointSet>,
     },
     #[error("{what}: bone {joint} is {length_m:.3} m long, at most {max_m:.3} m is plausible (are the units metres?)")]
     AbsurdBone {
@@ -60,12 +72,40 @@ pub enum InputError {
         min_m: f32,
         max_m: f32,
     },
-    #[error("key pose at {time_s} s is outside the song (0–{duration_s:.2} s)")]
-    TimeOutsideSong { time_s: f64, duration_s: f64 },
-    #[error("key poses at {first_s} s and {second_s} s fall on the same frame")]
-    DuplicateTime { first_s: f64, second_s: f64 },
+    #[error("key pose {index} at {time_s} s lands on frame {frame}, but the dance has {frames} frames at {fps} fps: times from 0 to under {limit_s:.3} s")]
+    TimeOutsideSong {
+        index: usize,
+        time_s: f64,
+        /// `round(time_s · fps)`.
+        frame: i64,
+        frames: usize,
+        fps: f64,
+        /// `(frames − ½) / fps`, the first time past the last frame.
+        limit_s: f64,
+    },
+    #[error("key poses {first} and {second} ({first_s} s and {second_s} s) fall on the same frame {frame}")]
+    DuplicateTime {
+        first: usize,
+        second: usize,
+        first_s: f64,
+        second_s: f64,
+        frame: usize,
+    },
     #[error("{0}")]
     Malformed(String),
+}
+
+/// The accepted joint sets, for a wrong count: which one was asked for, if any, and both.
+fn joint_sets_wanted(asked: Option<JointSet>) -> String {
+    let both = format!(
+        "send {} joints in motion.json's `joint_names` order (joint_set \"choreo\") or {} in the dataset's order (joint_set \"dataset\")",
+        JointSet::Choreo.joint_count(),
+        JointSet::Dataset.joint_count()
+    );
+    match asked {
+        Some(set) => format!("joint_set \"{}\" has {}: {both}", set.name(), set.joint_count()),
+        None => both,
+    }
 }
 
 impl InputError {
@@ -89,7 +129,7 @@ pub fn check_pose(what: &str, joints: &[[f64; 3]], root: [f64; 3]) -> Result<(),
         return Err(InputError::WrongJointCount {
             what: what.to_string(),
             got: joints.len(),
-            expected: NUM_JOINTS,
+            asked: Some(JointSet::Dataset),
         });
     }
     for (j, p) in joints.iter().enumerate() {
@@ -130,34 +170,84 @@ pub fn check_pose(what: &str, joints: &[[f64; 3]], root: [f64; 3]) -> Result<(),
     Ok(())
 }
 
-/// Validates key poses against a song of `song_duration_s` seconds.
-pub fn validate_key_poses(poses: &[KeyPose], song_duration_s: f64) -> Result<(), InputError> {
+/// Frames a model makes for a song of `duration_s` seconds at `fps`: `⌊duration_s · fps⌋`, at least
+/// one.
+pub fn song_frames(duration_s: f64, fps: f64) -> usize {
+    let n = (duration_s * fps).floor();
+    if n.is_finite() && n >= 1.0 {
+        n as usize
+    } else {
+        1
+    }
+}
+
+/// The frame key pose `index` at `time_s` lands on, `round(time_s · fps)`, when it is one of the
+/// dance's `frames` frames (see the module doc).
+pub fn key_frame(index: usize, time_s: f64, frames: usize, fps: f64) -> Result<usize, InputError> {
+    if !time_s.is_finite() {
+        return Err(InputError::NonFinite {
+            what: format!("key pose {index} time_s"),
+        });
+    }
+    let frame = (time_s * fps).round();
+    if time_s < 0.0 || frame < 0.0 || frame >= frames as f64 {
+        return Err(InputError::TimeOutsideSong {
+            index,
+            time_s,
+            frame: frame as i64,
+            frames,
+            fps,
+            limit_s: (frames as f64 - 0.5) / fps,
+        });
+    }
+    Ok(frame as usize)
+}
+
+/// The frame of each canonical key pose for a dance of `frames` frames at `fps`, checking what a
+/// model needs to serve them: 23 finite joints, a time on a frame of the dance, no two on one
+/// frame. The models call it ([`crate::models::keypose_transformer::local_keys`]); the API calls
+/// it through [`validate_key_poses`], so a key pose the API accepts is one the model serves.
+pub fn key_frames(poses: &[KeyPose], frames: usize, fps: f64) -> Result<Vec<usize>, InputError> {
+    let mut at = Vec::with_capacity(poses.len());
+    let mut taken = std::collections::HashMap::with_capacity(poses.len());
     for (i, p) in poses.iter().enumerate() {
-        if !p.time_s.is_finite() {
+        let frame = key_frame(i, p.time_s, frames, fps)?;
+        if let Some(&first) = taken.get(&frame) {
+            return Err(InputError::DuplicateTime {
+                first,
+                second: i,
+                first_s: poses[first].time_s,
+                second_s: p.time_s,
+                frame,
+            });
+        }
+        taken.insert(frame, i);
+        if p.joints.len() != NUM_JOINTS {
+            return Err(InputError::WrongJointCount {
+                what: format!("key pose {i}"),
+                got: p.joints.len(),
+                asked: Some(JointSet::Dataset),
+            });
+        }
+        if let Some(j) = p.joints.iter().position(|v| v.iter().any(|c| !c.is_finite())) {
             return Err(InputError::NonFinite {
-                what: format!("key pose {i} time_s"),
+                what: format!("key pose {i}, joint {}", JOINT_NAMES[j]),
             });
         }
-        if p.time_s < 0.0 || p.time_s > song_duration_s {
-            return Err(InputError::TimeOutsideSong {
-                time_s: p.time_s,
-                duration_s: song_duration_s,
-            });
-        }
+        at.push(frame);
+    }
+    Ok(at)
+}
+
+/// Validates canonical key poses for a dance of `frames` frames at `fps` and returns each one's
+/// frame: [`key_frames`], and plausible bone lengths ([`check_pose`]). The API's check.
+pub fn validate_key_poses(poses: &[KeyPose], frames: usize, fps: f64) -> Result<Vec<usize>, InputError> {
+    let at = key_frames(poses, frames, fps)?;
+    for (i, p) in poses.iter().enumerate() {
         // Key poses are relative to the body centre, so the root is the origin.
         check_pose(&format!("key pose {i}"), &p.joints, [0.0; 3])?;
     }
-    let mut times: Vec<f64> = poses.iter().map(|p| p.time_s).collect();
-    times.sort_by(f64::total_cmp);
-    for w in times.windows(2) {
-        if w[1] - w[0] < DUPLICATE_TIME_S {
-            return Err(InputError::DuplicateTime {
-                first_s: w[0],
-                second_s: w[1],
-            });
-        }
-    }
-    Ok(())
+    Ok(at)
 }
 
 /// Validates a seed motion: fps, length, and every frame as a pose around its body centre.
@@ -167,12 +257,18 @@ pub fn validate_seed_motion(motion: &Motion) -> Result<(), InputError> {
             what: "seed motion fps".into(),
         });
     }
+    if motion.fps > MAX_SEED_FPS {
+        return Err(InputError::Malformed(format!(
+            "seed motion at {} fps; at most {MAX_SEED_FPS} fps is accepted",
+            motion.fps
+        )));
+    }
     let sh = motion.positions.shape();
     if sh[1] != NUM_JOINTS || sh[2] != 3 {
         return Err(InputError::WrongJointCount {
             what: "seed motion".into(),
             got: sh[1],
-            expected: NUM_JOINTS,
+            asked: Some(JointSet::Dataset),
         });
     }
     if sh[0] == 0 || sh[0] > MAX_SEED_FRAMES {
@@ -201,55 +297,43 @@ pub fn validate_seed_motion(motion: &Motion) -> Result<(), InputError> {
     Ok(())
 }
 
-fn bvh_input(e: MotionError) -> InputError {
-    InputError::Malformed(e.to_string())
+fn bvh_input(what: &str, e: MotionError) -> InputError {
+    InputError::Malformed(format!("{what}: {e}"))
 }
 
 /// A seed motion from BVH text (metres, y up, our joint names), validated.
 pub fn seed_from_bvh(text: &str) -> Result<Motion, InputError> {
-    let bvh = Bvh::parse(text).map_err(bvh_input)?;
-    let motion = bvh.to_motion().map_err(bvh_input)?;
+    let what = "seed motion BVH";
+    let bvh = Bvh::parse(text).map_err(|e| bvh_input(what, e))?;
+    let motion = bvh.to_motion().map_err(|e| bvh_input(what, e))?;
     validate_seed_motion(&motion)?;
     Ok(motion)
 }
 
-/// A key pose at `time_s` from frame `frame` of BVH text, relative to its body centre, validated
-/// (`song_duration_s` bounds the time).
-pub fn key_pose_from_bvh(
-    text: &str,
-    frame: usize,
-    time_s: f64,
-    song_duration_s: f64,
-) -> Result<KeyPose, InputError> {
-    let bvh = Bvh::parse(text).map_err(bvh_input)?;
-    let motion = bvh.to_motion().map_err(bvh_input)?;
-    if frame >= motion.num_frames() {
+/// Key pose `index` at `time_s` from frame `frame` of BVH text (metres, y up, our joint names),
+/// relative to its body centre: the root joint when the file has one (choreo's exports), else the
+/// weighted centroid. Its time is checked by [`validate_key_poses`].
+pub fn key_pose_from_bvh(text: &str, frame: usize, index: usize, time_s: f64) -> Result<KeyPose, InputError> {
+    let what = format!("key pose {index} BVH");
+    let bvh = Bvh::parse(text).map_err(|e| bvh_input(&what, e))?;
+    if frame >= bvh.frames.len() {
         return Err(InputError::Malformed(format!(
-            "BVH has {} frames, no frame {frame}",
-            motion.num_frames()
+            "{what} has {} frames, no frame {frame}",
+            bvh.frames.len()
         )));
     }
-    let f = motion.positions.index_axis(ndarray::Axis(0), frame);
-    // The body centre is the root joint when the file has one (our exports), else the centroid.
+    let world = bvh.world_frame(frame);
+    let idx = bvh.dataset_joints().map_err(|e| bvh_input(&what, e))?;
+    let f = ndarray::Array2::from_shape_fn((NUM_JOINTS, 3), |(j, c)| world[idx[j]][c] as f32);
     let c = match bvh.names.iter().position(|n| n == super::rig::ROOT_NAME) {
-        Some(k) => {
-            let w = bvh.world_positions();
-            [w[[frame, k, 0]], w[[frame, k, 1]], w[[frame, k, 2]]]
-        }
-        None => body_centre(f).map(f64::from),
+        Some(k) => [world[k][0], world[k][1], world[k][2]],
+        None => body_centre(f.view()).map(f64::from),
     };
-    let joints = f
-        .outer_iter()
-        .map(|p| {
-            [
-                f64::from(p[0]) - c[0],
-                f64::from(p[1]) - c[1],
-                f64::from(p[2]) - c[2],
-            ]
-        })
+    let joints = (0..NUM_JOINTS)
+        .map(|j| [0, 1, 2].map(|a| world[idx[j]][a] - c[a]))
         .collect();
     let pose = KeyPose { time_s, joints };
-    validate_key_poses(std::slice::from_ref(&pose), song_duration_s)?;
+    check_pose(&format!("key pose {index}"), &pose.joints, [0.0; 3])?;
     Ok(pose)
 }
 
@@ -277,34 +361,51 @@ mod tests {
 
     #[test]
     fn accepts_plausible_key_poses() {
-        assert_eq!(validate_key_poses(&[pose(1.0), pose(2.0)], 10.0), Ok(()));
+        assert_eq!(validate_key_poses(&[pose(1.0), pose(2.0)], 250, 25.0), Ok(vec![25, 50]));
+    }
+
+    #[test]
+    fn a_key_pose_must_land_on_a_frame_of_the_dance() {
+        // A 5.3 s song has 132 frames at 25 fps: 0..=131, times up to (132 − ½) / 25 = 5.26 s.
+        let n = song_frames(5.3, 25.0);
+        assert_eq!(n, 132);
+        assert_eq!(key_frame(0, 0.0, n, 25.0), Ok(0));
+        assert_eq!(key_frame(0, 131.0 / 25.0, n, 25.0), Ok(131));
+        assert_eq!(key_frame(0, 5.259, n, 25.0), Ok(131));
+        for outside in [5.26, 5.29, 5.3, -0.001] {
+            assert_eq!(key_frame(0, outside, n, 25.0).unwrap_err().code(), "time-outside-song", "{outside}");
+        }
+        assert_eq!(song_frames(0.01, 25.0), 1, "the models make at least one frame");
+        assert_eq!(song_frames(f64::NAN, 25.0), 1);
     }
 
     #[test]
     fn refuses_each_kind_of_bad_key_pose() {
         let mut nan = pose(1.0);
         nan.joints[4][1] = f64::NAN;
-        assert_eq!(validate_key_poses(&[nan], 10.0).unwrap_err().code(), "non-finite");
+        let v = |poses: &[KeyPose]| validate_key_poses(poses, 250, 25.0).unwrap_err().code();
+        assert_eq!(v(&[nan]), "non-finite");
         let mut inf = pose(1.0);
         inf.time_s = f64::INFINITY;
-        assert_eq!(validate_key_poses(&[inf], 10.0).unwrap_err().code(), "non-finite");
+        assert_eq!(v(&[inf]), "non-finite");
         let mut short = pose(1.0);
         short.joints.pop();
-        assert_eq!(validate_key_poses(&[short], 10.0).unwrap_err().code(), "wrong-joint-count");
+        assert_eq!(v(&[short]), "wrong-joint-count");
         let mut cm = pose(1.0);
         cm.joints.iter_mut().flatten().for_each(|v| *v *= 100.0);
-        assert_eq!(validate_key_poses(&[cm], 10.0).unwrap_err().code(), "absurd-bone-length");
+        assert_eq!(v(&[cm]), "absurd-bone-length");
         let mut long_arm = pose(1.0);
         long_arm.joints[6][0] += 1.0; // right wrist a metre from the forearm
-        assert_eq!(validate_key_poses(&[long_arm], 10.0).unwrap_err().code(), "absurd-bone-length");
+        assert_eq!(v(&[long_arm]), "absurd-bone-length");
         let mut collapsed = pose(1.0);
         collapsed.joints.iter_mut().flatten().for_each(|v| *v *= 0.1);
-        assert_eq!(validate_key_poses(&[collapsed], 10.0).unwrap_err().code(), "absurd-skeleton-size");
-        assert_eq!(validate_key_poses(&[pose(12.0)], 10.0).unwrap_err().code(), "time-outside-song");
-        assert_eq!(validate_key_poses(&[pose(-0.5)], 10.0).unwrap_err().code(), "time-outside-song");
-        assert_eq!(
-            validate_key_poses(&[pose(3.0), pose(1.0), pose(3.01)], 10.0).unwrap_err().code(),
-            "duplicate-time"
-        );
+        assert_eq!(v(&[collapsed]), "absurd-skeleton-size");
+        assert_eq!(v(&[pose(12.0)]), "time-outside-song");
+        assert_eq!(v(&[pose(-0.5)]), "time-outside-song");
+        // 3.0 s and 3.01 s are both frame 75; 3.03 s is frame 76 (0.03 s apart, yet distinct frames).
+        assert_eq!(v(&[pose(3.0), pose(1.0), pose(3.01)]), "duplicate-time");
+        assert_eq!(validate_key_poses(&[pose(3.0), pose(3.03)], 250, 25.0), Ok(vec![75, 76]));
+        // 3.021 s and 3.059 s are 0.038 s apart but share frame 76.
+        assert_eq!(v(&[pose(3.021), pose(3.059)]), "duplicate-time");
     }
 }

@@ -167,13 +167,14 @@ impl FromStr for Status {
     }
 }
 
-/// A motion a dance should continue from: world joint positions in metres, y up.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+/// A motion a dance should continue from, as a job stores it: the canonical form the API makes of
+/// what was sent (`motion::input::seed_motion`), world joint positions in metres, y up.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SeedMotion {
-    /// Frames per second of `positions`.
+    /// Frames per second of `positions` (the motion rate, 25).
     pub fps: f64,
-    /// `T × J × [x, y, z]`, in the skeleton's joint order.
+    /// `T × 23 × [x, y, z]`, in the dataset's joint order (`motion::skeleton::JOINT_NAMES`).
     pub positions: Vec<Vec<[f64; 3]>>,
 }
 

@@ -25,7 +25,8 @@ pub struct GenerateArgs {
     /// Seeds every random draw: the same seed gives the same dance.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// A JSON file with key poses `[{time_s, joints}]` (models that take them).
+    /// A JSON file with key poses `[{time_s, joints}]` as the API takes them: 26 joints (a frame of
+    /// motion.json), 23 (dataset order), or `bvh: {text, frame}` (models that take them).
     #[arg(long)]
     pub key_poses: Option<PathBuf>,
     /// Where trained models live.
@@ -103,7 +104,7 @@ pub fn generate_decoded(
 pub fn generate(args: &GenerateArgs) -> Result<Generated, WorkerError> {
     tch::set_num_threads(std::thread::available_parallelism().map(|n| n.get() as i32).unwrap_or(1));
     let registry = Registry::load(&args.models_dir)?;
-    let key_poses: Vec<KeyPose> = match &args.key_poses {
+    let key_inputs: Vec<crate::motion::input::KeyPoseInput> = match &args.key_poses {
         Some(p) => serde_json::from_str(&std::fs::read_to_string(p)?)
             .map_err(|e| WorkerError::InvalidOptions(format!("{}: {e}", p.display())))?,
         None => Vec::new(),
@@ -118,6 +119,9 @@ pub fn generate(args: &GenerateArgs) -> Result<Generated, WorkerError> {
     let t0 = Instant::now();
     let audio = audio::decode_path(&args.song)?;
     let decode = t0.elapsed();
+    let frames = crate::motion::validate::song_frames(audio.duration_s, crate::motion::MOTION_FPS);
+    let key_poses: Vec<KeyPose> = crate::motion::input::key_poses(&key_inputs, frames, crate::motion::MOTION_FPS)
+        .map_err(|e| WorkerError::InvalidOptions(format!("key poses: {e}")))?;
     // Progress over the whole run: decode 0–5%, features 5–25%, encode 25–35%, decode loop 35–90%.
     let span = |stage: &str| match stage {
         "features" => (0.05, 0.25),

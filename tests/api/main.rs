@@ -11,4 +11,5 @@ mod keypose;
 mod models;
 mod openapi;
 mod preview;
+mod roundtrip;
 mod songs;

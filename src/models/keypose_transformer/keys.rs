@@ -88,28 +88,11 @@ pub struct LocalKey {
 }
 
 /// Checks key poses against a song of `n` frames at `fps` and maps them into pose space.
-/// Errors (422 at the API): wrong joint count, non-finite values, a time outside the song, two
-/// keys on the same frame, more keys than frames.
+/// The checks are the API's own ([`crate::motion::validate::key_frames`]): what it accepted passes here.
 pub fn local_keys(keys: &[KeyPose], n: usize, fps: f64) -> Result<Vec<LocalKey>, ModelError> {
-    if keys.len() > n {
-        return Err(ModelError::Invalid(format!("{} key poses for a song of {n} frames", keys.len())));
-    }
+    let frames = crate::motion::validate::key_frames(keys, n, fps).map_err(crate::motion::MotionError::from)?;
     let mut out: Vec<LocalKey> = Vec::with_capacity(keys.len());
-    for (i, k) in keys.iter().enumerate() {
-        if k.joints.len() != NUM_JOINTS {
-            return Err(ModelError::Invalid(format!("key pose {i}: {} joints, expected {NUM_JOINTS}", k.joints.len())));
-        }
-        if !k.time_s.is_finite() || k.joints.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(ModelError::Invalid(format!("key pose {i}: not a finite number")));
-        }
-        let f = (k.time_s * fps).round();
-        if k.time_s < 0.0 || f < 0.0 || f >= n as f64 {
-            return Err(ModelError::Invalid(format!("key pose {i}: time {} s is outside the song (0 to {:.2} s)", k.time_s, n as f64 / fps)));
-        }
-        let frame = f as usize;
-        if out.iter().any(|o| o.frame == frame) {
-            return Err(ModelError::Invalid(format!("key pose {i}: closer than one frame to another key pose (frame {frame})")));
-        }
+    for (k, frame) in keys.iter().zip(frames) {
         let mut joints = Array2::<f32>::zeros((NUM_JOINTS, 3));
         for (j, p) in k.joints.iter().enumerate() {
             for a in 0..3 {

@@ -192,8 +192,11 @@ impl DanceModel for Served {
         progress.report("features", 1.0)?;
         let given = match req.seed_motion {
             Some(m) if m.num_frames() > 0 => {
-                let root = crate::motion::skeleton::body_centre_track(m.positions.view());
-                let (mut f, start) = repr::to_features(m.positions.view(), root.view())?;
+                // The network continues from the seed's last T′ frames, so the root starts there.
+                let ts = self.file.config.seed_len as usize;
+                let tail = m.positions.slice(ndarray::s![m.num_frames().saturating_sub(ts).., .., ..]);
+                let root = crate::motion::skeleton::body_centre_track(tail);
+                let (mut f, start) = repr::to_features(tail, root.view())?;
                 if self.file.root_height == RootHeight::FootClearance {
                     let floor = repr::floor_of_features(f.view());
                     repr::height_to_clearance(&mut f, floor);
