@@ -1,8 +1,9 @@
 //! Extractors whose rejections are problem+json bodies naming the field at fault.
 use super::problem::ApiError;
+use super::AppState;
 use axum::body::Bytes;
 use axum::extract::{FromRequest, FromRequestParts, Request};
-use axum::http::{header, request::Parts};
+use axum::http::{header, request::Parts, StatusCode};
 use serde::de::DeserializeOwned;
 
 /// A JSON body; malformed JSON is a 400, a wrong field a 422 that names it.
@@ -45,14 +46,13 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     Ok(value)
 }
 
-impl<S, T> FromRequest<S> for ApiJson<T>
+impl<T> FromRequest<AppState> for ApiJson<T>
 where
-    S: Send + Sync,
     T: DeserializeOwned,
 {
     type Rejection = ApiError;
 
-    async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, Self::Rejection> {
         let is_json = req
             .headers()
             .get(header::CONTENT_TYPE)
@@ -65,7 +65,14 @@ where
         if !is_json {
             return Err(ApiError::NotJson);
         }
-        let bytes = Bytes::from_request(req, state).await.map_err(|e| ApiError::MalformedJson(e.body_text()))?;
+        // The route's `DefaultBodyLimit` is `max_job_body_bytes`; past it nothing more is read.
+        let bytes = Bytes::from_request(req, state).await.map_err(|e| {
+            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                ApiError::BodyTooLarge { limit: state.config.max_job_body_bytes }
+            } else {
+                ApiError::MalformedJson(e.body_text())
+            }
+        })?;
         parse_json(&bytes).map(ApiJson)
     }
 }

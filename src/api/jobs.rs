@@ -29,6 +29,10 @@ const MAX_LIMIT: u32 = 100;
 const PRIORITY_RANGE: std::ops::RangeInclusive<i64> = -100..=100;
 /// Highest seed-motion frame rate accepted.
 const MAX_SEED_FPS: f64 = 240.0;
+/// Most key poses one job takes; each costs validation here and a constraint in the model.
+pub const MAX_KEY_POSES: usize = 128;
+/// Most seed-motion frames one job takes (41 s at 25 fps); models use only its last frames.
+pub const MAX_SEED_FRAMES: usize = 1024;
 
 /// A request for a dance.
 #[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
@@ -42,6 +46,7 @@ pub struct CreateJob {
     pub seed: Option<u64>,
     /// Poses the dance must pass through (models with the `key_poses` capability).
     #[serde(default)]
+    #[schema(max_items = 128)]
     pub key_poses: Vec<KeyPose>,
     /// A motion to continue from (models with the `seed_motion` capability).
     #[serde(default)]
@@ -150,10 +155,12 @@ pub struct JobPage {
 #[into_params(parameter_in = Query)]
 pub struct ListQuery {
     /// queued, running, succeeded, failed or cancelled.
+    #[param(value_type = Option<Status>)]
     pub status: Option<String>,
     /// A model id.
     pub model: Option<String>,
     /// 1..=100, default 20.
+    #[param(minimum = 1, maximum = 100, default = 20)]
     pub limit: Option<u32>,
     /// `next_cursor` of the previous page.
     pub cursor: Option<String>,
@@ -192,6 +199,19 @@ fn check_seed_motion(seed: &SeedMotion) -> Result<(), ApiError> {
     Ok(())
 }
 
+/// Refuses inputs whose size alone would cost memory or time, before anything else reads them.
+fn check_sizes(request: &CreateJob) -> Result<(), ApiError> {
+    if request.key_poses.len() > MAX_KEY_POSES {
+        return Err(invalid("key_poses", format!("at most {MAX_KEY_POSES} key poses, got {}", request.key_poses.len())));
+    }
+    if let Some(seed) = &request.seed_motion {
+        if seed.positions.len() > MAX_SEED_FRAMES {
+            return Err(invalid("seed_motion.positions", format!("at most {MAX_SEED_FRAMES} frames, got {}", seed.positions.len())));
+        }
+    }
+    Ok(())
+}
+
 fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempotency>, ApiError> {
     let Some(value) = headers.get(&IDEMPOTENCY_KEY) else { return Ok(None) };
     let key = value.to_str().map_err(|_| ApiError::InvalidIdempotencyKey)?;
@@ -209,6 +229,7 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
 #[utoipa::path(
     post,
     path = "/v1/jobs",
+    operation_id = "createJob",
     tag = "jobs",
     request_body = CreateJob,
     params(("Idempotency-Key" = Option<String>, Header, description = "Makes retries safe: one job per key")),
@@ -225,6 +246,7 @@ pub async fn create(
     headers: HeaderMap,
     ApiJson(mut request): ApiJson<CreateJob>,
 ) -> Result<Response, ApiError> {
+    check_sizes(&request)?;
     let idempotency = idempotency(&headers, &request)?;
     let song = match state.store.song(request.song_id).await {
         Ok(song) => song,
@@ -288,6 +310,7 @@ fn parse_job_id(id: &str) -> Result<JobId, ApiError> {
 #[utoipa::path(
     get,
     path = "/v1/jobs/{id}",
+    operation_id = "getJob",
     tag = "jobs",
     params(("id" = String, Path, description = "Job id")),
     responses(
@@ -305,6 +328,7 @@ pub async fn get(State(state): State<AppState>, Path(id): Path<String>) -> Resul
 #[utoipa::path(
     get,
     path = "/v1/jobs",
+    operation_id = "listJobs",
     tag = "jobs",
     params(ListQuery),
     responses(
@@ -338,6 +362,7 @@ pub async fn list(State(state): State<AppState>, ApiQuery(query): ApiQuery<ListQ
 #[utoipa::path(
     delete,
     path = "/v1/jobs/{id}",
+    operation_id = "cancelJob",
     tag = "jobs",
     params(("id" = String, Path, description = "Job id")),
     responses(
@@ -367,6 +392,7 @@ fn content_type(file: &str) -> &'static str {
 #[utoipa::path(
     get,
     path = "/v1/jobs/{id}/{file}",
+    operation_id = "getJobFile",
     tag = "jobs",
     params(
         ("id" = String, Path, description = "Job id"),

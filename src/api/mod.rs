@@ -55,6 +55,8 @@ pub struct AppState {
     /// Bounds concurrent upload decodes, so memory stays bounded under many uploads.
     pub decode_permits: Arc<Semaphore>,
     pub workers_running: Arc<AtomicBool>,
+    /// Cancelled when the server stops; in-flight upload decodes watch it and return.
+    pub shutdown: CancellationToken,
 }
 
 /// Errors from starting the service.
@@ -75,7 +77,12 @@ pub fn router(state: AppState) -> Router {
     let v1 = Router::new()
         .route("/songs", axum::routing::post(songs::upload))
         .route("/songs/{id}", get(songs::get))
-        .route("/jobs", get(jobs::list).post(jobs::create))
+        .route(
+            "/jobs",
+            get(jobs::list).post(jobs::create).layer(axum::extract::DefaultBodyLimit::max(
+                usize::try_from(state.config.max_job_body_bytes).unwrap_or(usize::MAX),
+            )),
+        )
         .route("/jobs/{id}", get(jobs::get).delete(jobs::cancel))
         .route("/jobs/{id}/{file}", get(jobs::result))
         .route("/models", get(system::models))
@@ -221,6 +228,7 @@ impl Server {
             metrics: metrics.clone(),
             decode_permits: Arc::new(Semaphore::new(std::thread::available_parallelism().map_or(1, |n| n.get()))),
             workers_running: Arc::new(AtomicBool::new(false)),
+            shutdown: shutdown.clone(),
         };
 
         let listener = tokio::net::TcpListener::bind(&config.bind)

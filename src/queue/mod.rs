@@ -173,7 +173,8 @@ impl FromStr for Status {
 pub struct SeedMotion {
     /// Frames per second of `positions`.
     pub fps: f64,
-    /// `T × J × [x, y, z]`, in the skeleton's joint order.
+    /// `T × J × [x, y, z]`, in the skeleton's joint order; at most 1024 frames.
+    #[schema(min_items = 1, max_items = 1024)]
     pub positions: Vec<Vec<[f64; 3]>>,
 }
 

@@ -1,43 +1,81 @@
 //! The work of each job kind: decode → analyse, or decode → model → export + report.
 use super::{Execute, WorkerError};
-use crate::audio::{self, DecodedAudio};
+use crate::audio::{self, AudioError, Budget, DecodeOptions, DecodedAudio, Keep};
+use crate::config::Config;
 use crate::models::{Cancelled, GenerateRequest, Progress, Registry};
 use crate::motion::{KeyPose, Motion};
 use crate::queue::{DataDir, GenerateOptions, Job, JobFiles, JobKind, Outcome, SeedMotion, Song};
 use crate::telemetry::StageTimer;
+use std::cell::RefCell;
 use std::path::Path;
 use std::sync::Arc;
+use std::time::Duration;
 
 /// Share of a generate job's progress spent before the model starts (decoding).
 const MODEL_START: f32 = 0.1;
 /// Share of a generate job's progress done when the model finishes; the rest is export.
 const MODEL_END: f32 = 0.85;
 
+/// Highest rate a generate job keeps the song at: the models' feature grids resample to at
+/// most 22 050 Hz, so more only costs memory (a 15-minute song at 384 kHz would be 1.4 GB).
+const GENERATE_MAX_SR: u32 = 48_000;
+
 /// The service's [`Execute`]: real decoding, analysis, models and exporters.
 pub struct Pipeline {
     registry: Arc<Registry>,
     data: DataDir,
+    /// Song length limit: songs stored before a lower limit are refused, not decoded whole.
+    max_duration_s: f64,
+    /// Wall-clock budget of one decode and of one analysis.
+    audio_timeout: Duration,
 }
 
 impl Pipeline {
     /// A pipeline over the loaded models, writing results under `data`.
-    pub fn new(registry: Arc<Registry>, data: DataDir) -> Self {
-        Self { registry, data }
+    pub fn new(registry: Arc<Registry>, data: DataDir, config: &Config) -> Self {
+        Self {
+            registry,
+            data,
+            max_duration_s: config.max_duration_s,
+            audio_timeout: Duration::from_secs_f64(config.audio_timeout_s),
+        }
+    }
+
+    /// Runs `work` under the audio budget, stopping it when the job is cancelled (or the
+    /// server stops): the stop signal is the job's own progress checkpoint.
+    fn budgeted<T>(
+        &self,
+        progress: &mut dyn Progress,
+        stage: &'static str,
+        fraction: f32,
+        work: impl FnOnce(&Budget) -> Result<T, AudioError>,
+    ) -> Result<T, WorkerError> {
+        let progress = RefCell::new(progress);
+        let stop = || progress.borrow_mut().report(stage, fraction).is_err();
+        let budget = Budget::new(Some(self.audio_timeout), Some(&stop));
+        Ok(work(&budget)?)
     }
 
     #[tracing::instrument(skip_all, fields(song_id = %song.id))]
-    fn decode(&self, kind: &'static str, song: &Song) -> Result<DecodedAudio, WorkerError> {
+    fn decode(&self, kind: &'static str, song: &Song, keep: Keep, progress: &mut dyn Progress) -> Result<DecodedAudio, WorkerError> {
         let _timer = StageTimer::start(kind, "decode");
-        Ok(audio::decode_path(&self.data.song_path(song.id, song.format))?)
+        let path = self.data.song_path(song.id, song.format);
+        let max_duration_s = self.max_duration_s;
+        let decoded = self.budgeted(progress, "decode", 0.0, |budget| {
+            audio::decode_file(&path, &DecodeOptions { keep, max_duration_s, budget })
+        })?;
+        Ok(decoded.audio)
     }
 
     #[tracing::instrument(skip_all, fields(job_id = %job.id))]
     fn analyze(&self, job: &Job, song: &Song, progress: &mut dyn Progress) -> Result<Outcome, WorkerError> {
         progress.report("decode", 0.0)?;
-        let decoded = self.decode("analyze", song)?;
+        // Decoded straight to the analysis rate: the song never exists at its native rate.
+        let decoded = self.decode("analyze", song, Keep::At(audio::ANALYSIS_SR), progress)?;
         progress.report("analyze", 0.5)?;
         let _timer = StageTimer::start("analyze", "analyze");
-        Ok(Outcome::Analysis(audio::analyze(&decoded)?))
+        let analysis = self.budgeted(progress, "analyze", 0.5, |budget| audio::analyze_within(&decoded, budget))?;
+        Ok(Outcome::Analysis(analysis))
     }
 
     #[tracing::instrument(skip_all, fields(job_id = %job.id, model = %options.model.0))]
@@ -50,7 +88,7 @@ impl Pipeline {
     ) -> Result<Outcome, WorkerError> {
         let model = self.registry.get(&options.model).ok_or_else(|| WorkerError::ModelUnavailable(options.model.clone()))?;
         progress.report("decode", 0.0)?;
-        let decoded = self.decode("generate", song)?;
+        let decoded = self.decode("generate", song, Keep::AtMost(GENERATE_MAX_SR), progress)?;
         let seed_motion = options.seed_motion.as_ref().map(seed_motion).transpose()?;
         progress.report("model", MODEL_START)?;
         let motion = {

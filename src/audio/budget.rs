@@ -1,0 +1,58 @@
+//! A wall-clock budget and a stop signal for long audio work (decoding, analysis).
+//!
+//! Work on user audio calls [`Budget::check`] at its checkpoints (every decoded packet, between
+//! analysis stages). Past the budget it returns [`AudioError::TimedOut`], and when the stop
+//! signal is up (a server shutdown, a cancelled job) [`AudioError::Cancelled`], so the thread
+//! doing the work returns instead of burning a core on a file nobody will get an answer for.
+use super::AudioError;
+use std::time::{Duration, Instant};
+
+/// The limits one piece of audio work runs under.
+pub struct Budget<'a> {
+    start: Instant,
+    limit: Option<Duration>,
+    stop: Option<&'a dyn Fn() -> bool>,
+}
+
+impl<'a> Budget<'a> {
+    /// No time limit and no stop signal (the CLI, tests, offline evaluation).
+    pub fn unlimited() -> Self {
+        Self { start: Instant::now(), limit: None, stop: None }
+    }
+
+    /// A budget of `limit` from now; `stop` returning true ends the work at its next checkpoint.
+    pub fn new(limit: Option<Duration>, stop: Option<&'a dyn Fn() -> bool>) -> Self {
+        Self { start: Instant::now(), limit, stop }
+    }
+
+    /// `Err` when the work must end now: stopped, or past its budget while in `stage`.
+    pub fn check(&self, stage: &'static str) -> Result<(), AudioError> {
+        if self.stop.is_some_and(|stop| stop()) {
+            return Err(AudioError::Cancelled);
+        }
+        match self.limit {
+            Some(limit) if self.start.elapsed() > limit => Err(AudioError::TimedOut { stage, limit_s: limit.as_secs_f64() }),
+            _ => Ok(()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::cell::Cell;
+
+    #[test]
+    fn stops_when_asked_and_when_over_budget() {
+        assert!(Budget::unlimited().check("decode").is_ok());
+        let flag = Cell::new(false);
+        let stop = || flag.get();
+        let budget = Budget::new(Some(Duration::from_secs(60)), Some(&stop));
+        assert!(budget.check("decode").is_ok());
+        flag.set(true);
+        assert!(matches!(budget.check("decode"), Err(AudioError::Cancelled)));
+        let over = Budget::new(Some(Duration::ZERO), None);
+        std::thread::sleep(Duration::from_millis(2));
+        assert!(matches!(over.check("analysis"), Err(AudioError::TimedOut { stage: "analysis", .. })));
+    }
+}
