@@ -10,6 +10,8 @@ use ndarray_npy::ReadNpyExt;
 
 #[path = "audio/hostile.rs"]
 mod hostile;
+#[path = "common/hostile_files.rs"]
+mod hostile_files;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -77,6 +77,27 @@ where
     }
 }
 
+/// Deserialises an optional integer written as `36` or `36.0`: JSON Schema's `integer` admits
+/// both, so clients and generators may send either. A fraction or an out-of-range value is an
+/// error that names the field.
+pub fn optional_integer<'de, D, T>(deserializer: D) -> Result<Option<T>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: TryFrom<i128>,
+{
+    use serde::de::Error;
+    use serde::Deserialize;
+    let Some(n) = Option::<serde_json::Number>::deserialize(deserializer)? else { return Ok(None) };
+    let value = match (n.as_i64(), n.as_u64(), n.as_f64()) {
+        (Some(i), _, _) => i128::from(i),
+        (_, Some(u), _) => i128::from(u),
+        // 2^64 bounds every integer field; past it (or with a fraction) it is no integer we take.
+        (_, _, Some(f)) if f.fract() == 0.0 && f.abs() <= 18_446_744_073_709_551_615.0 => f as i128,
+        _ => return Err(D::Error::custom(format!("invalid value {n}, expected an integer"))),
+    };
+    T::try_from(value).map(Some).map_err(|_| D::Error::custom(format!("{n} is out of range")))
+}
+
 /// A query string; an unknown or malformed parameter is a 400 that says which.
 pub struct ApiQuery<T>(pub T);
 

@@ -1,5 +1,5 @@
 //! `/v1/jobs`: submit, read, list, cancel, and the result files.
-use super::extract::{ApiJson, ApiQuery};
+use super::extract::{optional_integer, ApiJson, ApiQuery};
 use super::problem::{ApiError, Problem};
 use super::AppState;
 use crate::models::ModelId;
@@ -42,7 +42,7 @@ pub struct CreateJob {
     /// A model id from `GET /v1/models`.
     pub model: String,
     /// Seeds every random draw; the same seed gives the same dance. Random when absent.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "optional_integer")]
     pub seed: Option<u64>,
     /// Poses the dance must pass through (models with the `key_poses` capability).
     #[serde(default)]
@@ -56,7 +56,8 @@ pub struct CreateJob {
     #[serde(default)]
     pub plant_feet: Option<bool>,
     /// Higher runs first; -100..=100, default 0.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "optional_integer")]
+    #[schema(minimum = -100, maximum = 100)]
     pub priority: Option<i64>,
 }
 
@@ -162,7 +163,8 @@ pub struct ListQuery {
     /// 1..=100, default 20.
     #[param(minimum = 1, maximum = 100, default = 20)]
     pub limit: Option<u32>,
-    /// `next_cursor` of the previous page.
+    /// `next_cursor` of the previous page (a job id).
+    #[param(format = Uuid)]
     pub cursor: Option<String>,
 }
 
@@ -232,10 +234,13 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
     operation_id = "createJob",
     tag = "jobs",
     request_body = CreateJob,
-    params(("Idempotency-Key" = Option<String>, Header, description = "Makes retries safe: one job per key")),
+    params(("Idempotency-Key" = Option<String>, Header, description = "Makes retries safe: one job per key. 1 to 255 visible ASCII characters",
+        min_length = 1, max_length = 255, pattern = "^[!-~]+$")),
     responses(
         (status = 202, description = "Job queued (or replayed)", body = JobView),
-        (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 400, description = "Malformed JSON, or a malformed Idempotency-Key", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "The song does not exist", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is over max_job_body_bytes", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "A field is invalid, the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
     ),
@@ -250,7 +255,8 @@ pub async fn create(
     let idempotency = idempotency(&headers, &request)?;
     let song = match state.store.song(request.song_id).await {
         Ok(song) => song,
-        Err(QueueError::SongNotFound(id)) => return Err(invalid("song_id", format!("song {id} does not exist; upload it first"))),
+        // 404, as for any id that names nothing: the request itself is well formed.
+        Err(QueueError::SongNotFound(id)) => return Err(ApiError::SongNotFound(id.to_string())),
         Err(e) => return Err(e.into()),
     };
     let model_id = ModelId(request.model.clone());

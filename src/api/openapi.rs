@@ -4,7 +4,7 @@
 //! exactly what the server does: the bearer token is optional (only a server with `auth_token`
 //! set asks for it, and then answers 401), and the ids that `POST /v1/songs` and `POST /v1/jobs`
 //! return are linked to the operations that take them.
-use utoipa::openapi::link::LinkBuilder;
+use serde_json::{json, Value};
 use utoipa::openapi::path::{Operation, PathItem};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
 use utoipa::openapi::{ContentBuilder, Ref, RefOr, ResponseBuilder};
@@ -30,7 +30,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
         super::system::readyz,
         super::system::metrics,
     ),
-    modifiers(&BearerAuth, &Links),
+    modifiers(&BearerAuth),
     tags(
         (name = "songs", description = "Upload songs; read their analysis"),
         (name = "jobs", description = "Dances: submit, follow, cancel, download"),
@@ -68,57 +68,69 @@ impl Modify for BearerAuth {
     }
 }
 
-/// OpenAPI links from the responses that create a song or a job to the operations taking its id.
-struct Links;
-
-impl Modify for Links {
-    fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
-        let link = |op: &str, params: &[(&str, &str)]| {
-            let mut b = LinkBuilder::new().operation_id(op);
-            for (name, value) in params {
-                b = b.parameter(*name, *value);
-            }
-            RefOr::T(b.build())
-        };
-        let song_links = || {
-            [
-                ("GetSong", link("getSong", &[("id", "$response.body#/id")])),
-                (
-                    "CreateJob",
-                    RefOr::T(
-                        LinkBuilder::new()
-                            .operation_id("createJob")
-                            .request_body(Some(serde_json::json!({ "song_id": "$response.body#/id", "model": "dance-revolution" })))
-                            .build(),
-                    ),
-                ),
-            ]
-        };
-        let job_links = || {
-            [
-                ("GetJob", link("getJob", &[("id", "$response.body#/id")])),
-                ("CancelJob", link("cancelJob", &[("id", "$response.body#/id")])),
-                ("GetJobFile", link("getJobFile", &[("id", "$response.body#/id"), ("file", "report.json")])),
-                ("GetSong", link("getSong", &[("id", "$response.body#/song_id")])),
-            ]
-        };
-        let add = |openapi: &mut utoipa::openapi::OpenApi, path: &str, status: &str, links: &[(&str, RefOr<utoipa::openapi::link::Link>)]| {
-            let Some(op) = openapi.paths.paths.get_mut(path).and_then(|item| item.post.as_mut()) else { return };
-            if let Some(RefOr::T(response)) = op.responses.responses.get_mut(status) {
-                for (name, l) in links {
-                    response.links.insert((*name).to_string(), l.clone());
-                }
-            }
-        };
-        add(openapi, "/v1/songs", "201", &song_links());
-        add(openapi, "/v1/songs", "200", &song_links());
-        add(openapi, "/v1/jobs", "202", &job_links());
+/// OpenAPI links from the responses that create a song or a job to the operations taking its
+/// id. Written into the JSON, because utoipa 5 serialises `Link` with snake_case keys
+/// (`operation_id`), which no OpenAPI tool reads.
+fn add_links(spec: &mut Value) {
+    let song = json!({
+        "GetSong": { "operationId": "getSong", "parameters": { "id": "$response.body#/id" } },
+        "CreateJob": {
+            "operationId": "createJob",
+            "requestBody": { "song_id": "$response.body#/id", "model": "dance-revolution" },
+        },
+    });
+    let job = json!({
+        "GetJob": { "operationId": "getJob", "parameters": { "id": "$response.body#/id" } },
+        "CancelJob": { "operationId": "cancelJob", "parameters": { "id": "$response.body#/id" } },
+        "GetJobFile": { "operationId": "getJobFile", "parameters": { "id": "$response.body#/id", "file": "report.json" } },
+        "GetSong": { "operationId": "getSong", "parameters": { "id": "$response.body#/song_id" } },
+    });
+    for (path, status, links) in [("/v1/songs", "201", &song), ("/v1/songs", "200", &song), ("/v1/jobs", "202", &job)] {
+        if let Some(response) = spec.pointer_mut(&format!("/paths/{}/post/responses/{status}", path.replace('/', "~1"))) {
+            response["links"] = links.clone();
+        }
     }
+}
+
+/// The result file names, from the one list the handler serves.
+fn result_file_names(spec: &mut Value) {
+    let Some(params) = spec.pointer_mut("/paths/~1v1~1jobs~1{id}~1{file}/get/parameters").and_then(Value::as_array_mut) else {
+        return;
+    };
+    for param in params.iter_mut().filter(|p| p["name"] == "file") {
+        param["schema"] = json!({ "type": "string", "enum": crate::queue::files::RESULT_FILES });
+    }
+}
+
+/// Array lengths serde enforces but utoipa 5 does not write: `[f64; 3]` points, and the
+/// joints of a seed-motion frame.
+fn fixed_lengths(spec: &mut Value) {
+    let joints = crate::motion::NUM_JOINTS;
+    for (pointer, n) in [
+        ("/components/schemas/SeedMotion/properties/positions/items/items", 3),
+        ("/components/schemas/SeedMotion/properties/positions/items", joints),
+        ("/components/schemas/KeyPose/properties/joints/items", 3),
+    ] {
+        if let Some(Value::Object(schema)) = spec.pointer_mut(pointer) {
+            schema.insert("minItems".into(), n.into());
+            schema.insert("maxItems".into(), n.into());
+        }
+    }
+}
+
+/// The spec the server serves: the generated document with its links, result file names and
+/// array lengths.
+pub fn spec() -> Result<Value, serde_json::Error> {
+    let mut spec = serde_json::to_value(ApiDoc::openapi())?;
+    add_links(&mut spec);
+    result_file_names(&mut spec);
+    fixed_lengths(&mut spec);
+    Ok(spec)
 }
 
 /// The spec as pretty JSON with a trailing newline, exactly as checked in.
 pub fn spec_json() -> Result<String, serde_json::Error> {
-    let mut json = ApiDoc::openapi().to_pretty_json()?;
+    let mut json = serde_json::to_string_pretty(&spec()?)?;
     json.push('\n');
     Ok(json)
 }

@@ -48,12 +48,13 @@ pub struct SongView {
     pub analysis: Option<Analysis>,
 }
 
-/// The multipart form of an upload.
+/// The multipart form of an upload: one field, `file` (any other is refused with 400).
 #[derive(utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
 #[allow(dead_code)]
 pub struct UploadForm {
     /// The song: mp3, wav, flac, ogg/vorbis or m4a/aac.
-    #[schema(value_type = String, format = Binary)]
+    #[schema(value_type = String, format = Binary, min_length = 1)]
     file: Vec<u8>,
 }
 

@@ -79,13 +79,29 @@ pub fn decode_file(path: &Path, options: &DecodeOptions) -> Result<Decoded, Audi
     if let Some(ext) = path.extension().and_then(|e| e.to_str()) {
         hint.with_extension(ext);
     }
-    decode_source(Box::new(file), hint, edit, options)
+    guarded(|| decode_source(Box::new(file), hint, edit, options))
 }
 
 /// Decodes an in-memory file within `options`.
 pub fn decode_bytes(bytes: Vec<u8>, options: &DecodeOptions) -> Result<Decoded, AudioError> {
     let edit = mp4_edit(&mut Cursor::new(&bytes[..])).unwrap_or(None);
-    decode_source(Box::new(Cursor::new(bytes)), Hint::new(), edit, options)
+    guarded(|| decode_source(Box::new(Cursor::new(bytes)), Hint::new(), edit, options))
+}
+
+/// Runs a decode, answering a panic inside it as an undecodable file.
+///
+/// symphonia 0.5 panics on some malformed headers: a WAV or AIFF whose sample rate is 0 builds a
+/// `TimeBase` with a zero denominator (found by `tests/audio/hostile.rs`). The decoder's state
+/// is dropped with the panic, so nothing half-updated survives it.
+fn guarded(decode: impl FnOnce() -> Result<Decoded, AudioError>) -> Result<Decoded, AudioError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(decode)).unwrap_or_else(|panic| {
+        let message = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic without a message".into());
+        Err(AudioError::Undecodable(format!("the decoder failed on a malformed header: {message}")))
+    })
 }
 
 fn undecodable(e: SymError) -> AudioError {

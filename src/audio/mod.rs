@@ -80,7 +80,7 @@ pub enum AudioError {
     Resample(String),
     #[error("librosa reference run failed: {0}")]
     Reference(String),
-    #[error("{stage} took longer than its {limit_s:.0} s budget and was abandoned")]
+    #[error("{stage} took longer than its {limit_s} s budget and was abandoned")]
     TimedOut { stage: &'static str, limit_s: f64 },
     #[error("stopped: the server is shutting down or the job was cancelled")]
     Cancelled,

@@ -171,7 +171,8 @@ impl FromStr for Status {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct SeedMotion {
-    /// Frames per second of `positions`.
+    /// Frames per second of `positions`, in (0, 240].
+    #[schema(exclusive_minimum = 0.0, maximum = 240.0)]
     pub fps: f64,
     /// `T × J × [x, y, z]`, in the skeleton's joint order; at most 1024 frames.
     #[schema(min_items = 1, max_items = 1024)]

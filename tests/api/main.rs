@@ -6,8 +6,12 @@ mod crash;
 mod generate;
 mod health;
 mod helpers;
+mod hostile;
+#[path = "../common/hostile_files.rs"]
+mod hostile_files;
 mod jobs;
 mod keypose;
 mod models;
 mod openapi;
+mod schemathesis;
 mod songs;
