@@ -128,6 +128,52 @@ async fn hostile_uploads_get_a_quick_answer_in_bounded_memory() {
     assert!(ticks < 30, "{ticks} CPU ticks in an idle second after the uploads");
 }
 
+/// Uploads `bytes` (asserting 201) and returns the song id.
+async fn upload_ok(client: &reqwest::Client, url: &str, name: &str, bytes: Vec<u8>) -> String {
+    let response = upload(client, url, name, bytes).await.expect("upload");
+    let status = response.status();
+    let body: Value = response.json().await.expect("song json");
+    assert_eq!(status, StatusCode::CREATED, "{body}");
+    body["id"].as_str().expect("id").to_string()
+}
+
+/// Polls a song until its analysis is `want` (or terminal), within `limit`.
+async fn wait_analysis(client: &reqwest::Client, url: &str, id: &str, want: &str, limit: Duration) -> String {
+    let deadline = Instant::now() + limit;
+    loop {
+        let song: Value = client.get(format!("{url}/v1/songs/{id}")).send().await.expect("GET song").json().await.expect("json");
+        let status = song["analysis_status"].as_str().unwrap_or("").to_string();
+        if status == want || status == "succeeded" || status == "failed" {
+            return status;
+        }
+        assert!(Instant::now() < deadline, "analysis still {status} after {limit:?}: {song}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_15_minute_384_khz_song_is_stored_and_analysed_in_bounded_memory() {
+    // Within every limit, at the highest rate accepted: it once took 1.3 GB to upload and 1.4 GB
+    // to analyse, decoded whole at 384 kHz each time.
+    let serve = Serve::start(&[]);
+    let client = client();
+    let idle = serve.status_kb("VmHWM");
+    let started = Instant::now();
+    let id = upload_ok(&client, &serve.url, "long-384k.flac", files::silent_flac(384_000, 899, true)).await;
+    let uploaded = started.elapsed();
+    let upload_peak = serve.status_kb("VmHWM").saturating_sub(idle);
+    let status = wait_analysis(&client, &serve.url, &id, "succeeded", Duration::from_secs(240)).await;
+    assert_eq!(status, "succeeded");
+    let peak = serve.status_kb("VmHWM").saturating_sub(idle);
+    eprintln!(
+        "899 s at 384 kHz: stored in {uploaded:?} (+{} MB), analysed after {:?} (+{} MB peak above idle)",
+        upload_peak / 1024,
+        started.elapsed(),
+        peak / 1024
+    );
+    assert!(peak <= MEMORY_BUDGET_KB, "peak RSS {peak} kB above idle");
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_decode_past_its_budget_is_abandoned_and_stops_burning_cpu() {
     // 1740 s of 384 kHz samples, no declared length, and limits that let the decode run.
@@ -163,7 +209,7 @@ async fn sigterm_stops_the_server_while_a_decode_is_in_flight() {
     }
     serve.sigterm();
     let exited = serve.wait_exit(Duration::from_secs(10));
-    let exited = exited.unwrap_or_else(|| panic!("choreo serve still runs 10 s after SIGTERM with a decode in flight"));
+    let exited = exited.unwrap_or_else(|| panic!("choreo serve still runs 10 s after SIGTERM with an upload decode in flight"));
     eprintln!("exited {exited:?} after SIGTERM");
     // The upload got an answer (503: try again) or its connection closed; never a hang.
     match in_flight.await.expect("upload task") {
@@ -212,4 +258,18 @@ async fn job_requests_are_capped_in_size() {
     // Past the size checks, it fails on the song that does not exist.
     expect_problem(response, StatusCode::NOT_FOUND, "song-not-found").await;
     app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sigterm_stops_the_server_while_an_analysis_job_decodes() {
+    let mut serve = Serve::start(&[]);
+    let client = client();
+    let id = upload_ok(&client, &serve.url, "long-384k.flac", files::silent_flac(384_000, 899, true)).await;
+    // Decoding 899 s at 384 kHz for analysis takes seconds: stop the server while it runs.
+    assert_eq!(wait_analysis(&client, &serve.url, &id, "running", Duration::from_secs(60)).await, "running");
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    serve.sigterm();
+    let exited = serve.wait_exit(Duration::from_secs(10));
+    let exited = exited.unwrap_or_else(|| panic!("choreo serve still runs 10 s after SIGTERM with an analysis in flight"));
+    eprintln!("exited {exited:?} after SIGTERM during the analysis");
 }
