@@ -245,7 +245,8 @@ impl axum::response::IntoResponse for UploadError {
         (status = 400, description = "Empty file, wrong field, bad file name or bad multipart", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Over the size limit", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Not audio, or not decodable", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Over the duration limit, or unusable audio", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Over the duration limit, cut short, an unsupported sample rate, or a decode past audio_timeout_s", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The server is shutting down; send the upload again when it is back", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
