@@ -44,6 +44,7 @@ pub enum Keep {
 
 /// How one decode is bounded.
 pub struct DecodeOptions<'a> {
+    /// What of the signal to keep.
     pub keep: Keep,
     /// Longer songs are refused: from the header when it declares a length, otherwise as soon
     /// as the decoded samples pass it.
@@ -55,6 +56,7 @@ pub struct DecodeOptions<'a> {
 /// A decoded file and the duration its header declares, when it declares one.
 #[derive(Clone, Debug)]
 pub struct Decoded {
+    /// The decoded song (no samples with [`Keep::Nothing`]).
     pub audio: DecodedAudio,
     /// From the header (Xing/Info frame count, WAV data size, FLAC STREAMINFO, MP4 track
     /// duration): a decoded length well short of it means the file was cut short.

@@ -37,6 +37,8 @@ async fn schemathesis_finds_no_mismatch_between_spec_and_server() {
         .args(["--report", "junit", "--report-dir"])
         .arg(reports.path())
         .env("NO_COLOR", "1")
+        // Its caches (.hypothesis, .schemathesis) go to the temporary dir, not the repository.
+        .current_dir(reports.path())
         .kill_on_drop(true)
         .output();
     let output = tokio::time::timeout(RUN_LIMIT, run)
