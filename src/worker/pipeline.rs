@@ -172,3 +172,103 @@ pub fn render(
     write_atomic(&dir.join(REPORT_FILE), &text)?;
     Ok(JobFiles { files: [BVH_FILE, JSON_FILE, GLB_FILE, REPORT_FILE].map(String::from).to_vec() })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::audio::AudioFormat;
+    use crate::queue::{JobId, SongId, Status};
+
+    /// A mono 16-bit WAV of a 440 Hz tone.
+    fn wav(sr: u32, seconds: u32) -> Vec<u8> {
+        let n = sr * seconds;
+        let mut b = Vec::with_capacity(44 + 2 * n as usize);
+        b.extend_from_slice(b"RIFF");
+        b.extend_from_slice(&(36 + 2 * n).to_le_bytes());
+        b.extend_from_slice(b"WAVEfmt ");
+        b.extend_from_slice(&16u32.to_le_bytes());
+        b.extend_from_slice(&1u16.to_le_bytes()); // PCM
+        b.extend_from_slice(&1u16.to_le_bytes()); // mono
+        b.extend_from_slice(&sr.to_le_bytes());
+        b.extend_from_slice(&(2 * sr).to_le_bytes());
+        b.extend_from_slice(&2u16.to_le_bytes());
+        b.extend_from_slice(&16u16.to_le_bytes());
+        b.extend_from_slice(b"data");
+        b.extend_from_slice(&(2 * n).to_le_bytes());
+        for i in 0..n {
+            let v = (f64::from(i) * 440.0 * std::f64::consts::TAU / f64::from(sr)).sin() * 8000.0;
+            b.extend_from_slice(&(v as i16).to_le_bytes());
+        }
+        b
+    }
+
+    /// Stops at its `stop_after`-th checkpoint.
+    struct StopAfter(usize);
+
+    impl Progress for StopAfter {
+        fn report(&mut self, _stage: &str, _fraction: f32) -> Result<(), Cancelled> {
+            if self.0 == 0 {
+                return Err(Cancelled);
+            }
+            self.0 -= 1;
+            Ok(())
+        }
+    }
+
+    fn setup(timeout_s: f64) -> (tempfile::TempDir, Pipeline, Job, Song) {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let data = DataDir::create(&dir.path().join("data")).expect("data dir");
+        let registry = Arc::new(Registry::load(&dir.path().join("no-models")).expect("registry"));
+        let config = Config { audio_timeout_s: timeout_s, ..Config::default() };
+        let song = Song {
+            id: SongId::new(),
+            filename: "tone.wav".into(),
+            format: AudioFormat::Wav,
+            duration_s: 30.0,
+            sample_rate: 44_100,
+            channels: 1,
+            sha256: "tone".into(),
+            size_bytes: 0,
+            analysis: None,
+            created_at: chrono::Utc::now(),
+        };
+        std::fs::write(data.song_path(song.id, song.format), wav(44_100, 30)).expect("write song");
+        let job = Job {
+            id: JobId::new(),
+            kind: JobKind::Analyze { song_id: song.id },
+            status: Status::Running,
+            stage: None,
+            progress: 0.0,
+            priority: 0,
+            attempts: 1,
+            max_attempts: 3,
+            cancel_requested: false,
+            error: None,
+            files: JobFiles::default(),
+            created_at: chrono::Utc::now(),
+            started_at: None,
+            finished_at: None,
+        };
+        (dir, Pipeline::new(registry, data, &config), job, song)
+    }
+
+    #[test]
+    fn an_analysis_past_its_budget_fails_and_is_not_retried() {
+        let (_dir, pipeline, job, song) = setup(1e-6);
+        let err = pipeline.execute(&job, &song, &mut StopAfter(usize::MAX)).expect_err("over budget");
+        assert!(matches!(err, WorkerError::Audio(AudioError::TimedOut { .. })), "{err}");
+        assert!(!err.is_retryable());
+        assert_eq!(err.code(), "audio-timeout");
+    }
+
+    #[test]
+    fn a_cancel_stops_the_decode_at_its_next_packet() {
+        // The job's first two checkpoints pass (decode and its first packet); the third stops it
+        // inside the decode, long before the 30 s song is through.
+        let (_dir, pipeline, job, song) = setup(60.0);
+        let err = pipeline.execute(&job, &song, &mut StopAfter(2)).expect_err("cancelled");
+        assert!(matches!(err, WorkerError::Cancelled), "{err}");
+        let analysis = pipeline.execute(&job, &song, &mut StopAfter(usize::MAX)).expect("analyses");
+        assert!(matches!(analysis, Outcome::Analysis(a) if (a.tempo_bpm).is_finite()));
+    }
+}
