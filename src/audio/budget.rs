@@ -40,6 +40,7 @@ impl<'a> Budget<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::audio::{analyze_within, AudioFormat, DecodedAudio, ANALYSIS_SR};
     use std::cell::Cell;
 
     #[test]
@@ -54,5 +55,22 @@ mod tests {
         let over = Budget::new(Some(Duration::ZERO), None);
         std::thread::sleep(Duration::from_millis(2));
         assert!(matches!(over.check("analysis"), Err(AudioError::TimedOut { stage: "analysis", .. })));
+    }
+
+    #[test]
+    fn an_analysis_stops_between_its_stages() {
+        let sr = ANALYSIS_SR;
+        let samples: Vec<f32> = (0..sr * 10).map(|i| if i % (sr / 2) < 200 { 0.8 } else { 0.0 }).collect();
+        let audio = DecodedAudio { format: AudioFormat::Wav, sample_rate: sr, channels: 1, duration_s: 10.0, samples };
+        assert!(analyze_within(&audio, &Budget::unlimited()).is_ok_and(|a| !a.beat_times.is_empty()));
+        // The fourth checkpoint comes after the mel spectrogram: the analysis stops there.
+        let calls = Cell::new(0);
+        let stop = || {
+            calls.set(calls.get() + 1);
+            calls.get() >= 4
+        };
+        let budget = Budget::new(None, Some(&stop));
+        assert!(matches!(analyze_within(&audio, &budget), Err(AudioError::Cancelled)));
+        assert_eq!(calls.get(), 4);
     }
 }

@@ -134,7 +134,8 @@ pub fn analyze(audio: &DecodedAudio) -> Result<Analysis, AudioError> {
     analyze_within(audio, &Budget::unlimited())
 }
 
-/// [`analyze`], checking `budget` between its stages (resampling, beat tracking).
+/// [`analyze`], checking `budget` between its stages (resampling, mel spectrogram, onsets,
+/// tempo, beats, downbeats).
 pub fn analyze_within(audio: &DecodedAudio, budget: &Budget) -> Result<Analysis, AudioError> {
     budget.check("analysis")?;
     // Decoded at the analysis rate already (the worker does that), the samples are used as they are.
@@ -143,6 +144,5 @@ pub fn analyze_within(audio: &DecodedAudio, budget: &Budget) -> Result<Analysis,
     } else {
         std::borrow::Cow::Owned(resample(&audio.samples, audio.sample_rate, ANALYSIS_SR)?)
     };
-    budget.check("analysis")?;
-    rhythm::analyze_mono(&y, ANALYSIS_SR, HOP_LENGTH)
+    rhythm::analyze_mono_within(&y, ANALYSIS_SR, HOP_LENGTH, budget)
 }
