@@ -6,7 +6,8 @@
 #     (.cargo/config.toml points LIBTORCH there; build.rs gives the binary an rpath to it).
 # With --test it also installs what the test suite uses: ffmpeg and sox (fixtures in other
 # formats are made from ../shared/audio at test time), blender and python3-numpy (the motion
-# exporters' round-trip test).
+# exporters' round-trip test), and schemathesis (PyPI) in .venv-schemathesis (the API test that
+# runs it against the real server).
 #
 # Usage: scripts/setup.sh [--test]
 set -euo pipefail
@@ -16,6 +17,8 @@ TORCH="torch==2.13.0"
 CUDA_RUNTIME="nvidia-cuda-runtime==13.0.96.*"
 CUPTI="nvidia-cuda-cupti==13.0.85.*"
 VENV=.torchenv
+SCHEMATHESIS="schemathesis==4.32.5"
+ST_VENV=.venv-schemathesis
 
 with_tests=0
 case "${1:-}" in
@@ -91,6 +94,13 @@ fi
 
 if [[ $with_tests -eq 1 ]]; then
   apt_install ffmpeg sox blender python3-numpy
+  # schemathesis, pinned, in its own venv (tests/api/schemathesis.rs runs its `st`).
+  if ! "$ST_VENV/bin/st" --version 2>/dev/null | grep -q "version ${SCHEMATHESIS#schemathesis==}$"; then
+    [[ -x "$ST_VENV/bin/pip" ]] || python3 -m venv "$ST_VENV"
+    log "installing $SCHEMATHESIS into $ST_VENV"
+    "$ST_VENV/bin/pip" install --quiet "$SCHEMATHESIS"
+    "$ST_VENV/bin/st" --version >/dev/null || { log "schemathesis is not runnable from $ST_VENV"; exit 1; }
+  fi
   if [[ ! -d ../shared/audio ]]; then
     log "warning: ../shared/audio is missing; the upload tests need it"
   fi

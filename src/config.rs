@@ -16,9 +16,9 @@ pub const ENV_PREFIX: &str = "CHOREO_";
 /// The settings, by name; only these are read from `CHOREO_*`, so other tools' variables that
 /// share the prefix do not break start-up.
 pub const SETTINGS: &[&str] = &[
-    "bind", "data_dir", "models_dir", "workers", "max_upload_bytes", "max_duration_s", "cors_origins",
-    "auth_token", "log_format", "log_level", "lease_s", "heartbeat_s", "max_attempts", "retry_backoff_s",
-    "poll_s",
+    "bind", "data_dir", "models_dir", "workers", "max_upload_bytes", "max_duration_s", "audio_timeout_s",
+    "max_job_body_bytes", "cors_origins", "auth_token", "log_format", "log_level", "lease_s", "heartbeat_s",
+    "max_attempts", "retry_backoff_s", "poll_s",
 ];
 
 /// Errors from loading or checking the configuration.
@@ -85,6 +85,11 @@ pub struct Config {
     pub max_upload_bytes: u64,
     /// Longest accepted song, in seconds.
     pub max_duration_s: f64,
+    /// Wall-clock budget of one decode, and of one analysis, in seconds; past it the work is
+    /// abandoned with an error and its thread stops.
+    pub audio_timeout_s: f64,
+    /// Largest accepted `POST /v1/jobs` body, in bytes.
+    pub max_job_body_bytes: u64,
     /// Origins allowed by CORS; `["*"]` allows any, `[]` none.
     pub cors_origins: Vec<String>,
     /// When set, every `/v1` route needs `Authorization: Bearer <token>`.
@@ -114,6 +119,8 @@ impl Default for Config {
             workers: 0,
             max_upload_bytes: 50 * 1024 * 1024,
             max_duration_s: 15.0 * 60.0,
+            audio_timeout_s: 60.0,
+            max_job_body_bytes: 2 * 1024 * 1024,
             cors_origins: Vec::new(),
             auth_token: None,
             log_format: LogFormat::Pretty,
@@ -149,6 +156,8 @@ struct Defaults {
     workers: usize,
     max_upload_bytes: u64,
     max_duration_s: f64,
+    audio_timeout_s: f64,
+    max_job_body_bytes: u64,
     cors_origins: Vec<String>,
     log_format: LogFormat,
     log_level: String,
@@ -169,6 +178,8 @@ impl Defaults {
             workers: d.workers,
             max_upload_bytes: d.max_upload_bytes,
             max_duration_s: d.max_duration_s,
+            audio_timeout_s: d.audio_timeout_s,
+            max_job_body_bytes: d.max_job_body_bytes,
             cors_origins: d.cors_origins,
             log_format: d.log_format,
             log_level: d.log_level,
@@ -206,6 +217,12 @@ impl Config {
         }
         if !(self.max_duration_s.is_finite() && self.max_duration_s > 0.0) {
             return invalid("max_duration_s", "must be a positive number of seconds");
+        }
+        if !(self.audio_timeout_s.is_finite() && self.audio_timeout_s > 0.0) {
+            return invalid("audio_timeout_s", "must be a positive number of seconds");
+        }
+        if self.max_job_body_bytes == 0 {
+            return invalid("max_job_body_bytes", "must be positive");
         }
         if !(self.lease_s.is_finite() && self.lease_s > 0.0) {
             return invalid("lease_s", "must be a positive number of seconds");

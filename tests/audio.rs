@@ -8,6 +8,11 @@ use choreo::audio::{self, chroma, dsp, features, onset, rhythm, DecodedAudio};
 use ndarray::{Array1, Array2, Axis};
 use ndarray_npy::ReadNpyExt;
 
+#[path = "audio/hostile.rs"]
+mod hostile;
+#[path = "common/hostile_files.rs"]
+mod hostile_files;
+
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }

@@ -1,8 +1,9 @@
 //! Extractors whose rejections are problem+json bodies naming the field at fault.
 use super::problem::ApiError;
+use super::AppState;
 use axum::body::Bytes;
 use axum::extract::{FromRequest, FromRequestParts, Request};
-use axum::http::{header, request::Parts};
+use axum::http::{header, request::Parts, StatusCode};
 use serde::de::DeserializeOwned;
 
 /// A JSON body; malformed JSON is a 400, a wrong field a 422 that names it.
@@ -45,14 +46,13 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     Ok(value)
 }
 
-impl<S, T> FromRequest<S> for ApiJson<T>
+impl<T> FromRequest<AppState> for ApiJson<T>
 where
-    S: Send + Sync,
     T: DeserializeOwned,
 {
     type Rejection = ApiError;
 
-    async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
+    async fn from_request(req: Request, state: &AppState) -> Result<Self, Self::Rejection> {
         let is_json = req
             .headers()
             .get(header::CONTENT_TYPE)
@@ -65,9 +65,37 @@ where
         if !is_json {
             return Err(ApiError::NotJson);
         }
-        let bytes = Bytes::from_request(req, state).await.map_err(|e| ApiError::MalformedJson(e.body_text()))?;
+        // The route's `DefaultBodyLimit` is `max_job_body_bytes`; past it nothing more is read.
+        let bytes = Bytes::from_request(req, state).await.map_err(|e| {
+            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                ApiError::BodyTooLarge { limit: state.config.max_job_body_bytes }
+            } else {
+                ApiError::MalformedJson(e.body_text())
+            }
+        })?;
         parse_json(&bytes).map(ApiJson)
     }
+}
+
+/// Deserialises an optional integer written as `36` or `36.0`: JSON Schema's `integer` admits
+/// both, so clients and generators may send either. A fraction or an out-of-range value is an
+/// error that names the field.
+pub fn optional_integer<'de, D, T>(deserializer: D) -> Result<Option<T>, D::Error>
+where
+    D: serde::Deserializer<'de>,
+    T: TryFrom<i128>,
+{
+    use serde::de::Error;
+    use serde::Deserialize;
+    let Some(n) = Option::<serde_json::Number>::deserialize(deserializer)? else { return Ok(None) };
+    let value = match (n.as_i64(), n.as_u64(), n.as_f64()) {
+        (Some(i), _, _) => i128::from(i),
+        (_, Some(u), _) => i128::from(u),
+        // 2^64 bounds every integer field; past it (or with a fraction) it is no integer we take.
+        (_, _, Some(f)) if f.fract() == 0.0 && f.abs() <= 18_446_744_073_709_551_615.0 => f as i128,
+        _ => return Err(D::Error::custom(format!("invalid value {n}, expected an integer"))),
+    };
+    T::try_from(value).map(Some).map_err(|_| D::Error::custom(format!("{n} is out of range")))
 }
 
 /// A query string; an unknown or malformed parameter is a 400 that says which.

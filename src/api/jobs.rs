@@ -1,5 +1,5 @@
 //! `/v1/jobs`: submit, read, list, cancel, and the result files.
-use super::extract::{ApiJson, ApiQuery};
+use super::extract::{optional_integer, ApiJson, ApiQuery};
 use super::problem::{ApiError, Problem};
 use super::AppState;
 use crate::models::ModelId;
@@ -28,6 +28,10 @@ const DEFAULT_LIMIT: u32 = 20;
 const MAX_LIMIT: u32 = 100;
 /// Priority bounds a client may ask for.
 const PRIORITY_RANGE: std::ops::RangeInclusive<i64> = -100..=100;
+/// Most key poses one job takes; each costs validation here and a constraint in the model.
+pub const MAX_KEY_POSES: usize = 128;
+/// Most seed-motion frames one job takes (41 s at 25 fps); models use only its last frames.
+pub const MAX_SEED_FRAMES: usize = 1024;
 
 /// A request for a dance.
 #[derive(Debug, Serialize, Deserialize, utoipa::ToSchema)]
@@ -37,7 +41,7 @@ pub struct CreateJob {
     /// A model id from `GET /v1/models`.
     pub model: String,
     /// Seeds every random draw; the same seed gives the same dance. Random when absent.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "optional_integer")]
     pub seed: Option<u64>,
     /// Poses the dance must pass through (models with the `key_poses` capability). Each is 26
     /// joints in motion.json's `joint_names` order (any frame of a choreo result: `positions[t]`),
@@ -45,6 +49,7 @@ pub struct CreateJob {
     /// of a BVH (`bvh: {text, frame}`, e.g. a job's motion.bvh). Its `time_s` must land on a frame
     /// of the dance: `round(time_s × 25) < ⌊duration_s × 25⌋`.
     #[serde(default)]
+    #[schema(max_items = 128)]
     pub key_poses: Vec<KeyPoseInput>,
     /// A motion to continue from (models with the `seed_motion` capability): `fps` and `positions`
     /// in either joint set (a slice of motion.json's `positions` works as it is), or `bvh` text.
@@ -55,7 +60,8 @@ pub struct CreateJob {
     #[serde(default)]
     pub plant_feet: Option<bool>,
     /// Higher runs first; -100..=100, default 0.
-    #[serde(default)]
+    #[serde(default, deserialize_with = "optional_integer")]
+    #[schema(minimum = -100, maximum = 100)]
     pub priority: Option<i64>,
 }
 
@@ -158,12 +164,15 @@ pub struct JobPage {
 #[into_params(parameter_in = Query)]
 pub struct ListQuery {
     /// queued, running, succeeded, failed or cancelled.
+    #[param(value_type = Option<Status>)]
     pub status: Option<String>,
     /// A model id.
     pub model: Option<String>,
     /// 1..=100, default 20.
+    #[param(minimum = 1, maximum = 100, default = 20)]
     pub limit: Option<u32>,
-    /// `next_cursor` of the previous page.
+    /// `next_cursor` of the previous page (a job id).
+    #[param(format = Uuid)]
     pub cursor: Option<String>,
 }
 
@@ -199,6 +208,19 @@ async fn motion_inputs(
     .map_err(|e| ApiError::Internal(format!("checking motion inputs: {e}")))?
 }
 
+/// Refuses inputs whose size alone would cost memory or time, before anything else reads them.
+fn check_sizes(request: &CreateJob) -> Result<(), ApiError> {
+    if request.key_poses.len() > MAX_KEY_POSES {
+        return Err(invalid("key_poses", format!("at most {MAX_KEY_POSES} key poses, got {}", request.key_poses.len())));
+    }
+    if let Some(positions) = request.seed_motion.as_ref().and_then(|s| s.positions.as_ref()) {
+        if positions.len() > MAX_SEED_FRAMES {
+            return Err(invalid("seed_motion.positions", format!("at most {MAX_SEED_FRAMES} frames, got {}", positions.len())));
+        }
+    }
+    Ok(())
+}
+
 fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempotency>, ApiError> {
     let Some(value) = headers.get(&IDEMPOTENCY_KEY) else { return Ok(None) };
     let key = value.to_str().map_err(|_| ApiError::InvalidIdempotencyKey)?;
@@ -219,12 +241,16 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
 #[utoipa::path(
     post,
     path = "/v1/jobs",
+    operation_id = "createJob",
     tag = "jobs",
     request_body = CreateJob,
-    params(("Idempotency-Key" = Option<String>, Header, description = "Makes retries safe: one job per key")),
+    params(("Idempotency-Key" = Option<String>, Header, description = "Makes retries safe: one job per key. 1 to 255 visible ASCII characters",
+        min_length = 1, max_length = 255, pattern = "^[!-~]+$")),
     responses(
         (status = 202, description = "Job queued (or replayed)", body = JobView),
-        (status = 400, description = "Malformed JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 400, description = "Malformed JSON, or a malformed Idempotency-Key", body = Problem, content_type = "application/problem+json"),
+        (status = 404, description = "The song does not exist", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is over max_job_body_bytes", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set), the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
     ),
@@ -235,10 +261,12 @@ pub async fn create(
     headers: HeaderMap,
     ApiJson(mut request): ApiJson<CreateJob>,
 ) -> Result<Response, ApiError> {
+    check_sizes(&request)?;
     let idempotency = idempotency(&headers, &request)?;
     let song = match state.store.song(request.song_id).await {
         Ok(song) => song,
-        Err(QueueError::SongNotFound(id)) => return Err(invalid("song_id", format!("song {id} does not exist; upload it first"))),
+        // 404, as for any id that names nothing: the request itself is well formed.
+        Err(QueueError::SongNotFound(id)) => return Err(ApiError::SongNotFound(id.to_string())),
         Err(e) => return Err(e.into()),
     };
     let model_id = ModelId(request.model.clone());
@@ -295,6 +323,7 @@ fn parse_job_id(id: &str) -> Result<JobId, ApiError> {
 #[utoipa::path(
     get,
     path = "/v1/jobs/{id}",
+    operation_id = "getJob",
     tag = "jobs",
     params(("id" = String, Path, description = "Job id")),
     responses(
@@ -312,6 +341,7 @@ pub async fn get(State(state): State<AppState>, Path(id): Path<String>) -> Resul
 #[utoipa::path(
     get,
     path = "/v1/jobs",
+    operation_id = "listJobs",
     tag = "jobs",
     params(ListQuery),
     responses(
@@ -345,6 +375,7 @@ pub async fn list(State(state): State<AppState>, ApiQuery(query): ApiQuery<ListQ
 #[utoipa::path(
     delete,
     path = "/v1/jobs/{id}",
+    operation_id = "cancelJob",
     tag = "jobs",
     params(("id" = String, Path, description = "Job id")),
     responses(
@@ -375,6 +406,7 @@ fn content_type(file: &str) -> &'static str {
 #[utoipa::path(
     get,
     path = "/v1/jobs/{id}/{file}",
+    operation_id = "getJobFile",
     tag = "jobs",
     params(
         ("id" = String, Path, description = "Job id"),

@@ -24,7 +24,6 @@ use tokio_util::sync::CancellationToken;
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
 use tower_http::trace::TraceLayer;
-use utoipa::OpenApi;
 use utoipa_swagger_ui::SwaggerUi;
 
 pub mod bench;
@@ -55,6 +54,8 @@ pub struct AppState {
     /// Bounds concurrent upload decodes, so memory stays bounded under many uploads.
     pub decode_permits: Arc<Semaphore>,
     pub workers_running: Arc<AtomicBool>,
+    /// Cancelled when the server stops; in-flight upload decodes watch it and return.
+    pub shutdown: CancellationToken,
 }
 
 /// Errors from starting the service.
@@ -75,7 +76,12 @@ pub fn router(state: AppState) -> Router {
     let v1 = Router::new()
         .route("/songs", axum::routing::post(songs::upload))
         .route("/songs/{id}", get(songs::get))
-        .route("/jobs", get(jobs::list).post(jobs::create))
+        .route(
+            "/jobs",
+            get(jobs::list).post(jobs::create).layer(axum::extract::DefaultBodyLimit::max(
+                usize::try_from(state.config.max_job_body_bytes).unwrap_or(usize::MAX),
+            )),
+        )
         .route("/jobs/{id}", get(jobs::get).delete(jobs::cancel))
         .route("/jobs/{id}/preview.png", get(jobs::preview))
         .route("/jobs/{id}/{file}", get(jobs::result))
@@ -95,7 +101,7 @@ pub fn router(state: AppState) -> Router {
         .route("/healthz", get(system::healthz))
         .route("/readyz", get(system::readyz))
         .route("/metrics", get(system::metrics))
-        .merge(SwaggerUi::new("/docs").url("/openapi.json", openapi::ApiDoc::openapi()))
+        .merge(SwaggerUi::new("/docs").external_url_unchecked("/openapi.json", openapi::spec().unwrap_or_default()))
         .fallback(|| async { ApiError::NoRoute })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
         .layer(middleware::from_fn(count_responses))
@@ -222,6 +228,7 @@ impl Server {
             metrics: metrics.clone(),
             decode_permits: Arc::new(Semaphore::new(std::thread::available_parallelism().map_or(1, |n| n.get()))),
             workers_running: Arc::new(AtomicBool::new(false)),
+            shutdown: shutdown.clone(),
         };
 
         let listener = tokio::net::TcpListener::bind(&config.bind)

@@ -1,5 +1,13 @@
 //! The OpenAPI document, generated from the handlers; `openapi/openapi.json` is its checked-in copy.
-use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityScheme};
+//!
+//! The modifiers state what the middleware does for every `/v1` route, so the document says
+//! exactly what the server does: the bearer token is optional (only a server with `auth_token`
+//! set asks for it, and then answers 401), and the ids that `POST /v1/songs` and `POST /v1/jobs`
+//! return are linked to the operations that take them.
+use serde_json::{json, Value};
+use utoipa::openapi::path::{Operation, PathItem};
+use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
+use utoipa::openapi::{ContentBuilder, Ref, RefOr, ResponseBuilder};
 use utoipa::{Modify, OpenApi};
 
 /// The checked-in copy of the spec, relative to the repository root.
@@ -33,19 +41,97 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
 )]
 pub struct ApiDoc;
 
-/// Declares the optional bearer token that guards `/v1`.
+fn operations(item: &mut PathItem) -> impl Iterator<Item = &mut Operation> {
+    [&mut item.get, &mut item.post, &mut item.put, &mut item.delete, &mut item.patch].into_iter().flatten()
+}
+
+/// Declares the bearer token that guards `/v1` when the server has one: every `/v1` operation
+/// may be called without it (the default) or with it, and may answer 401.
 struct BearerAuth;
 
 impl Modify for BearerAuth {
     fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
         let components = openapi.components.get_or_insert_with(Default::default);
         components.add_security_scheme("bearer", SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()));
+        let unauthorized = ResponseBuilder::new()
+            .description("The server has an auth_token and the request did not send it as `Authorization: Bearer <token>`")
+            .content(super::problem::PROBLEM_JSON, ContentBuilder::new().schema(Some(Ref::from_schema_name("Problem"))).build())
+            .build();
+        for (path, item) in openapi.paths.paths.iter_mut() {
+            if !path.starts_with("/v1/") {
+                continue;
+            }
+            for op in operations(item) {
+                op.security = Some(vec![SecurityRequirement::default(), SecurityRequirement::new("bearer", Vec::<String>::new())]);
+                op.responses.responses.entry("401".into()).or_insert_with(|| RefOr::T(unauthorized.clone()));
+            }
+        }
     }
+}
+
+/// OpenAPI links from the responses that create a song or a job to the operations taking its
+/// id. Written into the JSON, because utoipa 5 serialises `Link` with snake_case keys
+/// (`operation_id`), which no OpenAPI tool reads.
+fn add_links(spec: &mut Value) {
+    let song = json!({
+        "GetSong": { "operationId": "getSong", "parameters": { "id": "$response.body#/id" } },
+        "CreateJob": {
+            "operationId": "createJob",
+            "requestBody": { "song_id": "$response.body#/id", "model": "dance-revolution" },
+        },
+    });
+    let job = json!({
+        "GetJob": { "operationId": "getJob", "parameters": { "id": "$response.body#/id" } },
+        "CancelJob": { "operationId": "cancelJob", "parameters": { "id": "$response.body#/id" } },
+        "GetJobFile": { "operationId": "getJobFile", "parameters": { "id": "$response.body#/id", "file": "report.json" } },
+        "GetSong": { "operationId": "getSong", "parameters": { "id": "$response.body#/song_id" } },
+    });
+    for (path, status, links) in [("/v1/songs", "201", &song), ("/v1/songs", "200", &song), ("/v1/jobs", "202", &job)] {
+        if let Some(response) = spec.pointer_mut(&format!("/paths/{}/post/responses/{status}", path.replace('/', "~1"))) {
+            response["links"] = links.clone();
+        }
+    }
+}
+
+/// The result file names, from the one list the handler serves.
+fn result_file_names(spec: &mut Value) {
+    let Some(params) = spec.pointer_mut("/paths/~1v1~1jobs~1{id}~1{file}/get/parameters").and_then(Value::as_array_mut) else {
+        return;
+    };
+    for param in params.iter_mut().filter(|p| p["name"] == "file") {
+        param["schema"] = json!({ "type": "string", "enum": crate::queue::files::RESULT_FILES });
+    }
+}
+
+/// Array lengths serde enforces but utoipa 5 does not write: `[f64; 3]` points, and the
+/// joints of a seed-motion frame.
+fn fixed_lengths(spec: &mut Value) {
+    let joints = crate::motion::NUM_JOINTS;
+    for (pointer, n) in [
+        ("/components/schemas/SeedMotion/properties/positions/items/items", 3),
+        ("/components/schemas/SeedMotion/properties/positions/items", joints),
+        ("/components/schemas/KeyPose/properties/joints/items", 3),
+    ] {
+        if let Some(Value::Object(schema)) = spec.pointer_mut(pointer) {
+            schema.insert("minItems".into(), n.into());
+            schema.insert("maxItems".into(), n.into());
+        }
+    }
+}
+
+/// The spec the server serves: the generated document with its links, result file names and
+/// array lengths.
+pub fn spec() -> Result<Value, serde_json::Error> {
+    let mut spec = serde_json::to_value(ApiDoc::openapi())?;
+    add_links(&mut spec);
+    result_file_names(&mut spec);
+    fixed_lengths(&mut spec);
+    Ok(spec)
 }
 
 /// The spec as pretty JSON with a trailing newline, exactly as checked in.
 pub fn spec_json() -> Result<String, serde_json::Error> {
-    let mut json = ApiDoc::openapi().to_pretty_json()?;
+    let mut json = serde_json::to_string_pretty(&spec()?)?;
     json.push('\n');
     Ok(json)
 }

@@ -57,7 +57,9 @@ pub enum ApiError {
     EmptyFile,
     #[error("the file is larger than the {limit} byte limit")]
     FileTooLarge { limit: u64 },
-    #[error("the song is {seconds:.1} s long; the limit is {limit:.0} s")]
+    #[error("the body is larger than the {limit} byte limit")]
+    BodyTooLarge { limit: u64 },
+    #[error("the song is longer than the {limit:.0} s limit ({seconds:.1} s declared or decoded)")]
     SongTooLong { seconds: f64, limit: f64 },
     #[error("the file name {0:?} is not allowed: give a plain name without path separators, `..` or control characters")]
     InvalidFilename(String),
@@ -108,6 +110,7 @@ impl ApiError {
             ApiError::UnexpectedField(_) => "unexpected-multipart-field",
             ApiError::EmptyFile => "empty-file",
             ApiError::FileTooLarge { .. } => "file-too-large",
+            ApiError::BodyTooLarge { .. } => "body-too-large",
             ApiError::SongTooLong { .. } => "song-too-long",
             ApiError::InvalidFilename(_) => "invalid-filename",
             ApiError::Audio(e) => e.code(),
@@ -142,9 +145,12 @@ impl ApiError {
             ApiError::UnexpectedField(_) => StatusCode::BAD_REQUEST,
             ApiError::EmptyFile => StatusCode::BAD_REQUEST,
             ApiError::FileTooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            ApiError::BodyTooLarge { .. } => StatusCode::PAYLOAD_TOO_LARGE,
             ApiError::SongTooLong { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::InvalidFilename(_) => StatusCode::BAD_REQUEST,
             ApiError::Audio(AudioError::Undecodable(_)) => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            // The server is stopping; the same upload succeeds once it is back.
+            ApiError::Audio(AudioError::Cancelled) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Audio(e) if e.is_client_error() => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::Audio(_) => StatusCode::INTERNAL_SERVER_ERROR,
             ApiError::Truncated { .. } => StatusCode::UNPROCESSABLE_ENTITY,
@@ -223,6 +229,11 @@ impl IntoResponse for ApiError {
         }
         let mut response = (status, axum::Json(self.problem())).into_response();
         response.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
+        if matches!(self, ApiError::BodyTooLarge { .. }) {
+            // The rest of the body is never read; hyper drops the connection after the answer,
+            // so a keep-alive client must not send its next request into it.
+            response.headers_mut().insert(header::CONNECTION, HeaderValue::from_static("close"));
+        }
         if matches!(self, ApiError::Unauthorized) {
             response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }

@@ -6,7 +6,7 @@
 //! that records the song.
 use super::problem::{ApiError, Problem};
 use super::AppState;
-use crate::audio::{self, Analysis, AudioFormat};
+use crate::audio::{self, Analysis, AudioError, AudioFormat, Budget, DecodeOptions, Keep};
 use crate::queue::{JobKind, NewJob, Song, SongId, Status};
 use axum::extract::multipart::{Field, Multipart, MultipartRejection};
 use axum::extract::{Path, State};
@@ -16,6 +16,7 @@ use chrono::{DateTime, Utc};
 use serde::Serialize;
 use sha2::{Digest, Sha256};
 use std::str::FromStr;
+use std::time::Duration;
 use tokio::io::AsyncWriteExt;
 
 /// How much shorter than its header declares a decoded file may be before it counts as cut
@@ -47,12 +48,13 @@ pub struct SongView {
     pub analysis: Option<Analysis>,
 }
 
-/// The multipart form of an upload.
+/// The multipart form of an upload: one field, `file` (any other is refused with 400).
 #[derive(utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
 #[allow(dead_code)]
 pub struct UploadForm {
     /// The song: mp3, wav, flac, ogg/vorbis or m4a/aac.
-    #[schema(value_type = String, format = Binary)]
+    #[schema(value_type = String, format = Binary, min_length = 1)]
     file: Vec<u8>,
 }
 
@@ -234,6 +236,7 @@ impl axum::response::IntoResponse for UploadError {
 #[utoipa::path(
     post,
     path = "/v1/songs",
+    operation_id = "uploadSong",
     tag = "songs",
     request_body(content = UploadForm, content_type = "multipart/form-data"),
     responses(
@@ -242,7 +245,8 @@ impl axum::response::IntoResponse for UploadError {
         (status = 400, description = "Empty file, wrong field, bad file name or bad multipart", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Over the size limit", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Not audio, or not decodable", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "Over the duration limit, or unusable audio", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "Over the duration limit, cut short, an unsupported sample rate, or a decode past audio_timeout_s", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The server is shutting down; send the upload again when it is back", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
@@ -257,24 +261,33 @@ pub async fn upload(
         return Ok((StatusCode::OK, location(existing.id), Json(view(&state, existing).await?)));
     }
 
-    // Decode fully: that is the only proof the bytes are audio we can use. Bounded in parallel,
-    // so many uploads at once cannot hold many decoded songs in memory.
-    let (decoded, declared_s) = {
+    // Decode fully: that is the only proof the bytes are audio we can use. No samples are kept,
+    // the header's length and rate are checked before decoding, and the decode stops at the
+    // duration limit, the time budget or a server shutdown. Bounded in parallel as well.
+    let decoded = {
         let _permit = state.decode_permits.acquire().await.map_err(|e| ApiError::Internal(e.to_string()))?;
         let path = received.file.path().to_path_buf();
-        tokio::task::spawn_blocking(move || audio::decode_path(&path).map(|d| (d, declared_duration(&path))))
-            .await
-            .map_err(|e| ApiError::Internal(format!("decoder thread: {e}")))?
-            .map_err(ApiError::Audio)?
+        let (max_duration_s, timeout) = (state.config.max_duration_s, Duration::from_secs_f64(state.config.audio_timeout_s));
+        let shutdown = state.shutdown.clone();
+        tokio::task::spawn_blocking(move || {
+            let stop = || shutdown.is_cancelled();
+            let budget = Budget::new(Some(timeout), Some(&stop));
+            audio::decode_file(&path, &DecodeOptions { keep: Keep::Nothing, max_duration_s, budget: &budget })
+        })
+        .await
+        .map_err(|e| ApiError::Internal(format!("decoder thread: {e}")))?
+        .map_err(|e| match e {
+            // The configured limit is the API's own error, with the same code as ever.
+            AudioError::TooLong { seconds, limit } => ApiError::SongTooLong { seconds, limit },
+            other => ApiError::Audio(other),
+        })?
     };
-    if let Some(declared_s) = declared_s {
-        if decoded.duration_s + TRUNCATION_TOLERANCE_S < declared_s {
-            return Err(ApiError::Truncated { declared_s, decoded_s: decoded.duration_s }.into());
+    if let Some(declared_s) = decoded.declared_s {
+        if decoded.audio.duration_s + TRUNCATION_TOLERANCE_S < declared_s {
+            return Err(ApiError::Truncated { declared_s, decoded_s: decoded.audio.duration_s }.into());
         }
     }
-    if decoded.duration_s > state.config.max_duration_s {
-        return Err(ApiError::SongTooLong { seconds: decoded.duration_s, limit: state.config.max_duration_s }.into());
-    }
+    let decoded = decoded.audio;
 
     let id = SongId::new();
     let path = state.data.song_path(id, decoded.format);
@@ -321,31 +334,11 @@ fn location(id: SongId) -> HeaderMap {
     headers
 }
 
-/// The duration a file's header declares (Xing/Info frame count, WAV data size, FLAC
-/// STREAMINFO, MP4 track duration), when it declares one.
-///
-/// symphonia decodes a cut-off stream up to the cut without error, so comparing the decoded
-/// length with the declared one is what tells a truncated upload from a short song.
-fn declared_duration(path: &std::path::Path) -> Option<f64> {
-    use symphonia::core::formats::FormatOptions;
-    use symphonia::core::io::MediaSourceStream;
-    use symphonia::core::meta::MetadataOptions;
-    use symphonia::core::probe::Hint;
-    let file = std::fs::File::open(path).ok()?;
-    let stream = MediaSourceStream::new(Box::new(file), Default::default());
-    let probed = symphonia::default::get_probe()
-        .format(&Hint::new(), stream, &FormatOptions::default(), &MetadataOptions::default())
-        .ok()?;
-    let track = probed.format.default_track()?;
-    let frames = track.codec_params.n_frames?;
-    let rate = track.codec_params.sample_rate?;
-    (rate > 0).then(|| frames as f64 / f64::from(rate))
-}
-
 /// A song, with its analysis once done.
 #[utoipa::path(
     get,
     path = "/v1/songs/{id}",
+    operation_id = "getSong",
     tag = "songs",
     params(("id" = String, Path, description = "Song id")),
     responses(

@@ -19,7 +19,7 @@ pub struct Health {
 }
 
 /// The process is up.
-#[utoipa::path(get, path = "/healthz", tag = "system", responses((status = 200, body = Health)))]
+#[utoipa::path(get, path = "/healthz", operation_id = "healthz", tag = "system", responses((status = 200, body = Health)))]
 pub async fn healthz() -> Json<Health> {
     Json(Health { status: "ok".into() })
 }
@@ -28,6 +28,7 @@ pub async fn healthz() -> Json<Health> {
 #[utoipa::path(
     get,
     path = "/readyz",
+    operation_id = "readyz",
     tag = "system",
     responses(
         (status = 200, body = Health),
@@ -43,7 +44,7 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
 }
 
 /// Prometheus text: jobs by status, queue depth, busy workers, job and stage durations.
-#[utoipa::path(get, path = "/metrics", tag = "system", responses((status = 200, description = "Prometheus text format", content_type = "text/plain")))]
+#[utoipa::path(get, path = "/metrics", operation_id = "metrics", tag = "system", responses((status = 200, description = "Prometheus text format", content_type = "text/plain")))]
 pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse, ApiError> {
     // Counts come from the database at scrape time, so they are right across restarts.
     let counts = state.store.counts().await?;
@@ -57,7 +58,7 @@ pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse,
 }
 
 /// The models this server can dance with.
-#[utoipa::path(get, path = "/v1/models", tag = "models", responses((status = 200, body = [ModelInfo])), security(("bearer" = [])))]
+#[utoipa::path(get, path = "/v1/models", operation_id = "listModels", tag = "models", responses((status = 200, body = [ModelInfo])), security(("bearer" = [])))]
 pub async fn models(State(state): State<AppState>) -> Json<Vec<ModelInfo>> {
     Json(state.registry.list())
 }

@@ -1,39 +1,109 @@
 //! Decoding with symphonia: mono downmix (channel mean, as librosa's `to_mono`), the AAC
-//! encoder-delay trim from the MP4 edit list, and streaming rubato resampling so that a long
-//! song never exists at its native rate in memory when a lower rate is asked for.
+//! encoder-delay trim from the MP4 edit list, and streaming resampling so that a long song
+//! never exists at its native rate in memory when a lower rate is asked for.
+//!
+//! Every decode is bounded while it runs, because the file is a stranger's: the sample rate and
+//! (where the header declares one) the duration are checked before the first packet; the decoded
+//! length is counted as it streams and decoding stops at the limit; a [`Budget`] is checked on
+//! every packet; and what is kept ([`Keep`]) never grows with the native rate beyond the caller's
+//! choice. symphonia's own MP4 reader parses the edit list but does not expose it (its `atoms`
+//! module is private, and `CodecParameters` carries no delay for MP4), hence the small parser at
+//! the end of this file, which reads sizes from the file with checked arithmetic only.
 use std::io::{Cursor, Read, Seek, SeekFrom};
 use std::path::Path;
 
 use rubato::{FftFixedIn, Resampler};
 use symphonia::core::audio::SampleBuffer;
-use symphonia::core::codecs::{self, DecoderOptions, CODEC_TYPE_NULL};
+use symphonia::core::codecs::{self, CodecParameters, DecoderOptions, CODEC_TYPE_NULL};
 use symphonia::core::errors::Error as SymError;
 use symphonia::core::formats::FormatOptions;
 use symphonia::core::io::{MediaSource, MediaSourceStream};
 use symphonia::core::meta::MetadataOptions;
 use symphonia::core::probe::Hint;
 
-use super::{AudioError, AudioFormat, DecodedAudio, MAX_DURATION_S, MAX_SAMPLE_RATE, MIN_SAMPLE_RATE};
+use super::{AudioError, AudioFormat, Budget, DecodedAudio, MAX_DURATION_S, MAX_SAMPLE_RATE, MIN_SAMPLE_RATE};
 
 /// Input chunk (frames) fed to rubato; small so the resampler's buffers stay tiny.
 const RESAMPLE_CHUNK: usize = 4096;
+/// Slack on a header's declared duration before it alone refuses a song: declared lengths
+/// count the encoder's priming and padding, which the decoded length does not.
+const DECLARED_SLACK_S: f64 = 1.0;
 
-/// Decodes a file; with `target_sr` the mono signal is resampled while it streams.
+/// What a decode keeps of the signal (always mono).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Keep {
+    /// No samples: the file is decoded to prove it is audio and to measure it (uploads).
+    Nothing,
+    /// Every sample at the native rate.
+    Native,
+    /// Resampled to this rate while decoding.
+    At(u32),
+    /// The native rate, or this rate (resampled while decoding) when the native one is higher.
+    AtMost(u32),
+}
+
+/// How one decode is bounded.
+pub struct DecodeOptions<'a> {
+    /// What of the signal to keep.
+    pub keep: Keep,
+    /// Longer songs are refused: from the header when it declares a length, otherwise as soon
+    /// as the decoded samples pass it.
+    pub max_duration_s: f64,
+    /// Checked on every packet.
+    pub budget: &'a Budget<'a>,
+}
+
+/// A decoded file and the duration its header declares, when it declares one.
+#[derive(Clone, Debug)]
+pub struct Decoded {
+    /// The decoded song (no samples with [`Keep::Nothing`]).
+    pub audio: DecodedAudio,
+    /// From the header (Xing/Info frame count, WAV data size, FLAC STREAMINFO, MP4 track
+    /// duration): a decoded length well short of it means the file was cut short.
+    pub declared_s: Option<f64>,
+}
+
+/// Decodes a file with the default bounds; with `target_sr` the mono signal is resampled while
+/// it streams.
 pub fn decode_path_at(path: &Path, target_sr: Option<u32>) -> Result<DecodedAudio, AudioError> {
+    let keep = target_sr.map_or(Keep::Native, Keep::At);
+    let budget = Budget::unlimited();
+    Ok(decode_file(path, &DecodeOptions { keep, max_duration_s: MAX_DURATION_S, budget: &budget })?.audio)
+}
+
+/// Decodes a file within `options`.
+pub fn decode_file(path: &Path, options: &DecodeOptions) -> Result<Decoded, AudioError> {
     let mut file = std::fs::File::open(path)?;
+    // The edit list only trims; a file whose boxes cannot be read simply has none.
     let edit = mp4_edit(&mut file).unwrap_or(None);
     file.seek(SeekFrom::Start(0))?;
     let mut hint = Hint::new();
     if let Some(ext) = path.extension().and_then(|e| e.to_str()) {
         hint.with_extension(ext);
     }
-    decode_source(Box::new(file), hint, edit, target_sr)
+    guarded(|| decode_source(Box::new(file), hint, edit, options))
 }
 
-/// Decodes an in-memory file (an upload); with `target_sr` the signal is resampled.
-pub fn decode_bytes(bytes: Vec<u8>, target_sr: Option<u32>) -> Result<DecodedAudio, AudioError> {
+/// Decodes an in-memory file within `options`.
+pub fn decode_bytes(bytes: Vec<u8>, options: &DecodeOptions) -> Result<Decoded, AudioError> {
     let edit = mp4_edit(&mut Cursor::new(&bytes[..])).unwrap_or(None);
-    decode_source(Box::new(Cursor::new(bytes)), Hint::new(), edit, target_sr)
+    guarded(|| decode_source(Box::new(Cursor::new(bytes)), Hint::new(), edit, options))
+}
+
+/// Runs a decode, answering a panic inside it as an undecodable file.
+///
+/// symphonia 0.5 panics on some malformed headers: a WAV or AIFF whose sample rate is 0 builds a
+/// `TimeBase` with a zero denominator (found by `tests/audio/hostile.rs`). The decoder's state
+/// is dropped with the panic, so nothing half-updated survives it.
+fn guarded(decode: impl FnOnce() -> Result<Decoded, AudioError>) -> Result<Decoded, AudioError> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(decode)).unwrap_or_else(|panic| {
+        let message = panic
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| panic.downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic without a message".into());
+        Err(AudioError::Undecodable(format!("the decoder failed on a malformed header: {message}")))
+    })
 }
 
 fn undecodable(e: SymError) -> AudioError {
@@ -57,12 +127,36 @@ fn format_of(codec: codecs::CodecType) -> Result<AudioFormat, AudioError> {
     })
 }
 
+fn check_rate(sr: u32) -> Result<(), AudioError> {
+    if (MIN_SAMPLE_RATE..=MAX_SAMPLE_RATE).contains(&sr) {
+        Ok(())
+    } else {
+        Err(AudioError::UnsupportedSampleRate(sr))
+    }
+}
+
+/// The duration a header declares, in seconds.
+fn declared_seconds(params: &CodecParameters) -> Option<f64> {
+    let frames = params.n_frames?;
+    let seconds = match (params.time_base, params.sample_rate) {
+        (Some(tb), _) if tb.denom > 0 => {
+            let t = tb.calc_time(frames);
+            t.seconds as f64 + t.frac
+        }
+        (_, Some(sr)) if sr > 0 => frames as f64 / f64::from(sr),
+        _ => return None,
+    };
+    seconds.is_finite().then_some(seconds)
+}
+
 fn decode_source(
     source: Box<dyn MediaSource>,
     hint: Hint,
     edit: Option<Mp4Edit>,
-    target_sr: Option<u32>,
-) -> Result<DecodedAudio, AudioError> {
+    options: &DecodeOptions,
+) -> Result<Decoded, AudioError> {
+    let budget = options.budget;
+    let max_s = options.max_duration_s;
     let mss = MediaSourceStream::new(source, Default::default());
     let fmt_opts = FormatOptions { enable_gapless: true, ..Default::default() };
     let probed = symphonia::default::get_probe()
@@ -77,6 +171,16 @@ fn decode_source(
     let track_id = track.id;
     let params = track.codec_params.clone();
     let format = format_of(params.codec)?;
+    // What the header says is refused before a single packet is decoded.
+    let declared_s = declared_seconds(&params);
+    if let Some(rate) = params.sample_rate {
+        check_rate(rate)?;
+    }
+    if let Some(seconds) = declared_s {
+        if seconds > max_s + DECLARED_SLACK_S {
+            return Err(AudioError::TooLong { seconds, limit: max_s });
+        }
+    }
     let mut decoder = symphonia::default::get_codecs()
         .make(&params, &DecoderOptions::default())
         .map_err(undecodable)?;
@@ -92,8 +196,11 @@ fn decode_source(
     let mut sample_buf: Option<SampleBuffer<f32>> = None;
     let mut mono: Vec<f32> = Vec::new();
     let mut native_len: u64 = 0;
+    // Samples past which the song is too long, fixed once the rate is known.
+    let mut max_len: u64 = u64::MAX;
 
     loop {
+        budget.check("decoding")?;
         let packet = match reader.next_packet() {
             Ok(p) => p,
             Err(SymError::IoError(e)) if e.kind() == std::io::ErrorKind::UnexpectedEof => break,
@@ -118,10 +225,9 @@ fn decode_source(
         if native_sr == 0 { native_sr = spec.rate; }
         if channels == 0 { channels = spec.channels.count() as u16; }
         if sink.is_none() {
-            if !(MIN_SAMPLE_RATE..=MAX_SAMPLE_RATE).contains(&native_sr) {
-                return Err(AudioError::UnsupportedSampleRate(native_sr));
-            }
-            sink = Some(MonoSink::new(native_sr, target_sr.unwrap_or(native_sr))?);
+            check_rate(native_sr)?;
+            max_len = (max_s * f64::from(native_sr)).floor() as u64;
+            sink = Some(MonoSink::new(native_sr, options.keep)?);
         }
         let n_ch = spec.channels.count().max(1);
         let buf = sample_buf.get_or_insert_with(|| SampleBuffer::new(decoded.capacity() as u64, spec));
@@ -146,8 +252,12 @@ fn decode_source(
             *k -= n as u64;
         }
         native_len += slice.len() as u64;
-        if native_len as f64 / native_sr as f64 > MAX_DURATION_S {
-            return Err(AudioError::TooLong { seconds: native_len as f64 / native_sr as f64, limit: MAX_DURATION_S });
+        if native_len > max_len {
+            return Err(AudioError::TooLong { seconds: native_len as f64 / f64::from(native_sr), limit: max_s });
+        }
+        // Checked here, where the native samples pass, so a decode that keeps none checks too.
+        if slice.iter().any(|x| !x.is_finite()) {
+            return Err(AudioError::NonFinite);
         }
         if let Some(s) = sink.as_mut() { s.push(slice)?; }
     }
@@ -156,32 +266,37 @@ fn decode_source(
         return Err(AudioError::Empty);
     }
     let (samples, sample_rate) = sink.finish()?;
-    if samples.iter().any(|x| !x.is_finite()) {
-        return Err(AudioError::NonFinite);
-    }
-    Ok(DecodedAudio {
-        format,
-        sample_rate,
-        channels,
-        duration_s: native_len as f64 / native_sr as f64,
-        samples,
-    })
+    let audio = DecodedAudio { format, sample_rate, channels, duration_s: native_len as f64 / f64::from(native_sr), samples };
+    Ok(Decoded { audio, declared_s })
 }
 
-/// Collects mono audio, resampling on the fly when the rates differ.
+/// Collects mono audio as [`Keep`] asks, resampling on the fly when the rates differ.
 struct MonoSink {
     out: Vec<f32>,
     stream: Option<StreamResampler>,
     sr_out: u32,
+    store: bool,
 }
 
 impl MonoSink {
-    fn new(sr_in: u32, sr_out: u32) -> Result<Self, AudioError> {
-        let stream = if sr_in == sr_out { None } else { Some(StreamResampler::new(sr_in, sr_out)?) };
-        Ok(Self { out: Vec::new(), stream, sr_out })
+    fn new(sr_in: u32, keep: Keep) -> Result<Self, AudioError> {
+        let (sr_out, store) = match keep {
+            Keep::Nothing => (sr_in, false),
+            Keep::Native => (sr_in, true),
+            Keep::At(sr) => (sr, true),
+            Keep::AtMost(sr) => (sr_in.min(sr), true),
+        };
+        if sr_out == 0 {
+            return Err(AudioError::UnsupportedSampleRate(0));
+        }
+        let stream = if sr_in == sr_out || !store { None } else { Some(StreamResampler::new(sr_in, sr_out)?) };
+        Ok(Self { out: Vec::new(), stream, sr_out, store })
     }
 
     fn push(&mut self, x: &[f32]) -> Result<(), AudioError> {
+        if !self.store {
+            return Ok(());
+        }
         match self.stream.as_mut() {
             None => { self.out.extend_from_slice(x); Ok(()) }
             Some(s) => s.push(x, &mut self.out),
@@ -470,7 +585,7 @@ pub fn resample(x: &[f32], sr_in: u32, sr_out: u32) -> Result<Vec<f32>, AudioErr
     if sr_in == sr_out {
         return Ok(x.to_vec());
     }
-    let mut sink = MonoSink::new(sr_in, sr_out)?;
+    let mut sink = MonoSink::new(sr_in, Keep::At(sr_out))?;
     for chunk in x.chunks(1 << 16) {
         sink.push(chunk)?;
     }
@@ -492,20 +607,26 @@ pub struct Mp4Edit {
 
 impl Mp4Edit {
     fn to_samples(self, sr: u32) -> (u64, Option<u64>) {
-        let skip = if self.media_timescale > 0 {
-            (self.media_time as u128 * sr as u128 / self.media_timescale as u128) as u64
-        } else { 0 };
-        let keep = if self.segment_duration > 0 && self.movie_timescale > 0 {
-            Some((self.segment_duration as u128 * sr as u128 / self.movie_timescale as u128) as u64)
-        } else { None };
+        // u128 cannot overflow here (u64 × u32); a result past u64 saturates.
+        let scale = |v: u64, ts: u32| u64::try_from(u128::from(v) * u128::from(sr) / u128::from(ts)).unwrap_or(u64::MAX);
+        let skip = if self.media_timescale > 0 { scale(self.media_time, self.media_timescale) } else { 0 };
+        let keep = (self.segment_duration > 0 && self.movie_timescale > 0).then(|| scale(self.segment_duration, self.movie_timescale));
         (skip, keep)
     }
 }
 
+/// Largest `moov` box read for its edit list. Real ones hold a sample table of a few bytes per
+/// packet: about 1 MB for the longest song accepted.
+const MAX_MOOV_BYTES: u64 = 16 << 20;
+/// Most top-level boxes looked at before the `moov`; real files have a handful (ftyp, free,
+/// mdat, moov, udta), and each look is a seek and a read.
+const MAX_TOP_LEVEL_BOXES: usize = 1024;
+
+/// A box header: total size (0 resolved by the caller), type, and header length.
 fn read_box_header<R: Read>(r: &mut R) -> std::io::Result<(u64, [u8; 4], u64)> {
     let mut h = [0u8; 8];
     r.read_exact(&mut h)?;
-    let size32 = u32::from_be_bytes([h[0], h[1], h[2], h[3]]) as u64;
+    let size32 = u64::from(u32::from_be_bytes([h[0], h[1], h[2], h[3]]));
     let kind = [h[4], h[5], h[6], h[7]];
     if size32 == 1 {
         let mut l = [0u8; 8];
@@ -516,51 +637,75 @@ fn read_box_header<R: Read>(r: &mut R) -> std::io::Result<(u64, [u8; 4], u64)> {
     }
 }
 
-/// Reads the edit list of the first sound track of an MP4/M4A file; `None` for other files.
+/// Reads the edit list of the first sound track of an MP4/M4A file; `None` for other files,
+/// and for files whose boxes do not add up (the decoder then judges them).
+///
+/// Every size comes from the file, so each is checked against the bytes actually present before
+/// it moves the position or sizes an allocation: the position only grows (a box is at least its
+/// header), it never passes the end, and at most [`MAX_TOP_LEVEL_BOXES`] are visited.
 pub fn mp4_edit<R: Read + Seek>(r: &mut R) -> std::io::Result<Option<Mp4Edit>> {
     let end = r.seek(SeekFrom::End(0))?;
     let mut pos = 0u64;
-    while pos + 8 <= end {
+    for _ in 0..MAX_TOP_LEVEL_BOXES {
+        let left = end.saturating_sub(pos);
+        if left < 8 {
+            return Ok(None);
+        }
         r.seek(SeekFrom::Start(pos))?;
         let (size, kind, hdr) = read_box_header(r)?;
-        let size = if size == 0 { end - pos } else { size };
-        if size < hdr { return Ok(None); }
+        let size = if size == 0 { left } else { size };
+        if size < hdr || size > left {
+            return Ok(None);
+        }
         if &kind == b"moov" {
-            let len = (size - hdr).min(64 << 20) as usize;
-            let mut body = vec![0u8; len];
+            let len = size - hdr;
+            if len > MAX_MOOV_BYTES {
+                return Ok(None);
+            }
+            // `len` is at most what is left of the file, so this allocation is backed by bytes.
+            let mut body = vec![0u8; usize::try_from(len).unwrap_or(0)];
             r.read_exact(&mut body)?;
             return Ok(parse_moov(&body));
         }
-        if pos == 0 && &kind != b"ftyp" { return Ok(None); }
-        pos += size;
+        if pos == 0 && &kind != b"ftyp" {
+            return Ok(None);
+        }
+        pos += size; // size <= left = end - pos: no overflow.
     }
     Ok(None)
 }
 
+/// The child boxes of a box body. Stops at the first child whose size does not fit.
 fn children(body: &[u8]) -> Vec<([u8; 4], &[u8])> {
     let mut out = Vec::new();
-    let mut i = 0usize;
-    while i + 8 <= body.len() {
-        let size = u32::from_be_bytes([body[i], body[i + 1], body[i + 2], body[i + 3]]) as usize;
-        let kind = [body[i + 4], body[i + 5], body[i + 6], body[i + 7]];
-        let (size, hdr) = if size == 1 && i + 16 <= body.len() {
-            let mut l = [0u8; 8];
-            l.copy_from_slice(&body[i + 8..i + 16]);
-            (u64::from_be_bytes(l) as usize, 16)
-        } else if size == 0 { (body.len() - i, 8) } else { (size, 8) };
-        if size < hdr || i + size > body.len() { break; }
-        out.push((kind, &body[i + hdr..i + size]));
-        i += size;
+    let mut rest = body;
+    while let (Some(size32), Some(kind)) = (be_u32(rest, 0), rest.get(4..8)) {
+        let kind = [kind[0], kind[1], kind[2], kind[3]];
+        let (size, hdr) = match size32 {
+            0 => (rest.len() as u64, 8usize),
+            1 => match be_u64(rest, 8) {
+                Some(size) => (size, 16),
+                None => break,
+            },
+            size => (u64::from(size), 8),
+        };
+        // `size <= rest.len()` makes the cast exact; `size >= hdr` makes progress.
+        if size < hdr as u64 || size > rest.len() as u64 {
+            break;
+        }
+        let size = size as usize;
+        out.push((kind, &rest[hdr..size]));
+        rest = &rest[size..];
     }
     out
 }
 
 fn be_u32(b: &[u8], at: usize) -> Option<u32> {
-    b.get(at..at + 4).map(|s| u32::from_be_bytes([s[0], s[1], s[2], s[3]]))
+    b.get(at..at.checked_add(4)?).map(|s| u32::from_be_bytes([s[0], s[1], s[2], s[3]]))
 }
 
 fn be_u64(b: &[u8], at: usize) -> Option<u64> {
-    b.get(at..at + 8).map(|s| {
+    b.get(at..at.checked_add(8)?).map(|s| {
         let mut a = [0u8; 8];
         a.copy_from_slice(s);
         u64::from_be_bytes(a)
@@ -587,14 +732,15 @@ fn parse_moov(moov: &[u8]) -> Option<Mp4Edit> {
         let edts = tk.iter().find(|(k, _)| k == b"edts").map(|(_, b)| children(b))?;
         let elst = edts.iter().find(|(k, _)| k == b"elst").map(|(_, b)| *b)?;
         let version = *elst.first()?;
-        let count = be_u32(elst, 4)? as usize;
         let entry = if version == 1 { 20 } else { 12 };
+        // The declared count is believed only as far as the box holds entries.
+        let count = (be_u32(elst, 4)? as usize).min(elst.len().saturating_sub(8) / entry);
         for e in 0..count {
             let at = 8 + e * entry;
             let (dur, mt) = if version == 1 {
                 (be_u64(elst, at)?, be_u64(elst, at + 8)? as i64)
             } else {
-                (be_u32(elst, at)? as u64, be_u32(elst, at + 4)? as i32 as i64)
+                (u64::from(be_u32(elst, at)?), i64::from(be_u32(elst, at + 4)? as i32))
             };
             // media_time -1 is an empty edit (a gap); the first real edit says where audio starts.
             if mt >= 0 {
@@ -604,4 +750,105 @@ fn parse_moov(moov: &[u8]) -> Option<Mp4Edit> {
         return None;
     }
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn mp4_box(kind: &[u8; 4], body: &[u8]) -> Vec<u8> {
+        let mut b = ((body.len() + 8) as u32).to_be_bytes().to_vec();
+        b.extend_from_slice(kind);
+        b.extend_from_slice(body);
+        b
+    }
+
+    fn ftyp() -> Vec<u8> {
+        mp4_box(b"ftyp", b"M4A \0\0\0\0M4A ")
+    }
+
+    /// A `moov` with one sound track whose edit list starts at `media_time`.
+    fn moov(media_time: u32, elst_count: u32) -> Vec<u8> {
+        let mut mvhd = vec![0u8; 100];
+        mvhd[12..16].copy_from_slice(&1000u32.to_be_bytes());
+        let mut mdhd = vec![0u8; 24];
+        mdhd[12..16].copy_from_slice(&44_100u32.to_be_bytes());
+        let mut hdlr = vec![0u8; 24];
+        hdlr[8..12].copy_from_slice(b"soun");
+        let mut elst = vec![0u8; 8];
+        elst[4..8].copy_from_slice(&elst_count.to_be_bytes());
+        elst.extend_from_slice(&5000u32.to_be_bytes());
+        elst.extend_from_slice(&media_time.to_be_bytes());
+        elst.extend_from_slice(&0x0001_0000u32.to_be_bytes());
+        let mdia = [mp4_box(b"hdlr", &hdlr), mp4_box(b"mdhd", &mdhd)].concat();
+        let trak = [mp4_box(b"edts", &mp4_box(b"elst", &elst)), mp4_box(b"mdia", &mdia)].concat();
+        mp4_box(b"moov", &[mp4_box(b"mvhd", &mvhd), mp4_box(b"trak", &trak)].concat())
+    }
+
+    /// The hostile file of issue 11, byte for byte.
+    pub(crate) fn the_40_byte_m4a() -> Vec<u8> {
+        let mut b = mp4_box(b"ftyp", b"M4A \0\0\0\0");
+        b.extend_from_slice(&1u32.to_be_bytes());
+        b.extend_from_slice(b"mdat");
+        b.extend_from_slice(&(u64::MAX - 15).to_be_bytes());
+        b.extend_from_slice(&[0u8; 8]);
+        b
+    }
+
+    fn edit(bytes: &[u8]) -> Option<Mp4Edit> {
+        mp4_edit(&mut Cursor::new(bytes)).unwrap_or(None)
+    }
+
+    #[test]
+    fn reads_the_edit_list() {
+        let file = [ftyp(), moov(2112, 1)].concat();
+        let e = edit(&file).expect("an edit");
+        assert_eq!((e.media_time, e.media_timescale, e.segment_duration, e.movie_timescale), (2112, 44_100, 5000, 1000));
+        assert_eq!(e.to_samples(44_100), (2112, Some(220_500)));
+        // A count larger than the box holds reads the entries that are there.
+        assert_eq!(edit(&[ftyp(), moov(2112, u32::MAX)].concat()).map(|e| e.media_time), Some(2112));
+    }
+
+    #[test]
+    fn sizes_from_the_file_cannot_loop_overflow_or_over_allocate() {
+        // The 40-byte file that once looped for ever: a 16-byte ftyp, then a box whose 64-bit
+        // size is 2^64 - 16, which took the position back to 0.
+        let wrap = the_40_byte_m4a();
+        assert_eq!(wrap.len(), 40);
+        assert_eq!(edit(&wrap), None);
+        // Sizes that wrap the position to the start, to the box itself, or do not cover a header.
+        for size in [u64::MAX - 23, u64::MAX - 15, u64::MAX, 16, 8, 1, 2, 7] {
+            let mut b = ftyp();
+            b.extend_from_slice(&1u32.to_be_bytes());
+            b.extend_from_slice(b"free");
+            b.extend_from_slice(&size.to_be_bytes());
+            assert_eq!(edit(&b), None, "size {size}");
+        }
+        // A 4 GB moov header in a small file allocates nothing.
+        let mut big = ftyp();
+        big.extend_from_slice(&u32::MAX.to_be_bytes());
+        big.extend_from_slice(b"moov");
+        big.extend_from_slice(&[0u8; 64]);
+        assert_eq!(edit(&big), None);
+        // A child with a 2^64 size inside a real moov.
+        let mut m = moov(2112, 1);
+        let at = 8;
+        m[at..at + 4].copy_from_slice(&1u32.to_be_bytes());
+        m.splice(at + 8..at + 8, u64::MAX.to_be_bytes());
+        let size = m.len() as u32;
+        m[0..4].copy_from_slice(&size.to_be_bytes());
+        assert_eq!(edit(&[ftyp(), m].concat()), None);
+        // Many empty boxes: visited a bounded number of times.
+        let mut many = ftyp();
+        for _ in 0..100_000 {
+            many.extend_from_slice(&mp4_box(b"free", &[]));
+        }
+        many.extend_from_slice(&moov(2112, 1));
+        assert_eq!(edit(&many), None);
+        // Every truncation of a good file.
+        let good = [ftyp(), moov(2112, 1)].concat();
+        for n in 0..good.len() {
+            let _ = edit(&good[..n]);
+        }
+    }
 }

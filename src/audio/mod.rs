@@ -10,6 +10,7 @@
 use serde::{Deserialize, Serialize};
 
 pub mod bench;
+pub mod budget;
 pub mod chroma;
 pub mod decode;
 pub mod dsp;
@@ -17,7 +18,8 @@ pub mod features;
 pub mod onset;
 pub mod rhythm;
 
-pub use decode::{decode_bytes, decode_path_at, resample};
+pub use budget::Budget;
+pub use decode::{decode_bytes, decode_file, decode_path_at, resample, DecodeOptions, Decoded, Keep};
 
 /// Sample rate of `analyze` (librosa's default `sr`).
 pub const ANALYSIS_SR: u32 = 22_050;
@@ -27,11 +29,11 @@ pub const HOP_LENGTH: usize = 512;
 pub const N_FFT: usize = 2048;
 /// Number of mel bands, librosa's default.
 pub const N_MELS: usize = 128;
-/// Longest song accepted, in seconds (memory stays bounded below this).
+/// Longest song decoded when the caller gives no limit of its own, in seconds.
 pub const MAX_DURATION_S: f64 = 30.0 * 60.0;
 /// Lowest native sample rate accepted.
 pub const MIN_SAMPLE_RATE: u32 = 4_000;
-/// Highest native sample rate accepted.
+/// Highest native sample rate accepted (checked from the header, before any decoding).
 pub const MAX_SAMPLE_RATE: u32 = 384_000;
 
 /// The container/codec a song was decoded as, found by decoding, never by extension.
@@ -66,7 +68,7 @@ pub enum AudioError {
     Io(#[from] std::io::Error),
     #[error("the file decodes to no audio samples")]
     Empty,
-    #[error("the song is {seconds:.0} s long; the limit is {limit:.0} s")]
+    #[error("the song is longer than the {limit:.0} s limit ({seconds:.1} s declared or decoded)")]
     TooLong { seconds: f64, limit: f64 },
     #[error("sample rate {0} Hz is outside the supported {MIN_SAMPLE_RATE}..={MAX_SAMPLE_RATE} Hz")]
     UnsupportedSampleRate(u32),
@@ -78,6 +80,10 @@ pub enum AudioError {
     Resample(String),
     #[error("librosa reference run failed: {0}")]
     Reference(String),
+    #[error("{stage} took longer than its {limit_s} s budget and was abandoned")]
+    TimedOut { stage: &'static str, limit_s: f64 },
+    #[error("stopped: the server is shutting down or the job was cancelled")]
+    Cancelled,
 }
 
 impl AudioError {
@@ -93,6 +99,8 @@ impl AudioError {
             AudioError::InvalidParameter(_) => "audio-invalid-parameter",
             AudioError::Resample(_) => "audio-resample",
             AudioError::Reference(_) => "audio-reference",
+            AudioError::TimedOut { .. } => "audio-timeout",
+            AudioError::Cancelled => "audio-cancelled",
         }
     }
 
@@ -103,8 +111,12 @@ impl AudioError {
             | AudioError::Empty
             | AudioError::TooLong { .. }
             | AudioError::UnsupportedSampleRate(_)
-            | AudioError::NonFinite => true,
+            | AudioError::NonFinite
+            // Within the size and duration limits a file decodes in a few seconds; one that
+            // does not is built to stall the decoder, and another try would stall it again.
+            | AudioError::TimedOut { .. } => true,
             AudioError::Io(_)
+            | AudioError::Cancelled
             | AudioError::InvalidParameter(_)
             | AudioError::Resample(_)
             | AudioError::Reference(_) => false,
@@ -119,6 +131,18 @@ pub fn decode_path(path: &std::path::Path) -> Result<DecodedAudio, AudioError> {
 
 /// Tempo, beats and downbeats of a song (librosa `beat_track` at 22 050 Hz, hop 512).
 pub fn analyze(audio: &DecodedAudio) -> Result<Analysis, AudioError> {
-    let y = resample(&audio.samples, audio.sample_rate, ANALYSIS_SR)?;
-    rhythm::analyze_mono(&y, ANALYSIS_SR, HOP_LENGTH)
+    analyze_within(audio, &Budget::unlimited())
+}
+
+/// [`analyze`], checking `budget` between its stages (resampling, mel spectrogram, onsets,
+/// tempo, beats, downbeats).
+pub fn analyze_within(audio: &DecodedAudio, budget: &Budget) -> Result<Analysis, AudioError> {
+    budget.check("analysis")?;
+    // Decoded at the analysis rate already (the worker does that), the samples are used as they are.
+    let y: std::borrow::Cow<[f32]> = if audio.sample_rate == ANALYSIS_SR {
+        std::borrow::Cow::Borrowed(&audio.samples)
+    } else {
+        std::borrow::Cow::Owned(resample(&audio.samples, audio.sample_rate, ANALYSIS_SR)?)
+    };
+    rhythm::analyze_mono_within(&y, ANALYSIS_SR, HOP_LENGTH, budget)
 }

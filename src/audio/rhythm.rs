@@ -23,7 +23,7 @@ use rustfft::num_complex::Complex32;
 
 use super::dsp;
 use super::onset::{onset_strength_from_db, Aggregate};
-use super::{Analysis, AudioError, N_FFT, N_MELS};
+use super::{Analysis, AudioError, Budget, N_FFT, N_MELS};
 
 /// Autocorrelation tempogram, `[frames, win_length]`, librosa `feature.tempogram`
 /// (centred with a linear ramp to zero, periodic Hann window, max-normalised per frame).
@@ -239,13 +239,33 @@ pub fn beat_track(y: &[f32], sr: u32, hop: usize) -> (f64, Vec<usize>, Vec<f32>,
 
 /// Tempo, beats and downbeats of a mono signal.
 pub fn analyze_mono(y: &[f32], sr: u32, hop: usize) -> Result<Analysis, AudioError> {
+    analyze_mono_within(y, sr, hop, &Budget::unlimited())
+}
+
+/// [`analyze_mono`], checking `budget` between its stages ([`beat_track`]'s steps, then the
+/// downbeats), so an analysis past its budget stops within one stage.
+pub fn analyze_mono_within(y: &[f32], sr: u32, hop: usize, budget: &Budget) -> Result<Analysis, AudioError> {
     if y.is_empty() {
         return Err(AudioError::Empty);
     }
     if y.iter().any(|v| !v.is_finite()) {
         return Err(AudioError::NonFinite);
     }
-    let (bpm, beats, _onset, mel_db) = beat_track(y, sr, hop);
+    let stage = "analysis";
+    budget.check(stage)?;
+    let mut mel_db = dsp::melspectrogram(y, sr, N_FFT, hop, N_MELS);
+    budget.check(stage)?;
+    dsp::power_to_db_inplace(&mut mel_db);
+    let onset = onset_strength_from_db(&mel_db, N_FFT, hop, Aggregate::Median);
+    budget.check(stage)?;
+    let (bpm, beats) = if onset.iter().any(|&v| v != 0.0) {
+        let bpm = tempo(&onset, sr, hop);
+        budget.check(stage)?;
+        (bpm, beat_track_frames(&onset, bpm, sr as f64 / hop as f64, 100.0))
+    } else {
+        (0.0, Vec::new())
+    };
+    budget.check(stage)?;
     let to_s = |f: usize| f as f64 * hop as f64 / sr as f64;
     let down = downbeats(&beats, &mel_db, sr);
     Ok(Analysis {

@@ -133,9 +133,11 @@ pub struct SeedMotionInput {
     /// Which joints each frame of `positions` lists. Optional: 26 joints are `choreo`, 23 `dataset`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub joint_set: Option<JointSet>,
-    /// `T × J × [x, y, z]` world metres, y up, 1 to 15,000 frames. `choreo` (26): a slice of
-    /// motion.json's `positions`; `dataset` (23): the dataset's order. Give `positions` or `bvh`.
+    /// `T × J × [x, y, z]` world metres, y up, 1 to 1,024 frames (the API's cap; models use only the
+    /// last frames). `choreo` (26): a slice of motion.json's `positions`; `dataset` (23): the
+    /// dataset's order. Give `positions` or `bvh`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schema(min_items = 1, max_items = 1024)]
     pub positions: Option<Vec<Vec<[f64; 3]>>>,
     /// A whole BVH text instead of `positions` (e.g. a job's `motion.bvh`).
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -28,7 +28,7 @@ pub enum WorkerError {
     #[error("queue: {0}")]
     Queue(#[from] QueueError),
     #[error("audio: {0}")]
-    Audio(#[from] AudioError),
+    Audio(AudioError),
     #[error("model: {0}")]
     Model(ModelError),
     #[error("model {} is not available on this server", .0.0)]
@@ -54,6 +54,16 @@ impl From<ModelError> for WorkerError {
         match e {
             ModelError::Cancelled(_) => WorkerError::Cancelled,
             other => WorkerError::Model(other),
+        }
+    }
+}
+
+impl From<AudioError> for WorkerError {
+    fn from(e: AudioError) -> Self {
+        match e {
+            // Stopped at a checkpoint: cancelled, or the server is shutting down.
+            AudioError::Cancelled => WorkerError::Cancelled,
+            other => WorkerError::Audio(other),
         }
     }
 }
@@ -375,7 +385,7 @@ async fn heartbeat_loop(
 pub fn context(store: Arc<dyn Store>, registry: Arc<Registry>, data: DataDir, config: &crate::config::Config) -> Context {
     Context {
         store,
-        executor: Arc::new(Pipeline::new(registry, data)),
+        executor: Arc::new(Pipeline::new(registry, data, config)),
         policy: LeasePolicy {
             lease: Duration::from_secs_f64(config.lease_s),
             backoff: Duration::from_secs_f64(config.retry_backoff_s),

@@ -1,44 +1,82 @@
 //! The work of each job kind: decode → analyse, or decode → model → export + report.
 use super::{Execute, WorkerError};
-use crate::audio::{self, DecodedAudio};
+use crate::audio::{self, AudioError, Budget, DecodeOptions, DecodedAudio, Keep};
+use crate::config::Config;
 use crate::models::{Cancelled, GenerateRequest, Progress, Registry};
 use crate::motion::{KeyPose, Motion};
 use crate::queue::{DataDir, GenerateOptions, Job, JobFiles, JobKind, Outcome, SeedMotion, Song};
 use crate::report::preview::{self, Caption};
 use crate::telemetry::StageTimer;
+use std::cell::RefCell;
 use std::path::Path;
 use std::sync::Arc;
+use std::time::Duration;
 
 /// Share of a generate job's progress spent before the model starts (decoding).
 const MODEL_START: f32 = 0.1;
 /// Share of a generate job's progress done when the model finishes; the rest is export.
 const MODEL_END: f32 = 0.85;
 
+/// Highest rate a generate job keeps the song at: the models' feature grids resample to at
+/// most 22 050 Hz, so more only costs memory (a 15-minute song at 384 kHz would be 1.4 GB).
+const GENERATE_MAX_SR: u32 = 48_000;
+
 /// The service's [`Execute`]: real decoding, analysis, models and exporters.
 pub struct Pipeline {
     registry: Arc<Registry>,
     data: DataDir,
+    /// Song length limit: songs stored before a lower limit are refused, not decoded whole.
+    max_duration_s: f64,
+    /// Wall-clock budget of one decode and of one analysis.
+    audio_timeout: Duration,
 }
 
 impl Pipeline {
     /// A pipeline over the loaded models, writing results under `data`.
-    pub fn new(registry: Arc<Registry>, data: DataDir) -> Self {
-        Self { registry, data }
+    pub fn new(registry: Arc<Registry>, data: DataDir, config: &Config) -> Self {
+        Self {
+            registry,
+            data,
+            max_duration_s: config.max_duration_s,
+            audio_timeout: Duration::from_secs_f64(config.audio_timeout_s),
+        }
+    }
+
+    /// Runs `work` under the audio budget, stopping it when the job is cancelled (or the
+    /// server stops): the stop signal is the job's own progress checkpoint.
+    fn budgeted<T>(
+        &self,
+        progress: &mut dyn Progress,
+        stage: &'static str,
+        fraction: f32,
+        work: impl FnOnce(&Budget) -> Result<T, AudioError>,
+    ) -> Result<T, WorkerError> {
+        let progress = RefCell::new(progress);
+        let stop = || progress.borrow_mut().report(stage, fraction).is_err();
+        let budget = Budget::new(Some(self.audio_timeout), Some(&stop));
+        Ok(work(&budget)?)
     }
 
     #[tracing::instrument(skip_all, fields(song_id = %song.id))]
-    fn decode(&self, kind: &'static str, song: &Song) -> Result<DecodedAudio, WorkerError> {
+    fn decode(&self, kind: &'static str, song: &Song, keep: Keep, progress: &mut dyn Progress) -> Result<DecodedAudio, WorkerError> {
         let _timer = StageTimer::start(kind, "decode");
-        Ok(audio::decode_path(&self.data.song_path(song.id, song.format))?)
+        let path = self.data.song_path(song.id, song.format);
+        let max_duration_s = self.max_duration_s;
+        let decoded = self.budgeted(progress, "decode", 0.0, |budget| {
+            audio::decode_file(&path, &DecodeOptions { keep, max_duration_s, budget })
+        })?;
+        Ok(decoded.audio)
     }
 
     #[tracing::instrument(skip_all, fields(job_id = %job.id))]
     fn analyze(&self, job: &Job, song: &Song, progress: &mut dyn Progress) -> Result<Outcome, WorkerError> {
         progress.report("decode", 0.0)?;
-        let decoded = self.decode("analyze", song)?;
+        // Decoded straight to the analysis rate: the song never exists at its native rate.
+        let decoded = self.decode("analyze", song, Keep::At(audio::ANALYSIS_SR), progress)?;
         progress.report("analyze", 0.5)?;
         let _timer = StageTimer::start("analyze", "analyze");
-        Ok(Outcome::Analysis(audio::analyze(&decoded)?))
+        let analysis = self.budgeted(progress, "analyze", 0.5, |budget| audio::analyze_within(&decoded, budget))?;
+        Ok(Outcome::Analysis(analysis))
     }
 
     #[tracing::instrument(skip_all, fields(job_id = %job.id, model = %options.model.0))]
@@ -51,7 +89,7 @@ impl Pipeline {
     ) -> Result<Outcome, WorkerError> {
         let model = self.registry.get(&options.model).ok_or_else(|| WorkerError::ModelUnavailable(options.model.clone()))?;
         progress.report("decode", 0.0)?;
-        let decoded = self.decode("generate", song)?;
+        let decoded = self.decode("generate", song, Keep::AtMost(GENERATE_MAX_SR), progress)?;
         let seed_motion = options.seed_motion.as_ref().map(seed_motion).transpose()?;
         progress.report("model", MODEL_START)?;
         let motion = {
@@ -147,4 +185,104 @@ pub fn render(
     let png = preview::render_png(&sheet).map_err(|e| WorkerError::Export(format!("{}: {e}", preview::PREVIEW_FILE)))?;
     write_atomic(&dir.join(preview::PREVIEW_FILE), &png)?;
     Ok(JobFiles { files: [BVH_FILE, JSON_FILE, GLB_FILE, REPORT_FILE, preview::PREVIEW_FILE].map(String::from).to_vec() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::audio::AudioFormat;
+    use crate::queue::{JobId, SongId, Status};
+
+    /// A mono 16-bit WAV of a 440 Hz tone.
+    fn wav(sr: u32, seconds: u32) -> Vec<u8> {
+        let n = sr * seconds;
+        let mut b = Vec::with_capacity(44 + 2 * n as usize);
+        b.extend_from_slice(b"RIFF");
+        b.extend_from_slice(&(36 + 2 * n).to_le_bytes());
+        b.extend_from_slice(b"WAVEfmt ");
+        b.extend_from_slice(&16u32.to_le_bytes());
+        b.extend_from_slice(&1u16.to_le_bytes()); // PCM
+        b.extend_from_slice(&1u16.to_le_bytes()); // mono
+        b.extend_from_slice(&sr.to_le_bytes());
+        b.extend_from_slice(&(2 * sr).to_le_bytes());
+        b.extend_from_slice(&2u16.to_le_bytes());
+        b.extend_from_slice(&16u16.to_le_bytes());
+        b.extend_from_slice(b"data");
+        b.extend_from_slice(&(2 * n).to_le_bytes());
+        for i in 0..n {
+            let v = (f64::from(i) * 440.0 * std::f64::consts::TAU / f64::from(sr)).sin() * 8000.0;
+            b.extend_from_slice(&(v as i16).to_le_bytes());
+        }
+        b
+    }
+
+    /// Stops at its `stop_after`-th checkpoint.
+    struct StopAfter(usize);
+
+    impl Progress for StopAfter {
+        fn report(&mut self, _stage: &str, _fraction: f32) -> Result<(), Cancelled> {
+            if self.0 == 0 {
+                return Err(Cancelled);
+            }
+            self.0 -= 1;
+            Ok(())
+        }
+    }
+
+    fn setup(timeout_s: f64) -> (tempfile::TempDir, Pipeline, Job, Song) {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let data = DataDir::create(&dir.path().join("data")).expect("data dir");
+        let registry = Arc::new(Registry::load(&dir.path().join("no-models")).expect("registry"));
+        let config = Config { audio_timeout_s: timeout_s, ..Config::default() };
+        let song = Song {
+            id: SongId::new(),
+            filename: "tone.wav".into(),
+            format: AudioFormat::Wav,
+            duration_s: 30.0,
+            sample_rate: 44_100,
+            channels: 1,
+            sha256: "tone".into(),
+            size_bytes: 0,
+            analysis: None,
+            created_at: chrono::Utc::now(),
+        };
+        std::fs::write(data.song_path(song.id, song.format), wav(44_100, 30)).expect("write song");
+        let job = Job {
+            id: JobId::new(),
+            kind: JobKind::Analyze { song_id: song.id },
+            status: Status::Running,
+            stage: None,
+            progress: 0.0,
+            priority: 0,
+            attempts: 1,
+            max_attempts: 3,
+            cancel_requested: false,
+            error: None,
+            files: JobFiles::default(),
+            created_at: chrono::Utc::now(),
+            started_at: None,
+            finished_at: None,
+        };
+        (dir, Pipeline::new(registry, data, &config), job, song)
+    }
+
+    #[test]
+    fn an_analysis_past_its_budget_fails_and_is_not_retried() {
+        let (_dir, pipeline, job, song) = setup(1e-6);
+        let err = pipeline.execute(&job, &song, &mut StopAfter(usize::MAX)).expect_err("over budget");
+        assert!(matches!(err, WorkerError::Audio(AudioError::TimedOut { .. })), "{err}");
+        assert!(!err.is_retryable());
+        assert_eq!(err.code(), "audio-timeout");
+    }
+
+    #[test]
+    fn a_cancel_stops_the_decode_at_its_next_packet() {
+        // The job's first two checkpoints pass (decode and its first packet); the third stops it
+        // inside the decode, long before the 30 s song is through.
+        let (_dir, pipeline, job, song) = setup(60.0);
+        let err = pipeline.execute(&job, &song, &mut StopAfter(2)).expect_err("cancelled");
+        assert!(matches!(err, WorkerError::Cancelled), "{err}");
+        let analysis = pipeline.execute(&job, &song, &mut StopAfter(usize::MAX)).expect("analyses");
+        assert!(matches!(analysis, Outcome::Analysis(a) if (a.tempo_bpm).is_finite()));
+    }
 }

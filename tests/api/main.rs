@@ -6,10 +6,14 @@ mod crash;
 mod generate;
 mod health;
 mod helpers;
+mod hostile;
+#[path = "../common/hostile_files.rs"]
+mod hostile_files;
 mod jobs;
 mod keypose;
 mod models;
 mod openapi;
 mod preview;
 mod roundtrip;
+mod schemathesis;
 mod songs;
