@@ -453,6 +453,7 @@ pub struct Png(pub Vec<u8>);
 #[utoipa::path(
     get,
     path = "/v1/jobs/{id}/preview.png",
+    operation_id = "getJobPreview",
     tag = "jobs",
     params(("id" = String, Path, description = "Job id")),
     responses(

@@ -84,6 +84,7 @@ fn add_links(spec: &mut Value) {
         "GetJob": { "operationId": "getJob", "parameters": { "id": "$response.body#/id" } },
         "CancelJob": { "operationId": "cancelJob", "parameters": { "id": "$response.body#/id" } },
         "GetJobFile": { "operationId": "getJobFile", "parameters": { "id": "$response.body#/id", "file": "report.json" } },
+        "GetJobPreview": { "operationId": "getJobPreview", "parameters": { "id": "$response.body#/id" } },
         "GetSong": { "operationId": "getSong", "parameters": { "id": "$response.body#/song_id" } },
     });
     for (path, status, links) in [("/v1/songs", "201", &song), ("/v1/songs", "200", &song), ("/v1/jobs", "202", &job)] {
@@ -106,15 +107,12 @@ fn result_file_names(spec: &mut Value) {
 /// Array lengths serde enforces but utoipa 5 does not write: `[f64; 3]` points, and the
 /// joints of a seed-motion frame.
 fn fixed_lengths(spec: &mut Value) {
-    let joints = crate::motion::NUM_JOINTS;
-    for (pointer, n) in [
-        ("/components/schemas/SeedMotion/properties/positions/items/items", 3),
-        ("/components/schemas/SeedMotion/properties/positions/items", joints),
-        ("/components/schemas/KeyPose/properties/joints/items", 3),
-    ] {
+    // A point is exactly [x, y, z] (serde refuses any other length before anything else runs);
+    // the joint count (23 or 26) is checked after the song is found, and said in the description.
+    for pointer in ["/components/schemas/SeedMotionInput/properties/positions/items/items", "/components/schemas/KeyPoseInput/properties/joints/items"] {
         if let Some(Value::Object(schema)) = spec.pointer_mut(pointer) {
-            schema.insert("minItems".into(), n.into());
-            schema.insert("maxItems".into(), n.into());
+            schema.insert("minItems".into(), 3.into());
+            schema.insert("maxItems".into(), 3.into());
         }
     }
 }
