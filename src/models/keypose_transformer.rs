@@ -434,8 +434,12 @@ impl KeyposeTransformer {
     /// Generates `n` frames from music `[n, music_dim]` in overlapping windows of `T` frames
     /// ([`generation_windows`]), each seeded with `T′` final frames (the first with `seed`
     /// `[T′, pose_dim]`, or the mean pose) and crossfaded into the previous window's output. Key
-    /// poses `(frame, [key_dim])` (normalised) go to every window that contains them. `on_window(done, total)` may stop the loop. Returns `[n, pose_dim]`.
-    pub fn generate_long(&self, music: &Tensor, seed: Option<&Tensor>, keys: &[(i64, Vec<f32>)], mut on_window: impl FnMut(usize, usize) -> bool) -> Option<Tensor> {
+    /// poses `(frame, [key_dim])` (normalised) go to every window that contains them. With
+    /// `keep_seed` the seed's frames are the output's first `T′` (a user's seed motion is
+    /// continued, not redrawn); without, the network's own rendering of them is, which joins the
+    /// frames after them without a jump (a seed drawn from the pose bank only has to start the
+    /// dance). `on_window(done, total)` may stop the loop. Returns `[n, pose_dim]`.
+    pub fn generate_long(&self, music: &Tensor, seed: Option<&Tensor>, keep_seed: bool, keys: &[(i64, Vec<f32>)], mut on_window: impl FnMut(usize, usize) -> bool) -> Option<Tensor> {
         let c = &self.config;
         let (w, ts) = (c.window, c.seed_len);
         let n = music.size()[0];
@@ -446,7 +450,7 @@ impl KeyposeTransformer {
         let starts = generation_windows(total, w, ts);
         let out = Tensor::zeros([total, c.pose_dim], (Kind::Float, dev));
         let mut written = 0i64; // frames [0, written) have output
-        let seeded = seed.is_some();
+        let seeded = seed.is_some() && keep_seed;
         for (i, &s) in starts.iter().enumerate() {
             let seed_rows = if i == 0 {
                 match seed {
@@ -535,20 +539,24 @@ mod tests {
         let music = Tensor::randn([53, 4], (Kind::Float, Device::Cpu));
         let keys = vec![(30i64, vec![1.0f32; 6])];
         let mut windows = 0;
-        let a = m.generate_long(&music, None, &keys, |_, _| { windows += 1; true }).unwrap();
-        let b = m.generate_long(&music, None, &keys, |_, _| true).unwrap();
+        let a = m.generate_long(&music, None, true, &keys, |_, _| { windows += 1; true }).unwrap();
+        let b = m.generate_long(&music, None, true, &keys, |_, _| true).unwrap();
         assert_eq!(a.size(), vec![53, 7]);
         assert_eq!(windows, 5, "windows of 20 advancing by 10 (5 seed + 5 crossfade frames) over 53 frames");
         assert_eq!((&a - &b).abs().max().double_value(&[]), 0.0);
         // The key pose is an input: removing it changes the dance near it.
-        let c = m.generate_long(&music, None, &[], |_, _| true).unwrap();
+        let c = m.generate_long(&music, None, true, &[], |_, _| true).unwrap();
         assert!((&a - &c).abs().max().double_value(&[]) > 1e-5);
         // A given seed is kept verbatim at the start.
         let seed = Tensor::randn([5, 7], (Kind::Float, Device::Cpu));
-        let d = m.generate_long(&music, Some(&seed), &keys, |_, _| true).unwrap();
+        let d = m.generate_long(&music, Some(&seed), true, &keys, |_, _| true).unwrap();
         assert!((d.narrow(0, 0, 5) - &seed).abs().max().double_value(&[]) < 1e-6);
         // Cancelling stops it.
-        assert!(m.generate_long(&music, None, &keys, |i, _| i < 2).is_none());
+        assert!(m.generate_long(&music, None, true, &keys, |i, _| i < 2).is_none());
+        // A drawn seed is not kept: the network's rendering of it starts the dance.
+        let e = m.generate_long(&music, Some(&seed), false, &keys, |_, _| true).unwrap();
+        assert!((e.narrow(0, 0, 5) - &seed).abs().max().double_value(&[]) > 1e-4);
+        assert_eq!(e.size(), vec![53, 7]);
     }
 
     #[test]

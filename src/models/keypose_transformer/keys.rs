@@ -46,6 +46,38 @@ pub fn pass_through_keys(x: &mut Array2<f32>, cols: std::ops::Range<usize>, keys
     }
 }
 
+/// Frames on each side of a key that [`bridge_keys`] replaces.
+pub const BRIDGE_HALF: usize = 2;
+
+/// Replaces rows `k − half ..= k + half` around each key frame `k` of `x` `[n, c]` by the straight
+/// line between the rows just outside them (the nearer one alone at either end of the motion).
+/// The network tends to put a key pose on its own frame without leading into it: a spike one or
+/// two frames wide that the exact pass would keep. Bridging first makes the pass start from the
+/// network's trajectory, so the correction is the smooth [`pass_through_keys`] blend alone.
+pub fn bridge_keys(x: &mut Array2<f32>, frames: &[usize], half: usize) {
+    let n = x.nrows();
+    for &k in frames {
+        if k >= n {
+            continue;
+        }
+        let before = k.checked_sub(half + 1);
+        let after = (k + half + 1 < n).then_some(k + half + 1);
+        let (lo, hi) = (k.saturating_sub(half), (k + half).min(n - 1));
+        for t in lo..=hi {
+            let row: Vec<f32> = match (before, after) {
+                (Some(a), Some(b)) => {
+                    let u = (t - a) as f32 / (b - a) as f32;
+                    x.row(a).iter().zip(x.row(b).iter()).map(|(p, q)| p + u * (q - p)).collect()
+                }
+                (Some(a), None) => x.row(a).to_vec(),
+                (None, Some(b)) => x.row(b).to_vec(),
+                (None, None) => continue,
+            };
+            x.row_mut(t).assign(&ndarray::ArrayView1::from(&row));
+        }
+    }
+}
+
 /// Turns the integrated yaw so that frame `t_i` faces `yaw_i` (radians), blending the
 /// correction like [`pass_through_keys`]; returns the start yaw to integrate from.
 pub fn pass_through_yaws(features: &mut Array2<f32>, start_yaw: f32, keys: &[(usize, f32)], radius: f64) -> f32 {
@@ -131,6 +163,24 @@ mod tests {
     use super::*;
     use crate::models::keypose_transformer::served::BLEND_RADIUS;
     use crate::motion::repr::RootStart;
+
+    #[test]
+    fn bridging_removes_a_spike_at_a_key_and_nothing_else() {
+        let mut x = Array2::from_shape_fn((20, 2), |(t, c)| (t + c) as f32);
+        x[[10, 0]] = 50.0;
+        x[[11, 1]] = -50.0;
+        let mut y = x.clone();
+        bridge_keys(&mut y, &[10], BRIDGE_HALF);
+        for t in 8..=12 {
+            assert!((y[[t, 0]] - t as f32).abs() < 1e-5 && (y[[t, 1]] - (t + 1) as f32).abs() < 1e-5, "{t}");
+        }
+        assert_eq!(y.row(3), x.row(3));
+        assert_eq!(y.row(15), x.row(15));
+        // At the motion's start the nearer outside row is held.
+        let mut z = x.clone();
+        bridge_keys(&mut z, &[0], BRIDGE_HALF);
+        assert_eq!(z.row(0), x.row(3));
+    }
 
     #[test]
     fn pass_through_hits_every_key_and_leaves_far_frames() {

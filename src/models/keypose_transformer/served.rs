@@ -8,7 +8,7 @@ use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 use tch::Tensor;
 
-use super::keys::{normalize_key, pass_through_keys, pass_through_yaws, local_keys, LocalKey};
+use super::keys::{bridge_keys, local_keys, normalize_key, pass_through_keys, pass_through_yaws, LocalKey, BRIDGE_HALF};
 use super::scaffold::{PoseBank, Scaffold, POSE_BANK_FILE};
 use super::{Config, KeyposeTransformer};
 use crate::models::{read_model_file, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
@@ -99,12 +99,16 @@ pub struct Generation {
 /// Generation on normalised music plus the exact key-pose pass. `seed` is denormalised features
 /// (in the model's root-height representation) and the root start; `keys` are the user's key
 /// poses (passed exactly); `scaffold` are poses `(frame, 69 local coordinates)` the network is
-/// given as key poses but not held to. Shared by serving and the model card's evaluation.
+/// given as key poses but not held to. `keep_seed`: the seed's frames are kept as they are (a
+/// user's seed motion) rather than rendered by the network (a drawn one). Shared by serving and
+/// the model card's evaluation.
+#[allow(clippy::too_many_arguments)]
 pub fn generate_features(
     model: &KeyposeTransformer,
     file: &ModelFile,
     music: &Tensor,
     seed: Option<(&Array2<f32>, RootStart)>,
+    keep_seed: bool,
     keys: &[LocalKey],
     scaffold: &[(usize, Vec<f32>)],
     mut on_window: impl FnMut(usize, usize) -> bool,
@@ -125,10 +129,11 @@ pub fn generate_features(
     };
     let mut nkeys: Vec<(i64, Vec<f32>)> = keys.iter().map(|k| (k.frame as i64, normalize_key(&file.pose_norm, &k.local))).collect();
     nkeys.extend(scaffold.iter().map(|(f, local)| (*f as i64, normalize_key(&file.pose_norm, local))));
-    let y = tch::no_grad(|| model.generate_long(music, seed_norm.as_ref(), &nkeys, &mut on_window));
+    let y = tch::no_grad(|| model.generate_long(music, seed_norm.as_ref(), keep_seed, &nkeys, &mut on_window));
     let Some(y) = y else { return Ok(None) };
     let mut network = file.pose_norm.denormalize(&to_array(&y)?)?;
     let mut served = network.clone();
+    bridge_keys(&mut served, &keys.iter().map(|k| k.frame).collect::<Vec<_>>(), BRIDGE_HALF);
     let targets: Vec<(usize, Vec<f32>)> = keys.iter().map(|k| (k.frame, k.local.clone())).collect();
     pass_through_keys(&mut served, 0..POSE_DIM, &targets, BLEND_RADIUS);
     if file.root_height == RootHeight::FootClearance {
@@ -197,24 +202,30 @@ impl DanceModel for Served {
                 let tail = m.positions.slice(ndarray::s![m.num_frames().saturating_sub(ts).., .., ..]);
                 let root = crate::motion::skeleton::body_centre_track(tail);
                 let (mut f, start) = repr::to_features(tail, root.view())?;
+                let mut floor = 0.0;
                 if self.file.root_height == RootHeight::FootClearance {
-                    let floor = repr::floor_of_features(f.view());
+                    floor = repr::floor_of_features(f.view());
                     repr::height_to_clearance(&mut f, floor);
                 }
-                Some((f, start))
+                Some((f, start, floor))
             }
             _ => None,
         };
+        // The dance continues on a given seed's floor, so its frames come back where they were.
+        let floor = given.as_ref().map_or(0.0, |g| g.2);
+        let given = given.map(|(f, s, _)| (f, s));
         let plan = self.scaffold(req.seed, n, &keys);
+        let keep_seed = given.is_some();
         // A given seed motion wins over the drawn one; the scaffold stays either way.
         let seed = given.or_else(|| plan.as_ref().map(|p| (p.seed.clone(), RootStart::default())));
         let scaffold = plan.map(|p| p.poses).unwrap_or_default();
         let out = self.pool.with(|model| {
-            generate_features(model, &self.file, &music, seed.as_ref().map(|(f, s)| (f, *s)), &keys, &scaffold, |done, total| {
+            generate_features(model, &self.file, &music, seed.as_ref().map(|(f, s)| (f, *s)), keep_seed, &keys, &scaffold, |done, total| {
                 progress.report("decode", done as f32 / total as f32).is_ok()
             })
         })?;
-        let Some(g) = out? else { return Err(Cancelled.into()) };
+        let Some(mut g) = out? else { return Err(Cancelled.into()) };
+        g.served.column_mut(repr::ROOT_Y).mapv_inplace(|y| y + floor);
         let (motion, _root) = repr::from_features(g.served.view(), g.start, fps)?;
         Ok(motion)
     }

@@ -377,7 +377,7 @@ pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test
         to_clearance(&mut seed_feats);
         let seed_rows = seed_feats.slice(s![0..ts, ..]).to_owned();
         let gen = |keys: &[LocalKey]| {
-            generate_features(model, file, &music, Some((&seed_rows, start)), keys, &[], |_, _| true)
+            generate_features(model, file, &music, Some((&seed_rows, start)), true, keys, &[], |_, _| true)
                 .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?
                 .ok_or(TrainError::NoWindows(0))
         };
