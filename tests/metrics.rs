@@ -457,12 +457,13 @@ mod real_data {
             let (served, raw) = (&pair[0], &pair[1]);
             assert_eq!(served.scores.dances, raw.scores.dances);
             assert_eq!(served.scores.dances, 2 * served.dances.iter().map(|d| &d.song).collect::<std::collections::BTreeSet<_>>().len(), "two seeds per song");
-            // One dance per seed, finished twice: planting moves whole frames sideways, so the
-            // heights and the root-relative poses (hence the seed distance) are the same.
+            // One dance per seed, finished twice: grounding and planting move whole frames (down
+            // and sideways), so the root-relative poses (hence the seed distance) are the same,
+            // and the served dance is on the floor at least once in any two seconds.
             let (a, b) = (served.seed_distance_m.expect("seed pairs"), raw.seed_distance_m.expect("seed pairs"));
             assert!((a - b).abs() < 1e-4, "{a} vs {b}");
-            let (p, q) = (&served.scores.mean.physical, &raw.scores.mean.physical);
-            assert!((p.lowest_foot_m.median - q.lowest_foot_m.median).abs() < 1e-6, "{p:?} vs {q:?}");
+            let p = &served.scores.mean.physical;
+            assert!(p.lowest_foot_m.p5.abs() < 0.05, "{p:?}");
             assert!(served.scores.mean.verdict.get("seed-distance").is_some_and(|c| c.pass.is_some()));
             assert!(served.scores.fid_k_dance.is_finite() && served.scores.fid_k_window.is_finite());
         }

@@ -12,7 +12,8 @@ py=${PYTHON:-python3}
 mkdir -p "$out"
 echo "| song | seed | keys | frames | lowest foot p5 / median (m) | accel p99.9 / max (m/s²) | max within ±0.5 s of a key | speed (m/s) | freeze L/F |"
 echo "|---|---|---|---|---|---|---|---|---|"
-for song in ../shared/audio/*; do
+for song in ../shared/audio/*.{mp3,wav,flac,ogg,m4a}; do
+  [[ -e $song ]] || continue
   name=$(basename "${song%.*}")
   duration=$(ffprobe -v error -show_entries format=duration -of csv=p=0 "$song")
   "$py" tools/wholesong_check.py keys "$duration" "$out/$name.keys.json"

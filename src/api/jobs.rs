@@ -55,8 +55,9 @@ pub struct CreateJob {
     /// in either joint set (a slice of motion.json's `positions` works as it is), or `bvh` text.
     #[serde(default)]
     pub seed_motion: Option<SeedMotionInput>,
-    /// Hold the supporting foot in place so feet do not skate, by moving the whole body (the pose
-    /// and key poses are kept). Default true; false returns the model's motion as it came.
+    /// Keep the dancer on the floor (a foot touches it at least once in any two seconds) and hold
+    /// the supporting foot in place so feet do not skate, by moving the whole body (the pose and
+    /// key poses are kept). Default true; false returns the model's motion as it came.
     #[serde(default)]
     pub plant_feet: Option<bool>,
     /// Higher runs first; -100..=100, default 0.

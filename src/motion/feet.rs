@@ -98,6 +98,42 @@ pub fn plant_feet(mut positions: ArrayViewMut3<'_, f32>) -> usize {
     supported
 }
 
+/// Half-width of the window (seconds) in which a dancer's feet touch the floor at least once.
+pub const GROUND_WINDOW_S: f64 = 1.0;
+
+/// Keeps a dance on the floor, in place on world positions `[T, J, 3]` (metres, y up, floor at
+/// y = 0): the whole body moves vertically by minus the lowest foot point's minimum over ±1 s
+/// ([`GROUND_WINDOW_S`]), averaged over another ±1 s so the shift has no corner a viewer would
+/// see. A dancer bears weight on a foot at least once in any two seconds, so a dance whose feet
+/// never come near the floor (a network that predicts the root height apart from the legs) is put
+/// back on it, and one that sinks is lifted; steps, lifts and the pose are unchanged. Returns the
+/// mean shift (m, positive = lowered).
+pub fn ground(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> f64 {
+    let t = positions.dim().0;
+    if t == 0 || !(fps.is_finite() && fps > 0.0) {
+        return 0.0;
+    }
+    let lowest: Vec<f64> = (0..t)
+        .map(|f| FOOT_POINTS.iter().map(|&j| f64::from(positions[[f, j, 1]])).fold(f64::INFINITY, f64::min))
+        .collect();
+    let w = (GROUND_WINDOW_S * fps).round().max(1.0) as usize;
+    let window = |f: usize| f.saturating_sub(w)..(f + w + 1).min(t);
+    let minimum: Vec<f64> = (0..t).map(|f| lowest[window(f)].iter().copied().fold(f64::INFINITY, f64::min)).collect();
+    let shift: Vec<f64> = (0..t)
+        .map(|f| {
+            let r = window(f);
+            let n = r.len() as f64;
+            minimum[r].iter().sum::<f64>() / n
+        })
+        .collect();
+    for (f, &dy) in shift.iter().enumerate() {
+        for j in 0..positions.dim().1 {
+            positions[[f, j, 1]] -= dy as f32;
+        }
+    }
+    shift.iter().sum::<f64>() / t as f64
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -117,6 +153,30 @@ mod tests {
             }
             _ => 0.1 * j as f32,
         })
+    }
+
+    #[test]
+    fn grounding_puts_a_floating_dance_on_the_floor_and_keeps_its_steps() {
+        // Feet 1.2 m up, one foot point lifting 0.3 m for half a second every two seconds.
+        let lift = |f: usize| if f % 50 < 12 { 1.5 } else { 1.2 };
+        let mut p = gliding(300, lift);
+        let before = p.clone();
+        let shift = ground(p.view_mut(), 25.0);
+        assert!((shift - 1.2).abs() < 1e-4, "shift {shift}");
+        for f in 0..300 {
+            let low = FOOT_POINTS.iter().map(|&j| p[[f, j, 1]]).fold(f32::INFINITY, f32::min);
+            assert!(low.abs() < 0.31, "frame {f}: lowest foot {low}");
+            // The pose and horizontal travel are untouched; only heights move, all by one amount.
+            let d0 = p[[f, 0, 1]] - before[[f, 0, 1]];
+            for j in 0..NUM_JOINTS {
+                assert!((p[[f, j, 1]] - before[[f, j, 1]] - d0).abs() < 1e-5);
+                assert_eq!(p[[f, j, 0]], before[[f, j, 0]]);
+            }
+        }
+        // Sinking is lifted the same way.
+        let mut q = gliding(100, |_| -0.4);
+        ground(q.view_mut(), 25.0);
+        assert!(FOOT_POINTS.iter().all(|&j| q[[50, j, 1]].abs() < 1e-5));
     }
 
     #[test]

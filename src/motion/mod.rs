@@ -34,11 +34,12 @@ pub struct Motion {
     pub positions: Array3<f32>,
 }
 
-/// The motion stage after any model, before export: the feet planted ([`feet::plant_feet`]) unless
-/// the caller asked for the model's motion as it came. Jobs, `choreo generate` and `choreo eval`
-/// all go through it.
+/// The motion stage after any model, before export: the dance kept on the floor ([`feet::ground`])
+/// and the feet planted ([`feet::plant_feet`]), unless the caller asked for the model's motion as
+/// it came. Jobs, `choreo generate` and `choreo eval` all go through it.
 pub fn finish(mut motion: Motion, plant_feet: bool) -> Motion {
     if plant_feet {
+        feet::ground(motion.positions.view_mut(), motion.fps);
         feet::plant_feet(motion.positions.view_mut());
     }
     motion
