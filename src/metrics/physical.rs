@@ -25,6 +25,7 @@
 //! in `reference_train.json` under `physical`): lowest foot p5 0.01 m, median 0.16 m; mean joint
 //! acceleration median 3.3 m/s², p99.9 ≈ 56 (max 112, capture glitches); mean joint speed per
 //! dance 0.63–1.80 m/s.
+use crate::motion::feet::lowest_foot;
 use ndarray::ArrayView3;
 
 use super::kinematics::{mean_speed, percentile};
@@ -122,13 +123,6 @@ pub struct PhysicalSeries {
     pub speed: Vec<f64>,
     /// Largest acceleration near each key pose.
     pub key_pose_pops: Vec<f64>,
-}
-
-/// The lowest of `feet`'s heights (y) on every frame, metres.
-pub fn lowest_foot(positions: ArrayView3<'_, f32>, feet: &[usize]) -> Vec<f64> {
-    (0..positions.dim().0)
-        .map(|f| feet.iter().map(|&j| f64::from(positions[[f, j, 1]])).fold(f64::INFINITY, f64::min))
-        .collect()
 }
 
 /// Per-frame mean joint acceleration `mean_j |p[t+1] − 2p[t] + p[t−1]|·fps²` for `t = 1..T−1`

@@ -21,7 +21,7 @@ use tch::{Device, Kind, Tensor};
 
 use std::path::Path;
 
-use super::{read_model_file, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
+use super::{read_model_file, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::dataset::NormStats;
 use crate::motion::repr::RootStart;
 use crate::motion::Motion;
@@ -456,11 +456,6 @@ impl Served {
     }
 }
 
-/// `[r, c]` ndarray → tensor.
-fn to_tensor(m: &ndarray::Array2<f32>) -> Tensor {
-    let (r, c) = m.dim();
-    Tensor::from_slice(m.as_standard_layout().as_slice().expect("standard layout")).view([r as i64, c as i64])
-}
 
 impl DanceModel for Served {
     fn info(&self) -> ModelInfo {

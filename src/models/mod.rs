@@ -71,6 +71,20 @@ pub enum ModelError {
     Motion(#[from] crate::motion::MotionError),
 }
 
+/// `[r, c]` ndarray → tensor (a copy in standard layout).
+pub fn to_tensor(m: &ndarray::Array2<f32>) -> tch::Tensor {
+    let (r, c) = m.dim();
+    let m = m.as_standard_layout();
+    tch::Tensor::from_slice(m.as_slice().unwrap_or(&[])).view([r as i64, c as i64])
+}
+
+/// `[r, c]` tensor → ndarray.
+pub fn to_array(t: &tch::Tensor) -> Result<ndarray::Array2<f32>, ModelError> {
+    let (r, c) = t.size2()?;
+    let data: Vec<f32> = Vec::<f32>::try_from(t.contiguous().view([-1]))?;
+    ndarray::Array2::from_shape_vec((r as usize, c as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))
+}
+
 /// A trained model, ready to dance.
 pub trait DanceModel: Send + Sync {
     fn info(&self) -> ModelInfo;

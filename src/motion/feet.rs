@@ -20,13 +20,18 @@ pub const SUPPORT_HEIGHT_M: f64 = 0.05;
 /// noisy frames below it do not lower it.
 pub const FLOOR_PERCENTILE: f64 = 1.0;
 
+/// The lowest of `feet`'s heights (y) on every frame of `[T, J, 3]`, metres.
+pub fn lowest_foot(positions: ArrayView3<'_, f32>, feet: &[usize]) -> Vec<f64> {
+    (0..positions.dim().0)
+        .map(|f| feet.iter().map(|&j| f64::from(positions[[f, j, 1]])).fold(f64::INFINITY, f64::min))
+        .collect()
+}
+
 /// The floor height (metres, y) under a motion `[T, J, 3]`: the [`FLOOR_PERCENTILE`]th
 /// percentile of the per-frame lowest of `feet`, linearly interpolated as numpy does; NaN for
 /// an empty motion.
 pub fn floor_height(positions: ArrayView3<'_, f32>, feet: &[usize]) -> f64 {
-    let mut lowest: Vec<f64> = (0..positions.dim().0)
-        .map(|f| feet.iter().map(|&j| f64::from(positions[[f, j, 1]])).fold(f64::INFINITY, f64::min))
-        .collect();
+    let mut lowest = lowest_foot(positions, feet);
     if lowest.is_empty() {
         return f64::NAN;
     }
@@ -113,9 +118,7 @@ pub fn ground(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> f64 {
     if t == 0 || !(fps.is_finite() && fps > 0.0) {
         return 0.0;
     }
-    let lowest: Vec<f64> = (0..t)
-        .map(|f| FOOT_POINTS.iter().map(|&j| f64::from(positions[[f, j, 1]])).fold(f64::INFINITY, f64::min))
-        .collect();
+    let lowest = lowest_foot(positions.view(), &FOOT_POINTS);
     let w = (GROUND_WINDOW_S * fps).round().max(1.0) as usize;
     let window = |f: usize| f.saturating_sub(w)..(f + w + 1).min(t);
     let minimum: Vec<f64> = (0..t).map(|f| lowest[window(f)].iter().copied().fold(f64::INFINITY, f64::min)).collect();

@@ -222,8 +222,10 @@ impl Series {
             })
             .filter(|(_, v)| v.is_finite())
             .collect();
-        let lowest_foot = (0..t)
-            .map(|f| (f as f64 / fps, FOOT_POINTS.iter().map(|&j| f64::from(p[[f, j, 1]])).fold(f64::INFINITY, f64::min)))
+        let lowest_foot = crate::motion::feet::lowest_foot(p.view(), &FOOT_POINTS)
+            .into_iter()
+            .enumerate()
+            .map(|(f, y)| (f as f64 / fps, y))
             .filter(|(_, y)| y.is_finite())
             .collect();
         let mean_speed = if speed.is_empty() { f64::NAN } else { speed.iter().map(|(_, v)| v).sum::<f64>() / speed.len() as f64 };

@@ -11,7 +11,7 @@ use tch::Tensor;
 use super::keys::{bridge_keys, local_keys, normalize_key, pass_through_keys, pass_through_yaws, LocalKey, BRIDGE_HALF};
 use super::scaffold::{PoseBank, Scaffold, POSE_BANK_FILE};
 use super::{Config, KeyposeTransformer};
-use crate::models::{read_model_file, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
+use crate::models::{read_model_file, to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::dataset::NormStats;
 use crate::motion::repr::{self, RootStart, POSE_DIM};
 use crate::motion::Motion;
@@ -72,20 +72,6 @@ pub struct ModelFile {
     /// Frames between scaffold poses when serving ([`super::scaffold`]); 0 turns the scaffold off.
     #[serde(default)]
     pub scaffold_spacing: usize,
-}
-
-/// `[r, c]` ndarray → tensor.
-pub fn to_tensor(m: &Array2<f32>) -> Tensor {
-    let (r, c) = m.dim();
-    let m = m.as_standard_layout();
-    Tensor::from_slice(m.as_slice().unwrap_or(&[])).view([r as i64, c as i64])
-}
-
-/// `[r, c]` tensor → ndarray.
-pub fn to_array(t: &Tensor) -> Result<Array2<f32>, ModelError> {
-    let (r, c) = t.size2()?;
-    let data: Vec<f32> = Vec::<f32>::try_from(t.contiguous().view([-1]))?;
-    Array2::from_shape_vec((r as usize, c as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))
 }
 
 /// One generation: the network's features and the served ones (after the exact key pass), both

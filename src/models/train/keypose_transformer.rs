@@ -16,7 +16,8 @@ use tch::{Device, Kind, Tensor};
 
 use super::{append_log, batch_tensor, fit_normalizers, load_sequences, window_starts, write_atomic, EpochLog, Sequence, TrainError};
 use crate::models::keypose_transformer::scaffold::{PoseBank, POSE_BANK_FILE};
-use crate::models::keypose_transformer::served::{to_tensor, RootHeight};
+use crate::models::keypose_transformer::served::RootHeight;
+use crate::models::to_tensor;
 use crate::models::keypose_transformer::{
     generate_features, local_position_embedding, loss_weights, to_local, Config, KeyposeTransformer, LocalKey, ModelFile, TrainingRecord,
     WindowInput, MODEL_FILE, WEIGHTS_FILE,
@@ -25,7 +26,7 @@ use crate::motion::dataset::Dataset;
 use crate::motion::repr::{self, POSE_DIM};
 use crate::motion::{KeyPose, NUM_JOINTS};
 
-/// Options of one training run; the defaults reproduce the committed weights.
+/// Options of one training run; the model card gives the runs (and flags) behind the committed weights.
 #[derive(Clone, Debug, clap::Args)]
 pub struct Options {
     /// The dance-with-melody folder.
@@ -173,9 +174,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
 
     let base = if opts.tiny { Config::tiny(0, 0, 0) } else { Config::cpu() };
     let config = Config { music_dim: music_norm.dim() as i64, pose_dim: pose_norm.dim() as i64, key_dim: POSE_DIM as i64, lambda: opts.lambda, sigma: opts.sigma, ..base };
-    let vs = nn::VarStore::new(Device::Cpu);
+    let mut vs = nn::VarStore::new(Device::Cpu);
     let model = KeyposeTransformer::new(&vs.root(), config.clone());
-    let mut vs = vs;
     if let Some(init) = &opts.init {
         vs.load(init)?;
         tracing::info!(from = %init.display(), "initialised from earlier weights");
@@ -208,7 +208,6 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         root_height: RootHeight::FootClearance,
         scaffold_spacing: opts.scaffold_spacing,
     };
-    std::fs::create_dir_all(&opts.out).map_err(|source| TrainError::Io { path: opts.out.clone(), source })?;
     pose_bank(&train_raw, opts.bank_clips, opts.bank_frames, opts.seed)?
         .save(&opts.out.join(POSE_BANK_FILE))
         .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?;
