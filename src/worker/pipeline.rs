@@ -167,10 +167,11 @@ pub fn render(
     caption: &Caption,
     on_stage: &mut dyn FnMut(&str),
 ) -> Result<JobFiles, WorkerError> {
-    use crate::motion::export::{write_all, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
+    use crate::motion::export::{write_all_anchored, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
     std::fs::create_dir_all(dir)?;
     on_stage("export");
-    write_all(motion, dir)?;
+    let anchors: Vec<usize> = key_poses.iter().map(|k| (k.time_s * motion.fps).round() as usize).collect();
+    write_all_anchored(motion, dir, &anchors)?;
     on_stage("report");
     let analysis = audio::analyze(audio)?;
     let reference = crate::metrics::reference::ReferenceStats::builtin()?;
