@@ -20,6 +20,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
     paths(
         super::songs::upload,
         super::songs::get,
+        super::songs::audio,
         super::jobs::create,
         super::jobs::list,
         super::jobs::get,
