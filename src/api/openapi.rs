@@ -80,6 +80,7 @@ fn add_links(spec: &mut Value) {
             "operationId": "createJob",
             "requestBody": { "song_id": "$response.body#/id", "model": "dance-revolution" },
         },
+        "GetSongAudio": { "operationId": "getSongAudio", "parameters": { "id": "$response.body#/id" } },
     });
     let job = json!({
         "GetJob": { "operationId": "getJob", "parameters": { "id": "$response.body#/id" } },

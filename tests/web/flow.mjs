@@ -93,9 +93,12 @@ async function checkSync(page, label, seconds = 3) {
   return samples;
 }
 
-async function waitJob(page) {
-  await page.waitForFunction(() => ['succeeded', 'failed', 'cancelled'].includes(document.getElementById('job-stage').dataset.status),
-    null, { timeout: JOB_TIMEOUT_MS, polling: 200 });
+/** Waits for the job the page follows (one other than `previous`) to end; returns its id. */
+async function waitJob(page, previous = null) {
+  await page.waitForFunction((prev) => {
+    const stage = document.getElementById('job-stage');
+    return stage.dataset.jobId && stage.dataset.jobId !== prev && ['succeeded', 'failed', 'cancelled'].includes(stage.dataset.status);
+  }, previous, { timeout: JOB_TIMEOUT_MS, polling: 200 });
   const status = await page.$eval('#job-stage', (e) => e.dataset.status);
   const text = await page.$eval('#job-stage', (e) => e.textContent);
   check(status === 'succeeded', `job ended ${status}: ${text}`);
@@ -115,6 +118,23 @@ const drawn = (page, selector) => page.$eval(selector, (c) => {
   for (let i = 0; i < d.length; i += 4 * 7) colours.add((d[i] << 16) | (d[i + 1] << 8) | d[i + 2]);
   return colours.size;
 });
+
+/**
+ * How far the drawn skeleton is from motion.json at the time on screen: the body centre (the
+ * glb's root translation, linear between frames as here) and the worst joint. At a frame's own
+ * time the glb's skeleton gives motion.json's positions (measured within 0.3 mm); between frames
+ * it turns its joints (slerp) where this interpolates positions linearly, a few millimetres apart.
+ */
+async function poseError(page, motion) {
+  const shown = await page.evaluate((names) => new Promise((r) => requestAnimationFrame(() => r({
+    t: window.choreoPlayer.animationTime, joints: names.map((n) => window.choreoPlayer.joint(n)),
+  }))), motion.joint_names);
+  const f = shown.t * motion.fps, f0 = Math.min(Math.floor(f), motion.num_frames - 1), f1 = Math.min(f0 + 1, motion.num_frames - 1);
+  const at = (j) => [0, 1, 2].map((k) => motion.positions[f0][j][k] * (1 - (f - f0)) + motion.positions[f1][j][k] * (f - f0));
+  const errors = shown.joints.map((p, j) => (p ? Math.hypot(...at(j).map((v, k) => v - p[k])) : Infinity));
+  const worst = Math.max(...errors);
+  return { time_s: shown.t, body_centre: errors[0], worst_joint: worst, worst_joint_name: motion.joint_names[errors.indexOf(worst)] };
+}
 
 async function setRange(page, selector, value) {
   await page.$eval(selector, (e, v) => {
@@ -209,6 +229,7 @@ async function run(context) {
   const names = firstMotion.joint_names;
   const wrist = names.indexOf('left_wrist'), forearm = names.indexOf('left_forearm');
   const before = keys.find((k) => k.label.startsWith('dance')).joints;
+  await page.locator('#key-editor').scrollIntoViewIfNeeded();
   const [x, y] = await page.evaluate(() => window.choreoPlayer.keyEditorPoint('left_wrist'));
   await page.mouse.move(x, y);
   await page.mouse.down();
@@ -231,9 +252,13 @@ async function run(context) {
   const body = (await post).postDataJSON();
   check(body.key_poses?.length === 2 && body.seed === 3 && body.plant_feet === true, `request: ${JSON.stringify({ ...body, key_poses: body.key_poses?.length })}`);
   check(body.key_poses.every((k) => k.joints.length === 26 && Number.isInteger(Math.round(k.time_s * 25))), 'key poses carry 26 joints at frame times');
-  await page.waitForFunction(() => document.getElementById('job-stage').dataset.status, null, { timeout: 20_000 });
+  await page.waitForFunction((prev) => {
+    const id = document.getElementById('job-stage').dataset.jobId;
+    return id && id !== prev;
+  }, firstJob, { timeout: 20_000 });
   await shot(page, '03-progress');
-  const keyJob = await waitJob(page);
+  const keyJob = await waitJob(page, firstJob);
+  check(keyJob !== firstJob, 'a new job was followed');
   summary.progress = stages;
   check(stages.some((s) => /^(queued|running)/.test(s)), `progress was shown before the end: ${stages}`);
   await waitOpened(page, 'a', keyJob);
@@ -256,20 +281,21 @@ async function run(context) {
   await page.click('#play'); // pause
   await page.waitForFunction(() => !window.choreoPlayer.playing);
   const keyMotion = await apiJson(`/v1/jobs/${keyJob}/motion.json`);
-  const shown = await page.evaluate(() => new Promise((r) => requestAnimationFrame(() => r({
-    t: window.choreoPlayer.animationTime, centre: window.choreoPlayer.joint('body_centre'),
-  }))));
-  const f = shown.t * keyMotion.fps, f0 = Math.min(Math.floor(f), keyMotion.num_frames - 1), f1 = Math.min(f0 + 1, keyMotion.num_frames - 1);
-  const expect = [0, 1, 2].map((k) => keyMotion.positions[f0][0][k] * (1 - (f - f0)) + keyMotion.positions[f1][0][k] * (f - f0));
-  summary.body_centre_error_m = dist(expect, shown.centre);
-  check(summary.body_centre_error_m < 0.01, `the drawn body centre is ${summary.body_centre_error_m.toFixed(4)} m from motion.json at ${shown.t.toFixed(3)} s`);
+  summary.pose_error_m = await poseError(page, keyMotion);
+  check(summary.pose_error_m.body_centre < 0.001, `the drawn body centre is off: ${JSON.stringify(summary.pose_error_m)}`);
+  check(summary.pose_error_m.worst_joint < 0.03, `a drawn joint is off: ${JSON.stringify(summary.pose_error_m)}`);
 
   // 8. Scrub to 2 s: both clocks go there.
   await setRange(page, '#scrub', 2);
   await page.waitForFunction(() => Math.abs(window.choreoPlayer.audioTime - 2) < 0.05 && Math.abs(window.choreoPlayer.animationTime - 2) < 0.05, null, { timeout: 10_000 });
+  // 2 s is frame 50 itself: there the figure drawn is motion.json's frame, joint for joint.
+  summary.pose_error_at_frame_m = await poseError(page, keyMotion);
+  check(Math.abs(summary.pose_error_at_frame_m.time_s * 25 - 50) < 1e-3 && summary.pose_error_at_frame_m.worst_joint < 0.01,
+    `at frame 50 the drawn joints are motion.json's: ${JSON.stringify(summary.pose_error_at_frame_m)}`);
 
   // 9. Loop 1–2.5 s, chosen by dragging across the strip, and play through the loop end twice.
   const duration = song.duration_s;
+  await page.locator('#player-wave').scrollIntoViewIfNeeded();
   const strip = await page.locator('#player-wave').boundingBox();
   await page.mouse.move(strip.x + strip.width * (1 / duration), strip.y + strip.height / 2);
   await page.mouse.down();
@@ -315,6 +341,8 @@ async function run(context) {
   await linked.waitForFunction(() => window.choreoPlayer.playing && window.choreoPlayer.audioTime > 0.3, null, { timeout: 20_000 });
   await checkSync(linked, 'deep link', 2);
   await shot(linked, '06-deep-link');
+  summary.pose_error_deep_link_m = await poseError(linked, firstMotion);
+  check(summary.pose_error_deep_link_m.worst_joint < 0.03, `deep link: a drawn joint is off: ${JSON.stringify(summary.pose_error_deep_link_m)}`);
   await linked.close();
 
   // 12. The page served by the API server itself (same origin): the token typed, the link followed.

@@ -326,7 +326,12 @@ function request() {
   const m = model();
   const body = { song_id: state.song.id, model: m.id, plant_feet: $('plant-feet').checked };
   const seed = $('seed').value.trim();
-  if (seed !== '') body.seed = Number(seed);
+  if (seed !== '') {
+    // JSON numbers past 2^53 lose digits in JavaScript; the API takes any u64, the page these.
+    const n = Number(seed);
+    if (!Number.isSafeInteger(n) || n < 0) throw new Error(`The seed must be a whole number from 0 to ${Number.MAX_SAFE_INTEGER}.`);
+    body.seed = n;
+  }
   // `style` goes only to models that say they take it; others would answer 422.
   if (m.capabilities.style && $('style').value) body.style = $('style').value;
   if (m.capabilities.key_poses && state.keys.length) {
@@ -337,6 +342,11 @@ function request() {
 
 const submit = guard(async () => {
   $('submit').disabled = true;
+  // The last job's state goes, so nothing reads it as this one's.
+  $('job-progress').value = 0;
+  $('job-stage').textContent = 'submitting…';
+  delete $('job-stage').dataset.status;
+  delete $('job-stage').dataset.jobId;
   try {
     const job = await api.createJob(request());
     await follow(job.id);

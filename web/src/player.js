@@ -5,7 +5,7 @@
 import {
   AmbientLight, CircleGeometry, Color, CylinderGeometry, DirectionalLight, GridHelper, Mesh,
   MeshBasicMaterial, MeshStandardMaterial, PerspectiveCamera, Scene, SphereGeometry, Vector3, WebGLRenderer,
-  AnimationMixer, Quaternion,
+  AnimationMixer, Quaternion, Fog,
 } from 'three';
 import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
@@ -23,14 +23,31 @@ const MATERIALS = {
 const radius = (name) => (name.includes('hand_dir') ? 0.012 : /heel|toe/.test(name) ? 0.02 : /head/.test(name) ? 0.015 : 0.035);
 const side = (name) => (name.startsWith('left_') ? 'left' : name.startsWith('right_') ? 'right' : 'centre');
 
+let software = null;
+/** Whether WebGL here is rasterised in software (once per page, from a throwaway context). */
+function softwareRendering() {
+  if (software === null) {
+    const gl = document.createElement('canvas').getContext('webgl2');
+    const info = gl?.getExtension('WEBGL_debug_renderer_info');
+    const name = gl ? String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER)) : '';
+    software = /swiftshader|llvmpipe|software/i.test(name);
+    gl?.getExtension('WEBGL_lose_context')?.loseContext();
+  }
+  return software;
+}
+
 export class Stage {
   constructor(container) {
     this.container = container;
-    this.renderer = new WebGLRenderer({ antialias: true, preserveDrawingBuffer: true });
+    // A software rasteriser (no GPU: SwiftShader, llvmpipe) spends most of a frame on
+    // multisampling and then stalls the page; there the figure is drawn without it.
+    this.renderer = new WebGLRenderer({ antialias: !softwareRendering() });
     this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
     container.appendChild(this.renderer.domElement);
     this.scene = new Scene();
     this.scene.background = new Color(0xf3f0e8);
+    // The floor fades into the background instead of ending in a band of grid lines.
+    this.scene.fog = new Fog(0xf3f0e8, 5, 12);
     this.camera = new PerspectiveCamera(40, 1, 0.05, 100);
     this.camera.position.set(0, 1.5, 4.5);
     this.controls = new OrbitControls(this.camera, this.renderer.domElement);
