@@ -32,7 +32,7 @@ enum Command {
     /// Train a model on the train split of dance-with-melody and write its folder under models/.
     Train {
         #[command(subcommand)]
-        model: TrainCommand,
+        model: choreo::models::train::TrainCommand,
     },
     /// Write a dataset dance as BVH, JSON or glb through the exporter generated dances use.
     Export(choreo::motion::export::ExportArgs),
@@ -41,14 +41,6 @@ enum Command {
         #[command(subcommand)]
         what: BenchCommand,
     },
-}
-
-#[derive(Subcommand)]
-enum TrainCommand {
-    /// DanceRevolution (Huang et al., ICLR 2021).
-    DanceRevolution(choreo::models::train::dance_revolution::Options),
-    /// Key-pose controllable cross-modal transformer (issue 6).
-    KeyposeTransformer(choreo::models::train::keypose_transformer::Options),
 }
 
 #[derive(Subcommand)]
@@ -133,20 +125,9 @@ fn main() -> anyhow::Result<()> {
             println!("{}", choreo::worker::standalone::bench(args).context("choreo bench generate")?);
             Ok(())
         }
-        Command::Train { model: TrainCommand::DanceRevolution(opts) } => {
+        Command::Train { model } => {
             choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "info");
-            let logs = choreo::models::train::dance_revolution::train(opts).context("training dance-revolution")?;
-            println!("trained {} epochs into {}", logs.len(), opts.out.display());
-            Ok(())
-        }
-        Command::Train { model: TrainCommand::KeyposeTransformer(opts) } => {
-            choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "info");
-            let logs = choreo::models::train::keypose_transformer::train(opts).context("training keypose-transformer")?;
-            if opts.eval_only {
-                println!("evaluated {} (eval.json rewritten)", opts.out.display());
-            } else {
-                println!("trained {} epochs into {}", logs.len(), opts.out.display());
-            }
+            println!("{}", model.run().context("choreo train")?);
             Ok(())
         }
         Command::Bench { what: BenchCommand::Http(args) } => bench_http(args, load(&args.service)?),

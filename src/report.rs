@@ -39,6 +39,9 @@ pub struct Report {
     pub freezing: Freezing,
     /// What the FID and plausibility compare against.
     pub reference: String,
+    /// The style danced, for models that dance one: asked for, or predicted from the song.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub style: Option<crate::models::StyleChoice>,
 }
 
 /// Builds the report of `motion` danced to the song `analysis` describes (motion frame 0 at song
@@ -56,6 +59,7 @@ pub fn build(motion: &Motion, analysis: &Analysis, key_poses: &[KeyPose], refere
         fid_k_curve: fid_k_curve(motion, reference),
         freezing: scored.freezing,
         reference: format!("{} ({} dances)", reference.source, reference.dances.len()),
+        style: None,
     })
 }
 

@@ -37,7 +37,7 @@ fn rigid_fit_error_over_every_dance() {
     let mut per_dance_mean = Vec::new();
     for id in &ids {
         let dance = ds.load(id).expect("load");
-        let m = rig::fit_and_solve(dance.motion.positions.view(), dance.center.view(), dance.motion.fps)
+        let m = rig::fit_and_solve(dance.motion.positions.view(), dance.center.view(), dance.motion.fps, &[])
             .expect("ik");
         // The root trajectory is carried exactly.
         for (t, r) in m.root_translation.iter().enumerate() {
@@ -303,4 +303,32 @@ fn every_dataset_frame_passes_validation_and_bvh_inputs_load() {
         .join("\n");
     let err = seed_from_bvh(&scaled).unwrap_err();
     assert_eq!(err.code(), "absurd-bone-length", "{err}");
+}
+
+/// A dance whose second half is a bigger body (every pose scaled 1.12 about its centre) exports
+/// its anchor frame (a key pose's) as posed when the skeleton is fitted to the anchors, and misses
+/// it when fitted to every frame.
+#[test]
+fn anchored_fit_returns_the_key_frame_as_posed() {
+    let Some(ds) = dataset() else { return };
+    let dance = ds.load("DANCE_W_22").expect("load");
+    let mut positions = dance.motion.positions.slice(ndarray::s![..400, .., ..]).to_owned();
+    let centre = dance.center.slice(ndarray::s![..400, ..]).to_owned();
+    for t in 200..400 {
+        for j in 0..NUM_JOINTS {
+            for c in 0..3 {
+                positions[[t, j, c]] = centre[[t, c]] + 1.12 * (positions[[t, j, c]] - centre[[t, c]]);
+            }
+        }
+    }
+    let key = 300;
+    let error_at_key = |anchors: &[usize]| {
+        let m = rig::fit_and_solve(positions.view(), centre.view(), 25.0, anchors).expect("ik");
+        let e = joint_errors(m.joint_positions().view(), positions.view());
+        e.row(key).mean().unwrap_or(f32::NAN) * 100.0
+    };
+    let (anchored, whole) = (error_at_key(&[key]), error_at_key(&[]));
+    eprintln!("key frame error: anchored {anchored:.2} cm, fitted to every frame {whole:.2} cm");
+    assert!(anchored < 1.0, "anchored fit misses its key frame by {anchored:.2} cm");
+    assert!(whole > 2.0 * anchored, "the test does not tell the fits apart: {whole:.2} vs {anchored:.2} cm");
 }

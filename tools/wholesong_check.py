@@ -44,13 +44,17 @@ def measure(d, keys_path=None):
         "freeze": energy[-span:].mean() / max(energy[:span].mean(), 1e-9),
     }
     if keys_path:
-        near = []
+        near, errs = [], []
         for k in json.load(open(keys_path)):
             f = int(round(k["time_s"] * fps))
+            # Key error: mean per-joint distance (cm) at the key's frame, both poses centroid-aligned.
+            q = np.asarray(k["joints"], dtype=np.float64)
+            errs.append(np.linalg.norm((p[f] - p[f].mean(0)) - (q - q.mean(0)), axis=1).mean() * 100)
             # acc[i] is frame i + 1's acceleration.
             lo, hi = max(0, f - int(0.5 * fps) - 1), min(len(acc), f + int(0.5 * fps))
             near.append(acc[lo:hi].max())
         out["acc_near_keys_max"] = max(near)
+        out["key_err_max_cm"] = max(errs)
     return out
 
 

@@ -2,7 +2,7 @@
 use super::extract::{optional_integer, ApiJson, ApiQuery};
 use super::problem::{ApiError, Problem};
 use super::AppState;
-use crate::models::ModelId;
+use crate::models::{DanceStyle, ModelId};
 use crate::motion::input::{KeyPoseInput, SeedMotionInput};
 use crate::motion::{validate, KeyPose, MOTION_FPS};
 use crate::queue::files::RESULT_FILES;
@@ -28,6 +28,8 @@ const DEFAULT_LIMIT: u32 = 20;
 const MAX_LIMIT: u32 = 100;
 /// Priority bounds a client may ask for.
 const PRIORITY_RANGE: std::ops::RangeInclusive<i64> = -100..=100;
+/// Sampling temperatures a job may ask for.
+const TEMPERATURE_RANGE: std::ops::RangeInclusive<f64> = 0.05..=5.0;
 /// Most key poses one job takes; each costs validation here and a constraint in the model.
 pub const MAX_KEY_POSES: usize = 128;
 /// Most seed-motion frames one job takes (41 s at 25 fps); models use only its last frames.
@@ -60,6 +62,19 @@ pub struct CreateJob {
     /// key poses are kept). Default true; false returns the model's motion as it came.
     #[serde(default)]
     pub plant_feet: Option<bool>,
+    /// The ballroom style to dance (models with the `style` capability). Default: the model's
+    /// style classifier picks one from the song; the report says which, and whether it was picked.
+    #[serde(default)]
+    pub style: Option<DanceStyle>,
+    /// Scales the randomness of a sampling model (the `temperature` capability): 1 is as trained,
+    /// lower is more conservative. 0.05..=5.
+    #[serde(default)]
+    #[schema(minimum = 0.05, maximum = 5.0)]
+    pub temperature: Option<f64>,
+    /// Sample only among the k likeliest choices (the `top_k` capability). 1..=300.
+    #[serde(default, deserialize_with = "optional_integer")]
+    #[schema(minimum = 1, maximum = 300)]
+    pub top_k: Option<u32>,
     /// Higher runs first; -100..=100, default 0.
     #[serde(default, deserialize_with = "optional_integer")]
     #[schema(minimum = -100, maximum = 100)]
@@ -282,6 +297,25 @@ pub async fn create(
     if request.seed_motion.is_some() && !capabilities.seed_motion {
         return Err(invalid("seed_motion", format!("model `{}` does not take a seed motion", request.model)));
     }
+    if request.style.is_some() && !capabilities.style {
+        return Err(invalid("style", format!("model `{}` does not take a style", request.model)));
+    }
+    if let Some(t) = request.temperature {
+        if !capabilities.temperature {
+            return Err(invalid("temperature", format!("model `{}` does not sample with a temperature", request.model)));
+        }
+        if !TEMPERATURE_RANGE.contains(&t) {
+            return Err(invalid("temperature", "must be within 0.05..=5"));
+        }
+    }
+    if let Some(k) = request.top_k {
+        if !capabilities.top_k {
+            return Err(invalid("top_k", format!("model `{}` does not take top_k", request.model)));
+        }
+        if !(1..=300).contains(&k) {
+            return Err(invalid("top_k", "must be within 1..=300"));
+        }
+    }
     let priority = request.priority.unwrap_or(0);
     if !PRIORITY_RANGE.contains(&priority) {
         return Err(invalid("priority", "must be within -100..=100"));
@@ -296,6 +330,9 @@ pub async fn create(
             key_poses,
             seed_motion,
             plant_feet: request.plant_feet.unwrap_or(true),
+            style: request.style,
+            temperature: request.temperature,
+            top_k: request.top_k,
         }),
         priority,
         max_attempts: state.config.max_attempts,

@@ -274,8 +274,8 @@ fn dance_songs(
         let keys = keys_of(i);
         let mut groups: [Vec<(usize, Motion)>; 2] = Default::default();
         for seed in args.seed..args.seed + args.seeds.max(1) {
-            let req = GenerateRequest { audio: &s.audio, seed, key_poses: &keys, seed_motion: None };
-            let raw = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?;
+            let req = GenerateRequest { key_poses: &keys, ..GenerateRequest::plain(&s.audio, seed) };
+            let raw = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?.motion;
             // The motion stage every job runs (feet planted), and the network's motion as it came.
             let finished = [crate::motion::finish(raw.clone(), true), crate::motion::finish(raw, false)];
             if let Some(dir) = &args.previews {
@@ -416,7 +416,7 @@ fn write_preview(dir: &Path, model: &str, song: &Song, seed: u64, motion: &Motio
         .map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' })
         .collect();
     std::fs::create_dir_all(dir).map_err(|source| MetricsError::Io { path: dir.display().to_string(), source })?;
-    let caption = Caption { model: model.to_string(), seed, song: Some(song.name.clone()) };
+    let caption = Caption { model: model.to_string(), seed, song: Some(song.name.clone()), style: None };
     let key_pose_times: Vec<f64> = keys.iter().map(|k| k.time_s).collect();
     let sheet = Sheet { motion, beat_times: &song.beats, key_pose_times: &key_pose_times, song_duration_s: song.audio.duration_s, caption: &caption };
     let path = dir.join(name);

@@ -13,18 +13,16 @@
 //!   the paper found best). See [`DanceRevolution::forward_curriculum`].
 //!
 //! Sized for CPU: the paper's d_z = 1024 and a 3×1024 LSTM become the [`Config`] defaults below.
-use rand::SeedableRng;
-use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 use tch::nn;
 use tch::{Device, Kind, Tensor};
 
 use std::path::Path;
 
-use super::{read_model_file, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
-use crate::motion::dataset::NormStats;
+use super::folder::{self, Nothing};
+use super::layers::{sinusoid, Lstm, LstmState};
+use super::{to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::repr::RootStart;
-use crate::motion::Motion;
 
 
 /// Hyper-parameters, with the paper's symbols.
@@ -77,20 +75,6 @@ impl Config {
 
 /// The last song frame a served song can reach: 15 minutes at 25 fps (the upload limit's length).
 pub const MAX_POSITION: i64 = 15 * 60 * 25;
-
-/// Sinusoidal position encoding `[n, d]` starting at position `start`.
-pub fn sinusoid(start: i64, n: i64, d: i64, device: Device) -> Tensor {
-    let mut data = vec![0f32; (n * d) as usize];
-    for t in 0..n {
-        let pos = (start + t) as f64;
-        for i in 0..d {
-            let rate = 1.0 / 10000f64.powf((2 * (i / 2)) as f64 / d as f64);
-            let v = if i % 2 == 0 { (pos * rate).sin() } else { (pos * rate).cos() };
-            data[(t * d + i) as usize] = v as f32;
-        }
-    }
-    Tensor::from_slice(&data).view([n, d]).to_device(device)
-}
 
 /// Multi-head self-attention restricted to a window of `k` neighbours (paper §3.1).
 #[derive(Debug)]
@@ -228,56 +212,11 @@ impl MusicEncoder {
     }
 }
 
-/// A stacked LSTM written out cell by cell. libtorch's fused `lstm` op costs milliseconds of
-/// set-up per call on CPU (measured: 3.8 ms for one 3×256 step against 0.55 ms here), and the
-/// decoder calls it once per frame, so the cell is spelled out: PyTorch's gate order i, f, g, o.
-#[derive(Debug)]
-struct Lstm {
-    w_ih: Vec<Tensor>,
-    w_hh: Vec<Tensor>,
-    b: Vec<Tensor>,
-}
-
-/// Per-layer `(h, c)`, each `[b, hidden]`.
-pub type LstmState = Vec<(Tensor, Tensor)>;
-
-impl Lstm {
-    fn new(p: nn::Path, input: i64, hidden: i64, layers: i64) -> Self {
-        let bound = 1.0 / (hidden as f64).sqrt();
-        let init = nn::Init::Uniform { lo: -bound, up: bound };
-        let mut me = Self { w_ih: vec![], w_hh: vec![], b: vec![] };
-        for l in 0..layers {
-            let inp = if l == 0 { input } else { hidden };
-            me.w_ih.push(p.var(&format!("w_ih_l{l}"), &[4 * hidden, inp], init));
-            me.w_hh.push(p.var(&format!("w_hh_l{l}"), &[4 * hidden, hidden], init));
-            me.b.push(p.var(&format!("b_l{l}"), &[4 * hidden], init));
-        }
-        me
-    }
-
-    /// One time step: `x` `[b, input]` → top layer's `h` `[b, hidden]`.
-    fn step(&self, x: &Tensor, state: &mut LstmState) -> Tensor {
-        let mut inp = x.shallow_clone();
-        for (l, (h, c)) in state.iter_mut().enumerate() {
-            let gates = inp.linear(&self.w_ih[l], Some(&self.b[l])) + h.matmul(&self.w_hh[l].tr());
-            let g = gates.chunk(4, 1);
-            let c2 = g[1].sigmoid() * &*c + g[0].sigmoid() * g[2].tanh();
-            let h2 = g[3].sigmoid() * c2.tanh();
-            *c = c2;
-            *h = h2.shallow_clone();
-            inp = h2;
-        }
-        inp
-    }
-}
-
 /// The dance decoder (§3.2): an LSTM over the previous pose, read out with `[h_i; z_i]·W + b`.
 #[derive(Debug)]
 pub struct DanceDecoder {
     lstm: Lstm,
     readout: nn::Linear,
-    layers: i64,
-    hidden: i64,
 }
 
 impl DanceDecoder {
@@ -285,22 +224,13 @@ impl DanceDecoder {
         Self {
             lstm: Lstm::new(&p / "lstm", c.pose_dim, c.hidden, c.lstm_layers),
             readout: nn::linear(&p / "readout", c.hidden + c.d_z, c.pose_dim, Default::default()),
-            layers: c.lstm_layers,
-            hidden: c.hidden,
         }
     }
 
     /// `h_0 ~ N(0, I)`, `c_0 = 0`, drawn from `seed` (not libtorch's global generator, which
     /// workers share).
     pub fn initial_state(&self, batch: i64, seed: u64, device: Device) -> LstmState {
-        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-        (0..self.layers)
-            .map(|_| {
-                let h: Vec<f32> = (0..batch * self.hidden).map(|_| StandardNormal.sample(&mut rng)).collect();
-                let h = Tensor::from_slice(&h).view([batch, self.hidden]).to_device(device);
-                (h, Tensor::zeros([batch, self.hidden], (Kind::Float, device)))
-            })
-            .collect()
+        self.lstm.random_state(batch, seed, device)
     }
 
     /// Runs `inputs` `[b, t, pose]` (the poses *before* each output frame) against `z` `[b, t, d_z]`.
@@ -401,37 +331,20 @@ impl DanceRevolution {
     }
 }
 
-/// The model folder's description file.
-pub const MODEL_FILE: &str = "model.json";
-/// The model folder's weights (safetensors, keys `encoder.*` and `decoder.*`).
-pub const WEIGHTS_FILE: &str = "weights.safetensors";
 /// The API id.
 pub const ID: &str = "dance-revolution";
 
-/// How the committed weights were trained, stored beside them.
+/// The curriculum behind the committed weights, stored in `model.json` beside the common record.
 #[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct TrainingRecord {
-    pub epochs: usize,
+pub struct Curriculum {
     pub window: usize,
     pub p: i64,
     pub lambda: f64,
     pub q_max: i64,
-    pub lr: f64,
-    pub batch: usize,
-    pub seed: u64,
-    pub final_train_loss: f64,
-    pub minutes: f64,
 }
 
-/// `model.json`: the configuration and the train-split normalisation the weights expect.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ModelFile {
-    pub config: Config,
-    pub music_norm: NormStats,
-    pub pose_norm: NormStats,
-    pub fps: f64,
-    pub training: TrainingRecord,
-}
+/// `model.json`: the configuration, normalisation and training record.
+pub type ModelFile = folder::ModelFile<Config, Curriculum, Nothing>;
 
 /// A trained DanceRevolution, ready to serve.
 pub struct Served {
@@ -442,9 +355,7 @@ pub struct Served {
 impl Served {
     /// Loads `dir/model.json` and `dir/weights.safetensors`.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let file: ModelFile = read_model_file(dir, ID, MODEL_FILE)?;
-        let config = file.config.clone();
-        let pool = InstancePool::new(dir.join(WEIGHTS_FILE), move |p| DanceRevolution::new(p, config.clone()))?;
+        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| DanceRevolution::new(p, f.config.clone()))?;
         Ok(Self { file, pool })
     }
 
@@ -462,11 +373,11 @@ impl DanceModel for Served {
         ModelInfo {
             id: ModelId(ID.into()),
             paper: "Huang et al., Dance Revolution: Long-Term Dance Generation with Music via Curriculum Learning, ICLR 2021".into(),
-            capabilities: Capabilities { key_poses: false, seed_motion: true, style: false },
+            capabilities: Capabilities { key_poses: false, seed_motion: true, ..Default::default() },
         }
     }
 
-    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Motion, ModelError> {
+    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
         if !req.key_poses.is_empty() {
             return Err(ModelError::Unsupported(ID.into(), "key poses"));
         }
@@ -496,13 +407,9 @@ impl DanceModel for Served {
             });
             y.ok_or(ModelError::Cancelled(Cancelled))
         }))?;
-        let y = out?.squeeze_dim(0);
-        let (r, c) = (y.size()[0] as usize, y.size()[1] as usize);
-        let data: Vec<f32> = Vec::<f32>::try_from(y.contiguous().view([-1]))?;
-        let poses = ndarray::Array2::from_shape_vec((r, c), data).map_err(|e| ModelError::Invalid(e.to_string()))?;
-        let poses = self.file.pose_norm.denormalize(&poses)?;
+        let poses = self.file.pose_norm.denormalize(&to_array(&out?.squeeze_dim(0))?)?;
         let (motion, _root) = crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
-        Ok(motion)
+        Ok(motion.into())
     }
 }
 

@@ -30,12 +30,13 @@ pub mod scaffold;
 pub mod served;
 
 pub use keys::{local_keys, pass_through_keys, to_local, LocalKey};
-pub use served::{generate_features, Generation, ModelFile, Served, TrainingRecord, ID, MODEL_FILE, WEIGHTS_FILE};
+pub use served::{generate_features, Generation, KeySampling, ModelFile, Served, Serving, ID};
 
 use serde::{Deserialize, Serialize};
 use tch::nn;
-use tch::{Device, Kind, Tensor};
+use tch::{Kind, Tensor};
 
+use super::layers::{position_encoding, sinusoid_of, Dims, Stack};
 use crate::motion::repr::{self, POSE_DIM};
 
 /// Hyper-parameters, with the paper's symbols.
@@ -72,6 +73,11 @@ pub struct Config {
 }
 
 impl Config {
+    /// The sizes of every transformer stack of the model.
+    pub fn dims(&self) -> Dims {
+        Dims { d: self.d, n_heads: self.n_heads, d_ff: self.d_ff, dropout: self.dropout }
+    }
+
     /// The configuration the committed weights were trained with: small enough for CPU.
     pub fn cpu() -> Self {
         Self {
@@ -113,25 +119,6 @@ impl Config {
     }
 }
 
-/// Sinusoidal encodings `[n, d]` of the (possibly fractional) positions `pos`.
-pub fn sinusoid_of(pos: &[f64], d: i64) -> Vec<f32> {
-    let mut data = vec![0f32; pos.len() * d as usize];
-    for (t, &p) in pos.iter().enumerate() {
-        for i in 0..d {
-            let rate = 1.0 / 10000f64.powf((2 * (i / 2)) as f64 / d as f64);
-            let v = if i % 2 == 0 { (p * rate).sin() } else { (p * rate).cos() };
-            data[t * d as usize + i as usize] = v as f32;
-        }
-    }
-    data
-}
-
-/// Ordinary position encoding `[n, d]` of positions `0..n`.
-pub fn position_encoding(n: i64, d: i64, device: Device) -> Tensor {
-    let pos: Vec<f64> = (0..n).map(|t| t as f64).collect();
-    Tensor::from_slice(&sinusoid_of(&pos, d)).view([n, d]).to_device(device)
-}
-
 /// Distance used when a frame has no key pose on one side: far beyond any window.
 const NO_KEY_DISTANCE: f64 = 1000.0;
 
@@ -166,87 +153,6 @@ pub fn loss_weights(n: i64, keys: &[i64], lambda: f64, sigma: f64) -> Vec<f32> {
         .collect()
 }
 
-/// Multi-head self-attention over the whole sequence.
-#[derive(Debug)]
-struct MultiHeadAttention {
-    qkv: nn::Linear,
-    out: nn::Linear,
-    n_heads: i64,
-}
-
-impl MultiHeadAttention {
-    fn new(p: nn::Path, c: &Config) -> Self {
-        Self {
-            qkv: nn::linear(&p / "qkv", c.d, 3 * c.d, Default::default()),
-            out: nn::linear(&p / "out", c.d, c.d, Default::default()),
-            n_heads: c.n_heads,
-        }
-    }
-
-    /// `x`: `[b, n, d]` → `[b, n, d]`.
-    fn forward(&self, x: &Tensor) -> Tensor {
-        let (b, n, d) = x.size3().expect("attention input is [b, n, d]");
-        let h = self.n_heads;
-        let dh = d / h;
-        // [b, n, 3, h, dh] → [3, b, h, n, dh]
-        let qkv = x.apply(&self.qkv).view([b, n, 3, h, dh]).permute([2, 0, 3, 1, 4]);
-        let (q, k, v) = (qkv.get(0), qkv.get(1), qkv.get(2));
-        let attn = (q.matmul(&k.transpose(-1, -2)) / (dh as f64).sqrt()).softmax(-1, Kind::Float); // [b, h, n, n]
-        attn.matmul(&v).permute([0, 2, 1, 3]).contiguous().view([b, n, d]).apply(&self.out)
-    }
-}
-
-/// One pre-norm transformer layer: attention and FFN, each with a residual.
-#[derive(Debug)]
-struct EncoderLayer {
-    norm1: nn::LayerNorm,
-    attn: MultiHeadAttention,
-    norm2: nn::LayerNorm,
-    ff1: nn::Linear,
-    ff2: nn::Linear,
-    dropout: f64,
-}
-
-impl EncoderLayer {
-    fn new(p: nn::Path, c: &Config) -> Self {
-        Self {
-            norm1: nn::layer_norm(&p / "norm1", vec![c.d], Default::default()),
-            attn: MultiHeadAttention::new(&p / "attn", c),
-            norm2: nn::layer_norm(&p / "norm2", vec![c.d], Default::default()),
-            ff1: nn::linear(&p / "ff1", c.d, c.d_ff, Default::default()),
-            ff2: nn::linear(&p / "ff2", c.d_ff, c.d, Default::default()),
-            dropout: c.dropout,
-        }
-    }
-
-    fn forward(&self, x: &Tensor, train: bool) -> Tensor {
-        let x = x + self.attn.forward(&x.apply(&self.norm1)).dropout(self.dropout, train);
-        let f = x.apply(&self.norm2).apply(&self.ff1).gelu("none").apply(&self.ff2).dropout(self.dropout, train);
-        x + f
-    }
-}
-
-/// A stack of [`EncoderLayer`]s with a final layer norm.
-#[derive(Debug)]
-struct Stack {
-    layers: Vec<EncoderLayer>,
-    norm: nn::LayerNorm,
-}
-
-impl Stack {
-    fn new(p: nn::Path, c: &Config, n: i64) -> Self {
-        Self { layers: (0..n).map(|i| EncoderLayer::new(&p / "layers" / i, c)).collect(), norm: nn::layer_norm(&p / "norm", vec![c.d], Default::default()) }
-    }
-
-    fn forward(&self, x: &Tensor, train: bool) -> Tensor {
-        let mut x = x.shallow_clone();
-        for l in &self.layers {
-            x = l.forward(&x, train);
-        }
-        x.apply(&self.norm)
-    }
-}
-
 /// Music transformer encoder: `[b, T, music_dim]` → `[b, T, d]`.
 #[derive(Debug)]
 pub struct MusicEncoder {
@@ -257,12 +163,12 @@ pub struct MusicEncoder {
 
 impl MusicEncoder {
     fn new(p: nn::Path, c: &Config) -> Self {
-        Self { embed: nn::linear(&p / "embed", c.music_dim, c.d, Default::default()), stack: Stack::new(&p / "encoder", c, c.music_layers), d: c.d }
+        Self { embed: nn::linear(&p / "embed", c.music_dim, c.d, Default::default()), stack: Stack::new(&p / "encoder", c.dims(), c.music_layers), d: c.d }
     }
 
     pub fn forward(&self, music: &Tensor, train: bool) -> Tensor {
         let n = music.size()[1];
-        self.stack.forward(&(music.apply(&self.embed) + position_encoding(n, self.d, music.device()).unsqueeze(0)), train)
+        self.stack.forward(&(music.apply(&self.embed) + position_encoding(n, self.d, music.device()).unsqueeze(0)), None, train)
     }
 }
 
@@ -276,12 +182,12 @@ pub struct MotionEncoder {
 
 impl MotionEncoder {
     fn new(p: nn::Path, c: &Config) -> Self {
-        Self { embed: nn::linear(&p / "embed", c.pose_dim, c.d, Default::default()), stack: Stack::new(&p / "encoder", c, c.motion_layers), d: c.d }
+        Self { embed: nn::linear(&p / "embed", c.pose_dim, c.d, Default::default()), stack: Stack::new(&p / "encoder", c.dims(), c.motion_layers), d: c.d }
     }
 
     pub fn forward(&self, seed: &Tensor, train: bool) -> Tensor {
         let n = seed.size()[1];
-        self.stack.forward(&(seed.apply(&self.embed) + position_encoding(n, self.d, seed.device()).unsqueeze(0)), train)
+        self.stack.forward(&(seed.apply(&self.embed) + position_encoding(n, self.d, seed.device()).unsqueeze(0)), None, train)
     }
 }
 
@@ -313,7 +219,7 @@ pub struct CrossModalTransformer {
 
 impl CrossModalTransformer {
     fn new(p: nn::Path, c: &Config) -> Self {
-        Self { segment: p.var("segment", &[2, c.d], nn::Init::Randn { mean: 0.0, stdev: 0.02 }), stack: Stack::new(&p / "encoder", c, c.cross_layers), d: c.d }
+        Self { segment: p.var("segment", &[2, c.d], nn::Init::Randn { mean: 0.0, stdev: 0.02 }), stack: Stack::new(&p / "encoder", c.dims(), c.cross_layers), d: c.d }
     }
 
     /// `motion` `[b, T′, d]`, `music` `[b, T, d]` (already carrying key-pose and local position
@@ -323,7 +229,7 @@ impl CrossModalTransformer {
         let dev = music.device();
         let m = motion + position_encoding(ts, self.d, dev).unsqueeze(0) + self.segment.get(0);
         let a = music + position_encoding(t, self.d, dev).unsqueeze(0) + self.segment.get(1);
-        self.stack.forward(&Tensor::cat(&[m, a], 1), train).narrow(1, ts, t)
+        self.stack.forward(&Tensor::cat(&[m, a], 1), None, train).narrow(1, ts, t)
     }
 }
 
@@ -501,6 +407,7 @@ impl KeyposeTransformer {
 mod tests {
     use super::*;
     use tch::nn::OptimizerConfig;
+    use tch::Device;
 
     fn model(seed: i64) -> (nn::VarStore, KeyposeTransformer) {
         tch::manual_seed(seed);

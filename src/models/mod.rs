@@ -8,8 +8,25 @@ use crate::motion::{KeyPose, Motion};
 use serde::{Deserialize, Serialize};
 
 pub mod dance_revolution;
+pub mod folder;
 pub mod keypose_transformer;
+pub mod layers;
 pub mod train;
+
+/// One row per served model: its id (the folder name under the models dir) and how to load it.
+/// Adding a model is one row here, one `pub mod` above and one trainer under [`train`].
+pub const MODELS: &[Entry] = &[
+    Entry { id: dance_revolution::ID, load: |dir| Ok(std::sync::Arc::new(dance_revolution::Served::load(dir)?)) },
+    Entry { id: keypose_transformer::ID, load: |dir| Ok(std::sync::Arc::new(keypose_transformer::Served::load(dir)?)) },
+];
+
+/// A row of [`MODELS`].
+pub struct Entry {
+    /// The API id and the folder name.
+    pub id: &'static str,
+    /// Loads the model from its folder (`models/<id>/`).
+    pub load: fn(&std::path::Path) -> Result<std::sync::Arc<dyn DanceModel>, ModelError>,
+}
 
 /// A model's stable id, as used by the API (`"dance-revolution"`, `"keypose-transformer"`).
 #[derive(Clone, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
@@ -17,11 +34,97 @@ pub mod train;
 pub struct ModelId(pub String);
 
 /// What a model can take besides the song.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(Clone, Copy, Debug, Default, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Capabilities {
     pub key_poses: bool,
     pub seed_motion: bool,
+    /// Takes a [`DanceStyle`] (and predicts one from the song when none is given).
     pub style: bool,
+    /// Samples, and takes a `temperature` that scales its randomness.
+    #[serde(default)]
+    pub temperature: bool,
+    /// Samples from discrete choices, and takes a `top_k` that restricts them.
+    #[serde(default)]
+    pub top_k: bool,
+}
+
+/// The four ballroom styles of the training data (dance-with-melody's folder letters C, R, T, W).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
+#[serde(rename_all = "kebab-case")]
+pub enum DanceStyle {
+    ChaCha,
+    Rumba,
+    Tango,
+    Waltz,
+}
+
+impl DanceStyle {
+    /// Every style, in index order.
+    pub const ALL: [DanceStyle; 4] = [DanceStyle::ChaCha, DanceStyle::Rumba, DanceStyle::Tango, DanceStyle::Waltz];
+
+    /// The style of a dataset dance folder's letter (`DANCE_W_1` → waltz).
+    pub fn from_letter(c: char) -> Option<Self> {
+        match c.to_ascii_uppercase() {
+            'C' => Some(Self::ChaCha),
+            'R' => Some(Self::Rumba),
+            'T' => Some(Self::Tango),
+            'W' => Some(Self::Waltz),
+            _ => None,
+        }
+    }
+
+    /// The style of a dataset dance id (`DANCE_R_4`).
+    pub fn of_dance_id(id: &str) -> Option<Self> {
+        id.strip_prefix("DANCE_").and_then(|r| r.chars().next()).and_then(Self::from_letter)
+    }
+
+    /// Position in [`Self::ALL`] (a one-hot's index).
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    /// The name the API uses.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::ChaCha => "cha-cha",
+            Self::Rumba => "rumba",
+            Self::Tango => "tango",
+            Self::Waltz => "waltz",
+        }
+    }
+
+    /// Parses the API name.
+    pub fn parse(s: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|d| d.name() == s)
+    }
+
+    /// The API names, comma-separated, for error messages.
+    pub fn names() -> String {
+        Self::ALL.map(|d| d.name()).join(", ")
+    }
+}
+
+/// The style a dance was made in, as the job result and report state it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct StyleChoice {
+    pub style: DanceStyle,
+    /// True when the model's style classifier chose it from the song (no style was asked for).
+    pub predicted: bool,
+    /// The classifier's probabilities per style, in [`DanceStyle::ALL`] order, when it ran.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub probabilities: Vec<f32>,
+}
+
+/// What a model returns: the motion and what it chose on the user's behalf.
+pub struct Generated {
+    pub motion: Motion,
+    pub style: Option<StyleChoice>,
+}
+
+impl From<Motion> for Generated {
+    fn from(motion: Motion) -> Self {
+        Self { motion, style: None }
+    }
 }
 
 /// One model as `GET /v1/models` lists it.
@@ -39,6 +142,19 @@ pub struct GenerateRequest<'a> {
     pub seed: u64,
     pub key_poses: &'a [KeyPose],
     pub seed_motion: Option<&'a Motion>,
+    /// The style to dance, for models whose [`Capabilities::style`] is set (else their own choice).
+    pub style: Option<DanceStyle>,
+    /// Scales a sampling model's randomness (1 = as trained), when [`Capabilities::temperature`].
+    pub temperature: Option<f64>,
+    /// Keeps the `k` likeliest choices when sampling, when [`Capabilities::top_k`].
+    pub top_k: Option<u32>,
+}
+
+impl<'a> GenerateRequest<'a> {
+    /// A request with only the song and the seed: no key poses, no seed motion, model defaults.
+    pub fn plain(audio: &'a DecodedAudio, seed: u64) -> Self {
+        Self { audio, seed, key_poses: &[], seed_motion: None, style: None, temperature: None, top_k: None }
+    }
 }
 
 /// Returned by [`Progress::report`] when the job was cancelled.
@@ -88,7 +204,7 @@ pub fn to_array(t: &tch::Tensor) -> Result<ndarray::Array2<f32>, ModelError> {
 /// A trained model, ready to dance.
 pub trait DanceModel: Send + Sync {
     fn info(&self) -> ModelInfo;
-    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Motion, ModelError>;
+    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError>;
 }
 
 /// The models found under the models dir (`models/<id>/`), loaded once at start-up.
@@ -100,14 +216,12 @@ pub struct Registry {
 impl Registry {
     /// Loads every model whose weights are present under `dir`; a model without weights is left out.
     pub fn load(dir: &std::path::Path) -> Result<Self, ModelError> {
-        let mut models: Vec<std::sync::Arc<dyn DanceModel>> = Vec::new();
-        let dr = dir.join(dance_revolution::ID);
-        if dr.join(dance_revolution::WEIGHTS_FILE).exists() {
-            models.push(std::sync::Arc::new(dance_revolution::Served::load(&dr)?));
-        }
-        let kp = dir.join(keypose_transformer::ID);
-        if kp.join(keypose_transformer::WEIGHTS_FILE).exists() {
-            models.push(std::sync::Arc::new(keypose_transformer::Served::load(&kp)?));
+        let mut models = Vec::new();
+        for entry in MODELS {
+            let folder = dir.join(entry.id);
+            if folder.join(folder::WEIGHTS_FILE).exists() {
+                models.push((entry.load)(&folder)?);
+            }
         }
         Ok(Self { models })
     }
@@ -158,10 +272,4 @@ impl<M: Send> InstancePool<M> {
         self.free.lock().unwrap_or_else(|p| p.into_inner()).push(instance);
         Ok(out)
     }
-}
-
-/// Reads a model folder's description file, or says the model is missing.
-pub fn read_model_file<T: serde::de::DeserializeOwned>(dir: &std::path::Path, id: &str, name: &str) -> Result<T, ModelError> {
-    let text = std::fs::read_to_string(dir.join(name)).map_err(|_| ModelError::MissingWeights(id.into(), dir.display().to_string()))?;
-    serde_json::from_str(&text).map_err(|e| ModelError::Invalid(format!("{name}: {e}")))
 }

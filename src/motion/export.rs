@@ -63,19 +63,29 @@ pub const GLB_FILE: &str = "motion.glb";
 /// Fits the rigid skeleton of a motion whose body centre is unknown (generated motion): the root
 /// is the weighted centroid of [`super::skeleton::CENTRE_WEIGHTS`].
 pub fn prepare(motion: &Motion) -> Result<RigMotion, MotionError> {
+    prepare_anchored(motion, &[])
+}
+
+/// As [`prepare`], with the skeleton fitted to the `anchors` frames (the user's key poses) when
+/// there are any; see [`fit_and_solve`].
+pub fn prepare_anchored(motion: &Motion, anchors: &[usize]) -> Result<RigMotion, MotionError> {
     let root = body_centre_track(motion.positions.view());
-    prepare_with_root(motion, root.view())
+    prepare_root_anchored(motion, root.view(), anchors)
 }
 
 /// Fits the rigid skeleton of a motion around a known root track `[T, 3]` (carried exactly).
 pub fn prepare_with_root(motion: &Motion, root: ArrayView2<'_, f32>) -> Result<RigMotion, MotionError> {
+    prepare_root_anchored(motion, root, &[])
+}
+
+fn prepare_root_anchored(motion: &Motion, root: ArrayView2<'_, f32>, anchors: &[usize]) -> Result<RigMotion, MotionError> {
     if motion.num_frames() == 0 {
         return Err(MotionError::Shape("motion has no frames".into()));
     }
     if !(motion.fps > 0.0 && motion.fps.is_finite()) {
         return Err(MotionError::Invalid(format!("invalid fps {}", motion.fps)));
     }
-    let mut m = fit_and_solve(motion.positions.view(), root, motion.fps)?;
+    let mut m = fit_and_solve(motion.positions.view(), root, motion.fps, anchors)?;
     make_continuous(&mut m);
     Ok(m)
 }
@@ -411,7 +421,12 @@ pub fn write_all_rig(m: &RigMotion, dir: &Path) -> Result<ExportPaths, MotionErr
 
 /// Exports a motion (generated or not) as BVH, JSON and glb in `dir`: the worker's entry point.
 pub fn write_all(motion: &Motion, dir: &Path) -> Result<ExportPaths, MotionError> {
-    let m = prepare(motion)?;
+    write_all_anchored(motion, dir, &[])
+}
+
+/// As [`write_all`], with the skeleton fitted to the key-pose frames `anchors` when there are any.
+pub fn write_all_anchored(motion: &Motion, dir: &Path, anchors: &[usize]) -> Result<ExportPaths, MotionError> {
+    let m = prepare_anchored(motion, anchors)?;
     write_all_rig(&m, dir)
 }
 

@@ -464,13 +464,21 @@ fn twist(
     UnitQuaternion::from_axis_angle(&Unit::new_unchecked(a), angle) * swing
 }
 
-/// Fits a rig to a motion and solves its rotations in one go.
+/// Fits a rig to a motion and solves its rotations in one go. With `anchors` (frame indices,
+/// e.g. the user's key poses), the skeleton is fitted to those frames only, so the body the user
+/// posed is the body that dances and those frames come back as posed; otherwise to every frame.
 pub fn fit_and_solve(
     positions: ArrayView3<'_, f32>,
     root: ArrayView2<'_, f32>,
     fps: f64,
+    anchors: &[usize],
 ) -> Result<RigMotion, MotionError> {
-    let rig = Rig::fit(positions, root)?;
+    let keep: Vec<usize> = anchors.iter().copied().filter(|&f| f < positions.dim().0).collect();
+    let rig = if keep.is_empty() {
+        Rig::fit(positions, root)?
+    } else {
+        Rig::fit(positions.select(ndarray::Axis(0), &keep).view(), root.select(ndarray::Axis(0), &keep).view())?
+    };
     solve(&rig, positions, root, fps)
 }
 

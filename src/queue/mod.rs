@@ -193,6 +193,15 @@ pub struct GenerateOptions {
     /// existed read as true, what they would get now.
     #[serde(default = "planted")]
     pub plant_feet: bool,
+    /// The style asked for (models that dance one); none lets the model choose from the song.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub style: Option<crate::models::DanceStyle>,
+    /// Sampling temperature (sampling models); none is the model's default.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub temperature: Option<f64>,
+    /// Keep the k likeliest choices when sampling (models over discrete choices).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub top_k: Option<u32>,
 }
 
 fn planted() -> bool {

@@ -85,6 +85,8 @@ pub struct Caption {
     pub seed: u64,
     /// The song's name, where one is known (a file name or a test dance id).
     pub song: Option<String>,
+    /// The dance style, where the model danced one (and whether it chose it from the song).
+    pub style: Option<crate::models::StyleChoice>,
 }
 
 /// Everything the picture shows.
@@ -255,6 +257,9 @@ fn clock(seconds: f64) -> String {
 fn draw_title<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, sheet: &Sheet<'_>, series: &Series) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let c = sheet.caption;
     let mut parts = vec![c.model.clone(), format!("seed {}", c.seed)];
+    if let Some(s) = &c.style {
+        parts.push(format!("{}{}", s.style.name(), if s.predicted { " (from the song)" } else { "" }));
+    }
     if let Some(song) = &c.song {
         // The name is the user's: keep it to one line.
         let song: String = song.chars().filter(|ch| !ch.is_control()).take(60).collect();
@@ -538,7 +543,7 @@ mod tests {
     }
 
     fn rgb_of(motion: &Motion) -> Vec<u8> {
-        let caption = Caption { model: "test".into(), seed: 1, song: Some("a song".into()) };
+        let caption = Caption { model: "test".into(), seed: 1, song: Some("a song".into()), style: None };
         let sheet = Sheet { motion, beat_times: &[0.5, 1.0, 1.5], key_pose_times: &[1.2], song_duration_s: motion.duration_s(), caption: &caption };
         render_rgb(&sheet).expect("draws")
     }
@@ -572,7 +577,7 @@ mod tests {
     #[test]
     fn the_png_decodes_to_the_picture() {
         let motion = standing(0.0, 30);
-        let caption = Caption { model: "test".into(), seed: 3, song: None };
+        let caption = Caption { model: "test".into(), seed: 3, song: None, style: None };
         let sheet = Sheet { motion: &motion, beat_times: &[], key_pose_times: &[], song_duration_s: 1.2, caption: &caption };
         let bytes = render_png(&sheet).expect("png");
         let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
@@ -585,7 +590,7 @@ mod tests {
 
     #[test]
     fn bad_motions_are_refused_not_drawn() {
-        let caption = Caption { model: "test".into(), seed: 0, song: None };
+        let caption = Caption { model: "test".into(), seed: 0, song: None, style: None };
         let empty = Motion { fps: 25.0, positions: Array3::zeros((0, NUM_JOINTS, 3)) };
         let sheet = |m| Sheet { motion: m, beat_times: &[], key_pose_times: &[], song_duration_s: 1.0, caption: &caption };
         assert!(matches!(render_rgb(&sheet(&empty)), Err(PreviewError::Empty)));

@@ -92,20 +92,23 @@ impl Pipeline {
         let decoded = self.decode("generate", song, Keep::AtMost(GENERATE_MAX_SR), progress)?;
         let seed_motion = options.seed_motion.as_ref().map(seed_motion).transpose()?;
         progress.report("model", MODEL_START)?;
-        let motion = {
+        let generated = {
             let _timer = StageTimer::start("generate", "model");
             let request = GenerateRequest {
                 audio: &decoded,
                 seed: options.seed,
                 key_poses: &options.key_poses,
                 seed_motion: seed_motion.as_ref(),
+                style: options.style,
+                temperature: options.temperature,
+                top_k: options.top_k,
             };
             model.generate(&request, &mut Scaled { inner: progress, from: MODEL_START, to: MODEL_END })?
         };
-        let motion = crate::motion::finish(motion, options.plant_feet);
+        let motion = crate::motion::finish(generated.motion, options.plant_feet);
         progress.report("export", MODEL_END)?;
         let _timer = StageTimer::start("generate", "export");
-        let caption = Caption { model: options.model.0.clone(), seed: options.seed, song: Some(song.filename.clone()) };
+        let caption = Caption { model: options.model.0.clone(), seed: options.seed, song: Some(song.filename.clone()), style: generated.style };
         let files = render(&self.data.job_dir(job.id), &motion, &decoded, &options.key_poses, &caption, &mut |_| {})?;
         Ok(Outcome::Files(files))
     }
@@ -164,14 +167,16 @@ pub fn render(
     caption: &Caption,
     on_stage: &mut dyn FnMut(&str),
 ) -> Result<JobFiles, WorkerError> {
-    use crate::motion::export::{write_all, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
+    use crate::motion::export::{write_all_anchored, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
     std::fs::create_dir_all(dir)?;
     on_stage("export");
-    write_all(motion, dir)?;
+    let anchors: Vec<usize> = key_poses.iter().map(|k| (k.time_s * motion.fps).round() as usize).collect();
+    write_all_anchored(motion, dir, &anchors)?;
     on_stage("report");
     let analysis = audio::analyze(audio)?;
     let reference = crate::metrics::reference::ReferenceStats::builtin()?;
-    let report = crate::report::build(motion, &analysis, key_poses, &reference)?;
+    let mut report = crate::report::build(motion, &analysis, key_poses, &reference)?;
+    report.style = caption.style.clone();
     let text = serde_json::to_vec_pretty(&report).map_err(|e| WorkerError::Export(format!("report.json: {e}")))?;
     write_atomic(&dir.join(REPORT_FILE), &text)?;
     let key_pose_times: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();

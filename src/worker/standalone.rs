@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use crate::audio::{self, DecodedAudio};
-use crate::models::{Cancelled, GenerateRequest, ModelId, Progress, Registry};
+use crate::models::{Cancelled, DanceStyle, GenerateRequest, ModelId, Progress, Registry};
 use crate::motion::{KeyPose, Motion};
 use crate::report::preview::Caption;
 
@@ -35,6 +35,16 @@ pub struct GenerateArgs {
     /// Keep the model's motion as it came: do not plant the feet (`motion::feet`).
     #[arg(long)]
     pub no_plant_feet: bool,
+    /// The style to dance (models that take one): waltz, rumba, cha-cha or tango. Default: the
+    /// model's classifier picks one from the song.
+    #[arg(long)]
+    pub style: Option<String>,
+    /// Sampling temperature (sampling models): 1 is as trained.
+    #[arg(long)]
+    pub temperature: Option<f64>,
+    /// Sample only among the k likeliest choices (models over discrete choices).
+    #[arg(long)]
+    pub top_k: Option<u32>,
 }
 
 /// What one generation produced and how long each stage took.
@@ -92,10 +102,12 @@ pub fn generate_decoded(
     out: &Path,
     on_progress: &mut dyn FnMut(&str, f32),
 ) -> Result<Generated, WorkerError> {
-    let caption = Caption { model: model.0.clone(), seed: request.seed, song };
+    let id = model.0.clone();
     let model = registry.get(model).ok_or_else(|| WorkerError::ModelUnavailable(model.clone()))?;
     let mut clock = StageClock { current: None, done: Vec::new(), on_progress };
-    let motion = crate::motion::finish(model.generate(request, &mut clock)?, plant_feet);
+    let generated = model.generate(request, &mut clock)?;
+    let caption = Caption { model: id, seed: request.seed, song, style: generated.style };
+    let motion = crate::motion::finish(generated.motion, plant_feet);
     let files = super::pipeline::render(out, &motion, request.audio, request.key_poses, &caption, &mut |stage| clock.enter(stage))?;
     Ok(Generated { motion, files: files.files.iter().map(|f| out.join(f)).collect(), stages: clock.finish() })
 }
@@ -134,7 +146,11 @@ pub fn generate(args: &GenerateArgs) -> Result<Generated, WorkerError> {
         bar.set_message(stage.to_owned());
         bar.set_position(((a + (b - a) * f64::from(f)) * 1000.0) as u64);
     };
-    let request = GenerateRequest { audio: &audio, seed: args.seed, key_poses: &key_poses, seed_motion: None };
+    let style = match &args.style {
+        Some(s) => Some(DanceStyle::parse(s).ok_or_else(|| WorkerError::InvalidOptions(format!("unknown style `{s}`: one of {}", DanceStyle::names())))?),
+        None => None,
+    };
+    let request = GenerateRequest { key_poses: &key_poses, style, temperature: args.temperature, top_k: args.top_k, ..GenerateRequest::plain(&audio, args.seed) };
     let song = args.song.file_name().map(|n| n.to_string_lossy().into_owned());
     let mut g = generate_decoded(&registry, &ModelId(args.model.clone()), song, &request, !args.no_plant_feet, &args.out, &mut on_progress)?;
     g.stages.insert(0, ("decode audio".into(), decode));
@@ -200,7 +216,7 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
     let out = tempfile::tempdir()?;
     for model in &models {
         for (name, audio, decode) in &songs {
-            let request = GenerateRequest { audio, seed: 0, key_poses: &[], seed_motion: None };
+            let request = GenerateRequest::plain(audio, 0);
             let g = generate_decoded(&registry, model, Some(name.clone()), &request, true, out.path(), &mut |_, _| {})?;
             let mut stages = vec![("decode audio".to_string(), *decode)];
             stages.extend(g.stages);

@@ -124,9 +124,34 @@ async fn bad_job_requests_name_the_field() {
 
     let not_json = app.post_job_raw("song_id=1", "application/x-www-form-urlencoded", None).await;
     expect_problem(not_json, StatusCode::UNSUPPORTED_MEDIA_TYPE, "not-json").await;
+    // Job options a model does not take, or values outside their range, name the field.
+    let bogus_style = app.post_job(&json!({"song_id": song_id, "model": "dance-revolution", "style": "polka"}), None).await;
+    let body = expect_problem(bogus_style, StatusCode::UNPROCESSABLE_ENTITY, "invalid-field").await;
+    assert_eq!(body["field"], "style");
+    for style in ["waltz", "rumba", "cha-cha", "tango"] {
+        assert!(body["detail"].as_str().is_some_and(|d| d.contains(style)), "{body}");
+    }
     let unknown_song = app.post_job(&json!({"song_id": "01234567-89ab-7def-8123-456789abcdef", "model": "m"}), None).await;
     let body = expect_problem(unknown_song, StatusCode::NOT_FOUND, "song-not-found").await;
     assert!(body["detail"].as_str().is_some_and(|d| d.contains("01234567-89ab-7def-8123-456789abcdef")), "{body}");
+    still_serving(&app).await;
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn job_options_a_model_does_not_take_are_refused() {
+    let app = spawn_app_with(|c| c.models_dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models")).await;
+    let song = app.upload_ok(&short_song()).await;
+    let song_id = song["id"].as_str().expect("id").to_string();
+    let not_taken = app.post_job(&json!({"song_id": song_id, "model": "dance-revolution", "style": "waltz"}), None).await;
+    let body = expect_problem(not_taken, StatusCode::UNPROCESSABLE_ENTITY, "invalid-field").await;
+    assert_eq!(body["field"], "style");
+    let not_sampled = app.post_job(&json!({"song_id": song_id, "model": "dance-revolution", "temperature": 0.5}), None).await;
+    let body = expect_problem(not_sampled, StatusCode::UNPROCESSABLE_ENTITY, "invalid-field").await;
+    assert_eq!(body["field"], "temperature");
+    let no_top_k = app.post_job(&json!({"song_id": song_id, "model": "keypose-transformer", "top_k": 5}), None).await;
+    let body = expect_problem(no_top_k, StatusCode::UNPROCESSABLE_ENTITY, "invalid-field").await;
+    assert_eq!(body["field"], "top_k");
     still_serving(&app).await;
     app.stop().await;
 }

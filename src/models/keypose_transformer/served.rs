@@ -11,15 +11,10 @@ use tch::Tensor;
 use super::keys::{bridge_keys, local_keys, normalize_key, pass_through_keys, pass_through_yaws, LocalKey, BRIDGE_HALF};
 use super::scaffold::{PoseBank, Scaffold, POSE_BANK_FILE};
 use super::{Config, KeyposeTransformer};
-use crate::models::{read_model_file, to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, InstancePool, ModelError, ModelId, ModelInfo, Progress};
-use crate::motion::dataset::NormStats;
+use crate::models::folder;
+use crate::models::{to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::repr::{self, RootStart, POSE_DIM};
-use crate::motion::Motion;
 
-/// The model folder's description file.
-pub const MODEL_FILE: &str = "model.json";
-/// The model folder's weights (safetensors).
-pub const WEIGHTS_FILE: &str = "weights.safetensors";
 /// The API id.
 pub const ID: &str = "keypose-transformer";
 /// Frames over which a key pose's residual is blended in after the network (1 s at 25 fps, and
@@ -31,17 +26,11 @@ pub const BLEND_RADIUS: f64 = 25.0;
 /// half a second would be a spin that no dancer made.
 pub const YAW_BLEND_RADIUS: f64 = 50.0;
 
-/// How the committed weights were trained, stored beside them.
+/// The key-pose sampling behind the committed weights, stored beside the common record.
 #[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct TrainingRecord {
-    pub epochs: usize,
+pub struct KeySampling {
     pub steps: usize,
-    pub lr: f64,
-    pub batch: usize,
     pub max_keys: usize,
-    pub seed: u64,
-    pub final_train_loss: f64,
-    pub minutes: f64,
     /// Weight of the frame-difference (velocity) L1 term beside the ω(t)-weighted pose term.
     #[serde(default)]
     pub velocity_weight: f64,
@@ -58,14 +47,9 @@ pub enum RootHeight {
     FootClearance,
 }
 
-/// `model.json`: the configuration and the train-split normalisation the weights expect.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct ModelFile {
-    pub config: Config,
-    pub music_norm: NormStats,
-    pub pose_norm: NormStats,
-    pub fps: f64,
-    pub training: TrainingRecord,
+/// The served path's own fields of `model.json`.
+#[derive(Clone, Debug, Default, Serialize, Deserialize)]
+pub struct Serving {
     /// What the root-height column means.
     #[serde(default)]
     pub root_height: RootHeight,
@@ -73,6 +57,9 @@ pub struct ModelFile {
     #[serde(default)]
     pub scaffold_spacing: usize,
 }
+
+/// `model.json`: configuration, normalisation, training record and serving fields.
+pub type ModelFile = folder::ModelFile<Config, KeySampling, Serving>;
 
 /// One generation: the network's features and the served ones (after the exact key pass), both
 /// with absolute root heights, and where the root starts.
@@ -122,7 +109,7 @@ pub fn generate_features(
     bridge_keys(&mut served, &keys.iter().map(|k| k.frame).collect::<Vec<_>>(), BRIDGE_HALF);
     let targets: Vec<(usize, Vec<f32>)> = keys.iter().map(|k| (k.frame, k.local.clone())).collect();
     pass_through_keys(&mut served, 0..POSE_DIM, &targets, BLEND_RADIUS);
-    if file.root_height == RootHeight::FootClearance {
+    if file.extra.root_height == RootHeight::FootClearance {
         // After the key pass, so a key pose's legs set the height at its frame.
         repr::clearance_to_height(&mut network);
         repr::clearance_to_height(&mut served);
@@ -145,9 +132,7 @@ pub struct Served {
 impl Served {
     /// Loads `dir/model.json`, `dir/weights.safetensors` and, when present, `dir/pose_bank.safetensors`.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let file: ModelFile = read_model_file(dir, ID, MODEL_FILE)?;
-        let config = file.config.clone();
-        let pool = InstancePool::new(dir.join(WEIGHTS_FILE), move |p| KeyposeTransformer::new(p, config.clone()))?;
+        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| KeyposeTransformer::new(p, f.config.clone()))?;
         let bank_path = dir.join(POSE_BANK_FILE);
         let bank = if bank_path.exists() { Some(PoseBank::load(&bank_path)?) } else { None };
         Ok(Self { file, bank, pool })
@@ -160,7 +145,7 @@ impl Served {
 
     /// The seed rows and scaffold the job's seed draws, or none without a pose bank.
     pub fn scaffold(&self, seed: u64, frames: usize, keys: &[LocalKey]) -> Option<Scaffold> {
-        self.bank.as_ref().map(|b| b.scaffold(seed, frames, self.file.config.seed_len as usize, self.file.scaffold_spacing, keys))
+        self.bank.as_ref().map(|b| b.scaffold(seed, frames, self.file.config.seed_len as usize, self.file.extra.scaffold_spacing, keys))
     }
 }
 
@@ -169,11 +154,11 @@ impl DanceModel for Served {
         ModelInfo {
             id: ModelId(ID.into()),
             paper: "Controllable music-driven dance generation with key-pose constraints (key-pose controllable cross-modal transformer)".into(),
-            capabilities: Capabilities { key_poses: true, seed_motion: true, style: false },
+            capabilities: Capabilities { key_poses: true, seed_motion: true, ..Default::default() },
         }
     }
 
-    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Motion, ModelError> {
+    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
         let fps = self.file.fps;
         let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
         let keys = local_keys(req.key_poses, n, fps)?;
@@ -189,7 +174,7 @@ impl DanceModel for Served {
                 let root = crate::motion::skeleton::body_centre_track(tail);
                 let (mut f, start) = repr::to_features(tail, root.view())?;
                 let mut floor = 0.0;
-                if self.file.root_height == RootHeight::FootClearance {
+                if self.file.extra.root_height == RootHeight::FootClearance {
                     floor = repr::floor_of_features(f.view());
                     repr::height_to_clearance(&mut f, floor);
                 }
@@ -213,6 +198,6 @@ impl DanceModel for Served {
         let Some(mut g) = out? else { return Err(Cancelled.into()) };
         g.served.column_mut(repr::ROOT_Y).mapv_inplace(|y| y + floor);
         let (motion, _root) = repr::from_features(g.served.view(), g.start, fps)?;
-        Ok(motion)
+        Ok(motion.into())
     }
 }

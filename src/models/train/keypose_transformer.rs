@@ -3,24 +3,24 @@
 //! each window's first `T′` frames, Adam, on the train split of dance-with-melody. After training
 //! it measures the key-pose consistency error on the test split (whole dances, overlapping
 //! windows, the served code path) and writes it to `eval.json` for the model card.
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::path::Path;
 
 use ndarray::{s, Array2};
 use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
-use tch::nn::{self, OptimizerConfig};
+use tch::nn;
 use tch::{Device, Kind, Tensor};
 
-use super::{append_log, batch_tensor, fit_normalizers, load_sequences, window_starts, write_atomic, EpochLog, Sequence, TrainError};
+use super::{batch_tensor, load_sequences, window_starts, write_atomic, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError, Trainer};
+use crate::models::folder;
 use crate::models::keypose_transformer::scaffold::{PoseBank, POSE_BANK_FILE};
 use crate::models::keypose_transformer::served::RootHeight;
 use crate::models::to_tensor;
 use crate::models::keypose_transformer::{
-    generate_features, local_position_embedding, loss_weights, to_local, Config, KeyposeTransformer, LocalKey, ModelFile, TrainingRecord,
-    WindowInput, MODEL_FILE, WEIGHTS_FILE,
+    generate_features, local_position_embedding, loss_weights, to_local, Config, KeySampling, KeyposeTransformer, LocalKey, ModelFile, Serving,
+    WindowInput, ID,
 };
 use crate::motion::dataset::Dataset;
 use crate::motion::repr::{self, POSE_DIM};
@@ -29,12 +29,8 @@ use crate::motion::{KeyPose, NUM_JOINTS};
 /// Options of one training run; the model card gives the runs (and flags) behind the committed weights.
 #[derive(Clone, Debug, clap::Args)]
 pub struct Options {
-    /// The dance-with-melody folder.
-    #[arg(long, default_value = "../shared/data/dance-with-melody")]
-    pub data: PathBuf,
-    /// Where model.json, weights.safetensors, train_log.jsonl and eval.json go.
-    #[arg(long, default_value = "models/keypose-transformer")]
-    pub out: PathBuf,
+    #[command(flatten)]
+    pub common: CommonOptions,
     #[arg(long, default_value_t = 200)]
     pub epochs: usize,
     #[arg(long, default_value_t = 32)]
@@ -70,18 +66,6 @@ pub struct Options {
     pub eval_keys: usize,
     #[arg(long, default_value_t = 2023)]
     pub seed: u64,
-    /// libtorch intra-op threads.
-    #[arg(long, default_value_t = 1)]
-    pub threads: i32,
-    /// Stop after this many minutes even if epochs remain (the weights are saved either way).
-    #[arg(long)]
-    pub max_minutes: Option<f64>,
-    /// Start from these weights (same configuration) instead of a random initialisation.
-    #[arg(long)]
-    pub init: Option<PathBuf>,
-    /// Use the tiny test configuration (for smoke runs, never for committed weights).
-    #[arg(long)]
-    pub tiny: bool,
     /// Do not train: re-run the test-split evaluation of the model already in `--out` and rewrite
     /// its `eval.json`.
     #[arg(long)]
@@ -147,114 +131,71 @@ fn segment_scv(positions: ndarray::ArrayView3<'_, f32>, segs: &[std::ops::Range<
 
 /// Trains and writes the model folder; returns the per-epoch log.
 pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
-    tch::set_num_threads(opts.threads);
-    tch::manual_seed(opts.seed as i64);
+    let out = opts.common.out_dir(ID);
     if opts.eval_only {
-        let eval = evaluate_folder(&opts.out, &opts.data, opts.eval_keys, opts.seed)?;
+        tch::set_num_threads(opts.common.threads);
+        let eval = evaluate_folder(&out, &opts.common.data, opts.eval_keys, opts.seed)?;
         tracing::info!(?eval, "key-pose consistency on the test split");
-        write_atomic(&opts.out.join("eval.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
+        write_atomic(&out.join("eval.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
         return Ok(Vec::new());
     }
-    let started = Instant::now();
-    let ds = Dataset::open(&opts.data)?;
-    let features: super::FeatureFn = crate::audio::features::keypose;
-    let mut train_raw = load_sequences(&ds, ds.train_ids(), features)?;
-    let mut test_raw = load_sequences(&ds, ds.test_ids(), features)?;
-    for seq in train_raw.iter_mut().chain(test_raw.iter_mut()) {
+    let data = Data::load(&opts.common.data, crate::audio::features::keypose, |seq| {
         to_clearance(&mut seq.poses);
-    }
-    let (music_norm, pose_norm) = fit_normalizers(&train_raw)?;
-    let norm = |seqs: &[Sequence]| -> Result<Vec<Sequence>, TrainError> {
-        seqs.iter()
-            .map(|s| Ok(Sequence { music: music_norm.normalize(&s.music)?, poses: pose_norm.normalize(&s.poses)?, id: s.id.clone() }))
-            .collect()
-    };
-    let (train, test) = (norm(&train_raw)?, norm(&test_raw)?);
-    tracing::info!(seconds = started.elapsed().as_secs_f64(), "data ready");
-
-    let base = if opts.tiny { Config::tiny(0, 0, 0) } else { Config::cpu() };
-    let config = Config { music_dim: music_norm.dim() as i64, pose_dim: pose_norm.dim() as i64, key_dim: POSE_DIM as i64, lambda: opts.lambda, sigma: opts.sigma, ..base };
-    let mut vs = nn::VarStore::new(Device::Cpu);
-    let model = KeyposeTransformer::new(&vs.root(), config.clone());
-    if let Some(init) = &opts.init {
-        vs.load(init)?;
-        tracing::info!(from = %init.display(), "initialised from earlier weights");
-    }
-    let mut opt = nn::Adam::default().build(&vs, opts.lr)?;
-    std::fs::create_dir_all(&opts.out).map_err(|source| TrainError::Io { path: opts.out.clone(), source })?;
-    let log_path = opts.out.join("train_log.jsonl");
-    let _ = std::fs::remove_file(&log_path);
-
+        Ok(())
+    })?;
+    let base = if opts.common.tiny { Config::tiny(0, 0, 0) } else { Config::cpu() };
+    let config = Config { music_dim: data.music_norm.dim() as i64, pose_dim: data.pose_norm.dim() as i64, key_dim: POSE_DIM as i64, lambda: opts.lambda, sigma: opts.sigma, ..base };
+    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| KeyposeTransformer::new(p, config.clone()))?;
+    let (train, test) = (&data.train, &data.test);
     let len = config.window as usize;
-    let mut logs = Vec::new();
-    let mut steps = 0usize;
-    let record = |epochs: usize, steps: usize, logs: &[EpochLog]| TrainingRecord {
-        epochs,
-        steps,
-        lr: opts.lr,
-        batch: opts.batch,
-        max_keys: opts.max_keys,
-        seed: opts.seed,
-        final_train_loss: logs.last().map(|l| l.train_loss).unwrap_or(f64::NAN),
-        minutes: started.elapsed().as_secs_f64() / 60.0,
-        velocity_weight: opts.velocity_weight,
-    };
-    let model_file = |training: TrainingRecord| ModelFile {
+    let steps = std::cell::Cell::new(0usize);
+    let model_file = |t: &Trainer| ModelFile {
         config: config.clone(),
-        music_norm: music_norm.clone(),
-        pose_norm: pose_norm.clone(),
+        music_norm: data.music_norm.clone(),
+        pose_norm: data.pose_norm.clone(),
         fps: crate::motion::MOTION_FPS,
-        training,
-        root_height: RootHeight::FootClearance,
-        scaffold_spacing: opts.scaffold_spacing,
+        training: t.record(opts.lr, opts.batch, opts.seed, KeySampling { steps: steps.get(), max_keys: opts.max_keys, velocity_weight: opts.velocity_weight }),
+        extra: Serving { root_height: RootHeight::FootClearance, scaffold_spacing: opts.scaffold_spacing },
     };
-    pose_bank(&train_raw, opts.bank_clips, opts.bank_frames, opts.seed)?
-        .save(&opts.out.join(POSE_BANK_FILE))
+    pose_bank(&data.train_raw, opts.bank_clips, opts.bank_frames, opts.seed)?
+        .save(&trainer.out.join(POSE_BANK_FILE))
         .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?;
-    for epoch in 0..opts.epochs {
-        let t0 = Instant::now();
-        let starts = window_starts(&train, len, opts.stride, opts.seed + epoch as u64);
-        if starts.is_empty() {
-            return Err(TrainError::NoWindows(len));
-        }
-        let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
-        let (mut total, mut batches) = (0.0, 0);
-        let mut out_of_time = false;
-        for chunk in starts.chunks(opts.batch) {
-            let loss = window_loss(&model, &config, &train, chunk, opts.max_keys, opts.velocity_weight, &mut rng, true);
-            opt.backward_step_clip(&loss, 1.0);
-            total += loss.double_value(&[]);
-            batches += 1;
-            steps += 1;
-            out_of_time = opts.max_minutes.is_some_and(|m| started.elapsed().as_secs_f64() > m * 60.0);
-            if out_of_time {
-                break;
+    trainer.run(
+        0..opts.epochs,
+        2,
+        |epoch, opt, deadline| {
+            let starts = window_starts(train, len, opts.stride, opts.seed + epoch as u64);
+            if starts.is_empty() {
+                return Err(TrainError::NoWindows(len));
             }
-        }
-        let test_loss = tch::no_grad(|| {
-            let mut rng = StdRng::seed_from_u64(7);
-            let starts = window_starts(&test, len, len, 0);
-            let losses: Vec<f64> = starts.chunks(opts.batch).map(|c| window_loss(&model, &config, &test, c, opts.max_keys, opts.velocity_weight, &mut rng, false).double_value(&[])).collect();
-            (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
-        });
-        let line = EpochLog { epoch, train_loss: total / batches.max(1) as f64, test_loss, note: format!("steps={steps} λ={} σ={}", opts.lambda, opts.sigma), seconds: t0.elapsed().as_secs_f64() };
-        tracing::info!(epoch, train_loss = line.train_loss, test_loss = ?line.test_loss, steps, seconds = line.seconds, "epoch");
-        append_log(&log_path, &line)?;
-        logs.push(line);
-        if epoch % 2 == 1 || epoch + 1 == opts.epochs || out_of_time {
-            save(&vs, &opts.out, &model_file(record(epoch + 1, steps, &logs)))?;
-        }
-        if out_of_time {
-            tracing::warn!(epoch, "stopping: --max-minutes reached");
-            break;
-        }
-    }
-    let file = model_file(record(logs.len(), steps, &logs));
-    save(&vs, &opts.out, &file)?;
-    let eval = evaluate(&model, &file, &ds, &test_raw, opts.eval_keys, opts.seed)?;
+            let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
+            let (mut total, mut batches) = (0.0, 0);
+            for chunk in starts.chunks(opts.batch) {
+                let loss = window_loss(&model, &config, train, chunk, opts.max_keys, opts.velocity_weight, &mut rng, true);
+                opt.backward_step_clip(&loss, 1.0);
+                total += loss.double_value(&[]);
+                batches += 1;
+                steps.set(steps.get() + 1);
+                if deadline.expired() {
+                    break;
+                }
+            }
+            let test_loss = tch::no_grad(|| {
+                let mut rng = StdRng::seed_from_u64(7);
+                let starts = window_starts(test, len, len, 0);
+                let losses: Vec<f64> = starts.chunks(opts.batch).map(|c| window_loss(&model, &config, test, c, opts.max_keys, opts.velocity_weight, &mut rng, false).double_value(&[])).collect();
+                (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
+            });
+            Ok(EpochResult { train_loss: total / batches.max(1) as f64, test_loss, note: format!("steps={} λ={} σ={}", steps.get(), opts.lambda, opts.sigma) })
+        },
+        model_file,
+    )?;
+    let file = model_file(&trainer);
+    trainer.save(&file)?;
+    let eval = evaluate(&model, &file, &data.dataset, &data.test_raw, opts.eval_keys, opts.seed)?;
     tracing::info!(?eval, "key-pose consistency on the test split");
-    write_atomic(&opts.out.join("eval.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
-    Ok(logs)
+    write_atomic(&trainer.out.join("eval.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
+    Ok(trainer.logs)
 }
 
 /// Replaces a dance's root heights by its lowest foot's clearance above the dance's own floor.
@@ -440,20 +381,11 @@ fn mean_rows_error_cm(a: &Array2<f32>, b: &Array2<f32>) -> f64 {
 
 /// Re-runs the test-split evaluation for a trained folder (`model.json` + weights).
 pub fn evaluate_folder(dir: &Path, data: &Path, keys: usize, seed: u64) -> Result<KeyPoseEval, TrainError> {
-    let text = std::fs::read_to_string(dir.join(MODEL_FILE)).map_err(|source| TrainError::Io { path: dir.join(MODEL_FILE), source })?;
-    let file: ModelFile = serde_json::from_str(&text)?;
+    let file: ModelFile = folder::read(dir, ID).map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?;
     let mut vs = nn::VarStore::new(Device::Cpu);
     let model = KeyposeTransformer::new(&vs.root(), file.config.clone());
-    vs.load(dir.join(WEIGHTS_FILE))?;
+    vs.load(dir.join(folder::WEIGHTS_FILE))?;
     let ds = Dataset::open(data)?;
     let test = load_sequences(&ds, ds.test_ids(), crate::audio::features::keypose)?;
     evaluate(&model, &file, &ds, &test, keys, seed)
 }
-
-fn save(vs: &nn::VarStore, dir: &Path, file: &ModelFile) -> Result<(), TrainError> {
-    let tmp = dir.join(format!("{WEIGHTS_FILE}.tmp.safetensors"));
-    vs.save(&tmp)?;
-    std::fs::rename(&tmp, dir.join(WEIGHTS_FILE)).map_err(|source| TrainError::Io { path: dir.to_owned(), source })?;
-    write_atomic(&dir.join(MODEL_FILE), serde_json::to_string_pretty(file)?.as_bytes())
-}
-

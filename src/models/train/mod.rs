@@ -6,9 +6,12 @@ use ndarray::{s, Array2};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
+use tch::nn::{self, OptimizerConfig};
 use tch::{Device, Tensor};
+use std::time::Instant;
 
 use crate::audio::DecodedAudio;
+use crate::models::folder::{TrainingRecord, MODEL_FILE, TRAIN_LOG_FILE, WEIGHTS_FILE};
 use crate::motion::dataset::{Dataset, NormStats};
 
 /// Errors while preparing data or training.
@@ -54,6 +57,188 @@ pub fn load_sequences(ds: &Dataset, ids: &[String], features: FeatureFn) -> Resu
         out.push(Sequence { id: id.clone(), music, poses });
     }
     Ok(out)
+}
+
+/// Options every trainer takes, flattened into each model's own `Options`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct CommonOptions {
+    /// The dance-with-melody folder.
+    #[arg(long, default_value = "../shared/data/dance-with-melody")]
+    pub data: PathBuf,
+    /// The model folder to write [default: models/<id>].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// libtorch intra-op threads.
+    #[arg(long, default_value_t = 2)]
+    pub threads: i32,
+    /// Stop after this many minutes even if epochs remain (the weights are saved either way).
+    #[arg(long)]
+    pub max_minutes: Option<f64>,
+    /// Start from these weights (same configuration), e.g. to continue a committed run; the log
+    /// is then appended to, not replaced.
+    #[arg(long)]
+    pub init: Option<PathBuf>,
+    /// Use the tiny test configuration (for smoke runs, never for committed weights).
+    #[arg(long)]
+    pub tiny: bool,
+}
+
+impl CommonOptions {
+    /// The model folder: `--out`, or `models/<id>`.
+    pub fn out_dir(&self, id: &str) -> PathBuf {
+        self.out.clone().unwrap_or_else(|| Path::new("models").join(id))
+    }
+}
+
+/// The real dances a trainer learns from: train and test split, as loaded (`*_raw`) and
+/// normalised with statistics fitted on the train split.
+pub struct Data {
+    pub dataset: Dataset,
+    pub train_raw: Vec<Sequence>,
+    pub test_raw: Vec<Sequence>,
+    pub train: Vec<Sequence>,
+    pub test: Vec<Sequence>,
+    pub music_norm: NormStats,
+    pub pose_norm: NormStats,
+}
+
+impl Data {
+    /// Loads both splits with `features` for the music, applies `map` to each loaded sequence
+    /// (a model's own pose representation), and normalises.
+    pub fn load(folder: &Path, features: FeatureFn, mut map: impl FnMut(&mut Sequence) -> Result<(), TrainError>) -> Result<Self, TrainError> {
+        let started = Instant::now();
+        let dataset = Dataset::open(folder)?;
+        let mut train_raw = load_sequences(&dataset, dataset.train_ids(), features)?;
+        let mut test_raw = load_sequences(&dataset, dataset.test_ids(), features)?;
+        for s in train_raw.iter_mut().chain(test_raw.iter_mut()) {
+            map(s)?;
+        }
+        let (music_norm, pose_norm) = fit_normalizers(&train_raw)?;
+        let norm = |seqs: &[Sequence]| -> Result<Vec<Sequence>, TrainError> {
+            seqs.iter()
+                .map(|s| Ok(Sequence { music: music_norm.normalize(&s.music)?, poses: pose_norm.normalize(&s.poses)?, id: s.id.clone() }))
+                .collect()
+        };
+        let (train, test) = (norm(&train_raw)?, norm(&test_raw)?);
+        tracing::info!(seconds = started.elapsed().as_secs_f64(), train = train.len(), test = test.len(), "data ready");
+        Ok(Self { dataset, train_raw, test_raw, train, test, music_norm, pose_norm })
+    }
+}
+
+/// When a run must stop (`--max-minutes`), checked between batches and epochs.
+#[derive(Clone, Copy, Debug)]
+pub struct Deadline {
+    started: Instant,
+    max_minutes: Option<f64>,
+}
+
+impl Deadline {
+    /// True once the run has used its minutes.
+    pub fn expired(&self) -> bool {
+        self.max_minutes.is_some_and(|m| self.started.elapsed().as_secs_f64() > m * 60.0)
+    }
+
+    /// Minutes since the run started.
+    pub fn minutes(&self) -> f64 {
+        self.started.elapsed().as_secs_f64() / 60.0
+    }
+}
+
+/// What one epoch of a model's training reports to [`Trainer::run`].
+pub struct EpochResult {
+    pub train_loss: f64,
+    pub test_loss: Option<f64>,
+    /// Curriculum state or any other per-model schedule value.
+    pub note: String,
+}
+
+/// The training set-up every model shares: threads and seed, the network's variables and Adam,
+/// `--init`, the model folder and its epoch log, the time budget, and saving.
+pub struct Trainer {
+    pub vs: nn::VarStore,
+    pub opt: nn::Optimizer,
+    pub out: PathBuf,
+    pub logs: Vec<EpochLog>,
+    pub deadline: Deadline,
+}
+
+impl Trainer {
+    /// Builds the network with `build` under a fresh VarStore (after seeding libtorch), loads
+    /// `--init` if given, and prepares the folder and its log.
+    pub fn new<M>(common: &CommonOptions, id: &str, lr: f64, seed: u64, build: impl FnOnce(&nn::Path) -> M) -> Result<(Self, M), TrainError> {
+        tch::set_num_threads(common.threads);
+        tch::manual_seed(seed as i64);
+        let mut vs = nn::VarStore::new(Device::Cpu);
+        let model = build(&vs.root());
+        if let Some(init) = &common.init {
+            vs.load(init)?;
+            tracing::info!(from = %init.display(), "initialised from earlier weights");
+        }
+        let opt = nn::Adam::default().build(&vs, lr)?;
+        let out = common.out_dir(id);
+        std::fs::create_dir_all(&out).map_err(|source| TrainError::Io { path: out.clone(), source })?;
+        if common.init.is_none() {
+            let _ = std::fs::remove_file(out.join(TRAIN_LOG_FILE));
+        }
+        let deadline = Deadline { started: Instant::now(), max_minutes: common.max_minutes };
+        Ok((Self { vs, opt, out, logs: Vec::new(), deadline }, model))
+    }
+
+    /// Runs `epochs`, calling `one(epoch, optimiser, deadline)` for each, logging it, and saving
+    /// the folder (`file` gives `model.json`) every `save_every` epochs, after the last and when the
+    /// time budget runs out.
+    pub fn run<F: Serialize>(
+        &mut self,
+        epochs: std::ops::Range<usize>,
+        save_every: usize,
+        mut one: impl FnMut(usize, &mut nn::Optimizer, &Deadline) -> Result<EpochResult, TrainError>,
+        mut file: impl FnMut(&Self) -> F,
+    ) -> Result<(), TrainError> {
+        let last = epochs.end.saturating_sub(1);
+        for epoch in epochs.clone() {
+            let t0 = Instant::now();
+            let r = one(epoch, &mut self.opt, &self.deadline)?;
+            let line = EpochLog { epoch, train_loss: r.train_loss, test_loss: r.test_loss, note: r.note, seconds: t0.elapsed().as_secs_f64() };
+            tracing::info!(epoch, train_loss = line.train_loss, test_loss = ?line.test_loss, note = %line.note, seconds = line.seconds, "epoch");
+            append_log(&self.out.join(TRAIN_LOG_FILE), &line)?;
+            self.logs.push(line);
+            let out_of_time = self.deadline.expired();
+            if (epoch + 1 - epochs.start) % save_every.max(1) == 0 || epoch == last || out_of_time {
+                self.save(&file(self))?;
+            }
+            if out_of_time {
+                tracing::warn!(epoch, "stopping: --max-minutes reached");
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// The common training record so far, with the model's own fields.
+    pub fn record<X>(&self, lr: f64, batch: usize, seed: u64, extra: X) -> TrainingRecord<X> {
+        TrainingRecord {
+            epochs: self.logs.last().map(|l| l.epoch + 1).unwrap_or(0),
+            lr,
+            batch,
+            seed,
+            final_train_loss: self.logs.last().map(|l| l.train_loss).unwrap_or(f64::NAN),
+            minutes: self.deadline.minutes(),
+            extra,
+        }
+    }
+
+    /// Writes the weights and `model.json` into the folder, each atomically.
+    pub fn save<F: Serialize>(&self, file: &F) -> Result<(), TrainError> {
+        save_folder(&self.vs, &self.out, file)
+    }
+}
+
+/// Writes `weights.safetensors` and `model.json` into `dir`, each atomically.
+pub fn save_folder<F: Serialize>(vs: &nn::VarStore, dir: &Path, file: &F) -> Result<(), TrainError> {
+    let tmp = dir.join(format!("{WEIGHTS_FILE}.tmp.safetensors"));
+    vs.save(&tmp)?;
+    std::fs::rename(&tmp, dir.join(WEIGHTS_FILE)).map_err(|source| TrainError::Io { path: dir.to_owned(), source })?;
+    write_atomic(&dir.join(MODEL_FILE), serde_json::to_string_pretty(file)?.as_bytes())
 }
 
 /// Normalisation for music and poses, fitted on the given (train) sequences.
@@ -130,3 +315,29 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
 }
 pub mod dance_revolution;
 pub mod keypose_transformer;
+
+/// `choreo train <model>`: one variant per trainable model.
+#[derive(Clone, Debug, clap::Subcommand)]
+pub enum TrainCommand {
+    /// DanceRevolution (Huang et al., ICLR 2021).
+    DanceRevolution(dance_revolution::Options),
+    /// Key-pose controllable cross-modal transformer.
+    KeyposeTransformer(keypose_transformer::Options),
+}
+
+impl TrainCommand {
+    /// Trains (or evaluates) and says what it wrote.
+    pub fn run(&self) -> Result<String, TrainError> {
+        match self {
+            Self::DanceRevolution(o) => {
+                let logs = dance_revolution::train(o)?;
+                Ok(format!("trained {} epochs into {}", logs.len(), o.common.out_dir(crate::models::dance_revolution::ID).display()))
+            }
+            Self::KeyposeTransformer(o) => {
+                let logs = keypose_transformer::train(o)?;
+                let out = o.common.out_dir(crate::models::keypose_transformer::ID);
+                Ok(if o.eval_only { format!("evaluated {} (eval.json rewritten)", out.display()) } else { format!("trained {} epochs into {}", logs.len(), out.display()) })
+            }
+        }
+    }
+}

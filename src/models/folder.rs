@@ -1,0 +1,99 @@
+//! The one model-folder format every model uses (`models/<id>/`): `model.json` says what the
+//! weights expect (configuration, train-split normalisation, frame rate) and how they were trained;
+//! `weights.safetensors` holds the network; `train_log.jsonl` one line per epoch; `README.md` is
+//! the model card. A model adds its own fields to `model.json` through the `X` parameters.
+use std::path::Path;
+
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+use super::{InstancePool, ModelError};
+use crate::motion::dataset::NormStats;
+
+/// The folder's description file.
+pub const MODEL_FILE: &str = "model.json";
+/// The folder's weights (safetensors).
+pub const WEIGHTS_FILE: &str = "weights.safetensors";
+/// One JSON line per training epoch.
+pub const TRAIN_LOG_FILE: &str = "train_log.jsonl";
+
+/// How the committed weights were trained; `X` holds the model's own schedule values.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct TrainingRecord<X> {
+    pub epochs: usize,
+    pub lr: f64,
+    pub batch: usize,
+    pub seed: u64,
+    pub final_train_loss: f64,
+    pub minutes: f64,
+    #[serde(flatten)]
+    pub extra: X,
+}
+
+/// `model.json`: configuration `C`, normalisation, frame rate, training record (`T` its own
+/// fields) and the model's own top-level fields `X`.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ModelFile<C, T, X> {
+    pub config: C,
+    pub music_norm: NormStats,
+    pub pose_norm: NormStats,
+    pub fps: f64,
+    pub training: TrainingRecord<T>,
+    #[serde(flatten)]
+    pub extra: X,
+}
+
+/// No fields of a model's own.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Nothing {}
+
+/// Reads `dir/model.json`, or says the model is missing.
+pub fn read<F: DeserializeOwned>(dir: &Path, id: &str) -> Result<F, ModelError> {
+    let text = std::fs::read_to_string(dir.join(MODEL_FILE)).map_err(|_| ModelError::MissingWeights(id.into(), dir.display().to_string()))?;
+    serde_json::from_str(&text).map_err(|e| ModelError::Invalid(format!("{id}/{MODEL_FILE}: {e}")))
+}
+
+/// Reads `model.json` and loads the weights into a pool of networks built by `build`.
+pub fn load<F, M>(dir: &Path, id: &str, build: impl Fn(&tch::nn::Path, &F) -> M + Send + Sync + 'static) -> Result<(F, InstancePool<M>), ModelError>
+where
+    F: DeserializeOwned + Clone + Send + Sync + 'static,
+    M: Send,
+{
+    let file: F = read(dir, id)?;
+    let for_build = file.clone();
+    let pool = InstancePool::new(dir.join(WEIGHTS_FILE), move |p| build(p, &for_build))?;
+    Ok((file, pool))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+    struct Own {
+        steps: usize,
+        #[serde(default)]
+        weight: f64,
+    }
+
+    #[test]
+    fn own_fields_are_flat_and_older_files_read() {
+        let norm = NormStats { mean: vec![0.0], std: vec![1.0] };
+        let f = ModelFile {
+            config: 3u8,
+            music_norm: norm.clone(),
+            pose_norm: norm,
+            fps: 25.0,
+            training: TrainingRecord { epochs: 2, lr: 1e-3, batch: 4, seed: 9, final_train_loss: 0.5, minutes: 1.0, extra: Own { steps: 7, weight: 2.0 } },
+            extra: Own { steps: 1, weight: 0.0 },
+        };
+        let v = serde_json::to_value(&f).unwrap();
+        assert_eq!(v["training"]["steps"], 7);
+        assert_eq!(v["steps"], 1);
+        // A file written before a field existed reads with its default.
+        let mut old = v.clone();
+        old["training"].as_object_mut().unwrap().remove("weight");
+        let back: ModelFile<u8, Own, Own> = serde_json::from_value(old).unwrap();
+        assert_eq!(back.training.extra, Own { steps: 7, weight: 0.0 });
+    }
+}
