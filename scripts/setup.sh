@@ -6,8 +6,11 @@
 #     (.cargo/config.toml points LIBTORCH there; build.rs gives the binary an rpath to it).
 # With --test it also installs what the test suite uses: ffmpeg and sox (fixtures in other
 # formats are made from ../shared/audio at test time), blender and python3-numpy (the motion
-# exporters' round-trip test), and schemathesis (PyPI) in .venv-schemathesis (the API test that
-# runs it against the real server).
+# exporters' round-trip test), schemathesis (PyPI) in .venv-schemathesis (the API test that
+# runs it against the real server), and for the page's browser test (tests/web.rs): Debian's
+# chromium, Node.js 20+ with npm, and `npm ci` of tests/web (playwright-core) and web (esbuild and
+# three.js, to check that web/dist is what web/src builds to). Building choreo never needs npm:
+# the page's built files are committed under web/dist.
 #
 # Usage: scripts/setup.sh [--test]
 set -euo pipefail
@@ -101,6 +104,22 @@ if [[ $with_tests -eq 1 ]]; then
     "$ST_VENV/bin/pip" install --quiet "$SCHEMATHESIS"
     "$ST_VENV/bin/st" --version >/dev/null || { log "schemathesis is not runnable from $ST_VENV"; exit 1; }
   fi
+  # The page's browser test: Debian's chromium (Playwright's own browser download is not used),
+  # Node.js 20+ (playwright-core needs it) and the pinned npm packages of both lockfiles.
+  apt_install chromium
+  command -v node >/dev/null 2>&1 || apt_install nodejs
+  command -v npm >/dev/null 2>&1 || apt_install npm
+  node_major=$(node -p 'process.versions.node.split(".")[0]')
+  if [[ $node_major -lt 20 ]]; then
+    log "Node.js $(node --version) is too old for playwright-core: install Node.js 20 or later"; exit 1
+  fi
+  for dir in tests/web web; do
+    # Again only when the lockfile changed since the last install.
+    if [[ ! $dir/node_modules/.package-lock.json -nt $dir/package-lock.json ]]; then
+      log "npm ci in $dir"
+      (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
+    fi
+  done
   if [[ ! -d ../shared/audio ]]; then
     log "warning: ../shared/audio is missing; the upload tests need it"
   fi

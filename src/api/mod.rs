@@ -33,6 +33,7 @@ pub mod openapi;
 pub mod problem;
 pub mod songs;
 pub mod system;
+pub mod web;
 
 pub use problem::ApiError;
 
@@ -76,6 +77,7 @@ pub fn router(state: AppState) -> Router {
     let v1 = Router::new()
         .route("/songs", axum::routing::post(songs::upload))
         .route("/songs/{id}", get(songs::get))
+        .route("/songs/{id}/audio", get(songs::audio))
         .route(
             "/jobs",
             get(jobs::list).post(jobs::create).layer(axum::extract::DefaultBodyLimit::max(
@@ -98,6 +100,7 @@ pub fn router(state: AppState) -> Router {
     };
     Router::new()
         .nest("/v1", v1)
+        .merge(web::routes())
         .route("/healthz", get(system::healthz))
         .route("/readyz", get(system::readyz))
         .route("/metrics", get(system::metrics))

@@ -20,6 +20,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
     paths(
         super::songs::upload,
         super::songs::get,
+        super::songs::audio,
         super::jobs::create,
         super::jobs::list,
         super::jobs::get,
@@ -79,6 +80,7 @@ fn add_links(spec: &mut Value) {
             "operationId": "createJob",
             "requestBody": { "song_id": "$response.body#/id", "model": "dance-revolution" },
         },
+        "GetSongAudio": { "operationId": "getSongAudio", "parameters": { "id": "$response.body#/id" } },
     });
     let job = json!({
         "GetJob": { "operationId": "getJob", "parameters": { "id": "$response.body#/id" } },

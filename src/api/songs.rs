@@ -1,4 +1,4 @@
-//! `POST /v1/songs` and `GET /v1/songs/{id}`.
+//! `POST /v1/songs`, `GET /v1/songs/{id}` and `GET /v1/songs/{id}/audio`.
 //!
 //! An upload streams to a temp file inside the data dir while its size is checked and its
 //! sha256 computed; it is decoded with symphonia (the format comes from decoding, never the
@@ -351,6 +351,60 @@ pub async fn get(State(state): State<AppState>, Path(id): Path<String>) -> Resul
     let id = SongId::from_str(&id).map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
     let song = state.store.song(id).await?;
     Ok(Json(view(&state, song).await?))
+}
+
+/// The MIME type an uploaded song is served with, from the format its decode found.
+fn audio_mime(format: AudioFormat) -> &'static str {
+    match format {
+        AudioFormat::Mp3 => "audio/mpeg",
+        AudioFormat::Wav => "audio/wav",
+        AudioFormat::Flac => "audio/flac",
+        AudioFormat::Ogg => "audio/ogg",
+        AudioFormat::M4a => "audio/mp4",
+    }
+}
+
+/// The bytes of an uploaded song.
+// For the OpenAPI document only: a bare `Vec<u8>` would read there as an array of integers.
+#[derive(utoipa::ToSchema)]
+#[schema(value_type = String, format = Binary)]
+pub struct AudioBytes(pub Vec<u8>);
+
+/// The song's audio, byte for byte as it was uploaded.
+///
+/// For clients that play the song beside its dance (the page at `/` does): the content type
+/// follows the format found by decoding (`format` on the song).
+#[utoipa::path(
+    get,
+    path = "/v1/songs/{id}/audio",
+    operation_id = "getSongAudio",
+    tag = "songs",
+    params(("id" = String, Path, description = "Song id")),
+    responses(
+        (status = 200, description = "The uploaded file", content(
+            (inline(AudioBytes) = "audio/mpeg"),
+            (inline(AudioBytes) = "audio/wav"),
+            (inline(AudioBytes) = "audio/flac"),
+            (inline(AudioBytes) = "audio/ogg"),
+            (inline(AudioBytes) = "audio/mp4"),
+        )),
+        (status = 404, description = "No such song", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn audio(State(state): State<AppState>, Path(id): Path<String>) -> Result<axum::response::Response, ApiError> {
+    use axum::response::IntoResponse;
+    let id = SongId::from_str(&id).map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
+    let song = state.store.song(id).await?;
+    let path = state.data.song_path(song.id, song.format);
+    let file = tokio::fs::File::open(&path).await.map_err(|e| ApiError::Internal(format!("opening song {}: {e}", song.id)))?;
+    // Streamed: a song may be up to max_upload_bytes.
+    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::new(file));
+    let headers = [
+        (header::CONTENT_TYPE, HeaderValue::from_static(audio_mime(song.format))),
+        (header::CONTENT_LENGTH, HeaderValue::from(song.size_bytes)),
+    ];
+    Ok((headers, body).into_response())
 }
 
 #[cfg(test)]

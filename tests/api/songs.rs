@@ -1,4 +1,4 @@
-//! `POST /v1/songs` and `GET /v1/songs/{id}`.
+//! `POST /v1/songs`, `GET /v1/songs/{id}` and `GET /v1/songs/{id}/audio`.
 use crate::helpers::{expect_problem, fixture, short_song, spawn_app};
 use reqwest::StatusCode;
 use serde_json::Value;
@@ -82,5 +82,23 @@ async fn a_song_shows_its_analysis_status_before_the_analysis() {
     expect_problem(missing, StatusCode::NOT_FOUND, "song-not-found").await;
     let garbage = app.get("/v1/songs/not-an-id").await;
     expect_problem(garbage, StatusCode::NOT_FOUND, "song-not-found").await;
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_song_is_served_back_byte_for_byte_with_its_format_s_type() {
+    let app = spawn_app().await;
+    for (path, mime) in [(short_song(), "audio/ogg"), (fixture("mp3"), "audio/mpeg"), (fixture("m4a"), "audio/mp4")] {
+        let bytes = std::fs::read(&path).expect("read song");
+        let song = app.upload_ok(&path).await;
+        let response = app.get(&format!("/v1/songs/{}/audio", song["id"].as_str().expect("id"))).await;
+        assert_eq!(response.status(), StatusCode::OK);
+        assert_eq!(response.headers()["content-type"], mime, "{}", path.display());
+        assert_eq!(response.headers()["content-length"], bytes.len().to_string().as_str());
+        assert!(response.bytes().await.expect("body").as_ref() == bytes.as_slice(), "{} comes back as uploaded", path.display());
+    }
+    let unknown = app.get("/v1/songs/01900000-0000-7000-8000-000000000000/audio").await;
+    expect_problem(unknown, StatusCode::NOT_FOUND, "song-not-found").await;
+    expect_problem(app.get("/v1/songs/not-an-id/audio").await, StatusCode::NOT_FOUND, "song-not-found").await;
     app.stop().await;
 }

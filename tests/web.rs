@@ -1,0 +1,184 @@
+//! The page at `/` in a real browser: Playwright (`tests/web/flow.mjs`, npm `playwright-core`)
+//! drives Debian's chromium through the whole flow against two real servers, the page from one
+//! and the API from another origin with a bearer token and CORS: upload (file input and drop),
+//! key poses, submit, progress, playback in sync with the song, scrub, loop, compare, report
+//! plots, downloads and deep links. Also: the embedded assets, and that `web/dist` is what
+//! `web/src` builds to.
+//!
+//! Needs node, chromium, `npm ci` in `tests/web` and `web` (all from `scripts/setup.sh --test`)
+//! and `../shared/audio`; without them the tests fail under `CI=true` and print a notice otherwise.
+#[allow(dead_code)]
+#[path = "api/helpers.rs"]
+mod helpers;
+
+use helpers::{spawn_app, spawn_app_with, TestApp};
+use reqwest::StatusCode;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+const TOKEN: &str = "web-test-token";
+/// The whole browser flow (two generations of a 5-s song, playback) is killed past this.
+const FLOW_LIMIT: Duration = Duration::from_secs(480);
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn chromium() -> PathBuf {
+    std::env::var_os("CHROMIUM").map_or_else(|| PathBuf::from("/usr/bin/chromium"), PathBuf::from)
+}
+
+/// What a test needs besides node.
+struct Needs {
+    node_modules: &'static [&'static str],
+    browser_and_songs: bool,
+}
+
+/// What is missing to run a test, if anything.
+fn missing_prerequisites(needs: &Needs) -> Vec<String> {
+    let mut missing = Vec::new();
+    match std::process::Command::new("node").arg("--version").output() {
+        Ok(out) if out.status.success() => {}
+        _ => missing.push("node (Node.js 20 or later)".to_string()),
+    }
+    for dir in needs.node_modules {
+        if !root().join(dir).is_dir() {
+            missing.push(format!("{dir} (npm ci)"));
+        }
+    }
+    if needs.browser_and_songs {
+        if !chromium().is_file() {
+            missing.push(format!("{} (Debian's chromium package)", chromium().display()));
+        }
+        if !root().join("../shared/audio/trumpet_loop_90bpm.ogg").is_file() {
+            missing.push("../shared/audio".to_string());
+        }
+    }
+    missing
+}
+
+/// True when the test can run; panics under CI=true when it cannot, so CI never skips it.
+fn ready(test: &str, needs: &Needs) -> bool {
+    let missing = missing_prerequisites(needs);
+    if missing.is_empty() {
+        return true;
+    }
+    let message = format!("{test} needs {}: run `scripts/setup.sh --test` (or `make test`)", missing.join(", "));
+    assert!(std::env::var("CI").as_deref() != Ok("true"), "{message} (CI=true)");
+    eprintln!("NOTICE: skipping: {message}");
+    false
+}
+
+fn models_dir() -> PathBuf {
+    let dir = root().join("models");
+    assert!(dir.join("keypose-transformer/weights.safetensors").is_file(), "the committed weights are missing from {}", dir.display());
+    dir
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
+    if !ready("the browser flow test", &Needs { node_modules: &["tests/web/node_modules/playwright-core"], browser_and_songs: true }) {
+        return;
+    }
+    // The page from one server; the API, with models, a token and CORS for the page, from another.
+    let page: TestApp = spawn_app().await;
+    let page_origin = format!("http://{}", page.addr);
+    let api = spawn_app_with(|c| {
+        c.models_dir = models_dir();
+        c.auth_token = Some(choreo::config::Secret::new(TOKEN));
+        c.cors_origins = vec![page_origin.clone()];
+    })
+    .await;
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-flow");
+    let _ = std::fs::remove_dir_all(&out);
+    std::fs::create_dir_all(&out).expect("screenshot dir");
+
+    let run = tokio::process::Command::new("node")
+        .arg(root().join("tests/web/flow.mjs"))
+        .env("PAGE_URL", &page_origin)
+        .env("API_URL", format!("http://{}", api.addr))
+        .env("TOKEN", TOKEN)
+        .env("SONG", helpers::short_song())
+        .env("OUT_DIR", &out)
+        .env("CHROMIUM", chromium())
+        .current_dir(root().join("tests/web"))
+        .kill_on_drop(true)
+        .output();
+    let output = tokio::time::timeout(FLOW_LIMIT, run)
+        .await
+        .unwrap_or_else(|_| panic!("the browser flow ran past {FLOW_LIMIT:?}; screenshots in {}", out.display()))
+        .expect("run node tests/web/flow.mjs");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    eprintln!("{stdout}{}", String::from_utf8_lossy(&output.stderr));
+    assert!(output.status.success(), "the browser flow failed (above); screenshots in {}", out.display());
+
+    // The script's own summary, checked again here: the numbers the issue asks for.
+    let summary: serde_json::Value = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("summary: "))
+        .and_then(|s| serde_json::from_str(s).ok())
+        .expect("the flow prints its summary");
+    for (phase, sync) in summary["sync"].as_object().expect("sync phases") {
+        let worst = sync["worst_diff_s"].as_f64().expect("worst_diff_s");
+        assert!(worst <= 1.0 / 25.0, "{phase}: |audioTime − animationTime| reached {worst} s");
+        assert!(sync["audio_advanced_s"].as_f64().expect("advanced") > 1.0, "{phase}: the song did not play: {sync}");
+    }
+    assert!(summary["sync"].as_object().is_some_and(|s| s.len() >= 3), "playing, looping and deep link were measured: {summary}");
+    let shots = summary["screenshots"].as_array().expect("screenshots");
+    assert!(shots.len() >= 6, "{summary}");
+    for shot in shots {
+        let bytes = std::fs::read(shot.as_str().expect("path")).expect("screenshot file");
+        assert!(bytes.starts_with(b"\x89PNG") && bytes.len() > 10_000, "{shot} is a real PNG");
+    }
+    eprintln!("screenshots: {}", out.display());
+    api.stop().await;
+    page.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_page_and_its_assets_are_served_from_the_binary() {
+    let app = spawn_app().await;
+    let page = app.get("/").await;
+    assert_eq!(page.status(), StatusCode::OK);
+    let csp = page.headers().get("content-security-policy").and_then(|v| v.to_str().ok()).unwrap_or("").to_string();
+    assert!(csp.contains("script-src 'self'") && csp.contains("default-src 'none'"), "{csp}");
+    assert!(page.headers()["content-type"].to_str().is_ok_and(|t| t.starts_with("text/html")));
+    let html = page.text().await.expect("html");
+    assert!(html.contains(r#"src="/assets/app.js""#) && html.contains(r#"href="/assets/app.css""#), "{html}");
+    // Nothing is fetched from elsewhere: no absolute URL in the page's src or href attributes.
+    assert!(!html.contains("src=\"http") && !html.contains("href=\"http"), "{html}");
+
+    for (path, kind) in [("/assets/app.js", "text/javascript"), ("/assets/app.css", "text/css")] {
+        let first = app.get(path).await;
+        assert_eq!(first.status(), StatusCode::OK, "{path}");
+        assert!(first.headers()["content-type"].to_str().is_ok_and(|t| t.starts_with(kind)), "{path}");
+        let etag = first.headers()["etag"].clone();
+        let body = first.bytes().await.expect("body");
+        let on_disk = std::fs::read(root().join("web/dist").join(path.trim_start_matches("/assets/"))).expect("web/dist file");
+        assert_eq!(body.as_ref(), on_disk.as_slice(), "{path} is web/dist's file");
+        let again = app.client.get(app.url(path)).header("if-none-match", etag).send().await.expect("GET");
+        assert_eq!(again.status(), StatusCode::NOT_MODIFIED, "{path} with its ETag");
+    }
+    app.stop().await;
+}
+
+#[test]
+fn web_dist_is_what_web_src_builds_to() {
+    let needs = Needs { node_modules: &["web/node_modules/esbuild", "web/node_modules/three"], browser_and_songs: false };
+    if !ready("the web build check", &needs) {
+        return;
+    }
+    let out = tempfile::tempdir().expect("tempdir");
+    let status = std::process::Command::new("node")
+        .arg("build.mjs")
+        .arg(out.path())
+        .current_dir(root().join("web"))
+        .status()
+        .expect("run node web/build.mjs");
+    assert!(status.success(), "npm run build failed");
+    for file in ["index.html", "app.js", "app.css"] {
+        let built = std::fs::read(out.path().join(file)).expect("built file");
+        let committed = std::fs::read(root().join("web/dist").join(file)).expect("committed file");
+        assert!(built == committed, "web/dist/{file} differs from what web/src builds to: run `npm run build` in web/ and commit web/dist");
+    }
+}

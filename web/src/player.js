@@ -1,0 +1,177 @@
+// The 3-D view of one dance: three.js plays the job's motion.glb (its skeleton and animation) and
+// draws a body of capsules between the animated joints. The view never keeps time itself: the
+// caller sets it from the song's audio element every frame (setTime), so the dance cannot drift
+// from the music.
+import {
+  AmbientLight, CircleGeometry, Color, CylinderGeometry, DirectionalLight, GridHelper, Mesh,
+  MeshBasicMaterial, MeshStandardMaterial, PerspectiveCamera, Scene, SphereGeometry, Vector3, WebGLRenderer,
+  AnimationMixer, Quaternion, Fog,
+} from 'three';
+import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
+import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
+
+const UP = new Vector3(0, 1, 0);
+const LIMB = new CylinderGeometry(1, 1, 1, 12);
+const BALL = new SphereGeometry(1, 16, 12);
+const MATERIALS = {
+  left: new MeshStandardMaterial({ color: 0x2b6cb0, roughness: 0.6 }),
+  right: new MeshStandardMaterial({ color: 0xd4662a, roughness: 0.6 }),
+  centre: new MeshStandardMaterial({ color: 0x555555, roughness: 0.7 }),
+  head: new MeshStandardMaterial({ color: 0xe8d9c0, roughness: 0.8 }),
+};
+// Thinner limbs for the hand-direction points and the feet; no limb for zero-length branches.
+const radius = (name) => (name.includes('hand_dir') ? 0.012 : /heel|toe/.test(name) ? 0.02 : /head/.test(name) ? 0.015 : 0.035);
+const side = (name) => (name.startsWith('left_') ? 'left' : name.startsWith('right_') ? 'right' : 'centre');
+
+let software = null;
+/** Whether WebGL here is rasterised in software (once per page, from a throwaway context). */
+function softwareRendering() {
+  if (software === null) {
+    const gl = document.createElement('canvas').getContext('webgl2');
+    const info = gl?.getExtension('WEBGL_debug_renderer_info');
+    const name = gl ? String(gl.getParameter(info ? info.UNMASKED_RENDERER_WEBGL : gl.RENDERER)) : '';
+    software = /swiftshader|llvmpipe|software/i.test(name);
+    gl?.getExtension('WEBGL_lose_context')?.loseContext();
+  }
+  return software;
+}
+
+export class Stage {
+  constructor(container) {
+    this.container = container;
+    // A software rasteriser (no GPU: SwiftShader, llvmpipe) spends most of a frame on
+    // multisampling and then stalls the page; there the figure is drawn without it.
+    this.renderer = new WebGLRenderer({ antialias: !softwareRendering() });
+    this.renderer.setPixelRatio(Math.min(2, window.devicePixelRatio || 1));
+    container.appendChild(this.renderer.domElement);
+    this.scene = new Scene();
+    this.scene.background = new Color(0xf3f0e8);
+    // The floor fades into the background instead of ending in a band of grid lines.
+    this.scene.fog = new Fog(0xf3f0e8, 5, 12);
+    this.camera = new PerspectiveCamera(40, 1, 0.05, 100);
+    this.camera.position.set(0, 1.5, 4.5);
+    this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    this.controls.target.set(0, 1, 0);
+    this.controls.update();
+    this.scene.add(new AmbientLight(0xffffff, 1.2));
+    const sun = new DirectionalLight(0xffffff, 2.2);
+    sun.position.set(2, 5, 3);
+    this.scene.add(sun);
+    const grid = new GridHelper(20, 40, 0xb8b0a0, 0xd8d2c4);
+    this.scene.add(grid);
+    this.shadow = new Mesh(new CircleGeometry(0.35, 32), new MeshBasicMaterial({ color: 0x000000, transparent: true, opacity: 0.15 }));
+    this.shadow.rotation.x = -Math.PI / 2;
+    this.shadow.position.y = 0.002;
+    this.scene.add(this.shadow);
+    this.clear();
+    new ResizeObserver(() => this.resize()).observe(container);
+    this.resize();
+  }
+
+  resize() {
+    const w = Math.max(1, this.container.clientWidth), h = Math.max(1, this.container.clientHeight);
+    this.renderer.setSize(w, h, true);
+    this.camera.aspect = w / h;
+    this.camera.updateProjectionMatrix();
+    this.render();
+  }
+
+  clear() {
+    if (this.root) this.scene.remove(this.root);
+    for (const part of this.parts || []) this.scene.remove(part.mesh);
+    this.root = null;
+    this.parts = [];
+    this.action = null;
+    this.duration = 0;
+    this.render();
+  }
+
+  /** Loads a motion.glb (bytes); returns the clip's duration in seconds. */
+  async load(glb) {
+    this.clear();
+    const gltf = await new GLTFLoader().parseAsync(glb, '');
+    const clip = gltf.animations[0];
+    if (!clip) throw new Error('motion.glb has no animation');
+    this.root = gltf.scene;
+    this.scene.add(this.root);
+    this.mixer = new AnimationMixer(this.root);
+    this.action = this.mixer.clipAction(clip);
+    this.action.play();
+    this.duration = clip.duration;
+    this.bones = {};
+    this.root.traverse((node) => { if (node.name) this.bones[node.name] = node; });
+    for (const node of Object.values(this.bones)) {
+      const parent = node.parent;
+      if (!parent || !parent.name || !this.bones[parent.name]) continue;
+      const mesh = new Mesh(LIMB, MATERIALS[side(node.name)]);
+      this.scene.add(mesh);
+      this.parts.push({ kind: 'limb', mesh, from: parent, to: node, r: radius(node.name) });
+    }
+    if (this.bones.head_left && this.bones.head_right) {
+      const mesh = new Mesh(BALL, MATERIALS.head);
+      mesh.scale.setScalar(0.11);
+      this.scene.add(mesh);
+      this.parts.push({ kind: 'head', mesh, a: this.bones.head_left, b: this.bones.head_right });
+    }
+    for (const name of ['left_wrist', 'right_wrist', 'left_knee', 'right_knee', 'left_elbow', 'right_elbow']) {
+      if (!this.bones[name]) continue;
+      const mesh = new Mesh(BALL, MATERIALS[side(name)]);
+      mesh.scale.setScalar(0.045);
+      this.scene.add(mesh);
+      this.parts.push({ kind: 'ball', mesh, at: this.bones[name] });
+    }
+    this.setTime(0);
+    const centre = this.bones.body_centre?.getWorldPosition(new Vector3()) ?? new Vector3(0, 1, 0);
+    this.controls.target.set(centre.x, 0.95, centre.z);
+    this.camera.position.set(centre.x, 1.35, centre.z + 3.4);
+    this.controls.update();
+    return this.duration;
+  }
+
+  /** Shows the pose at `t` seconds (clamped to the dance); returns the animation time it shows. */
+  setTime(t) {
+    if (!this.action) return 0;
+    this.action.time = Math.min(Math.max(0, t), this.duration);
+    this.mixer.update(0);
+    this.root.updateMatrixWorld(true);
+    const a = new Vector3(), b = new Vector3(), d = new Vector3(), q = new Quaternion();
+    for (const part of this.parts) {
+      if (part.kind === 'limb') {
+        part.from.getWorldPosition(a);
+        part.to.getWorldPosition(b);
+        d.subVectors(b, a);
+        const length = d.length();
+        part.mesh.visible = length > 0.01;
+        if (!part.mesh.visible) continue;
+        part.mesh.position.addVectors(a, b).multiplyScalar(0.5);
+        part.mesh.quaternion.copy(q.setFromUnitVectors(UP, d.divideScalar(length)));
+        part.mesh.scale.set(part.r, length, part.r);
+      } else if (part.kind === 'head') {
+        part.a.getWorldPosition(a);
+        part.b.getWorldPosition(b);
+        part.mesh.position.addVectors(a, b).multiplyScalar(0.5);
+      } else {
+        part.at.getWorldPosition(part.mesh.position);
+      }
+    }
+    // The camera follows the dancer across the floor, keeping the angle the user gave it.
+    const centre = this.bones.body_centre.getWorldPosition(a);
+    this.shadow.position.x = centre.x;
+    this.shadow.position.z = centre.z;
+    const shift = new Vector3(centre.x - this.controls.target.x, 0, centre.z - this.controls.target.z).multiplyScalar(0.15);
+    this.controls.target.add(shift);
+    this.camera.position.add(shift);
+    this.controls.update();
+    return this.action.time;
+  }
+
+  /** The world position of a joint now, in metres. */
+  joint(name) {
+    const bone = this.bones?.[name];
+    return bone ? bone.getWorldPosition(new Vector3()).toArray() : null;
+  }
+
+  render() {
+    this.renderer.render(this.scene, this.camera);
+  }
+}

@@ -1,0 +1,216 @@
+// A job's report as plots (music beats against motion beats; speed over time), its scores, and
+// its files to download.
+
+/** Mean joint speed per frame (m/s) from motion.json, over the 23 dataset joints. */
+export function speeds(motion) {
+  const { positions, fps } = motion;
+  const out = new Float32Array(positions.length);
+  for (let t = 1; t < positions.length; t++) {
+    let sum = 0;
+    for (let j = 1; j <= 23; j++) {
+      const a = positions[t][j], b = positions[t - 1][j];
+      sum += Math.hypot(a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+    }
+    out[t] = (sum / 23) * fps;
+  }
+  out[0] = out[1] ?? 0;
+  // Half a beat of smoothing (5 frames): the plot shows the dance's pulse, not capture jitter.
+  const smooth = new Float32Array(out.length);
+  for (let t = 0; t < out.length; t++) {
+    let s = 0, n = 0;
+    for (let k = Math.max(0, t - 2); k <= Math.min(out.length - 1, t + 2); k++) { s += out[k]; n++; }
+    smooth[t] = s / n;
+  }
+  return smooth;
+}
+
+function canvas(parent, kind, label) {
+  const figure = document.createElement('figure');
+  const c = document.createElement('canvas');
+  c.className = `plot ${kind}`;
+  const caption = document.createElement('figcaption');
+  caption.textContent = label;
+  figure.append(c, caption);
+  parent.append(figure);
+  return c;
+}
+
+/** Sizes a canvas's pixels to its box (only when they differ: resizing clears it); returns the pixel ratio. */
+function fit(c) {
+  const ratio = window.devicePixelRatio || 1;
+  const w = Math.max(1, Math.round(c.clientWidth * ratio)), h = Math.max(1, Math.round(c.clientHeight * ratio));
+  if (c.width !== w) c.width = w;
+  if (c.height !== h) c.height = h;
+  return ratio;
+}
+
+const fmt = (v) => (typeof v === 'number' ? (Number.isInteger(v) ? String(v) : v.toFixed(3)) : String(v));
+
+/** Numeric and boolean leaves of an object, as [dotted.path, value] rows. */
+function leaves(obj, prefix = '') {
+  if (obj == null || typeof obj !== 'object' || Array.isArray(obj)) return [[prefix, obj]];
+  return Object.entries(obj).flatMap(([k, v]) => leaves(v, prefix ? `${prefix}.${k}` : k));
+}
+
+export class ReportView {
+  /** job: JobView; report: report.json; motion: motion.json; analysis: the song's analysis (or null). */
+  constructor(container, { api, job, report, motion, analysis }) {
+    this.container = container;
+    container.replaceChildren();
+    this.duration = motion.num_frames / motion.fps;
+    const title = document.createElement('h3');
+    title.textContent = `${job.model} · seed ${job.seed} · ${job.id.slice(0, 8)}…`;
+    container.append(title);
+
+    this.beats = canvas(container, 'beats', 'Beats: music (top; downbeats thick) against the dance\'s motion beats (bottom)');
+    this.speed = canvas(container, 'speed', 'Mean joint speed over time (m/s), music beats behind');
+    this.music = report.music_beat_times ?? analysis?.beat_times ?? [];
+    this.downbeats = analysis?.downbeat_times ?? [];
+    const kinematic = report.kinematic_beat_times ?? {};
+    this.motionBeats = kinematic.bailando ?? Object.values(kinematic)[0] ?? [];
+    this.speeds = speeds(motion);
+    this.fps = motion.fps;
+    this.playhead = 0;
+
+    const downloads = document.createElement('div');
+    downloads.className = 'downloads';
+    const files = [['motion.bvh', 'BVH'], ['motion.glb', 'glb'], ['motion.json', 'JSON'], ['report.json', 'report'], ['preview.png', 'preview']];
+    for (const [file, label] of files) {
+      const button = document.createElement('button');
+      button.type = 'button';
+      button.textContent = `Download ${label}`;
+      button.dataset.file = file;
+      // Fetched with the token (a plain link could not send it), then saved from a blob URL.
+      button.addEventListener('click', async () => {
+        button.disabled = true;
+        try {
+          const blob = await api.blob(`/v1/jobs/${job.id}/${file}`);
+          const a = document.createElement('a');
+          a.href = URL.createObjectURL(blob);
+          a.download = `${job.id}-${file}`;
+          document.body.append(a);
+          a.click();
+          a.remove();
+          setTimeout(() => URL.revokeObjectURL(a.href), 60_000);
+        } catch (e) {
+          window.dispatchEvent(new CustomEvent('choreo-error', { detail: e }));
+        } finally {
+          button.disabled = false;
+        }
+      });
+      downloads.append(button);
+    }
+    container.append(downloads);
+
+    const table = document.createElement('table');
+    table.className = 'scores';
+    const rows = [...leaves(report.scores ?? {}, 'scores'), ...leaves(report.physical ?? {}, 'physical')]
+      .filter(([, v]) => typeof v === 'number' || typeof v === 'boolean' || v === null);
+    for (const [name, value] of rows) {
+      const tr = table.insertRow();
+      tr.insertCell().textContent = name;
+      tr.insertCell().textContent = value === null ? '–' : fmt(value);
+    }
+    const details = document.createElement('details');
+    const summary = document.createElement('summary');
+    summary.textContent = `Scores (${rows.length})`;
+    details.append(summary, table);
+    container.append(details);
+
+    new ResizeObserver(() => this.draw()).observe(this.speed);
+    this.draw();
+  }
+
+  x(c, t) { return (t / this.duration) * c.width; }
+
+  /** Draws both plots into cached pictures, then shows them with the playhead. */
+  draw() {
+    this.bases = [this.beats, this.speed].map((c) => {
+      fit(c);
+      const base = document.createElement('canvas');
+      base.width = c.width;
+      base.height = c.height;
+      return base;
+    });
+    this.drawBeats(this.bases[0], this.beats);
+    this.drawSpeed(this.bases[1], this.speed);
+    this.blit();
+  }
+
+  blit() {
+    const ratio = window.devicePixelRatio || 1;
+    [this.beats, this.speed].forEach((c, i) => {
+      const g = c.getContext('2d');
+      g.drawImage(this.bases[i], 0, 0);
+      g.strokeStyle = '#111';
+      g.lineWidth = 1.5 * ratio;
+      g.beginPath();
+      g.moveTo(this.x(c, this.playhead), 0);
+      g.lineTo(this.x(c, this.playhead), c.height);
+      g.stroke();
+    });
+  }
+
+  drawBeats(c) {
+    const ratio = window.devicePixelRatio || 1, g = c.getContext('2d'), h = c.height;
+    g.fillStyle = '#fbfaf6';
+    g.fillRect(0, 0, c.width, h);
+    const tick = (t, y0, y1, color, width) => {
+      g.strokeStyle = color;
+      g.lineWidth = width * ratio;
+      g.beginPath();
+      g.moveTo(this.x(c, t), y0);
+      g.lineTo(this.x(c, t), y1);
+      g.stroke();
+    };
+    g.fillStyle = '#777';
+    g.font = `${11 * ratio}px sans-serif`;
+    g.fillText('music', 4 * ratio, 12 * ratio);
+    g.fillText('motion', 4 * ratio, h - 4 * ratio);
+    for (const t of this.music) tick(t, 16 * ratio, h / 2 - 2 * ratio, 'rgba(230,140,30,0.9)', 1.5);
+    for (const t of this.downbeats) tick(t, 16 * ratio, h / 2 - 2 * ratio, 'rgba(200,30,40,0.95)', 3);
+    for (const t of this.motionBeats) tick(t, h / 2 + 2 * ratio, h - 16 * ratio, 'rgba(43,108,176,0.95)', 2);
+  }
+
+  drawSpeed(c) {
+    const ratio = window.devicePixelRatio || 1, g = c.getContext('2d'), h = c.height;
+    g.fillStyle = '#fbfaf6';
+    g.fillRect(0, 0, c.width, h);
+    const top = Math.max(0.5, ...this.speeds) * 1.1;
+    const y = (v) => h - 4 * ratio - (v / top) * (h - 14 * ratio);
+    for (const t of this.music) {
+      g.strokeStyle = 'rgba(230,140,30,0.35)';
+      g.lineWidth = ratio;
+      g.beginPath();
+      g.moveTo(this.x(c, t), 0);
+      g.lineTo(this.x(c, t), h);
+      g.stroke();
+    }
+    g.strokeStyle = '#c9c3b4';
+    g.fillStyle = '#777';
+    g.font = `${10 * ratio}px sans-serif`;
+    for (let v = 0.5; v < top; v += 0.5) {
+      g.beginPath();
+      g.moveTo(0, y(v));
+      g.lineTo(c.width, y(v));
+      g.stroke();
+      g.fillText(`${v.toFixed(1)} m/s`, 3 * ratio, y(v) - 2 * ratio);
+    }
+    g.strokeStyle = '#2b6cb0';
+    g.lineWidth = 1.5 * ratio;
+    g.beginPath();
+    this.speeds.forEach((v, t) => {
+      const px = this.x(c, t / this.fps);
+      if (t === 0) g.moveTo(px, y(v));
+      else g.lineTo(px, y(v));
+    });
+    g.stroke();
+  }
+
+  /** Moves the playhead; redraws (from the cached plots) only when it moved by a pixel or more. */
+  setPlayhead(t) {
+    const moved = Math.abs(this.x(this.speed, t) - this.x(this.speed, this.playhead)) >= 1;
+    this.playhead = t;
+    if (moved) this.blit();
+  }
+}
