@@ -18,6 +18,7 @@ use tokio_util::sync::CancellationToken;
 use tracing::Instrument;
 
 pub mod pipeline;
+pub mod process;
 pub mod standalone;
 
 pub use pipeline::Pipeline;
@@ -180,7 +181,8 @@ fn owner_prefix() -> String {
     format!("{}-{}", std::process::id(), &uuid::Uuid::now_v7().simple().to_string()[24..])
 }
 
-/// Starts `count` workers and the lease reaper; they stop when `shutdown` is cancelled.
+/// Starts `count` workers, the lease reaper and the store's wake-ups (jobs queued by other
+/// processes); they stop when `shutdown` is cancelled.
 pub fn start(ctx: Context, count: usize, shutdown: CancellationToken) -> Vec<JoinHandle<()>> {
     let prefix = owner_prefix();
     let mut handles: Vec<JoinHandle<()>> = (0..count)
@@ -190,8 +192,16 @@ pub fn start(ctx: Context, count: usize, shutdown: CancellationToken) -> Vec<Joi
             tokio::spawn(worker_loop(ctx.clone(), owner, shutdown.clone()).instrument(span))
         })
         .collect();
+    handles.push(tokio::spawn(watch(ctx.clone(), shutdown.clone())));
     handles.push(tokio::spawn(reaper(ctx, shutdown)));
     handles
+}
+
+/// Wakes idle workers when another process queues a job (PostgreSQL's `LISTEN`).
+async fn watch(ctx: Context, shutdown: CancellationToken) {
+    if let Err(e) = ctx.store.watch(ctx.wake.clone(), shutdown).await {
+        tracing::error!(error = %e, "job notifications stopped; idle workers find new jobs by polling");
+    }
 }
 
 /// Requeues jobs whose lease expired (their worker died), every half lease.

@@ -13,7 +13,10 @@ mod jobs;
 mod keypose;
 mod models;
 mod openapi;
+#[path = "../common/postgres.rs"]
+mod postgres;
 mod preview;
 mod roundtrip;
+mod scale;
 mod schemathesis;
 mod songs;
