@@ -40,7 +40,7 @@ fn choreo(args: &[&str], data_dir: &Path, database_url: &str) -> Command {
 }
 
 /// Spawns a command and returns it with its first stdout line.
-async fn spawn(mut command: Command) -> (Child, String) {
+pub async fn spawn(mut command: Command) -> (Child, String) {
     let mut child = command.spawn().expect("spawn choreo");
     let stdout = child.stdout.take().expect("stdout");
     let mut lines = BufReader::new(stdout).lines();
