@@ -19,6 +19,7 @@ pub const SETTINGS: &[&str] = &[
     "bind", "data_dir", "models_dir", "workers", "max_upload_bytes", "max_duration_s", "audio_timeout_s",
     "max_job_body_bytes", "cors_origins", "auth_token", "log_format", "log_level", "lease_s", "heartbeat_s",
     "max_attempts", "retry_backoff_s", "poll_s", "database_url",
+    "artifacts_url", "s3_endpoint", "s3_region",
 ];
 
 /// Errors from loading or checking the configuration.
@@ -120,6 +121,13 @@ pub struct Config {
     /// `sqlite://PATH` or `postgres://user:password@host:port/db`; unset means
     /// `sqlite://<data_dir>/choreo.sqlite`. Never printed.
     pub database_url: Option<Secret>,
+    /// Where songs and results are kept: unset or `local` (the data dir), or
+    /// `s3://bucket[/prefix]` (credentials from the `AWS_*` environment).
+    pub artifacts_url: Option<String>,
+    /// The S3-compatible server's URL when not AWS (MinIO, moto, ...); `http://` is allowed.
+    pub s3_endpoint: Option<String>,
+    /// The bucket's region.
+    pub s3_region: String,
 }
 
 impl Default for Config {
@@ -143,6 +151,9 @@ impl Default for Config {
             retry_backoff_s: 1.0,
             poll_s: 0.5,
             database_url: None,
+            artifacts_url: None,
+            s3_endpoint: None,
+            s3_region: "us-east-1".into(),
         }
     }
 }
@@ -179,6 +190,7 @@ struct Defaults {
     max_attempts: u32,
     retry_backoff_s: f64,
     poll_s: f64,
+    s3_region: String,
 }
 
 impl Defaults {
@@ -201,6 +213,7 @@ impl Defaults {
             max_attempts: d.max_attempts,
             retry_backoff_s: d.retry_backoff_s,
             poll_s: d.poll_s,
+            s3_region: d.s3_region,
         }
     }
 }
@@ -253,6 +266,11 @@ impl Config {
             return invalid("poll_s", "must be a positive number of seconds");
         }
         self.database()?;
+        if let Some(url) = &self.artifacts_url {
+            if url != "local" && !url.strip_prefix("s3://").is_some_and(|rest| !rest.is_empty() && !rest.starts_with('/')) {
+                return invalid("artifacts_url", "must be \"local\" or s3://bucket[/prefix]");
+            }
+        }
         if let Some(token) = &self.auth_token {
             if token.expose().is_empty() {
                 return invalid("auth_token", "must not be empty; leave it unset to turn auth off");

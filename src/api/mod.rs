@@ -3,6 +3,7 @@
 //! [`Server::start`] is the whole service: it opens the data dir and database, requeues the
 //! jobs of a previous process whose leases expired, loads the models, starts the workers and
 //! serves HTTP. Tests start it on port 0; `choreo serve` starts it on the configured address.
+use crate::artifacts::ArtifactStore;
 use crate::config::Config;
 use crate::models::Registry;
 use crate::queue::{DataDir, Store};
@@ -47,6 +48,8 @@ pub struct AppState {
     pub store: Arc<dyn Store>,
     pub registry: Arc<Registry>,
     pub data: DataDir,
+    /// Where songs and results are kept (the data dir, or a bucket).
+    pub artifacts: Arc<dyn ArtifactStore>,
     pub config: Arc<Config>,
     /// Wakes idle workers when a job is registered.
     pub wake: Arc<Notify>,
@@ -73,6 +76,8 @@ pub enum StartError {
     Queue(#[from] crate::queue::QueueError),
     #[error("loading models: {0}")]
     Models(#[from] crate::models::ModelError),
+    #[error(transparent)]
+    Artifacts(#[from] crate::artifacts::ArtifactError),
 }
 
 /// All routes, with auth on `/v1`, CORS, request ids and tracing.
@@ -216,6 +221,7 @@ impl Server {
             tracing::info!(files = stale, "removed uploads cut off by a previous process");
         }
         let store: Arc<dyn Store> = crate::queue::open(&config.database()?).await?;
+        let artifacts = crate::artifacts::open(&config, data.clone())?;
         let registry = Arc::new(Registry::load(&config.models_dir)?);
         let workers = config.worker_count();
         tracing::info!(
@@ -225,7 +231,7 @@ impl Server {
             "starting"
         );
 
-        let ctx = crate::worker::context(store.clone(), registry.clone(), data.clone(), &config);
+        let ctx = crate::worker::context(store.clone(), artifacts.clone(), registry.clone(), data.clone(), &config);
         if run_workers {
             let recovered = crate::worker::recover(store.as_ref(), ctx.policy).await?;
             if recovered != crate::queue::Requeued::default() {
@@ -238,6 +244,7 @@ impl Server {
             store,
             registry,
             data,
+            artifacts,
             config: Arc::new(config.clone()),
             wake: ctx.wake.clone(),
             metrics: metrics.clone(),

@@ -22,6 +22,8 @@ pub enum StartError {
     Queue(#[from] QueueError),
     #[error("loading models: {0}")]
     Models(#[from] ModelError),
+    #[error(transparent)]
+    Artifacts(#[from] crate::artifacts::ArtifactError),
 }
 
 /// Running workers of one process.
@@ -37,8 +39,9 @@ impl WorkerProcess {
         let data = DataDir::create(&config.data_dir)
             .map_err(|source| StartError::DataDir { path: config.data_dir.display().to_string(), source })?;
         let store = crate::queue::open(&config.database()?).await?;
+        let artifacts = crate::artifacts::open(config, data.clone())?;
         let registry = Arc::new(Registry::load(&config.models_dir)?);
-        let ctx: Context = super::context(store.clone(), registry, data, config);
+        let ctx: Context = super::context(store.clone(), artifacts, registry, data, config);
         let recovered = super::recover(store.as_ref(), ctx.policy).await?;
         if recovered != Requeued::default() {
             tracing::warn!(?recovered, "requeued jobs whose leases had expired");

@@ -1,5 +1,6 @@
 //! API tests: the real service on port 0, real HTTP (reqwest), a real SQLite file on disk.
 //! One module per endpoint or concern; `helpers::spawn_app()` starts the service.
+mod artifacts;
 mod bad_input;
 mod concurrency;
 mod crash;
