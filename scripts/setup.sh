@@ -22,6 +22,8 @@ CUPTI="nvidia-cuda-cupti==13.0.85.*"
 VENV=.torchenv
 SCHEMATHESIS="schemathesis==4.32.5"
 ST_VENV=.venv-schemathesis
+MOTO="moto[server]==5.2.5"
+MOTO_VENV=.venv-moto
 
 with_tests=0
 case "${1:-}" in
@@ -120,6 +122,17 @@ if [[ $with_tests -eq 1 ]]; then
       (cd "$dir" && npm ci --no-audit --no-fund --loglevel=error)
     fi
   done
+  # PostgreSQL's server binaries (/usr/lib/postgresql/<v>/bin); tests run them as the postgres
+  # user when run as root, with setpriv (util-linux).
+  if ! compgen -G "/usr/lib/postgresql/*/bin/initdb" >/dev/null; then apt_install postgresql; fi
+  command -v setpriv >/dev/null 2>&1 || apt_install util-linux
+  # moto's S3 server, pinned, in its own venv (tests/api/artifacts.rs runs its moto_server).
+  if ! "$MOTO_VENV/bin/python" -c 'import moto, flask; assert moto.__version__ == "'"${MOTO#moto\[server\]==}"'"' 2>/dev/null; then
+    [[ -x "$MOTO_VENV/bin/pip" ]] || python3 -m venv "$MOTO_VENV"
+    log "installing $MOTO into $MOTO_VENV"
+    "$MOTO_VENV/bin/pip" install --quiet "$MOTO"
+    [[ -x "$MOTO_VENV/bin/moto_server" ]] || { log "moto_server is not runnable from $MOTO_VENV"; exit 1; }
+  fi
   if [[ ! -d ../shared/audio ]]; then
     log "warning: ../shared/audio is missing; the upload tests need it"
   fi

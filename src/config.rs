@@ -18,7 +18,8 @@ pub const ENV_PREFIX: &str = "CHOREO_";
 pub const SETTINGS: &[&str] = &[
     "bind", "data_dir", "models_dir", "workers", "max_upload_bytes", "max_duration_s", "audio_timeout_s",
     "max_job_body_bytes", "cors_origins", "auth_token", "log_format", "log_level", "lease_s", "heartbeat_s",
-    "max_attempts", "retry_backoff_s", "poll_s",
+    "max_attempts", "retry_backoff_s", "poll_s", "database_url",
+    "artifacts_url", "s3_endpoint", "s3_region",
 ];
 
 /// Errors from loading or checking the configuration.
@@ -69,6 +70,15 @@ pub enum LogFormat {
     Json,
 }
 
+/// The job and song database a [`Config`] names.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Database {
+    /// One SQLite file, for one process (the default: `<data_dir>/choreo.sqlite`).
+    Sqlite(PathBuf),
+    /// A PostgreSQL database shared by API and worker processes; the URL may hold a password.
+    Postgres(Secret),
+}
+
 /// The whole service configuration.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -108,6 +118,16 @@ pub struct Config {
     pub retry_backoff_s: f64,
     /// How often idle workers look for new jobs, in seconds.
     pub poll_s: f64,
+    /// `sqlite://PATH` or `postgres://user:password@host:port/db`; unset means
+    /// `sqlite://<data_dir>/choreo.sqlite`. Never printed.
+    pub database_url: Option<Secret>,
+    /// Where songs and results are kept: unset or `local` (the data dir), or
+    /// `s3://bucket[/prefix]` (credentials from the `AWS_*` environment).
+    pub artifacts_url: Option<String>,
+    /// The S3-compatible server's URL when not AWS (MinIO, moto, ...); `http://` is allowed.
+    pub s3_endpoint: Option<String>,
+    /// The bucket's region.
+    pub s3_region: String,
 }
 
 impl Default for Config {
@@ -130,6 +150,10 @@ impl Default for Config {
             max_attempts: 3,
             retry_backoff_s: 1.0,
             poll_s: 0.5,
+            database_url: None,
+            artifacts_url: None,
+            s3_endpoint: None,
+            s3_region: "us-east-1".into(),
         }
     }
 }
@@ -166,6 +190,7 @@ struct Defaults {
     max_attempts: u32,
     retry_backoff_s: f64,
     poll_s: f64,
+    s3_region: String,
 }
 
 impl Defaults {
@@ -188,6 +213,7 @@ impl Defaults {
             max_attempts: d.max_attempts,
             retry_backoff_s: d.retry_backoff_s,
             poll_s: d.poll_s,
+            s3_region: d.s3_region,
         }
     }
 }
@@ -239,6 +265,12 @@ impl Config {
         if !(self.poll_s.is_finite() && self.poll_s > 0.0) {
             return invalid("poll_s", "must be a positive number of seconds");
         }
+        self.database()?;
+        if let Some(url) = &self.artifacts_url {
+            if url != "local" && !url.strip_prefix("s3://").is_some_and(|rest| !rest.is_empty() && !rest.starts_with('/')) {
+                return invalid("artifacts_url", "must be \"local\" or s3://bucket[/prefix]");
+            }
+        }
         if let Some(token) = &self.auth_token {
             if token.expose().is_empty() {
                 return invalid("auth_token", "must not be empty; leave it unset to turn auth off");
@@ -256,9 +288,29 @@ impl Config {
         }
     }
 
-    /// The SQLite database file.
+    /// The SQLite database file used when `database_url` is unset.
     pub fn database_path(&self) -> PathBuf {
         self.data_dir.join("choreo.sqlite")
+    }
+
+    /// The database `database_url` names (`sqlite://`, `postgres://` or `postgresql://`).
+    pub fn database(&self) -> Result<Database, ConfigError> {
+        let Some(url) = &self.database_url else {
+            return Ok(Database::Sqlite(self.database_path()));
+        };
+        let url = url.expose();
+        if let Some(path) = url.strip_prefix("sqlite://") {
+            // sqlx's query options (`?mode=`) are not ours to take: the store sets its own.
+            if path.is_empty() || path.contains('?') {
+                return Err(ConfigError::Invalid { field: "database_url", message: "sqlite://PATH needs a file path and no query".into() });
+            }
+            Ok(Database::Sqlite(PathBuf::from(path)))
+        } else if url.starts_with("postgres://") || url.starts_with("postgresql://") {
+            Ok(Database::Postgres(Secret::new(url)))
+        } else {
+            // The URL is not echoed: it may hold a password.
+            Err(ConfigError::Invalid { field: "database_url", message: "must start with sqlite:// or postgres://".into() })
+        }
     }
 }
 
@@ -286,6 +338,25 @@ mod tests {
             assert_eq!(c.data_dir, PathBuf::from("/tmp/y"));
             assert_eq!(c.workers, 3);
             assert_eq!(c.max_attempts, 7);
+            Ok(())
+        });
+    }
+
+    #[test]
+    fn database_url_picks_the_store_and_never_prints() {
+        figment::Jail::expect_with(|jail| {
+            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default()).map_err(|e| e.to_string())?;
+            assert_eq!(c.database().map_err(|e| e.to_string())?, Database::Sqlite(PathBuf::from("data/choreo.sqlite")));
+            jail.set_env("CHOREO_DATABASE_URL", "sqlite:///tmp/q.sqlite");
+            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default()).map_err(|e| e.to_string())?;
+            assert_eq!(c.database().map_err(|e| e.to_string())?, Database::Sqlite(PathBuf::from("/tmp/q.sqlite")));
+            jail.set_env("CHOREO_DATABASE_URL", "postgres://u:hunter2@db:5432/choreo");
+            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default()).map_err(|e| e.to_string())?;
+            assert!(matches!(c.database(), Ok(Database::Postgres(_))));
+            assert!(!format!("{c:?} {:?}", c.database()).contains("hunter2"));
+            jail.set_env("CHOREO_DATABASE_URL", "mysql://u:hunter2@db/choreo");
+            let err = Config::load(Some(Path::new("missing.toml")), &Overrides::default()).unwrap_err().to_string();
+            assert!(err.contains("database_url") && !err.contains("hunter2"), "{err}");
             Ok(())
         });
     }

@@ -4,9 +4,11 @@
 //! Data flows one way, and each step lives in its own module:
 //!
 //! 1. **upload** (`api`): `POST /v1/songs` stores the bytes under the data dir, named by their
-//!    id, after `audio` has proved them decodable. An `analyze` job is queued for the song.
-//! 2. **queue** (`queue`): jobs are rows in SQLite. A worker claims one in a single atomic
-//!    `UPDATE … RETURNING`, holds a lease and heartbeats; expired leases are requeued.
+//!    id, after `audio` has proved them decodable, and publishes them to the artifact store
+//!    (`artifacts`: the data dir, or an S3 bucket). An `analyze` job is queued for the song.
+//! 2. **queue** (`queue`): jobs are rows in SQLite, or in PostgreSQL shared by API and worker
+//!    processes. A worker claims one in a single atomic `UPDATE … RETURNING` (`FOR UPDATE SKIP
+//!    LOCKED` in PostgreSQL), holds a lease and heartbeats; expired leases are requeued.
 //! 3. **decode → features** (`audio`): symphonia decodes, rubato resamples, and the feature
 //!    sets each paper used are computed to match librosa.
 //! 4. **model** (`models`): one file per paper; libtorch runs on the worker's blocking thread.
@@ -18,6 +20,7 @@
 //! Only worker threads (tokio blocking threads) and the CLI's `train`/`generate`/`eval` call into
 //! libtorch. Each worker runs with one intra-op thread, so N workers never oversubscribe the cores.
 pub mod api;
+pub mod artifacts;
 pub mod audio;
 pub mod config;
 pub mod error;

@@ -16,8 +16,10 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run the HTTP service and its workers.
-    Serve(ServiceArgs),
+    /// Run the HTTP service and its workers (`--no-workers`: the API only).
+    Serve(ServeArgs),
+    /// Run workers only, no HTTP: they take jobs from the configured database.
+    Worker(WorkerArgs),
     /// Print a song's tempo, beats and downbeats as JSON.
     Analyze {
         /// An mp3, wav, flac, ogg or m4a file.
@@ -82,6 +84,34 @@ impl ServiceArgs {
 }
 
 #[derive(Args)]
+struct ServeArgs {
+    #[command(flatten)]
+    service: ServiceArgs,
+    /// Serve the API only; `choreo worker` processes sharing the database run the jobs.
+    #[arg(long)]
+    no_workers: bool,
+}
+
+#[derive(Args)]
+struct WorkerArgs {
+    /// Where songs and results live [env: CHOREO_DATA_DIR].
+    #[arg(long)]
+    data_dir: Option<PathBuf>,
+    /// Where trained models live [env: CHOREO_MODELS_DIR].
+    #[arg(long)]
+    models_dir: Option<PathBuf>,
+    /// Worker count; 0 = one per core [env: CHOREO_WORKERS].
+    #[arg(long)]
+    workers: Option<usize>,
+}
+
+impl WorkerArgs {
+    fn overrides(&self) -> Overrides {
+        Overrides { data_dir: self.data_dir.clone(), models_dir: self.models_dir.clone(), workers: self.workers, ..Overrides::default() }
+    }
+}
+
+#[derive(Args)]
 struct HttpBenchArgs {
     /// The song whose analysis keeps the workers busy.
     #[arg(long, default_value = "../shared/audio/vibe_ace.ogg")]
@@ -103,7 +133,10 @@ fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     let load = |args: &ServiceArgs| Config::load(cli.config.as_deref(), &args.overrides()).context("loading configuration");
     match &cli.command {
-        Command::Serve(args) => serve(load(args)?),
+        Command::Serve(args) => serve(load(&args.service)?, !args.no_workers),
+        Command::Worker(args) => {
+            worker(Config::load(cli.config.as_deref(), &args.overrides()).context("loading configuration")?)
+        }
         Command::Analyze { path } => analyze(path),
         Command::Doctor(args) => {
             for (name, value) in choreo::telemetry::doctor(&load(args)?) {
@@ -141,15 +174,33 @@ fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")
 }
 
-fn serve(config: Config) -> anyhow::Result<()> {
+fn serve(config: Config, with_workers: bool) -> anyhow::Result<()> {
     choreo::telemetry::init_tracing(config.log_format, &config.log_level);
     runtime()?.block_on(async {
-        let server = choreo::api::Server::start(config).await.context("starting the service")?;
+        let server = if with_workers {
+            choreo::api::Server::start(config).await
+        } else {
+            choreo::api::Server::start_api_only(config).await
+        }
+        .context("starting the service")?;
         // Tools and tests read the bound address (port 0 resolves here) from this line.
         println!("choreo listening on http://{}", server.addr());
         shutdown_signal().await;
         tracing::info!("shutting down");
         server.stop().await;
+        Ok(())
+    })
+}
+
+fn worker(config: Config) -> anyhow::Result<()> {
+    choreo::telemetry::init_tracing(config.log_format, &config.log_level);
+    runtime()?.block_on(async {
+        let workers = choreo::worker::process::WorkerProcess::start(&config).await.context("starting the workers")?;
+        // Tools and tests wait for this line.
+        println!("choreo worker running {} workers", workers.count());
+        shutdown_signal().await;
+        tracing::info!("shutting down");
+        workers.stop().await;
         Ok(())
     })
 }

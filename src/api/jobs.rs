@@ -471,8 +471,11 @@ pub async fn result(State(state): State<AppState>, Path((id, file)): Path<(Strin
     if !job.files.files.iter().any(|f| f == name) {
         return Err(ApiError::ResultNotFound(format!("job {} did not write {name}", job.id)));
     }
-    let path = state.data.job_dir(job.id).join(name);
-    let bytes = tokio::fs::read(&path).await.map_err(|e| ApiError::Internal(format!("reading {name} of job {}: {e}", job.id)))?;
+    let bytes = state
+        .artifacts
+        .read(crate::artifacts::Artifact::Result(job.id, name))
+        .await
+        .map_err(|e| ApiError::Internal(format!("reading {name} of job {}: {e}", job.id)))?;
     Ok(([(header::CONTENT_TYPE, content_type(name))], Body::from(bytes)).into_response())
 }
 

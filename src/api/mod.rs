@@ -3,9 +3,10 @@
 //! [`Server::start`] is the whole service: it opens the data dir and database, requeues the
 //! jobs of a previous process whose leases expired, loads the models, starts the workers and
 //! serves HTTP. Tests start it on port 0; `choreo serve` starts it on the configured address.
+use crate::artifacts::ArtifactStore;
 use crate::config::Config;
 use crate::models::Registry;
-use crate::queue::{DataDir, SqliteStore, Store};
+use crate::queue::{DataDir, Store};
 use crate::telemetry;
 use axum::extract::{Request, State};
 use axum::http::{header, HeaderName, Method};
@@ -48,6 +49,8 @@ pub struct AppState {
     pub store: Arc<dyn Store>,
     pub registry: Arc<Registry>,
     pub data: DataDir,
+    /// Where songs and results are kept (the data dir, or a bucket).
+    pub artifacts: Arc<dyn ArtifactStore>,
     pub config: Arc<Config>,
     /// Wakes idle workers when a job is registered.
     pub wake: Arc<Notify>,
@@ -55,6 +58,8 @@ pub struct AppState {
     /// Bounds concurrent upload decodes, so memory stays bounded under many uploads.
     pub decode_permits: Arc<Semaphore>,
     pub workers_running: Arc<AtomicBool>,
+    /// Whether this process runs workers (`false` under `choreo serve --no-workers`).
+    pub runs_workers: bool,
     /// Cancelled when the server stops; in-flight upload decodes watch it and return.
     pub shutdown: CancellationToken,
 }
@@ -67,9 +72,13 @@ pub enum StartError {
     #[error("binding {bind}: {source}")]
     Bind { bind: String, source: std::io::Error },
     #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    #[error(transparent)]
     Queue(#[from] crate::queue::QueueError),
     #[error("loading models: {0}")]
     Models(#[from] crate::models::ModelError),
+    #[error(transparent)]
+    Artifacts(#[from] crate::artifacts::ArtifactError),
 }
 
 /// All routes, with auth on `/v1`, CORS, request ids and tracing.
@@ -199,26 +208,38 @@ pub struct Server {
 impl Server {
     /// Starts everything; `config.bind` may use port 0.
     pub async fn start(config: Config) -> Result<Self, StartError> {
+        Self::launch(config, true).await
+    }
+
+    /// Starts the HTTP API without workers: `choreo worker` processes run the jobs.
+    pub async fn start_api_only(config: Config) -> Result<Self, StartError> {
+        Self::launch(config, false).await
+    }
+
+    async fn launch(config: Config, run_workers: bool) -> Result<Self, StartError> {
         let data_err = |source| StartError::DataDir { path: config.data_dir.display().to_string(), source };
         let data = DataDir::create(&config.data_dir).map_err(data_err)?;
         let stale = data.clean_tmp().map_err(data_err)?;
         if stale > 0 {
             tracing::info!(files = stale, "removed uploads cut off by a previous process");
         }
-        let store: Arc<dyn Store> = Arc::new(SqliteStore::open(&config.database_path()).await?);
+        let store: Arc<dyn Store> = crate::queue::open(&config.database()?).await?;
+        let artifacts = crate::artifacts::open(&config, data.clone())?;
         let registry = Arc::new(Registry::load(&config.models_dir)?);
         let workers = config.worker_count();
         tracing::info!(
             data_dir = %config.data_dir.display(),
             models = ?registry.list().iter().map(|m| m.id.0.clone()).collect::<Vec<_>>(),
-            workers,
+            workers = if run_workers { workers } else { 0 },
             "starting"
         );
 
-        let ctx = crate::worker::context(store.clone(), registry.clone(), data.clone(), &config);
-        let recovered = crate::worker::recover(store.as_ref(), ctx.policy).await?;
-        if recovered != crate::queue::Requeued::default() {
-            tracing::warn!(?recovered, "recovered jobs of a previous process whose leases had expired");
+        let ctx = crate::worker::context(store.clone(), artifacts.clone(), registry.clone(), data.clone(), &config);
+        if run_workers {
+            let recovered = crate::worker::recover(store.as_ref(), ctx.policy).await?;
+            if recovered != crate::queue::Requeued::default() {
+                tracing::warn!(?recovered, "recovered jobs of a previous process whose leases had expired");
+            }
         }
         let metrics = telemetry::prometheus();
         let shutdown = CancellationToken::new();
@@ -226,11 +247,13 @@ impl Server {
             store,
             registry,
             data,
+            artifacts,
             config: Arc::new(config.clone()),
             wake: ctx.wake.clone(),
             metrics: metrics.clone(),
             decode_permits: Arc::new(Semaphore::new(std::thread::available_parallelism().map_or(1, |n| n.get()))),
             workers_running: Arc::new(AtomicBool::new(false)),
+            runs_workers: run_workers,
             shutdown: shutdown.clone(),
         };
 
@@ -239,8 +262,13 @@ impl Server {
             .map_err(|source| StartError::Bind { bind: config.bind.clone(), source })?;
         let addr = listener.local_addr().map_err(|source| StartError::Bind { bind: config.bind.clone(), source })?;
 
-        let worker_handles = crate::worker::start(ctx, workers, shutdown.clone());
-        state.workers_running.store(true, Ordering::Relaxed);
+        let worker_handles = if run_workers {
+            let handles = crate::worker::start(ctx, workers, shutdown.clone());
+            state.workers_running.store(true, Ordering::Relaxed);
+            handles
+        } else {
+            Vec::new()
+        };
         let upkeep = tokio::spawn({
             let shutdown = shutdown.clone();
             async move {

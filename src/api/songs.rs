@@ -6,6 +6,7 @@
 //! that records the song.
 use super::problem::{ApiError, Problem};
 use super::AppState;
+use crate::artifacts::Artifact;
 use crate::audio::{self, Analysis, AudioError, AudioFormat, Budget, DecodeOptions, Keep};
 use crate::queue::{JobKind, NewJob, Song, SongId, Status};
 use axum::extract::multipart::{Field, Multipart, MultipartRejection};
@@ -292,6 +293,9 @@ pub async fn upload(
     let id = SongId::new();
     let path = state.data.song_path(id, decoded.format);
     received.file.persist(&path).map_err(|e| ApiError::Internal(format!("storing song: {}", e.error)))?;
+    // Published before its analyze job exists, so any worker that claims the job finds it.
+    let artifact = Artifact::Song(id, decoded.format);
+    state.artifacts.publish(artifact).await.map_err(|e| ApiError::Internal(format!("storing song: {e}")))?;
     let song = Song {
         id,
         filename: received.filename,
@@ -313,8 +317,8 @@ pub async fn upload(
     let (stored, created) = state.store.add_song(song, analyze).await.map_err(ApiError::from)?;
     if !created {
         // Another upload of the same bytes won the race; keep its file, drop ours.
-        if let Err(e) = std::fs::remove_file(&path) {
-            tracing::warn!(error = %e, path = %path.display(), "could not remove a duplicate upload");
+        if let Err(e) = state.artifacts.remove(artifact).await {
+            tracing::warn!(error = %e, "could not remove a duplicate upload");
         }
         return Ok((StatusCode::OK, location(stored.id), Json(view(&state, stored).await?)));
     }

@@ -36,7 +36,8 @@ pub async fn healthz() -> Json<Health> {
     )
 )]
 pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
-    if !state.workers_running.load(Ordering::Relaxed) {
+    // An API-only process (`serve --no-workers`) is ready when its database answers.
+    if state.runs_workers && !state.workers_running.load(Ordering::Relaxed) {
         return Err(ApiError::NotReady("workers are not running".into()));
     }
     state.store.ping().await.map_err(|e| ApiError::NotReady(format!("database: {e}")))?;

@@ -7,8 +7,10 @@
 //! dead workers to the queue. Every status change is appended to `job_events` by a trigger, so
 //! the history of a job cannot drift from its row.
 //!
-//! Handlers and workers see only the traits, so a Postgres store (`FOR UPDATE SKIP LOCKED`)
-//! can be added beside `sqlite.rs` without touching them.
+//! Handlers and workers see only the traits. Two stores keep the same contract (the tests in
+//! `tests/queue.rs` run against both): [`SqliteStore`], one file beside one process, and
+//! [`PgStore`], one database shared by API and worker processes on many hosts (`FOR UPDATE SKIP
+//! LOCKED`, `LISTEN/NOTIFY`). [`open`] picks one from the configured database URL.
 use crate::audio::{Analysis, AudioFormat};
 use crate::models::ModelId;
 use crate::motion::KeyPose;
@@ -17,13 +19,18 @@ use futures::future::BoxFuture;
 use serde::{Deserialize, Serialize};
 use std::fmt;
 use std::str::FromStr;
+use std::sync::Arc;
 use std::time::Duration;
+use tokio::sync::Notify;
+use tokio_util::sync::CancellationToken;
 use uuid::Uuid;
 
 pub mod files;
+pub mod postgres;
 pub mod sqlite;
 
 pub use files::DataDir;
+pub use postgres::PgStore;
 pub use sqlite::SqliteStore;
 
 /// Errors from the job and song store.
@@ -402,6 +409,9 @@ pub trait JobStore: Send + Sync {
     fn counts(&self) -> StoreFuture<'_, Vec<(Status, u64)>>;
     /// Whether the database answers.
     fn ping(&self) -> StoreFuture<'_, ()>;
+    /// Wakes `wake` whenever a job becomes claimable in another process, until `shutdown`.
+    /// A store without notifications returns at once; workers then find such jobs by polling.
+    fn watch(&self, wake: Arc<Notify>, shutdown: CancellationToken) -> StoreFuture<'_, ()>;
 }
 
 /// The song catalogue.
@@ -421,3 +431,12 @@ pub trait SongStore: Send + Sync {
 pub trait Store: JobStore + SongStore {}
 
 impl<T: JobStore + SongStore> Store for T {}
+
+/// Opens the store `database` names, running its migrations.
+pub async fn open(database: &crate::config::Database) -> Result<Arc<dyn Store>, QueueError> {
+    use crate::config::Database;
+    Ok(match database {
+        Database::Sqlite(path) => Arc::new(SqliteStore::open(path).await?),
+        Database::Postgres(url) => Arc::new(PgStore::connect(url).await?),
+    })
+}

@@ -12,7 +12,10 @@ use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, S
 use sqlx::{Row, SqlitePool};
 use std::path::Path;
 use std::str::FromStr;
+use std::sync::Arc;
 use std::time::Duration;
+use tokio::sync::Notify;
+use tokio_util::sync::CancellationToken;
 
 /// How long a writer waits for the lock before SQLite gives up.
 const BUSY_TIMEOUT: Duration = Duration::from_secs(30);
@@ -411,6 +414,12 @@ impl JobStore for SqliteStore {
             Ok(())
         })
     }
+
+    fn watch(&self, _wake: Arc<Notify>, _shutdown: CancellationToken) -> StoreFuture<'_, ()> {
+        // SQLite cannot notify another process: this process's registrations wake its workers
+        // directly (`worker::Context::wake`), other processes' jobs are found by polling.
+        Box::pin(async { Ok(()) })
+    }
 }
 
 impl SongStore for SqliteStore {
@@ -475,90 +484,5 @@ impl SongStore for SqliteStore {
             let row = sqlx::query(&sql).bind(song.to_string()).fetch_optional(&self.pool).await?;
             row.as_ref().map(job_from_row).transpose()
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::audio::AudioFormat;
-
-    fn policy() -> LeasePolicy {
-        LeasePolicy { lease: Duration::from_millis(50), backoff: Duration::ZERO }
-    }
-
-    async fn store_with_song(dir: &Path) -> (SqliteStore, SongId) {
-        let store = SqliteStore::open(&dir.join("q.sqlite")).await.expect("open store");
-        let song = Song {
-            id: SongId::new(),
-            filename: "a.ogg".into(),
-            format: AudioFormat::Ogg,
-            duration_s: 1.0,
-            sample_rate: 44_100,
-            channels: 2,
-            sha256: "00".into(),
-            size_bytes: 1,
-            analysis: None,
-            created_at: Utc::now(),
-        };
-        let analyze = NewJob { kind: JobKind::Analyze { song_id: song.id }, priority: 0, max_attempts: 2, idempotency: None };
-        let (song, created) = store.add_song(song, analyze).await.expect("add song");
-        assert!(created);
-        (store, song.id)
-    }
-
-    #[tokio::test]
-    async fn claim_is_exclusive_and_expired_leases_retry_then_fail() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let (store, _) = store_with_song(dir.path()).await;
-        let first = store.claim("w1", policy()).await.expect("claim").expect("a job");
-        assert_eq!(first.attempts, 1);
-        assert!(store.claim("w2", policy()).await.expect("claim").is_none(), "one job, claimed once");
-        tokio::time::sleep(Duration::from_millis(80)).await;
-        let requeued = store.requeue_expired(policy()).await.expect("requeue");
-        assert_eq!(requeued.requeued, vec![first.id]);
-        // The dead worker can no longer finish it.
-        assert!(!store.complete(first.id, "w1", Outcome::Files(JobFiles::default())).await.expect("complete"));
-        let second = store.claim("w2", policy()).await.expect("claim").expect("requeued job");
-        assert_eq!((second.id, second.attempts), (first.id, 2));
-        tokio::time::sleep(Duration::from_millis(80)).await;
-        let requeued = store.requeue_expired(policy()).await.expect("requeue");
-        assert_eq!(requeued.failed, vec![first.id], "max_attempts = 2 reached");
-        let job = store.job(first.id).await.expect("job");
-        assert_eq!(job.status, Status::Failed);
-        assert!(job.error.as_deref().is_some_and(|e| e.contains("lease expired on attempt 2 of 2")), "{:?}", job.error);
-    }
-
-    #[tokio::test]
-    async fn cancel_queued_is_immediate_and_running_is_requested() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let (store, song) = store_with_song(dir.path()).await;
-        let running = store.claim("w", policy()).await.expect("claim").expect("job");
-        let queued = NewJob { kind: JobKind::Analyze { song_id: song }, priority: 0, max_attempts: 1, idempotency: None };
-        let queued = store.register(queued).await.expect("register").job().clone();
-        assert_eq!(store.cancel(queued.id).await.expect("cancel").status, Status::Cancelled);
-        let after = store.cancel(running.id).await.expect("cancel");
-        assert_eq!((after.status, after.cancel_requested), (Status::Running, true));
-        let beat = store.heartbeat(running.id, "w", "x", 0.5, LeasePolicy { lease: Duration::from_secs(5), ..policy() }).await;
-        assert_eq!(beat.expect("beat"), Beat::Held { cancel_requested: true });
-        assert!(store.finish_cancelled(running.id, "w").await.expect("finish"));
-        assert_eq!(store.job(running.id).await.expect("job").status, Status::Cancelled);
-    }
-
-    #[tokio::test]
-    async fn idempotency_key_returns_the_same_job_or_conflicts() {
-        let dir = tempfile::tempdir().expect("tempdir");
-        let (store, song) = store_with_song(dir.path()).await;
-        let job = |hash: &str| NewJob {
-            kind: JobKind::Analyze { song_id: song },
-            priority: 0,
-            max_attempts: 1,
-            idempotency: Some(Idempotency { key: "k".into(), request_hash: hash.into() }),
-        };
-        let a = store.register(job("h1")).await.expect("register");
-        let b = store.register(job("h1")).await.expect("register again");
-        assert!(matches!(a, Registered::Created(_)) && matches!(b, Registered::Existing(_)));
-        assert_eq!(a.job().id, b.job().id);
-        assert!(matches!(store.register(job("h2")).await, Err(QueueError::IdempotencyConflict(id)) if id == a.job().id));
     }
 }

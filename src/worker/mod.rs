@@ -5,6 +5,7 @@
 //! back. While the job runs, a heartbeat task extends the lease, copies stage and progress to
 //! the job row, and reads back `cancel_requested`; the job sees that flag at its next
 //! [`Progress::report`] checkpoint. A panic inside a job fails that job and the worker goes on.
+use crate::artifacts::{Artifact, ArtifactStore};
 use crate::audio::AudioError;
 use crate::models::{Cancelled, ModelError, ModelId, Progress, Registry};
 use crate::queue::{Beat, DataDir, Job, JobStore, LeasePolicy, Outcome, QueueError, Song, Store};
@@ -18,6 +19,7 @@ use tokio_util::sync::CancellationToken;
 use tracing::Instrument;
 
 pub mod pipeline;
+pub mod process;
 pub mod standalone;
 
 pub use pipeline::Pipeline;
@@ -47,6 +49,8 @@ pub enum WorkerError {
     Cancelled,
     #[error("the job panicked: {0}")]
     Panicked(String),
+    #[error("artifact store: {0}")]
+    Artifact(#[from] crate::artifacts::ArtifactError),
 }
 
 impl From<ModelError> for WorkerError {
@@ -89,6 +93,7 @@ impl WorkerError {
             WorkerError::Metrics(_) => "report-failed",
             WorkerError::Cancelled => "cancelled",
             WorkerError::Panicked(_) => "job-panicked",
+            WorkerError::Artifact(e) => e.code(),
         }
     }
 
@@ -106,6 +111,7 @@ impl WorkerError {
             WorkerError::Metrics(_) => false,
             WorkerError::Cancelled => false,
             WorkerError::Panicked(_) => false,
+            WorkerError::Artifact(e) => e.is_retryable(),
         }
     }
 }
@@ -120,6 +126,8 @@ pub trait Execute: Send + Sync + 'static {
 #[derive(Clone)]
 pub struct Context {
     pub store: Arc<dyn Store>,
+    /// Songs are fetched from it before a job runs; results are published to it after.
+    pub artifacts: Arc<dyn ArtifactStore>,
     pub executor: Arc<dyn Execute>,
     pub policy: LeasePolicy,
     /// How often a running job heartbeats and flushes progress.
@@ -180,7 +188,8 @@ fn owner_prefix() -> String {
     format!("{}-{}", std::process::id(), &uuid::Uuid::now_v7().simple().to_string()[24..])
 }
 
-/// Starts `count` workers and the lease reaper; they stop when `shutdown` is cancelled.
+/// Starts `count` workers, the lease reaper and the store's wake-ups (jobs queued by other
+/// processes); they stop when `shutdown` is cancelled.
 pub fn start(ctx: Context, count: usize, shutdown: CancellationToken) -> Vec<JoinHandle<()>> {
     let prefix = owner_prefix();
     let mut handles: Vec<JoinHandle<()>> = (0..count)
@@ -190,8 +199,16 @@ pub fn start(ctx: Context, count: usize, shutdown: CancellationToken) -> Vec<Joi
             tokio::spawn(worker_loop(ctx.clone(), owner, shutdown.clone()).instrument(span))
         })
         .collect();
+    handles.push(tokio::spawn(watch(ctx.clone(), shutdown.clone())));
     handles.push(tokio::spawn(reaper(ctx, shutdown)));
     handles
+}
+
+/// Wakes idle workers when another process queues a job (PostgreSQL's `LISTEN`).
+async fn watch(ctx: Context, shutdown: CancellationToken) {
+    if let Err(e) = ctx.store.watch(ctx.wake.clone(), shutdown).await {
+        tracing::error!(error = %e, "job notifications stopped; idle workers find new jobs by polling");
+    }
 }
 
 /// Requeues jobs whose lease expired (their worker died), every half lease.
@@ -282,8 +299,13 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
     let done = CancellationToken::new();
     let heartbeat = tokio::spawn(heartbeat_loop(ctx.clone(), owner.to_string(), job.id, state.clone(), done.clone(), shutdown.clone()));
 
-    let result = match ctx.store.song(job.kind.song_id()).await {
+    let song = match ctx.store.song(job.kind.song_id()).await {
         Err(e) => Err(WorkerError::Queue(e)),
+        // The song in the local data dir, where the pipeline reads it (a bucket's is fetched).
+        Ok(song) => ctx.artifacts.fetch(Artifact::Song(song.id, song.format)).await.map(|_| song).map_err(WorkerError::from),
+    };
+    let result = match song {
+        Err(e) => Err(e),
         Ok(song) => {
             let executor = ctx.executor.clone();
             let mut progress = JobProgress { state: state.clone() };
@@ -306,6 +328,12 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
                 },
             }
         }
+    };
+    // Results are published before the job is marked succeeded, so a succeeded job's files
+    // are there for every API process to serve.
+    let result = match result {
+        Ok(Outcome::Files(files)) => publish(ctx, job.id, &files).await.map(|()| Outcome::Files(files)),
+        other => other,
     };
     done.cancel();
     if let Err(e) = heartbeat.await {
@@ -342,6 +370,13 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
         Ok((false, _)) => tracing::warn!("lease lost before the outcome was written; the queue owns the job now"),
         Err(e) => tracing::error!(error = %e, "writing the job outcome failed; its lease will expire and it will be retried"),
     }
+}
+
+async fn publish(ctx: &Context, id: crate::queue::JobId, files: &crate::queue::JobFiles) -> Result<(), WorkerError> {
+    for file in &files.files {
+        ctx.artifacts.publish(Artifact::Result(id, file)).await?;
+    }
+    Ok(())
 }
 
 async fn heartbeat_loop(
@@ -382,9 +417,16 @@ async fn heartbeat_loop(
 }
 
 /// Builds the service's worker context.
-pub fn context(store: Arc<dyn Store>, registry: Arc<Registry>, data: DataDir, config: &crate::config::Config) -> Context {
+pub fn context(
+    store: Arc<dyn Store>,
+    artifacts: Arc<dyn ArtifactStore>,
+    registry: Arc<Registry>,
+    data: DataDir,
+    config: &crate::config::Config,
+) -> Context {
     Context {
         store,
+        artifacts,
         executor: Arc::new(Pipeline::new(registry, data, config)),
         policy: LeasePolicy {
             lease: Duration::from_secs_f64(config.lease_s),

@@ -22,7 +22,8 @@ impl Execute for Scripted {
     }
 }
 
-async fn add(store: &SqliteStore, name: &str) -> JobId {
+/// A song (an empty file in the data dir: `Scripted` never reads it) and its analyze job.
+async fn add(store: &SqliteStore, data: &std::path::Path, name: &str) -> JobId {
     let song = Song {
         id: SongId::new(),
         filename: name.into(),
@@ -35,6 +36,7 @@ async fn add(store: &SqliteStore, name: &str) -> JobId {
         analysis: None,
         created_at: chrono::Utc::now(),
     };
+    std::fs::write(DataDir::create(data).expect("data dir").song_path(song.id, song.format), b"").expect("song file");
     let job = NewJob { kind: JobKind::Analyze { song_id: song.id }, priority: 0, max_attempts: 1, idempotency: None };
     let (song, _) = store.add_song(song, job).await.expect("add song");
     store.analyze_job(song.id).await.expect("query").expect("analyze job").id
@@ -52,9 +54,10 @@ async fn wait_terminal(store: &SqliteStore, id: JobId) -> Job {
     }
 }
 
-fn context(store: Arc<SqliteStore>) -> Context {
+fn context(store: Arc<SqliteStore>, data: &std::path::Path) -> Context {
     Context {
         store,
+        artifacts: Arc::new(crate::artifacts::LocalArtifacts::new(DataDir::create(data).expect("data dir"))),
         executor: Arc::new(Scripted),
         policy: LeasePolicy { lease: Duration::from_secs(5), backoff: Duration::ZERO },
         heartbeat: Duration::from_millis(50),
@@ -67,10 +70,10 @@ fn context(store: Arc<SqliteStore>) -> Context {
 async fn a_panic_fails_its_job_and_the_worker_runs_the_next() {
     let dir = tempfile::tempdir().expect("tempdir");
     let store = Arc::new(SqliteStore::open(&dir.path().join("db.sqlite")).await.expect("open"));
-    let bad = add(&store, "panic").await;
-    let good = add(&store, "fine").await;
+    let bad = add(&store, dir.path(), "panic").await;
+    let good = add(&store, dir.path(), "fine").await;
     let shutdown = CancellationToken::new();
-    let handles = start(context(store.clone()), 1, shutdown.clone());
+    let handles = start(context(store.clone(), dir.path()), 1, shutdown.clone());
 
     let bad = wait_terminal(&store, bad).await;
     assert_eq!(bad.status, Status::Failed);
@@ -91,9 +94,9 @@ async fn a_panic_fails_its_job_and_the_worker_runs_the_next() {
 async fn a_cancelled_running_job_stops_at_its_next_checkpoint() {
     let dir = tempfile::tempdir().expect("tempdir");
     let store = Arc::new(SqliteStore::open(&dir.path().join("db.sqlite")).await.expect("open"));
-    let slow = add(&store, "slow").await;
+    let slow = add(&store, dir.path(), "slow").await;
     let shutdown = CancellationToken::new();
-    let handles = start(context(store.clone()), 1, shutdown.clone());
+    let handles = start(context(store.clone(), dir.path()), 1, shutdown.clone());
 
     // Wait until it runs and has reported progress through a heartbeat.
     let deadline = Instant::now() + Duration::from_secs(10);

@@ -1,5 +1,6 @@
 //! API tests: the real service on port 0, real HTTP (reqwest), a real SQLite file on disk.
 //! One module per endpoint or concern; `helpers::spawn_app()` starts the service.
+mod artifacts;
 mod bad_input;
 mod concurrency;
 mod crash;
@@ -13,7 +14,10 @@ mod jobs;
 mod keypose;
 mod models;
 mod openapi;
+#[path = "../common/postgres.rs"]
+mod postgres;
 mod preview;
 mod roundtrip;
+mod scale;
 mod schemathesis;
 mod songs;

@@ -1,0 +1,60 @@
+//! The data dir as the artifact store: every artifact is already in place when published.
+use super::{Artifact, ArtifactError, ArtifactFuture, ArtifactStore};
+use crate::queue::DataDir;
+use bytes::Bytes;
+use std::path::PathBuf;
+
+/// Artifacts in the local data dir, shared by the processes of one host.
+#[derive(Clone, Debug)]
+pub struct LocalArtifacts {
+    data: DataDir,
+}
+
+impl LocalArtifacts {
+    /// The store of `data`.
+    pub fn new(data: DataDir) -> Self {
+        Self { data }
+    }
+}
+
+fn io(artifact: &Artifact<'_>, source: std::io::Error) -> ArtifactError {
+    if source.kind() == std::io::ErrorKind::NotFound {
+        ArtifactError::NotFound(artifact.key())
+    } else {
+        ArtifactError::Io { key: artifact.key(), source }
+    }
+}
+
+impl ArtifactStore for LocalArtifacts {
+    fn publish<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ()> {
+        Box::pin(async move {
+            // The atomic write that put it there is the publication.
+            tokio::fs::metadata(artifact.local_path(&self.data)).await.map_err(|e| io(&artifact, e))?;
+            Ok(())
+        })
+    }
+
+    fn fetch<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, PathBuf> {
+        Box::pin(async move {
+            let path = artifact.local_path(&self.data);
+            tokio::fs::metadata(&path).await.map_err(|e| io(&artifact, e))?;
+            Ok(path)
+        })
+    }
+
+    fn read<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, Bytes> {
+        Box::pin(async move {
+            let bytes = tokio::fs::read(artifact.local_path(&self.data)).await.map_err(|e| io(&artifact, e))?;
+            Ok(Bytes::from(bytes))
+        })
+    }
+
+    fn remove<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ()> {
+        Box::pin(async move {
+            match tokio::fs::remove_file(artifact.local_path(&self.data)).await {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(io(&artifact, e)),
+                _ => Ok(()),
+            }
+        })
+    }
+}

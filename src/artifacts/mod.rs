@@ -1,0 +1,167 @@
+//! The artifact store: uploaded songs and job results, addressed by id.
+//!
+//! Every artifact is first written, atomically, to its place in the local data dir
+//! ([`crate::queue::DataDir`]): uploads are renamed into place, results are written to a temp
+//! file and renamed. [`ArtifactStore::publish`] then makes that file the stored artifact, and
+//! [`ArtifactStore::fetch`] gives a process a local path holding one. Two stores:
+//!
+//! - [`LocalArtifacts`] (the default): the data dir is the store; publish and fetch only check
+//!   the file is there. API and worker processes on one host share it.
+//! - [`BucketArtifacts`]: an S3-compatible bucket (`object_store`), for processes on many hosts;
+//!   the data dir is each host's cache. A PUT is atomic (an object appears whole or not at all),
+//!   and a fetched artifact is written to the cache through a temp file and a rename.
+//!
+//! Artifacts never change once written (names come from ids), so a cached copy is never stale.
+use crate::audio::AudioFormat;
+use crate::queue::{DataDir, JobId, SongId};
+use bytes::Bytes;
+use futures::future::BoxFuture;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+pub mod bucket;
+pub mod local;
+
+pub use bucket::BucketArtifacts;
+pub use local::LocalArtifacts;
+
+/// Errors from the artifact store.
+#[derive(Debug, thiserror::Error)]
+pub enum ArtifactError {
+    #[error("artifact {0} not found")]
+    NotFound(String),
+    #[error("artifact {key}: {source}")]
+    Io { key: String, source: std::io::Error },
+    #[error("artifact {key}: object store: {source}")]
+    Bucket { key: String, source: object_store::Error },
+    #[error("artifact store configuration: {0}")]
+    Config(String),
+}
+
+impl ArtifactError {
+    /// Stable kebab-case name of the failure.
+    pub fn code(&self) -> &'static str {
+        match self {
+            ArtifactError::NotFound(_) => "artifact-not-found",
+            ArtifactError::Io { .. } => "artifact-io",
+            ArtifactError::Bucket { .. } => "artifact-store",
+            ArtifactError::Config(_) => "artifact-config",
+        }
+    }
+
+    /// Whether trying again later may succeed.
+    pub fn is_retryable(&self) -> bool {
+        match self {
+            // A song or result that is missing now may be a replica that has not caught up.
+            ArtifactError::NotFound(_) => true,
+            ArtifactError::Io { .. } => true,
+            ArtifactError::Bucket { .. } => true,
+            ArtifactError::Config(_) => false,
+        }
+    }
+}
+
+/// One artifact, named by ids only (never by user input).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Artifact<'a> {
+    /// An uploaded song, in the format decoding found.
+    Song(SongId, AudioFormat),
+    /// One result file of a generate job (a name from `queue::files::RESULT_FILES`).
+    Result(JobId, &'a str),
+}
+
+impl Artifact<'_> {
+    /// Its key in a bucket, the same as its path under the data dir: `songs/<id>.<ext>`,
+    /// `jobs/<id>/<file>`.
+    pub fn key(&self) -> String {
+        match self {
+            Artifact::Song(id, format) => format!("songs/{id}.{}", crate::queue::files::extension(*format)),
+            Artifact::Result(id, file) => format!("jobs/{id}/{file}"),
+        }
+    }
+
+    /// Where it lives (or is cached) in the local data dir.
+    pub fn local_path(&self, data: &DataDir) -> PathBuf {
+        match self {
+            Artifact::Song(id, format) => data.song_path(*id, *format),
+            Artifact::Result(id, file) => data.job_dir(*id).join(file),
+        }
+    }
+}
+
+/// A future returned by an artifact store.
+pub type ArtifactFuture<'a, T> = BoxFuture<'a, Result<T, ArtifactError>>;
+
+/// Where songs and results are kept.
+pub trait ArtifactStore: Send + Sync {
+    /// Stores the file at `artifact`'s local path (written there atomically) as the artifact.
+    fn publish<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ()>;
+    /// A local path holding the artifact, fetched into the data dir if it is not there.
+    fn fetch<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, PathBuf>;
+    /// The artifact's bytes.
+    fn read<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, Bytes>;
+    /// Removes the artifact and its local copy (an upload that lost a race to its twin).
+    fn remove<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ()>;
+}
+
+/// Where [`open`] keeps artifacts.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Location {
+    /// The data dir.
+    Local,
+    /// An S3-compatible bucket, with an optional key prefix.
+    Bucket { bucket: String, prefix: String },
+}
+
+impl Location {
+    /// Parses `artifacts_url`: unset or `local`, or `s3://bucket[/prefix]`.
+    pub fn parse(url: Option<&str>) -> Result<Self, ArtifactError> {
+        match url {
+            None | Some("local") => Ok(Location::Local),
+            Some(url) => {
+                let Some(rest) = url.strip_prefix("s3://") else {
+                    return Err(ArtifactError::Config(format!("artifacts_url {url:?}: use \"local\" or s3://bucket[/prefix]")));
+                };
+                let (bucket, prefix) = rest.split_once('/').unwrap_or((rest, ""));
+                if bucket.is_empty() {
+                    return Err(ArtifactError::Config(format!("artifacts_url {url:?} names no bucket")));
+                }
+                Ok(Location::Bucket { bucket: bucket.to_string(), prefix: prefix.trim_matches('/').to_string() })
+            }
+        }
+    }
+}
+
+/// Opens the artifact store the configuration names; `data` is the store or its cache.
+pub fn open(config: &crate::config::Config, data: DataDir) -> Result<Arc<dyn ArtifactStore>, ArtifactError> {
+    Ok(match Location::parse(config.artifacts_url.as_deref())? {
+        Location::Local => Arc::new(LocalArtifacts::new(data)),
+        Location::Bucket { bucket, prefix } => Arc::new(BucketArtifacts::connect(
+            &bucket,
+            &prefix,
+            config.s3_endpoint.as_deref(),
+            &config.s3_region,
+            data,
+        )?),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keys_come_from_ids_and_urls_parse() {
+        let song = SongId::new();
+        assert_eq!(Artifact::Song(song, AudioFormat::Flac).key(), format!("songs/{song}.flac"));
+        let job = JobId::new();
+        assert_eq!(Artifact::Result(job, "motion.bvh").key(), format!("jobs/{job}/motion.bvh"));
+        assert_eq!(Location::parse(None).expect("default"), Location::Local);
+        assert_eq!(
+            Location::parse(Some("s3://b/choreo/prod/")).expect("bucket"),
+            Location::Bucket { bucket: "b".into(), prefix: "choreo/prod".into() }
+        );
+        assert!(Location::parse(Some("s3:///x")).is_err());
+        assert!(Location::parse(Some("gs://b")).is_err());
+    }
+}
