@@ -295,17 +295,13 @@ impl DanceRevolution {
     /// Generates `z.size(1)` frames autoregressively from encoded music `z` `[1, n, d_z]`.
     ///
     /// `seed_poses` `[1, s, pose]` (normalised), if given, are fed as ground truth for the first
-    /// frames, so the dance continues from them. Otherwise the decoder first dances `warmup`
-    /// frames of its own to the song (looped if shorter) and the dance starts from where that left
-    /// off: started from the mean pose (0) it takes ~5 s to get moving, which is the whole of a
-    /// short song. `on_step` is called every `report_every` frames with the fraction done and may
-    /// stop the loop.
+    /// frames, so the dance continues from them; otherwise the first input is the mean pose (0).
+    /// `on_step` is called every `report_every` frames with the fraction done and may stop the loop.
     pub fn decode(
         &self,
         z: &Tensor,
         seed: u64,
         seed_poses: Option<&Tensor>,
-        warmup: i64,
         report_every: i64,
         mut on_step: impl FnMut(f32) -> bool,
     ) -> Option<Tensor> {
@@ -315,11 +311,6 @@ impl DanceRevolution {
         let mut out = Vec::with_capacity(n as usize);
         let mut prev = Tensor::zeros([1, 1, self.config.pose_dim], (Kind::Float, device));
         let seeded = seed_poses.map(|s| s.size()[1].min(n)).unwrap_or(0);
-        if seeded == 0 && n > 0 {
-            for i in 0..warmup {
-                prev = self.decoder.run(&prev, &z.narrow(1, i % n, 1), &mut state);
-            }
-        }
         if let Some(s) = seed_poses.filter(|_| seeded > 0) {
             // Teacher-force the seed frames: inputs are [mean, s_0 .. s_{m-2}], outputs replaced by s.
             let inputs = Tensor::cat(&[prev.shallow_clone(), s.narrow(1, 0, seeded - 1)], 1);
@@ -342,9 +333,6 @@ impl DanceRevolution {
 
 /// The API id.
 pub const ID: &str = "dance-revolution";
-/// Frames the served decoder dances before a song's first frame when no seed motion is given
-/// (10 s at 25 fps; see [`DanceRevolution::decode`]).
-pub const WARMUP_FRAMES: i64 = 250;
 
 /// The curriculum behind the committed weights, stored in `model.json` beside the common record.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -413,7 +401,7 @@ impl DanceModel for Served {
                 !cancelled
             });
             let z = z.ok_or(Cancelled)?;
-            let y = model.decode(&z, req.seed, seed_poses.as_ref(), WARMUP_FRAMES, 250, |f| {
+            let y = model.decode(&z, req.seed, seed_poses.as_ref(), 250, |f| {
                 cancelled = progress.report("decode", f).is_err();
                 !cancelled
             });
@@ -473,9 +461,9 @@ mod tests {
         let (_vs, m) = model(2);
         let x = Tensor::randn([1, 30, 6], (Kind::Float, Device::Cpu));
         let z = m.encoder.forward(&x, 0, false);
-        let a = m.decode(&z, 7, None, 0, 0, |_| true).unwrap();
-        let b = m.decode(&z, 7, None, 0, 0, |_| true).unwrap();
-        let c = m.decode(&z, 8, None, 0, 0, |_| true).unwrap();
+        let a = m.decode(&z, 7, None, 0, |_| true).unwrap();
+        let b = m.decode(&z, 7, None, 0, |_| true).unwrap();
+        let c = m.decode(&z, 8, None, 0, |_| true).unwrap();
         assert_eq!(a.size(), vec![1, 30, 5]);
         assert!((a.shallow_clone() - b).abs().max().double_value(&[]) == 0.0);
         assert!((a - c).abs().max().double_value(&[]) > 1e-4);
