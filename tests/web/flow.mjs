@@ -192,8 +192,13 @@ async function run(context) {
 
   // 3. A first dance with a model without key poses: the "earlier dance" to take a pose from.
   await page.selectOption('#model', plainModel.id);
-  check(await page.$eval('#style', (e) => e.disabled) === !plainModel.capabilities.style, 'style is enabled exactly when the model takes it');
-  check(await page.$eval('#keys-box', (e) => e.disabled) === !plainModel.capabilities.key_poses, 'key poses are enabled exactly when the model takes them');
+  for (const m of models) {
+    await page.selectOption('#model', m.id);
+    for (const [control, capability] of [['#style', 'style'], ['#temperature', 'temperature'], ['#top-k', 'top_k'], ['#keys-box', 'key_poses']]) {
+      check(await page.$eval(control, (e) => e.disabled) === !m.capabilities[capability], `${control} is enabled exactly when ${m.id} takes ${capability}`);
+    }
+  }
+  await page.selectOption('#model', plainModel.id);
   await page.fill('#seed', '7');
   const firstPost = page.waitForRequest((r) => r.url() === `${API}/v1/jobs` && r.method() === 'POST');
   await page.click('#submit');
