@@ -120,6 +120,7 @@ async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
         .expect("the flow prints its summary");
     for (phase, sync) in summary["sync"].as_object().expect("sync phases") {
         let worst = sync["worst_diff_s"].as_f64().expect("worst_diff_s");
+        // Over the frames drawn in time; flow.mjs bounds the CPU-starved ones (see checkSync).
         assert!(worst <= 1.0 / 25.0, "{phase}: |audioTime − animationTime| reached {worst} s");
         assert!(sync["audio_advanced_s"].as_f64().expect("advanced") > 1.0, "{phase}: the song did not play: {sync}");
     }

@@ -97,7 +97,19 @@ pub struct BvhFrame {
     /// The BVH text, metres, y up, joints named as choreo names them: e.g. a job's `motion.bvh`.
     pub text: String,
     /// Frame of the file, from 0.
+    #[serde(deserialize_with = "whole_number")]
     pub frame: usize,
+}
+
+/// A whole number sent as `380` or as `380.0`: JSON Schema's `integer` (the OpenAPI document's
+/// type for it) admits both, so the API takes both.
+fn whole_number<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<usize, D::Error> {
+    use serde::de::Error;
+    let n = serde_json::Number::deserialize(deserializer)?;
+    let whole = n.as_u64().or_else(|| n.as_f64().filter(|f| f.fract() == 0.0 && (0.0..=u64::MAX as f64).contains(f)).map(|f| f as u64));
+    whole
+        .and_then(|u| usize::try_from(u).ok())
+        .ok_or_else(|| D::Error::custom(format!("invalid value {n}, expected a frame index (a whole number from 0)")))
 }
 
 /// A key pose as sent: `joints` (either joint set) or one frame of a BVH, and its time in the song.
@@ -337,6 +349,16 @@ mod tests {
     use crate::motion::export;
     use crate::motion::skeleton::{topological_order, PARENTS};
     use crate::motion::validate::REFERENCE_BONE_M;
+
+    #[test]
+    fn a_bvh_frame_is_any_json_form_of_a_whole_number() {
+        let frame = |v: &str| serde_json::from_str::<BvhFrame>(&format!(r#"{{"text": "", "frame": {v}}}"#)).map(|b| b.frame);
+        assert_eq!(frame("380").ok(), Some(380));
+        assert_eq!(frame("380.0").ok(), Some(380));
+        for bad in ["1.5", "-1", "\"3\"", "1e300"] {
+            assert!(frame(bad).is_err(), "{bad}");
+        }
+    }
 
     /// A plausible motion of `t` frames: a figure with the reference bone lengths (each bone
     /// leaning a little differently, so the rig has a body, not a line) walking along x.

@@ -76,14 +76,26 @@ async function checkSync(page, label, seconds = 3) {
     samples.push(await sample(page));
     await page.waitForTimeout(100);
   }
-  const worst = Math.max(...samples.map((s) => Math.abs(s.audio - s.animation)));
+  // A frame whose drawing itself took longer than a motion frame was starved of CPU (the 2-core
+  // machine is shared): its gap measures the machine, not the player. Every gap must be explained
+  // by its frame's drawing time (the pose came from the audio clock read when the frame began);
+  // frames drawn in time must keep the gap within one motion frame; and starved frames must be few.
+  const gap = (s) => Math.abs(s.audio - s.animation);
+  const starved = samples.filter((s) => s.frameMs > FRAME_S * 1000);
+  const inTime = samples.filter((s) => s.frameMs <= FRAME_S * 1000);
+  const worst = Math.max(...inTime.map(gap));
+  for (const s of samples) {
+    check(gap(s) <= s.frameMs / 1000 + 0.01, `${label}: a gap of ${gap(s).toFixed(4)} s is more than its frame's ${s.frameMs} ms of drawing`);
+  }
+  check(starved.length <= samples.length / 5, `${label}: ${starved.length} of ${samples.length} frames took over ${FRAME_S * 1000} ms to draw`);
   const first = samples[0], last = samples[samples.length - 1];
   // Forward steps only: a loop's jump back is not time played.
   const advanced = samples.slice(1).reduce((sum, s, i) => sum + Math.max(0, s.audio - samples[i].audio), 0);
   const wall = (last.now - first.now) / 1000;
   const frameMs = samples.map((s) => s.frameMs).sort((a, b) => a - b);
   summary.sync[label] = {
-    samples: samples.length, worst_diff_s: worst, audio_advanced_s: advanced, wall_s: wall, frames_drawn: last.frames - first.frames,
+    samples: samples.length, worst_diff_s: worst, worst_diff_all_s: Math.max(...samples.map(gap)), starved_frames: starved.length,
+    audio_advanced_s: advanced, wall_s: wall, frames_drawn: last.frames - first.frames,
     frame_ms_median: frameMs[Math.floor(frameMs.length / 2)], frame_ms_max: frameMs[frameMs.length - 1],
   };
   log(label, JSON.stringify(summary.sync[label]));
@@ -192,8 +204,13 @@ async function run(context) {
 
   // 3. A first dance with a model without key poses: the "earlier dance" to take a pose from.
   await page.selectOption('#model', plainModel.id);
-  check(await page.$eval('#style', (e) => e.disabled) === !plainModel.capabilities.style, 'style is enabled exactly when the model takes it');
-  check(await page.$eval('#keys-box', (e) => e.disabled) === !plainModel.capabilities.key_poses, 'key poses are enabled exactly when the model takes them');
+  for (const m of models) {
+    await page.selectOption('#model', m.id);
+    for (const [control, capability] of [['#style', 'style'], ['#temperature', 'temperature'], ['#top-k', 'top_k'], ['#keys-box', 'key_poses']]) {
+      check(await page.$eval(control, (e) => e.disabled) === !m.capabilities[capability], `${control} is enabled exactly when ${m.id} takes ${capability}`);
+    }
+  }
+  await page.selectOption('#model', plainModel.id);
   await page.fill('#seed', '7');
   const firstPost = page.waitForRequest((r) => r.url() === `${API}/v1/jobs` && r.method() === 'POST');
   await page.click('#submit');
@@ -281,9 +298,10 @@ async function run(context) {
   await page.click('#play'); // pause
   await page.waitForFunction(() => !window.choreoPlayer.playing);
   const keyMotion = await apiJson(`/v1/jobs/${keyJob}/motion.json`);
+  // Between frames only the body centre is compared: the glb turns joints (slerp) where motion.json
+  // is interpolated linearly here, centimetres apart on a fast foot; joints are compared at frame 50.
   summary.pose_error_m = await poseError(page, keyMotion);
   check(summary.pose_error_m.body_centre < 0.001, `the drawn body centre is off: ${JSON.stringify(summary.pose_error_m)}`);
-  check(summary.pose_error_m.worst_joint < 0.03, `a drawn joint is off: ${JSON.stringify(summary.pose_error_m)}`);
 
   // 8. Scrub to 2 s: both clocks go there.
   await setRange(page, '#scrub', 2);
@@ -341,8 +359,12 @@ async function run(context) {
   await linked.waitForFunction(() => window.choreoPlayer.playing && window.choreoPlayer.audioTime > 0.3, null, { timeout: 20_000 });
   await checkSync(linked, 'deep link', 2);
   await shot(linked, '06-deep-link');
+  await linked.click('#play'); // pause, then frame 40 (1.6 s) itself
+  await linked.waitForFunction(() => !window.choreoPlayer.playing);
+  await setRange(linked, '#scrub', 1.6);
+  await linked.waitForFunction(() => Math.abs(window.choreoPlayer.animationTime - 1.6) < 1e-3, null, { timeout: 10_000 });
   summary.pose_error_deep_link_m = await poseError(linked, firstMotion);
-  check(summary.pose_error_deep_link_m.worst_joint < 0.03, `deep link: a drawn joint is off: ${JSON.stringify(summary.pose_error_deep_link_m)}`);
+  check(summary.pose_error_deep_link_m.worst_joint < 0.01, `deep link: at frame 40 a drawn joint is off: ${JSON.stringify(summary.pose_error_deep_link_m)}`);
   await linked.close();
 
   // 12. The page served by the API server itself (same origin): the token typed, the link followed.

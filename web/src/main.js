@@ -11,8 +11,8 @@ import { JOINT_NAMES, LIBRARY, PoseEditor, clonePose, drawPose } from './poses.j
 const $ = (id) => document.getElementById(id);
 /** Frames per second of every choreo dance (motion.json's fps). */
 const FPS = 25;
-/** What the API takes when a model says `style: true` but does not list its styles. */
-const DEFAULT_STYLES = ['waltz', 'rumba', 'cha-cha', 'tango'];
+/** The styles the API takes (its DanceStyle), for models that say `style: true`. */
+const STYLES = ['waltz', 'rumba', 'cha-cha', 'tango'];
 
 const params = new URLSearchParams(location.search);
 let api = new Api();
@@ -129,13 +129,15 @@ const uploadSong = guard(async (file) => {
 });
 
 $('song-file').addEventListener('change', (e) => uploadSong(e.target.files[0]));
+// A song dropped anywhere on the page is uploaded (and the browser does not navigate to it).
 const drop = $('drop');
-drop.addEventListener('dragover', (e) => { e.preventDefault(); drop.classList.add('over'); });
+drop.addEventListener('dragenter', () => drop.classList.add('over'));
 drop.addEventListener('dragleave', () => drop.classList.remove('over'));
-drop.addEventListener('drop', (e) => {
+window.addEventListener('dragover', (e) => e.preventDefault());
+window.addEventListener('drop', (e) => {
   e.preventDefault();
   drop.classList.remove('over');
-  uploadSong(e.dataTransfer.files[0]);
+  if (e.dataTransfer?.files.length) uploadSong(e.dataTransfer.files[0]);
 });
 
 // ---------------------------------------------------------------- model, seed, style
@@ -159,8 +161,11 @@ function modelChanged() {
   $('model-info').textContent = m ? `${m.paper}` : 'No models on this server.';
   const style = $('style');
   style.disabled = !caps.style;
-  const styles = Array.isArray(caps.styles) ? caps.styles : DEFAULT_STYLES;
+  const styles = Array.isArray(caps.styles) ? caps.styles : STYLES;
   style.replaceChildren(new Option('from the music', ''), ...(caps.style ? styles.map((s) => new Option(s, s)) : []));
+  // Sampling controls, like style, only for models whose capabilities name them.
+  $('temperature').disabled = !caps.temperature;
+  $('top-k').disabled = !caps.top_k;
   $('keys-box').disabled = !caps.key_poses;
   $('keys-note').textContent = caps.key_poses
     ? 'Choose a pose (from the library of real train-split poses, or any frame of a dance), put the cursor on the song, and add it.'
@@ -334,6 +339,10 @@ function request() {
   }
   // `style` goes only to models that say they take it; others would answer 422.
   if (m.capabilities.style && $('style').value) body.style = $('style').value;
+  const temperature = $('temperature').value.trim();
+  if (m.capabilities.temperature && temperature !== '') body.temperature = Number(temperature);
+  const topK = $('top-k').value.trim();
+  if (m.capabilities.top_k && topK !== '') body.top_k = Number(topK);
   if (m.capabilities.key_poses && state.keys.length) {
     body.key_poses = state.keys.map((k) => ({ time_s: k.time_s, joints: k.joints }));
   }
@@ -348,7 +357,13 @@ const submit = guard(async () => {
   delete $('job-stage').dataset.status;
   delete $('job-stage').dataset.jobId;
   try {
-    const job = await api.createJob(request());
+    let job;
+    try {
+      job = await api.createJob(request());
+    } catch (e) {
+      $('job-stage').textContent = 'not submitted';
+      throw e;
+    }
     await follow(job.id);
   } finally {
     updateSubmit();

@@ -59,7 +59,8 @@ export class ReportView {
     container.replaceChildren();
     this.duration = motion.num_frames / motion.fps;
     const title = document.createElement('h3');
-    title.textContent = `${job.model} · seed ${job.seed} · ${job.id.slice(0, 8)}…`;
+    const style = report.style ? ` · ${report.style.style}${report.style.predicted ? ' (from the music)' : ''}` : '';
+    title.textContent = `${job.model} · seed ${job.seed}${style} · ${job.id.slice(0, 8)}…`;
     container.append(title);
 
     this.beats = canvas(container, 'beats', 'Beats: music (top; downbeats thick) against the dance\'s motion beats (bottom)');
