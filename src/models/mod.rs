@@ -12,12 +12,14 @@ pub mod folder;
 pub mod keypose_transformer;
 pub mod layers;
 pub mod train;
+pub mod tsmt;
 
 /// One row per served model: its id (the folder name under the models dir) and how to load it.
 /// Adding a model is one row here, one `pub mod` above and one trainer under [`train`].
 pub const MODELS: &[Entry] = &[
     Entry { id: dance_revolution::ID, load: |dir| Ok(std::sync::Arc::new(dance_revolution::Served::load(dir)?)) },
     Entry { id: keypose_transformer::ID, load: |dir| Ok(std::sync::Arc::new(keypose_transformer::Served::load(dir)?)) },
+    Entry { id: tsmt::ID, load: |dir| Ok(std::sync::Arc::new(tsmt::Served::load(dir)?)) },
 ];
 
 /// A row of [`MODELS`].

@@ -27,6 +27,8 @@ pub enum TrainError {
     Io { path: PathBuf, source: std::io::Error },
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),
+    #[error("model: {0}")]
+    Model(#[from] crate::models::ModelError),
     #[error("no training windows: every dance is shorter than the window ({0} frames)")]
     NoWindows(usize),
 }
@@ -315,6 +317,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
 }
 pub mod dance_revolution;
 pub mod keypose_transformer;
+pub mod tsmt;
 
 /// `choreo train <model>`: one variant per trainable model.
 #[derive(Clone, Debug, clap::Subcommand)]
@@ -323,6 +326,8 @@ pub enum TrainCommand {
     DanceRevolution(dance_revolution::Options),
     /// Key-pose controllable cross-modal transformer.
     KeyposeTransformer(keypose_transformer::Options),
+    /// TSMT, the two-stream motion transformer over discretised poses (Li et al. 2020).
+    Tsmt(tsmt::Options),
 }
 
 impl TrainCommand {
@@ -337,6 +342,10 @@ impl TrainCommand {
                 let logs = keypose_transformer::train(o)?;
                 let out = o.common.out_dir(crate::models::keypose_transformer::ID);
                 Ok(if o.eval_only { format!("evaluated {} (eval.json rewritten)", out.display()) } else { format!("trained {} epochs into {}", logs.len(), out.display()) })
+            }
+            Self::Tsmt(o) => {
+                let logs = tsmt::train(o)?;
+                Ok(format!("trained {} epochs into {}", logs.len(), o.common.out_dir(crate::models::tsmt::ID).display()))
             }
         }
     }

@@ -1,0 +1,147 @@
+//! `choreo train tsmt`: cross-entropy over the discretised poses of every step of a window in
+//! parallel (paper §3.3), Adam, on the train split of dance-with-melody. Writes the bins (fitted
+//! on the train split) into `model.json` and a few real seed clips beside the weights.
+use ndarray::{s, Array2};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use tch::{Device, Tensor};
+
+use super::{batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError};
+use super::Trainer;
+use crate::models::tsmt::{Bins, Config, ModelFile, Sampling, Schedule, SeedClips, Serving, Tsmt, ID, MAX_POSITION, SEED_CLIPS_FILE};
+use crate::motion::repr;
+
+/// Options of one training run (the card gives the run behind the committed weights).
+#[derive(Clone, Debug, clap::Args)]
+pub struct Options {
+    #[command(flatten)]
+    pub common: CommonOptions,
+    #[arg(long, default_value_t = 200)]
+    pub epochs: usize,
+    #[arg(long, default_value_t = 32)]
+    pub batch: usize,
+    /// Stride between window starts, in frames (the window is the configuration's context).
+    #[arg(long, default_value_t = 20)]
+    pub stride: usize,
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Standard deviation, in bins, of Gaussian noise added to the pose stream's input tokens
+    /// (the targets stay clean), so that the model learns to come back from its own draws.
+    #[arg(long, default_value_t = 1.0)]
+    pub input_noise_bins: f64,
+    /// Default sampling temperature written into `model.json`.
+    #[arg(long, default_value_t = 1.0)]
+    pub temperature: f64,
+    /// Default top-k written into `model.json` (0: every bin).
+    #[arg(long, default_value_t = 0)]
+    pub top_k: usize,
+    #[arg(long, default_value_t = 2020)]
+    pub seed: u64,
+}
+
+/// Seed clips kept in the folder, and their length in frames.
+const SEED_CLIPS: usize = 32;
+const SEED_CLIP_FRAMES: usize = 50;
+
+/// Trains and writes the model folder; returns the per-epoch log.
+pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
+    // The root height becomes the lowest foot's clearance over each dance's own floor.
+    let data = Data::load(&opts.common.data, crate::audio::features::tsmt, |s| {
+        let floor = repr::floor_of_features(s.poses.view());
+        repr::height_to_clearance(&mut s.poses, floor);
+        Ok(())
+    })?;
+    let base = if opts.common.tiny { Config::tiny() } else { Config::cpu() };
+    let config = Config { music_dim: data.music_norm.dim() as i64, coords: data.pose_norm.dim() as i64, ..base };
+    let bins = Bins::fit(data.train_raw.iter().map(|s| &s.poses), config.n_bins as usize)?;
+    let tokens = |seqs: &[Sequence]| -> Vec<Array2<i64>> { seqs.iter().map(|s| bins.tokens(&s.poses)).collect() };
+    let (train_tokens, test_tokens) = (tokens(&data.train_raw), tokens(&data.test_raw));
+    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| Tsmt::new(p, config.clone()))?;
+    let clips = SeedClips::draw(&data.train_raw.iter().map(|s| &s.poses).collect::<Vec<_>>(), SEED_CLIPS, SEED_CLIP_FRAMES, opts.seed)?;
+    clips.save(&trainer.out.join(SEED_CLIPS_FILE))?;
+    let len = config.window as usize + 1;
+    let mut steps = 0usize;
+    let noise = Normal::new(0.0, opts.input_noise_bins.max(1e-9)).map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(format!("--input-noise-bins: {e}"))))?;
+    let epochs = 0..opts.epochs;
+    let (train, test) = (&data.train, &data.test);
+    let file_of = |t: &Trainer, steps: usize| ModelFile {
+        config: config.clone(),
+        music_norm: data.music_norm.clone(),
+        pose_norm: data.pose_norm.clone(),
+        fps: crate::motion::MOTION_FPS,
+        training: t.record(opts.lr, opts.batch, opts.seed, Schedule { window: config.window as usize, stride: opts.stride, input_noise_bins: opts.input_noise_bins, steps }),
+        extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k } },
+    };
+    let steps_cell = std::cell::Cell::new(0usize);
+    trainer.run(
+        epochs,
+        2,
+        |epoch, opt, deadline| {
+            let starts = window_starts(train, len, opts.stride, opts.seed + epoch as u64);
+            if starts.is_empty() {
+                return Err(TrainError::NoWindows(len));
+            }
+            let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
+            let (mut total, mut batches) = (0.0, 0);
+            for chunk in starts.chunks(opts.batch) {
+                let target = token_batch(&train_tokens, chunk, len);
+                let input = if opts.input_noise_bins > 0.0 { noised(&train_tokens, chunk, len, config.n_bins, &noise, &mut rng) } else { target.shallow_clone() };
+                let music = batch_tensor(train, chunk, len, |s| &s.music, Device::Cpu);
+                let start = rng.gen_range(0..MAX_POSITION - len as i64);
+                let loss = model.loss_with_input(&input, &target, &music, start, true);
+                opt.backward_step_clip(&loss, 1.0);
+                total += loss.double_value(&[]);
+                batches += 1;
+                steps += 1;
+                if deadline.expired() {
+                    break;
+                }
+            }
+            steps_cell.set(steps);
+            let test_loss = tch::no_grad(|| {
+                let starts = window_starts(test, len, config.window as usize, 0);
+                let losses: Vec<f64> = starts
+                    .chunks(opts.batch)
+                    .enumerate()
+                    .map(|(i, c)| {
+                        let t = token_batch(&test_tokens, c, len);
+                        let m = batch_tensor(test, c, len, |s| &s.music, Device::Cpu);
+                        model.loss(&t, &m, (i as i64 * 997) % (MAX_POSITION - len as i64), false).double_value(&[])
+                    })
+                    .collect();
+                (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
+            });
+            Ok(EpochResult { train_loss: total / batches.max(1) as f64, test_loss, note: format!("steps={steps} (cross-entropy, nats per coordinate)") })
+        },
+        |t| file_of(t, steps_cell.get()),
+    )?;
+    Ok(trainer.logs)
+}
+
+/// Token windows `[b, len, coords]` (int64).
+fn token_batch(tokens: &[Array2<i64>], starts: &[(usize, usize)], len: usize) -> Tensor {
+    let parts: Vec<Tensor> = starts
+        .iter()
+        .map(|&(i, f)| {
+            let m = tokens[i].slice(s![f..f + len, ..]);
+            let (r, c) = m.dim();
+            Tensor::from_slice(&m.iter().copied().collect::<Vec<i64>>()).view([r as i64, c as i64])
+        })
+        .collect();
+    Tensor::stack(&parts, 0)
+}
+
+/// [`token_batch`] with rounded Gaussian noise on every token, clamped to the bins.
+fn noised(tokens: &[Array2<i64>], starts: &[(usize, usize)], len: usize, n_bins: i64, noise: &Normal<f64>, rng: &mut StdRng) -> Tensor {
+    let parts: Vec<Tensor> = starts
+        .iter()
+        .map(|&(i, f)| {
+            let m = tokens[i].slice(s![f..f + len, ..]);
+            let (r, c) = m.dim();
+            let v: Vec<i64> = m.iter().map(|&b| (b + noise.sample(rng).round() as i64).clamp(0, n_bins - 1)).collect();
+            Tensor::from_slice(&v).view([r as i64, c as i64])
+        })
+        .collect();
+    Tensor::stack(&parts, 0)
+}
