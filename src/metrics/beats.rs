@@ -300,6 +300,35 @@ pub fn p_score(reference: &[f64], estimated: &[f64]) -> f64 {
     hits as f64 / reference.len().max(estimated.len()) as f64
 }
 
+/// TSMT (Li et al. 2020) scores beats as a detection: a motion beat is right when it matches a
+/// music beat within this tolerance (one-to-one, as [`match_events`]); ±0.1 s is ±2.5 frames at
+/// 25 fps ([`ALIGN_TOLERANCE_S`]; `mir_eval`'s 0.07 s is less than two frames here).
+pub const BEAT_PRF_WINDOW_S: f64 = ALIGN_TOLERANCE_S;
+
+/// Beat precision, recall and F of motion beats against music beats.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct BeatPrf {
+    /// Matched motion beats over all motion beats: how many of the dance's accents fall on a beat.
+    pub precision: f64,
+    /// Matched music beats over all music beats: how many beats the dance marks.
+    pub recall: f64,
+    /// Their harmonic mean (0 when both are 0).
+    pub f: f64,
+}
+
+/// [`BeatPrf`] of `motion_beats` against `music_beats` (both sorted, seconds) within `window`,
+/// each beat matched at most once. Empty lists give 0.
+pub fn beat_prf(music_beats: &[f64], motion_beats: &[f64], window: f64) -> BeatPrf {
+    if music_beats.is_empty() || motion_beats.is_empty() {
+        return BeatPrf::default();
+    }
+    let m = match_events(music_beats, motion_beats, window) as f64;
+    let precision = m / motion_beats.len() as f64;
+    let recall = m / music_beats.len() as f64;
+    let f = if precision + recall > 0.0 { 2.0 * precision * recall / (precision + recall) } else { 0.0 };
+    BeatPrf { precision, recall, f }
+}
+
 /// Music beats that fall within `[0, duration_s]`, the span a dance covers.
 pub fn beats_within(beats: &[f64], duration_s: f64) -> Vec<f64> {
     beats.iter().copied().filter(|&b| b >= 0.0 && b <= duration_s).collect()
@@ -326,6 +355,9 @@ pub struct RhythmScores {
     pub cemgil: f64,
     /// mir_eval P-score, same lists.
     pub p_score: f64,
+    /// TSMT's beat precision, recall and F (±[`BEAT_PRF_WINDOW_S`], FACT kinematic beats).
+    #[serde(default)]
+    pub beat_prf: BeatPrf,
 }
 
 /// Scores a dance's kinematic beats against music beats already clipped to the dance's span.
@@ -341,5 +373,6 @@ pub fn rhythm_scores(music_beats: &[f64], fact_beats: &[f64], bailando_beats: &[
         f_measure: f_measure(music_beats, fact_beats),
         cemgil: cemgil(music_beats, fact_beats),
         p_score: p_score(music_beats, fact_beats),
+        beat_prf: beat_prf(music_beats, fact_beats, BEAT_PRF_WINDOW_S),
     }
 }

@@ -25,6 +25,7 @@
 //! beyond the cha-cha; judge rhythm by several numbers (beat F, rhythm hit, BAS against its
 //! chance), never by BAS alone.
 pub mod beats;
+pub mod diversity;
 pub mod eval;
 pub mod features;
 pub mod fid;

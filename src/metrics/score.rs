@@ -214,6 +214,11 @@ pub fn score_set(dances: &[ScoredDance], reference: &ReferenceStats) -> SetScore
             f_measure: mean_of(r().map(|x| x.f_measure)),
             cemgil: mean_of(r().map(|x| x.cemgil)),
             p_score: mean_of(r().map(|x| x.p_score)),
+            beat_prf: super::beats::BeatPrf {
+                precision: mean_of(r().map(|x| x.beat_prf.precision)),
+                recall: mean_of(r().map(|x| x.beat_prf.recall)),
+                f: mean_of(r().map(|x| x.beat_prf.f)),
+            },
         },
         fid_k: mean_of(d().map(|s| s.fid_k)),
         fid_g: mean_of(d().map(|s| s.fid_g)),

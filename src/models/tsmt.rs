@@ -17,8 +17,13 @@
 //! - §3.3 **late fusion**: per-coordinate logits `W^X z^X_{t−1} + W^A z^A_t`, trained with
 //!   cross-entropy on every step of a window in parallel (causal mask). `W^X`, `W^A` are stored
 //!   factorised: each stream maps to a `e_out`-wide vector per coordinate, and a shared output
-//!   table of bin vectors (plus a per-coordinate bias) turns the sum into 300 logits — still
-//!   linear in `z`, a rank-`e_out` `W` per coordinate, at a fifth of the parameters and time.
+//!   table of bin vectors (plus a per-coordinate bias) turns the sum into 300 logits: linear in
+//!   `z`, a rank-`e_out` `W` per coordinate, at a fifth of the parameters and time. A linear
+//!   read-out makes each coordinate's 300 logits a linear function of one `D`-wide vector, so a
+//!   sharp peak at the previous value (what a 25 fps pose mostly needs) cannot be formed for
+//!   every coordinate at once; with `head_hidden > 0` the fused per-coordinate vector goes
+//!   through one shared GELU layer before the bin table (the fusion itself stays the sum of the
+//!   two streams' linear maps). The model card says which the committed weights use.
 //! - §3.4 **inference**: each coordinate sampled (seeded RNG, `temperature`, `top_k`), one frame
 //!   at a time, with a key/value cache that keeps the last `window` frames (cost per frame is
 //!   constant, so a song's cost is linear in its length). The seed motion is the request's, or
@@ -76,6 +81,10 @@ pub struct Config {
     pub a_band: i64,
     /// Width of each stream's per-coordinate output vector (rank of the factorised `W`).
     pub e_out: i64,
+    /// Width of the shared non-linear bin read-out after the fusion (0: the paper's linear
+    /// read-out; see the module doc).
+    #[serde(default)]
+    pub head_hidden: i64,
     /// Context window of the pose stream, frames (training window length and the cache kept).
     pub window: i64,
     pub dropout: f64,
@@ -98,6 +107,7 @@ impl Config {
             a_kernel: 5,
             a_band: 25,
             e_out: 32,
+            head_hidden: 64,
             window: 80,
             dropout: 0.1,
         }
@@ -105,7 +115,7 @@ impl Config {
 
     /// A tiny configuration for tests and smoke runs.
     pub fn tiny() -> Self {
-        Self { e_bin: 4, d_x: 16, x_layers: 1, x_heads: 2, d_a: 8, a_layers: 1, a_heads: 2, a_band: 6, e_out: 8, window: 16, dropout: 0.0, ..Self::cpu() }
+        Self { e_bin: 4, d_x: 16, x_layers: 1, x_heads: 2, d_a: 8, a_layers: 1, a_heads: 2, a_band: 6, e_out: 8, head_hidden: 8, window: 16, dropout: 0.0, ..Self::cpu() }
     }
 }
 
@@ -265,7 +275,9 @@ pub struct Tsmt {
     w_x: nn::Linear,
     /// `W^A`, factorised: `z^A` → `[coords, e_out]`.
     w_a: nn::Linear,
-    /// The shared output bin vectors `[n_bins, e_out]`.
+    /// The shared non-linear read-out `e_out → head_hidden` (GELU), when `head_hidden > 0`.
+    head: Option<nn::Linear>,
+    /// The shared output bin vectors `[n_bins, head_hidden or e_out]`.
     bin_out: Tensor,
     /// Per-coordinate logit bias `[coords, n_bins]`.
     bias: Tensor,
@@ -282,7 +294,11 @@ impl Tsmt {
             audio: AudioStream::new(p / "audio", c),
             w_x: nn::linear(p / "w_x", c.d_x, c.coords * c.e_out, nn::LinearConfig { bias: false, ..Default::default() }),
             w_a: nn::linear(p / "w_a", c.d_a, c.coords * c.e_out, Default::default()),
-            bin_out: p.var("bin_out", &[c.n_bins, c.e_out], nn::Init::Randn { mean: 0.0, stdev: 1.0 / (c.e_out as f64).sqrt() }),
+            head: (c.head_hidden > 0).then(|| nn::linear(p / "head", c.e_out, c.head_hidden, Default::default())),
+            bin_out: {
+                let w = if c.head_hidden > 0 { c.head_hidden } else { c.e_out };
+                p.var("bin_out", &[c.n_bins, w], nn::Init::Randn { mean: 0.0, stdev: 1.0 / (w as f64).sqrt() })
+            },
             bias: p.var("bias", &[c.coords, c.n_bins], nn::Init::Const(0.0)),
             config,
         }
@@ -293,7 +309,12 @@ impl Tsmt {
         let mut shape = fused.size();
         let last = shape.pop().unwrap_or(0);
         shape.extend([self.config.coords, last / self.config.coords]);
-        fused.view(shape.as_slice()).matmul(&self.bin_out.tr()) + &self.bias
+        let h = fused.view(shape.as_slice());
+        let h = match &self.head {
+            Some(l) => h.apply(l).gelu("none"),
+            None => h,
+        };
+        h.matmul(&self.bin_out.tr()) + &self.bias
     }
 
     /// Training pass (§3.3): `tokens` `[b, n + 1, coords]` (int64), `music` `[b, n + 1, music_dim]`,
@@ -624,9 +645,11 @@ mod tests {
         let x = Array2::from_shape_fn((400, 2), |(t, c)| ((t as f32) * 0.01 + c as f32).sin());
         let b = Bins::fit([&x], 300).unwrap();
         let back = b.values(&b.tokens(&x));
-        let width = (b.hi[0] - b.lo[0]) / 300.0;
-        let err = (&back - &x).mapv(f32::abs).fold(0f32, |a, &v| a.max(v));
-        assert!(err <= 0.5 * width + 1e-6, "error {err}, bin {width}");
+        for c in 0..2 {
+            let width = (b.hi[c] - b.lo[c]) / 300.0;
+            let err = (&back.column(c) - &x.column(c)).mapv(f32::abs).fold(0f32, |a, &v| a.max(v));
+            assert!(err <= 0.5 * width + 1e-6, "column {c}: error {err}, bin {width}");
+        }
         assert_eq!(b.index(0, -100.0), 0);
         assert_eq!(b.index(0, 100.0), 299);
     }
