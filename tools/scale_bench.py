@@ -121,6 +121,7 @@ def main():
     ap.add_argument("--model", default="dance-revolution")
     args = ap.parse_args()
     tmp = tempfile.mkdtemp(prefix="choreo-scale-bench-")
+    os.chmod(tmp, 0o755)  # the postgres user must reach its folder inside
     procs = []
     try:
         pg, db_url = start_postgres(tmp)
