@@ -39,6 +39,11 @@ pub struct Report {
     pub freezing: Freezing,
     /// What the FID and plausibility compare against.
     pub reference: String,
+    /// The worst key-pose error (cm) of the model's own motion, before the export fits one rigid
+    /// skeleton to it; `scores` measure the exported motion (what `motion.json` holds). The two
+    /// differ when the key poses' own bone lengths differ from each other (captured poses do).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model_key_pose_error_cm: Option<f64>,
     /// The style danced, for models that dance one: asked for, or predicted from the song.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub style: Option<crate::models::StyleChoice>,
@@ -59,6 +64,7 @@ pub fn build(motion: &Motion, analysis: &Analysis, key_poses: &[KeyPose], refere
         fid_k_curve: fid_k_curve(motion, reference),
         freezing: scored.freezing,
         reference: format!("{} ({} dances)", reference.source, reference.dances.len()),
+        model_key_pose_error_cm: None,
         style: None,
     })
 }

@@ -458,10 +458,12 @@ mod real_data {
             assert_eq!(served.scores.dances, raw.scores.dances);
             assert_eq!(served.scores.dances, 2 * served.dances.iter().map(|d| &d.song).collect::<std::collections::BTreeSet<_>>().len(), "two seeds per song");
             // One dance per seed, finished twice: grounding and planting move whole frames (down
-            // and sideways), so the root-relative poses (hence the seed distance) are the same,
-            // and the served dance is on the floor at least once in any two seconds.
+            // and sideways), and the served one is then fitted to one rigid skeleton (bone lengths
+            // fixed, within a centimetre here), so the root-relative poses (hence the seed
+            // distance) agree to a centimetre, and the served dance is on the floor at least once
+            // in any two seconds.
             let (a, b) = (served.seed_distance_m.expect("seed pairs"), raw.seed_distance_m.expect("seed pairs"));
-            assert!((a - b).abs() < 1e-4, "{a} vs {b}");
+            assert!((a - b).abs() < 0.01, "{a} vs {b}");
             let p = &served.scores.mean.physical;
             assert!(p.lowest_foot_m.p5.abs() < 0.05, "{p:?}");
             assert!(served.scores.mean.verdict.get("seed-distance").is_some_and(|c| c.pass.is_some()));

@@ -400,7 +400,8 @@ pub async fn audio(State(state): State<AppState>, Path(id): Path<String>) -> Res
     use axum::response::IntoResponse;
     let id = SongId::from_str(&id).map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
     let song = state.store.song(id).await?;
-    let path = state.data.song_path(song.id, song.format);
+    // Through the artifact store: with a bucket, another API host may have taken the upload.
+    let path = state.artifacts.fetch(Artifact::Song(song.id, song.format)).await.map_err(|e| ApiError::Internal(format!("fetching song {}: {e}", song.id)))?;
     let file = tokio::fs::File::open(&path).await.map_err(|e| ApiError::Internal(format!("opening song {}: {e}", song.id)))?;
     // Streamed: a song may be up to max_upload_bytes.
     let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::new(file));

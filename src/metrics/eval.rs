@@ -6,7 +6,8 @@
 //!   - **Mismatched real**: each test song paired with a real *train* dance (chosen by the seed),
 //!     cropped to the test dance's length: real motion that ignores this music. A rhythm metric
 //!     that cannot tell Real from Mismatched real measures nothing.
-//!   - two rows per served model: as served (after [`crate::motion::finish`], feet planted) and
+//!   - two rows per served model: as served (after [`crate::motion::finish`], feet planted, and
+//!     the export's rigid skeleton: what motion.json holds) and
 //!     the network's raw output; each dance is generated once and finished both ways.
 //! - **Extra songs**: every audio file of `../shared/audio` (and of each `--songs` folder), whole,
 //!   danced by each model; no real dance exists for them, so only model rows.
@@ -277,7 +278,11 @@ fn dance_songs(
             let req = GenerateRequest { key_poses: &keys, ..GenerateRequest::plain(&s.audio, seed) };
             let raw = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?.motion;
             // The motion stage every job runs (feet planted), and the network's motion as it came.
-            let finished = [crate::motion::finish(raw.clone(), true), crate::motion::finish(raw, false)];
+            // Served: planted and exported through the rigid skeleton, as motion.json holds it.
+            let anchors: Vec<usize> = keys.iter().map(|k| (k.time_s * raw.fps).round() as usize).collect();
+            let planted = crate::motion::finish(raw.clone(), true);
+            let rig = crate::motion::export::prepare_anchored(&planted, &anchors).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
+            let finished = [crate::motion::export::served_motion(&rig), crate::motion::finish(raw, false)];
             if let Some(dir) = &args.previews {
                 write_preview(dir, id, s, seed, &finished[0], &keys)?;
             }

@@ -430,6 +430,14 @@ pub fn write_all_anchored(motion: &Motion, dir: &Path, anchors: &[usize]) -> Res
     write_all_rig(&m, dir)
 }
 
+/// The dataset's joints as the exported rig places them: `motion.json`'s positions less the body
+/// centre (joint 0) and the branch joints after them, i.e. what a user downloads, in [`Motion`] form.
+pub fn served_motion(m: &RigMotion) -> Motion {
+    let world = m.world_positions();
+    let positions = world.slice(ndarray::s![.., 1..=super::NUM_JOINTS, ..]).mapv(|v| v as f32);
+    Motion { fps: m.fps, positions }
+}
+
 /// Export formats the CLI and the API name.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -40,7 +40,7 @@ pub struct Motion {
 pub fn finish(mut motion: Motion, plant_feet: bool) -> Motion {
     if plant_feet {
         feet::ground(motion.positions.view_mut(), motion.fps);
-        feet::plant_feet(motion.positions.view_mut());
+        feet::plant_feet(motion.positions.view_mut(), motion.fps);
     }
     motion
 }

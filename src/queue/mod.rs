@@ -27,6 +27,7 @@ use uuid::Uuid;
 
 pub mod files;
 pub mod postgres;
+pub mod sql;
 pub mod sqlite;
 
 pub use files::DataDir;

@@ -6,12 +6,12 @@
 //! claims take different jobs without waiting on each other. A trigger appends every status
 //! change to `job_events` and, when a job becomes queued, sends `NOTIFY choreo_jobs`, which
 //! [`JobStore::watch`] turns into a wake-up of this process's idle workers.
+use super::sql::{corrupt, ms, now_ms, opt_time, to_time, JOB_COLUMNS, MAX_BACKOFF_DOUBLINGS, SONG_COLUMNS};
 use super::{
     Beat, Idempotency, Job, JobFiles, JobFilter, JobId, JobKind, JobStore, LeasePolicy, NewJob, Outcome, QueueError,
     Registered, Requeued, Song, SongId, SongStore, Status, StoreFuture,
 };
 use crate::config::Secret;
-use chrono::{DateTime, TimeZone, Utc};
 use sqlx::postgres::{PgConnectOptions, PgListener, PgPoolOptions, PgRow};
 use sqlx::{PgPool, Row};
 use std::str::FromStr;
@@ -27,40 +27,13 @@ pub const CHANNEL: &str = "choreo_jobs";
 const ACQUIRE_TIMEOUT: Duration = Duration::from_secs(30);
 /// Connections per process: workers hold none while a job runs, so a few serve many.
 const MAX_CONNECTIONS: u32 = 8;
-/// Cap on the backoff exponent, so `1 << n` cannot overflow.
-const MAX_BACKOFF_DOUBLINGS: i64 = 16;
 /// Pause before listening again after the notification connection failed.
 const RELISTEN_AFTER: Duration = Duration::from_secs(1);
-
-const JOB_COLUMNS: &str = "id, options, status, stage, progress, priority, attempts, max_attempts, cancel_requested, \
-     error, result, created_at, started_at, finished_at";
-const SONG_COLUMNS: &str =
-    "id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, analysis, created_at";
 
 /// The jobs and songs of one PostgreSQL database.
 #[derive(Clone, Debug)]
 pub struct PgStore {
     pool: PgPool,
-}
-
-fn now_ms() -> i64 {
-    Utc::now().timestamp_millis()
-}
-
-fn to_time(ms: i64) -> Result<DateTime<Utc>, QueueError> {
-    Utc.timestamp_millis_opt(ms).single().ok_or_else(|| QueueError::Corrupt(format!("timestamp {ms}")))
-}
-
-fn opt_time(ms: Option<i64>) -> Result<Option<DateTime<Utc>>, QueueError> {
-    ms.map(to_time).transpose()
-}
-
-fn ms(d: Duration) -> i64 {
-    i64::try_from(d.as_millis()).unwrap_or(i64::MAX)
-}
-
-fn corrupt(what: &str, e: impl std::fmt::Display) -> QueueError {
-    QueueError::Corrupt(format!("{what}: {e}"))
 }
 
 fn job_from_row(row: &PgRow) -> Result<Job, QueueError> {

@@ -3,11 +3,11 @@
 //! SQLite has a single writer, so a claim that selects and updates in one statement cannot hand
 //! the same job to two workers. Every write transaction starts with its write, so a waiting
 //! writer is handled by the busy timeout and never surfaces as `SQLITE_BUSY`.
+use super::sql::{corrupt, ms, now_ms, opt_time, to_time, JOB_COLUMNS, MAX_BACKOFF_DOUBLINGS, SONG_COLUMNS};
 use super::{
     Beat, Idempotency, Job, JobFiles, JobFilter, JobId, JobKind, JobStore, LeasePolicy, NewJob, Outcome, QueueError,
     Registered, Requeued, Song, SongId, SongStore, Status, StoreFuture,
 };
-use chrono::{DateTime, TimeZone, Utc};
 use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteRow, SqliteSynchronous};
 use sqlx::{Row, SqlitePool};
 use std::path::Path;
@@ -21,38 +21,11 @@ use tokio_util::sync::CancellationToken;
 const BUSY_TIMEOUT: Duration = Duration::from_secs(30);
 /// Connections in the pool; SQLite serialises writers anyway, readers run in parallel in WAL.
 const MAX_CONNECTIONS: u32 = 8;
-/// Cap on the backoff exponent, so `1 << n` cannot overflow.
-const MAX_BACKOFF_DOUBLINGS: i64 = 16;
-
-const JOB_COLUMNS: &str = "id, options, status, stage, progress, priority, attempts, max_attempts, cancel_requested, \
-     error, result, created_at, started_at, finished_at";
-const SONG_COLUMNS: &str =
-    "id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, analysis, created_at";
 
 /// The jobs and songs of one SQLite file.
 #[derive(Clone, Debug)]
 pub struct SqliteStore {
     pool: SqlitePool,
-}
-
-fn now_ms() -> i64 {
-    Utc::now().timestamp_millis()
-}
-
-fn to_time(ms: i64) -> Result<DateTime<Utc>, QueueError> {
-    Utc.timestamp_millis_opt(ms).single().ok_or_else(|| QueueError::Corrupt(format!("timestamp {ms}")))
-}
-
-fn opt_time(ms: Option<i64>) -> Result<Option<DateTime<Utc>>, QueueError> {
-    ms.map(to_time).transpose()
-}
-
-fn ms(d: Duration) -> i64 {
-    i64::try_from(d.as_millis()).unwrap_or(i64::MAX)
-}
-
-fn corrupt(what: &str, e: impl std::fmt::Display) -> QueueError {
-    QueueError::Corrupt(format!("{what}: {e}"))
 }
 
 fn job_from_row(row: &SqliteRow) -> Result<Job, QueueError> {

@@ -161,21 +161,26 @@ pub const REPORT_FILE: &str = "report.json";
 /// atomically into `dir`. `on_stage` hears each stage as it starts.
 pub fn render(
     dir: &Path,
-    motion: &Motion,
+    model_motion: &Motion,
     audio: &DecodedAudio,
     key_poses: &[KeyPose],
     caption: &Caption,
     on_stage: &mut dyn FnMut(&str),
 ) -> Result<JobFiles, WorkerError> {
-    use crate::motion::export::{write_all_anchored, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
+    use crate::motion::export::{prepare_anchored, served_motion, write_all_rig, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
     std::fs::create_dir_all(dir)?;
     on_stage("export");
-    let anchors: Vec<usize> = key_poses.iter().map(|k| (k.time_s * motion.fps).round() as usize).collect();
-    write_all_anchored(motion, dir, &anchors)?;
+    let anchors: Vec<usize> = key_poses.iter().map(|k| (k.time_s * model_motion.fps).round() as usize).collect();
+    let rig = prepare_anchored(model_motion, &anchors)?;
+    write_all_rig(&rig, dir)?;
+    // The report and the preview judge what the user downloads: the rigid skeleton's motion.
+    let served = served_motion(&rig);
+    let motion = &served;
     on_stage("report");
     let analysis = audio::analyze(audio)?;
     let reference = crate::metrics::reference::ReferenceStats::builtin()?;
     let mut report = crate::report::build(motion, &analysis, key_poses, &reference)?;
+    report.model_key_pose_error_cm = crate::metrics::kinematics::key_pose_error_cm(model_motion.positions.view(), model_motion.fps, key_poses);
     report.style = caption.style.clone();
     let text = serde_json::to_vec_pretty(&report).map_err(|e| WorkerError::Export(format!("report.json: {e}")))?;
     write_atomic(&dir.join(REPORT_FILE), &text)?;

@@ -172,8 +172,17 @@ async fn api_and_worker_on_separate_disks_share_songs_and_results_through_a_buck
         let stored = bucket.get(&key).await.expect("the result is in the bucket").bytes().await.expect("object");
         assert_eq!(stored.as_ref(), on_worker.as_slice(), "{file} in the bucket");
     }
+    // A second API host with an empty disk serves the song's audio (fetched from the bucket).
+    let second_dir = tempfile::tempdir().expect("tempdir");
+    let (_second, line) = spawn(choreo(&["serve", "--no-workers", "--bind", "127.0.0.1:0"], second_dir.path(), &server.url(), &moto.endpoint)).await;
+    let second = line.strip_prefix("choreo listening on ").unwrap_or_else(|| panic!("unexpected first line {line:?}")).to_string();
+    let audio = client.get(format!("{second}/v1/songs/{song_id}/audio")).send().await.expect("GET audio");
+    assert_eq!(audio.status(), StatusCode::OK);
+    assert_eq!(audio.bytes().await.expect("body").as_ref(), bytes.as_slice(), "the second API host serves the upload's bytes");
+    let second_files = files_under(second_dir.path());
+    assert!(second_files.contains(&format!("songs/{song_id}.ogg")), "{second_files:?}");
     // Every write went through a temp file and a rename, or a single PUT: nothing partial is left.
-    for f in worker_files.iter().chain(api_files.iter()) {
+    for f in worker_files.iter().chain(api_files.iter()).chain(second_files.iter()) {
         assert!(!f.contains(".partial-") && !f.starts_with("tmp/"), "left behind: {f}");
     }
 }

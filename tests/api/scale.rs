@@ -60,11 +60,11 @@ async fn worker(data_dir: &Path, url: &str) -> Child {
     child
 }
 
-/// A 10 s mono 22 050 Hz WAV click track at `bpm`, with a little seeded noise: real audio the
+/// A 30 s mono 22 050 Hz WAV click track at `bpm`, with a little seeded noise: real audio the
 /// analysis finds beats in, and different bytes for every song.
 fn click_track(bpm: f64, seed: u64) -> Vec<u8> {
     const SR: u32 = 22_050;
-    let n = SR as usize * 10;
+    let n = SR as usize * 30;
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let period = 60.0 / bpm;
     let mut bytes = Vec::with_capacity(44 + 2 * n);
@@ -125,7 +125,10 @@ async fn workers_killed_at_random_lose_no_job_and_run_each_once() {
     let mut kills = 0;
     let deadline = Instant::now() + Duration::from_secs(420);
     loop {
-        tokio::time::sleep(Duration::from_millis(rng.gen_range(300..1200))).await;
+        // Jobs take tens of milliseconds, so a kill at a random moment often lands between jobs:
+        // aim at a process that holds a running job (its lease owner is `<pid>-<suffix>`), at a
+        // random short delay, so recovery is exercised on every run.
+        tokio::time::sleep(Duration::from_millis(rng.gen_range(30..300))).await;
         let (jobs, open): (i64, i64) = {
             let row = sqlx::query("SELECT COUNT(*), COUNT(*) FILTER (WHERE status IN ('queued', 'running')) FROM jobs")
                 .fetch_one(&pool)
@@ -137,7 +140,17 @@ async fn workers_killed_at_random_lose_no_job_and_run_each_once() {
             break;
         }
         assert!(Instant::now() < deadline, "{open} of {jobs} jobs still open after 420 s ({kills} kills)");
-        let victim = rng.gen_range(0..WORKERS);
+        let owners: Vec<String> = sqlx::query_scalar("SELECT lease_owner FROM jobs WHERE status = 'running' AND lease_owner IS NOT NULL")
+            .fetch_all(&pool)
+            .await
+            .expect("running jobs");
+        let busy: Vec<usize> = (0..WORKERS)
+            .filter(|&w| {
+                let pid = workers[w].id().map(|p| format!("{p}-"));
+                pid.is_some_and(|pid| owners.iter().any(|o| o.starts_with(&pid)))
+            })
+            .collect();
+        let victim = if busy.is_empty() { rng.gen_range(0..WORKERS) } else { busy[rng.gen_range(0..busy.len())] };
         workers[victim].start_kill().expect("SIGKILL");
         workers[victim].wait().await.expect("killed worker exits");
         kills += 1;

@@ -47,13 +47,16 @@ pub fn pass_through_keys(x: &mut Array2<f32>, cols: std::ops::Range<usize>, keys
 }
 
 /// Frames on each side of a key that [`bridge_keys`] replaces.
-pub const BRIDGE_HALF: usize = 2;
+pub const BRIDGE_HALF: usize = 3;
 
-/// Replaces rows `k − half ..= k + half` around each key frame `k` of `x` `[n, c]` by the straight
-/// line between the rows just outside them (the nearer one alone at either end of the motion).
-/// The network tends to put a key pose on its own frame without leading into it: a spike one or
-/// two frames wide that the exact pass would keep. Bridging first makes the pass start from the
-/// network's trajectory, so the correction is the smooth [`pass_through_keys`] blend alone.
+/// Replaces rows `k − half ..= k + half` around each key frame `k` of `x` `[n, c]` by the cubic
+/// Hermite curve between the rows just outside them, with the network's own per-frame velocity
+/// there as tangents (the nearer row held at either end of the motion). The network tends to put
+/// a key pose on its own frame without leading into it: a spike up to three frames wide that the
+/// exact pass would keep. Bridging first makes the pass start from the network's trajectory, so
+/// the correction is the smooth [`pass_through_keys`] blend alone. A straight line (the earlier
+/// bridge) left a velocity kink where it met the trajectory: an 87 m/s² wrist pop one frame past
+/// a bridge on a test dance.
 pub fn bridge_keys(x: &mut Array2<f32>, frames: &[usize], half: usize) {
     let n = x.nrows();
     for &k in frames {
@@ -63,11 +66,23 @@ pub fn bridge_keys(x: &mut Array2<f32>, frames: &[usize], half: usize) {
         let before = k.checked_sub(half + 1);
         let after = (k + half + 1 < n).then_some(k + half + 1);
         let (lo, hi) = (k.saturating_sub(half), (k + half).min(n - 1));
+        // Per-frame velocity just outside the bridge (zero where the motion ends there).
+        let slope = |a: usize, b: usize| -> Vec<f32> { x.row(b).iter().zip(x.row(a).iter()).map(|(q, p)| q - p).collect() };
+        let (va, vb) = match (before, after) {
+            (Some(a), Some(b)) => (
+                if a > 0 { slope(a - 1, a) } else { vec![0.0; x.ncols()] },
+                if b + 1 < n { slope(b, b + 1) } else { vec![0.0; x.ncols()] },
+            ),
+            _ => (Vec::new(), Vec::new()),
+        };
         for t in lo..=hi {
             let row: Vec<f32> = match (before, after) {
                 (Some(a), Some(b)) => {
-                    let u = (t - a) as f32 / (b - a) as f32;
-                    x.row(a).iter().zip(x.row(b).iter()).map(|(p, q)| p + u * (q - p)).collect()
+                    let len = (b - a) as f32;
+                    let u = (t - a) as f32 / len;
+                    let (u2, u3) = (u * u, u * u * u);
+                    let (h00, h10, h01, h11) = (2.0 * u3 - 3.0 * u2 + 1.0, u3 - 2.0 * u2 + u, -2.0 * u3 + 3.0 * u2, u3 - u2);
+                    (0..x.ncols()).map(|c| h00 * x[[a, c]] + h10 * len * va[c] + h01 * x[[b, c]] + h11 * len * vb[c]).collect()
                 }
                 (Some(a), None) => x.row(a).to_vec(),
                 (None, Some(b)) => x.row(b).to_vec(),
@@ -171,15 +186,25 @@ mod tests {
         x[[11, 1]] = -50.0;
         let mut y = x.clone();
         bridge_keys(&mut y, &[10], BRIDGE_HALF);
-        for t in 8..=12 {
-            assert!((y[[t, 0]] - t as f32).abs() < 1e-5 && (y[[t, 1]] - (t + 1) as f32).abs() < 1e-5, "{t}");
+        // A straight trajectory is bridged by itself.
+        for t in 7..=13 {
+            assert!((y[[t, 0]] - t as f32).abs() < 1e-4 && (y[[t, 1]] - (t + 1) as f32).abs() < 1e-4, "{t}");
         }
         assert_eq!(y.row(3), x.row(3));
         assert_eq!(y.row(15), x.row(15));
         // At the motion's start the nearer outside row is held.
         let mut z = x.clone();
         bridge_keys(&mut z, &[0], BRIDGE_HALF);
-        assert_eq!(z.row(0), x.row(3));
+        assert_eq!(z.row(0), x.row(4));
+        // A curved trajectory is met with its own velocity: no kink where the bridge ends.
+        let curve = Array2::from_shape_fn((30, 1), |(t, _)| (t as f32 * 0.3).sin());
+        let mut w = curve.clone();
+        w[[15, 0]] = 5.0;
+        bridge_keys(&mut w, &[15], BRIDGE_HALF);
+        let acc = |m: &Array2<f32>, t: usize| (m[[t + 1, 0]] - 2.0 * m[[t, 0]] + m[[t - 1, 0]]).abs();
+        for t in 10..=20 {
+            assert!(acc(&w, t) < 0.2, "frame {t}: {} against the curve's {}", acc(&w, t), acc(&curve, t));
+        }
     }
 
     #[test]
