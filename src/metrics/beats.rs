@@ -376,3 +376,31 @@ pub fn rhythm_scores(music_beats: &[f64], fact_beats: &[f64], bailando_beats: &[
         beat_prf: beat_prf(music_beats, fact_beats, BEAT_PRF_WINDOW_S),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn beat_prf_counts_one_to_one_matches_within_the_window() {
+        // Music beats every 0.5 s; the dance marks the first three (one 0.08 s late), adds one
+        // accent off the beat and a second accent near the first beat (matched only once).
+        let music = [0.5, 1.0, 1.5, 2.0];
+        let motion = [0.47, 0.52, 1.08, 1.5, 1.75];
+        let p = beat_prf(&music, &motion, BEAT_PRF_WINDOW_S);
+        assert!((p.precision - 3.0 / 5.0).abs() < 1e-12, "{p:?}");
+        assert!((p.recall - 3.0 / 4.0).abs() < 1e-12, "{p:?}");
+        let f = 2.0 * 0.6 * 0.75 / (0.6 + 0.75);
+        assert!((p.f - f).abs() < 1e-12, "{p:?}");
+    }
+
+    #[test]
+    fn beat_prf_of_a_perfect_and_an_empty_dance() {
+        let music = [0.4, 0.8, 1.2];
+        assert_eq!(beat_prf(&music, &music, BEAT_PRF_WINDOW_S), BeatPrf { precision: 1.0, recall: 1.0, f: 1.0 });
+        assert_eq!(beat_prf(&music, &[], BEAT_PRF_WINDOW_S), BeatPrf::default());
+        // Everything off by more than the window: nothing matches.
+        let late: Vec<f64> = music.iter().map(|b| b + 0.15).collect();
+        assert_eq!(beat_prf(&music, &late, BEAT_PRF_WINDOW_S).f, 0.0);
+    }
+}

@@ -30,6 +30,7 @@ use std::path::{Path, PathBuf};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 
+use super::diversity::{diversity, Diversity};
 use super::physical::{seed_distance_m, Criterion, PhysicalScores, Verdict};
 use super::reference::ReferenceStats;
 use super::score::{multimodality, score_dance, score_set, ScoredDance, SetScores};
@@ -113,6 +114,10 @@ pub struct EvalRow {
     pub seed_distance_m: Option<f64>,
     /// The smallest seed distance of any song pair (the verdict's value).
     pub seed_distance_min_m: Option<f64>,
+    /// TSMT's A-seq-D, I-seq-D and S-music-D ([`super::diversity`]) on z-normalised kinetic
+    /// windows; S-music-D only where one song has dances from several seeds.
+    #[serde(default)]
+    pub diversity: Diversity,
     /// Per-dance detail: what was danced to what.
     pub dances: Vec<EvalDance>,
 }
@@ -193,6 +198,14 @@ fn crop(m: &Motion, frames: usize) -> Motion {
 fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: Option<Vec<Vec<(usize, Motion)>>>, reference: &ReferenceStats) -> EvalRow {
     let dances: Vec<ScoredDance> = scored.iter().map(|(_, s)| s.clone()).collect();
     let mut scores = score_set(&dances, reference);
+    // The paper's diversity measures: dances grouped by song (each dance alone without groups).
+    let normed: Vec<Vec<Vec<f64>>> = dances.iter().map(|s| s.features.kinetic.iter().map(|r| reference.kinetic.normalise(r)).collect()).collect();
+    let song_groups: Vec<Vec<usize>> = match &per_song {
+        Some(groups) => groups.iter().map(|g| g.iter().map(|(i, _)| *i).collect()).collect(),
+        None => (0..dances.len()).map(|i| vec![i]).collect(),
+    };
+    let by_song: Vec<Vec<&[Vec<f64>]>> = song_groups.iter().map(|g| g.iter().map(|&i| normed[i].as_slice()).collect()).collect();
+    let diversity_v = diversity(&by_song);
     let (mut multimodality_v, mut seed_mean, mut seed_min) = (None, None, None);
     if let Some(groups) = per_song {
         let g: Vec<Vec<&ScoredDance>> = groups.iter().map(|ix| ix.iter().map(|(i, _)| &dances[*i]).collect()).collect();
@@ -222,6 +235,7 @@ fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: Option<Vec<V
         multimodality: multimodality_v,
         seed_distance_m: seed_mean,
         seed_distance_min_m: seed_min,
+        diversity: diversity_v,
         dances: scored.into_iter().map(|(e, _)| e).collect(),
     }
 }
@@ -518,6 +532,31 @@ fn scores_table(rows: &[EvalRow]) -> String {
 
 const PHYSICAL_HEADER: &str = "| Motion | n | Lowest foot p5 / median / p95 m | Below −5 cm | Deepest m | Accel median / p99 / p99.9 / max m/s² | Key pop max m/s² ↓ | Speed m/s | × real | Freeze L/F | Seed Δ m (min) | Key err cm (worst) ↓ | Verdict | Dances passing |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 
+/// TSMT's own measures (Li et al. 2020): its three diversities, authenticity and coherence, and
+/// beat precision/recall/F of FACT motion beats against music beats (±0.1 s).
+fn paper_table(rows: &[EvalRow]) -> String {
+    let mut out = String::from("| Motion | n | A-seq-D | I-seq-D | S-music-D | Authentic ↑ | Coherent ↑ | Beat P | Beat R | Beat F (TSMT) |\n|---|---|---|---|---|---|---|---|---|---|\n");
+    for r in rows {
+        let m = &r.scores.mean;
+        let d = &r.diversity;
+        let b = &m.rhythm.beat_prf;
+        let cells = [
+            r.name.clone(),
+            r.scores.dances.to_string(),
+            opt(d.a_seq_d),
+            opt(d.i_seq_d),
+            opt(d.s_music_d),
+            f(m.plausibility.authenticity),
+            f(m.plausibility.coherence),
+            f(b.precision),
+            f(b.recall),
+            f(b.f),
+        ];
+        out.push_str(&format!("| {} |\n", cells.join(" | ")));
+    }
+    out
+}
+
 /// One line of the physical table: `tail` is the seed distance, key error, verdict and passing cells.
 fn physical_cells(name: &str, n: usize, p: &PhysicalScores, freeze: f64, tail: [String; 4]) -> String {
     let [seeds, key_err, verdict, passing] = tail;
@@ -575,11 +614,15 @@ pub fn markdown(result: &EvalResult) -> String {
     out += &scores_table(&result.rows);
     out += "\n### Physical plausibility\n\n";
     out += &physical_table(&result.rows, reference.as_ref());
+    out += "\n### TSMT's measures (diversity on z-normalised kinetic 5-s windows, beat P/R/F ±0.1 s)\n\n";
+    out += &paper_table(&result.rows);
     if !result.extra_rows.is_empty() {
         out += &format!("\n## Extra songs, whole ({})\n\n### Scores\n\n", result.extra_songs.join(", "));
         out += &scores_table(&result.extra_rows);
         out += "\n### Physical plausibility\n\n";
         out += &physical_table(&result.extra_rows, reference.as_ref());
+        out += "\n### TSMT's measures\n\n";
+        out += &paper_table(&result.extra_rows);
     }
     out
 }

@@ -508,12 +508,33 @@ pub struct Schedule {
     pub steps: usize,
 }
 
-/// `model.json`'s own fields: the bins and the default sampling.
+/// `model.json`'s own fields: the bins, the default sampling and the de-quantisation.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Serving {
     pub bins: Bins,
     /// Used where a job gives no `temperature` / `top_k`.
     pub sampling: Sampling,
+    /// σ, in frames, of the Gaussian that smooths the sampled bin centres over time before the
+    /// motion is rebuilt (0: none). Each coordinate is drawn on its own, so a joint's three
+    /// coordinates jitter by a bin or two from frame to frame; at 25 fps one 4-mm bin of jitter
+    /// is already ~2.5 m/s² of acceleration, and the model card measures what is left.
+    #[serde(default)]
+    pub smooth_frames: f64,
+}
+
+/// Smooths every column of sampled features `[T, D]` over time (σ `sigma` frames, scipy's
+/// `gaussian_filter1d`), leaving the opening rows (`keep`, a request's own seed motion) as given.
+pub fn dequantise(features: &mut Array2<f32>, keep: usize, sigma: f64) {
+    if sigma <= 0.0 || features.nrows() <= keep + 1 {
+        return;
+    }
+    for mut col in features.columns_mut() {
+        let x: Vec<f64> = col.iter().map(|&v| f64::from(v)).collect();
+        let y = crate::metrics::beats::gaussian_filter1d(&x[keep..], sigma);
+        for (dst, v) in col.iter_mut().skip(keep).zip(y) {
+            *dst = v as f32;
+        }
+    }
 }
 
 /// `model.json`.
@@ -594,7 +615,8 @@ impl Served {
             })
         })??;
         let Some(tokens) = out else { return Err(Cancelled.into()) };
-        let sampled = bins.values(&tokens);
+        let mut sampled = bins.values(&tokens);
+        dequantise(&mut sampled, 0, self.file.extra.smooth_frames);
         let features = match opening {
             Some(o) => ndarray::concatenate(ndarray::Axis(0), &[o.view(), sampled.view()]).map_err(|e| ModelError::Invalid(e.to_string()))?,
             None => sampled,
@@ -652,6 +674,24 @@ mod tests {
         }
         assert_eq!(b.index(0, -100.0), 0);
         assert_eq!(b.index(0, 100.0), 299);
+    }
+
+    #[test]
+    fn dequantising_removes_bin_jitter_and_keeps_the_opening() {
+        // A slow ramp drawn one bin off at random every frame, after 5 given frames.
+        let mut rng = StdRng::seed_from_u64(1);
+        let clean = Array2::from_shape_fn((200, 1), |(t, _)| t as f32 * 0.004);
+        let mut x = clean.mapv(|v| v) + Array2::from_shape_fn((200, 1), |_| 0.004 * rng.gen_range(-1..=1) as f32);
+        let given = x.slice(s![..5, ..]).to_owned();
+        let accel = |a: &Array2<f32>| (6..194).map(|t| (a[[t + 1, 0]] - 2.0 * a[[t, 0]] + a[[t - 1, 0]]).abs()).fold(0f32, f32::max);
+        let before = accel(&x);
+        dequantise(&mut x, 5, 1.5);
+        assert_eq!(x.slice(s![..5, ..]), given);
+        let after = accel(&x);
+        assert!(after < 0.25 * before, "second difference {before} -> {after}");
+        // The ramp itself is kept (away from the ends).
+        let off = (20..180).map(|t| (x[[t, 0]] - clean[[t, 0]]).abs()).fold(0f32, f32::max);
+        assert!(off < 0.004, "smoothing moved the ramp by {off}");
     }
 
     #[test]

@@ -21,3 +21,4 @@ mod roundtrip;
 mod scale;
 mod schemathesis;
 mod songs;
+mod tsmt;

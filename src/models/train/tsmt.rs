@@ -36,6 +36,9 @@ pub struct Options {
     /// Default top-k written into `model.json` (0: every bin).
     #[arg(long, default_value_t = 0)]
     pub top_k: usize,
+    /// De-quantisation σ (frames) written into `model.json` (see `tsmt::Serving`).
+    #[arg(long, default_value_t = 1.0)]
+    pub smooth_frames: f64,
     #[arg(long, default_value_t = 2020)]
     pub seed: u64,
 }
@@ -71,7 +74,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         pose_norm: data.pose_norm.clone(),
         fps: crate::motion::MOTION_FPS,
         training: t.record(opts.lr, opts.batch, opts.seed, Schedule { window: config.window as usize, stride: opts.stride, input_noise_bins: opts.input_noise_bins, steps }),
-        extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k } },
+        extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k }, smooth_frames: opts.smooth_frames },
     };
     let steps_cell = std::cell::Cell::new(0usize);
     trainer.run(

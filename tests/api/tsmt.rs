@@ -1,0 +1,74 @@
+//! A `tsmt` job end to end with the committed weights: a real song through the API, the sampled
+//! dance back as motion.json and a report, seeded draws reproducible, sampling options checked.
+use crate::helpers::{expect_problem, short_song, spawn_app_with};
+use reqwest::StatusCode;
+use serde_json::{json, Value};
+use std::path::Path;
+
+fn models_dir() -> std::path::PathBuf {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
+    assert!(dir.join("tsmt/weights.safetensors").is_file(), "the committed tsmt weights are missing from {}", dir.display());
+    dir
+}
+
+async fn dance(app: &crate::helpers::TestApp, body: Value) -> String {
+    let response = app.post_job(&body, None).await;
+    assert_eq!(response.status(), StatusCode::ACCEPTED);
+    let job: Value = response.json().await.expect("job");
+    let id = job["id"].as_str().expect("job id").to_string();
+    let done = app.wait_job(&id).await;
+    assert_eq!(done["status"], "succeeded", "{done}");
+    id
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tsmt_samples_a_dance_for_a_real_song() {
+    let app = spawn_app_with(|c| c.models_dir = models_dir()).await;
+    let models: Value = app.get("/v1/models").await.json().await.expect("models");
+    let listed = models.as_array().or_else(|| models["models"].as_array()).expect("model list")
+        .iter().find(|m| m["id"] == "tsmt").cloned().expect("tsmt is listed");
+    for (cap, want) in [("temperature", true), ("top_k", true), ("seed_motion", true), ("key_poses", false), ("style", false)] {
+        assert_eq!(listed["capabilities"][cap], want, "{cap}: {listed}");
+    }
+
+    let song = app.upload_ok(&short_song()).await;
+    let song_id = song["id"].as_str().expect("song id");
+    let frames = (song["duration_s"].as_f64().expect("duration") * 25.0).floor() as usize;
+    let body = |seed: u64| json!({"song_id": song_id, "model": "tsmt", "seed": seed, "temperature": 0.8, "top_k": 8});
+    let job = dance(&app, body(4)).await;
+
+    let motion: Value = app.get(&format!("/v1/jobs/{job}/motion.json")).await.json().await.expect("motion json");
+    let positions = motion["positions"].as_array().expect("positions");
+    assert_eq!(positions.len(), frames, "one frame per 1/25 s of music");
+    let joints = motion["joint_names"].as_array().expect("joint names").len();
+    let values: Vec<f64> = positions.iter().filter_map(Value::as_array).flatten().filter_map(Value::as_array).flatten().filter_map(Value::as_f64).collect();
+    assert_eq!(values.len(), frames * joints * 3);
+    assert!(values.iter().all(|v| v.is_finite() && v.abs() < 100.0), "positions are finite and near the dancer");
+
+    let report: Value = app.get(&format!("/v1/jobs/{job}/report.json")).await.json().await.expect("report");
+    assert_eq!(report["frames"], frames);
+    let speed = report["scores"]["physical"]["mean_speed_m_s"].as_f64().expect("speed");
+    assert!(speed > 0.05, "the sampled dance moves: {speed} m/s");
+    assert!(report["scores"]["rhythm"]["beat_prf"]["f"].as_f64().is_some_and(f64::is_finite), "TSMT's beat F rides in the report: {report}");
+
+    // Seeded sampling: the same seed gives the same dance, another seed another.
+    let text = |id: String| {
+        let app = &app;
+        async move { app.get(&format!("/v1/jobs/{id}/motion.json")).await.text().await.expect("text") }
+    };
+    let (again, other) = (dance(&app, body(4)).await, dance(&app, body(5)).await);
+    let (a, b, c) = (text(job).await, text(again).await, text(other).await);
+    assert_eq!(a, b, "same seed, same dance");
+    assert_ne!(a, c, "another seed, another dance");
+
+    // Sampling options out of range, and key poses the model cannot honour, are refused up front.
+    for bad in [json!({"temperature": 0.0}), json!({"temperature": 6.0}), json!({"top_k": 0}), json!({"top_k": 301})] {
+        let mut body = json!({"song_id": song_id, "model": "tsmt"});
+        body.as_object_mut().expect("object").extend(bad.as_object().expect("object").clone());
+        expect_problem(app.post_job(&body, None).await, StatusCode::UNPROCESSABLE_ENTITY, "invalid-field").await;
+    }
+    let pose = json!({"time_s": 1.0, "joints": vec![[0.0, 0.0, 0.0]; 23]});
+    let keyed = app.post_job(&json!({"song_id": song_id, "model": "tsmt", "key_poses": [pose]}), None).await;
+    expect_problem(keyed, StatusCode::UNPROCESSABLE_ENTITY, "invalid-field").await;
+    app.stop().await;
+}
