@@ -172,7 +172,14 @@ pub struct BenchArgs {
     /// libtorch intra-op threads (the service uses 1 per worker).
     #[arg(long, default_value_t = 1)]
     pub threads: i32,
+    /// Also time a 90-s and a 420-s song (the given songs joined and looped: none of the shared
+    /// songs is 7 minutes long) and print each model's cost ratio beside the length ratio.
+    #[arg(long)]
+    pub scaling: bool,
 }
+
+/// The lengths `--scaling` compares, seconds: a 1.5-minute and a 7-minute song.
+pub const SCALING_LENGTHS_S: [u32; 2] = [90, 420];
 
 /// The seconds `choreo bench generate` aims for on a 3-minute song (decode → BVH + report).
 pub const TARGET_3MIN_S: f64 = 5.0;
@@ -193,6 +200,7 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
         songs.push((p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(), a, t.elapsed()));
     }
     // A 3-minute song: the given songs joined (at the first one's rate) and cut to 180 s.
+    let mut scaling = Vec::new();
     if let Some((_, first, _)) = songs.first() {
         let sr = first.sample_rate;
         let mut samples = Vec::new();
@@ -204,18 +212,33 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
         samples.truncate(180 * sr as usize);
         let secs = samples.len() as f64 / f64::from(sr);
         let decode_share: Duration = songs.iter().map(|(_, _, d)| *d).sum::<Duration>().mul_f64(secs / songs.iter().map(|(_, a, _)| a.duration_s).sum::<f64>());
+        if args.scaling && !samples.is_empty() {
+            // The joined songs looped to each length; decode time is charged pro rata.
+            let per_s = decode_share.div_f64(secs.max(1e-9));
+            for len in SCALING_LENGTHS_S {
+                let want = len as usize * sr as usize;
+                let looped: Vec<f32> = samples.iter().copied().cycle().take(want).collect();
+                let a = DecodedAudio { format: first.format, sample_rate: sr, channels: first.channels, duration_s: f64::from(len), samples: looped };
+                scaling.push((format!("looped {len} s"), a, per_s.mul_f64(f64::from(len))));
+            }
+        }
         let joined = DecodedAudio { format: first.format, sample_rate: sr, channels: first.channels, duration_s: secs, samples };
         songs.push((format!("joined {:.0} s", secs), joined, decode_share));
     }
+    let n_timed = songs.len();
+    songs.extend(scaling);
     let stage_names = ["decode audio", "features", "encode", "decode", "export", "report"];
     let mut table = format!(
-        "| model | song | music s | {} | total s | s per music min | 3-min target |\n|---|---|---|{}---|---|---|\n",
+        "| model | song | music s | {} | total s | s per music min | decode ms per frame | 3-min target |\n|---|---|---|{}---|---|---|---|\n",
         stage_names.join(" | "),
         "---|".repeat(stage_names.len())
     );
     let out = tempfile::tempdir()?;
+    let mut ratios = String::new();
     for model in &models {
-        for (name, audio, decode) in &songs {
+        // (music s, total s, decode s) of the scaling songs.
+        let mut scaled: Vec<(f64, f64, f64)> = Vec::new();
+        for (k, (name, audio, decode)) in songs.iter().enumerate() {
             let request = GenerateRequest::plain(audio, 0);
             let g = generate_decoded(&registry, model, Some(name.clone()), &request, true, out.path(), &mut |_, _| {})?;
             let mut stages = vec![("decode audio".to_string(), *decode)];
@@ -237,8 +260,28 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
                 "-".into()
             };
             let cells: Vec<String> = stage_names.iter().map(|s| get(s)).collect();
-            table += &format!("| {} | {name} | {:.0} | {} | {total:.2} | {per_min:.2} | {target} |\n", model.0, audio.duration_s, cells.join(" | "));
+            // The autoregressive loop's cost per motion frame (a TSMT "step").
+            let decode_s: f64 = stages.iter().filter(|(n, _)| n == "decode").map(|(_, d)| d.as_secs_f64()).sum();
+            let frames = (audio.duration_s * crate::motion::MOTION_FPS).floor().max(1.0);
+            let per_frame = if decode_s > 0.0 { format!("{:.2}", 1000.0 * decode_s / frames) } else { "–".into() };
+            table += &format!("| {} | {name} | {:.0} | {} | {total:.2} | {per_min:.2} | {per_frame} | {target} |\n", model.0, audio.duration_s, cells.join(" | "));
+            if k >= n_timed {
+                scaled.push((audio.duration_s, total, decode_s));
+            }
         }
+        if let [(la, ta, da), (lb, tb, db)] = scaled[..] {
+            ratios += &format!(
+                "{}: {lb:.0} s song / {la:.0} s song: length × {:.2}, total cost × {:.2}, decode × {}\n",
+                model.0,
+                lb / la,
+                tb / ta,
+                if da > 0.0 { format!("{:.2}", db / da) } else { "–".into() }
+            );
+        }
+    }
+    if !ratios.is_empty() {
+        table += "\n";
+        table += &ratios;
     }
     Ok(table)
 }
