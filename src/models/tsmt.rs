@@ -548,6 +548,12 @@ pub struct Serving {
     /// is already ~2.5 m/s² of acceleration, and the model card measures what is left.
     #[serde(default)]
     pub smooth_frames: f64,
+    /// σ, in frames, of a second Gaussian over the root height once it is rebuilt from the
+    /// clearance (0: none). The height is the clearance minus the lowest foot point's local
+    /// height, and which point is lowest hops between feet and heel/toe as each coordinate is
+    /// drawn on its own: the whole body then rises or drops by up to 0.2 m in a frame (4–6 m/s).
+    #[serde(default)]
+    pub smooth_height_frames: f64,
 }
 
 /// Smooths every column of sampled features `[T, D]` over time (σ `sigma` frames, scipy's
@@ -669,6 +675,13 @@ impl DanceModel for Served {
         let n = ((req.audio.duration_s * self.file.fps).floor() as usize).max(1);
         let mut g = self.generate_features(req, n, progress)?;
         repr::clearance_to_height(&mut g.features);
+        // The root height follows the lowest foot point, which hops between feet and points as
+        // their coordinates are drawn; smoothing the height itself (not the clearance) keeps the
+        // body from jumping with it. The opening (a request's seed motion) is kept.
+        let keep = req.seed_motion.map_or(0, |m| m.num_frames().min(n));
+        let mut h = g.features.column(repr::ROOT_Y).to_owned().insert_axis(ndarray::Axis(1));
+        dequantise(&mut h, keep, self.file.extra.smooth_height_frames);
+        g.features.column_mut(repr::ROOT_Y).assign(&h.column(0));
         let (motion, _root) = repr::from_features(g.features.view(), g.start, self.file.fps)?;
         Ok(motion.into())
     }

@@ -44,6 +44,9 @@ pub struct Options {
     /// De-quantisation σ (frames) written into `model.json` (see `tsmt::Serving`).
     #[arg(long, default_value_t = 1.0)]
     pub smooth_frames: f64,
+    /// De-quantisation σ (frames) of the height column (see `tsmt::Serving`).
+    #[arg(long, default_value_t = 4.0)]
+    pub smooth_height_frames: f64,
     #[arg(long, default_value_t = 2020)]
     pub seed: u64,
 }
@@ -79,7 +82,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         pose_norm: data.pose_norm.clone(),
         fps: crate::motion::MOTION_FPS,
         training: t.record(opts.lr, opts.batch, opts.seed, Schedule { window: config.window as usize, stride: opts.stride, input_noise_bins: opts.input_noise_bins, loss_frames: opts.loss_frames, steps }),
-        extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k }, smooth_frames: opts.smooth_frames },
+        extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k }, smooth_frames: opts.smooth_frames, smooth_height_frames: opts.smooth_height_frames },
     };
     let steps_cell = std::cell::Cell::new(0usize);
     trainer.run(
