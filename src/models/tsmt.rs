@@ -529,6 +529,10 @@ pub struct Schedule {
     /// Share of each window's frames scored per step (1: all; see `train::tsmt::Options`).
     #[serde(default = "one")]
     pub loss_frames: f64,
+    /// Windows whose last second was slower than this (m/s, root-relative joints) were left out
+    /// (0: none).
+    #[serde(default)]
+    pub min_window_speed: f64,
     pub steps: usize,
 }
 

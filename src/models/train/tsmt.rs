@@ -41,6 +41,10 @@ pub struct Options {
     /// about three times the steps for the same minutes.
     #[arg(long, default_value_t = 0.25)]
     pub loss_frames: f64,
+    /// Windows whose last second's mean root-relative joint speed is below this (m/s) are not
+    /// trained on (the dancer comes to a stand, mostly a dance's closing hold).
+    #[arg(long, default_value_t = 0.15)]
+    pub min_window_speed: f64,
     /// De-quantisation σ (frames) written into `model.json` (see `tsmt::Serving`).
     #[arg(long, default_value_t = 1.0)]
     pub smooth_frames: f64,
@@ -72,6 +76,15 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     let clips = SeedClips::draw(&data.train_raw.iter().map(|s| &s.poses).collect::<Vec<_>>(), SEED_CLIPS, SEED_CLIP_FRAMES, opts.seed)?;
     clips.save(&trainer.out.join(SEED_CLIPS_FILE))?;
     let len = config.window as usize + 1;
+    // Windows where the dancer stands still (mostly the closing hold of a dance) are left out:
+    // a held pose is an attractor for a sampled model, which once in it repeats it for minutes.
+    let speeds: Vec<Vec<f32>> = data.train_raw.iter().map(|s| local_speed(&s.poses, crate::motion::MOTION_FPS as f32)).collect();
+    // Judged on the window's last second: a window that ends in a hold teaches "stay still".
+    let tail = (crate::motion::MOTION_FPS as usize).min(len - 1);
+    let moving = |&(i, f): &(usize, usize)| speeds[i][f + len - tail..f + len].iter().sum::<f32>() / tail as f32 >= opts.min_window_speed as f32;
+    let all = window_starts(&data.train, len, opts.stride, 0).len();
+    let kept = window_starts(&data.train, len, opts.stride, 0).iter().filter(|w| moving(w)).count();
+    tracing::info!(all, kept, min_speed = opts.min_window_speed, "training windows where the dancer moves");
     let mut steps = 0usize;
     let noise = Normal::new(0.0, opts.input_noise_bins.max(1e-9)).map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(format!("--input-noise-bins: {e}"))))?;
     let epochs = 0..opts.epochs;
@@ -81,7 +94,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         music_norm: data.music_norm.clone(),
         pose_norm: data.pose_norm.clone(),
         fps: crate::motion::MOTION_FPS,
-        training: t.record(opts.lr, opts.batch, opts.seed, Schedule { window: config.window as usize, stride: opts.stride, input_noise_bins: opts.input_noise_bins, loss_frames: opts.loss_frames, steps }),
+        training: t.record(opts.lr, opts.batch, opts.seed, Schedule { window: config.window as usize, stride: opts.stride, input_noise_bins: opts.input_noise_bins, loss_frames: opts.loss_frames, min_window_speed: opts.min_window_speed, steps }),
         extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k }, smooth_frames: opts.smooth_frames, smooth_height_frames: opts.smooth_height_frames },
     };
     let steps_cell = std::cell::Cell::new(0usize);
@@ -89,7 +102,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         epochs,
         2,
         |epoch, opt, deadline| {
-            let starts = window_starts(train, len, opts.stride, opts.seed + epoch as u64);
+            let starts: Vec<(usize, usize)> = window_starts(train, len, opts.stride, opts.seed + epoch as u64).into_iter().filter(|w| moving(w)).collect();
             if starts.is_empty() {
                 return Err(TrainError::NoWindows(len));
             }
@@ -136,6 +149,19 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         |t| file_of(t, steps_cell.get()),
     )?;
     Ok(trainer.logs)
+}
+
+/// Mean speed (m/s) of the joints relative to the root, per frame (0 for the first), from
+/// feature rows: root-relative joint coordinates in the facing frame, metres.
+fn local_speed(poses: &Array2<f32>, fps: f32) -> Vec<f32> {
+    let joints = repr::POSE_DIM / 3;
+    let mut out = vec![0f32; poses.nrows()];
+    for t in 1..poses.nrows() {
+        let (a, b) = (poses.row(t - 1), poses.row(t));
+        let sum: f32 = (0..joints).map(|j| (0..3).map(|c| (b[3 * j + c] - a[3 * j + c]).powi(2)).sum::<f32>().sqrt()).sum();
+        out[t] = sum / joints as f32 * fps;
+    }
+    out
 }
 
 /// Token windows `[b, len, coords]` (int64).
