@@ -2,8 +2,10 @@
 //!
 //! All metrics take world joint positions in metres, y up, `[T, J, 3]`, and the motion's fps.
 //! - [`beats`]: kinematic beats (FACT and Bailando variants), BAS in both conventions, beat
-//!   coverage / hit rate (DanceRevolution), rhythm hit (DanceNet), and `mir_eval`'s beat metrics.
-//! - [`features`]: AIST++ kinetic and geometric features; [`fid`]: FID and diversity.
+//!   coverage / hit rate (DanceRevolution), rhythm hit (DanceNet), beat precision/recall/F (TSMT),
+//!   and `mir_eval`'s beat metrics.
+//! - [`features`]: AIST++ kinetic and geometric features; [`fid`]: FID and diversity;
+//!   [`diversity`]: TSMT's A-seq-D, I-seq-D and S-music-D.
 //! - [`kinematics`]: smoothness, foot skating, freezing, key-pose error; [`plausibility`]:
 //!   authenticity and coherence against real joint-angle limits (TSMT).
 //! - [`physical`]: floor contact, ground penetration, pops, liveliness, seed sensitivity, and
