@@ -61,6 +61,22 @@ async fn tsmt_samples_a_dance_for_a_real_song() {
     assert_eq!(a, b, "same seed, same dance");
     assert_ne!(a, c, "another seed, another dance");
 
+    // What comes out goes back in: the first second of this dance as a seed motion opens the next
+    // dance (kept as its first frames, up to the export's rigid fit), and the rest is sampled.
+    let first: Value = serde_json::from_str(&a).expect("motion json");
+    let seed_frames: Vec<Value> = first["positions"].as_array().expect("positions")[..25].to_vec();
+    let seeded = dance(&app, json!({"song_id": song_id, "model": "tsmt", "seed": 9, "seed_motion": {"fps": 25.0, "positions": seed_frames}})).await;
+    let second: Value = serde_json::from_str(&text(seeded).await).expect("motion json");
+    assert_eq!(second["positions"].as_array().map(Vec::len), Some(frames));
+    let rel = |m: &Value, f: usize| -> Vec<[f64; 3]> {
+        let p: Vec<[f64; 3]> = m["positions"][f].as_array().expect("frame").iter().map(|j| [0, 1, 2].map(|c| j[c].as_f64().expect("number"))).collect();
+        p.iter().map(|j| [j[0] - p[0][0], j[1] - p[0][1], j[2] - p[0][2]]).collect()
+    };
+    for f in [0, 12, 24] {
+        let worst = rel(&first, f).iter().zip(rel(&second, f)).map(|(a, b)| (0..3).map(|c| (a[c] - b[c]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max);
+        assert!(worst < 0.05, "seed frame {f}: a joint is {worst:.3} m from where the seed motion had it");
+    }
+
     // Sampling options out of range, and key poses the model cannot honour, are refused up front.
     for bad in [json!({"temperature": 0.0}), json!({"temperature": 6.0}), json!({"top_k": 0}), json!({"top_k": 301})] {
         let mut body = json!({"song_id": song_id, "model": "tsmt"});
