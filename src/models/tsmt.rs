@@ -382,7 +382,21 @@ impl Tsmt {
     /// Generates `n` frames of tokens after the context `prefix` `[m ≥ 1, coords]`, frame t
     /// from the last frames and row t of `audio_vectors` ([`Self::audio_logit_vectors`]).
     /// `on_step(done)` is called before the first frame and every 250 frames, and may stop it.
-    pub fn sample(&self, prefix: &Array2<i64>, audio_vectors: &Tensor, sampling: Sampling, seed: u64, mut on_step: impl FnMut(usize) -> bool) -> Option<Array2<i64>> {
+    pub fn sample(&self, prefix: &Array2<i64>, audio_vectors: &Tensor, sampling: Sampling, seed: u64, on_step: impl FnMut(usize) -> bool) -> Option<Array2<i64>> {
+        self.sample_guarded(prefix, audio_vectors, sampling, None, seed, on_step)
+    }
+
+    /// [`Self::sample`] with an optional [`StallGuard`] and the metres per bin of each joint
+    /// coordinate (the first `POSE_DIM` coordinates) it measures motion with.
+    pub fn sample_guarded(
+        &self,
+        prefix: &Array2<i64>,
+        audio_vectors: &Tensor,
+        sampling: Sampling,
+        guard: Option<(&StallGuard, &[f32])>,
+        seed: u64,
+        mut on_step: impl FnMut(usize) -> bool,
+    ) -> Option<Array2<i64>> {
         let c = self.config.coords as usize;
         let n = audio_vectors.size()[0] as usize;
         let mut out = Array2::<i64>::zeros((n, c));
@@ -403,11 +417,23 @@ impl Tsmt {
         if !on_step(0) {
             return None;
         }
+        // The last frames drawn, for the guard.
+        let mut recent: std::collections::VecDeque<Vec<i64>> = std::collections::VecDeque::new();
         for t in 0..n {
             let logits = self.logits(&(wx.shallow_clone() + audio_vectors.get(t as i64))); // [coords, n_bins]
             let flat: Vec<f32> = Vec::<f32>::try_from(logits.contiguous().view([-1])).ok()?;
+            let now = match guard {
+                Some((g, widths)) if recent.len() >= g.window_frames && reach_m(&recent, widths) < g.min_reach_m => g.boosted(sampling),
+                _ => sampling,
+            };
             for (ci, row) in flat.chunks(self.config.n_bins as usize).enumerate() {
-                out[[t, ci]] = sampling.draw(row, &mut probs, &mut rng) as i64;
+                out[[t, ci]] = now.draw(row, &mut probs, &mut rng) as i64;
+            }
+            if let Some((g, _)) = guard {
+                recent.push_back(out.row(t).to_vec());
+                while recent.len() > g.window_frames {
+                    recent.pop_front();
+                }
             }
             wx = self.step(&tensor_of(out.row(t)), pos, &mut caches);
             pos += 1;
@@ -416,6 +442,45 @@ impl Tsmt {
             }
         }
         Some(out)
+    }
+}
+
+/// How far the pose has come within `frames` (tokens, oldest first): the largest, over the
+/// earlier frames, of the mean distance (m) of the root-relative joints from where they are in
+/// the last frame, from the metres per bin of each joint coordinate (`widths`, `POSE_DIM` long).
+/// A bin or two of sampling jitter adds a centimetre or so; a dancer who moves reaches tens.
+fn reach_m(frames: &std::collections::VecDeque<Vec<i64>>, widths: &[f32]) -> f32 {
+    let joints = widths.len() / 3;
+    let Some(last) = frames.back() else { return 0.0 };
+    if joints == 0 || last.len() < 3 * joints {
+        return 0.0;
+    }
+    frames
+        .iter()
+        .map(|f| {
+            let sum: f32 = (0..joints)
+                .map(|j| (0..3).map(|c| ((last[3 * j + c] - f[3 * j + c]) as f32 * widths[3 * j + c]).powi(2)).sum::<f32>().sqrt())
+                .sum();
+            sum / joints as f32
+        })
+        .fold(0.0, f32::max)
+}
+
+/// A served guard against stalls (not in the paper): a sampled model that reaches a held pose
+/// (mostly a dance's closing pose) can stay in it for minutes, since each coordinate's likeliest
+/// bin is its previous one. While no pose of the last `window_frames` frames is more than
+/// `min_reach_m` (mean over joints, root-relative) from the newest ([`reach_m`]), draws use the
+/// temperature times `boost` (and twice the top-k) until the dancer moves again.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct StallGuard {
+    pub min_reach_m: f32,
+    pub window_frames: usize,
+    pub boost: f64,
+}
+
+impl StallGuard {
+    fn boosted(&self, s: Sampling) -> Sampling {
+        Sampling { temperature: s.temperature * self.boost, top_k: if s.top_k == 0 { 0 } else { s.top_k * 2 } }
     }
 }
 
@@ -558,6 +623,9 @@ pub struct Serving {
     /// drawn on its own: the whole body then rises or drops by up to 0.2 m in a frame (4–6 m/s).
     #[serde(default)]
     pub smooth_height_frames: f64,
+    /// The stall guard, if any ([`StallGuard`]).
+    #[serde(default)]
+    pub stall_guard: Option<StallGuard>,
 }
 
 /// Smooths every column of sampled features `[T, D]` over time (σ `sigma` frames, scipy's
@@ -649,7 +717,9 @@ impl Served {
                 };
                 let rest = vectors.narrow(0, opened as i64, (n - opened) as i64);
                 let total = (n - opened).max(1);
-                Ok(model.sample(&context, &rest, sampling, req.seed, |done| progress.report("decode", done as f32 / total as f32).is_ok()))
+                let widths: Vec<f32> = (0..repr::POSE_DIM).map(|c| (bins.hi[c] - bins.lo[c]) / bins.n as f32).collect();
+                let guard = self.file.extra.stall_guard.as_ref().map(|g| (g, widths.as_slice()));
+                Ok(model.sample_guarded(&context, &rest, sampling, guard, req.seed, |done| progress.report("decode", done as f32 / total as f32).is_ok()))
             })
         })??;
         let Some(tokens) = out else { return Err(Cancelled.into()) };
@@ -796,6 +866,29 @@ mod tests {
         // top_k = 1 is greedy: the same whatever the seed.
         let g = Sampling { temperature: 1.0, top_k: 1 };
         assert_eq!(m.sample(&prefix, &av, g, 1, |_| true).unwrap(), m.sample(&prefix, &av, g, 2, |_| true).unwrap());
+    }
+
+    #[test]
+    fn reach_measures_how_far_the_pose_came_and_the_guard_only_acts_on_a_stall() {
+        // Two joints, 1 cm per bin: a held pose reaches 0; a joint 30 bins away 0.15 m on the mean.
+        let widths = vec![0.01f32; 6];
+        let held: std::collections::VecDeque<Vec<i64>> = (0..10).map(|_| vec![5i64; 6]).collect();
+        assert_eq!(reach_m(&held, &widths), 0.0);
+        let mut moved = held.clone();
+        moved.push_front(vec![35, 5, 5, 5, 5, 5]);
+        assert!((reach_m(&moved, &widths) - 0.15).abs() < 1e-6);
+        // A guard that never fires leaves the draws as they were; one that always fires changes them.
+        let (_vs, m) = model(6);
+        let music = Tensor::randn([1, 30, 3], (Kind::Float, Device::Cpu));
+        let av = m.audio_logit_vectors(&music, |_| true).unwrap();
+        let prefix = Array2::from_shape_fn((10, 5), |(t, c)| ((t + c) % 12) as i64);
+        let s = Sampling { temperature: 0.3, top_k: 3 };
+        let w = vec![0.01f32; 3];
+        let never = StallGuard { min_reach_m: 0.0, window_frames: 5, boost: 10.0 };
+        let always = StallGuard { min_reach_m: 1e9, window_frames: 5, boost: 10.0 };
+        let plain = m.sample(&prefix, &av, s, 3, |_| true).unwrap();
+        assert_eq!(m.sample_guarded(&prefix, &av, s, Some((&never, &w)), 3, |_| true).unwrap(), plain);
+        assert_ne!(m.sample_guarded(&prefix, &av, s, Some((&always, &w)), 3, |_| true).unwrap(), plain);
     }
 
     #[test]

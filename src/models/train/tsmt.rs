@@ -95,7 +95,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         pose_norm: data.pose_norm.clone(),
         fps: crate::motion::MOTION_FPS,
         training: t.record(opts.lr, opts.batch, opts.seed, Schedule { window: config.window as usize, stride: opts.stride, input_noise_bins: opts.input_noise_bins, loss_frames: opts.loss_frames, min_window_speed: opts.min_window_speed, steps }),
-        extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k }, smooth_frames: opts.smooth_frames, smooth_height_frames: opts.smooth_height_frames },
+        extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k }, smooth_frames: opts.smooth_frames, smooth_height_frames: opts.smooth_height_frames, stall_guard: None },
     };
     let steps_cell = std::cell::Cell::new(0usize);
     trainer.run(
