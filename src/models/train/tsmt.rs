@@ -9,7 +9,7 @@ use tch::{Device, Tensor};
 
 use super::{batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError};
 use super::Trainer;
-use crate::models::tsmt::{Bins, Config, ModelFile, Sampling, Schedule, SeedClips, Serving, Tsmt, ID, MAX_POSITION, SEED_CLIPS_FILE};
+use crate::models::tsmt::{Bins, Config, ModelFile, Sampling, Schedule, SeedClips, Serving, StallGuard, Tsmt, ID, MAX_POSITION, SEED_CLIPS_FILE};
 use crate::motion::repr;
 
 /// Options of one training run (the card gives the run behind the committed weights).
@@ -28,13 +28,13 @@ pub struct Options {
     pub lr: f64,
     /// Standard deviation, in bins, of Gaussian noise added to the pose stream's input tokens
     /// (the targets stay clean), so that the model learns to come back from its own draws.
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, default_value_t = 2.0)]
     pub input_noise_bins: f64,
     /// Default sampling temperature written into `model.json`.
     #[arg(long, default_value_t = 1.0)]
     pub temperature: f64,
     /// Default top-k written into `model.json` (0: every bin).
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 20)]
     pub top_k: usize,
     /// Share of each window's predicted frames scored per step (drawn afresh every batch):
     /// the 300-bin read-out is most of a step's cost, so scoring a quarter of the frames gives
@@ -42,8 +42,9 @@ pub struct Options {
     #[arg(long, default_value_t = 0.25)]
     pub loss_frames: f64,
     /// Windows whose last second's mean root-relative joint speed is below this (m/s) are not
-    /// trained on (the dancer comes to a stand, mostly a dance's closing hold).
-    #[arg(long, default_value_t = 0.15)]
+    /// trained on (the dancer comes to a stand, mostly a dance's closing hold). 0 keeps all (the
+    /// served weights; 0.15 was tried, see the model card).
+    #[arg(long, default_value_t = 0.0)]
     pub min_window_speed: f64,
     /// De-quantisation σ (frames) written into `model.json` (see `tsmt::Serving`).
     #[arg(long, default_value_t = 1.0)]
@@ -51,6 +52,10 @@ pub struct Options {
     /// De-quantisation σ (frames) of the height column (see `tsmt::Serving`).
     #[arg(long, default_value_t = 4.0)]
     pub smooth_height_frames: f64,
+    /// The stall guard's reach (m) written into `model.json` (0: no guard; `tsmt::StallGuard`,
+    /// over 2 s, temperature × 1.5).
+    #[arg(long, default_value_t = 0.22)]
+    pub stall_reach: f64,
     #[arg(long, default_value_t = 2020)]
     pub seed: u64,
 }
@@ -95,7 +100,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         pose_norm: data.pose_norm.clone(),
         fps: crate::motion::MOTION_FPS,
         training: t.record(opts.lr, opts.batch, opts.seed, Schedule { window: config.window as usize, stride: opts.stride, input_noise_bins: opts.input_noise_bins, loss_frames: opts.loss_frames, min_window_speed: opts.min_window_speed, steps }),
-        extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k }, smooth_frames: opts.smooth_frames, smooth_height_frames: opts.smooth_height_frames, stall_guard: None },
+        extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k }, smooth_frames: opts.smooth_frames, smooth_height_frames: opts.smooth_height_frames, stall_guard: (opts.stall_reach > 0.0).then_some(StallGuard { min_reach_m: opts.stall_reach as f32, window_frames: 50, boost: 1.5 }) },
     };
     let steps_cell = std::cell::Cell::new(0usize);
     trainer.run(
