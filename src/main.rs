@@ -145,6 +145,8 @@ fn main() -> anyhow::Result<()> {
             Ok(())
         }
         Command::Generate(args) => {
+            // Warnings (and RUST_LOG's choice) from the models reach the terminal.
+            choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "warn");
             let g = choreo::worker::standalone::generate(args).context("choreo generate")?;
             for (stage, d) in &g.stages {
                 eprintln!("{stage:<14} {:>8.3} s", d.as_secs_f64());

@@ -19,9 +19,10 @@ use tch::{Device, Kind, Tensor};
 
 use std::path::Path;
 
-use super::folder::{self, Nothing};
+use super::folder;
 use super::layers::{sinusoid, Lstm, LstmState};
 use super::{to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
+use crate::motion::dataset::NormStats;
 use crate::motion::repr::RootStart;
 
 
@@ -297,20 +298,39 @@ impl DanceRevolution {
     /// `seed_poses` `[1, s, pose]` (normalised), if given, are fed as ground truth for the first
     /// frames, so the dance continues from them; otherwise the first input is the mean pose (0).
     /// `on_step` is called every `report_every` frames with the fraction done and may stop the loop.
+    /// `guard`, if given, kicks the LSTM state out of a held pose ([`StallGuard`]); its
+    /// `NormStats` turn the normalised outputs back into metres. Without seed poses, the first
+    /// `warm_up` frames are decoded and dropped before frame 0 ([`Serving::warm_up_frames`]).
+    #[allow(clippy::too_many_arguments)]
     pub fn decode(
         &self,
         z: &Tensor,
         seed: u64,
         seed_poses: Option<&Tensor>,
+        guard: Option<(&StallGuard, &NormStats)>,
+        warm_up: i64,
         report_every: i64,
         mut on_step: impl FnMut(f32) -> bool,
     ) -> Option<Tensor> {
         let n = z.size()[1];
         let device = z.device();
         let mut state = self.decoder.initial_state(1, seed, device);
+        // The guard's own draws: seeded apart from h_0's, so a dance that never stalls is unchanged.
+        let mut watch = guard.map(|(g, norm)| StallWatch::new(*g, norm, seed));
         let mut out = Vec::with_capacity(n as usize);
         let mut prev = Tensor::zeros([1, 1, self.config.pose_dim], (Kind::Float, device));
         let seeded = seed_poses.map(|s| s.size()[1].min(n)).unwrap_or(0);
+        if seeded == 0 {
+            // Warm-up: the decoder starts from the mean pose, a standing stance it leaves only
+            // slowly; run it over the song's opening and keep only its state and last pose.
+            for i in 0..warm_up.min(n) {
+                let y = self.decoder.run(&prev, &z.narrow(1, i, 1), &mut state);
+                if let Some(w) = watch.as_mut() {
+                    w.observe(&y, &mut state);
+                }
+                prev = y;
+            }
+        }
         if let Some(s) = seed_poses.filter(|_| seeded > 0) {
             // Teacher-force the seed frames: inputs are [mean, s_0 .. s_{m-2}], outputs replaced by s.
             let inputs = Tensor::cat(&[prev.shallow_clone(), s.narrow(1, 0, seeded - 1)], 1);
@@ -321,14 +341,115 @@ impl DanceRevolution {
         }
         for i in seeded..n {
             let y = self.decoder.run(&prev, &z.narrow(1, i, 1), &mut state);
+            if let Some(w) = watch.as_mut() {
+                w.observe(&y, &mut state);
+            }
             prev = y.shallow_clone();
             out.push(y);
             if report_every > 0 && (i + 1) % report_every == 0 && !on_step((i + 1) as f32 / n as f32) {
                 return None;
             }
         }
+        if let Some(w) = watch {
+            tracing::debug!(frames = n, kicked = w.kicked, "dance-revolution stall guard");
+        }
         Some(Tensor::cat(&out, 1))
     }
+}
+
+/// A served guard against stalls (not in the paper): the decoder is deterministic once `h_0` is
+/// drawn, and some draws settle into a held pose for tens of seconds (seed 0 on sugar_plum_fairy
+/// stood at 0.18 m/s for its first 25 s). While no pose of the last `window_frames` frames is
+/// more than `min_reach_m` (mean over joints, root-relative) from the newest, every layer's `h`
+/// takes Gaussian noise of standard deviation `kick` per frame, a random walk small enough per
+/// frame not to jump, until the dancer moves again.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct StallGuard {
+    pub min_reach_m: f32,
+    pub window_frames: usize,
+    pub kick: f64,
+}
+
+impl StallGuard {
+    /// What is served: 2-s windows, 0.10 m (below the 5th percentile of most served dances'
+    /// reach), kick 0.3 per frame (h_0 itself is N(0, 1)).
+    pub const SERVED: StallGuard = StallGuard { min_reach_m: 0.10, window_frames: 50, kick: 0.3 };
+}
+
+/// Warm-up frames served: 3 s.
+pub const WARM_UP_FRAMES: i64 = 75;
+
+impl Serving {
+    /// What `choreo train` writes: the served guard and warm-up.
+    pub fn served() -> Self {
+        Self { stall_guard: Some(StallGuard::SERVED), warm_up_frames: WARM_UP_FRAMES }
+    }
+}
+
+/// `model.json` fields of DanceRevolution's own.
+#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
+pub struct Serving {
+    /// The stall guard, if any ([`StallGuard`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub stall_guard: Option<StallGuard>,
+    /// Frames decoded over the song's opening and dropped before the dance starts (not in the
+    /// paper), so frame 0 is already mid-dance rather than the mean pose's slow start.
+    #[serde(default)]
+    pub warm_up_frames: i64,
+}
+
+/// The guard's running state: the last frames' root-relative joints in metres.
+struct StallWatch<'a> {
+    guard: StallGuard,
+    norm: &'a NormStats,
+    history: std::collections::VecDeque<Vec<f32>>,
+    rng: rand::rngs::StdRng,
+    kicked: usize,
+}
+
+impl<'a> StallWatch<'a> {
+    fn new(guard: StallGuard, norm: &'a NormStats, seed: u64) -> Self {
+        use rand::SeedableRng;
+        let rng = rand::rngs::StdRng::seed_from_u64(seed ^ 0x5354_414c_4c00_0000);
+        Self { guard, norm, history: std::collections::VecDeque::with_capacity(guard.window_frames + 1), rng, kicked: 0 }
+    }
+
+    /// Records output `y` `[1, 1, pose]` (normalised) and kicks `state` if the dance has stalled.
+    fn observe(&mut self, y: &Tensor, state: &mut LstmState) {
+        // The root-relative joints lead the pose vector ([`crate::motion::repr`]).
+        let width = (y.size().last().copied().unwrap_or(0) as usize).min(crate::motion::repr::POSE_DIM) / 3 * 3;
+        let v: Vec<f32> = Vec::<f32>::try_from(y.flatten(0, -1).narrow(0, 0, width as i64)).unwrap_or_default();
+        let metres: Vec<f32> = v.iter().enumerate().map(|(k, x)| x * self.norm.std[k] + self.norm.mean[k]).collect();
+        self.history.push_back(metres);
+        if self.history.len() > self.guard.window_frames {
+            self.history.pop_front();
+        }
+        if self.history.len() < self.guard.window_frames || reach_m(&self.history) >= self.guard.min_reach_m {
+            return;
+        }
+        use rand_distr::{Distribution, StandardNormal};
+        self.kicked += 1;
+        for (h, _) in state.iter_mut() {
+            let noise: Vec<f32> = (0..h.numel()).map(|_| StandardNormal.sample(&mut self.rng)).collect();
+            let noise = Tensor::from_slice(&noise).view(h.size().as_slice()).to_device(h.device());
+            *h = &*h + noise * self.guard.kick;
+        }
+    }
+}
+
+/// The largest distance (mean over joints, metres) of any pose in `history` from the newest.
+fn reach_m(history: &std::collections::VecDeque<Vec<f32>>) -> f32 {
+    let Some(last) = history.back() else { return 0.0 };
+    let joints = last.len() / 3;
+    history
+        .iter()
+        .map(|f| {
+            let sum: f32 = (0..joints)
+                .map(|j| (0..3).map(|c| (last[3 * j + c] - f[3 * j + c]).powi(2)).sum::<f32>().sqrt())
+                .sum();
+            sum / joints.max(1) as f32
+        })
+        .fold(0.0, f32::max)
 }
 
 /// The API id.
@@ -344,7 +465,7 @@ pub struct Curriculum {
 }
 
 /// `model.json`: the configuration, normalisation and training record.
-pub type ModelFile = folder::ModelFile<Config, Curriculum, Nothing>;
+pub type ModelFile = folder::ModelFile<Config, Curriculum, Serving>;
 
 /// A trained DanceRevolution, ready to serve.
 pub struct Served {
@@ -401,7 +522,8 @@ impl DanceModel for Served {
                 !cancelled
             });
             let z = z.ok_or(Cancelled)?;
-            let y = model.decode(&z, req.seed, seed_poses.as_ref(), 250, |f| {
+            let guard = self.file.extra.stall_guard.as_ref().map(|g| (g, &self.file.pose_norm));
+            let y = model.decode(&z, req.seed, seed_poses.as_ref(), guard, self.file.extra.warm_up_frames, 250, |f| {
                 cancelled = progress.report("decode", f).is_err();
                 !cancelled
             });
@@ -461,12 +583,44 @@ mod tests {
         let (_vs, m) = model(2);
         let x = Tensor::randn([1, 30, 6], (Kind::Float, Device::Cpu));
         let z = m.encoder.forward(&x, 0, false);
-        let a = m.decode(&z, 7, None, 0, |_| true).unwrap();
-        let b = m.decode(&z, 7, None, 0, |_| true).unwrap();
-        let c = m.decode(&z, 8, None, 0, |_| true).unwrap();
+        let a = m.decode(&z, 7, None, None, 0, 0, |_| true).unwrap();
+        let b = m.decode(&z, 7, None, None, 0, 0, |_| true).unwrap();
+        let c = m.decode(&z, 8, None, None, 0, 0, |_| true).unwrap();
         assert_eq!(a.size(), vec![1, 30, 5]);
         assert!((a.shallow_clone() - b).abs().max().double_value(&[]) == 0.0);
         assert!((a - c).abs().max().double_value(&[]) > 1e-4);
+    }
+
+    #[test]
+    fn reach_is_the_farthest_pose_of_the_window_from_the_newest() {
+        let h: std::collections::VecDeque<Vec<f32>> =
+            [vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0], vec![0.3, 0.4, 0.0, 0.0, 0.0, 0.0], vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.1]].into();
+        // Newest is frame 2: frame 1 is (0.5 + 0.1) / 2 away, frame 0 is (0 + 0.1) / 2.
+        assert!((reach_m(&h) - 0.3).abs() < 1e-6, "{}", reach_m(&h));
+    }
+
+    #[test]
+    fn stall_guard_acts_only_on_a_held_pose() {
+        let (_vs, m) = model(5);
+        let x = Tensor::randn([1, 40, 6], (Kind::Float, Device::Cpu));
+        let z = m.encoder.forward(&x, 0, false);
+        let norm = NormStats { mean: vec![0.0; 5], std: vec![1.0; 5] };
+        let plain = m.decode(&z, 3, None, None, 0, 0, |_| true).unwrap();
+        // A reach of 0 is always met: nothing is kicked and the dance is the unguarded one.
+        let never = StallGuard { min_reach_m: 0.0, window_frames: 10, kick: 0.3 };
+        let same = m.decode(&z, 3, None, Some((&never, &norm)), 0, 0, |_| true).unwrap();
+        assert_eq!((plain.shallow_clone() - same).abs().max().double_value(&[]), 0.0);
+        // A reach no pose meets: the state is kicked from the 10th frame on, so frames 0..9 are as before.
+        let always = StallGuard { min_reach_m: 1e9, window_frames: 10, kick: 0.3 };
+        let kicked = m.decode(&z, 3, None, Some((&always, &norm)), 0, 0, |_| true).unwrap();
+        let head = (plain.narrow(1, 0, 10) - kicked.narrow(1, 0, 10)).abs().max().double_value(&[]);
+        let tail = (plain.narrow(1, 10, 30) - kicked.narrow(1, 10, 30)).abs().max().double_value(&[]);
+        assert_eq!(head, 0.0);
+        assert!(tail > 1e-4, "kicks changed nothing");
+        // Warm-up drops its frames: the dance still has one frame per music frame.
+        let warmed = m.decode(&z, 3, None, Some((&never, &norm)), 12, 0, |_| true).unwrap();
+        assert_eq!(warmed.size(), vec![1, 40, 5]);
+        assert!((plain - warmed).abs().max().double_value(&[]) > 1e-4);
     }
 
     #[test]

@@ -3,8 +3,7 @@
 use tch::{Device, Kind, Tensor};
 
 use super::{batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError, Trainer};
-use crate::models::dance_revolution::{curriculum_q, Config, Curriculum, DanceRevolution, ModelFile, ID};
-use crate::models::folder::Nothing;
+use crate::models::dance_revolution::{curriculum_q, Config, Curriculum, DanceRevolution, ModelFile, Serving, ID};
 
 /// Options of one training run; the defaults reproduce the committed weights' schedule (the
 /// card gives the runs).
@@ -86,7 +85,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             pose_norm: data.pose_norm.clone(),
             fps: crate::motion::MOTION_FPS,
             training: t.record(opts.lr, opts.batch, opts.seed, curriculum.clone()),
-            extra: Nothing {},
+            extra: Serving::served(),
         },
     )?;
     Ok(trainer.logs)
