@@ -194,22 +194,10 @@ impl MusicEncoder {
     /// Encodes a whole song `[1, n, music_dim]` in overlapping chunks so memory stays bounded.
     /// Each chunk carries `k` frames of context on each side, which covers every window that an
     /// `N`-layer stack of local attention can see (`N·k/2` per side for `N` ≤ 2).
-    pub fn forward_chunked(&self, music: &Tensor, chunk: i64, mut on_chunk: impl FnMut(f32) -> bool) -> Option<Tensor> {
+    pub fn forward_chunked(&self, music: &Tensor, chunk: i64, on_chunk: impl FnMut(f32) -> bool) -> Option<Tensor> {
         let n = music.size()[1];
         let ctx = self.k * (self.layers.len() as i64).max(1) / 2 + 1;
-        let mut parts = Vec::new();
-        let mut s = 0;
-        while s < n {
-            let e = (s + chunk).min(n);
-            let (cs, ce) = ((s - ctx).max(0), (e + ctx).min(n));
-            let z = self.forward(&music.narrow(1, cs, ce - cs), cs, false);
-            parts.push(z.narrow(1, s - cs, e - s));
-            s = e;
-            if !on_chunk(s as f32 / n as f32) {
-                return None;
-            }
-        }
-        Some(Tensor::cat(&parts, 1))
+        super::layers::chunked(n, chunk, ctx, |cs, len| self.forward(&music.narrow(1, cs, len), cs, false), on_chunk)
     }
 }
 

@@ -21,6 +21,25 @@ pub fn sinusoid_of(pos: &[f64], d: i64) -> Vec<f32> {
     data
 }
 
+/// Runs a sequence model over frames `[0, n)` in chunks of `chunk` frames so memory stays bounded:
+/// `forward(start, len)` sees each chunk widened by `ctx` frames on both sides (enough context to
+/// equal one whole pass) and only the chunk's own frames are kept, joined along dim 1.
+/// `on_chunk` gets the fraction done and may stop it.
+pub fn chunked(n: i64, chunk: i64, ctx: i64, mut forward: impl FnMut(i64, i64) -> Tensor, mut on_chunk: impl FnMut(f32) -> bool) -> Option<Tensor> {
+    let mut parts = Vec::new();
+    let mut s = 0;
+    while s < n {
+        let e = (s + chunk.max(1)).min(n);
+        let (cs, ce) = ((s - ctx).max(0), (e + ctx).min(n));
+        parts.push(forward(cs, ce - cs).narrow(1, s - cs, e - s));
+        s = e;
+        if !on_chunk(s as f32 / n as f32) {
+            return None;
+        }
+    }
+    Some(Tensor::cat(&parts, 1))
+}
+
 /// Sinusoidal position encoding `[n, d]` of positions `start..start + n`.
 pub fn sinusoid(start: i64, n: i64, d: i64, device: Device) -> Tensor {
     let pos: Vec<f64> = (start..start + n).map(|t| t as f64).collect();

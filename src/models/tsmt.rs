@@ -220,22 +220,9 @@ impl AudioStream {
 
     /// Encodes a whole song `[1, n, music_dim]` in chunks with enough context on each side to
     /// equal one pass; `on_chunk` gets the fraction done and may stop it.
-    pub fn forward_chunked(&self, music: &Tensor, kernel: i64, start: i64, chunk: i64, mut on_chunk: impl FnMut(f32) -> bool) -> Option<Tensor> {
+    pub fn forward_chunked(&self, music: &Tensor, kernel: i64, start: i64, chunk: i64, on_chunk: impl FnMut(f32) -> bool) -> Option<Tensor> {
         let n = music.size()[1];
-        let ctx = self.reach(kernel);
-        let mut parts = Vec::new();
-        let mut s = 0;
-        while s < n {
-            let e = (s + chunk).min(n);
-            let (cs, ce) = ((s - ctx).max(0), (e + ctx).min(n));
-            let z = self.forward(&music.narrow(1, cs, ce - cs), start + cs, false);
-            parts.push(z.narrow(1, s - cs, e - s));
-            s = e;
-            if !on_chunk(s as f32 / n as f32) {
-                return None;
-            }
-        }
-        Some(Tensor::cat(&parts, 1))
+        super::layers::chunked(n, chunk, self.reach(kernel), |cs, len| self.forward(&music.narrow(1, cs, len), start + cs, false), on_chunk)
     }
 }
 

@@ -12,18 +12,9 @@ fn models_dir() -> std::path::PathBuf {
 }
 
 async fn generate(app: &crate::helpers::TestApp, song_id: &str, seed: u64) -> String {
-    generate_with(app, json!({"song_id": song_id, "model": "dance-revolution", "seed": seed})).await
+    app.dance(&json!({"song_id": song_id, "model": "dance-revolution", "seed": seed})).await
 }
 
-async fn generate_with(app: &crate::helpers::TestApp, body: Value) -> String {
-    let response = app.post_job(&body, None).await;
-    assert_eq!(response.status(), StatusCode::ACCEPTED);
-    let job: Value = response.json().await.expect("job");
-    let id = job["id"].as_str().expect("job id").to_string();
-    let done = app.wait_job(&id).await;
-    assert_eq!(done["status"], "succeeded", "{done}");
-    id
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn dance_revolution_dances_a_real_song_through_the_api() {
@@ -82,7 +73,7 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
 
     // Feet are planted by default; `plant_feet: false` gives the model's motion as it came: the
     // same poses, moved only horizontally, and feet that skate at least as much.
-    let raw = generate_with(&app, json!({"song_id": song_id, "model": "dance-revolution", "seed": 7, "plant_feet": false})).await;
+    let raw = app.dance(&json!({"song_id": song_id, "model": "dance-revolution", "seed": 7, "plant_feet": false})).await;
     let json_of = |id: &str| {
         let app = &app;
         let id = id.to_string();

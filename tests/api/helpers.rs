@@ -192,6 +192,17 @@ impl TestApp {
         }
     }
 
+    /// Submits a job (202 expected), waits for it and asserts it succeeded; returns its id.
+    pub async fn dance(&self, body: &Value) -> String {
+        let response = self.post_job(body, None).await;
+        assert_eq!(response.status(), StatusCode::ACCEPTED);
+        let job: Value = response.json().await.expect("job");
+        let id = job["id"].as_str().expect("job id").to_string();
+        let done = self.wait_job(&id).await;
+        assert_eq!(done["status"], "succeeded", "{done}");
+        id
+    }
+
     /// The analyze job of a song.
     pub async fn analyze_job_of(&self, song_id: &str) -> Value {
         let page: Value = self.get("/v1/jobs?limit=100").await.json().await.expect("jobs json");

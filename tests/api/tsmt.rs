@@ -11,15 +11,6 @@ fn models_dir() -> std::path::PathBuf {
     dir
 }
 
-async fn dance(app: &crate::helpers::TestApp, body: Value) -> String {
-    let response = app.post_job(&body, None).await;
-    assert_eq!(response.status(), StatusCode::ACCEPTED);
-    let job: Value = response.json().await.expect("job");
-    let id = job["id"].as_str().expect("job id").to_string();
-    let done = app.wait_job(&id).await;
-    assert_eq!(done["status"], "succeeded", "{done}");
-    id
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn tsmt_samples_a_dance_for_a_real_song() {
@@ -35,7 +26,7 @@ async fn tsmt_samples_a_dance_for_a_real_song() {
     let song_id = song["id"].as_str().expect("song id");
     let frames = (song["duration_s"].as_f64().expect("duration") * 25.0).floor() as usize;
     let body = |seed: u64| json!({"song_id": song_id, "model": "tsmt", "seed": seed, "temperature": 0.8, "top_k": 8});
-    let job = dance(&app, body(4)).await;
+    let job = app.dance(&body(4)).await;
 
     let motion: Value = app.get(&format!("/v1/jobs/{job}/motion.json")).await.json().await.expect("motion json");
     let positions = motion["positions"].as_array().expect("positions");
@@ -56,7 +47,7 @@ async fn tsmt_samples_a_dance_for_a_real_song() {
         let app = &app;
         async move { app.get(&format!("/v1/jobs/{id}/motion.json")).await.text().await.expect("text") }
     };
-    let (again, other) = (dance(&app, body(4)).await, dance(&app, body(5)).await);
+    let (again, other) = (app.dance(&body(4)).await, app.dance(&body(5)).await);
     let (a, b, c) = (text(job).await, text(again).await, text(other).await);
     assert_eq!(a, b, "same seed, same dance");
     assert_ne!(a, c, "another seed, another dance");
@@ -65,7 +56,7 @@ async fn tsmt_samples_a_dance_for_a_real_song() {
     // dance (kept as its first frames, up to the export's rigid fit), and the rest is sampled.
     let first: Value = serde_json::from_str(&a).expect("motion json");
     let seed_frames: Vec<Value> = first["positions"].as_array().expect("positions")[..25].to_vec();
-    let seeded = dance(&app, json!({"song_id": song_id, "model": "tsmt", "seed": 9, "seed_motion": {"fps": 25.0, "positions": seed_frames}})).await;
+    let seeded = app.dance(&json!({"song_id": song_id, "model": "tsmt", "seed": 9, "seed_motion": {"fps": 25.0, "positions": seed_frames}})).await;
     let second: Value = serde_json::from_str(&text(seeded).await).expect("motion json");
     assert_eq!(second["positions"].as_array().map(Vec::len), Some(frames));
     let rel = |m: &Value, f: usize| -> Vec<[f64; 3]> {
