@@ -4,6 +4,8 @@
 //! - [`dataset`]: the dance-with-melody dances, their split, music alignment, normalisation.
 //! - [`repr`]: what the models predict (root-relative poses + root velocity in the facing
 //!   frame) with its exact inverse, and foot-contact labels.
+//! - [`rotations`]: DanceNet's rotation features (root changes, 6-D local rotations, end
+//!   effectors) with their inverse through the rig.
 //! - [`input`] and [`validate`]: key poses and seed motion as users send them (either joint set,
 //!   or BVH), made canonical and checked by the rules the API and the models share.
 //!
@@ -19,6 +21,7 @@ pub mod feet;
 pub mod input;
 pub mod repr;
 pub mod rig;
+pub mod rotations;
 pub mod skeleton;
 pub mod validate;
 

@@ -299,6 +299,21 @@ impl Rig {
         }
     }
 
+    /// The rig's hierarchy with the given rest offsets (`RIG_JOINTS` of them, metres, each in its
+    /// parent's frame), e.g. a skeleton stored with a model.
+    pub fn from_offsets(offsets: &[[f64; 3]]) -> Result<Rig, MotionError> {
+        let (names, parents) = hierarchy();
+        if offsets.len() != names.len() || offsets.iter().flatten().any(|v| !v.is_finite()) {
+            return Err(MotionError::Shape(format!("{} rig offsets, expected {} finite ones", offsets.len(), names.len())));
+        }
+        Ok(Rig { names, parents, offsets: offsets.iter().map(|o| Vector3::new(o[0], o[1], o[2])).collect() })
+    }
+
+    /// The rest offsets as plain arrays (the form [`Rig::from_offsets`] takes).
+    pub fn offset_arrays(&self) -> Vec<[f64; 3]> {
+        self.offsets.iter().map(|o| [o.x, o.y, o.z]).collect()
+    }
+
     /// Children of rig joint `j`.
     pub fn children(&self, j: usize) -> Vec<usize> {
         (0..self.parents.len())
