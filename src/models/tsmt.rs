@@ -32,22 +32,20 @@
 //! Sizes differ from the paper to train on one CPU core; the model card says where and why.
 use std::path::Path;
 
-use ndarray::{s, Array2, Array3};
+use ndarray::{s, Array2};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 use tch::nn;
 use tch::{Device, Kind, Tensor};
 
-use super::folder;
+use super::folder::{self, SeedClips, SEED_CLIPS_FILE};
 use super::layers::{sinusoid, Dims, KvCache, Stack};
 use super::{to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::repr::{self, RootStart, FEATURE_DIM};
 
 /// The API id.
 pub const ID: &str = "tsmt";
-/// The seed clips file in the model folder: `[clips, frames, FEATURE_DIM]` pose features.
-pub const SEED_CLIPS_FILE: &str = "seed_clips.safetensors";
 /// The last song frame a served song can reach: 15 minutes at 25 fps (the upload limit's
 /// length); training draws window positions over all of it.
 pub const MAX_POSITION: i64 = 15 * 60 * 25 + 1024;
@@ -516,61 +514,6 @@ impl Sampling {
     }
 }
 
-/// Real clips of the train split (pose features, foot clearance as the height), one drawn by a
-/// job's seed when the request brings no seed motion: a dance started from one fixed pose would
-/// begin every song the same way.
-#[derive(Clone, Debug)]
-pub struct SeedClips {
-    /// `[clips, frames, FEATURE_DIM]`.
-    pub clips: Array3<f32>,
-}
-
-impl SeedClips {
-    /// `count` clips of `frames` frames at seeded starts over `seqs` (each a dance's features).
-    pub fn draw(seqs: &[&Array2<f32>], count: usize, frames: usize, seed: u64) -> Result<Self, ModelError> {
-        let usable: Vec<&&Array2<f32>> = seqs.iter().filter(|s| s.nrows() > frames + 50).collect();
-        if usable.is_empty() || count == 0 {
-            return Err(ModelError::Invalid(format!("no dance longer than {frames} frames for seed clips")));
-        }
-        let mut rng = StdRng::seed_from_u64(seed);
-        let mut clips = Array3::<f32>::zeros((count, frames, FEATURE_DIM));
-        for k in 0..count {
-            let s = usable[k % usable.len()];
-            let start = rng.gen_range(25..s.nrows() - frames - 25);
-            clips.slice_mut(s![k, .., ..]).assign(&s.slice(s![start..start + frames, ..]));
-        }
-        Ok(Self { clips })
-    }
-
-    /// Writes the clips as safetensors.
-    pub fn save(&self, path: &Path) -> Result<(), ModelError> {
-        let (k, f, d) = self.clips.dim();
-        let data: Vec<f32> = self.clips.iter().copied().collect();
-        let t = Tensor::from_slice(&data).view([k as i64, f as i64, d as i64]);
-        Tensor::write_safetensors(&[("clips", t)], path)?;
-        Ok(())
-    }
-
-    /// Reads clips written by [`Self::save`].
-    pub fn load(path: &Path) -> Result<Self, ModelError> {
-        let named = Tensor::read_safetensors(path)?;
-        let t = named.into_iter().find(|(n, _)| n == "clips").map(|(_, t)| t).ok_or_else(|| ModelError::Invalid(format!("{}: no `clips` tensor", path.display())))?;
-        let (k, f, d) = t.size3()?;
-        if d != FEATURE_DIM as i64 || k == 0 || f == 0 {
-            return Err(ModelError::Invalid(format!("{}: clips are {k}×{f}×{d}", path.display())));
-        }
-        let data = Vec::<f32>::try_from(t.contiguous().view([-1]))?;
-        let clips = Array3::from_shape_vec((k as usize, f as usize, d as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))?;
-        Ok(Self { clips })
-    }
-
-    /// The clip a job's seed picks.
-    pub fn pick(&self, seed: u64) -> Array2<f32> {
-        let k = StdRng::seed_from_u64(seed ^ 0x5EED_C11F).gen_range(0..self.clips.dim().0);
-        self.clips.slice(s![k, .., ..]).to_owned()
-    }
-}
-
 /// The run behind the committed weights, beside the common record.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Schedule {
@@ -651,7 +594,7 @@ impl Served {
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
         let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| Tsmt::new(p, f.config.clone()))?;
         let path = dir.join(SEED_CLIPS_FILE);
-        let clips = if path.exists() { Some(SeedClips::load(&path)?) } else { None };
+        let clips = if path.exists() { Some(SeedClips::load(&path, FEATURE_DIM)?) } else { None };
         Ok(Self { file, clips, pool })
     }
 

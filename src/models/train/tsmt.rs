@@ -9,7 +9,8 @@ use tch::{Device, Tensor};
 
 use super::{batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError};
 use super::Trainer;
-use crate::models::tsmt::{Bins, Config, ModelFile, Sampling, Schedule, SeedClips, Serving, StallGuard, Tsmt, ID, MAX_POSITION, SEED_CLIPS_FILE};
+use crate::models::tsmt::{Bins, Config, ModelFile, Sampling, Schedule, Serving, StallGuard, Tsmt, ID, MAX_POSITION};
+use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
 use crate::motion::repr;
 
 /// Options of one training run (the card gives the run behind the committed weights).

@@ -1,0 +1,599 @@
+//! DanceNet: Zhuang, Wang, Xia, Chai, Wang, "Music2Dance: DanceNet for Music-driven Dance
+//! Generation" (arXiv 2002.03761, 2020). Served as `dancenet`.
+//!
+//! - §3.1 **motion**: root translation and rotation as changes from the previous frame, every
+//!   other joint's rotation relative to its parent (6-D), end-effector positions
+//!   (`motion::rotations`), and foot-contact labels. The root's height is the lowest foot's
+//!   clearance above the floor, so the height follows the legs (the paper integrates it).
+//! - §3.2 **music**: the control signals at 25 fps (`audio::features::dancenet`: onset strength,
+//!   beat and downbeat one-hots, chroma); a **musical style classifier** ([`style`]) over 30-s
+//!   windows; a **musical context-aware encoder** ([`ContextEncoder`]: temporal convolutions and a
+//!   Bi-LSTM over 8-s windows, overlapping by half at inference and cross-faded).
+//! - §3.3 **motion decoder** ([`Decoder`]): dilated causal convolutions (kernel 2, dilations
+//!   1, 2, 4, 8, 16 repeating), gated activation `tanh(W_f * x + V_f c) ⊙ σ(W_g * x + V_g c)`,
+//!   residual and skip connections, the control signals (style one-hot and music code) added
+//!   through 1×1 convolutions (`V c`). Receptive field: `1 + Σ dilations` frames
+//!   ([`Config::receptive_field`]).
+//! - §3.4 **output**: a Gaussian mixture (diagonal, `mixtures` components; the paper uses one)
+//!   over the next frame's features, its means relative to the current frame, and foot contact
+//!   by binary cross-entropy: `L = L_gmm + λ · L_foot`, with Gaussian noise on the decoder's
+//!   input frames during training (`σ_in`). At inference the mixture is sampled, seeded, one frame
+//!   at a time; `temperature` scales σ.
+//!
+//! Sizes differ from the paper to train in an hour on two CPU cores; the model card says where.
+use ndarray::Array2;
+use rand::rngs::StdRng;
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+use serde::{Deserialize, Serialize};
+use tch::nn::{self, RNN};
+use tch::{Device, Kind, Tensor};
+
+
+/// The API id.
+pub const ID: &str = "dancenet";
+/// Smallest and largest log σ of a mixture component (normalised units), so a component can
+/// neither collapse onto a training point nor spread over everything.
+pub const LOG_SIGMA: (f64, f64) = (-7.0, 2.0);
+
+/// Hyper-parameters, with the paper's names where it has them.
+#[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Config {
+    /// Width of a motion frame (`motion::rotations::Layout::dim`).
+    pub pose_dim: i64,
+    /// Foot-contact labels per frame (4: heels and toes).
+    pub contacts: i64,
+    /// Control-signal width (15).
+    pub music_dim: i64,
+    /// Styles (4).
+    pub styles: i64,
+    /// Context encoder: temporal convolution channels.
+    pub enc_channels: i64,
+    /// Context encoder: temporal convolutions (kernel `enc_kernel`, centred).
+    pub enc_convs: i64,
+    pub enc_kernel: i64,
+    /// Context encoder: Bi-LSTM hidden width per direction.
+    pub enc_hidden: i64,
+    /// Width of the music code `c` the decoder is conditioned on.
+    pub d_code: i64,
+    /// Context encoder window (frames; the paper's 8 s) and hop between windows at inference.
+    pub enc_window: i64,
+    pub enc_hop: i64,
+    /// Decoder residual channels.
+    pub residual: i64,
+    /// Decoder skip channels.
+    pub skip: i64,
+    /// Dilation of each gated layer (kernel 2).
+    pub dilations: Vec<i64>,
+    /// Mixture components `N` (the paper: 1).
+    pub mixtures: i64,
+}
+
+impl Config {
+    /// The configuration the committed weights were trained with (two CPU cores, an hour).
+    pub fn cpu(pose_dim: i64) -> Self {
+        Self {
+            pose_dim,
+            contacts: 4,
+            music_dim: crate::audio::features::DANCENET_DIM as i64,
+            styles: crate::models::DanceStyle::ALL.len() as i64,
+            enc_channels: 32,
+            enc_convs: 2,
+            enc_kernel: 3,
+            enc_hidden: 32,
+            d_code: 32,
+            enc_window: 200,
+            enc_hop: 100,
+            residual: 64,
+            skip: 128,
+            dilations: [1, 2, 4, 8, 16].repeat(2),
+            mixtures: 4,
+        }
+    }
+
+    /// A tiny configuration for tests and smoke runs.
+    pub fn tiny(pose_dim: i64) -> Self {
+        Self { enc_channels: 4, enc_convs: 1, enc_hidden: 4, d_code: 4, enc_window: 16, enc_hop: 8, residual: 8, skip: 8, dilations: vec![1, 2, 4], mixtures: 2, ..Self::cpu(pose_dim) }
+    }
+
+    /// Frames of history each prediction sees: `1 + Σ dilations` (kernel 2).
+    pub fn receptive_field(&self) -> i64 {
+        1 + self.dilations.iter().sum::<i64>()
+    }
+
+    /// Width of the decoder's output: mixture logits, means and log σ, contact logits.
+    fn out_dim(&self) -> i64 {
+        self.mixtures * (1 + 2 * self.pose_dim) + self.contacts
+    }
+}
+
+/// §3.2 musical context-aware encoder: control signals `[b, n, music_dim]` → music code
+/// `[b, n, d_code]`.
+#[derive(Debug)]
+pub struct ContextEncoder {
+    convs: Vec<nn::Conv1D>,
+    lstm: nn::LSTM,
+    out: nn::Linear,
+    window: i64,
+    hop: i64,
+}
+
+impl ContextEncoder {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        let conv = |i: i64| {
+            let inp = if i == 0 { c.music_dim } else { c.enc_channels };
+            nn::conv1d(&p / format!("conv{i}"), inp, c.enc_channels, c.enc_kernel, nn::ConvConfig { padding: c.enc_kernel / 2, ..Default::default() })
+        };
+        Self {
+            convs: (0..c.enc_convs).map(conv).collect(),
+            lstm: nn::lstm(&p / "lstm", c.enc_channels, c.enc_hidden, nn::RNNConfig { bidirectional: true, ..Default::default() }),
+            out: nn::linear(&p / "out", 2 * c.enc_hidden, c.d_code, Default::default()),
+            window: c.enc_window,
+            hop: c.enc_hop,
+        }
+    }
+
+    /// One window (any length): `[b, n, music_dim]` → `[b, n, d_code]`.
+    pub fn forward(&self, music: &Tensor) -> Tensor {
+        let mut x = music.transpose(1, 2); // [b, music_dim, n]
+        for conv in &self.convs {
+            x = x.apply(conv).relu();
+        }
+        let (h, _) = self.lstm.seq(&x.transpose(1, 2).contiguous()); // [b, n, 2 · enc_hidden]
+        h.apply(&self.out)
+    }
+
+    /// A whole song `[1, n, music_dim]` → `[n, d_code]`: windows of `enc_window` frames every
+    /// `enc_hop`, each frame's code the mean of the windows over it weighted by a triangle that
+    /// peaks mid-window (a cross-fade: a window's edges see the least context). `on_window` gets
+    /// the fraction done and may stop it.
+    pub fn encode_song(&self, music: &Tensor, mut on_window: impl FnMut(f32) -> bool) -> Option<Tensor> {
+        let n = music.size()[1];
+        let d = self.out.ws.size()[0];
+        let w = self.window.min(n).max(1);
+        let mut starts: Vec<i64> = (0..).map(|k| k * self.hop).take_while(|&s| s + w < n).collect();
+        starts.push((n - w).max(0));
+        starts.dedup();
+        let sum = Tensor::zeros([n, d], (Kind::Float, music.device()));
+        let weight = Tensor::zeros([n, 1], (Kind::Float, music.device()));
+        let tri: Vec<f32> = (0..w).map(|i| 1.0 - ((i as f32 + 0.5) / w as f32 - 0.5).abs()).collect();
+        let tri = Tensor::from_slice(&tri).view([w, 1]).to_device(music.device());
+        for (i, &s) in starts.iter().enumerate() {
+            let code = self.forward(&music.narrow(1, s, w)).squeeze_dim(0); // [w, d]
+            let _ = sum.narrow(0, s, w).g_add_(&(code * &tri));
+            let _ = weight.narrow(0, s, w).g_add_(&tri);
+            if !on_window((i + 1) as f32 / starts.len() as f32) {
+                return None;
+            }
+        }
+        Some(sum / weight)
+    }
+}
+
+/// One gated layer of the decoder (§3.3).
+#[derive(Debug)]
+struct GatedLayer {
+    dilation: i64,
+    /// `W_f`, `W_g` stacked: `[2C, C, 2]`.
+    conv: nn::Conv1D,
+    /// `V_f`, `V_g` of the music code (1×1).
+    cond: nn::Conv1D,
+    /// `V_f`, `V_g` of the style one-hot (1×1, no bias).
+    style: nn::Conv1D,
+    res: nn::Conv1D,
+    skip: nn::Conv1D,
+}
+
+impl GatedLayer {
+    fn new(p: nn::Path, c: &Config, dilation: i64) -> Self {
+        let one = |name: &str, i: i64, o: i64, bias: bool| nn::conv1d(&p / name, i, o, 1, nn::ConvConfig { bias, ..Default::default() });
+        Self {
+            dilation,
+            conv: nn::conv1d(&p / "conv", c.residual, 2 * c.residual, 2, nn::ConvConfig { dilation, ..Default::default() }),
+            cond: one("cond", c.d_code, 2 * c.residual, true),
+            style: one("style", c.styles, 2 * c.residual, false),
+            res: one("res", c.residual, c.residual, true),
+            skip: one("skip", c.residual, c.skip, true),
+        }
+    }
+
+    /// The conditioning of every frame: `V c + V_s s + b` `[b, 2C, n]` (the dilated
+    /// convolution's bias folded in).
+    fn conditioning(&self, code: &Tensor, style: &Tensor) -> Tensor {
+        let bias = self.conv.bs.as_ref().map(|b| b.view([1, -1, 1]));
+        let c = code.apply(&self.cond) + style.apply(&self.style);
+        match bias {
+            Some(b) => c + b,
+            None => c,
+        }
+    }
+
+    /// Causal pass over `[b, C, n]` with conditioning `[b, 2C, n]`: `(residual out, skip)`.
+    fn forward(&self, h: &Tensor, cond: &Tensor) -> (Tensor, Tensor) {
+        let padded = h.constant_pad_nd([self.dilation, 0]);
+        let z = padded.conv1d(&self.conv.ws, None::<&Tensor>, [1], [0], [self.dilation], 1) + cond;
+        let zs = z.chunk(2, 1);
+        let g = zs[0].tanh() * zs[1].sigmoid();
+        (h + g.apply(&self.res), g.apply(&self.skip))
+    }
+}
+
+/// §3.3 motion decoder: frames `[b, n, pose_dim + contacts]` (the current frame) with the next
+/// frame's conditioning → mixture and contact parameters of the next frame.
+#[derive(Debug)]
+pub struct Decoder {
+    input: nn::Conv1D,
+    layers: Vec<GatedLayer>,
+    head: nn::Conv1D,
+    out: nn::Conv1D,
+}
+
+impl Decoder {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        let one = |name: &str, i: i64, o: i64| nn::conv1d(&p / name, i, o, 1, Default::default());
+        Self {
+            input: one("input", c.pose_dim + c.contacts, c.residual),
+            layers: c.dilations.iter().enumerate().map(|(i, &d)| GatedLayer::new(&p / "layers" / i, c, d)).collect(),
+            head: one("head", c.skip, c.skip),
+            out: one("out", c.skip, c.out_dim()),
+        }
+    }
+}
+
+/// The whole model: context encoder and decoder.
+#[derive(Debug)]
+pub struct DanceNet {
+    pub config: Config,
+    pub encoder: ContextEncoder,
+    pub decoder: Decoder,
+}
+
+/// The decoder's output for a batch of frames, split: `[.., K]` mixture logits, `[.., K, D]`
+/// means (absolute, normalised units) and log σ, `[.., 4]` contact logits.
+pub struct Mixture {
+    pub logits: Tensor,
+    pub mean: Tensor,
+    pub log_sigma: Tensor,
+    pub contacts: Tensor,
+}
+
+/// The parts of a training loss, per frame and dimension.
+pub struct Losses {
+    /// Mixture negative log-likelihood per feature dimension (nats).
+    pub gmm: Tensor,
+    /// Foot-contact binary cross-entropy.
+    pub foot: Tensor,
+}
+
+impl DanceNet {
+    /// Builds the variables under `p` (checkpoint keys `encoder.*`, `decoder.*`).
+    pub fn new(p: &nn::Path, config: Config) -> Self {
+        Self { encoder: ContextEncoder::new(p / "encoder", &config), decoder: Decoder::new(p / "decoder", &config), config }
+    }
+
+    /// Style one-hots `[b, styles, 1]` of style indices.
+    pub fn style_one_hot(&self, styles: &[usize], device: Device) -> Tensor {
+        let idx: Vec<i64> = styles.iter().map(|&s| s as i64).collect();
+        Tensor::from_slice(&idx).to_device(device).one_hot(self.config.styles).to_kind(Kind::Float).unsqueeze(-1)
+    }
+
+    /// Splits the decoder's raw output `[.., out_dim]` relative to the current frames `[.., D]`.
+    fn mixture(&self, raw: &Tensor, current: &Tensor) -> Mixture {
+        let (k, d) = (self.config.mixtures, self.config.pose_dim);
+        let mut lead = raw.size();
+        lead.pop();
+        let shape = |tail: &[i64]| -> Vec<i64> { lead.iter().copied().chain(tail.iter().copied()).collect() };
+        let logits = raw.narrow(-1, 0, k);
+        let delta = raw.narrow(-1, k, k * d).reshape(shape(&[k, d]).as_slice());
+        let log_sigma = raw.narrow(-1, k + k * d, k * d).reshape(shape(&[k, d]).as_slice()).clamp(LOG_SIGMA.0, LOG_SIGMA.1);
+        let contacts = raw.narrow(-1, k * (1 + 2 * d), self.config.contacts);
+        Mixture { logits, mean: current.unsqueeze(-2) + delta, log_sigma, contacts }
+    }
+
+    /// Teacher-forced pass: `frames` `[b, n, D + contacts]` (frame t's features and contacts,
+    /// normalised; possibly noised), `code` `[b, n, d_code]` and `style` `[b, styles, 1]`.
+    /// Position t predicts frame t + 1 from frames ≤ t and frame t + 1's music code, so outputs
+    /// `[b, n − 1, ..]` cover frames 1..n.
+    pub fn forward(&self, frames: &Tensor, code: &Tensor, style: &Tensor) -> Mixture {
+        let n = frames.size()[1];
+        let x = frames.narrow(1, 0, n - 1).transpose(1, 2); // [b, D + 4, n − 1]
+        let c = code.narrow(1, 1, n - 1).transpose(1, 2); // [b, d_code, n − 1]
+        let mut h = x.apply(&self.decoder.input); // [b, C, n − 1]
+        let mut skip: Option<Tensor> = None;
+        for l in &self.decoder.layers {
+            let (next, s) = l.forward(&h, &l.conditioning(&c, style));
+            h = next;
+            skip = Some(match skip {
+                Some(acc) => acc + s,
+                None => s,
+            });
+        }
+        let skip = skip.unwrap_or_else(|| Tensor::zeros([1], (Kind::Float, frames.device())));
+        let raw = skip.relu().apply(&self.decoder.head).relu().apply(&self.decoder.out).transpose(1, 2); // [b, n − 1, out]
+        let current = frames.narrow(1, 0, n - 1).narrow(2, 0, self.config.pose_dim);
+        self.mixture(&raw, &current)
+    }
+
+    /// Training losses on a window: `input` the frames the decoder reads (noised), `target` the
+    /// clean frames `[b, n, D + contacts]`, `music` `[b, n, music_dim]`; frames before `warmup`
+    /// are context only (they would see zero padding instead of history).
+    pub fn losses(&self, input: &Tensor, target: &Tensor, music: &Tensor, style: &Tensor, warmup: i64) -> Losses {
+        let code = self.encoder.forward(music);
+        let m = self.forward(input, &code, style);
+        let n = target.size()[1] - 1;
+        let from = warmup.clamp(0, n - 1);
+        let keep = |t: &Tensor| t.narrow(1, from, n - from);
+        let d = self.config.pose_dim;
+        let y = keep(&target.narrow(1, 1, n).narrow(2, 0, d)).unsqueeze(-2); // [b, m, 1, D]
+        let (mean, log_sigma) = (keep(&m.mean), keep(&m.log_sigma));
+        let z = (&y - mean) * (-&log_sigma).exp();
+        let log_n = (z.square() * -0.5 - &log_sigma).sum_dim_intlist(-1, false, Kind::Float) - 0.5 * (d as f64) * (2.0 * std::f64::consts::PI).ln();
+        let log_p = (keep(&m.logits).log_softmax(-1, Kind::Float) + log_n).logsumexp(-1, false); // [b, m]
+        let gmm = -log_p.mean(Kind::Float) / d as f64;
+        let contacts = keep(&target.narrow(1, 1, n).narrow(2, d, self.config.contacts));
+        let foot = keep(&m.contacts).binary_cross_entropy_with_logits::<Tensor>(&contacts, None, None, tch::Reduction::Mean);
+        Losses { gmm, foot }
+    }
+
+    /// Samples frames after the context `prefix` `[m ≥ 1, D + contacts]` (normalised). `code`
+    /// `[m − 1 + n, d_code]` is the music code of every frame after the first of the prefix: the
+    /// prefix's own frames 1..m, then the `n` frames to make. Each step runs the gated layers on
+    /// one frame against queues of their past inputs (the dilated convolution needs only the
+    /// input `d` frames back), so a frame costs the same however long the song.
+    /// `on_step(done)` is called before the first frame and every 250 frames, and may stop it.
+    pub fn sample(&self, prefix: &Array2<f32>, code: &Tensor, style: usize, sampling: Sampling, rng: &mut StdRng, mut on_step: impl FnMut(usize) -> bool) -> Option<Array2<f32>> {
+        let c = &self.config;
+        let (d, width) = (c.pose_dim as usize, (c.pose_dim + c.contacts) as usize);
+        let m = prefix.nrows();
+        if m == 0 || prefix.ncols() != width {
+            return None;
+        }
+        let n = (code.size()[0] as usize).checked_sub(m - 1)?;
+        let dev = code.device();
+        let style = self.style_one_hot(&[style], dev); // [1, styles, 1]
+        let code_t = code.transpose(0, 1).unsqueeze(0); // [1, d_code, m − 1 + n]
+        let conds: Vec<Tensor> = self.decoder.layers.iter().map(|l| l.conditioning(&code_t, &style)).collect(); // [1, 2C, m − 1 + n]
+        // The context but its last frame, as one teacher-forced pass; each layer keeps the inputs
+        // of its last `dilation` positions.
+        let mut queues: Vec<std::collections::VecDeque<Tensor>> = self.decoder.layers.iter().map(|_| std::collections::VecDeque::new()).collect();
+        if m > 1 {
+            let x = super::to_tensor(&prefix.slice(ndarray::s![..m - 1, ..]).to_owned()).to_device(dev).transpose(0, 1).unsqueeze(0);
+            let mut h = x.apply(&self.decoder.input); // [1, C, m − 1]
+            for ((l, cond), q) in self.decoder.layers.iter().zip(&conds).zip(queues.iter_mut()) {
+                let keep = (m - 1).min(l.dilation as usize);
+                for t in m - 1 - keep..m - 1 {
+                    q.push_back(h.get(0).select(1, t as i64));
+                }
+                h = l.forward(&h, &cond.narrow(2, 0, (m - 1) as i64)).0;
+            }
+        }
+        // Per layer: taps at t − d and t `[2C, C]`, conditioning rows `[m − 1 + n, 2C]`, and the
+        // 1×1 convolutions as matrices.
+        let mat = |conv: &nn::Conv1D| {
+            let b = conv.bs.as_ref().map(|b| b.shallow_clone()).unwrap_or_else(|| Tensor::zeros([conv.ws.size()[0]], (Kind::Float, dev)));
+            (conv.ws.squeeze_dim(-1), b)
+        };
+        let layers: Vec<_> = self
+            .decoder
+            .layers
+            .iter()
+            .zip(&conds)
+            .map(|(l, cond)| (l.conv.ws.select(2, 0), l.conv.ws.select(2, 1), cond.squeeze_dim(0).transpose(0, 1).contiguous(), mat(&l.res), mat(&l.skip), l.dilation as usize))
+            .collect();
+        let (w_in, b_in) = mat(&self.decoder.input);
+        let (w_head, b_head) = mat(&self.decoder.head);
+        let (w_out, b_out) = mat(&self.decoder.out);
+        let zeros = Tensor::zeros([c.residual], (Kind::Float, dev));
+        let mut out = Array2::<f32>::zeros((n, width));
+        let mut frame: Vec<f32> = prefix.row(m - 1).to_vec();
+        if !on_step(0) {
+            return None;
+        }
+        let k = c.mixtures as usize;
+        let mut probs = vec![0f32; k];
+        for t in 0..n {
+            let row = (m - 1 + t) as i64;
+            let mut h = w_in.mv(&Tensor::from_slice(&frame).to_device(dev)) + &b_in;
+            let mut skip: Option<Tensor> = None;
+            for ((w_past, w_now, cond, (w_res, b_res), (w_skip, b_skip), dilation), q) in layers.iter().zip(queues.iter_mut()) {
+                let past = if q.len() >= *dilation { q[q.len() - dilation].shallow_clone() } else { zeros.shallow_clone() };
+                let z = w_past.mv(&past) + w_now.mv(&h) + cond.get(row);
+                let zs = z.chunk(2, 0);
+                let g = zs[0].tanh() * zs[1].sigmoid();
+                let sk = w_skip.mv(&g) + b_skip;
+                skip = Some(match skip {
+                    Some(a) => a + sk,
+                    None => sk,
+                });
+                q.push_back(h.shallow_clone());
+                while q.len() > *dilation {
+                    q.pop_front();
+                }
+                h = h + w_res.mv(&g) + b_res;
+            }
+            let raw = w_out.mv(&(w_head.mv(&skip?.relu()) + &b_head).relu()) + &b_out;
+            let raw: Vec<f32> = Vec::<f32>::try_from(raw).ok()?;
+            let next = sampling.draw(&raw, &frame[..d], k, d, c.contacts as usize, &mut probs, rng);
+            out.row_mut(t).assign(&ndarray::ArrayView1::from(&next));
+            frame = next;
+            if (t + 1) % 250 == 0 && !on_step(t + 1) {
+                return None;
+            }
+        }
+        Some(out)
+    }
+}
+
+/// How the mixture becomes a frame (§3.4): a component drawn by its weight, then each
+/// dimension from its Gaussian with σ × `temperature`; contacts where their probability is over
+/// one half.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Sampling {
+    pub temperature: f64,
+}
+
+impl Default for Sampling {
+    fn default() -> Self {
+        Self { temperature: 1.0 }
+    }
+}
+
+impl Sampling {
+    /// The next frame `[D + contacts]` from the decoder's raw output for one frame, given the
+    /// current frame's features `current` `[D]`; `probs` is scratch of `k` entries.
+    pub fn draw(&self, raw: &[f32], current: &[f32], k: usize, d: usize, contacts: usize, probs: &mut [f32], rng: &mut StdRng) -> Vec<f32> {
+        let logits = &raw[..k];
+        let max = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let mut total = 0f32;
+        for (p, &l) in probs.iter_mut().zip(logits) {
+            *p = (l - max).exp();
+            total += *p;
+        }
+        let mut u = rng.gen::<f32>() * total;
+        let mut pick = k - 1;
+        for (i, &p) in probs.iter().enumerate() {
+            if u < p {
+                pick = i;
+                break;
+            }
+            u -= p;
+        }
+        let mean = &raw[k + pick * d..k + (pick + 1) * d];
+        let log_sigma = &raw[k + k * d + pick * d..k + k * d + (pick + 1) * d];
+        let t = self.temperature.max(0.0) as f32;
+        let mut next: Vec<f32> = (0..d)
+            .map(|i| {
+                let ls = log_sigma[i].clamp(LOG_SIGMA.0 as f32, LOG_SIGMA.1 as f32);
+                let e: f32 = StandardNormal.sample(rng);
+                current[i] + mean[i] + t * ls.exp() * e
+            })
+            .collect();
+        let c0 = k * (1 + 2 * d);
+        next.extend(raw[c0..c0 + contacts].iter().map(|&l| if l > 0.0 { 1.0 } else { 0.0 }));
+        next
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+    use tch::nn::OptimizerConfig;
+
+    const D: i64 = 6;
+
+    fn model(seed: i64) -> (nn::VarStore, DanceNet) {
+        tch::manual_seed(seed);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let m = DanceNet::new(&vs.root(), Config { music_dim: 3, ..Config::tiny(D) });
+        (vs, m)
+    }
+
+    fn frames(b: i64, n: i64) -> Tensor {
+        Tensor::randn([b, n, D + 4], (Kind::Float, Device::Cpu))
+    }
+
+    #[test]
+    fn the_decoder_does_not_see_the_future() {
+        let (_vs, m) = model(0);
+        let x = frames(1, 20);
+        let code = Tensor::randn([1, 20, 4], (Kind::Float, Device::Cpu));
+        let s = m.style_one_hot(&[2], Device::Cpu);
+        let a = m.forward(&x, &code, &s);
+        assert_eq!(a.mean.size(), vec![1, 19, 2, D]);
+        // Changing frame 8 may change predictions from position 8 on, never before.
+        let x2 = x.copy();
+        let _ = x2.narrow(1, 8, 1).fill_(3.0);
+        let b = m.forward(&x2, &code, &s);
+        let early = (a.mean.narrow(1, 0, 8) - b.mean.narrow(1, 0, 8)).abs().max().double_value(&[]);
+        assert!(early < 1e-6, "positions < 8 moved by {early}");
+        let late = (a.mean.narrow(1, 8, 1) - b.mean.narrow(1, 8, 1)).abs().max().double_value(&[]);
+        assert!(late > 1e-6, "position 8 did not see frame 8");
+    }
+
+    #[test]
+    fn the_receptive_field_is_one_plus_the_dilations() {
+        let (_vs, m) = model(1);
+        let rf = m.config.receptive_field();
+        assert_eq!(rf, 8);
+        let x = frames(1, 30);
+        let code = Tensor::randn([1, 30, 4], (Kind::Float, Device::Cpu));
+        let s = m.style_one_hot(&[0], Device::Cpu);
+        let a = m.forward(&x, &code, &s);
+        // Position 20 sees frames 13..=20 and not 12.
+        for (f, seen) in [(12, false), (13, true)] {
+            let x2 = x.copy();
+            let _ = x2.narrow(1, f, 1).fill_(5.0);
+            let b = m.forward(&x2, &code, &s);
+            let d = (a.mean.narrow(1, 20, 1) - b.mean.narrow(1, 20, 1)).abs().max().double_value(&[]);
+            assert_eq!(d > 1e-6, seen, "frame {f}: change {d}");
+        }
+    }
+
+    #[test]
+    fn stepwise_sampling_follows_the_parallel_pass() {
+        // With temperature 0 and one component the sample is the mean: feeding it back through the
+        // teacher-forced pass must reproduce every step.
+        tch::manual_seed(2);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let m = DanceNet::new(&vs.root(), Config { music_dim: 3, mixtures: 1, ..Config::tiny(D) });
+        let prefix = Array2::from_shape_fn((10, (D + 4) as usize), |(t, c)| ((t * 7 + c * 3) % 5) as f32 * 0.3 - 0.6);
+        let n = 12;
+        let code = Tensor::randn([10 + n, 4], (Kind::Float, Device::Cpu));
+        let mut rng = StdRng::seed_from_u64(0);
+        let out = m.sample(&prefix, &code.narrow(0, 1, 9 + n), 1, Sampling { temperature: 0.0 }, &mut rng, |_| true).expect("sampled");
+        assert_eq!(out.nrows(), n as usize);
+        let all = ndarray::concatenate(ndarray::Axis(0), &[prefix.view(), out.view()]).unwrap();
+        let x = crate::models::to_tensor(&all).unsqueeze(0);
+        let pass = m.forward(&x, &code.unsqueeze(0), &m.style_one_hot(&[1], Device::Cpu));
+        for t in 0..n {
+            let want = pass.mean.get(0).get(9 + t).get(0);
+            let got = Tensor::from_slice(&out.row(t as usize).to_vec()[..D as usize]);
+            let d = (want - got).abs().max().double_value(&[]);
+            assert!(d < 1e-4, "step {t} differs by {d}");
+        }
+    }
+
+    #[test]
+    fn same_seed_same_dance_other_seed_other_dance() {
+        let (_vs, m) = model(3);
+        let prefix = Array2::from_shape_fn((10, (D + 4) as usize), |(t, c)| ((t + c) % 4) as f32 * 0.2);
+        let code = Tensor::randn([39, 4], (Kind::Float, Device::Cpu));
+        let s = Sampling::default();
+        let run = |seed: u64| m.sample(&prefix, &code, 3, s, &mut StdRng::seed_from_u64(seed), |_| true).expect("sampled");
+        assert_eq!(run(7), run(7));
+        assert_ne!(run(7), run(8));
+    }
+
+    #[test]
+    fn a_whole_song_is_encoded_in_cross_faded_windows() {
+        let (_vs, m) = model(4);
+        let music = Tensor::randn([1, 50, 3], (Kind::Float, Device::Cpu));
+        let code = m.encoder.encode_song(&music, |_| true).expect("encoded");
+        assert_eq!(code.size(), vec![50, 4]);
+        // A song no longer than one window is one pass.
+        let short = music.narrow(1, 0, 16);
+        let one = m.encoder.forward(&short).squeeze_dim(0);
+        let d = (m.encoder.encode_song(&short, |_| true).expect("encoded") - one).abs().max().double_value(&[]);
+        assert!(d < 1e-5, "{d}");
+    }
+
+    #[test]
+    fn loss_falls_on_a_few_batches() {
+        let (vs, m) = model(5);
+        let mut opt = nn::Adam::default().build(&vs, 3e-3).unwrap();
+        let x = frames(4, 24);
+        let music = Tensor::randn([4, 24, 3], (Kind::Float, Device::Cpu));
+        let s = m.style_one_hot(&[0, 1, 2, 3], Device::Cpu);
+        let loss = |m: &DanceNet| {
+            let l = m.losses(&x, &x, &music, &s, 4);
+            l.gmm + l.foot
+        };
+        let first = loss(&m).double_value(&[]);
+        for _ in 0..60 {
+            opt.backward_step(&loss(&m));
+        }
+        let last = loss(&m).double_value(&[]);
+        assert!(last < first - 0.3, "loss {first} -> {last}");
+    }
+}
