@@ -109,6 +109,10 @@ pub struct JobView {
     pub song_id: SongId,
     pub model: Option<String>,
     pub seed: Option<u64>,
+    /// The style danced, once a generate job of a model that dances one has succeeded: the one
+    /// asked for, or the one its classifier predicted from the song (`predicted: true`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub style: Option<crate::models::StyleChoice>,
     pub status: Status,
     /// What the job is doing now (`decode`, `analyze`, `model`, `export`, `done`).
     pub stage: Option<String>,
@@ -150,6 +154,7 @@ impl From<Job> for JobView {
             song_id: job.kind.song_id(),
             model,
             seed,
+            style: job.files.style.clone(),
             status: job.status,
             stage: job.stage,
             progress: job.progress,

@@ -23,11 +23,15 @@
 //! Sizes differ from the paper to train in an hour on two CPU cores; the model card says where.
 use ndarray::Array2;
 use rand::rngs::StdRng;
-use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 use tch::nn::{self, RNN};
 use tch::{Device, Kind, Tensor};
+
+pub mod served;
+pub mod style;
+
+pub use served::Served;
 
 
 /// The API id.
@@ -67,6 +71,13 @@ pub struct Config {
     pub dilations: Vec<i64>,
     /// Mixture components `N` (the paper: 1).
     pub mixtures: i64,
+    /// Leading frame columns whose mixture means are absolute; the rest are relative to the current
+    /// frame. Served: all absolute. Means relative to the current frame (a residual) made every
+    /// sampled error part of the next frame's starting point, and the dance drifted off without
+    /// bound (from 9 training epochs on, every song); with the root's rates alone absolute it still
+    /// drifted, with all absolute it stays within the train split's range for whole songs.
+    #[serde(default)]
+    pub absolute_dims: i64,
 }
 
 impl Config {
@@ -87,7 +98,8 @@ impl Config {
             residual: 64,
             skip: 128,
             dilations: [1, 2, 4, 8, 16].repeat(2),
-            mixtures: 4,
+            mixtures: 1,
+            absolute_dims: pose_dim,
         }
     }
 
@@ -287,7 +299,9 @@ impl DanceNet {
         let delta = raw.narrow(-1, k, k * d).reshape(shape(&[k, d]).as_slice());
         let log_sigma = raw.narrow(-1, k + k * d, k * d).reshape(shape(&[k, d]).as_slice()).clamp(LOG_SIGMA.0, LOG_SIGMA.1);
         let contacts = raw.narrow(-1, k * (1 + 2 * d), self.config.contacts);
-        Mixture { logits, mean: current.unsqueeze(-2) + delta, log_sigma, contacts }
+        let relative = current.narrow(-1, self.config.absolute_dims, d - self.config.absolute_dims);
+        let base = Tensor::cat(&[current.narrow(-1, 0, self.config.absolute_dims).zeros_like(), relative], -1);
+        Mixture { logits, mean: base.unsqueeze(-2) + delta, log_sigma, contacts }
     }
 
     /// Teacher-forced pass: `frames` `[b, n, D + contacts]` (frame t's features and contacts,
@@ -341,7 +355,18 @@ impl DanceNet {
     /// one frame against queues of their past inputs (the dilated convolution needs only the
     /// input `d` frames back), so a frame costs the same however long the song.
     /// `on_step(done)` is called before the first frame and every 250 frames, and may stop it.
-    pub fn sample(&self, prefix: &Array2<f32>, code: &Tensor, style: usize, sampling: Sampling, rng: &mut StdRng, mut on_step: impl FnMut(usize) -> bool) -> Option<Array2<f32>> {
+    /// `project` may correct each drawn frame's features (normalised, `[D]`) before they are kept
+    /// and fed back (the served model puts them back on valid rotations).
+    pub fn sample(
+        &self,
+        prefix: &Array2<f32>,
+        code: &Tensor,
+        style: usize,
+        sampling: Sampling,
+        rng: &mut StdRng,
+        mut project: impl FnMut(&mut [f32]),
+        mut on_step: impl FnMut(usize) -> bool,
+    ) -> Option<Array2<f32>> {
         let c = &self.config;
         let (d, width) = (c.pose_dim as usize, (c.pose_dim + c.contacts) as usize);
         let m = prefix.nrows();
@@ -391,6 +416,7 @@ impl DanceNet {
         }
         let k = c.mixtures as usize;
         let mut probs = vec![0f32; k];
+        let mut draws = Draws::new(d, rng);
         for t in 0..n {
             let row = (m - 1 + t) as i64;
             let mut h = w_in.mv(&Tensor::from_slice(&frame).to_device(dev)) + &b_in;
@@ -413,7 +439,10 @@ impl DanceNet {
             }
             let raw = w_out.mv(&(w_head.mv(&skip?.relu()) + &b_head).relu()) + &b_out;
             let raw: Vec<f32> = Vec::<f32>::try_from(raw).ok()?;
-            let next = sampling.draw(&raw, &frame[..d], k, d, c.contacts as usize, &mut probs, rng);
+            let mut base = frame[..d].to_vec();
+            base[..c.absolute_dims as usize].fill(0.0);
+            let mut next = sampling.draw(&raw, &base, k, d, c.contacts as usize, &mut probs, &mut draws, rng);
+            project(&mut next[..d]);
             out.row_mut(t).assign(&ndarray::ArrayView1::from(&next));
             frame = next;
             if (t + 1) % 250 == 0 && !on_step(t + 1) {
@@ -424,24 +453,99 @@ impl DanceNet {
     }
 }
 
+/// The run behind the committed weights, beside the common record.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Schedule {
+    pub window: usize,
+    pub stride: usize,
+    /// σ_in: noise on the decoder's input frames (normalised units).
+    pub input_noise: f64,
+    /// Per-window offset and per-frame random walk on the input frames (normalised units).
+    #[serde(default)]
+    pub input_offset: f64,
+    #[serde(default)]
+    pub input_walk: f64,
+    /// λ of the foot-contact loss.
+    pub lambda_foot: f64,
+    /// Context-only frames at the start of each window.
+    pub warmup: usize,
+    /// Exponent of the rarer styles' window repeats.
+    pub style_balance: f64,
+    pub steps: usize,
+    /// Mean per-joint distance (cm, root-relative) between the train split and its rigid
+    /// rotation features decoded back.
+    pub rigid_fit_error_cm: f64,
+}
+
+/// How the committed weights are served.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Serving {
+    /// Rest offsets of the rig every dance is expressed on (`motion::rig`, metres), fitted on the
+    /// train split.
+    pub rig: Vec<[f64; 3]>,
+    /// Default sampling.
+    pub sampling: Sampling,
+}
+
+/// `model.json`.
+pub type ModelFile = super::folder::ModelFile<Config, Schedule, Serving>;
+
 /// How the mixture becomes a frame (§3.4): a component drawn by its weight, then each
 /// dimension from its Gaussian with σ × `temperature`; contacts where their probability is over
-/// one half.
+/// one half. With `coherence` ρ > 0 the standard-normal draws behind each frame are an AR(1)
+/// process, `z_t = ρ z_{t−1} + √(1 − ρ²) n_t` (the component's uniform through `z`'s CDF): every
+/// frame is still a draw from its own mixture, but neighbouring frames' draws move together, so
+/// the dance does not shiver at 25 fps with independent noise (not in the paper; the model card
+/// shows both).
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Sampling {
     pub temperature: f64,
+    #[serde(default)]
+    pub coherence: f64,
 }
 
 impl Default for Sampling {
     fn default() -> Self {
-        Self { temperature: 1.0 }
+        Self { temperature: 1.0, coherence: 0.0 }
     }
 }
 
+/// The random state [`Sampling::draw`] carries from frame to frame: one normal per dimension and
+/// one for the component.
+pub struct Draws {
+    z: Vec<f32>,
+    pick: f32,
+}
+
+impl Draws {
+    /// Fresh standard normals for `d` dimensions.
+    pub fn new(d: usize, rng: &mut StdRng) -> Self {
+        Self { z: (0..d).map(|_| StandardNormal.sample(rng)).collect(), pick: StandardNormal.sample(rng) }
+    }
+}
+
+/// Standard normal CDF, logistic approximation (within 0.01; it only turns a normal into a
+/// uniform for the component draw).
+fn phi(z: f32) -> f32 {
+    1.0 / (1.0 + (-1.702 * z).exp())
+}
+
 impl Sampling {
-    /// The next frame `[D + contacts]` from the decoder's raw output for one frame, given the
-    /// current frame's features `current` `[D]`; `probs` is scratch of `k` entries.
-    pub fn draw(&self, raw: &[f32], current: &[f32], k: usize, d: usize, contacts: usize, probs: &mut [f32], rng: &mut StdRng) -> Vec<f32> {
+    /// The next frame `[D + contacts]` from the decoder's raw output for one frame, whose means are
+    /// relative to `base` `[D]` (the current frame, zero where means are absolute); `probs` is
+    /// scratch of `k` entries.
+    #[allow(clippy::too_many_arguments)]
+    pub fn draw(&self, raw: &[f32], base: &[f32], k: usize, d: usize, contacts: usize, probs: &mut [f32], draws: &mut Draws, rng: &mut StdRng) -> Vec<f32> {
+        let rho = self.coherence.clamp(0.0, 0.999) as f32;
+        let fresh = (1.0 - rho * rho).sqrt();
+        let mut step = |z: &mut f32| {
+            let n: f32 = StandardNormal.sample(rng);
+            *z = rho * *z + fresh * n;
+        };
+        step(&mut draws.pick);
+        for z in draws.z.iter_mut() {
+            step(z);
+        }
         let logits = &raw[..k];
         let max = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
         let mut total = 0f32;
@@ -449,7 +553,7 @@ impl Sampling {
             *p = (l - max).exp();
             total += *p;
         }
-        let mut u = rng.gen::<f32>() * total;
+        let mut u = phi(draws.pick) * total;
         let mut pick = k - 1;
         for (i, &p) in probs.iter().enumerate() {
             if u < p {
@@ -464,8 +568,7 @@ impl Sampling {
         let mut next: Vec<f32> = (0..d)
             .map(|i| {
                 let ls = log_sigma[i].clamp(LOG_SIGMA.0 as f32, LOG_SIGMA.1 as f32);
-                let e: f32 = StandardNormal.sample(rng);
-                current[i] + mean[i] + t * ls.exp() * e
+                base[i] + mean[i] + t * ls.exp() * draws.z[i]
             })
             .collect();
         let c0 = k * (1 + 2 * d);
@@ -541,7 +644,7 @@ mod tests {
         let n = 12;
         let code = Tensor::randn([10 + n, 4], (Kind::Float, Device::Cpu));
         let mut rng = StdRng::seed_from_u64(0);
-        let out = m.sample(&prefix, &code.narrow(0, 1, 9 + n), 1, Sampling { temperature: 0.0 }, &mut rng, |_| true).expect("sampled");
+        let out = m.sample(&prefix, &code.narrow(0, 1, 9 + n), 1, Sampling { temperature: 0.0, coherence: 0.0 }, &mut rng, |_| {}, |_| true).expect("sampled");
         assert_eq!(out.nrows(), n as usize);
         let all = ndarray::concatenate(ndarray::Axis(0), &[prefix.view(), out.view()]).unwrap();
         let x = crate::models::to_tensor(&all).unsqueeze(0);
@@ -560,7 +663,7 @@ mod tests {
         let prefix = Array2::from_shape_fn((10, (D + 4) as usize), |(t, c)| ((t + c) % 4) as f32 * 0.2);
         let code = Tensor::randn([39, 4], (Kind::Float, Device::Cpu));
         let s = Sampling::default();
-        let run = |seed: u64| m.sample(&prefix, &code, 3, s, &mut StdRng::seed_from_u64(seed), |_| true).expect("sampled");
+        let run = |seed: u64| m.sample(&prefix, &code, 3, s, &mut StdRng::seed_from_u64(seed), |_| {}, |_| true).expect("sampled");
         assert_eq!(run(7), run(7));
         assert_ne!(run(7), run(8));
     }
@@ -595,5 +698,25 @@ mod tests {
         }
         let last = loss(&m).double_value(&[]);
         assert!(last < first - 0.3, "loss {first} -> {last}");
+    }
+
+    #[test]
+    fn coherent_draws_keep_each_frames_spread_and_move_together() {
+        // One component, one dimension, mean 0, σ 1 (log σ 0), no contacts.
+        let raw = [0.0f32, 0.0, 0.0];
+        let stats = |rho: f64| {
+            let s = Sampling { temperature: 2.0, coherence: rho };
+            let mut rng = StdRng::seed_from_u64(1);
+            let mut draws = Draws::new(1, &mut rng);
+            let x: Vec<f32> = (0..20_000).map(|_| s.draw(&raw, &[0.0], 1, 1, 0, &mut [0.0], &mut draws, &mut rng)[0]).collect();
+            let var = x.iter().map(|v| v * v).sum::<f32>() / x.len() as f32;
+            let lag1 = x.windows(2).map(|w| w[0] * w[1]).sum::<f32>() / (x.len() - 1) as f32 / var;
+            (var, lag1)
+        };
+        let (var0, lag0) = stats(0.0);
+        let (var9, lag9) = stats(0.9);
+        // σ × temperature = 2 either way; only independent draws are uncorrelated.
+        assert!((var0 - 4.0).abs() < 0.3 && (var9 - 4.0).abs() < 0.6, "variances {var0} {var9}");
+        assert!(lag0.abs() < 0.05 && (lag9 - 0.9).abs() < 0.05, "lag-1 correlations {lag0} {lag9}");
     }
 }

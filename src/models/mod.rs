@@ -19,6 +19,7 @@ pub mod tsmt;
 /// Adding a model is one row here, one `pub mod` above and one trainer under [`train`].
 pub const MODELS: &[Entry] = &[
     Entry { id: dance_revolution::ID, load: |dir| Ok(std::sync::Arc::new(dance_revolution::Served::load(dir)?)) },
+    Entry { id: dancenet::ID, load: |dir| Ok(std::sync::Arc::new(dancenet::Served::load(dir)?)) },
     Entry { id: keypose_transformer::ID, load: |dir| Ok(std::sync::Arc::new(keypose_transformer::Served::load(dir)?)) },
     Entry { id: tsmt::ID, load: |dir| Ok(std::sync::Arc::new(tsmt::Served::load(dir)?)) },
 ];

@@ -252,10 +252,14 @@ impl JobKind {
     }
 }
 
-/// The files a succeeded generate job wrote, relative to its result dir.
-#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+/// The files a succeeded generate job wrote, relative to its result dir, and what the model chose
+/// on the user's behalf.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct JobFiles {
     pub files: Vec<String>,
+    /// The style danced (models that dance one): asked for, or predicted from the song.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub style: Option<crate::models::StyleChoice>,
 }
 
 /// What a job produced when it succeeded.

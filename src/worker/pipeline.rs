@@ -194,7 +194,7 @@ pub fn render(
     };
     let png = preview::render_png(&sheet).map_err(|e| WorkerError::Export(format!("{}: {e}", preview::PREVIEW_FILE)))?;
     write_atomic(&dir.join(preview::PREVIEW_FILE), &png)?;
-    Ok(JobFiles { files: [BVH_FILE, JSON_FILE, GLB_FILE, REPORT_FILE, preview::PREVIEW_FILE].map(String::from).to_vec() })
+    Ok(JobFiles { files: [BVH_FILE, JSON_FILE, GLB_FILE, REPORT_FILE, preview::PREVIEW_FILE].map(String::from).to_vec(), style: caption.style.clone() })
 }
 
 #[cfg(test)]

@@ -4,6 +4,7 @@ mod artifacts;
 mod bad_input;
 mod concurrency;
 mod crash;
+mod dancenet;
 mod generate;
 mod health;
 mod helpers;

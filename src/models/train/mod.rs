@@ -316,6 +316,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
     Ok(())
 }
 pub mod dance_revolution;
+pub mod dancenet;
 pub mod keypose_transformer;
 pub mod tsmt;
 
@@ -324,6 +325,8 @@ pub mod tsmt;
 pub enum TrainCommand {
     /// DanceRevolution (Huang et al., ICLR 2021).
     DanceRevolution(dance_revolution::Options),
+    /// DanceNet (Zhuang et al. 2020): dilated gated causal convolutions, mixture output, style control.
+    Dancenet(dancenet::Options),
     /// Key-pose controllable cross-modal transformer.
     KeyposeTransformer(keypose_transformer::Options),
     /// TSMT, the two-stream motion transformer over discretised poses (Li et al. 2020).
@@ -337,6 +340,10 @@ impl TrainCommand {
             Self::DanceRevolution(o) => {
                 let logs = dance_revolution::train(o)?;
                 Ok(format!("trained {} epochs into {}", logs.len(), o.common.out_dir(crate::models::dance_revolution::ID).display()))
+            }
+            Self::Dancenet(o) => {
+                let logs = dancenet::train(o)?;
+                Ok(format!("trained {} epochs into {}", logs.len(), o.common.out_dir(crate::models::dancenet::ID).display()))
             }
             Self::KeyposeTransformer(o) => {
                 let logs = keypose_transformer::train(o)?;

@@ -1,0 +1,161 @@
+//! DanceNet as served: the song's control signals, its style (asked for, or the classifier's
+//! choice), the music code of the whole song, then the decoder sampled frame by frame from a real
+//! seed clip (or the request's seed motion), and the rotations turned back into joint positions
+//! on the model's rig.
+use std::path::Path;
+
+use ndarray::{concatenate, s, Array2, Axis};
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use tch::Tensor;
+
+use super::style::ServedStyle;
+use super::{DanceNet, ModelFile, Sampling, ID};
+use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
+use crate::models::{to_tensor, Cancelled, Capabilities, DanceModel, DanceStyle, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress, StyleChoice};
+use crate::motion::repr::RootStart;
+use crate::motion::rig::Rig;
+use crate::motion::rotations;
+
+/// A trained DanceNet, ready to serve.
+pub struct Served {
+    file: ModelFile,
+    rig: Rig,
+    layout: rotations::Layout,
+    clips: SeedClips,
+    style: Option<ServedStyle>,
+    pool: InstancePool<DanceNet>,
+}
+
+/// What one generation made, before it becomes joint positions.
+pub struct Generation {
+    /// Rotation features `[T, D]` (de-normalised) and the predicted contacts `[T, 4]`.
+    pub features: Array2<f32>,
+    pub contacts: Array2<f32>,
+    pub start: RootStart,
+    pub style: StyleChoice,
+}
+
+impl Served {
+    /// Loads `dir/model.json`, the weights, the seed clips and (when present) the style classifier.
+    pub fn load(dir: &Path) -> Result<Self, ModelError> {
+        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| DanceNet::new(p, f.config.clone()))?;
+        let rig = Rig::from_offsets(&file.extra.rig)?;
+        let width = (file.config.pose_dim + file.config.contacts) as usize;
+        if rotations::Layout::of(&rig).dim() != file.config.pose_dim as usize {
+            return Err(ModelError::Invalid(format!("{ID}: the rig's features are not {} wide", file.config.pose_dim)));
+        }
+        let clips = SeedClips::load(&dir.join(SEED_CLIPS_FILE), width)?;
+        let style = if dir.join(super::style::STYLE_FILE).exists() { Some(ServedStyle::load(dir)?) } else { None };
+        let layout = rotations::Layout::of(&rig);
+        Ok(Self { file, rig, layout, clips, style, pool })
+    }
+
+    /// The model's description file.
+    pub fn file(&self) -> &ModelFile {
+        &self.file
+    }
+
+    /// The style to dance: the request's, or the classifier's most likely one for the song.
+    fn style_of(&self, req: &GenerateRequest<'_>, features: &Array2<f32>) -> Result<StyleChoice, ModelError> {
+        if let Some(style) = req.style {
+            return Ok(StyleChoice { style, predicted: false, probabilities: vec![] });
+        }
+        let classifier = self.style.as_ref().ok_or_else(|| ModelError::MissingWeights(format!("{ID} style classifier"), super::style::STYLE_FILE.into()))?;
+        let p = classifier.predict(features)?;
+        let best = (0..p.len()).max_by(|&a, &b| p[a].total_cmp(&p[b])).unwrap_or(0);
+        Ok(StyleChoice { style: DanceStyle::ALL[best], predicted: true, probabilities: p.to_vec() })
+    }
+
+    /// Generates `n` frames of rotation features for `req`. The context is the request's seed
+    /// motion (which then opens the dance), else a real clip drawn by the seed (context only).
+    pub fn generate_features(&self, req: &GenerateRequest<'_>, n: usize, progress: &mut dyn Progress) -> Result<Generation, ModelError> {
+        let fps = self.file.fps;
+        let d = self.file.config.pose_dim as usize;
+        let mut sampling = Sampling { temperature: req.temperature.unwrap_or(self.file.extra.sampling.temperature), ..self.file.extra.sampling };
+        if let Some(rho) = std::env::var("DANCENET_RHO").ok().and_then(|v| v.parse().ok()) {
+            sampling.coherence = rho;
+        }
+        progress.report("features", 0.0)?;
+        let feats = crate::audio::features::dancenet(req.audio, fps, 0.0, n)?;
+        progress.report("features", 1.0)?;
+        let style = self.style_of(req, &feats)?;
+        let music = to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0);
+        // The context (normalised features and contacts) and how many of its frames open the dance.
+        let rf = self.file.config.receptive_field() as usize;
+        let (context, opening, start) = match req.seed_motion {
+            Some(m) if m.num_frames() > 0 => {
+                let keep = m.num_frames().min(n);
+                let enc = rotations::encode(&self.rig, m.positions.slice(s![..keep, .., ..]), fps)?;
+                let feats = self.file.pose_norm.normalize(&enc.features)?;
+                let rows = concatenate(Axis(1), &[feats.view(), enc.contacts.view()]).map_err(|e| ModelError::Invalid(e.to_string()))?;
+                (rows, keep, enc.start)
+            }
+            _ => (self.clips.pick(req.seed), 0, RootStart::default()),
+        };
+        let m = context.nrows();
+        let out = self.pool.with(|model| {
+            tch::no_grad(|| -> Result<Option<Array2<f32>>, ModelError> {
+                let mut cancelled = false;
+                let Some(code) = model.encoder.encode_song(&music, |f| {
+                    cancelled = progress.report("encode", f).is_err();
+                    !cancelled
+                }) else {
+                    return Ok(None);
+                };
+                // Conditioning rows: a seed motion is danced over the song's opening, so its frames
+                // have the song's code; a clip from another dance gets the opening's first code.
+                let tail = m.min(rf + 1);
+                let ctx = context.slice(s![m - tail.., ..]).to_owned();
+                let rows = if opening > 0 {
+                    code.narrow(0, (opening - tail + 1) as i64, (n - opening + tail - 1) as i64)
+                } else {
+                    Tensor::cat(&[code.narrow(0, 0, 1).repeat([(tail - 1) as i64, 1]), code.shallow_clone()], 0)
+                };
+                let total = (n - opening).max(1);
+                let mut rng = StdRng::seed_from_u64(req.seed ^ 0xDA_2CE_2E7);
+                let (norm, layout) = (&self.file.pose_norm, &self.layout);
+                let project = |row: &mut [f32]| {
+                    let mut raw: Vec<f32> = row.iter().zip(norm.mean.iter().zip(&norm.std)).map(|(v, (m, s))| v * s + m).collect();
+                    if rotations::project(&self.rig, layout, &mut raw) {
+                        for ((v, r), (m, s)) in row.iter_mut().zip(&raw).zip(norm.mean.iter().zip(&norm.std)) {
+                            *v = (r - m) / s;
+                        }
+                    }
+                };
+                Ok(model.sample(&ctx, &rows, style.style.index(), sampling, &mut rng, project, |done| progress.report("decode", done as f32 / total as f32).is_ok()))
+            })
+        })??;
+        let Some(sampled) = out else { return Err(Cancelled.into()) };
+        if let Ok(path) = std::env::var("DANCENET_DUMP") {
+            let _ = ndarray_npy::write_npy(&path, &sampled);
+        }
+        let rows = if opening > 0 { concatenate(Axis(0), &[context.view(), sampled.view()]).map_err(|e| ModelError::Invalid(e.to_string()))? } else { sampled };
+        let features = self.file.pose_norm.denormalize(&rows.slice(s![.., ..d]).to_owned())?;
+        let contacts = rows.slice(s![.., d..]).to_owned();
+        Ok(Generation { features, contacts, start, style })
+    }
+}
+
+impl DanceModel for Served {
+    fn info(&self) -> ModelInfo {
+        ModelInfo {
+            id: ModelId(ID.into()),
+            paper: "Zhuang et al., Music2Dance: DanceNet for Music-driven Dance Generation, 2020 (dilated gated convolutions, mixture output, style control)".into(),
+            capabilities: Capabilities { key_poses: false, seed_motion: true, style: true, temperature: true, top_k: false },
+        }
+    }
+
+    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
+        if !req.key_poses.is_empty() {
+            return Err(ModelError::Unsupported(ID.into(), "key poses"));
+        }
+        if req.top_k.is_some() {
+            return Err(ModelError::Unsupported(ID.into(), "top_k"));
+        }
+        let n = ((req.audio.duration_s * self.file.fps).floor() as usize).max(1);
+        let g = self.generate_features(req, n, progress)?;
+        let motion = rotations::decode(&self.rig, g.features.view(), g.start, self.file.fps)?;
+        Ok(Generated { motion, style: Some(g.style) })
+    }
+}

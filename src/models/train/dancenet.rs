@@ -1,0 +1,255 @@
+//! `choreo train dancenet`: the mixture negative log-likelihood of every next frame of a window
+//! plus λ times the foot-contact cross-entropy (paper §3.4), teacher-forced with Gaussian noise on
+//! the decoder's input frames, Adam, on the train split of dance-with-melody. Fits the rig every
+//! dance is expressed on (train split), and writes it, the normalisation and a few real seed
+//! clips beside the weights.
+use ndarray::{concatenate, Array2, Axis};
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use tch::{Device, Kind, Tensor};
+
+use super::{batch_tensor, window_starts, CommonOptions, EpochLog, EpochResult, Sequence, TrainError, Trainer};
+use crate::models::dancenet::{Config, DanceNet, ModelFile, Sampling, Schedule, Serving, ID};
+use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
+use crate::models::DanceStyle;
+use crate::motion::dataset::{Dataset, NormStats};
+use crate::motion::rig::Rig;
+use crate::motion::rotations;
+use crate::motion::skeleton::body_centre_track;
+
+/// Options of one training run (the card gives the run behind the committed weights).
+#[derive(Clone, Debug, clap::Args)]
+pub struct Options {
+    #[command(flatten)]
+    pub common: CommonOptions,
+    #[arg(long, default_value_t = 60)]
+    pub epochs: usize,
+    #[arg(long, default_value_t = 32)]
+    pub batch: usize,
+    /// Training window, frames (the context encoder's 8 s).
+    #[arg(long, default_value_t = 200)]
+    pub window: usize,
+    /// Stride between window starts, frames.
+    #[arg(long, default_value_t = 20)]
+    pub stride: usize,
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// λ, the weight of the foot-contact loss.
+    #[arg(long, default_value_t = 0.5)]
+    pub lambda_foot: f64,
+    /// σ_in: standard deviation of the Gaussian noise on the decoder's input frames (normalised
+    /// units; the targets stay clean), so it learns to come back from its own samples.
+    #[arg(long, default_value_t = 0.1)]
+    pub input_noise: f64,
+    /// Standard deviation of a constant offset added to each window's input frames (normalised
+    /// units; per window and dimension): a history that has drifted off the real dances, which
+    /// the decoder must learn to come back from since the targets stay clean. Sampling drifts:
+    /// every draw adds its own error to what the decoder reads next.
+    #[arg(long, default_value_t = 0.1)]
+    pub input_offset: f64,
+    /// Standard deviation per frame of a random walk added to the input frames (normalised
+    /// units): drift that grows within the window.
+    #[arg(long, default_value_t = 0.01)]
+    pub input_walk: f64,
+    /// Frames of each window that are context only (default: the receptive field, so every
+    /// scored frame sees real history, never zero padding).
+    #[arg(long)]
+    pub warmup: Option<usize>,
+    /// Windows of the rarer styles repeat `(waltz frames / style frames)^p` times (at most 4), so
+    /// the style input is learned from more than waltz; 0 trains on the data as it is.
+    #[arg(long, default_value_t = 0.5)]
+    pub style_balance: f64,
+    /// Mixture components (the paper: 1).
+    #[arg(long)]
+    pub mixtures: Option<i64>,
+    /// Leading frame columns whose mixture means are absolute rather than relative to the current
+    /// frame (default: all; 4 makes only the root's absolute, see `dancenet::Config::absolute_dims`).
+    #[arg(long)]
+    pub absolute_dims: Option<i64>,
+    /// Default sampling temperature written into `model.json`.
+    #[arg(long, default_value_t = 1.0)]
+    pub temperature: f64,
+    /// Default coherence ρ of the sampling draws written into `model.json` (`dancenet::Sampling`).
+    #[arg(long, default_value_t = 0.95)]
+    pub coherence: f64,
+    #[arg(long, default_value_t = 2020)]
+    pub seed: u64,
+}
+
+/// Seed clips kept in the folder, and their length in frames (past the receptive field).
+const SEED_CLIPS: usize = 32;
+
+/// One dance in DanceNet's terms.
+struct Prepared {
+    id: String,
+    style: DanceStyle,
+    music: Array2<f32>,
+    /// Rotation features then contacts, `[T, D + 4]`.
+    frames: Array2<f32>,
+}
+
+/// Loads `ids` as rotation features on `rig` with their control signals.
+fn prepare(ds: &Dataset, ids: &[String], rig: &Rig) -> Result<(Vec<Prepared>, f64), TrainError> {
+    let mut out = Vec::new();
+    let (mut err_sum, mut err_n) = (0.0f64, 0usize);
+    for id in ids {
+        let dance = ds.load(id)?;
+        let style = DanceStyle::of_dance_id(id).ok_or_else(|| TrainError::Motion(crate::motion::MotionError::UnknownDance { id: id.clone() }))?;
+        let audio = crate::audio::decode_path(&dance.audio_path)?;
+        let t = dance.motion.num_frames();
+        let music = crate::audio::features::dancenet(&audio, dance.motion.fps, dance.song_time_s(0), t)?;
+        let enc = rotations::encode(rig, dance.motion.positions.view(), dance.motion.fps)?;
+        // How far the rigid skeleton is from the capture (root-relative, so the floor and travel
+        // integration do not count): the error the representation itself brings.
+        let back = rotations::decode(rig, enc.features.view(), enc.start, dance.motion.fps)?;
+        let (a, b) = (dance.motion.positions.view(), back.positions.view());
+        let (ca, cb) = (body_centre_track(a), body_centre_track(b));
+        for f in 0..t {
+            for j in 0..crate::motion::NUM_JOINTS {
+                let d: f64 = (0..3).map(|c| f64::from((a[[f, j, c]] - ca[[f, c]]) - (b[[f, j, c]] - cb[[f, c]])).powi(2)).sum::<f64>().sqrt();
+                err_sum += d;
+                err_n += 1;
+            }
+        }
+        let frames = concatenate(Axis(1), &[enc.features.view(), enc.contacts.view()]).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
+        tracing::info!(dance = %id, frames = t, "loaded");
+        out.push(Prepared { id: id.clone(), style, music, frames });
+    }
+    Ok((out, err_sum / err_n.max(1) as f64))
+}
+
+/// Trains and writes the model folder; returns the per-epoch log.
+pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
+    let ds = Dataset::open(&opts.common.data)?;
+    // One skeleton for every dance, fitted on the train split: rotations are relative to its
+    // rest pose, which must be the same for all.
+    let train_dances = ds.load_all(ds.train_ids())?;
+    let all_pos = concatenate(Axis(0), &train_dances.iter().map(|d| d.motion.positions.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
+    let all_root = concatenate(Axis(0), &train_dances.iter().map(|d| d.center.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
+    let rig = Rig::fit(all_pos.view(), all_root.view())?;
+    drop((train_dances, all_pos, all_root));
+    let (train_raw, fit_err) = prepare(&ds, ds.train_ids(), &rig)?;
+    let (test_raw, test_fit_err) = prepare(&ds, ds.test_ids(), &rig)?;
+    tracing::info!(train_cm = 100.0 * fit_err, test_cm = 100.0 * test_fit_err, "rigid representation error (mean per joint, root-relative)");
+    let layout = rotations::Layout::of(&rig);
+    let d = layout.dim();
+    let music_norm = NormStats::fit(train_raw.iter().map(|p| &p.music))?;
+    let pose_norm = NormStats::fit(train_raw.iter().map(|p| p.frames.slice(ndarray::s![.., ..d]).to_owned()).collect::<Vec<_>>().iter())?;
+    let normalise = |seqs: &[Prepared]| -> Result<Vec<Sequence>, TrainError> {
+        seqs.iter()
+            .map(|p| {
+                let feats = pose_norm.normalize(&p.frames.slice(ndarray::s![.., ..d]).to_owned())?;
+                let poses = concatenate(Axis(1), &[feats.view(), p.frames.slice(ndarray::s![.., d..])]).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
+                Ok(Sequence { id: p.id.clone(), music: music_norm.normalize(&p.music)?, poses })
+            })
+            .collect()
+    };
+    let (train, test) = (normalise(&train_raw)?, normalise(&test_raw)?);
+    let train_style: Vec<usize> = train_raw.iter().map(|p| p.style.index()).collect();
+    let test_style: Vec<usize> = test_raw.iter().map(|p| p.style.index()).collect();
+    let base = if opts.common.tiny { Config::tiny(d as i64) } else { Config::cpu(d as i64) };
+    let config = Config { music_dim: music_norm.dim() as i64, mixtures: opts.mixtures.unwrap_or(base.mixtures), absolute_dims: opts.absolute_dims.unwrap_or(base.absolute_dims).clamp(0, d as i64), ..base };
+    let warmup = opts.warmup.unwrap_or(config.receptive_field() as usize).min(opts.window.saturating_sub(2));
+    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| DanceNet::new(p, config.clone()))?;
+    // Seed clips: normalised rows (features and contacts), long enough to fill the receptive field.
+    let clip_frames = config.receptive_field() as usize + 1;
+    let clips = SeedClips::draw(&train.iter().map(|s| &s.poses).collect::<Vec<_>>(), SEED_CLIPS, clip_frames, opts.seed)?;
+    clips.save(&trainer.out.join(SEED_CLIPS_FILE))?;
+    // How often each style's windows repeat in an epoch.
+    let mut style_frames = [0usize; 4];
+    for p in &train_raw {
+        style_frames[p.style.index()] += p.frames.nrows();
+    }
+    let most = *style_frames.iter().max().unwrap_or(&1) as f64;
+    let repeats: Vec<usize> = style_frames.iter().map(|&f| if f == 0 || opts.style_balance <= 0.0 { 1 } else { ((most / f as f64).powf(opts.style_balance).round() as usize).clamp(1, 4) }).collect();
+    tracing::info!(?style_frames, ?repeats, warmup, receptive_field = config.receptive_field(), "training set-up");
+    let len = opts.window;
+    let schedule = |steps: usize| Schedule { window: len, stride: opts.stride, input_noise: opts.input_noise, input_offset: opts.input_offset, input_walk: opts.input_walk, lambda_foot: opts.lambda_foot, warmup, style_balance: opts.style_balance, steps, rigid_fit_error_cm: 100.0 * fit_err };
+    let file_of = |t: &Trainer, steps: usize| ModelFile {
+        config: config.clone(),
+        music_norm: music_norm.clone(),
+        pose_norm: pose_norm.clone(),
+        fps: crate::motion::MOTION_FPS,
+        training: t.record(opts.lr, opts.batch, opts.seed, schedule(steps)),
+        extra: Serving { rig: rig.offset_arrays(), sampling: Sampling { temperature: opts.temperature, coherence: opts.coherence } },
+    };
+    let steps = std::cell::Cell::new(0usize);
+    let dev = Device::Cpu;
+    trainer.run(
+        0..opts.epochs,
+        2,
+        |epoch, opt, deadline| {
+            let mut starts: Vec<(usize, usize)> = Vec::new();
+            for w in window_starts(&train, len, opts.stride, opts.seed + epoch as u64) {
+                for _ in 0..repeats[train_style[w.0]] {
+                    starts.push(w);
+                }
+            }
+            if starts.is_empty() {
+                return Err(TrainError::NoWindows(len));
+            }
+            use rand::seq::SliceRandom;
+            let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
+            starts.shuffle(&mut rng);
+            let (mut total, mut gmm_sum, mut foot_sum, mut batches) = (0.0, 0.0, 0.0, 0usize);
+            for chunk in starts.chunks(opts.batch) {
+                let target = batch_tensor(&train, chunk, len, |s| &s.poses, dev);
+                let music = batch_tensor(&train, chunk, len, |s| &s.music, dev);
+                let style = model.style_one_hot(&chunk.iter().map(|&(i, _)| train_style[i]).collect::<Vec<_>>(), dev);
+                let input = if opts.input_noise > 0.0 || opts.input_offset > 0.0 || opts.input_walk > 0.0 {
+                    let (b, l) = (chunk.len() as i64, len as i64);
+                    let noise = Tensor::randn([b, l, d as i64], (Kind::Float, dev)) * opts.input_noise
+                        + Tensor::randn([b, 1, d as i64], (Kind::Float, dev)) * opts.input_offset
+                        + (Tensor::randn([b, l, d as i64], (Kind::Float, dev)) * opts.input_walk).cumsum(1, Kind::Float);
+                    let zeros = Tensor::zeros([chunk.len() as i64, len as i64, config.contacts], (Kind::Float, dev));
+                    &target + Tensor::cat(&[noise, zeros], 2)
+                } else {
+                    target.shallow_clone()
+                };
+                let l = model.losses(&input, &target, &music, &style, warmup as i64);
+                let loss = &l.gmm + opts.lambda_foot * &l.foot;
+                opt.backward_step_clip(&loss, 1.0);
+                total += loss.double_value(&[]);
+                gmm_sum += l.gmm.double_value(&[]);
+                foot_sum += l.foot.double_value(&[]);
+                batches += 1;
+                steps.set(steps.get() + 1);
+                if deadline.expired() {
+                    break;
+                }
+            }
+            let test_loss = tch::no_grad(|| {
+                let starts = window_starts(&test, len, len, 0);
+                let losses: Vec<(f64, f64)> = starts
+                    .chunks(opts.batch)
+                    .map(|c| {
+                        let t = batch_tensor(&test, c, len, |s| &s.poses, dev);
+                        let m = batch_tensor(&test, c, len, |s| &s.music, dev);
+                        let s = model.style_one_hot(&c.iter().map(|&(i, _)| test_style[i]).collect::<Vec<_>>(), dev);
+                        let l = model.losses(&t, &t, &m, &s, warmup as i64);
+                        (l.gmm.double_value(&[]), l.foot.double_value(&[]))
+                    })
+                    .collect();
+                (!losses.is_empty()).then(|| {
+                    let n = losses.len() as f64;
+                    (losses.iter().map(|l| l.0).sum::<f64>() / n, losses.iter().map(|l| l.1).sum::<f64>() / n)
+                })
+            });
+            let b = batches.max(1) as f64;
+            Ok(EpochResult {
+                train_loss: total / b,
+                test_loss: test_loss.map(|(g, f)| g + opts.lambda_foot * f),
+                note: format!(
+                    "steps={} gmm={:.4} foot={:.4} test_gmm={} test_foot={} (nats per dimension; BCE)",
+                    steps.get(),
+                    gmm_sum / b,
+                    foot_sum / b,
+                    test_loss.map_or("-".into(), |t| format!("{:.4}", t.0)),
+                    test_loss.map_or("-".into(), |t| format!("{:.4}", t.1))
+                ),
+            })
+        },
+        |t| file_of(t, steps.get()),
+    )?;
+    Ok(trainer.logs)
+}
