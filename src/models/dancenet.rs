@@ -355,8 +355,6 @@ impl DanceNet {
     /// one frame against queues of their past inputs (the dilated convolution needs only the
     /// input `d` frames back), so a frame costs the same however long the song.
     /// `on_step(done)` is called before the first frame and every 250 frames, and may stop it.
-    /// `project` may correct each drawn frame's features (normalised, `[D]`) before they are kept
-    /// and fed back (the served model puts them back on valid rotations).
     pub fn sample(
         &self,
         prefix: &Array2<f32>,
@@ -364,7 +362,6 @@ impl DanceNet {
         style: usize,
         sampling: Sampling,
         rng: &mut StdRng,
-        mut project: impl FnMut(&mut [f32]),
         mut on_step: impl FnMut(usize) -> bool,
     ) -> Option<Array2<f32>> {
         let c = &self.config;
@@ -441,8 +438,7 @@ impl DanceNet {
             let raw: Vec<f32> = Vec::<f32>::try_from(raw).ok()?;
             let mut base = frame[..d].to_vec();
             base[..c.absolute_dims as usize].fill(0.0);
-            let mut next = sampling.draw(&raw, &base, k, d, c.contacts as usize, &mut probs, &mut draws, rng);
-            project(&mut next[..d]);
+            let next = sampling.draw(&raw, &base, k, d, c.contacts as usize, &mut probs, &mut draws, rng);
             out.row_mut(t).assign(&ndarray::ArrayView1::from(&next));
             frame = next;
             if (t + 1) % 250 == 0 && !on_step(t + 1) {
@@ -458,8 +454,11 @@ impl DanceNet {
 pub struct Schedule {
     pub window: usize,
     pub stride: usize,
-    /// σ_in: noise on the decoder's input frames (normalised units).
+    /// σ_in: noise on the decoder's input frames (normalised units), and its AR(1) correlation
+    /// from frame to frame.
     pub input_noise: f64,
+    #[serde(default)]
+    pub input_coherence: f64,
     /// Per-window offset and per-frame random walk on the input frames (normalised units).
     #[serde(default)]
     pub input_offset: f64,
@@ -485,6 +484,10 @@ pub struct Serving {
     pub rig: Vec<[f64; 3]>,
     /// Default sampling.
     pub sampling: Sampling,
+    /// σ (frames) of the temporal smoothing of the sampled features before they become joint
+    /// positions (`served::smooth_columns`); 0: none.
+    #[serde(default)]
+    pub smooth_frames: f64,
 }
 
 /// `model.json`.
@@ -644,7 +647,7 @@ mod tests {
         let n = 12;
         let code = Tensor::randn([10 + n, 4], (Kind::Float, Device::Cpu));
         let mut rng = StdRng::seed_from_u64(0);
-        let out = m.sample(&prefix, &code.narrow(0, 1, 9 + n), 1, Sampling { temperature: 0.0, coherence: 0.0 }, &mut rng, |_| {}, |_| true).expect("sampled");
+        let out = m.sample(&prefix, &code.narrow(0, 1, 9 + n), 1, Sampling { temperature: 0.0, coherence: 0.0 }, &mut rng, |_| true).expect("sampled");
         assert_eq!(out.nrows(), n as usize);
         let all = ndarray::concatenate(ndarray::Axis(0), &[prefix.view(), out.view()]).unwrap();
         let x = crate::models::to_tensor(&all).unsqueeze(0);
@@ -663,7 +666,7 @@ mod tests {
         let prefix = Array2::from_shape_fn((10, (D + 4) as usize), |(t, c)| ((t + c) % 4) as f32 * 0.2);
         let code = Tensor::randn([39, 4], (Kind::Float, Device::Cpu));
         let s = Sampling::default();
-        let run = |seed: u64| m.sample(&prefix, &code, 3, s, &mut StdRng::seed_from_u64(seed), |_| {}, |_| true).expect("sampled");
+        let run = |seed: u64| m.sample(&prefix, &code, 3, s, &mut StdRng::seed_from_u64(seed), |_| true).expect("sampled");
         assert_eq!(run(7), run(7));
         assert_ne!(run(7), run(8));
     }

@@ -238,43 +238,6 @@ pub fn decode(rig: &Rig, features: ArrayView2<'_, f32>, start: RootStart, fps: f
     Ok(Motion { fps, positions })
 }
 
-/// Puts one row back on what rows of real motion can be: each 6-D block becomes the two columns
-/// of the rotation it decodes to (orthonormal), and the end effectors are where those rotations put
-/// them on `rig`. A model that feeds its own samples back (DanceNet's decoder) drifts off this
-/// set a little with every draw; projected, what it reads next is always a pose a body can take.
-/// Returns false (row untouched) when a block is degenerate or the row has the wrong width.
-pub fn project(rig: &Rig, layout: &Layout, row: &mut [f32]) -> bool {
-    if row.len() != layout.dim() {
-        return false;
-    }
-    let mut local = vec![UnitQuaternion::identity(); rig.parents.len()];
-    for (k, &j) in layout.joints.iter().enumerate() {
-        let c = ROOT_DIMS + 6 * k;
-        let v = [row[c], row[c + 1], row[c + 2], row[c + 3], row[c + 4], row[c + 5]];
-        let Some(q) = rotation_from_6d(&v) else { return false };
-        local[j] = q;
-    }
-    for (k, &j) in layout.joints.iter().enumerate() {
-        let m = local[j].to_rotation_matrix();
-        let m = m.matrix();
-        let c = ROOT_DIMS + 6 * k;
-        for r in 0..3 {
-            row[c + r] = m[(r, 0)] as f32;
-            row[c + 3 + r] = m[(r, 1)] as f32;
-        }
-    }
-    // The facing frame: root rotation identity, anchor at the origin.
-    let (pos, _) = fk_frame(rig, &(-rig.offsets[ANCHOR]), &local);
-    let ee0 = layout.end_effectors().start;
-    for (e, joints) in END_EFFECTORS.iter().enumerate() {
-        let p = joints.iter().map(|&j| pos[rig_index(j)]).sum::<Vector3<f64>>() / joints.len() as f64;
-        for c in 0..3 {
-            row[ee0 + 3 * e + c] = p[c] as f32;
-        }
-    }
-    true
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -364,38 +327,5 @@ mod tests {
         let b = encode(&rig, q.view(), 25.0).expect("encode").features;
         let d = (&a - &b).mapv(f32::abs).fold(0f32, |m, &v| m.max(v));
         assert!(d < 1e-4, "features moved by {d}");
-    }
-
-    #[test]
-    fn projection_keeps_real_rows_and_repairs_drifted_ones() {
-        let rig = rig();
-        let layout = Layout::of(&rig);
-        let e = encode(&rig, rigid_motion(&rig, 10).view(), 25.0).expect("encode");
-        let row = e.features.row(5).to_vec();
-        let mut same = row.clone();
-        assert!(project(&rig, &layout, &mut same));
-        let d = row.iter().zip(&same).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
-        assert!(d < 1e-4, "a real row moved by {d}");
-        // Scaled and skewed 6-D columns and wrong end effectors come back to the rotation's own.
-        let mut drifted = row.clone();
-        for v in drifted[layout.rotations()].iter_mut() {
-            *v *= 1.3;
-        }
-        drifted[layout.rotations().start + 3] += 0.2;
-        for v in drifted[layout.end_effectors()].iter_mut() {
-            *v += 0.5;
-        }
-        assert!(project(&rig, &layout, &mut drifted));
-        for k in 0..layout.joints.len() {
-            let c = ROOT_DIMS + 6 * k;
-            let (a, b) = (&drifted[c..c + 3], &drifted[c + 3..c + 6]);
-            let dot: f32 = a.iter().zip(b).map(|(x, y)| x * y).sum();
-            let na: f32 = a.iter().map(|x| x * x).sum();
-            assert!(dot.abs() < 1e-5 && (na - 1.0).abs() < 1e-5, "block {k} is not orthonormal");
-        }
-        // The end effectors follow the (slightly changed) rotations: near, not at, the real ones.
-        let ee = layout.end_effectors();
-        let off = drifted[ee.clone()].iter().zip(&row[ee]).map(|(a, b)| (a - b).abs()).fold(0f32, f32::max);
-        assert!(off < 0.3, "end effectors {off} m away");
     }
 }

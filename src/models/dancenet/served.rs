@@ -21,7 +21,6 @@ use crate::motion::rotations;
 pub struct Served {
     file: ModelFile,
     rig: Rig,
-    layout: rotations::Layout,
     clips: SeedClips,
     style: Option<ServedStyle>,
     pool: InstancePool<DanceNet>,
@@ -47,8 +46,7 @@ impl Served {
         }
         let clips = SeedClips::load(&dir.join(SEED_CLIPS_FILE), width)?;
         let style = if dir.join(super::style::STYLE_FILE).exists() { Some(ServedStyle::load(dir)?) } else { None };
-        let layout = rotations::Layout::of(&rig);
-        Ok(Self { file, rig, layout, clips, style, pool })
+        Ok(Self { file, rig, clips, style, pool })
     }
 
     /// The model's description file.
@@ -72,10 +70,7 @@ impl Served {
     pub fn generate_features(&self, req: &GenerateRequest<'_>, n: usize, progress: &mut dyn Progress) -> Result<Generation, ModelError> {
         let fps = self.file.fps;
         let d = self.file.config.pose_dim as usize;
-        let mut sampling = Sampling { temperature: req.temperature.unwrap_or(self.file.extra.sampling.temperature), ..self.file.extra.sampling };
-        if let Some(rho) = std::env::var("DANCENET_RHO").ok().and_then(|v| v.parse().ok()) {
-            sampling.coherence = rho;
-        }
+        let sampling = Sampling { temperature: req.temperature.unwrap_or(self.file.extra.sampling.temperature), ..self.file.extra.sampling };
         progress.report("features", 0.0)?;
         let feats = crate::audio::features::dancenet(req.audio, fps, 0.0, n)?;
         progress.report("features", 1.0)?;
@@ -114,24 +109,13 @@ impl Served {
                 };
                 let total = (n - opening).max(1);
                 let mut rng = StdRng::seed_from_u64(req.seed ^ 0xDA_2CE_2E7);
-                let (norm, layout) = (&self.file.pose_norm, &self.layout);
-                let project = |row: &mut [f32]| {
-                    let mut raw: Vec<f32> = row.iter().zip(norm.mean.iter().zip(&norm.std)).map(|(v, (m, s))| v * s + m).collect();
-                    if rotations::project(&self.rig, layout, &mut raw) {
-                        for ((v, r), (m, s)) in row.iter_mut().zip(&raw).zip(norm.mean.iter().zip(&norm.std)) {
-                            *v = (r - m) / s;
-                        }
-                    }
-                };
-                Ok(model.sample(&ctx, &rows, style.style.index(), sampling, &mut rng, project, |done| progress.report("decode", done as f32 / total as f32).is_ok()))
+                Ok(model.sample(&ctx, &rows, style.style.index(), sampling, &mut rng, |done| progress.report("decode", done as f32 / total as f32).is_ok()))
             })
         })??;
         let Some(sampled) = out else { return Err(Cancelled.into()) };
-        if let Ok(path) = std::env::var("DANCENET_DUMP") {
-            let _ = ndarray_npy::write_npy(&path, &sampled);
-        }
         let rows = if opening > 0 { concatenate(Axis(0), &[context.view(), sampled.view()]).map_err(|e| ModelError::Invalid(e.to_string()))? } else { sampled };
-        let features = self.file.pose_norm.denormalize(&rows.slice(s![.., ..d]).to_owned())?;
+        let mut features = self.file.pose_norm.denormalize(&rows.slice(s![.., ..d]).to_owned())?;
+        smooth_columns(&mut features, opening, self.file.extra.smooth_frames);
         let contacts = rows.slice(s![.., d..]).to_owned();
         Ok(Generation { features, contacts, start, style })
     }
@@ -157,5 +141,22 @@ impl DanceModel for Served {
         let g = self.generate_features(req, n, progress)?;
         let motion = rotations::decode(&self.rig, g.features.view(), g.start, self.file.fps)?;
         Ok(Generated { motion, style: Some(g.style) })
+    }
+}
+
+/// Smooths every column of `[T, D]` features over time (Gaussian, σ `sigma` frames, scipy's
+/// `gaussian_filter1d`), leaving the first `keep` rows (a request's own seed motion) as given. The
+/// decoder's samples carry frame-to-frame jitter a dancer does not have; σ of 1.5 frames (0.06 s)
+/// keeps 75 % of a 2-Hz movement and removes what is faster than 6 Hz.
+pub fn smooth_columns(features: &mut Array2<f32>, keep: usize, sigma: f64) {
+    if sigma <= 0.0 || features.nrows() <= keep + 1 {
+        return;
+    }
+    for mut col in features.columns_mut() {
+        let x: Vec<f64> = col.iter().skip(keep).map(|&v| f64::from(v)).collect();
+        let y = crate::metrics::beats::gaussian_filter1d(&x, sigma);
+        for (dst, v) in col.iter_mut().skip(keep).zip(y) {
+            *dst = v as f32;
+        }
     }
 }
