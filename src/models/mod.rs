@@ -8,6 +8,7 @@ use crate::motion::{KeyPose, Motion};
 use serde::{Deserialize, Serialize};
 
 pub mod dance_revolution;
+pub mod dancenet;
 pub mod folder;
 pub mod keypose_transformer;
 pub mod layers;
