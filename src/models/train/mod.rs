@@ -343,7 +343,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
 }
+pub mod classify;
 pub mod dance_revolution;
+pub mod dancenet_style;
 pub mod keypose_transformer;
 pub mod tsmt;
 
@@ -356,6 +358,8 @@ pub enum TrainCommand {
     KeyposeTransformer(keypose_transformer::Options),
     /// TSMT, the two-stream motion transformer over discretised poses (Li et al. 2020).
     Tsmt(tsmt::Options),
+    /// DanceNet's musical style classifier (Zhuang et al. 2020): song → style, into models/dancenet/style.*.
+    DancenetStyle(dancenet_style::Options),
 }
 
 impl TrainCommand {
@@ -375,6 +379,7 @@ impl TrainCommand {
                 let logs = tsmt::train(o)?;
                 Ok(format!("trained {} epochs into {}", logs.len(), o.common.out_dir(crate::models::tsmt::ID).display()))
             }
+            Self::DancenetStyle(o) => dancenet_style::train(o),
         }
     }
 }
