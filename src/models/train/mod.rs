@@ -347,6 +347,7 @@ pub mod classify;
 pub mod dance_revolution;
 pub mod dancenet_style;
 pub mod keypose_transformer;
+pub mod motion_style;
 pub mod tsmt;
 
 /// `choreo train <model>`: one variant per trainable model.
@@ -360,6 +361,8 @@ pub enum TrainCommand {
     Tsmt(tsmt::Options),
     /// DanceNet's musical style classifier (Zhuang et al. 2020): song → style, into models/dancenet/style.*.
     DancenetStyle(dancenet_style::Options),
+    /// The motion style classifier the metrics use: motion → style, into models/motion-style/.
+    MotionStyle(motion_style::Options),
 }
 
 impl TrainCommand {
@@ -380,6 +383,7 @@ impl TrainCommand {
                 Ok(format!("trained {} epochs into {}", logs.len(), o.common.out_dir(crate::models::tsmt::ID).display()))
             }
             Self::DancenetStyle(o) => dancenet_style::train(o),
+            Self::MotionStyle(o) => motion_style::train(o),
         }
     }
 }
