@@ -144,6 +144,12 @@ pub struct EvalResult {
     pub extra_songs: Vec<String>,
     /// Model rows on the extra songs.
     pub extra_rows: Vec<EvalRow>,
+    /// Models that dance a style asked for: every song (test and extra) in every style.
+    #[serde(default)]
+    pub style_control: Vec<super::style_control::StyleControl>,
+    /// The motion style classifier on the real test dances (when it and a style model ran).
+    #[serde(default)]
+    pub real_styles: Option<super::style_control::RealStyles>,
 }
 
 /// A song on a dance's clock: the audio of the segment and the beats within it.
@@ -392,6 +398,7 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
     // Models, on the test songs and on the extra songs.
     let mut extra_rows = Vec::new();
     let mut extra_names = Vec::new();
+    let (mut style_control, mut real_styles) = (Vec::new(), None);
     if !args.real_only {
         let registry = Registry::load(&args.models_dir).map_err(|e| MetricsError::Reference(format!("loading models: {e}")))?;
         let mut folders: Vec<PathBuf> = Vec::new();
@@ -412,6 +419,9 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
         }
         extra_names = extra.iter().map(|s| s.name.clone()).collect();
         let ids: Vec<String> = if args.models.is_empty() { registry.list().into_iter().map(|m| m.id.0).collect() } else { args.models.clone() };
+        // The motion style classifier, for style control (absent: distances and verdicts only).
+        let classifier_dir = args.models_dir.join(super::style::ID);
+        let classifier = if classifier_dir.is_dir() { Some(super::style::MotionStyle::load(&classifier_dir).map_err(|e| MetricsError::Reference(format!("motion style classifier: {e}")))?) } else { None };
         for id in &ids {
             let model = registry
                 .get(&ModelId(id.clone()))
@@ -421,9 +431,18 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
             if let Some(e) = r.extra {
                 extra_rows.extend(e);
             }
+            if model.info().capabilities.style {
+                let all: Vec<super::style_control::StyleSong<'_>> =
+                    songs.iter().chain(&extra).map(|s| super::style_control::StyleSong { name: &s.name, audio: &s.audio, beats: &s.beats }).collect();
+                style_control.push(super::style_control::style_control(model.as_ref(), id, &all, args.seed, classifier.as_ref(), &reference, &mut Quiet)?);
+            }
+        }
+        if let (Some(c), false) = (&classifier, style_control.is_empty()) {
+            let real: Vec<(&str, &Motion)> = eval_dances.iter().map(|d| (d.id.as_str(), &d.motion)).collect();
+            real_styles = Some(super::style_control::real_styles(c, &real)?);
         }
     }
-    Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows, extra_songs: extra_names, extra_rows })
+    Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows, extra_songs: extra_names, extra_rows, style_control, real_styles })
 }
 
 /// Writes the contact sheet of `model`'s dance to `song` with `seed` into `dir`.
@@ -623,6 +642,10 @@ pub fn markdown(result: &EvalResult) -> String {
         out += &physical_table(&result.extra_rows, reference.as_ref());
         out += "\n### TSMT's measures\n\n";
         out += &paper_table(&result.extra_rows);
+    }
+    if !result.style_control.is_empty() {
+        out += "\n## Style control (every song above, test and extra, in each style)\n\n";
+        out += &super::style_control::markdown(&result.style_control, result.real_styles.as_ref());
     }
     out
 }

@@ -12,6 +12,8 @@
 //!   issue 10's pass/fail verdict on them.
 //! - [`reference`]: the committed train-split statistics; [`score`]: one dance and a set;
 //!   [`eval`]: `choreo eval`; [`skeleton_map`]: AIST++ joints on our 23-joint skeleton.
+//! - [`style`]: a motion style classifier (motion only, no music) to check that a dance asked
+//!   for in a style looks like it.
 //!
 //! # BAS on dance-with-melody: read it with its chance level
 //! FACT's BAS uses σ = 0.05 s, so kinematic beats at *random* times already score about
@@ -37,6 +39,8 @@ pub mod plausibility;
 pub mod reference;
 pub mod score;
 pub mod skeleton_map;
+pub mod style;
+pub mod style_control;
 
 /// Errors from computing metrics or loading their reference statistics.
 #[derive(Debug, thiserror::Error)]

@@ -1,4 +1,4 @@
-//! DanceNet: Zhuang, Wang, Xia, Chai, Wang, "Music2Dance: DanceNet for Music-driven Dance
+//! DanceNet: Zhuang, Wang, Chai, Wang, Shao, Xia, "Music2Dance: DanceNet for Music-driven Dance
 //! Generation" (arXiv 2002.03761, 2020). Served as `dancenet`.
 //!
 //! - §3.1 **motion**: root translation and rotation as changes from the previous frame, every

@@ -31,6 +31,8 @@ pub enum TrainError {
     Model(#[from] crate::models::ModelError),
     #[error("no training windows: every dance is shorter than the window ({0} frames)")]
     NoWindows(usize),
+    #[error("invalid option: {0}")]
+    InvalidOption(String),
 }
 
 /// Computes a feature matrix `[n_frames, F]` at `fps` whose row i is the music at `start_s + i/fps`.
@@ -154,12 +156,28 @@ pub struct EpochResult {
     pub note: String,
 }
 
+/// The files a trainer writes into its folder: a model folder's ([`FolderFiles::MODEL`]), or
+/// others where a second network shares the folder (DanceNet's style classifier beside DanceNet),
+/// so that neither overwrites the other's weights or log.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FolderFiles {
+    pub weights: &'static str,
+    pub description: &'static str,
+    pub log: &'static str,
+}
+
+impl FolderFiles {
+    /// `weights.safetensors`, `model.json`, `train_log.jsonl`.
+    pub const MODEL: Self = Self { weights: WEIGHTS_FILE, description: MODEL_FILE, log: TRAIN_LOG_FILE };
+}
+
 /// The training set-up every model shares: threads and seed, the network's variables and Adam,
 /// `--init`, the model folder and its epoch log, the time budget, and saving.
 pub struct Trainer {
     pub vs: nn::VarStore,
     pub opt: nn::Optimizer,
     pub out: PathBuf,
+    pub files: FolderFiles,
     pub logs: Vec<EpochLog>,
     pub deadline: Deadline,
 }
@@ -168,6 +186,11 @@ impl Trainer {
     /// Builds the network with `build` under a fresh VarStore (after seeding libtorch), loads
     /// `--init` if given, and prepares the folder and its log.
     pub fn new<M>(common: &CommonOptions, id: &str, lr: f64, seed: u64, build: impl FnOnce(&nn::Path) -> M) -> Result<(Self, M), TrainError> {
+        Self::with_files(common, id, FolderFiles::MODEL, lr, seed, build)
+    }
+
+    /// [`Trainer::new`] writing `files` rather than the model folder's own.
+    pub fn with_files<M>(common: &CommonOptions, id: &str, files: FolderFiles, lr: f64, seed: u64, build: impl FnOnce(&nn::Path) -> M) -> Result<(Self, M), TrainError> {
         tch::set_num_threads(common.threads);
         tch::manual_seed(seed as i64);
         let mut vs = nn::VarStore::new(Device::Cpu);
@@ -180,10 +203,10 @@ impl Trainer {
         let out = common.out_dir(id);
         std::fs::create_dir_all(&out).map_err(|source| TrainError::Io { path: out.clone(), source })?;
         if common.init.is_none() {
-            let _ = std::fs::remove_file(out.join(TRAIN_LOG_FILE));
+            let _ = std::fs::remove_file(out.join(files.log));
         }
         let deadline = Deadline { started: Instant::now(), max_minutes: common.max_minutes };
-        Ok((Self { vs, opt, out, logs: Vec::new(), deadline }, model))
+        Ok((Self { vs, opt, out, files, logs: Vec::new(), deadline }, model))
     }
 
     /// Runs `epochs`, calling `one(epoch, optimiser, deadline)` for each, logging it, and saving
@@ -202,7 +225,7 @@ impl Trainer {
             let r = one(epoch, &mut self.opt, &self.deadline)?;
             let line = EpochLog { epoch, train_loss: r.train_loss, test_loss: r.test_loss, note: r.note, seconds: t0.elapsed().as_secs_f64() };
             tracing::info!(epoch, train_loss = line.train_loss, test_loss = ?line.test_loss, note = %line.note, seconds = line.seconds, "epoch");
-            append_log(&self.out.join(TRAIN_LOG_FILE), &line)?;
+            append_log(&self.out.join(self.files.log), &line)?;
             self.logs.push(line);
             let out_of_time = self.deadline.expired();
             if (epoch + 1 - epochs.start) % save_every.max(1) == 0 || epoch == last || out_of_time {
@@ -229,18 +252,23 @@ impl Trainer {
         }
     }
 
-    /// Writes the weights and `model.json` into the folder, each atomically.
+    /// Writes the weights and the description (`model.json`) into the folder, each atomically.
     pub fn save<F: Serialize>(&self, file: &F) -> Result<(), TrainError> {
-        save_folder(&self.vs, &self.out, file)
+        save_files(&self.vs, &self.out, self.files, file)
     }
 }
 
 /// Writes `weights.safetensors` and `model.json` into `dir`, each atomically.
 pub fn save_folder<F: Serialize>(vs: &nn::VarStore, dir: &Path, file: &F) -> Result<(), TrainError> {
-    let tmp = dir.join(format!("{WEIGHTS_FILE}.tmp.safetensors"));
+    save_files(vs, dir, FolderFiles::MODEL, file)
+}
+
+/// Writes the weights and the description named by `files` into `dir`, each atomically.
+pub fn save_files<F: Serialize>(vs: &nn::VarStore, dir: &Path, files: FolderFiles, file: &F) -> Result<(), TrainError> {
+    let tmp = dir.join(format!("{}.tmp.safetensors", files.weights));
     vs.save(&tmp)?;
-    std::fs::rename(&tmp, dir.join(WEIGHTS_FILE)).map_err(|source| TrainError::Io { path: dir.to_owned(), source })?;
-    write_atomic(&dir.join(MODEL_FILE), serde_json::to_string_pretty(file)?.as_bytes())
+    std::fs::rename(&tmp, dir.join(files.weights)).map_err(|source| TrainError::Io { path: dir.to_owned(), source })?;
+    write_atomic(&dir.join(files.description), serde_json::to_string_pretty(file)?.as_bytes())
 }
 
 /// Normalisation for music and poses, fitted on the given (train) sequences.
@@ -315,9 +343,12 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
 }
+pub mod classify;
 pub mod dance_revolution;
 pub mod dancenet;
+pub mod dancenet_style;
 pub mod keypose_transformer;
+pub mod motion_style;
 pub mod tsmt;
 
 /// `choreo train <model>`: one variant per trainable model.
@@ -331,6 +362,10 @@ pub enum TrainCommand {
     KeyposeTransformer(keypose_transformer::Options),
     /// TSMT, the two-stream motion transformer over discretised poses (Li et al. 2020).
     Tsmt(tsmt::Options),
+    /// DanceNet's musical style classifier (Zhuang et al. 2020): song → style, into models/dancenet/style.*.
+    DancenetStyle(dancenet_style::Options),
+    /// The motion style classifier the metrics use: motion → style, into models/motion-style/.
+    MotionStyle(motion_style::Options),
 }
 
 impl TrainCommand {
@@ -354,6 +389,8 @@ impl TrainCommand {
                 let logs = tsmt::train(o)?;
                 Ok(format!("trained {} epochs into {}", logs.len(), o.common.out_dir(crate::models::tsmt::ID).display()))
             }
+            Self::DancenetStyle(o) => dancenet_style::train(o),
+            Self::MotionStyle(o) => motion_style::train(o),
         }
     }
 }
