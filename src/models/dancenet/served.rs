@@ -146,8 +146,8 @@ impl DanceModel for Served {
 
 /// Smooths every column of `[T, D]` features over time (Gaussian, σ `sigma` frames, scipy's
 /// `gaussian_filter1d`), leaving the first `keep` rows (a request's own seed motion) as given. The
-/// decoder's samples carry frame-to-frame jitter a dancer does not have; σ of 1.5 frames (0.06 s)
-/// keeps 75 % of a 2-Hz movement and removes what is faster than 6 Hz.
+/// decoder's samples carry frame-to-frame jitter a dancer does not have; σ of 2 frames (0.08 s,
+/// served) keeps 60 % of a 2-Hz movement and removes what is faster than 5 Hz.
 pub fn smooth_columns(features: &mut Array2<f32>, keep: usize, sigma: f64) {
     if sigma <= 0.0 || features.nrows() <= keep + 1 {
         return;

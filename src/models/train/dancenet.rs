@@ -71,14 +71,14 @@ pub struct Options {
     /// frame (default: all; 4 makes only the root's absolute, see `dancenet::Config::absolute_dims`).
     #[arg(long)]
     pub absolute_dims: Option<i64>,
-    /// Default sampling temperature written into `model.json`.
-    #[arg(long, default_value_t = 1.0)]
+    /// Default sampling temperature written into `model.json` (served: 0.8; see the model card).
+    #[arg(long, default_value_t = 0.8)]
     pub temperature: f64,
     /// Default coherence ρ of the sampling draws written into `model.json` (`dancenet::Sampling`).
     #[arg(long, default_value_t = 0.95)]
     pub coherence: f64,
     /// σ (frames) of the served smoothing written into `model.json` (`dancenet::Serving`).
-    #[arg(long, default_value_t = 1.5)]
+    #[arg(long, default_value_t = 2.0)]
     pub smooth_frames: f64,
     #[arg(long, default_value_t = 2020)]
     pub seed: u64,
