@@ -207,7 +207,9 @@ async fn complete_stores_the_outcome_once(db: TestDb) {
     assert_eq!(beat, Beat::Held { cancel_requested: false });
     let running = store.job(files.id).await.expect("job");
     assert_eq!((running.stage.as_deref(), running.progress), (Some("model"), 0.4));
-    let written = JobFiles { files: vec!["motion.bvh".into(), "report.json".into()] };
+    // The style a model chose on the user's behalf is stored with the files.
+    let style = choreo::models::StyleChoice { style: choreo::models::DanceStyle::Rumba, predicted: true, probabilities: vec![0.1, 0.7, 0.05, 0.15] };
+    let written = JobFiles { files: vec!["motion.bvh".into(), "report.json".into()], style: Some(style) };
     assert!(store.complete(files.id, "w", Outcome::Files(written.clone())).await.expect("complete"));
     assert_eq!(store.job(files.id).await.expect("job").files, written);
 }

@@ -64,7 +64,8 @@ pub fn facing_yaw(frame: ArrayView2<'_, f32>) -> f32 {
     fx.atan2(fz) as f32
 }
 
-fn wrap(a: f64) -> f64 {
+/// `a` wrapped to (−π, π].
+pub(crate) fn wrap(a: f64) -> f64 {
     let two_pi = std::f64::consts::TAU;
     let mut a = a % two_pi;
     if a > std::f64::consts::PI {

@@ -23,7 +23,7 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use ndarray::{Array2, Array3, ArrayView2, ArrayView3};
 
-use super::repr::{facing_yaw, foot_contacts, RootStart};
+use super::repr::{facing_yaw, foot_contacts, wrap, RootStart};
 use super::rig::{fk_frame, rig_index, rotation_from_6d, solve, Rig};
 use super::skeleton::{FOOT_POINTS, HEAD, SPINE, TOES, WRISTS};
 use super::{feet, Motion, MotionError, NUM_JOINTS};
@@ -83,17 +83,6 @@ pub struct Encoded {
     pub contacts: Array2<f32>,
     /// The anchor's ground position and yaw on frame 0.
     pub start: RootStart,
-}
-
-fn wrap(a: f64) -> f64 {
-    let two_pi = std::f64::consts::TAU;
-    let mut a = a % two_pi;
-    if a > std::f64::consts::PI {
-        a -= two_pi;
-    } else if a <= -std::f64::consts::PI {
-        a += two_pi;
-    }
-    a
 }
 
 fn yaw_rotation(yaw: f64) -> UnitQuaternion<f64> {

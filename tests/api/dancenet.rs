@@ -36,11 +36,9 @@ fn pose_distance(a: &Value, b: &Value) -> f64 {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn dancenet_dances_a_real_song_in_the_style_asked_for_or_the_one_it_hears() {
     let app = spawn_app_with(|c| c.models_dir = models_dir()).await;
-    let models: Value = app.get("/v1/models").await.json().await.expect("models");
-    let listed = models.as_array().or_else(|| models["models"].as_array()).expect("model list")
-        .iter().find(|m| m["id"] == "dancenet").cloned().expect("dancenet is listed");
+    let capabilities = app.capabilities("dancenet").await;
     for (cap, want) in [("style", true), ("temperature", true), ("seed_motion", true), ("top_k", false), ("key_poses", false)] {
-        assert_eq!(listed["capabilities"][cap], want, "{cap}: {listed}");
+        assert_eq!(capabilities[cap], want, "{cap}: {capabilities}");
     }
 
     let song = app.upload_ok(&short_song()).await;

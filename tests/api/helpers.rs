@@ -109,6 +109,13 @@ pub async fn spawn_app_with(edit: impl FnOnce(&mut Config)) -> TestApp {
 }
 
 impl TestApp {
+    /// The `capabilities` of model `id` as `GET /v1/models` lists them (panics when it is not listed).
+    pub async fn capabilities(&self, id: &str) -> Value {
+        let models: Value = self.get("/v1/models").await.json().await.expect("models");
+        let listed = models.as_array().or_else(|| models["models"].as_array()).expect("model list").iter().find(|m| m["id"] == id).cloned();
+        listed.unwrap_or_else(|| panic!("{id} is not listed: {models}"))["capabilities"].clone()
+    }
+
     /// `http://addr{path}`.
     pub fn url(&self, path: &str) -> String {
         format!("http://{}{}", self.addr, path)

@@ -15,11 +15,9 @@ fn models_dir() -> std::path::PathBuf {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn tsmt_samples_a_dance_for_a_real_song() {
     let app = spawn_app_with(|c| c.models_dir = models_dir()).await;
-    let models: Value = app.get("/v1/models").await.json().await.expect("models");
-    let listed = models.as_array().or_else(|| models["models"].as_array()).expect("model list")
-        .iter().find(|m| m["id"] == "tsmt").cloned().expect("tsmt is listed");
+    let capabilities = app.capabilities("tsmt").await;
     for (cap, want) in [("temperature", true), ("top_k", true), ("seed_motion", true), ("key_poses", false), ("style", false)] {
-        assert_eq!(listed["capabilities"][cap], want, "{cap}: {listed}");
+        assert_eq!(capabilities[cap], want, "{cap}: {capabilities}");
     }
 
     let song = app.upload_ok(&short_song()).await;
