@@ -155,21 +155,19 @@ fn glb_world_positions(bytes: &[u8]) -> (Vec<String>, Vec<Vec<[f64; 3]>>) {
     (names, frames)
 }
 
-#[test]
-fn bvh_json_and_glb_agree_within_a_millimetre() {
+/// The largest coordinate difference (m) between motion.json's positions and the BVH (read back
+/// by our reader) and the glb (read back by hand) of one prepared motion.
+fn formats_disagree_m(m: &rig::RigMotion) -> (f64, f64) {
     use choreo::motion::bvh::Bvh;
     use choreo::motion::export::{self, MotionJson};
-    let Some(ds) = dataset() else { return };
-    let dance = ds.load("DANCE_W_3").expect("load");
-    let m = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
-    let json: MotionJson = serde_json::from_str(&export::json_string(&m).expect("json")).expect("parse json");
-    let t_len = dance.motion.num_frames();
+    let json: MotionJson = serde_json::from_str(&export::json_string(m).expect("json")).expect("parse json");
+    let t_len = m.num_frames();
     assert_eq!(json.num_frames, t_len);
     assert_eq!(json.positions.len(), t_len);
     assert_eq!(json.joint_names.len(), rig::RIG_JOINTS);
 
     // BVH, read back by our reader.
-    let bvh = Bvh::parse(&export::bvh_string(&m).expect("bvh")).expect("read bvh");
+    let bvh = Bvh::parse(&export::bvh_string(m).expect("bvh")).expect("read bvh");
     assert_eq!(bvh.frames.len(), t_len);
     assert!((bvh.fps() - 25.0).abs() < 1e-6);
     let bw = bvh.world_positions();
@@ -183,7 +181,7 @@ fn bvh_json_and_glb_agree_within_a_millimetre() {
         }
     }
     // glb, read back by hand.
-    let (names, gw) = glb_world_positions(&export::glb_bytes(&m).expect("glb"));
+    let (names, gw) = glb_world_positions(&export::glb_bytes(m).expect("glb"));
     assert_eq!(gw.len(), t_len);
     let mut worst_glb = 0.0f64;
     for t in 0..t_len {
@@ -194,11 +192,29 @@ fn bvh_json_and_glb_agree_within_a_millimetre() {
             }
         }
     }
-    eprintln!("max coordinate difference vs JSON: BVH {:.4} mm, glb {:.4} mm", worst_bvh * 1e3, worst_glb * 1e3);
-    assert!(worst_bvh < 1e-3, "BVH differs from JSON by {worst_bvh} m");
-    assert!(worst_glb < 1e-3, "glb differs from JSON by {worst_glb} m");
+    (worst_bvh, worst_glb)
+}
+
+#[test]
+fn bvh_json_and_glb_agree_within_a_millimetre() {
+    use choreo::motion::bvh::Bvh;
+    use choreo::motion::export;
+    let Some(ds) = dataset() else { return };
+    let dance = ds.load("DANCE_W_3").expect("load");
+    let t_len = dance.motion.num_frames();
+    let m = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
+    // As a dataset dance is exported, and as a generated one with key poses is (least-squares IK
+    // around the joints' weighted centroid, rig fitted to the key frames).
+    let anchored = export::prepare_anchored(&dance.motion, &[100, 458, 817, 1175, 1534]).expect("prepare anchored");
+    for (what, m) in [("dataset export", &m), ("anchored export", &anchored)] {
+        let (worst_bvh, worst_glb) = formats_disagree_m(m);
+        eprintln!("{what}: max coordinate difference vs JSON: BVH {:.4} mm, glb {:.4} mm", worst_bvh * 1e3, worst_glb * 1e3);
+        assert!(worst_bvh < 1e-3, "{what}: BVH differs from JSON by {worst_bvh} m");
+        assert!(worst_glb < 1e-3, "{what}: glb differs from JSON by {worst_glb} m");
+    }
 
     // The BVH maps back onto the 23 joints, and its root is the body centre exactly.
+    let bvh = Bvh::parse(&export::bvh_string(&m).expect("bvh")).expect("read bvh");
     let back = bvh.to_motion().expect("to motion");
     let e = joint_errors(back.positions.view(), dance.motion.positions.view());
     let mean = e.mean().unwrap_or(f32::NAN);
@@ -331,4 +347,50 @@ fn anchored_fit_returns_the_key_frame_as_posed() {
     eprintln!("key frame error: anchored {anchored:.2} cm, fitted to every frame {whole:.2} cm");
     assert!(anchored < 1.0, "anchored fit misses its key frame by {anchored:.2} cm");
     assert!(whole > 2.0 * anchored, "the test does not tell the fits apart: {whole:.2} vs {anchored:.2} cm");
+}
+
+/// Captured key poses come back within issue 10's 3 cm through the export, with no pop: the five
+/// poses of DANCE_W_3 that `tools/wholesong_check.sh` spreads over every song, and the key frames
+/// `choreo eval --key-poses 4` draws from the three test dances whose worst key missed (seeds 0,
+/// 1, 4 of `key_poses_of`). The dance itself stands in for the model's motion, which passes
+/// through its key poses exactly (`model_key_pose_error_cm` 0.00), around the joints' weighted
+/// centroid as a generated dance's export is. Before the least-squares IK (chain IK on the key
+/// frames' median skeleton) the worst keys were 5.37, 3.54, 5.76 and 4.87 cm.
+#[test]
+fn captured_key_poses_come_back_within_3_cm() {
+    use choreo::metrics::kinematics::key_pose_errors_cm;
+    use choreo::metrics::physical::{joint_acceleration, key_pose_pops};
+    use choreo::motion::export::{prepare_anchored, served_motion};
+    use choreo::motion::KeyPose;
+    let Some(ds) = dataset() else { return };
+    let cases: [(&str, &[usize]); 4] = [
+        ("DANCE_W_3", &[100, 458, 817, 1175, 1534]),
+        ("DANCE_C_8", &[449, 752, 1087, 1174]),
+        ("DANCE_R_9", &[174, 396, 937, 1737]),
+        ("DANCE_W_8", &[249, 679, 996, 1321]),
+    ];
+    for (id, frames) in cases {
+        let dance = ds.load(id).expect("load");
+        let fps = dance.motion.fps;
+        let keys: Vec<KeyPose> = frames
+            .iter()
+            .map(|&f| KeyPose {
+                time_s: f as f64 / fps,
+                joints: (0..NUM_JOINTS).map(|j| [0, 1, 2].map(|c| f64::from(dance.motion.positions[[f, j, c]]))).collect(),
+            })
+            .collect();
+        let served = served_motion(&prepare_anchored(&dance.motion, frames).expect("export"));
+        let errors = key_pose_errors_cm(served.positions.view(), fps, &keys);
+        let acc = joint_acceleration(served.positions.view(), fps);
+        let pops = key_pose_pops(&acc, fps, served.num_frames(), &keys);
+        let data_pops = key_pose_pops(&joint_acceleration(dance.motion.positions.view(), fps), fps, served.num_frames(), &keys);
+        let worst_pop = pops.iter().copied().fold(0.0, f64::max);
+        let data_pop = data_pops.iter().copied().fold(0.0, f64::max);
+        eprintln!("{id}: key errors {errors:.2?} cm; largest acceleration within ±0.5 s of a key {worst_pop:.1} m/s² (the data's {data_pop:.1})");
+        assert_eq!(errors.len(), frames.len());
+        for e in &errors {
+            assert!(*e < 3.0, "{id}: a key pose comes back {e:.2} cm off: {errors:.2?}");
+        }
+        assert!(worst_pop <= 1.1 * data_pop + 1.0, "{id}: {worst_pop:.1} m/s² near a key, the data has {data_pop:.1}");
+    }
 }
