@@ -249,34 +249,39 @@ fn blender_imports_bvh_and_glb_of_a_dataset_dance() {
     let Some(ds) = dataset() else { return };
     ensure_blender();
     let dance = ds.load("DANCE_W_3").expect("load");
-    let m = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
-    let dir = tempfile::tempdir().expect("tempdir");
-    let paths = export::write_all_rig(&m, dir.path()).expect("export");
-    let result = dir.path().join("result.json");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/blender/check_import.py");
-    let out = std::process::Command::new("blender")
-        .args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
-        .arg(&script)
-        .arg("--")
-        .args([&paths.bvh, &paths.glb, &paths.json, &result])
-        .output()
-        .expect("run blender");
-    let log = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "blender failed:\n{log}");
-    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&result).expect("result")).expect("result json");
-    eprintln!("{}", serde_json::to_string_pretty(&r).unwrap_or_default());
-    let t_len = dance.motion.num_frames() as u64;
-    for kind in ["bvh", "glb"] {
-        let k = &r[kind];
-        assert!(k.get("error").is_none(), "{kind} import raised: {}", k["error"]);
-        assert_eq!(k["status"], serde_json::json!(["FINISHED"]), "{kind} import status");
-        assert_eq!(k["frames"].as_u64(), Some(t_len), "{kind} frame count");
-        assert_eq!(k["joints"].as_u64(), Some(rig::RIG_JOINTS as u64), "{kind} joint count");
-        for t in [0, t_len / 2, t_len - 1] {
-            let c = &k["checks"][t.to_string()];
-            assert_eq!(c["missing"], serde_json::json!([]), "{kind} frame {t}: joints missing");
-            let e = c["max_error_m"].as_f64().expect("error");
-            assert!(e < 0.01, "{kind} frame {t}: joint {} is {e} m from our JSON", c["worst_joint"]);
+    // As a dataset dance is exported, and as a generated dance with key poses is (least-squares
+    // IK, rig fitted to the key frames).
+    let plain = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
+    let anchored = export::prepare_anchored(&dance.motion, &[100, 458, 817, 1175, 1534]).expect("prepare anchored");
+    for (what, m) in [("dataset export", &plain), ("anchored export", &anchored)] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let paths = export::write_all_rig(m, dir.path()).expect("export");
+        let result = dir.path().join("result.json");
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/blender/check_import.py");
+        let out = std::process::Command::new("blender")
+            .args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
+            .arg(&script)
+            .arg("--")
+            .args([&paths.bvh, &paths.glb, &paths.json, &result])
+            .output()
+            .expect("run blender");
+        let log = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{what}: blender failed:\n{log}");
+        let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&result).expect("result")).expect("result json");
+        eprintln!("{what}: {}", serde_json::to_string_pretty(&r).unwrap_or_default());
+        let t_len = dance.motion.num_frames() as u64;
+        for kind in ["bvh", "glb"] {
+            let k = &r[kind];
+            assert!(k.get("error").is_none(), "{what}: {kind} import raised: {}", k["error"]);
+            assert_eq!(k["status"], serde_json::json!(["FINISHED"]), "{what}: {kind} import status");
+            assert_eq!(k["frames"].as_u64(), Some(t_len), "{what}: {kind} frame count");
+            assert_eq!(k["joints"].as_u64(), Some(rig::RIG_JOINTS as u64), "{what}: {kind} joint count");
+            for t in [0, t_len / 2, t_len - 1] {
+                let c = &k["checks"][t.to_string()];
+                assert_eq!(c["missing"], serde_json::json!([]), "{what}: {kind} frame {t}: joints missing");
+                let e = c["max_error_m"].as_f64().expect("error");
+                assert!(e < 0.01, "{what}: {kind} frame {t}: joint {} is {e} m from our JSON", c["worst_joint"]);
+            }
         }
     }
 }
