@@ -42,7 +42,7 @@
 //! [`fit_and_solve`] with anchors fits the bone lengths to the key frames in least squares
 //! ([`Rig::fit_lengths`]) and refines every frame's chain solution in least squares over all 23
 //! joints with the root free ([`fit_frame`], [`solve_least_squares`]), the root's rotation being
-//! the facing yaw. Five captured poses of DANCE_W_3 whose thigh measures 43–54 cm came back
+//! the facing yaw tilted onto the spine. Five captured poses of DANCE_W_3 whose thigh measures 43–54 cm came back
 //! 4.25 / 0.84 / 1.63 / 1.24 / 5.37 cm off through the chain IK (per joint at the worst: hips 10,
 //! spine 8, ankles 7–8 cm) and 2.04 / 1.53 / 1.72 / 1.54 / 2.12 cm through this.
 //!
@@ -530,7 +530,7 @@ impl Rig {
     /// around `root` `[K, 3]` in least squares: each frame is posed by [`fit_frame`] (root
     /// free), then the lengths that bring the 23 joints of all frames closest to their targets
     /// are solved at once (positions are linear in the lengths once the rotations are fixed, and
-    /// each frame's root translation is free), [`LENGTH_ROUNDS`] times. The spine's offset from
+    /// each frame's root translation is free), `LENGTH_ROUNDS` times. The spine's offset from
     /// the body centre is kept: with every frame's root free, it and the pelvis's could slide
     /// together without changing any joint.
     pub fn fit_lengths(&mut self, positions: ArrayView3<'_, f32>, root: ArrayView2<'_, f32>) -> Result<(), MotionError> {
@@ -649,11 +649,11 @@ fn rerooted(rig: &Rig, root_rot: UnitQuaternion<f64>, local: &[UnitQuaternion<f6
 /// differ from the rig's the mismatch is spread over the body rather than piled on the ends of its
 /// chains, and the root sits where the body fits best.
 ///
-/// The root's own rotation is the frame's facing yaw ([`facing_yaw`]), its children (spine and
-/// pelvis) carrying the lean: [`solve`]'s root rotation is a best fit of the spine's and the
-/// pelvis's offsets, which coincide, so it is free about that offset and turns by 90° (median)
-/// from one frame to the next, the children turning back. The motion's world positions do not
-/// show it; an animation tool that interpolates between frames would.
+/// The root's own rotation is `root_rotation`'s (the facing yaw tilted onto the spine), kept
+/// through the fit: [`solve`]'s root rotation is a best fit of the spine's and the pelvis's
+/// offsets, which coincide, so it is free about that offset and turns by 90° (median) from one
+/// frame to the next, the children turning back. The motion's world positions do not show it; an
+/// animation tool that interpolates between frames would.
 ///
 /// Each frame starts from its own chain solution, not from the previous frame's fit: started from
 /// the previous frame, the fits of a captured dance drift into a wrong pose within 20 s (mean joint
@@ -692,8 +692,8 @@ const ROTATION_PRIOR_M: f64 = 0.01;
 
 /// Refits one frame of `rig` in least squares, starting from `root` and `local`: the root
 /// translation and the rotation of every joint with children but the root (whose rotation is
-/// kept) that bring the 23 dataset joints closest to `target` (rig-indexed, as [`targets`] builds
-/// it) in the sum of squared distances, plus [`ROTATION_PRIOR_M`]'s pull towards `local`, by
+/// kept) that bring the 23 dataset joints closest to `target` (rig-indexed, as `targets` builds
+/// it) in the sum of squared distances, plus `ROTATION_PRIOR_M`'s pull towards `local`, by
 /// Levenberg–Marquardt.
 ///
 /// [`solve`] points each bone at its child's target from the parent's already-fitted end: where
