@@ -155,21 +155,19 @@ fn glb_world_positions(bytes: &[u8]) -> (Vec<String>, Vec<Vec<[f64; 3]>>) {
     (names, frames)
 }
 
-#[test]
-fn bvh_json_and_glb_agree_within_a_millimetre() {
+/// The largest coordinate difference (m) between motion.json's positions and the BVH (read back
+/// by our reader) and the glb (read back by hand) of one prepared motion.
+fn formats_disagree_m(m: &rig::RigMotion) -> (f64, f64) {
     use choreo::motion::bvh::Bvh;
     use choreo::motion::export::{self, MotionJson};
-    let Some(ds) = dataset() else { return };
-    let dance = ds.load("DANCE_W_3").expect("load");
-    let m = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
-    let json: MotionJson = serde_json::from_str(&export::json_string(&m).expect("json")).expect("parse json");
-    let t_len = dance.motion.num_frames();
+    let json: MotionJson = serde_json::from_str(&export::json_string(m).expect("json")).expect("parse json");
+    let t_len = m.num_frames();
     assert_eq!(json.num_frames, t_len);
     assert_eq!(json.positions.len(), t_len);
     assert_eq!(json.joint_names.len(), rig::RIG_JOINTS);
 
     // BVH, read back by our reader.
-    let bvh = Bvh::parse(&export::bvh_string(&m).expect("bvh")).expect("read bvh");
+    let bvh = Bvh::parse(&export::bvh_string(m).expect("bvh")).expect("read bvh");
     assert_eq!(bvh.frames.len(), t_len);
     assert!((bvh.fps() - 25.0).abs() < 1e-6);
     let bw = bvh.world_positions();
@@ -183,7 +181,7 @@ fn bvh_json_and_glb_agree_within_a_millimetre() {
         }
     }
     // glb, read back by hand.
-    let (names, gw) = glb_world_positions(&export::glb_bytes(&m).expect("glb"));
+    let (names, gw) = glb_world_positions(&export::glb_bytes(m).expect("glb"));
     assert_eq!(gw.len(), t_len);
     let mut worst_glb = 0.0f64;
     for t in 0..t_len {
@@ -194,11 +192,29 @@ fn bvh_json_and_glb_agree_within_a_millimetre() {
             }
         }
     }
-    eprintln!("max coordinate difference vs JSON: BVH {:.4} mm, glb {:.4} mm", worst_bvh * 1e3, worst_glb * 1e3);
-    assert!(worst_bvh < 1e-3, "BVH differs from JSON by {worst_bvh} m");
-    assert!(worst_glb < 1e-3, "glb differs from JSON by {worst_glb} m");
+    (worst_bvh, worst_glb)
+}
+
+#[test]
+fn bvh_json_and_glb_agree_within_a_millimetre() {
+    use choreo::motion::bvh::Bvh;
+    use choreo::motion::export;
+    let Some(ds) = dataset() else { return };
+    let dance = ds.load("DANCE_W_3").expect("load");
+    let t_len = dance.motion.num_frames();
+    let m = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
+    // As a dataset dance is exported, and as a generated one with key poses is (least-squares IK
+    // around the joints' weighted centroid, rig fitted to the key frames).
+    let anchored = export::prepare_anchored(&dance.motion, &[100, 458, 817, 1175, 1534]).expect("prepare anchored");
+    for (what, m) in [("dataset export", &m), ("anchored export", &anchored)] {
+        let (worst_bvh, worst_glb) = formats_disagree_m(m);
+        eprintln!("{what}: max coordinate difference vs JSON: BVH {:.4} mm, glb {:.4} mm", worst_bvh * 1e3, worst_glb * 1e3);
+        assert!(worst_bvh < 1e-3, "{what}: BVH differs from JSON by {worst_bvh} m");
+        assert!(worst_glb < 1e-3, "{what}: glb differs from JSON by {worst_glb} m");
+    }
 
     // The BVH maps back onto the 23 joints, and its root is the body centre exactly.
+    let bvh = Bvh::parse(&export::bvh_string(&m).expect("bvh")).expect("read bvh");
     let back = bvh.to_motion().expect("to motion");
     let e = joint_errors(back.positions.view(), dance.motion.positions.view());
     let mean = e.mean().unwrap_or(f32::NAN);
@@ -233,34 +249,39 @@ fn blender_imports_bvh_and_glb_of_a_dataset_dance() {
     let Some(ds) = dataset() else { return };
     ensure_blender();
     let dance = ds.load("DANCE_W_3").expect("load");
-    let m = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
-    let dir = tempfile::tempdir().expect("tempdir");
-    let paths = export::write_all_rig(&m, dir.path()).expect("export");
-    let result = dir.path().join("result.json");
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/blender/check_import.py");
-    let out = std::process::Command::new("blender")
-        .args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
-        .arg(&script)
-        .arg("--")
-        .args([&paths.bvh, &paths.glb, &paths.json, &result])
-        .output()
-        .expect("run blender");
-    let log = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
-    assert!(out.status.success(), "blender failed:\n{log}");
-    let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&result).expect("result")).expect("result json");
-    eprintln!("{}", serde_json::to_string_pretty(&r).unwrap_or_default());
-    let t_len = dance.motion.num_frames() as u64;
-    for kind in ["bvh", "glb"] {
-        let k = &r[kind];
-        assert!(k.get("error").is_none(), "{kind} import raised: {}", k["error"]);
-        assert_eq!(k["status"], serde_json::json!(["FINISHED"]), "{kind} import status");
-        assert_eq!(k["frames"].as_u64(), Some(t_len), "{kind} frame count");
-        assert_eq!(k["joints"].as_u64(), Some(rig::RIG_JOINTS as u64), "{kind} joint count");
-        for t in [0, t_len / 2, t_len - 1] {
-            let c = &k["checks"][t.to_string()];
-            assert_eq!(c["missing"], serde_json::json!([]), "{kind} frame {t}: joints missing");
-            let e = c["max_error_m"].as_f64().expect("error");
-            assert!(e < 0.01, "{kind} frame {t}: joint {} is {e} m from our JSON", c["worst_joint"]);
+    // As a dataset dance is exported, and as a generated dance with key poses is (least-squares
+    // IK, rig fitted to the key frames).
+    let plain = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
+    let anchored = export::prepare_anchored(&dance.motion, &[100, 458, 817, 1175, 1534]).expect("prepare anchored");
+    for (what, m) in [("dataset export", &plain), ("anchored export", &anchored)] {
+        let dir = tempfile::tempdir().expect("tempdir");
+        let paths = export::write_all_rig(m, dir.path()).expect("export");
+        let result = dir.path().join("result.json");
+        let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/blender/check_import.py");
+        let out = std::process::Command::new("blender")
+            .args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
+            .arg(&script)
+            .arg("--")
+            .args([&paths.bvh, &paths.glb, &paths.json, &result])
+            .output()
+            .expect("run blender");
+        let log = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+        assert!(out.status.success(), "{what}: blender failed:\n{log}");
+        let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&result).expect("result")).expect("result json");
+        eprintln!("{what}: {}", serde_json::to_string_pretty(&r).unwrap_or_default());
+        let t_len = dance.motion.num_frames() as u64;
+        for kind in ["bvh", "glb"] {
+            let k = &r[kind];
+            assert!(k.get("error").is_none(), "{what}: {kind} import raised: {}", k["error"]);
+            assert_eq!(k["status"], serde_json::json!(["FINISHED"]), "{what}: {kind} import status");
+            assert_eq!(k["frames"].as_u64(), Some(t_len), "{what}: {kind} frame count");
+            assert_eq!(k["joints"].as_u64(), Some(rig::RIG_JOINTS as u64), "{what}: {kind} joint count");
+            for t in [0, t_len / 2, t_len - 1] {
+                let c = &k["checks"][t.to_string()];
+                assert_eq!(c["missing"], serde_json::json!([]), "{what}: {kind} frame {t}: joints missing");
+                let e = c["max_error_m"].as_f64().expect("error");
+                assert!(e < 0.01, "{what}: {kind} frame {t}: joint {} is {e} m from our JSON", c["worst_joint"]);
+            }
         }
     }
 }
@@ -331,4 +352,98 @@ fn anchored_fit_returns_the_key_frame_as_posed() {
     eprintln!("key frame error: anchored {anchored:.2} cm, fitted to every frame {whole:.2} cm");
     assert!(anchored < 1.0, "anchored fit misses its key frame by {anchored:.2} cm");
     assert!(whole > 2.0 * anchored, "the test does not tell the fits apart: {whole:.2} vs {anchored:.2} cm");
+}
+
+/// Captured key poses come back within issue 10's 3 cm through the export, with no pop: the five
+/// poses of DANCE_W_3 that `tools/wholesong_check.sh` spreads over every song, and the key frames
+/// `choreo eval --key-poses 4` draws from the three test dances whose worst key missed (seeds 0,
+/// 1, 4 of `key_poses_of`). The dance itself stands in for the model's motion, which passes
+/// through its key poses exactly (`model_key_pose_error_cm` 0.00), around the joints' weighted
+/// centroid as a generated dance's export is. Before the least-squares IK (chain IK on the key
+/// frames' median skeleton) the worst keys were 5.37, 3.54, 5.76 and 4.87 cm.
+#[test]
+fn captured_key_poses_come_back_within_3_cm() {
+    use choreo::metrics::kinematics::key_pose_errors_cm;
+    use choreo::metrics::physical::{joint_acceleration, key_pose_pops};
+    use choreo::motion::export::{prepare_anchored, served_motion};
+    use choreo::motion::KeyPose;
+    let Some(ds) = dataset() else { return };
+    let cases: [(&str, &[usize]); 4] = [
+        ("DANCE_W_3", &[100, 458, 817, 1175, 1534]),
+        ("DANCE_C_8", &[449, 752, 1087, 1174]),
+        ("DANCE_R_9", &[174, 396, 937, 1737]),
+        ("DANCE_W_8", &[249, 679, 996, 1321]),
+    ];
+    for (id, frames) in cases {
+        let dance = ds.load(id).expect("load");
+        let fps = dance.motion.fps;
+        let keys: Vec<KeyPose> = frames
+            .iter()
+            .map(|&f| KeyPose {
+                time_s: f as f64 / fps,
+                joints: (0..NUM_JOINTS).map(|j| [0, 1, 2].map(|c| f64::from(dance.motion.positions[[f, j, c]]))).collect(),
+            })
+            .collect();
+        let served = served_motion(&prepare_anchored(&dance.motion, frames).expect("export"));
+        let errors = key_pose_errors_cm(served.positions.view(), fps, &keys);
+        let acc = joint_acceleration(served.positions.view(), fps);
+        let pops = key_pose_pops(&acc, fps, served.num_frames(), &keys);
+        let data_pops = key_pose_pops(&joint_acceleration(dance.motion.positions.view(), fps), fps, served.num_frames(), &keys);
+        let worst_pop = pops.iter().copied().fold(0.0, f64::max);
+        let data_pop = data_pops.iter().copied().fold(0.0, f64::max);
+        eprintln!("{id}: key errors {errors:.2?} cm; largest acceleration within ±0.5 s of a key {worst_pop:.1} m/s² (the data's {data_pop:.1})");
+        assert_eq!(errors.len(), frames.len());
+        for e in &errors {
+            assert!(*e < 3.0, "{id}: a key pose comes back {e:.2} cm off: {errors:.2?}");
+        }
+        assert!(worst_pop <= 1.1 * data_pop + 1.0, "{id}: {worst_pop:.1} m/s² near a key, the data has {data_pop:.1}");
+    }
+}
+
+/// Captured key poses beyond the four sets above: 6 sets per dance of all 43 (4 and 5 key frames
+/// in turn, drawn from frame 25 on with seeds 100–105), each exported as `captured_key_poses_…`
+/// does (the key frames alone stand in for the motion: the export of a key frame depends on the
+/// key poses only). Prints the worst key per set through the least-squares export and through the
+/// chain IK on the key frames' median skeleton (the export before 2026-11-25); the model card's
+/// table quotes both.
+#[test]
+fn captured_key_sets_of_every_dance() {
+    use choreo::metrics::kinematics::key_pose_errors_cm;
+    use choreo::motion::export::served_motion;
+    use choreo::motion::skeleton::body_centre_track;
+    use choreo::motion::KeyPose;
+    use rand::seq::SliceRandom;
+    use rand::SeedableRng;
+    let Some(ds) = dataset() else { return };
+    let (mut fitted, mut chain) = (Vec::new(), Vec::new());
+    for id in ds.all_ids() {
+        let dance = ds.load(&id).expect("load");
+        for s in 0..6u64 {
+            let mut frames: Vec<usize> = (25..dance.motion.num_frames()).collect();
+            frames.shuffle(&mut rand::rngs::StdRng::seed_from_u64(100 + s));
+            frames.truncate(if s % 2 == 0 { 4 } else { 5 });
+            let positions = dance.motion.positions.select(ndarray::Axis(0), &frames);
+            let root = body_centre_track(positions.view());
+            let keys: Vec<KeyPose> = (0..frames.len())
+                .map(|k| KeyPose { time_s: k as f64 / 25.0, joints: (0..NUM_JOINTS).map(|j| [0, 1, 2].map(|c| f64::from(positions[[k, j, c]]))).collect() })
+                .collect();
+            let anchors: Vec<usize> = (0..frames.len()).collect();
+            let worst = |m: &rig::RigMotion| key_pose_errors_cm(served_motion(m).positions.view(), 25.0, &keys).into_iter().fold(0.0, f64::max);
+            fitted.push(worst(&rig::fit_and_solve(positions.view(), root.view(), 25.0, &anchors).expect("export")));
+            let median_rig = rig::Rig::fit(positions.view(), root.view()).expect("fit");
+            chain.push(worst(&rig::solve(&median_rig, positions.view(), root.view(), 25.0).expect("solve")));
+        }
+    }
+    let summary = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        (v[n / 2], v[n * 9 / 10], v[n - 1], v.iter().filter(|&&e| e > 3.0).count())
+    };
+    let (f, c) = (summary(&mut fitted), summary(&mut chain));
+    eprintln!("worst key per set of {} (cm), median / p90 / max, sets over 3 cm:", fitted.len());
+    eprintln!("  least squares        {:.2} / {:.2} / {:.2}, {}", f.0, f.1, f.2, f.3);
+    eprintln!("  chain, median bones  {:.2} / {:.2} / {:.2}, {}", c.0, c.1, c.2, c.3);
+    assert_eq!(fitted.len(), 258);
+    // As measured on 2026-11-25 (1.67 / 2.59 / 3.74, 5 sets over 3 cm): a regression guard.
+    assert!(f.2 < 4.0 && f.3 <= 5, "least-squares export: {f:?}");
 }

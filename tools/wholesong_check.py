@@ -46,7 +46,9 @@ def measure(d, keys_path=None):
     if keys_path:
         near, errs = [], []
         for k in json.load(open(keys_path)):
-            f = int(round(k["time_s"] * fps))
+            # The key's frame as choreo places it: Rust's round(), half away from zero (Python's
+            # round() takes a half to the even side: 59.94 s at 25 fps would be 1498, not 1499).
+            f = int(np.floor(k["time_s"] * fps + 0.5))
             # Key error: mean per-joint distance (cm) at the key's frame, both poses centroid-aligned.
             q = np.asarray(k["joints"], dtype=np.float64)
             errs.append(np.linalg.norm((p[f] - p[f].mean(0)) - (q - q.mean(0)), axis=1).mean() * 100)

@@ -67,7 +67,7 @@ pub fn prepare(motion: &Motion) -> Result<RigMotion, MotionError> {
 }
 
 /// As [`prepare`], with the skeleton fitted to the `anchors` frames (the user's key poses) when
-/// there are any; see [`fit_and_solve`].
+/// there are any, and then every frame solved in least squares; see [`fit_and_solve`].
 pub fn prepare_anchored(motion: &Motion, anchors: &[usize]) -> Result<RigMotion, MotionError> {
     let root = body_centre_track(motion.positions.view());
     prepare_root_anchored(motion, root.view(), anchors)
