@@ -455,7 +455,13 @@ pub fn solve(
             local[j] = parent_world.inverse() * w;
         }
         root_translation.push(frame[0]);
-        rotations.push(local);
+        // The root's children (spine and pelvis) share one rest direction, so the best fit above
+        // leaves the root free to turn about it, and it did: 90° (median) from one frame to the
+        // next, the children turning back. Positions do not show it; a tool that interpolates
+        // between frames would spin the torso. The facing yaw tilted onto the spine fixes the
+        // turn; every world position and every other local rotation stays.
+        let t = rotations.len();
+        rotations.push(rerooted(rig, root_rotation(rig, positions.index_axis(Axis(0), t), frame), &local));
     }
     Ok(RigMotion {
         rig: rig.clone(),
@@ -649,11 +655,8 @@ fn rerooted(rig: &Rig, root_rot: UnitQuaternion<f64>, local: &[UnitQuaternion<f6
 /// differ from the rig's the mismatch is spread over the body rather than piled on the ends of its
 /// chains, and the root sits where the body fits best.
 ///
-/// The root's own rotation is `root_rotation`'s (the facing yaw tilted onto the spine), kept
-/// through the fit: [`solve`]'s root rotation is a best fit of the spine's and the pelvis's
-/// offsets, which coincide, so it is free about that offset and turns by 90° (median) from one
-/// frame to the next, the children turning back. The motion's world positions do not show it; an
-/// animation tool that interpolates between frames would.
+/// The root's own rotation is `root_rotation`'s (the facing yaw tilted onto the spine), as
+/// [`solve`] leaves it, kept through the fit.
 ///
 /// Each frame starts from its own chain solution, not from the previous frame's fit: started from
 /// the previous frame, the fits of a captured dance drift into a wrong pose within 20 s (mean joint
@@ -1042,6 +1045,44 @@ mod tests {
         assert_eq!(a.rig, b.rig);
         assert_eq!(a.root_translation, b.root_translation);
         assert_eq!(a.rotations, b.rotations);
+    }
+
+    /// A pose turning slowly about y: the root's rotation turns with it, never by the free
+    /// quarter turns a best fit of the coinciding spine and pelvis offsets allows.
+    #[test]
+    fn the_root_turns_with_the_body() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let (names, parents) = hierarchy();
+        let mut offsets: Vec<Vector3<f64>> = (0..RIG_JOINTS).map(|_| Vector3::new(rng.gen_range(-0.2..0.2), rng.gen_range(-0.3..0.3), rng.gen_range(-0.2..0.2))).collect();
+        offsets[0] = Vector3::zeros();
+        offsets[NUM_JOINTS + 1] = offsets[rig_index(super::super::skeleton::SPINE)];
+        offsets[NUM_JOINTS + 2] = Vector3::zeros();
+        let rig = Rig { names, parents, offsets };
+        let pose: Vec<UnitQuaternion<f64>> = (0..RIG_JOINTS).map(|_| UnitQuaternion::from_euler_angles(rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5), rng.gen_range(-0.5..0.5))).collect();
+        let t_len = 30;
+        let step = 0.02; // rad per frame
+        let mut pos = Array3::zeros((t_len, NUM_JOINTS, 3));
+        let mut root = Array2::zeros((t_len, 3));
+        for t in 0..t_len {
+            let mut local = pose.clone();
+            local[0] = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), step * t as f64) * pose[0];
+            let r = Vector3::new(0.0, 1.0, 0.0);
+            let (p, _) = fk_frame(&rig, &r, &local);
+            for j in 0..NUM_JOINTS {
+                for c in 0..3 {
+                    pos[[t, j, c]] = p[rig_index(j)][c] as f32;
+                }
+            }
+            for c in 0..3 {
+                root[[t, c]] = r[c] as f32;
+            }
+        }
+        let m = solve(&rig, pos.view(), root.view(), 25.0).expect("solve");
+        let worst = (1..t_len).map(|t| m.rotations[t][0].angle_to(&m.rotations[t - 1][0])).fold(0.0, f64::max);
+        assert!(worst < 3.0 * step, "the root turned {worst:.3} rad in one frame (the body {step})");
+        let err = joint_errors(m.joint_positions().view(), pos.view()).fold(0.0f32, |a, &b| a.max(b));
+        assert!(err < 1e-4, "positions moved by {err} m");
     }
 
     #[test]
