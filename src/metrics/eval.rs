@@ -299,10 +299,8 @@ fn dance_songs(
             let raw = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?.motion;
             // The motion stage every job runs (feet planted), and the network's motion as it came.
             // Served: planted and exported through the rigid skeleton, as motion.json holds it.
-            let anchors: Vec<usize> = keys.iter().map(|k| (k.time_s * raw.fps).round() as usize).collect();
-            let planted = crate::motion::finish(raw.clone(), true);
-            let rig = crate::motion::export::prepare_anchored(&planted, &anchors).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
-            let finished = [crate::motion::export::served_motion(&rig), crate::motion::finish(raw, false)];
+            let served = as_served(raw.clone(), &keys).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
+            let finished = [served, crate::motion::finish(raw, false)];
             if let Some(dir) = &args.previews {
                 write_preview(dir, id, s, seed, &finished[0], &keys)?;
             }
@@ -318,6 +316,15 @@ fn dance_songs(
         }
     }
     Ok(out)
+}
+
+/// A model's motion as a user downloads it: feet planted (the motion stage every job runs), then
+/// fitted to the export's rigid skeleton with the key poses as anchors (what motion.json holds).
+pub(crate) fn as_served(raw: Motion, keys: &[KeyPose]) -> Result<Motion, crate::motion::MotionError> {
+    let anchors: Vec<usize> = keys.iter().map(|k| (k.time_s * raw.fps).round() as usize).collect();
+    let planted = crate::motion::finish(raw, true);
+    let rig = crate::motion::export::prepare_anchored(&planted, &anchors)?;
+    Ok(crate::motion::export::served_motion(&rig))
 }
 
 /// Names of the two rows of a model.

@@ -14,6 +14,7 @@ use super::score::score_dance;
 use super::style::MotionStyle;
 use super::MetricsError;
 use crate::audio::DecodedAudio;
+use crate::models::dancenet::style::most_probable;
 use crate::models::{DanceModel, DanceStyle, GenerateRequest, Progress};
 use crate::motion::Motion;
 
@@ -62,17 +63,13 @@ pub struct RealStyles {
     pub accuracy: f64,
 }
 
-fn argmax(p: &[f32; 4]) -> usize {
-    (0..4).max_by(|&a, &b| p[a].total_cmp(&p[b])).unwrap_or(0)
-}
-
 /// Classifies real dances `(id, motion)`, their style from the id.
 pub fn real_styles(classifier: &MotionStyle, dances: &[(&str, &Motion)]) -> Result<RealStyles, MetricsError> {
     let mut out = Vec::new();
     for (id, m) in dances {
         let Some(truth) = DanceStyle::of_dance_id(id) else { continue };
         let p = classifier.classify(m).map_err(|e| MetricsError::Reference(format!("motion style classifier on {id}: {e}")))?;
-        out.push((id.to_string(), truth, DanceStyle::ALL[argmax(&p)]));
+        out.push((id.to_string(), truth, most_probable(&p)));
     }
     let accuracy = out.iter().filter(|(_, a, b)| a == b).count() as f64 / out.len().max(1) as f64;
     Ok(RealStyles { dances: out, accuracy })
@@ -97,15 +94,13 @@ pub fn style_control(
         for s in songs {
             let req = GenerateRequest { style: Some(style), ..GenerateRequest::plain(s.audio, seed) };
             let raw = model.generate(&req, progress).map_err(|e| MetricsError::Reference(format!("{id} ({}) on {}: {e}", style.name(), s.name)))?.motion;
-            let planted = crate::motion::finish(raw, true);
-            let rig = crate::motion::export::prepare_anchored(&planted, &[]).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
-            let m = crate::motion::export::served_motion(&rig);
+            let m = super::eval::as_served(raw, &[]).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
             let sc = score_dance(&m, s.beats, &[], reference)?;
             passing += usize::from(sc.scores.verdict.pass);
             speed += sc.scores.physical.mean_speed_m_s;
             if let Some(c) = classifier {
                 let p = c.classify(&m).map_err(|e| MetricsError::Reference(format!("motion style classifier: {e}")))?;
-                classified[argmax(&p)] += 1;
+                classified[most_probable(&p).index()] += 1;
             }
             motions.push(m);
         }

@@ -488,7 +488,7 @@ pub struct Serving {
     /// Default sampling.
     pub sampling: Sampling,
     /// σ (frames) of the temporal smoothing of the sampled features before they become joint
-    /// positions (`served::smooth_columns`); 0: none.
+    /// positions (`models::smooth_columns`); 0: none.
     #[serde(default)]
     pub smooth_frames: f64,
 }

@@ -9,8 +9,8 @@ use ndarray::{s, Array2, Array3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::de::DeserializeOwned;
-use tch::Tensor;
 use serde::{Deserialize, Serialize};
+use tch::Tensor;
 
 use super::{InstancePool, ModelError};
 use crate::motion::dataset::NormStats;
@@ -101,23 +101,16 @@ impl SeedClips {
 
     /// Writes the clips as safetensors.
     pub fn save(&self, path: &Path) -> Result<(), ModelError> {
-        let (k, f, d) = self.clips.dim();
-        let data: Vec<f32> = self.clips.iter().copied().collect();
-        let t = Tensor::from_slice(&data).view([k as i64, f as i64, d as i64]);
-        Tensor::write_safetensors(&[("clips", t)], path)?;
-        Ok(())
+        write_clips(&self.clips, path)
     }
 
     /// Reads clips written by [`Self::save`], `width` numbers a frame.
     pub fn load(path: &Path, width: usize) -> Result<Self, ModelError> {
-        let named = Tensor::read_safetensors(path)?;
-        let t = named.into_iter().find(|(n, _)| n == "clips").map(|(_, t)| t).ok_or_else(|| ModelError::Invalid(format!("{}: no `clips` tensor", path.display())))?;
-        let (k, f, d) = t.size3()?;
-        if d != width as i64 || k == 0 || f == 0 {
+        let clips = read_clips(path)?;
+        let (k, f, d) = clips.dim();
+        if d != width || k == 0 || f == 0 {
             return Err(ModelError::Invalid(format!("{}: clips are {k}×{f}×{d}", path.display())));
         }
-        let data = Vec::<f32>::try_from(t.contiguous().view([-1]))?;
-        let clips = Array3::from_shape_vec((k as usize, f as usize, d as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))?;
         Ok(Self { clips })
     }
 
@@ -126,6 +119,27 @@ impl SeedClips {
         let k = StdRng::seed_from_u64(seed ^ 0x5EED_C11F).gen_range(0..self.clips.dim().0);
         self.clips.slice(s![k, .., ..]).to_owned()
     }
+}
+
+/// The tensor name of a clips file ([`SeedClips`], keypose-transformer's pose bank).
+const CLIPS: &str = "clips";
+
+/// Writes `[clips, frames, width]` real clips as safetensors.
+pub fn write_clips(clips: &Array3<f32>, path: &Path) -> Result<(), ModelError> {
+    let (k, f, d) = clips.dim();
+    let data: Vec<f32> = clips.iter().copied().collect();
+    let t = Tensor::from_slice(&data).view([k as i64, f as i64, d as i64]);
+    Tensor::write_safetensors(&[(CLIPS, t)], path)?;
+    Ok(())
+}
+
+/// Reads clips written by [`write_clips`], any shape.
+pub fn read_clips(path: &Path) -> Result<Array3<f32>, ModelError> {
+    let named = Tensor::read_safetensors(path)?;
+    let t = named.into_iter().find(|(n, _)| n == CLIPS).map(|(_, t)| t).ok_or_else(|| ModelError::Invalid(format!("{}: no `{CLIPS}` tensor", path.display())))?;
+    let (k, f, d) = t.size3()?;
+    let data = Vec::<f32>::try_from(t.to_kind(tch::Kind::Float).contiguous().view([-1]))?;
+    Array3::from_shape_vec((k as usize, f as usize, d as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))
 }
 
 #[cfg(test)]

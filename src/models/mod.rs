@@ -205,6 +205,22 @@ pub fn to_array(t: &tch::Tensor) -> Result<ndarray::Array2<f32>, ModelError> {
     ndarray::Array2::from_shape_vec((r as usize, c as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))
 }
 
+/// Smooths every column of `[T, D]` feature rows over time (Gaussian, σ `sigma` frames, scipy's
+/// `gaussian_filter1d`), leaving the first `keep` rows (a request's own seed motion) as given: a
+/// sampling model's draws jitter from frame to frame in a way a dancer does not.
+pub fn smooth_columns(features: &mut ndarray::Array2<f32>, keep: usize, sigma: f64) {
+    if sigma <= 0.0 || features.nrows() <= keep + 1 {
+        return;
+    }
+    for mut col in features.columns_mut() {
+        let x: Vec<f64> = col.iter().skip(keep).map(|&v| f64::from(v)).collect();
+        let y = crate::metrics::beats::gaussian_filter1d(&x, sigma);
+        for (dst, v) in col.iter_mut().skip(keep).zip(y) {
+            *dst = v as f32;
+        }
+    }
+}
+
 /// A trained model, ready to dance.
 pub trait DanceModel: Send + Sync {
     fn info(&self) -> ModelInfo;

@@ -41,7 +41,7 @@ use tch::{Device, Kind, Tensor};
 
 use super::folder::{self, SeedClips, SEED_CLIPS_FILE};
 use super::layers::{sinusoid, Dims, KvCache, Stack};
-use super::{to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
+use super::{smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::repr::{self, RootStart, FEATURE_DIM};
 
 /// The API id.
@@ -558,21 +558,6 @@ pub struct Serving {
     pub stall_guard: Option<StallGuard>,
 }
 
-/// Smooths every column of sampled features `[T, D]` over time (σ `sigma` frames, scipy's
-/// `gaussian_filter1d`), leaving the opening rows (`keep`, a request's own seed motion) as given.
-pub fn dequantise(features: &mut Array2<f32>, keep: usize, sigma: f64) {
-    if sigma <= 0.0 || features.nrows() <= keep + 1 {
-        return;
-    }
-    for mut col in features.columns_mut() {
-        let x: Vec<f64> = col.iter().map(|&v| f64::from(v)).collect();
-        let y = crate::metrics::beats::gaussian_filter1d(&x[keep..], sigma);
-        for (dst, v) in col.iter_mut().skip(keep).zip(y) {
-            *dst = v as f32;
-        }
-    }
-}
-
 /// `model.json`.
 pub type ModelFile = folder::ModelFile<Config, Schedule, Serving>;
 
@@ -654,7 +639,7 @@ impl Served {
         })??;
         let Some(tokens) = out else { return Err(Cancelled.into()) };
         let mut sampled = bins.values(&tokens);
-        dequantise(&mut sampled, 0, self.file.extra.smooth_frames);
+        smooth_columns(&mut sampled, 0, self.file.extra.smooth_frames);
         let features = match opening {
             Some(o) => ndarray::concatenate(ndarray::Axis(0), &[o.view(), sampled.view()]).map_err(|e| ModelError::Invalid(e.to_string()))?,
             None => sampled,
@@ -684,7 +669,7 @@ impl DanceModel for Served {
         // body from jumping with it. The opening (a request's seed motion) is kept.
         let keep = req.seed_motion.map_or(0, |m| m.num_frames().min(n));
         let mut h = g.features.column(repr::ROOT_Y).to_owned().insert_axis(ndarray::Axis(1));
-        dequantise(&mut h, keep, self.file.extra.smooth_height_frames);
+        smooth_columns(&mut h, keep, self.file.extra.smooth_height_frames);
         g.features.column_mut(repr::ROOT_Y).assign(&h.column(0));
         let (motion, _root) = repr::from_features(g.features.view(), g.start, self.file.fps)?;
         Ok(motion.into())
@@ -730,7 +715,7 @@ mod tests {
         let given = x.slice(s![..5, ..]).to_owned();
         let accel = |a: &Array2<f32>| (6..194).map(|t| (a[[t + 1, 0]] - 2.0 * a[[t, 0]] + a[[t - 1, 0]]).abs()).fold(0f32, f32::max);
         let before = accel(&x);
-        dequantise(&mut x, 5, 1.5);
+        smooth_columns(&mut x, 5, 1.5);
         assert_eq!(x.slice(s![..5, ..]), given);
         let after = accel(&x);
         assert!(after < 0.25 * before, "second difference {before} -> {after}");

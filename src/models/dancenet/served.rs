@@ -12,7 +12,7 @@ use tch::Tensor;
 use super::style::ServedStyle;
 use super::{DanceNet, ModelFile, Sampling, ID};
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
-use crate::models::{to_tensor, Cancelled, Capabilities, DanceModel, DanceStyle, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress, StyleChoice};
+use crate::models::{smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress, StyleChoice};
 use crate::motion::repr::RootStart;
 use crate::motion::rig::Rig;
 use crate::motion::rotations;
@@ -28,9 +28,9 @@ pub struct Served {
 
 /// What one generation made, before it becomes joint positions.
 pub struct Generation {
-    /// Rotation features `[T, D]` (de-normalised) and the predicted contacts `[T, 4]`.
+    /// Rotation features `[T, D]` (de-normalised). The contacts the decoder also predicts are
+    /// dropped: the served foot planting finds contacts from foot height.
     pub features: Array2<f32>,
-    pub contacts: Array2<f32>,
     pub start: RootStart,
     pub style: StyleChoice,
 }
@@ -61,8 +61,7 @@ impl Served {
         }
         let classifier = self.style.as_ref().ok_or_else(|| ModelError::MissingWeights(format!("{ID} style classifier"), super::style::STYLE_FILE.into()))?;
         let p = classifier.predict(features)?;
-        let best = (0..p.len()).max_by(|&a, &b| p[a].total_cmp(&p[b])).unwrap_or(0);
-        Ok(StyleChoice { style: DanceStyle::ALL[best], predicted: true, probabilities: p.to_vec() })
+        Ok(StyleChoice { style: super::style::most_probable(&p), predicted: true, probabilities: p.to_vec() })
     }
 
     /// Generates `n` frames of rotation features for `req`. The context is the request's seed
@@ -115,9 +114,10 @@ impl Served {
         let Some(sampled) = out else { return Err(Cancelled.into()) };
         let rows = if opening > 0 { concatenate(Axis(0), &[context.view(), sampled.view()]).map_err(|e| ModelError::Invalid(e.to_string()))? } else { sampled };
         let mut features = self.file.pose_norm.denormalize(&rows.slice(s![.., ..d]).to_owned())?;
+        // σ of 2 frames (0.08 s, served) keeps 60 % of a 2-Hz movement and removes what is faster
+        // than 5 Hz.
         smooth_columns(&mut features, opening, self.file.extra.smooth_frames);
-        let contacts = rows.slice(s![.., d..]).to_owned();
-        Ok(Generation { features, contacts, start, style })
+        Ok(Generation { features, start, style })
     }
 }
 
@@ -141,22 +141,5 @@ impl DanceModel for Served {
         let g = self.generate_features(req, n, progress)?;
         let motion = rotations::decode(&self.rig, g.features.view(), g.start, self.file.fps)?;
         Ok(Generated { motion, style: Some(g.style) })
-    }
-}
-
-/// Smooths every column of `[T, D]` features over time (Gaussian, σ `sigma` frames, scipy's
-/// `gaussian_filter1d`), leaving the first `keep` rows (a request's own seed motion) as given. The
-/// decoder's samples carry frame-to-frame jitter a dancer does not have; σ of 2 frames (0.08 s,
-/// served) keeps 60 % of a 2-Hz movement and removes what is faster than 5 Hz.
-pub fn smooth_columns(features: &mut Array2<f32>, keep: usize, sigma: f64) {
-    if sigma <= 0.0 || features.nrows() <= keep + 1 {
-        return;
-    }
-    for mut col in features.columns_mut() {
-        let x: Vec<f64> = col.iter().skip(keep).map(|&v| f64::from(v)).collect();
-        let y = crate::metrics::beats::gaussian_filter1d(&x, sigma);
-        for (dst, v) in col.iter_mut().skip(keep).zip(y) {
-            *dst = v as f32;
-        }
     }
 }

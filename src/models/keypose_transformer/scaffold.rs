@@ -22,11 +22,9 @@ use super::keys::LocalKey;
 use crate::models::ModelError;
 use crate::motion::repr::POSE_DIM;
 
-/// The bank file in a model folder.
+/// The bank file in a model folder (`models::folder::write_clips`: `[clips, frames, features]`,
+/// denormalised, in the model's root-height representation).
 pub const POSE_BANK_FILE: &str = "pose_bank.safetensors";
-/// The tensor name inside it: `[clips, frames, features]`, denormalised, in the model's
-/// root-height representation.
-const CLIPS: &str = "clips";
 
 /// Real clips the seed draws from.
 #[derive(Clone, Debug)]
@@ -62,25 +60,12 @@ impl PoseBank {
 
     /// Reads a bank written by [`PoseBank::save`].
     pub fn load(path: &Path) -> Result<Self, ModelError> {
-        let tensors = tch::Tensor::read_safetensors(path)?;
-        let t = tensors
-            .into_iter()
-            .find(|(name, _)| name == CLIPS)
-            .map(|(_, t)| t)
-            .ok_or_else(|| ModelError::Invalid(format!("{} has no tensor {CLIPS:?}", path.display())))?;
-        let (k, l, d) = t.size3()?;
-        let data = Vec::<f32>::try_from(t.to_kind(tch::Kind::Float).contiguous().view([-1]))?;
-        let clips = Array3::from_shape_vec((k as usize, l as usize, d as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))?;
-        Self::new(clips)
+        Self::new(crate::models::folder::read_clips(path)?)
     }
 
     /// Writes the bank as safetensors.
     pub fn save(&self, path: &Path) -> Result<(), ModelError> {
-        let (k, l, d) = self.clips.dim();
-        let data = self.clips.as_standard_layout();
-        let t = tch::Tensor::from_slice(data.as_slice().unwrap_or(&[])).view([k as i64, l as i64, d as i64]);
-        tch::Tensor::write_safetensors(&[(CLIPS, &t)], path)?;
-        Ok(())
+        crate::models::folder::write_clips(&self.clips, path)
     }
 
     /// `[clips, frames, features]`.

@@ -12,17 +12,17 @@ use super::{batch_tensor, window_starts, CommonOptions, EpochLog, EpochResult, S
 use crate::models::dancenet::{Config, DanceNet, ModelFile, Sampling, Schedule, Serving, ID};
 use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
 use crate::models::DanceStyle;
-use crate::motion::dataset::{Dataset, NormStats};
+use crate::metrics::physical::seed_distance_m;
+use crate::motion::dataset::{Dance, Dataset, NormStats};
 use crate::motion::rig::Rig;
 use crate::motion::rotations;
-use crate::motion::skeleton::body_centre_track;
 
 /// Options of one training run (the card gives the run behind the committed weights).
 #[derive(Clone, Debug, clap::Args)]
 pub struct Options {
     #[command(flatten)]
     pub common: CommonOptions,
-    #[arg(long, default_value_t = 60)]
+    #[arg(long, default_value_t = 50)]
     pub epochs: usize,
     #[arg(long, default_value_t = 32)]
     pub batch: usize,
@@ -96,29 +96,23 @@ struct Prepared {
     frames: Array2<f32>,
 }
 
-/// Loads `ids` as rotation features on `rig` with their control signals.
-fn prepare(ds: &Dataset, ids: &[String], rig: &Rig) -> Result<(Vec<Prepared>, f64), TrainError> {
+/// `dances` as rotation features on `rig` with their control signals, and the mean per-joint
+/// distance (m, root-relative, frame-weighted) between the dances and their rigid features decoded
+/// back: the error the representation itself brings.
+fn prepare(dances: &[Dance], rig: &Rig) -> Result<(Vec<Prepared>, f64), TrainError> {
     let mut out = Vec::new();
     let (mut err_sum, mut err_n) = (0.0f64, 0usize);
-    for id in ids {
-        let dance = ds.load(id)?;
+    for dance in dances {
+        let id = &dance.id;
         let style = DanceStyle::of_dance_id(id).ok_or_else(|| TrainError::Motion(crate::motion::MotionError::UnknownDance { id: id.clone() }))?;
         let audio = crate::audio::decode_path(&dance.audio_path)?;
         let t = dance.motion.num_frames();
         let music = crate::audio::features::dancenet(&audio, dance.motion.fps, dance.song_time_s(0), t)?;
         let enc = rotations::encode(rig, dance.motion.positions.view(), dance.motion.fps)?;
-        // How far the rigid skeleton is from the capture (root-relative, so the floor and travel
-        // integration do not count): the error the representation itself brings.
         let back = rotations::decode(rig, enc.features.view(), enc.start, dance.motion.fps)?;
-        let (a, b) = (dance.motion.positions.view(), back.positions.view());
-        let (ca, cb) = (body_centre_track(a), body_centre_track(b));
-        for f in 0..t {
-            for j in 0..crate::motion::NUM_JOINTS {
-                let d: f64 = (0..3).map(|c| f64::from((a[[f, j, c]] - ca[[f, c]]) - (b[[f, j, c]] - cb[[f, c]])).powi(2)).sum::<f64>().sqrt();
-                err_sum += d;
-                err_n += 1;
-            }
-        }
+        let n = t * crate::motion::NUM_JOINTS;
+        err_sum += seed_distance_m(&dance.motion, &back) * n as f64;
+        err_n += n;
         let frames = concatenate(Axis(1), &[enc.features.view(), enc.contacts.view()]).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
         tracing::info!(dance = %id, frames = t, "loaded");
         out.push(Prepared { id: id.clone(), style, music, frames });
@@ -135,9 +129,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     let all_pos = concatenate(Axis(0), &train_dances.iter().map(|d| d.motion.positions.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
     let all_root = concatenate(Axis(0), &train_dances.iter().map(|d| d.center.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
     let rig = Rig::fit(all_pos.view(), all_root.view())?;
-    drop((train_dances, all_pos, all_root));
-    let (train_raw, fit_err) = prepare(&ds, ds.train_ids(), &rig)?;
-    let (test_raw, test_fit_err) = prepare(&ds, ds.test_ids(), &rig)?;
+    drop((all_pos, all_root));
+    let (train_raw, fit_err) = prepare(&train_dances, &rig)?;
+    drop(train_dances);
+    let (test_raw, test_fit_err) = prepare(&ds.load_all(ds.test_ids())?, &rig)?;
     tracing::info!(train_cm = 100.0 * fit_err, test_cm = 100.0 * test_fit_err, "rigid representation error (mean per joint, root-relative)");
     let layout = rotations::Layout::of(&rig);
     let d = layout.dim();
