@@ -673,10 +673,7 @@ pub fn solve_least_squares(
     let (root_translation, rotations) = tg
         .iter()
         .enumerate()
-        .map(|(t, frame)| {
-            let root_rot = root_rotation(rig, positions.index_axis(Axis(0), t), frame);
-            fit_frame(rig, &chain.root_translation[t], &rerooted(rig, root_rot, &chain.rotations[t]), frame)
-        })
+        .map(|(t, frame)| fit_frame(rig, &chain.root_translation[t], &chain.rotations[t], frame))
         .unzip();
     Ok(RigMotion { rig: rig.clone(), fps, root_translation, rotations })
 }
