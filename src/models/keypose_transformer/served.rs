@@ -8,7 +8,7 @@ use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 use tch::Tensor;
 
-use super::keys::{bridge_keys, local_keys, normalize_key, pass_through_keys, pass_through_yaws, LocalKey, BRIDGE_HALF};
+use super::keys::{bridge_keys, jump_frames, local_keys, normalize_key, pass_through_keys, pass_through_yaws, LocalKey, BRIDGE_HALF, JUMP_HALF};
 use super::scaffold::{PoseBank, Scaffold, POSE_BANK_FILE};
 use super::{Config, KeyposeTransformer};
 use crate::models::folder;
@@ -25,6 +25,11 @@ pub const BLEND_RADIUS: f64 = 25.0;
 /// network's integrated facing can be far from a key's, and turning the body that far within
 /// half a second would be a spin that no dancer made.
 pub const YAW_BLEND_RADIUS: f64 = 50.0;
+
+/// A frame of the network's motion accelerating more than this (m/s², mean over joints, root
+/// travel aside) is a jump, spread over [`JUMP_HALF`] frames each side: the train split's p99.9
+/// (`metrics/reference_train.json`, `physical.pooled`), which 0.1 % of real frames exceed.
+pub const JUMP_M_S2: f64 = 57.0;
 
 /// The key-pose sampling behind the committed weights, stored beside the common record.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -106,6 +111,21 @@ pub fn generate_features(
     let Some(y) = y else { return Ok(None) };
     let mut network = file.pose_norm.denormalize(&to_array(&y)?)?;
     let mut served = network.clone();
+    let mut heights = network.clone();
+    if file.extra.root_height == RootHeight::FootClearance {
+        repr::clearance_to_height(&mut heights);
+    }
+    let jumps = jump_frames(heights.view(), JUMP_M_S2, file.fps);
+    if !jumps.is_empty() {
+        tracing::debug!(?jumps, "spreading the network's one-frame jumps");
+    }
+    // Poses and height only: the root's travel and turn are velocities, left as the network made them.
+    let cols: Vec<usize> = (0..POSE_DIM).chain([repr::ROOT_Y]).collect();
+    let mut posed = served.select(ndarray::Axis(1), &cols);
+    bridge_keys(&mut posed, &jumps, JUMP_HALF);
+    for (i, &c) in cols.iter().enumerate() {
+        served.column_mut(c).assign(&posed.column(i));
+    }
     bridge_keys(&mut served, &keys.iter().map(|k| k.frame).collect::<Vec<_>>(), BRIDGE_HALF);
     let targets: Vec<(usize, Vec<f32>)> = keys.iter().map(|k| (k.frame, k.local.clone())).collect();
     pass_through_keys(&mut served, 0..POSE_DIM, &targets, BLEND_RADIUS);
