@@ -70,10 +70,6 @@ pub struct Options {
     /// its `eval.json`.
     #[arg(long)]
     pub eval_only: bool,
-    /// Do not train: rewrite the pose bank of the model already in `--out` from the train split
-    /// (the bank is serving data; the network never sees it while training).
-    #[arg(long)]
-    pub bank_only: bool,
 }
 
 /// Key-pose consistency on the test split, written to `eval.json`.
@@ -147,12 +143,6 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         to_clearance(&mut seq.poses);
         Ok(())
     })?;
-    if opts.bank_only {
-        pose_bank(&data.train_raw, opts.bank_clips, opts.bank_frames, opts.seed)?
-            .save(&out.join(POSE_BANK_FILE))
-            .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?;
-        return Ok(Vec::new());
-    }
     let base = if opts.common.tiny { Config::tiny(0, 0, 0) } else { Config::cpu() };
     let config = Config { music_dim: data.music_norm.dim() as i64, pose_dim: data.pose_norm.dim() as i64, key_dim: POSE_DIM as i64, lambda: opts.lambda, sigma: opts.sigma, ..base };
     let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| KeyposeTransformer::new(p, config.clone()))?;
@@ -215,69 +205,29 @@ fn to_clearance(poses: &mut Array2<f32>) {
 }
 
 /// `clips` clips of `frames` frames from the train dances (features as the model predicts them,
-/// denormalised), at seeded starts spread over the dances in proportion to their length, in none
-/// of which any 5-s stretch (the metrics' window) moves slower than the slowest whole train dance.
-///
-/// The seed's clip sets the pace of a short song (a 5-s song is its seed and a few scaffold poses
-/// of one clip), and an unfiltered draw took pauses: 5 of 32 clips moved 0.27–0.60 m/s where the
-/// slowest real dance moves 0.63, and the two seeds that drew them danced a 5-s loop at 0.32 and
-/// 0.48 m/s; a clip fast on average can still hold a slow stretch.
+/// denormalised), at seeded starts spread over the dances in proportion to their length.
 fn pose_bank(train: &[Sequence], clips: usize, frames: usize, seed: u64) -> Result<PoseBank, TrainError> {
-    /// Jittered starts tried within a clip's stratum, then as many anywhere, before giving up.
-    const TRIES: usize = 64;
-    let stretch = (5.0 * crate::motion::MOTION_FPS) as usize;
     let mut rng = StdRng::seed_from_u64(seed ^ 0xBA_4C);
     let long: Vec<&Sequence> = train.iter().filter(|s| s.poses.nrows() >= frames).collect();
     let total: usize = long.iter().map(|s| s.poses.nrows() - frames + 1).sum();
     if long.is_empty() || clips == 0 {
         return Err(TrainError::NoWindows(frames));
     }
-    let mut min_speed = f64::INFINITY;
-    for seq in train {
-        let v = joint_speeds(seq.poses.view())?;
-        min_speed = min_speed.min(v.iter().sum::<f64>() / v.len().max(1) as f64);
-    }
-    let window = |mut at: usize| -> ndarray::ArrayView2<'_, f32> {
+    let width = long[0].poses.ncols();
+    let mut bank = ndarray::Array3::<f32>::zeros((clips, frames, width));
+    for c in 0..clips {
+        // Stratified over the concatenated start positions, jittered within each stratum.
+        let mut at = (c * total) / clips + rng.gen_range(0..(total / clips).max(1));
         for seq in &long {
             let n = seq.poses.nrows() - frames + 1;
             if at < n {
-                return seq.poses.slice(s![at..at + frames, ..]);
+                bank.slice_mut(s![c, .., ..]).assign(&seq.poses.slice(s![at..at + frames, ..]));
+                break;
             }
             at -= n;
         }
-        unreachable!("start below the total of starts")
-    };
-    let width = long[0].poses.ncols();
-    let mut bank = ndarray::Array3::<f32>::zeros((clips, frames, width));
-    let mut slowest = f64::INFINITY;
-    for c in 0..clips {
-        // Stratified over the concatenated start positions, jittered within each stratum.
-        let stratum = (total / clips).max(1);
-        let chosen = (0..2 * TRIES)
-            .map(|i| if i < TRIES { (c * total) / clips + rng.gen_range(0..stratum) } else { rng.gen_range(0..total) })
-            .map(|at| joint_speeds(window(at)).map(|v| (at, slowest_stretch(&v, stretch))))
-            .find(|r| r.as_ref().map_or(true, |&(_, v)| v >= min_speed))
-            .ok_or_else(|| TrainError::Motion(crate::motion::MotionError::Invalid(format!("no clip of {frames} frames moves {min_speed:.2} m/s throughout"))))??;
-        slowest = slowest.min(chosen.1);
-        bank.slice_mut(s![c, .., ..]).assign(&window(chosen.0));
     }
-    tracing::info!(clips, min_speed_m_s = min_speed, slowest_stretch_m_s = slowest, "pose bank drawn");
     PoseBank::new(bank).map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))
-}
-
-/// Mean joint speed per frame step (m/s, as `metrics::physical` measures liveliness) of features
-/// in the clearance representation, decoded with the floor at 0.
-fn joint_speeds(features: ndarray::ArrayView2<'_, f32>) -> Result<Vec<f64>, TrainError> {
-    let mut f = features.to_owned();
-    repr::clearance_to_height(&mut f);
-    let (motion, _) = repr::from_features(f.view(), repr::RootStart::default(), crate::motion::MOTION_FPS)?;
-    Ok(crate::metrics::kinematics::mean_speed(motion.positions.view(), motion.fps))
-}
-
-/// The lowest mean of `speeds` over any `stretch` consecutive steps (the whole mean when shorter).
-fn slowest_stretch(speeds: &[f64], stretch: usize) -> f64 {
-    let n = stretch.clamp(1, speeds.len().max(1));
-    speeds.windows(n).map(|w| w.iter().sum::<f64>() / n as f64).fold(f64::INFINITY, f64::min)
 }
 
 /// Draws 0..=max_keys distinct key frames in `[T′, T)` (the seed already fixes the first frames).
@@ -438,43 +388,4 @@ pub fn evaluate_folder(dir: &Path, data: &Path, keys: usize, seed: u64) -> Resul
     let ds = Dataset::open(data)?;
     let test = load_sequences(&ds, ds.test_ids(), crate::audio::features::keypose)?;
     evaluate(&model, &file, &ds, &test, keys, seed)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A dance of `frames` frames travelling at 1 m/s on the frames `moving` picks, still otherwise.
-    fn dance(frames: usize, moving: impl Fn(usize) -> bool) -> Sequence {
-        let mut poses = Array2::<f32>::zeros((frames, repr::FEATURE_DIM));
-        for t in (0..frames).filter(|&t| moving(t)) {
-            poses[[t, repr::ROOT_VZ]] = 1.0 / crate::motion::MOTION_FPS as f32;
-        }
-        Sequence { id: "made-up".into(), music: Array2::zeros((frames, 1)), poses }
-    }
-
-    #[test]
-    fn pose_bank_draws_no_stretch_slower_than_the_slowest_dance() {
-        // The slowest dance moves at 0.5 m/s on average; its first 300 frames stand still.
-        let train = [dance(600, |t| t >= 300), dance(600, |_| true), dance(600, |t| t >= 100)];
-        let bank = pose_bank(&train, 6, 200, 1).unwrap();
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join(POSE_BANK_FILE);
-        bank.save(&path).unwrap();
-        let clips = folder::read_clips(&path).unwrap();
-        for clip in clips.outer_iter() {
-            let v = joint_speeds(clip).unwrap();
-            assert!(slowest_stretch(&v, 125) >= 0.5 - 1e-4, "{}", slowest_stretch(&v, 125));
-        }
-        // 1 s still, 1 s moving, over and over: every 8-s clip holds a 5-s stretch at 0.4 m/s where
-        // the dance averages 0.5. An error, not a slow bank.
-        assert!(pose_bank(&[dance(600, |t| t % 50 >= 25)], 2, 200, 1).is_err());
-    }
-
-    #[test]
-    fn slowest_stretch_is_the_lowest_window_mean() {
-        assert_eq!(slowest_stretch(&[1.0, 0.0, 0.0, 3.0], 2), 0.0);
-        assert_eq!(slowest_stretch(&[1.0, 2.0, 3.0, 4.0], 3), 2.0);
-        assert_eq!(slowest_stretch(&[2.0, 4.0], 10), 3.0);
-    }
 }
