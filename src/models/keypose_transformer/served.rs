@@ -115,7 +115,15 @@ pub fn generate_features(
     if file.extra.root_height == RootHeight::FootClearance {
         repr::clearance_to_height(&mut heights);
     }
-    let jumps = jump_frames(heights.view(), JUMP_M_S2, file.fps);
+    let mut jumps = jump_frames(heights.view(), JUMP_M_S2, file.fps);
+    if keep_seed && seed.is_some() {
+        // The user's seed frames stay as given: a jump where the network takes over from them
+        // (or inside them) is spread over the frames after them.
+        for t in &mut jumps {
+            *t = (*t).max(ts + JUMP_HALF);
+        }
+        jumps.dedup();
+    }
     if !jumps.is_empty() {
         tracing::debug!(?jumps, "spreading the network's one-frame jumps");
     }
