@@ -13,7 +13,7 @@
 //! the facing and the height. Scaffold poses keep away from user keys by one spacing.
 //!
 //! The dance starts on a lively stretch: the seed redraws (up to [`START_TRIES`] times) a clip and
-//! start whose first 5 s move at least as fast as the slowest real dance. Half the bank's clips
+//! start whose first 5 s move at least as fast as the slowest real dance. 14 of the 32 clips
 //! hold slower stretches (a pause, a travel-heavy figure), and on a short song that one stretch was
 //! the whole dance: seeds 0–31 danced a 5-s loop at 0.32–0.81 m/s, 10 of them below 0.5. The bank
 //! keeps its slow stretches for later in the dance: filtering them out of the bank made every
