@@ -93,7 +93,7 @@ pub fn bridge_keys(x: &mut Array2<f32>, frames: &[usize], half: usize) {
     }
 }
 
-/// Frames each side of a one-frame jump that [`spread_jumps`] bridges: 15 frames in all, 0.6 s.
+/// Frames each side of a jump ([`jump_frames`]) that the served path bridges: 15 frames in all, 0.6 s.
 pub const JUMP_HALF: usize = 7;
 
 /// The frames of features `[n, 73]` (absolute root height) whose mean joint acceleration
@@ -104,22 +104,10 @@ pub const JUMP_HALF: usize = 7;
 /// other on a single frame (a 27-cm drop of the body on test dance DANCE_R_9, 178 m/s², 0.56 s
 /// before a key); a dancer takes half a second.
 pub fn jump_frames(x: ArrayView2<'_, f32>, threshold_m_s2: f64, fps: f64) -> Vec<usize> {
-    let n = x.nrows();
-    let point = |x: &ArrayView2<'_, f32>, t: usize, j: usize| -> [f64; 3] {
-        let h = f64::from(x[[t, repr::ROOT_Y]]);
-        [f64::from(x[[t, 3 * j]]), f64::from(x[[t, 3 * j + 1]]) + h, f64::from(x[[t, 3 * j + 2]])]
-    };
-    (1..n.saturating_sub(1))
-        .filter(|&t| {
-            let sum: f64 = (0..NUM_JOINTS)
-                .map(|j| {
-                    let (a, b, c) = (point(&x, t - 1, j), point(&x, t, j), point(&x, t + 1, j));
-                    (0..3).map(|i| (c[i] - 2.0 * b[i] + a[i]).powi(2)).sum::<f64>().sqrt()
-                })
-                .sum();
-            sum / NUM_JOINTS as f64 * fps * fps > threshold_m_s2
-        })
-        .collect()
+    let joints = ndarray::Array3::from_shape_fn((x.nrows(), NUM_JOINTS, 3), |(t, j, c)| x[[t, 3 * j + c]] + if c == 1 { x[[t, repr::ROOT_Y]] } else { 0.0 });
+    // `joint_acceleration`'s value i is frame i + 1's.
+    let acceleration = crate::metrics::physical::joint_acceleration(joints.view(), fps);
+    acceleration.iter().enumerate().filter(|(_, &a)| a > threshold_m_s2).map(|(i, _)| i + 1).collect()
 }
 
 /// Turns the integrated yaw so that frame `t_i` faces `yaw_i` (radians), blending the

@@ -125,16 +125,15 @@ impl PoseBank {
         let ts = ts.min(l);
         let mut rng = StdRng::seed_from_u64(seed ^ 0x5CAF_F01D);
         let need = frames.clamp(ts, START_STRETCH).min(l);
-        let mut draws = (0..START_TRIES).map(|_| (rng.gen_range(0..k), rng.gen_range(0..=l - need))).collect::<Vec<_>>();
-        let first = draws[0];
-        draws.retain(|&(c, at)| self.pace(c, at, need) >= LIVELY_M_S);
-        let (mut clip, start) = draws.first().copied().unwrap_or(first);
+        // Every draw is made, so what follows does not depend on which was taken.
+        let draws: Vec<(usize, usize)> = (0..START_TRIES).map(|_| (rng.gen_range(0..k), rng.gen_range(0..=l - need))).collect();
+        let origin = draws.iter().copied().find(|&(c, at)| self.pace(c, at, need) >= LIVELY_M_S).unwrap_or(draws[0]);
+        let (mut clip, start) = origin;
         let seed_rows = self.clips.slice(s![clip, start..start + ts, ..]).to_owned();
         let mut poses = Vec::new();
         if spacing == 0 {
-            return Scaffold { seed: seed_rows, poses, start: (clip, start) };
+            return Scaffold { seed: seed_rows, poses, start: origin };
         }
-        let origin = (clip, start);
         let mut cursor = start + ts - 1;
         let mut frame = ts - 1 + spacing;
         while frame < frames {

@@ -111,11 +111,10 @@ pub fn generate_features(
     let Some(y) = y else { return Ok(None) };
     let mut network = file.pose_norm.denormalize(&to_array(&y)?)?;
     let mut served = network.clone();
-    let mut heights = network.clone();
     if file.extra.root_height == RootHeight::FootClearance {
-        repr::clearance_to_height(&mut heights);
+        repr::clearance_to_height(&mut network);
     }
-    let mut jumps = jump_frames(heights.view(), JUMP_M_S2, file.fps);
+    let mut jumps = jump_frames(network.view(), JUMP_M_S2, file.fps);
     if keep_seed && seed.is_some() {
         // The user's seed frames stay as given: a jump where the network takes over from them
         // (or inside them) is spread over the frames after them.
@@ -139,7 +138,6 @@ pub fn generate_features(
     pass_through_keys(&mut served, 0..POSE_DIM, &targets, BLEND_RADIUS);
     if file.extra.root_height == RootHeight::FootClearance {
         // After the key pass, so a key pose's legs set the height at its frame.
-        repr::clearance_to_height(&mut network);
         repr::clearance_to_height(&mut served);
     }
     let mut start = seed.map(|(_, s)| s).unwrap_or_default();
@@ -187,6 +185,7 @@ impl DanceModel for Served {
     }
 
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
+        self.refuse_unsupported(req)?;
         let fps = self.file.fps;
         let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
         let keys = local_keys(req.key_poses, n, fps)?;
