@@ -487,9 +487,7 @@ impl DanceModel for Served {
     }
 
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
-        if !req.key_poses.is_empty() {
-            return Err(ModelError::Unsupported(ID.into(), "key poses"));
-        }
+        self.refuse_unsupported(req)?;
         let fps = self.file.fps;
         let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
         progress.report("features", 0.0)?;

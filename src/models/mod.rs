@@ -225,6 +225,24 @@ pub fn smooth_columns(features: &mut ndarray::Array2<f32>, keep: usize, sigma: f
 pub trait DanceModel: Send + Sync {
     fn info(&self) -> ModelInfo;
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError>;
+
+    /// Refuses a request with an input this model's [`Capabilities`] do not list, as the API does
+    /// before queueing; every model's `generate` starts with it, so the CLI and the eval refuse too.
+    fn refuse_unsupported(&self, req: &GenerateRequest<'_>) -> Result<(), ModelError> {
+        let info = self.info();
+        let c = info.capabilities;
+        let refused = [
+            (!req.key_poses.is_empty() && !c.key_poses, "key poses"),
+            (req.seed_motion.is_some() && !c.seed_motion, "a seed motion"),
+            (req.style.is_some() && !c.style, "a style"),
+            (req.temperature.is_some() && !c.temperature, "a temperature"),
+            (req.top_k.is_some() && !c.top_k, "top_k"),
+        ];
+        match refused.into_iter().find(|(r, _)| *r) {
+            Some((_, what)) => Err(ModelError::Unsupported(info.id.0, what)),
+            None => Ok(()),
+        }
+    }
 }
 
 /// The models found under the models dir (`models/<id>/`), loaded once at start-up.
@@ -291,5 +309,48 @@ impl<M: Send> InstancePool<M> {
         let out = f(&instance.0);
         self.free.lock().unwrap_or_else(|p| p.into_inner()).push(instance);
         Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Only what `refuse_unsupported` reads: the model's capabilities.
+    struct Takes(Capabilities);
+
+    impl DanceModel for Takes {
+        fn info(&self) -> ModelInfo {
+            ModelInfo { id: ModelId("m".into()), paper: String::new(), capabilities: self.0 }
+        }
+        fn generate(&self, _: &GenerateRequest<'_>, _: &mut dyn Progress) -> Result<Generated, ModelError> {
+            unreachable!("refuse_unsupported only")
+        }
+    }
+
+    #[test]
+    fn inputs_a_model_does_not_take_are_refused_by_name() {
+        let audio = DecodedAudio { format: crate::audio::AudioFormat::Wav, sample_rate: 22_050, channels: 1, duration_s: 0.0, samples: Vec::new() };
+        let key = [KeyPose { time_s: 0.0, joints: vec![[0.0; 3]; 23] }];
+        let plain = GenerateRequest::plain(&audio, 0);
+        let with = |f: fn(&mut GenerateRequest<'_>)| {
+            let mut r = GenerateRequest::plain(&audio, 0);
+            f(&mut r);
+            r
+        };
+        let nothing = Takes(Capabilities::default());
+        assert!(nothing.refuse_unsupported(&plain).is_ok());
+        let refused = |m: &Takes, r: &GenerateRequest<'_>| match m.refuse_unsupported(r) {
+            Err(ModelError::Unsupported(id, what)) => Some((id, what)),
+            _ => None,
+        };
+        assert_eq!(refused(&nothing, &with(|r| r.style = Some(DanceStyle::ALL[0]))), Some(("m".into(), "a style")));
+        assert_eq!(refused(&nothing, &with(|r| r.temperature = Some(0.8))), Some(("m".into(), "a temperature")));
+        assert_eq!(refused(&nothing, &with(|r| r.top_k = Some(4))), Some(("m".into(), "top_k")));
+        let keyed = GenerateRequest { key_poses: &key, ..GenerateRequest::plain(&audio, 0) };
+        assert_eq!(refused(&nothing, &keyed), Some(("m".into(), "key poses")));
+        let all = Takes(Capabilities { key_poses: true, seed_motion: true, style: true, temperature: true, top_k: true });
+        let everything = GenerateRequest { key_poses: &key, style: Some(DanceStyle::ALL[0]), temperature: Some(0.8), top_k: Some(4), ..GenerateRequest::plain(&audio, 0) };
+        assert!(all.refuse_unsupported(&everything).is_ok());
     }
 }

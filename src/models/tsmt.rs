@@ -658,9 +658,7 @@ impl DanceModel for Served {
     }
 
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
-        if !req.key_poses.is_empty() {
-            return Err(ModelError::Unsupported(ID.into(), "key poses"));
-        }
+        self.refuse_unsupported(req)?;
         let n = ((req.audio.duration_s * self.file.fps).floor() as usize).max(1);
         let mut g = self.generate_features(req, n, progress)?;
         repr::clearance_to_height(&mut g.features);

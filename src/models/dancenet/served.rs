@@ -131,12 +131,7 @@ impl DanceModel for Served {
     }
 
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
-        if !req.key_poses.is_empty() {
-            return Err(ModelError::Unsupported(ID.into(), "key poses"));
-        }
-        if req.top_k.is_some() {
-            return Err(ModelError::Unsupported(ID.into(), "top_k"));
-        }
+        self.refuse_unsupported(req)?;
         let n = ((req.audio.duration_s * self.file.fps).floor() as usize).max(1);
         let g = self.generate_features(req, n, progress)?;
         let motion = rotations::decode(&self.rig, g.features.view(), g.start, self.file.fps)?;
