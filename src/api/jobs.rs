@@ -476,12 +476,15 @@ pub async fn result(State(state): State<AppState>, Path((id, file)): Path<(Strin
     if !job.files.files.iter().any(|f| f == name) {
         return Err(ApiError::ResultNotFound(format!("job {} did not write {name}", job.id)));
     }
-    let bytes = state
+    let file = state
         .artifacts
-        .read(crate::artifacts::Artifact::Result(job.id, name))
+        .stream(crate::artifacts::Artifact::Result(job.id, name))
         .await
-        .map_err(|e| ApiError::Internal(format!("reading {name} of job {}: {e}", job.id)))?;
-    Ok(([(header::CONTENT_TYPE, content_type(name))], Body::from(bytes)).into_response())
+        .map_err(|e| ApiError::artifact(&format!("reading {name} of job {}", job.id), &e))?;
+    // Streamed with backpressure: a client that stops reading holds one chunk, not the file.
+    let headers =
+        [(header::CONTENT_TYPE, HeaderValue::from_static(content_type(name))), (header::CONTENT_LENGTH, HeaderValue::from(file.len))];
+    Ok((headers, Body::from_stream(file.body)).into_response())
 }
 
 /// The bytes of a PNG image.
