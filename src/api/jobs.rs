@@ -273,7 +273,10 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
         (status = 404, description = "The song does not exist", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "The body is over max_job_body_bytes", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 408, description = "The body stalled for more than body_timeout_s", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set), the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The database is unreachable; nothing was queued, send it again shortly", body = Problem, content_type = "application/problem+json"),
+        (status = 507, description = "The server is out of storage; nothing was queued", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
