@@ -462,7 +462,9 @@ async fn a_full_disk_acknowledges_nothing_it_cannot_keep_and_recovers() {
                 let id = job["id"].as_str().expect("id").to_string();
                 // Acknowledged means durable: the job is there when asked for.
                 let got = client.get(serve.url(&format!("/v1/jobs/{id}"))).send().await.expect("GET job");
-                assert_eq!(got.status(), StatusCode::OK, "job {id} was acknowledged with 202 but is not there");
+                let log = serve.log();
+                let tail: String = log.lines().rev().take(15).collect::<Vec<_>>().join("\n");
+                assert_eq!(got.status(), StatusCode::OK, "job {id} was acknowledged with 202 but is not there; server log, last lines first:\n{tail}");
                 accepted.push(id);
             }
             StatusCode::INSUFFICIENT_STORAGE => {
@@ -492,7 +494,8 @@ async fn a_full_disk_acknowledges_nothing_it_cannot_keep_and_recovers() {
         .send()
         .await
         .expect("POST /v1/jobs");
-    assert_eq!(response.status(), StatusCode::ACCEPTED, "accepted again once space returned");
+    let status = response.status();
+    assert_eq!(status, StatusCode::ACCEPTED, "accepted again once space returned: {}", response.text().await.unwrap_or_default());
     let jobs = settle(&client, &serve, Duration::from_secs(180)).await;
     for id in &accepted {
         let job = jobs.iter().find(|j| j["id"] == id.as_str()).unwrap_or_else(|| panic!("acknowledged job {id} was lost: {jobs:?}"));
