@@ -415,16 +415,18 @@ pub async fn audio(State(state): State<AppState>, Path(id): Path<String>) -> Res
     use axum::response::IntoResponse;
     let id = SongId::from_str(&id).map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
     let song = state.store.song(id).await?;
-    // Through the artifact store: with a bucket, another API host may have taken the upload.
-    let file = state
+    // Through the artifact store: with a bucket, another API host may have taken the upload; it
+    // is cached in this host's data dir, then streamed from there.
+    let path = state
         .artifacts
-        .stream(Artifact::Song(song.id, song.format))
+        .fetch(Artifact::Song(song.id, song.format))
         .await
-        .map_err(|e| ApiError::artifact(&format!("reading song {}", song.id), &e))?;
+        .map_err(|e| ApiError::artifact(&format!("fetching song {}", song.id), &e))?;
+    let file = tokio::fs::File::open(&path).await.map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?;
+    let len = file.metadata().await.map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?.len();
     // Streamed with backpressure: a song may be up to max_upload_bytes.
-    let body = axum::body::Body::from_stream(file.body);
-    let headers =
-        [(header::CONTENT_TYPE, HeaderValue::from_static(audio_mime(song.format))), (header::CONTENT_LENGTH, HeaderValue::from(file.len))];
+    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::with_capacity(file, crate::artifacts::STREAM_CHUNK_BYTES));
+    let headers = [(header::CONTENT_TYPE, HeaderValue::from_static(audio_mime(song.format))), (header::CONTENT_LENGTH, HeaderValue::from(len))];
     Ok((headers, body).into_response())
 }
 
