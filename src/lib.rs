@@ -23,7 +23,6 @@ pub mod api;
 pub mod artifacts;
 pub mod audio;
 pub mod config;
-pub mod error;
 pub mod metrics;
 pub mod models;
 pub mod motion;
