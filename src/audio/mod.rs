@@ -15,7 +15,9 @@ pub mod chroma;
 pub mod decode;
 pub mod dsp;
 pub mod features;
+pub mod mp4;
 pub mod onset;
+mod resample;
 pub mod rhythm;
 
 pub use budget::Budget;
