@@ -489,7 +489,7 @@ impl DanceModel for Served {
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let fps = self.file.fps;
-        let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
+        let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
         progress.report("features", 0.0)?;
         let music = self.music(req.audio, n)?;
         progress.report("features", 1.0)?;

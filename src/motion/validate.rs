@@ -95,7 +95,8 @@ pub fn check_pose(what: &str, joints: &[[f64; 3]], root: [f64; 3]) -> Result<(),
 }
 
 /// Frames a model makes for a song of `duration_s` seconds at `fps`: `⌊duration_s · fps⌋`, at least
-/// one.
+/// one. The one rule: every model's `generate`, the style classifier and the API's key-pose check
+/// call it, so a key pose the API accepted always lands on a frame the model makes.
 pub fn song_frames(duration_s: f64, fps: f64) -> usize {
     let n = (duration_s * fps).floor();
     if n.is_finite() && n >= 1.0 {

@@ -132,7 +132,7 @@ impl DanceModel for Served {
 
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
-        let n = ((req.audio.duration_s * self.file.fps).floor() as usize).max(1);
+        let n = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
         let g = self.generate_features(req, n, progress)?;
         let motion = rotations::decode(&self.rig, g.features.view(), g.start, self.file.fps)?;
         Ok(Generated { motion, style: Some(g.style) })

@@ -407,7 +407,7 @@ impl ServedStyle {
 
     /// [`ServedStyle::predict`] of a whole decoded song.
     pub fn predict_song(&self, audio: &crate::audio::DecodedAudio) -> Result<[f32; STYLES], ModelError> {
-        let n = ((audio.duration_s * self.file.fps).floor() as usize).max(1);
+        let n = crate::motion::validate::song_frames(audio.duration_s, self.file.fps);
         self.predict(&crate::audio::features::dancenet(audio, self.file.fps, 0.0, n)?)
     }
 }

@@ -187,7 +187,7 @@ impl DanceModel for Served {
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let fps = self.file.fps;
-        let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
+        let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
         let keys = local_keys(req.key_poses, n, fps)?;
         progress.report("features", 0.0)?;
         let feats = crate::audio::features::keypose(req.audio, fps, 0.0, n)?;

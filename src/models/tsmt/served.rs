@@ -156,7 +156,7 @@ impl DanceModel for Served {
 
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
-        let n = ((req.audio.duration_s * self.file.fps).floor() as usize).max(1);
+        let n = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
         let mut g = self.generate_features(req, n, progress)?;
         repr::clearance_to_height(&mut g.features);
         // The root height follows the lowest foot point, which hops between feet and points as
