@@ -136,7 +136,7 @@ impl Bins {
     /// each side.
     pub fn fit<'a>(rows: impl IntoIterator<Item = &'a Array2<f32>>, n: usize) -> Result<Self, ModelError> {
         let rows: Vec<&Array2<f32>> = rows.into_iter().collect();
-        let d = rows.first().map(|r| r.ncols()).ok_or_else(|| ModelError::Invalid("no rows to fit bins on".into()))?;
+        let d = rows.first().map(|r| r.ncols()).ok_or_else(|| ModelError::Input("no rows to fit bins on".into()))?;
         let (mut lo, mut hi) = (Vec::with_capacity(d), Vec::with_capacity(d));
         for c in 0..d {
             let col: Vec<f32> = rows.iter().flat_map(|r| r.column(c).to_vec()).collect();

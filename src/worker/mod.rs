@@ -84,6 +84,8 @@ impl WorkerError {
         match self {
             WorkerError::Queue(e) => e.code(),
             WorkerError::Audio(e) => e.code(),
+            // Stable for clients: no model failure is one a client can fix (the API refuses what a
+            // model does not take before a job exists); the finer `ModelError::code` is logged.
             WorkerError::Model(_) => "model-failed",
             WorkerError::ModelUnavailable(_) => "model-unavailable",
             WorkerError::InvalidOptions(_) => "invalid-job-options",
@@ -364,6 +366,7 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
             metrics::counter!(telemetry::JOBS_FINISHED, "kind" => kind, "status" => outcome).increment(1);
             match &result {
                 Ok(_) => tracing::info!(seconds = started.elapsed().as_secs_f64(), "job succeeded"),
+                Err(WorkerError::Model(m)) => tracing::warn!(error = %m, model_error = m.code(), outcome, "job did not succeed"),
                 Err(e) => tracing::warn!(error = %e, outcome, "job did not succeed"),
             }
         }

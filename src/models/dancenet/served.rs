@@ -42,7 +42,7 @@ impl Served {
         let rig = Rig::from_offsets(&file.extra.rig)?;
         let width = (file.config.pose_dim + file.config.contacts) as usize;
         if rotations::Layout::of(&rig).dim() != file.config.pose_dim as usize {
-            return Err(ModelError::Invalid(format!("{ID}: the rig's features are not {} wide", file.config.pose_dim)));
+            return Err(ModelError::BadModelFile(format!("{ID}: the rig's features are not {} wide", file.config.pose_dim)));
         }
         let clips = SeedClips::load(&dir.join(SEED_CLIPS_FILE), width)?;
         let style = if dir.join(super::style::STYLE_FILE).exists() { Some(ServedStyle::load(dir)?) } else { None };
@@ -82,7 +82,7 @@ impl Served {
                 let keep = m.num_frames().min(n);
                 let enc = rotations::encode(&self.rig, m.positions.slice(s![..keep, .., ..]), fps)?;
                 let feats = self.file.pose_norm.normalize(&enc.features)?;
-                let rows = concatenate(Axis(1), &[feats.view(), enc.contacts.view()]).map_err(|e| ModelError::Invalid(e.to_string()))?;
+                let rows = concatenate(Axis(1), &[feats.view(), enc.contacts.view()]).map_err(|e| ModelError::Shape(e.to_string()))?;
                 (rows, keep, enc.start)
             }
             _ => (self.clips.pick(req.seed), 0, RootStart::default()),
@@ -112,7 +112,7 @@ impl Served {
             })
         })??;
         let Some(sampled) = out else { return Err(Cancelled.into()) };
-        let rows = if opening > 0 { concatenate(Axis(0), &[context.view(), sampled.view()]).map_err(|e| ModelError::Invalid(e.to_string()))? } else { sampled };
+        let rows = if opening > 0 { concatenate(Axis(0), &[context.view(), sampled.view()]).map_err(|e| ModelError::Shape(e.to_string()))? } else { sampled };
         let mut features = self.file.pose_norm.denormalize(&rows.slice(s![.., ..d]).to_owned())?;
         // σ of 2 frames (0.08 s, served) keeps 60 % of a 2-Hz movement and removes what is faster
         // than 5 Hz.

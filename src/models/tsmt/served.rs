@@ -112,7 +112,7 @@ impl Served {
             _ => {
                 let clip = match &self.clips {
                     Some(c) => c.pick(req.seed),
-                    None => return Err(ModelError::Invalid(format!("{ID}: no seed motion and no {SEED_CLIPS_FILE}"))),
+                    None => return Err(ModelError::BadModelFile(format!("{ID}: no seed motion and no {SEED_CLIPS_FILE}"))),
                 };
                 (bins.tokens(&clip), None, RootStart::default())
             }
@@ -138,7 +138,7 @@ impl Served {
         let mut sampled = bins.values(&tokens);
         smooth_columns(&mut sampled, 0, self.file.extra.smooth_frames);
         let features = match opening {
-            Some(o) => ndarray::concatenate(ndarray::Axis(0), &[o.view(), sampled.view()]).map_err(|e| ModelError::Invalid(e.to_string()))?,
+            Some(o) => ndarray::concatenate(ndarray::Axis(0), &[o.view(), sampled.view()]).map_err(|e| ModelError::Shape(e.to_string()))?,
             None => sampled,
         };
         Ok(Generation { features, start })
