@@ -21,6 +21,7 @@ use symphonia::core::probe::Hint;
 use super::mp4::{mp4_edit, Mp4Edit};
 use super::resample::StreamResampler;
 use super::{AudioError, AudioFormat, Budget, DecodedAudio, MAX_DURATION_S, MAX_SAMPLE_RATE, MIN_SAMPLE_RATE};
+use crate::stage::Stage;
 
 /// Slack on a header's declared duration before it alone refuses a song: declared lengths
 /// count the encoder's priming and padding, which the decoded length does not.
@@ -197,7 +198,7 @@ fn decode_source(
     let mut max_len: u64 = u64::MAX;
 
     loop {
-        budget.check("decoding")?;
+        budget.check(Stage::DecodeAudio)?;
         let packet = match reader.next_packet() {
             Ok(p) => p,
             Err(SymError::IoError(e)) if e.kind() == std::io::ErrorKind::UnexpectedEof => break,

@@ -5,6 +5,7 @@
 //! progress through [`Progress`], which also carries cancellation.
 use crate::audio::DecodedAudio;
 use crate::motion::{KeyPose, Motion};
+use crate::stage::Stage;
 use serde::{Deserialize, Serialize};
 
 pub mod dance_revolution;
@@ -168,8 +169,9 @@ pub struct Cancelled;
 
 /// Receives progress; returning `Err(Cancelled)` stops the model at this checkpoint.
 pub trait Progress {
-    /// `stage` is a short name ("features", "encode", "decode"); `fraction` is 0..=1 within it.
-    fn report(&mut self, stage: &str, fraction: f32) -> Result<(), Cancelled>;
+    /// `stage` is the model's own work ([`Stage::Features`], [`Stage::Encode`], [`Stage::Generate`]);
+    /// `fraction` is 0..=1 within it.
+    fn report(&mut self, stage: Stage, fraction: f32) -> Result<(), Cancelled>;
 }
 
 /// Errors a model can raise.

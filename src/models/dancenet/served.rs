@@ -16,6 +16,7 @@ use crate::models::{smooth_columns, to_tensor, Cancelled, Capabilities, DanceMod
 use crate::motion::repr::RootStart;
 use crate::motion::rig::Rig;
 use crate::motion::rotations;
+use crate::stage::Stage;
 
 /// A trained DanceNet, ready to serve.
 pub struct Served {
@@ -70,9 +71,9 @@ impl Served {
         let fps = self.file.fps;
         let d = self.file.config.pose_dim as usize;
         let sampling = Sampling { temperature: req.temperature.unwrap_or(self.file.extra.sampling.temperature), ..self.file.extra.sampling };
-        progress.report("features", 0.0)?;
+        progress.report(Stage::Features, 0.0)?;
         let feats = crate::audio::features::dancenet(req.audio, fps, 0.0, n)?;
-        progress.report("features", 1.0)?;
+        progress.report(Stage::Features, 1.0)?;
         let style = self.style_of(req, &feats)?;
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0);
         // The context (normalised features and contacts) and how many of its frames open the dance.
@@ -92,7 +93,7 @@ impl Served {
             tch::no_grad(|| -> Result<Option<Array2<f32>>, ModelError> {
                 let mut cancelled = false;
                 let Some(code) = model.encoder.encode_song(&music, |f| {
-                    cancelled = progress.report("encode", f).is_err();
+                    cancelled = progress.report(Stage::Encode, f).is_err();
                     !cancelled
                 }) else {
                     return Ok(None);
@@ -108,7 +109,7 @@ impl Served {
                 };
                 let total = (n - opening).max(1);
                 let mut rng = StdRng::seed_from_u64(req.seed ^ 0xDA_2CE_2E7);
-                Ok(model.sample(&ctx, &rows, style.style.index(), sampling, &mut rng, |done| progress.report("decode", done as f32 / total as f32).is_ok()))
+                Ok(model.sample(&ctx, &rows, style.style.index(), sampling, &mut rng, |done| progress.report(Stage::Generate, done as f32 / total as f32).is_ok()))
             })
         })??;
         let Some(sampled) = out else { return Err(Cancelled.into()) };

@@ -10,6 +10,7 @@ use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
 use crate::models::{smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::repr::{self, RootStart, FEATURE_DIM};
+use crate::stage::Stage;
 
 /// The run behind the committed weights, beside the common record.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -94,10 +95,10 @@ impl Served {
             temperature: req.temperature.unwrap_or(self.file.extra.sampling.temperature),
             top_k: req.top_k.map(|k| k as usize).unwrap_or(self.file.extra.sampling.top_k),
         };
-        progress.report("features", 0.0)?;
+        progress.report(Stage::Features, 0.0)?;
         let feats = crate::audio::features::tsmt(req.audio, fps, 0.0, n)?;
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0);
-        progress.report("features", 1.0)?;
+        progress.report(Stage::Features, 1.0)?;
         // The opening: the request's seed motion (kept as the dance's first frames), or a real clip.
         let (context, opening, start) = match req.seed_motion {
             Some(m) if m.num_frames() > 0 => {
@@ -122,7 +123,7 @@ impl Served {
             tch::no_grad(|| -> Result<Option<Array2<i64>>, ModelError> {
                 let mut cancelled = false;
                 let Some(vectors) = model.audio_logit_vectors(&music, |f| {
-                    cancelled = progress.report("encode", f).is_err();
+                    cancelled = progress.report(Stage::Encode, f).is_err();
                     !cancelled
                 }) else {
                     return Ok(None);
@@ -131,7 +132,7 @@ impl Served {
                 let total = (n - opened).max(1);
                 let widths: Vec<f32> = (0..repr::POSE_DIM).map(|c| (bins.hi[c] - bins.lo[c]) / bins.n as f32).collect();
                 let guard = self.file.extra.stall_guard.as_ref().map(|g| (g, widths.as_slice()));
-                Ok(model.sample_guarded(&context, &rest, sampling, guard, req.seed, |done| progress.report("decode", done as f32 / total as f32).is_ok()))
+                Ok(model.sample_guarded(&context, &rest, sampling, guard, req.seed, |done| progress.report(Stage::Generate, done as f32 / total as f32).is_ok()))
             })
         })??;
         let Some(tokens) = out else { return Err(Cancelled.into()) };
