@@ -153,8 +153,8 @@ struct JobState {
 impl JobState {
     fn snapshot(&self) -> (Option<Stage>, f64) {
         match self.stage_progress.lock() {
-            Ok(guard) => guard.clone(),
-            Err(poisoned) => poisoned.into_inner().clone(),
+            Ok(guard) => *guard,
+            Err(poisoned) => *poisoned.into_inner(),
         }
     }
 }
