@@ -28,5 +28,6 @@ pub mod models;
 pub mod motion;
 pub mod queue;
 pub mod report;
+pub mod stage;
 pub mod telemetry;
 pub mod worker;

@@ -776,7 +776,7 @@ fn style_probes() {
 
     struct Quiet;
     impl Progress for Quiet {
-        fn report(&mut self, _: &str, _: f32) -> Result<(), Cancelled> {
+        fn report(&mut self, _: choreo::stage::Stage, _: f32) -> Result<(), Cancelled> {
             Ok(())
         }
     }

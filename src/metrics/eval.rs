@@ -189,7 +189,7 @@ fn whole_song(path: &Path) -> Result<Song, MetricsError> {
 /// A progress sink for the CLI: never cancels.
 struct Quiet;
 impl Progress for Quiet {
-    fn report(&mut self, _stage: &str, _fraction: f32) -> Result<(), Cancelled> {
+    fn report(&mut self, _stage: crate::stage::Stage, _fraction: f32) -> Result<(), Cancelled> {
         Ok(())
     }
 }

@@ -19,6 +19,7 @@ pub mod dataset;
 pub mod export;
 pub mod feet;
 pub mod input;
+pub mod input_error;
 pub mod repr;
 pub mod rig;
 pub mod rotations;

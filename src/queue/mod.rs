@@ -279,8 +279,8 @@ pub struct Job {
     pub id: JobId,
     pub kind: JobKind,
     pub status: Status,
-    /// Short name of what the job is doing now.
-    pub stage: Option<String>,
+    /// What the job is doing now; a stored name this build does not know reads as none.
+    pub stage: Option<crate::stage::Stage>,
     /// 0..=1 within the whole job.
     pub progress: f64,
     pub priority: i64,

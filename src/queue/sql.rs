@@ -155,7 +155,7 @@ where
             id: JobId(D::uuid(row.try_get("id")?).map_err(|e| corrupt("job id", e))?),
             kind: serde_json::from_str::<JobKind>(&options).map_err(|e| corrupt("job options", e))?,
             status: Status::from_str(&status).map_err(|e| corrupt("job status", e))?,
-            stage: row.try_get("stage")?,
+            stage: crate::stage::Stage::from_stored(row.try_get::<Option<String>, _>("stage")?.as_deref()),
             progress: row.try_get("progress")?,
             priority: row.try_get("priority")?,
             attempts: row.try_get::<i64, _>("attempts")?.try_into().map_err(|e| corrupt("attempts", e))?,

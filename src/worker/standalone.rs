@@ -8,6 +8,7 @@ use crate::audio::{self, DecodedAudio};
 use crate::models::{Cancelled, DanceStyle, GenerateRequest, ModelId, Progress, Registry};
 use crate::motion::{KeyPose, Motion};
 use crate::report::preview::Caption;
+use crate::stage::Stage;
 
 use super::WorkerError;
 
@@ -54,28 +55,28 @@ pub struct Generated {
     /// motion.bvh, motion.json, motion.glb, report.json and preview.png.
     pub files: Vec<PathBuf>,
     /// `(stage, duration)` in pipeline order.
-    pub stages: Vec<(String, Duration)>,
+    pub stages: Vec<(Stage, Duration)>,
 }
 
 /// Times each stage a model reports, and forwards fractions to an optional callback.
 struct StageClock<'a> {
-    current: Option<(String, Instant)>,
-    done: Vec<(String, Duration)>,
-    on_progress: &'a mut dyn FnMut(&str, f32),
+    current: Option<(Stage, Instant)>,
+    done: Vec<(Stage, Duration)>,
+    on_progress: &'a mut dyn FnMut(Stage, f32),
 }
 
 impl StageClock<'_> {
-    fn enter(&mut self, stage: &str) {
-        if self.current.as_ref().is_some_and(|(s, _)| s == stage) {
+    fn enter(&mut self, stage: Stage) {
+        if self.current.as_ref().is_some_and(|(s, _)| *s == stage) {
             return;
         }
         if let Some((s, t)) = self.current.take() {
             self.done.push((s, t.elapsed()));
         }
-        self.current = Some((stage.to_owned(), Instant::now()));
+        self.current = Some((stage, Instant::now()));
     }
 
-    fn finish(mut self) -> Vec<(String, Duration)> {
+    fn finish(mut self) -> Vec<(Stage, Duration)> {
         if let Some((s, t)) = self.current.take() {
             self.done.push((s, t.elapsed()));
         }
@@ -84,7 +85,7 @@ impl StageClock<'_> {
 }
 
 impl Progress for StageClock<'_> {
-    fn report(&mut self, stage: &str, fraction: f32) -> Result<(), Cancelled> {
+    fn report(&mut self, stage: Stage, fraction: f32) -> Result<(), Cancelled> {
         self.enter(stage);
         (self.on_progress)(stage, fraction);
         Ok(())
@@ -100,7 +101,7 @@ pub fn generate_decoded(
     request: &GenerateRequest<'_>,
     plant_feet: bool,
     out: &Path,
-    on_progress: &mut dyn FnMut(&str, f32),
+    on_progress: &mut dyn FnMut(Stage, f32),
 ) -> Result<Generated, WorkerError> {
     let id = model.0.clone();
     let model = registry.get(model).ok_or_else(|| WorkerError::ModelUnavailable(model.clone()))?;
@@ -127,23 +128,24 @@ pub fn generate(args: &GenerateArgs) -> Result<Generated, WorkerError> {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
-    bar.set_message("decode");
+    bar.set_message(Stage::DecodeAudio.as_str());
     let t0 = Instant::now();
     let audio = audio::decode_path(&args.song)?;
     let decode = t0.elapsed();
     let frames = crate::motion::validate::song_frames(audio.duration_s, crate::motion::MOTION_FPS);
     let key_poses: Vec<KeyPose> = crate::motion::input::key_poses(&key_inputs, frames, crate::motion::MOTION_FPS)
         .map_err(|e| WorkerError::InvalidOptions(format!("key poses: {e}")))?;
-    // Progress over the whole run: decode 0–5%, features 5–25%, encode 25–35%, decode loop 35–90%.
-    let span = |stage: &str| match stage {
-        "features" => (0.05, 0.25),
-        "encode" => (0.25, 0.35),
-        "decode" | "generate" => (0.35, 0.90),
-        _ => (0.90, 0.95),
+    // Progress over the whole run: decode 0–5%, features 5–25%, encode 25–35%, frame loop 35–90%.
+    let span = |stage: Stage| match stage {
+        Stage::Claimed | Stage::DecodeAudio | Stage::Analyze => (0.0, 0.05),
+        Stage::Features => (0.05, 0.25),
+        Stage::Encode => (0.25, 0.35),
+        Stage::Generate => (0.35, 0.90),
+        Stage::Export | Stage::Report | Stage::Done => (0.90, 0.95),
     };
-    let mut on_progress = |stage: &str, f: f32| {
+    let mut on_progress = |stage: Stage, f: f32| {
         let (a, b) = span(stage);
-        bar.set_message(stage.to_owned());
+        bar.set_message(stage.as_str());
         bar.set_position(((a + (b - a) * f64::from(f)) * 1000.0) as u64);
     };
     let style = match &args.style {
@@ -153,7 +155,7 @@ pub fn generate(args: &GenerateArgs) -> Result<Generated, WorkerError> {
     let request = GenerateRequest { key_poses: &key_poses, style, temperature: args.temperature, top_k: args.top_k, ..GenerateRequest::plain(&audio, args.seed) };
     let song = args.song.file_name().map(|n| n.to_string_lossy().into_owned());
     let mut g = generate_decoded(&registry, &ModelId(args.model.clone()), song, &request, !args.no_plant_feet, &args.out, &mut on_progress)?;
-    g.stages.insert(0, ("decode audio".into(), decode));
+    g.stages.insert(0, (Stage::DecodeAudio, decode));
     bar.finish_with_message("done");
     Ok(g)
 }
@@ -227,10 +229,10 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
     }
     let n_timed = songs.len();
     songs.extend(scaling);
-    let stage_names = ["decode audio", "features", "encode", "decode", "export", "report"];
+    let stage_names = [Stage::DecodeAudio, Stage::Features, Stage::Encode, Stage::Generate, Stage::Export, Stage::Report];
     let mut table = format!(
-        "| model | song | music s | {} | total s | s per music min | decode ms per frame | 3-min target |\n|---|---|---|{}---|---|---|---|\n",
-        stage_names.join(" | "),
+        "| model | song | music s | {} | total s | s per music min | generate ms per frame | 3-min target |\n|---|---|---|{}---|---|---|---|\n",
+        stage_names.map(Stage::as_str).join(" | "),
         "---|".repeat(stage_names.len())
     );
     let out = tempfile::tempdir()?;
@@ -241,11 +243,11 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
         for (k, (name, audio, decode)) in songs.iter().enumerate() {
             let request = GenerateRequest::plain(audio, 0);
             let g = generate_decoded(&registry, model, Some(name.clone()), &request, true, out.path(), &mut |_, _| {})?;
-            let mut stages = vec![("decode audio".to_string(), *decode)];
+            let mut stages = vec![(Stage::DecodeAudio, *decode)];
             stages.extend(g.stages);
             // "–" for a stage this model does not have (the key-pose transformer has no separate encode).
-            let get = |s: &str| {
-                let times: Vec<f64> = stages.iter().filter(|(n, _)| n == s).map(|(_, d)| d.as_secs_f64()).collect();
+            let get = |s: Stage| {
+                let times: Vec<f64> = stages.iter().filter(|(n, _)| *n == s).map(|(_, d)| d.as_secs_f64()).collect();
                 if times.is_empty() {
                     "–".to_string()
                 } else {
@@ -259,9 +261,9 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
             } else {
                 "-".into()
             };
-            let cells: Vec<String> = stage_names.iter().map(|s| get(s)).collect();
+            let cells: Vec<String> = stage_names.iter().map(|&s| get(s)).collect();
             // The autoregressive loop's cost per motion frame (a TSMT "step").
-            let decode_s: f64 = stages.iter().filter(|(n, _)| n == "decode").map(|(_, d)| d.as_secs_f64()).sum();
+            let decode_s: f64 = stages.iter().filter(|(n, _)| *n == Stage::Generate).map(|(_, d)| d.as_secs_f64()).sum();
             let frames = (audio.duration_s * crate::motion::MOTION_FPS).floor().max(1.0);
             let per_frame = if decode_s > 0.0 { format!("{:.2}", 1000.0 * decode_s / frames) } else { "–".into() };
             table += &format!("| {} | {name} | {:.0} | {} | {total:.2} | {per_min:.2} | {per_frame} | {target} |\n", model.0, audio.duration_s, cells.join(" | "));
@@ -271,7 +273,7 @@ pub fn bench(args: &BenchArgs) -> Result<String, WorkerError> {
         }
         if let [(la, ta, da), (lb, tb, db)] = scaled[..] {
             ratios += &format!(
-                "{}: {lb:.0} s song / {la:.0} s song: length × {:.2}, total cost × {:.2}, decode × {}\n",
+                "{}: {lb:.0} s song / {la:.0} s song: length × {:.2}, total cost × {:.2}, generate × {}\n",
                 model.0,
                 lb / la,
                 tb / ta,

@@ -113,7 +113,7 @@ fn prepare(dances: &[Dance], rig: &Rig) -> Result<(Vec<Prepared>, f64), TrainErr
         let n = t * crate::motion::NUM_JOINTS;
         err_sum += seed_distance_m(&dance.motion, &back) * n as f64;
         err_n += n;
-        let frames = concatenate(Axis(1), &[enc.features.view(), enc.contacts.view()]).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
+        let frames = concatenate(Axis(1), &[enc.features.view(), enc.contacts.view()]).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
         tracing::info!(dance = %id, frames = t, "loaded");
         out.push(Prepared { id: id.clone(), style, music, frames });
     }
@@ -126,8 +126,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     // One skeleton for every dance, fitted on the train split: rotations are relative to its
     // rest pose, which must be the same for all.
     let train_dances = ds.load_all(ds.train_ids())?;
-    let all_pos = concatenate(Axis(0), &train_dances.iter().map(|d| d.motion.positions.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
-    let all_root = concatenate(Axis(0), &train_dances.iter().map(|d| d.center.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
+    let all_pos = concatenate(Axis(0), &train_dances.iter().map(|d| d.motion.positions.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
+    let all_root = concatenate(Axis(0), &train_dances.iter().map(|d| d.center.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
     let rig = Rig::fit(all_pos.view(), all_root.view())?;
     drop((all_pos, all_root));
     let (train_raw, fit_err) = prepare(&train_dances, &rig)?;
@@ -142,7 +142,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         seqs.iter()
             .map(|p| {
                 let feats = pose_norm.normalize(&p.frames.slice(ndarray::s![.., ..d]).to_owned())?;
-                let poses = concatenate(Axis(1), &[feats.view(), p.frames.slice(ndarray::s![.., d..])]).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
+                let poses = concatenate(Axis(1), &[feats.view(), p.frames.slice(ndarray::s![.., d..])]).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
                 Ok(Sequence { id: p.id.clone(), music: music_norm.normalize(&p.music)?, poses })
             })
             .collect()

@@ -43,7 +43,7 @@ pub fn songs(ds: &Dataset, ids: &[String]) -> Result<Vec<Labelled>, TrainError> 
         .map(|id| {
             let dance = ds.load(id)?;
             let audio = crate::audio::decode_path(&dance.audio_path)?;
-            let n = ((audio.duration_s * FPS).floor() as usize).max(1);
+            let n = crate::motion::validate::song_frames(audio.duration_s, FPS);
             let features = crate::audio::features::dancenet(&audio, FPS, 0.0, n)?;
             let style = DanceStyle::of_dance_id(id).ok_or_else(|| crate::motion::MotionError::UnknownDance { id: id.clone() })?;
             tracing::info!(song = %id, seconds = audio.duration_s, "features");
