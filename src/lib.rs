@@ -24,6 +24,7 @@ pub mod artifacts;
 pub mod audio;
 pub mod config;
 pub mod error;
+pub mod eval;
 pub mod metrics;
 pub mod models;
 pub mod motion;

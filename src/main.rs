@@ -28,7 +28,7 @@ enum Command {
     /// Print the libtorch version, thread settings, data dir and the models found.
     Doctor(ServiceArgs),
     /// Score Real, Mismatched-real and models on the test split (Markdown table + JSON).
-    Eval(choreo::metrics::eval::EvalArgs),
+    Eval(choreo::eval::EvalArgs),
     /// Generate a dance for a song: motion.bvh, motion.json, motion.glb, report.json and preview.png.
     Generate(choreo::worker::standalone::GenerateArgs),
     /// Train a model on the train split of dance-with-melody and write its folder under models/.
@@ -167,7 +167,7 @@ fn main() -> anyhow::Result<()> {
         }
         Command::Bench { what: BenchCommand::Http(args) } => bench_http(args, load(&args.service)?),
         Command::Bench { what: BenchCommand::Audio(args) } => args.run().map(|_| ()).context("choreo bench audio"),
-        Command::Eval(args) => choreo::metrics::eval::run(args).context("choreo eval"),
+        Command::Eval(args) => choreo::eval::run(args).context("choreo eval"),
         Command::Export(args) => args.run().context("choreo export"),
     }
 }

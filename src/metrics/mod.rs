@@ -11,9 +11,10 @@
 //! - [`physical`]: floor contact, ground penetration, pops, liveliness, seed sensitivity, and
 //!   issue 10's pass/fail verdict on them.
 //! - [`reference`]: the committed train-split statistics; [`score`]: one dance and a set;
-//!   [`eval`]: `choreo eval`; [`skeleton_map`]: AIST++ joints on our 23-joint skeleton.
-//! - [`style`]: a motion style classifier (motion only, no music) to check that a dance asked
-//!   for in a style looks like it.
+//!   [`skeleton_map`]: AIST++ joints on our 23-joint skeleton.
+//!
+//! Measures only: they take motion (and beats), never a model. The harness that runs the models
+//! and scores them with these measures is `crate::eval` (`choreo eval`), a layer above.
 //!
 //! # BAS on dance-with-melody: read it with its chance level
 //! FACT's BAS uses σ = 0.05 s, so kinematic beats at *random* times already score about
@@ -30,7 +31,6 @@
 //! chance), never by BAS alone.
 pub mod beats;
 pub mod diversity;
-pub mod eval;
 pub mod features;
 pub mod fid;
 pub mod kinematics;
@@ -39,8 +39,6 @@ pub mod plausibility;
 pub mod reference;
 pub mod score;
 pub mod skeleton_map;
-pub mod style;
-pub mod style_control;
 
 /// Errors from computing metrics or loading their reference statistics.
 #[derive(Debug, thiserror::Error)]

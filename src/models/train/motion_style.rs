@@ -1,4 +1,4 @@
-//! `choreo train motion-style`: the motion style classifier of `metrics::style` on the train
+//! `choreo train motion-style`: the motion style classifier of `models::motion_style` on the train
 //! split's real motion, in 10-s windows drawn class-balanced at random offsets
 //! (`models::train::classify`), with windows of no style beside them ([`no_style_windows`]).
 //! Writes `weights.safetensors`, `model.json` (with the test split's accuracy) and
@@ -10,7 +10,7 @@ use rand_distr::{Distribution, Normal};
 
 use super::classify::{fit, Additions, ClassifyOptions, Fold, Splits};
 use super::{CommonOptions, FolderFiles, TrainError};
-use crate::metrics::style::{config, features, MotionStyleFile, FPS, HOP_S, ID, WINDOW_S};
+use crate::models::motion_style::{config, features, MotionStyleFile, FPS, HOP_S, ID, WINDOW_S};
 use crate::models::dancenet::style::{Labelled, StyleConfig};
 use crate::models::DanceStyle;
 use crate::motion::dataset::Dataset;

@@ -13,9 +13,9 @@
 //!   danced by each model; no real dance exists for them, so only model rows.
 //!
 //! Every model dances every song with seeds `seed, seed+1, …` (`--seeds`, default 2), so the same
-//! seeds give the same numbers and the seed sensitivity ([`super::physical::seed_distance_m`],
+//! seeds give the same numbers and the seed sensitivity ([`crate::metrics::physical::seed_distance_m`],
 //! per song pair, averaged) is measured. Every row carries the physical-plausibility numbers of
-//! [`super::physical`] and issue 10's verdict (each criterion as the row's worst dance has it).
+//! [`crate::metrics::physical`] and issue 10's verdict (each criterion as the row's worst dance has it).
 //!
 //! FID in two protocols: `fid_*_window` fits a Gaussian to every 5-s window of the row (biased
 //! by sample size: the Mismatched-real row with one train dance per song scores FID_k 38.9, with
@@ -25,16 +25,18 @@
 //!
 //! Music beats come from [`crate::audio::analyze`] on the whole song and are moved onto the
 //! dance's clock (motion frame 0 = song time `start_position / 25`).
+pub mod style_control;
+
 use std::path::{Path, PathBuf};
 
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 
-use super::diversity::{diversity, Diversity};
-use super::physical::{seed_distance_m, Criterion, PhysicalScores, Verdict};
-use super::reference::ReferenceStats;
-use super::score::{multimodality, score_dance, score_set, ScoredDance, SetScores};
-use super::MetricsError;
+use crate::metrics::diversity::{diversity, Diversity};
+use crate::metrics::physical::{seed_distance_m, Criterion, PhysicalScores, Verdict};
+use crate::metrics::reference::ReferenceStats;
+use crate::metrics::score::{multimodality, score_dance, score_set, ScoredDance, SetScores};
+use crate::metrics::MetricsError;
 use crate::audio::{self, DecodedAudio};
 use crate::models::{Cancelled, GenerateRequest, ModelId, Progress, Registry};
 use crate::motion::dataset::{Dance, Dataset};
@@ -114,7 +116,7 @@ pub struct EvalRow {
     pub seed_distance_m: Option<f64>,
     /// The smallest seed distance of any song pair (the verdict's value).
     pub seed_distance_min_m: Option<f64>,
-    /// TSMT's A-seq-D, I-seq-D and S-music-D ([`super::diversity`]) on z-normalised kinetic
+    /// TSMT's A-seq-D, I-seq-D and S-music-D ([`crate::metrics::diversity`]) on z-normalised kinetic
     /// windows; S-music-D only where one song has dances from several seeds.
     #[serde(default)]
     pub diversity: Diversity,
@@ -130,7 +132,7 @@ pub struct EvalDance {
     /// The motion: a dance id, or `model@seed`.
     pub motion: String,
     pub seconds: f64,
-    pub scores: super::score::DanceScores,
+    pub scores: crate::metrics::score::DanceScores,
 }
 
 /// Everything `choreo eval` computed.
@@ -146,10 +148,10 @@ pub struct EvalResult {
     pub extra_rows: Vec<EvalRow>,
     /// Models that dance a style asked for: every song (test and extra) in every style.
     #[serde(default)]
-    pub style_control: Vec<super::style_control::StyleControl>,
+    pub style_control: Vec<style_control::StyleControl>,
     /// The motion style classifier on the real test dances (when it and a style model ran).
     #[serde(default)]
-    pub real_styles: Option<super::style_control::RealStyles>,
+    pub real_styles: Option<style_control::RealStyles>,
 }
 
 /// A song on a dance's clock: the audio of the segment and the beats within it.
@@ -427,8 +429,8 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
         extra_names = extra.iter().map(|s| s.name.clone()).collect();
         let ids: Vec<String> = if args.models.is_empty() { registry.list().into_iter().map(|m| m.id.0).collect() } else { args.models.clone() };
         // The motion style classifier, for style control (absent: distances and verdicts only).
-        let classifier_dir = args.models_dir.join(super::style::ID);
-        let classifier = if classifier_dir.is_dir() { Some(super::style::MotionStyle::load(&classifier_dir).map_err(|e| MetricsError::Reference(format!("motion style classifier: {e}")))?) } else { None };
+        let classifier_dir = args.models_dir.join(crate::models::motion_style::ID);
+        let classifier = if classifier_dir.is_dir() { Some(crate::models::motion_style::MotionStyle::load(&classifier_dir).map_err(|e| MetricsError::Reference(format!("motion style classifier: {e}")))?) } else { None };
         for id in &ids {
             let model = registry
                 .get(&ModelId(id.clone()))
@@ -439,14 +441,14 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
                 extra_rows.extend(e);
             }
             if model.info().capabilities.style {
-                let all: Vec<super::style_control::StyleSong<'_>> =
-                    songs.iter().chain(&extra).map(|s| super::style_control::StyleSong { name: &s.name, audio: &s.audio, beats: &s.beats }).collect();
-                style_control.push(super::style_control::style_control(model.as_ref(), id, &all, args.seed, classifier.as_ref(), &reference, &mut Quiet)?);
+                let all: Vec<style_control::StyleSong<'_>> =
+                    songs.iter().chain(&extra).map(|s| style_control::StyleSong { name: &s.name, audio: &s.audio, beats: &s.beats }).collect();
+                style_control.push(style_control::style_control(model.as_ref(), id, &all, args.seed, classifier.as_ref(), &reference, &mut Quiet)?);
             }
         }
         if let (Some(c), false) = (&classifier, style_control.is_empty()) {
             let real: Vec<(&str, &Motion)> = eval_dances.iter().map(|d| (d.id.as_str(), &d.motion)).collect();
-            real_styles = Some(super::style_control::real_styles(c, &real)?);
+            real_styles = Some(style_control::real_styles(c, &real)?);
         }
     }
     Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows, extra_songs: extra_names, extra_rows, style_control, real_styles })
@@ -628,7 +630,7 @@ fn physical_table(rows: &[EvalRow], reference: Option<&ReferenceStats>) -> Strin
 
 /// The row's worst key-pose error (cm), from its verdict.
 fn worst_key_error(r: &EvalRow) -> Option<f64> {
-    r.scores.mean.verdict.get(super::physical::names::KEY_POSES).and_then(|c| c.value)
+    r.scores.mean.verdict.get(crate::metrics::physical::names::KEY_POSES).and_then(|c| c.value)
 }
 
 /// The Markdown `choreo eval` prints: per section, a scores table and a physical-plausibility
@@ -652,7 +654,7 @@ pub fn markdown(result: &EvalResult) -> String {
     }
     if !result.style_control.is_empty() {
         out += "\n## Style control (every song above, test and extra, in each style)\n\n";
-        out += &super::style_control::markdown(&result.style_control, result.real_styles.as_ref());
+        out += &style_control::markdown(&result.style_control, result.real_styles.as_ref());
     }
     out
 }

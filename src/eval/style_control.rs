@@ -1,18 +1,18 @@
 //! Style control, for models that dance a style asked for (DanceNet): every song danced once in
 //! each of the four styles with one seed, then
 //! - how far apart the styles' dances are (root-relative pose distance, the seed-sensitivity
-//!   measure of [`super::physical::seed_distance_m`]): a style input that changes nothing reads 0;
+//!   measure of [`crate::metrics::physical::seed_distance_m`]): a style input that changes nothing reads 0;
 //! - whether each dance still passes issue 10's plausibility verdict, and how fast it moves;
-//! - what a classifier trained on real motion alone ([`super::style::MotionStyle`]) says each
+//! - what a classifier trained on real motion alone ([`crate::models::motion_style::MotionStyle`]) says each
 //!   dance is, beside what it says of the real test dances: its accuracy on real dances is the
 //!   ceiling a model's "agrees" share can be read against.
 use serde::{Deserialize, Serialize};
 
-use super::physical::seed_distance_m;
-use super::reference::ReferenceStats;
-use super::score::score_dance;
-use super::style::MotionStyle;
-use super::MetricsError;
+use crate::metrics::physical::seed_distance_m;
+use crate::metrics::reference::ReferenceStats;
+use crate::metrics::score::score_dance;
+use crate::models::motion_style::MotionStyle;
+use crate::metrics::MetricsError;
 use crate::audio::DecodedAudio;
 use crate::models::dancenet::style::most_probable;
 use crate::models::{DanceModel, DanceStyle, GenerateRequest, Progress};
@@ -94,7 +94,7 @@ pub fn style_control(
         for s in songs {
             let req = GenerateRequest { style: Some(style), ..GenerateRequest::plain(s.audio, seed) };
             let raw = model.generate(&req, progress).map_err(|e| MetricsError::Reference(format!("{id} ({}) on {}: {e}", style.name(), s.name)))?.motion;
-            let m = super::eval::as_served(raw, &[]).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
+            let m = super::as_served(raw, &[]).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
             let sc = score_dance(&m, s.beats, &[], reference)?;
             passing += usize::from(sc.scores.verdict.pass);
             speed += sc.scores.physical.mean_speed_m_s;
