@@ -322,11 +322,8 @@ fn dance_songs(
 
 /// A model's motion as a user downloads it: feet planted (the motion stage every job runs), then
 /// fitted to the export's rigid skeleton with the key poses as anchors (what motion.json holds).
-pub(crate) fn as_served(raw: Motion, keys: &[KeyPose]) -> Result<Motion, crate::motion::MotionError> {
-    let anchors: Vec<usize> = keys.iter().map(|k| (k.time_s * raw.fps).round() as usize).collect();
-    let planted = crate::motion::finish(raw, true);
-    let rig = crate::motion::export::prepare_anchored(&planted, &anchors)?;
-    Ok(crate::motion::export::served_motion(&rig))
+fn as_served(raw: Motion, keys: &[KeyPose]) -> Result<Motion, crate::motion::MotionError> {
+    Ok(crate::motion::serve(&crate::motion::finish(raw, true), keys)?.motion)
 }
 
 /// Names of the two rows of a model.
