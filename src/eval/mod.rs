@@ -25,22 +25,26 @@
 //!
 //! Music beats come from [`crate::audio::analyze`] on the whole song and are moved onto the
 //! dance's clock (motion frame 0 = song time `start_position / 25`).
+mod rows;
+mod songs;
 pub mod style_control;
+pub mod tables;
 
 use std::path::{Path, PathBuf};
 
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 
-use crate::metrics::diversity::{diversity, Diversity};
-use crate::metrics::physical::{seed_distance_m, Criterion, PhysicalScores, Verdict};
+use crate::metrics::diversity::Diversity;
 use crate::metrics::reference::ReferenceStats;
-use crate::metrics::score::{multimodality, score_dance, score_set, ScoredDance, SetScores};
+use crate::metrics::score::{score_dance, SetScores};
 use crate::metrics::MetricsError;
-use crate::audio::{self, DecodedAudio};
-use crate::models::{Cancelled, GenerateRequest, ModelId, Progress, Registry};
+use crate::models::{ModelId, Registry};
 use crate::motion::dataset::{Dance, Dataset};
-use crate::motion::{KeyPose, Motion, MOTION_FPS};
+use crate::motion::{KeyPose, Motion};
+use rows::{crop, model_rows, row, Quiet};
+use songs::{song_segment, songs_in, whole_song, Song};
+pub use tables::markdown;
 
 /// Where `--write-reference` writes by default (the committed, compiled-in file).
 pub const REFERENCE_PATH: &str = "src/metrics/reference_train.json";
@@ -154,100 +158,6 @@ pub struct EvalResult {
     pub real_styles: Option<style_control::RealStyles>,
 }
 
-/// A song on a dance's clock: the audio of the segment and the beats within it.
-struct Song {
-    name: String,
-    audio: DecodedAudio,
-    /// Beat times in seconds from the segment start.
-    beats: Vec<f64>,
-}
-
-fn audio_err(e: audio::AudioError) -> MetricsError {
-    MetricsError::NotEnoughData(format!("audio: {e}"))
-}
-
-/// The test dance's song cut to the span the dance covers, with beats from the whole song.
-fn song_segment(d: &Dance) -> Result<Song, MetricsError> {
-    let full = audio::decode_path(&d.audio_path).map_err(audio_err)?;
-    let analysis = audio::analyze(&full).map_err(audio_err)?;
-    let start = d.song_time_s(0);
-    let dur = d.motion.duration_s();
-    let sr = full.sample_rate as f64;
-    let a = ((start * sr).round() as usize).min(full.samples.len());
-    let b = (((start + dur) * sr).round() as usize).min(full.samples.len());
-    let audio = DecodedAudio { samples: full.samples[a..b].to_vec(), duration_s: (b - a) as f64 / sr, ..full };
-    let beats = analysis.beat_times.iter().map(|t| t - start).filter(|t| *t >= 0.0 && *t <= dur).collect();
-    Ok(Song { name: d.id.clone(), audio, beats })
-}
-
-/// An extra song, whole.
-fn whole_song(path: &Path) -> Result<Song, MetricsError> {
-    let audio = audio::decode_path(path).map_err(audio_err)?;
-    let analysis = audio::analyze(&audio).map_err(audio_err)?;
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    Ok(Song { name, audio, beats: analysis.beat_times })
-}
-
-/// A progress sink for the CLI: never cancels.
-struct Quiet;
-impl Progress for Quiet {
-    fn report(&mut self, _stage: &str, _fraction: f32) -> Result<(), Cancelled> {
-        Ok(())
-    }
-}
-
-fn crop(m: &Motion, frames: usize) -> Motion {
-    let n = frames.min(m.positions.dim().0);
-    Motion { fps: m.fps, positions: m.positions.slice(ndarray::s![..n, .., ..]).to_owned() }
-}
-
-/// A row of scored dances; `per_song` groups the indices of dances of one song (different
-/// seeds), with their motions, for multimodality and the seed distance.
-fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: Option<Vec<Vec<(usize, Motion)>>>, reference: &ReferenceStats) -> EvalRow {
-    let dances: Vec<ScoredDance> = scored.iter().map(|(_, s)| s.clone()).collect();
-    let mut scores = score_set(&dances, reference);
-    // The paper's diversity measures: dances grouped by song (each dance alone without groups).
-    let normed: Vec<Vec<Vec<f64>>> = dances.iter().map(|s| s.features.kinetic.iter().map(|r| reference.kinetic.normalise(r)).collect()).collect();
-    let song_groups: Vec<Vec<usize>> = match &per_song {
-        Some(groups) => groups.iter().map(|g| g.iter().map(|(i, _)| *i).collect()).collect(),
-        None => (0..dances.len()).map(|i| vec![i]).collect(),
-    };
-    let by_song: Vec<Vec<&[Vec<f64>]>> = song_groups.iter().map(|g| g.iter().map(|&i| normed[i].as_slice()).collect()).collect();
-    let diversity_v = diversity(&by_song);
-    let (mut multimodality_v, mut seed_mean, mut seed_min) = (None, None, None);
-    if let Some(groups) = per_song {
-        let g: Vec<Vec<&ScoredDance>> = groups.iter().map(|ix| ix.iter().map(|(i, _)| &dances[*i]).collect()).collect();
-        multimodality_v = multimodality(&g, reference);
-        let per_pair: Vec<f64> = groups
-            .iter()
-            .flat_map(|grp| {
-                let mut d = Vec::new();
-                for a in 0..grp.len() {
-                    for b in a + 1..grp.len() {
-                        d.push(seed_distance_m(&grp[a].1, &grp[b].1));
-                    }
-                }
-                d
-            })
-            .filter(|x| !x.is_nan())
-            .collect();
-        if !per_pair.is_empty() {
-            seed_mean = Some(per_pair.iter().sum::<f64>() / per_pair.len() as f64);
-            seed_min = per_pair.iter().copied().reduce(f64::min);
-        }
-        scores.mean.verdict = scores.mean.verdict.clone().with_seed_distance(seed_min);
-    }
-    EvalRow {
-        name: name.into(),
-        scores,
-        multimodality: multimodality_v,
-        seed_distance_m: seed_mean,
-        seed_distance_min_m: seed_min,
-        diversity: diversity_v,
-        dances: scored.into_iter().map(|(e, _)| e).collect(),
-    }
-}
-
 /// Recomputes the reference statistics from the train split and writes them.
 pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, MetricsError> {
     let ds = Dataset::open(data).map_err(|e| MetricsError::Reference(e.to_string()))?;
@@ -259,102 +169,10 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, Metric
     Ok(stats)
 }
 
-/// The audio files of a folder, sorted by name.
-fn songs_in(dir: &Path) -> Result<Vec<PathBuf>, MetricsError> {
-    let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|source| MetricsError::Io { path: dir.display().to_string(), source })?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.is_file() && audio::decode_path(p).is_ok())
-        .collect();
-    paths.sort();
-    Ok(paths)
-}
-
-/// The rows of one model: as served (feet planted) and as the network made them, on the test
-/// songs and on the extra songs. Each dance is generated once and finished both ways.
-struct ModelRows {
-    test: [EvalRow; 2],
-    extra: Option<[EvalRow; 2]>,
-}
-
-/// A model's dances of a list of songs, finished both ways, grouped by song.
-#[derive(Default)]
-struct Danced {
-    scored: [Vec<(EvalDance, ScoredDance)>; 2],
-    per_song: [Vec<Vec<(usize, Motion)>>; 2],
-}
-
-fn dance_songs(
-    model: &dyn crate::models::DanceModel,
-    id: &str,
-    songs: &[Song],
-    keys_of: impl Fn(usize) -> Vec<KeyPose>,
-    args: &EvalArgs,
-    reference: &ReferenceStats,
-) -> Result<Danced, MetricsError> {
-    let mut out = Danced::default();
-    for (i, s) in songs.iter().enumerate() {
-        let keys = keys_of(i);
-        let mut groups: [Vec<(usize, Motion)>; 2] = Default::default();
-        for seed in args.seed..args.seed + args.seeds.max(1) {
-            let req = GenerateRequest { key_poses: &keys, ..GenerateRequest::plain(&s.audio, seed) };
-            let raw = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?.motion;
-            // The motion stage every job runs (feet planted), and the network's motion as it came.
-            // Served: planted and exported through the rigid skeleton, as motion.json holds it.
-            let served = as_served(raw.clone(), &keys).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
-            let finished = [served, crate::motion::finish(raw, false)];
-            if let Some(dir) = &args.previews {
-                write_preview(dir, id, s, seed, &finished[0], &keys)?;
-            }
-            for (v, m) in finished.into_iter().enumerate() {
-                let sc = score_dance(&m, &s.beats, &keys, reference)?;
-                groups[v].push((out.scored[v].len(), m.clone()));
-                let e = EvalDance { song: s.name.clone(), motion: format!("{id}@{seed}"), seconds: m.duration_s(), scores: sc.scores.clone() };
-                out.scored[v].push((e, sc));
-            }
-        }
-        for (v, g) in groups.into_iter().enumerate() {
-            out.per_song[v].push(g);
-        }
-    }
-    Ok(out)
-}
-
 /// A model's motion as a user downloads it: feet planted (the motion stage every job runs), then
 /// fitted to the export's rigid skeleton with the key poses as anchors (what motion.json holds).
 fn as_served(raw: Motion, keys: &[KeyPose]) -> Result<Motion, crate::motion::MotionError> {
     Ok(crate::motion::serve(&crate::motion::finish(raw, true), keys)?.motion)
-}
-
-/// Names of the two rows of a model.
-fn row_names(base: &str) -> [String; 2] {
-    [base.to_string(), format!("{base} (raw network output, feet not planted)")]
-}
-
-fn rows_of(d: Danced, names: &[String; 2], reference: &ReferenceStats) -> [EvalRow; 2] {
-    let Danced { scored: [s0, s1], per_song: [g0, g1] } = d;
-    [row(&names[0], s0, Some(g0), reference), row(&names[1], s1, Some(g1), reference)]
-}
-
-fn model_rows(
-    model: &dyn crate::models::DanceModel,
-    id: &str,
-    test: (&[Song], &[Dance]),
-    extra: &[Song],
-    args: &EvalArgs,
-    reference: &ReferenceStats,
-) -> Result<ModelRows, MetricsError> {
-    let keyed = args.key_poses > 0 && model.info().capabilities.key_poses;
-    let (songs, dances) = test;
-    let keys_of = |i: usize| if keyed { key_poses_of(&dances[i], args.key_poses, args.seed + i as u64) } else { Vec::new() };
-    let base = if keyed { format!("{id} + {} key poses", args.key_poses) } else { id.to_string() };
-    let test_rows = rows_of(dance_songs(model, id, songs, keys_of, args, reference)?, &row_names(&base), reference);
-    let extra_rows = if extra.is_empty() {
-        None
-    } else {
-        Some(rows_of(dance_songs(model, id, extra, |_| Vec::new(), args, reference)?, &row_names(id), reference))
-    };
-    Ok(ModelRows { test: test_rows, extra: extra_rows })
 }
 
 /// Runs the evaluation and returns the rows (printing nothing but a note for a missing
@@ -449,211 +267,6 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
         }
     }
     Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows, extra_songs: extra_names, extra_rows, style_control, real_styles })
-}
-
-/// Writes the contact sheet of `model`'s dance to `song` with `seed` into `dir`.
-fn write_preview(dir: &Path, model: &str, song: &Song, seed: u64, motion: &Motion, keys: &[KeyPose]) -> Result<(), MetricsError> {
-    use crate::report::preview::{write_png, Caption, Sheet};
-    let stem = song.name.rsplit_once('.').map_or(song.name.as_str(), |(stem, _)| stem);
-    let name: String = format!("{model}_{stem}_seed{seed}.png")
-        .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' })
-        .collect();
-    std::fs::create_dir_all(dir).map_err(|source| MetricsError::Io { path: dir.display().to_string(), source })?;
-    let caption = Caption { model: model.to_string(), seed, song: Some(song.name.clone()), style: None };
-    let key_pose_times: Vec<f64> = keys.iter().map(|k| k.time_s).collect();
-    let sheet = Sheet { motion, beat_times: &song.beats, key_pose_times: &key_pose_times, song_duration_s: song.audio.duration_s, caption: &caption };
-    let path = dir.join(name);
-    write_png(&path, &sheet).map_err(|e| MetricsError::Io { path: path.display().to_string(), source: std::io::Error::other(e) })
-}
-
-/// `n` poses of a real dance (root-relative, metres) at distinct frames after its first second,
-/// drawn by `seed`, in time order.
-fn key_poses_of(d: &Dance, n: usize, seed: u64) -> Vec<KeyPose> {
-    let rel = d.root_relative();
-    let first = MOTION_FPS as usize;
-    let mut frames: Vec<usize> = (first..d.motion.num_frames()).collect();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    frames.shuffle(&mut rng);
-    frames.truncate(n);
-    frames.sort_unstable();
-    frames
-        .into_iter()
-        .map(|f| KeyPose {
-            time_s: f as f64 / d.motion.fps,
-            joints: (0..rel.dim().1).map(|j| [0, 1, 2].map(|a| f64::from(rel[[f, j, a]]))).collect(),
-        })
-        .collect()
-}
-
-fn f(x: f64) -> String {
-    if x.is_nan() {
-        "–".into()
-    } else {
-        format!("{x:.3}")
-    }
-}
-
-fn f2(x: f64) -> String {
-    if x.is_nan() {
-        "–".into()
-    } else {
-        format!("{x:.2}")
-    }
-}
-
-fn opt(x: Option<f64>) -> String {
-    x.map(f).unwrap_or_else(|| "–".into())
-}
-
-/// The failing criteria with their values, or "pass".
-fn verdict_cell(v: &Verdict) -> String {
-    let fails: Vec<String> = v
-        .criteria
-        .iter()
-        .filter(|c: &&Criterion| c.pass == Some(false))
-        .map(|c| format!("✗ {} {}", c.name, c.value.map(f2).unwrap_or_default()))
-        .collect();
-    if fails.is_empty() {
-        "pass".into()
-    } else {
-        fails.join("; ")
-    }
-}
-
-/// The scores table of a set of rows.
-fn scores_table(rows: &[EvalRow]) -> String {
-    let mut out = String::from(
-        "| Motion | n | BAS FACT ↑ | (chance) | BAS Bailando ↑ | Coverage | Hit rate ↑ | Rhythm hit ↑ | Beat F ↑ | FID_k window ↓ | FID_g window ↓ | FID_k dance ↓ | FID_g dance ↓ | Div_k | Div_g | S_cv ↓ | Skate ↓ | Authentic ↑ | Coherent ↑ | Multimodality |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
-    );
-    for r in rows {
-        let m = &r.scores.mean;
-        let cells = [
-            r.name.clone(),
-            r.scores.dances.to_string(),
-            f(m.rhythm.bas_fact),
-            f(m.rhythm.bas_fact_chance),
-            f(m.rhythm.bas_bailando),
-            f(m.rhythm.beat_coverage),
-            f(m.rhythm.beat_hit_rate),
-            f(m.rhythm.rhythm_hit),
-            f(m.rhythm.f_measure),
-            f(r.scores.fid_k_window),
-            f(r.scores.fid_g_window),
-            f(r.scores.fid_k_dance),
-            f(r.scores.fid_g_dance),
-            f(r.scores.div_k),
-            f(r.scores.div_g),
-            f(m.smoothness_cv),
-            f(m.foot_skating.skate_ratio),
-            f(m.plausibility.authenticity),
-            f(m.plausibility.coherence),
-            opt(r.multimodality),
-        ];
-        out.push_str(&format!("| {} |\n", cells.join(" | ")));
-    }
-    out
-}
-
-const PHYSICAL_HEADER: &str = "| Motion | n | Lowest foot p5 / median / p95 m | Below −5 cm | Deepest m | Accel median / p99 / p99.9 / max m/s² | Key pop max m/s² ↓ | Speed m/s | × real | Freeze L/F | Seed Δ m (min) | Key err cm (worst) ↓ | Verdict | Dances passing |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-
-/// TSMT's own measures (Li et al. 2020): its three diversities, authenticity and coherence, and
-/// beat precision/recall/F of FACT motion beats against music beats (±0.1 s).
-fn paper_table(rows: &[EvalRow]) -> String {
-    let mut out = String::from("| Motion | n | A-seq-D | I-seq-D | S-music-D | Authentic ↑ | Coherent ↑ | Beat P | Beat R | Beat F (TSMT) |\n|---|---|---|---|---|---|---|---|---|---|\n");
-    for r in rows {
-        let m = &r.scores.mean;
-        let d = &r.diversity;
-        let b = &m.rhythm.beat_prf;
-        let cells = [
-            r.name.clone(),
-            r.scores.dances.to_string(),
-            opt(d.a_seq_d),
-            opt(d.i_seq_d),
-            opt(d.s_music_d),
-            f(m.plausibility.authenticity),
-            f(m.plausibility.coherence),
-            f(b.precision),
-            f(b.recall),
-            f(b.f),
-        ];
-        out.push_str(&format!("| {} |\n", cells.join(" | ")));
-    }
-    out
-}
-
-/// One line of the physical table: `tail` is the seed distance, key error, verdict and passing cells.
-fn physical_cells(name: &str, n: usize, p: &PhysicalScores, freeze: f64, tail: [String; 4]) -> String {
-    let [seeds, key_err, verdict, passing] = tail;
-    let cells = [
-        name.to_string(),
-        n.to_string(),
-        format!("{} / {} / {}", f2(p.lowest_foot_m.p5), f2(p.lowest_foot_m.median), f2(p.lowest_foot_m.p95)),
-        format!("{:.1} %", 100.0 * p.below_floor_share),
-        f2(p.deepest_m),
-        format!("{} / {} / {} / {}", f2(p.acceleration_m_s2.median), f2(p.acceleration_m_s2.p99), f2(p.acceleration_m_s2.p99_9), f2(p.acceleration_m_s2.max)),
-        p.key_pose_pops_m_s2.iter().copied().reduce(f64::max).map(f2).unwrap_or_else(|| "–".into()),
-        f2(p.mean_speed_m_s),
-        f2(p.speed_ratio),
-        f(freeze),
-        seeds,
-        key_err,
-        verdict,
-        passing,
-    ];
-    format!("| {} |\n", cells.join(" | "))
-}
-
-/// The physical-plausibility table of a set of rows, under the real train figures.
-fn physical_table(rows: &[EvalRow], reference: Option<&ReferenceStats>) -> String {
-    let mut out = String::from(PHYSICAL_HEADER);
-    if let Some(r) = reference {
-        let p = &r.physical;
-        let name = format!("Real train (reference; speed per dance {:.2}–{:.2})", p.mean_speed_range_m_s[0], p.mean_speed_range_m_s[1]);
-        out.push_str(&physical_cells(&name, r.dances.len(), &p.pooled, f64::NAN, ["–".into(), "–".into(), "–".into(), "–".into()]));
-    }
-    for r in rows {
-        let m = &r.scores.mean;
-        let seeds = match (r.seed_distance_m, r.seed_distance_min_m) {
-            (Some(a), Some(b)) => format!("{} ({})", f2(a), f2(b)),
-            _ => "–".into(),
-        };
-        let passing = format!("{}/{}", r.scores.dances_passing, r.scores.dances);
-        let key_err = worst_key_error(r).map(f2).unwrap_or_else(|| "–".into());
-        out.push_str(&physical_cells(&r.name, r.scores.dances, &m.physical, m.freezing_ratio, [seeds, key_err, verdict_cell(&m.verdict), passing]));
-    }
-    out
-}
-
-/// The row's worst key-pose error (cm), from its verdict.
-fn worst_key_error(r: &EvalRow) -> Option<f64> {
-    r.scores.mean.verdict.get(crate::metrics::physical::names::KEY_POSES).and_then(|c| c.value)
-}
-
-/// The Markdown `choreo eval` prints: per section, a scores table and a physical-plausibility
-/// table (the verdict: each criterion as the row's worst dance has it; the values beside it are
-/// every frame of the row pooled).
-pub fn markdown(result: &EvalResult) -> String {
-    let reference = ReferenceStats::builtin().ok();
-    let mut out = format!("## {} split ({} songs, each cut to its dance)\n\n### Scores\n\n", result.split, result.rows.first().map_or(0, |r| r.scores.dances));
-    out += &scores_table(&result.rows);
-    out += "\n### Physical plausibility\n\n";
-    out += &physical_table(&result.rows, reference.as_ref());
-    out += "\n### TSMT's measures (diversity on z-normalised kinetic 5-s windows, beat P/R/F ±0.1 s)\n\n";
-    out += &paper_table(&result.rows);
-    if !result.extra_rows.is_empty() {
-        out += &format!("\n## Extra songs, whole ({})\n\n### Scores\n\n", result.extra_songs.join(", "));
-        out += &scores_table(&result.extra_rows);
-        out += "\n### Physical plausibility\n\n";
-        out += &physical_table(&result.extra_rows, reference.as_ref());
-        out += "\n### TSMT's measures\n\n";
-        out += &paper_table(&result.extra_rows);
-    }
-    if !result.style_control.is_empty() {
-        out += "\n## Style control (every song above, test and extra, in each style)\n\n";
-        out += &style_control::markdown(&result.style_control, result.real_styles.as_ref());
-    }
-    out
 }
 
 /// `choreo eval`: writes the reference, or evaluates, prints the table and writes the JSON.
