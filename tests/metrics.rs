@@ -363,7 +363,7 @@ fn report_rejects_a_motion_with_the_wrong_joint_count() {
 
 mod real_data {
     use super::*;
-    use choreo::eval::{evaluate, EvalArgs};
+    use choreo::eval::{evaluate, EvalOptions};
     use choreo::motion::dataset::Dataset;
     use std::path::PathBuf;
 
@@ -379,24 +379,8 @@ mod real_data {
         None
     }
 
-    fn args(root: PathBuf) -> EvalArgs {
-        EvalArgs {
-            models: vec![],
-            real_only: true,
-            split: "test".into(),
-            songs: vec![],
-            no_shared_songs: true,
-            json: None,
-            data: root,
-            models_dir: "models".into(),
-            seed: 0,
-            seeds: 2,
-            key_poses: 0,
-            previews: None,
-            mismatch_per_song: 3,
-            write_reference: false,
-            reference_out: "unused".into(),
-        }
+    fn args(root: PathBuf) -> EvalOptions {
+        EvalOptions { real_only: true, no_shared_songs: true, data: root, mismatch_per_song: 3, ..EvalOptions::default() }
     }
 
     #[test]

@@ -38,73 +38,129 @@ use rand::SeedableRng;
 use crate::metrics::diversity::Diversity;
 use crate::metrics::reference::ReferenceStats;
 use crate::metrics::score::{score_dance, SetScores};
+use crate::audio::AudioError;
 use crate::metrics::MetricsError;
-use crate::models::{ModelId, Registry};
+use crate::models::motion_style::{MotionStyle, StyleError};
+use crate::models::{ModelError, ModelId, Registry};
 use crate::motion::dataset::{Dance, Dataset};
-use crate::motion::{KeyPose, Motion};
+use crate::motion::{KeyPose, Motion, MotionError};
+use crate::report::preview::PreviewError;
 use rows::{crop, model_rows, row, Quiet};
 use songs::{song_segment, songs_in, whole_song, Song};
 pub use tables::markdown;
 
-/// Where `--write-reference` writes by default (the committed, compiled-in file).
+/// Where [`write_reference`] writes the committed, compiled-in statistics (`choreo eval
+/// --write-reference`'s default).
 pub const REFERENCE_PATH: &str = "src/metrics/reference_train.json";
 /// The songs every model dances besides the test split (relative to the repository root).
 pub const SHARED_SONGS: &str = "../shared/audio";
 
-/// Arguments of `choreo eval`.
-#[derive(Clone, Debug, clap::Args)]
-pub struct EvalArgs {
+/// What `choreo eval` evaluates. `Default` is the committed protocol (the CLI's defaults).
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
     /// Model ids to evaluate (e.g. dance-revolution); none means every model served from
-    /// --models-dir.
+    /// `models_dir`.
     pub models: Vec<String>,
     /// Real and Mismatched real only: no model is run.
-    #[arg(long)]
     pub real_only: bool,
-    /// Dataset split whose songs are evaluated.
-    #[arg(long, default_value = "test")]
+    /// Dataset split whose songs are evaluated (`test` or `train`).
     pub split: String,
     /// More folders of songs (every audio file in each), danced whole by each model beside
-    /// ../shared/audio.
-    #[arg(long)]
+    /// [`SHARED_SONGS`].
     pub songs: Vec<PathBuf>,
-    /// Leave out ../shared/audio (the test split and --songs only).
-    #[arg(long)]
+    /// Leave out [`SHARED_SONGS`] (the test split and `songs` only).
     pub no_shared_songs: bool,
-    /// Write the full results as JSON here.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
     /// The dance-with-melody folder.
-    #[arg(long, default_value = crate::motion::dataset::DEFAULT_ROOT)]
     pub data: PathBuf,
     /// Where trained models live.
-    #[arg(long, default_value = "models")]
     pub models_dir: PathBuf,
     /// First seed (mismatch pairing and generation).
-    #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Dances generated per song and model (seeds seed..seed+N); ≥ 2 gives multimodality and
     /// the seed sensitivity.
-    #[arg(long, default_value_t = 2)]
     pub seeds: u64,
     /// Key poses given to models that take them, on each test song: this many poses of the real
     /// test dance (root-relative) at frames drawn by the seed after its first second. Extra songs
-    /// get none. The key-pose error column then shows how closely the dances pass through them.
-    #[arg(long, default_value_t = 0)]
+    /// get none.
     pub key_poses: usize,
     /// Write each generated dance's contact sheet (as served) here as
     /// `<model>_<song>_seed<seed>.png` (the picture jobs serve as preview.png).
-    #[arg(long, value_name = "DIR")]
     pub previews: Option<PathBuf>,
     /// Train dances paired with each test song in the Mismatched-real row.
-    #[arg(long, default_value_t = 1)]
     pub mismatch_per_song: usize,
-    /// Recompute the reference statistics from the train split, write them to
-    /// src/metrics/reference_train.json (or --reference-out) and exit.
-    #[arg(long)]
-    pub write_reference: bool,
-    /// Output path for --write-reference.
-    #[arg(long, default_value = REFERENCE_PATH)]
-    pub reference_out: PathBuf,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        Self {
+            models: Vec::new(),
+            real_only: false,
+            split: "test".into(),
+            songs: Vec::new(),
+            no_shared_songs: false,
+            data: PathBuf::from(crate::motion::dataset::DEFAULT_ROOT),
+            models_dir: PathBuf::from("models"),
+            seed: 0,
+            seeds: 2,
+            key_poses: 0,
+            previews: None,
+            mismatch_per_song: 1,
+        }
+    }
+}
+
+impl EvalOptions {
+    /// Whether the extra-song section will miss [`SHARED_SONGS`] (asked for, but not there).
+    pub fn shared_songs_missing(&self) -> bool {
+        !self.real_only && !self.no_shared_songs && !Path::new(SHARED_SONGS).is_dir()
+    }
+}
+
+/// Everything that can stop `choreo eval`.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    #[error(transparent)]
+    Metrics(#[from] MetricsError),
+    #[error("dataset: {0}")]
+    Dataset(#[from] MotionError),
+    #[error("unknown split {0:?} (test or train)")]
+    UnknownSplit(String),
+    #[error("audio: {0}")]
+    Audio(#[from] AudioError),
+    #[error("loading models: {0}")]
+    Models(ModelError),
+    #[error("model {id} not found under {dir}")]
+    UnknownModel { id: String, dir: PathBuf },
+    /// `model` may carry the style asked for, e.g. `dancenet (waltz)`.
+    #[error("{model} on {song}: {source}")]
+    Generate { model: String, song: String, source: ModelError },
+    #[error("{model} on {song}: export: {source}")]
+    Export { model: String, song: String, source: MotionError },
+    #[error("motion style classifier{on}: {source}")]
+    Classifier { on: String, source: StyleError },
+    #[error("{path}: {source}")]
+    Preview { path: PathBuf, source: PreviewError },
+    #[error("i/o error on {path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+}
+
+impl EvalError {
+    /// Stable kebab-case name of the failure.
+    pub fn code(&self) -> &'static str {
+        match self {
+            EvalError::Metrics(e) => e.code(),
+            EvalError::Dataset(e) => e.code(),
+            EvalError::UnknownSplit(_) => "eval-unknown-split",
+            EvalError::Audio(e) => e.code(),
+            EvalError::Models(_) => "eval-models-unavailable",
+            EvalError::UnknownModel { .. } => "eval-unknown-model",
+            EvalError::Generate { .. } => "eval-generate-failed",
+            EvalError::Export { .. } => "eval-export-failed",
+            EvalError::Classifier { source, .. } => source.code(),
+            EvalError::Preview { source, .. } => source.code(),
+            EvalError::Io { .. } => "eval-io",
+        }
+    }
 }
 
 /// One row of the table.
@@ -159,10 +215,10 @@ pub struct EvalResult {
 }
 
 /// Recomputes the reference statistics from the train split and writes them.
-pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, MetricsError> {
-    let ds = Dataset::open(data).map_err(|e| MetricsError::Reference(e.to_string()))?;
+pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, EvalError> {
+    let ds = Dataset::open(data)?;
     let ids = ds.train_ids().to_vec();
-    let dances = ds.load_all(&ids).map_err(|e| MetricsError::Reference(e.to_string()))?;
+    let dances = ds.load_all(&ids)?;
     let motions: Vec<Motion> = dances.into_iter().map(|d| d.motion).collect();
     let stats = ReferenceStats::compute("dance-with-melody train split", ids, &motions)?;
     stats.write(out)?;
@@ -171,21 +227,21 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, Metric
 
 /// A model's motion as a user downloads it: feet planted (the motion stage every job runs), then
 /// fitted to the export's rigid skeleton with the key poses as anchors (what motion.json holds).
-fn as_served(raw: Motion, keys: &[KeyPose]) -> Result<Motion, crate::motion::MotionError> {
+fn as_served(raw: Motion, keys: &[KeyPose]) -> Result<Motion, MotionError> {
     Ok(crate::motion::serve(&crate::motion::finish(raw, true), keys)?.motion)
 }
 
-/// Runs the evaluation and returns the rows (printing nothing but a note for a missing
-/// ../shared/audio).
-pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
+/// Runs the evaluation and returns the rows (printing nothing; without [`SHARED_SONGS`] the
+/// extra-song section covers `songs` only: see [`EvalOptions::shared_songs_missing`]).
+pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
     let reference = ReferenceStats::builtin()?;
-    let ds = Dataset::open(&args.data).map_err(|e| MetricsError::Reference(e.to_string()))?;
+    let ds = Dataset::open(&args.data)?;
     let ids: Vec<String> = match args.split.as_str() {
         "test" => ds.test_ids().to_vec(),
         "train" => ds.train_ids().to_vec(),
-        other => return Err(MetricsError::NotEnoughData(format!("unknown split {other:?} (test or train)"))),
+        other => return Err(EvalError::UnknownSplit(other.to_string())),
     };
-    let eval_dances = ds.load_all(&ids).map_err(|e| MetricsError::Reference(e.to_string()))?;
+    let eval_dances = ds.load_all(&ids)?;
     let songs: Vec<Song> = eval_dances.iter().map(song_segment).collect::<Result<_, _>>()?;
     let mut rows = Vec::new();
 
@@ -198,7 +254,7 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
     rows.push(row("Real", real, None, &reference));
 
     // Mismatched real: train dances (never the song's own) on each song, seeded.
-    let train = ds.load_all(ds.train_ids()).map_err(|e| MetricsError::Reference(e.to_string()))?;
+    let train = ds.load_all(ds.train_ids())?;
     let mut rng = rand::rngs::StdRng::seed_from_u64(args.seed);
     let mut mism = Vec::new();
     for (d, s) in eval_dances.iter().zip(&songs) {
@@ -224,14 +280,13 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
     let mut extra_names = Vec::new();
     let (mut style_control, mut real_styles) = (Vec::new(), None);
     if !args.real_only {
-        let registry = Registry::load(&args.models_dir).map_err(|e| MetricsError::Reference(format!("loading models: {e}")))?;
+        let registry = Registry::load(&args.models_dir).map_err(EvalError::Models)?;
         let mut folders: Vec<PathBuf> = Vec::new();
         if !args.no_shared_songs {
             let shared = PathBuf::from(SHARED_SONGS);
+            // Missing, it is left out (the CLI says so: `shared_songs_missing`).
             if shared.is_dir() {
                 folders.push(shared);
-            } else {
-                eprintln!("note: {SHARED_SONGS} not found; the extra-song section covers --songs only");
             }
         }
         folders.extend(args.songs.iter().cloned());
@@ -245,11 +300,11 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
         let ids: Vec<String> = if args.models.is_empty() { registry.list().into_iter().map(|m| m.id.0).collect() } else { args.models.clone() };
         // The motion style classifier, for style control (absent: distances and verdicts only).
         let classifier_dir = args.models_dir.join(crate::models::motion_style::ID);
-        let classifier = if classifier_dir.is_dir() { Some(crate::models::motion_style::MotionStyle::load(&classifier_dir).map_err(|e| MetricsError::Reference(format!("motion style classifier: {e}")))?) } else { None };
+        let classifier = if classifier_dir.is_dir() { Some(MotionStyle::load(&classifier_dir).map_err(|source| EvalError::Classifier { on: String::new(), source })?) } else { None };
         for id in &ids {
             let model = registry
                 .get(&ModelId(id.clone()))
-                .ok_or_else(|| MetricsError::Reference(format!("model {id} not found under {}", args.models_dir.display())))?;
+                .ok_or_else(|| EvalError::UnknownModel { id: id.clone(), dir: args.models_dir.clone() })?;
             let r = model_rows(model.as_ref(), id, (&songs, &eval_dances), &extra, args, &reference)?;
             rows.extend(r.test);
             if let Some(e) = r.extra {
@@ -267,41 +322,4 @@ pub fn evaluate(args: &EvalArgs) -> Result<EvalResult, MetricsError> {
         }
     }
     Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows, extra_songs: extra_names, extra_rows, style_control, real_styles })
-}
-
-/// `choreo eval`: writes the reference, or evaluates, prints the table and writes the JSON.
-pub fn run(args: &EvalArgs) -> Result<(), MetricsError> {
-    if args.write_reference {
-        let s = write_reference(&args.data, &args.reference_out)?;
-        println!(
-            "wrote {} ({} train dances, {} kinetic / {} geometric windows, body scale {:?})",
-            args.reference_out.display(),
-            s.dances.len(),
-            s.kinetic.gaussian.count,
-            s.geometric.gaussian.count,
-            s.body_scale
-        );
-        let p = &s.physical;
-        println!(
-            "train physical: lowest foot p5 {:.3} / median {:.3} / p95 {:.3} m; acceleration median {:.2}, p99 {:.2}, p99.9 {:.2}, max {:.2} m/s²; mean joint speed {:.3} m/s (per dance {:.2}–{:.2})",
-            p.pooled.lowest_foot_m.p5,
-            p.pooled.lowest_foot_m.median,
-            p.pooled.lowest_foot_m.p95,
-            p.pooled.acceleration_m_s2.median,
-            p.pooled.acceleration_m_s2.p99,
-            p.pooled.acceleration_m_s2.p99_9,
-            p.pooled.acceleration_m_s2.max,
-            p.pooled.mean_speed_m_s,
-            p.mean_speed_range_m_s[0],
-            p.mean_speed_range_m_s[1]
-        );
-        return Ok(());
-    }
-    let result = evaluate(args)?;
-    print!("{}", markdown(&result));
-    if let Some(path) = &args.json {
-        let text = serde_json::to_string_pretty(&result)?;
-        std::fs::write(path, text).map_err(|source| MetricsError::Io { path: path.display().to_string(), source })?;
-    }
-    Ok(())
 }

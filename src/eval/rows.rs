@@ -3,12 +3,11 @@
 use std::path::Path;
 
 use super::songs::{key_poses_of, Song};
-use super::{as_served, EvalDance, EvalArgs, EvalRow};
+use super::{as_served, EvalDance, EvalError, EvalOptions, EvalRow};
 use crate::metrics::diversity::diversity;
 use crate::metrics::physical::seed_distance_m;
 use crate::metrics::reference::ReferenceStats;
 use crate::metrics::score::{multimodality, score_dance, score_set, ScoredDance};
-use crate::metrics::MetricsError;
 use crate::models::{Cancelled, GenerateRequest, Progress};
 use crate::motion::dataset::Dance;
 use crate::motion::{KeyPose, Motion};
@@ -92,19 +91,19 @@ fn dance_songs(
     id: &str,
     songs: &[Song],
     keys_of: impl Fn(usize) -> Vec<KeyPose>,
-    args: &EvalArgs,
+    args: &EvalOptions,
     reference: &ReferenceStats,
-) -> Result<Danced, MetricsError> {
+) -> Result<Danced, EvalError> {
     let mut out = Danced::default();
     for (i, s) in songs.iter().enumerate() {
         let keys = keys_of(i);
         let mut groups: [Vec<(usize, Motion)>; 2] = Default::default();
         for seed in args.seed..args.seed + args.seeds.max(1) {
             let req = GenerateRequest { key_poses: &keys, ..GenerateRequest::plain(&s.audio, seed) };
-            let raw = model.generate(&req, &mut Quiet).map_err(|e| MetricsError::Reference(format!("{id} on {}: {e}", s.name)))?.motion;
+            let raw = model.generate(&req, &mut Quiet).map_err(|source| EvalError::Generate { model: id.into(), song: s.name.clone(), source })?.motion;
             // The motion stage every job runs (feet planted), and the network's motion as it came.
             // Served: planted and exported through the rigid skeleton, as motion.json holds it.
-            let served = as_served(raw.clone(), &keys).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
+            let served = as_served(raw.clone(), &keys).map_err(|source| EvalError::Export { model: id.into(), song: s.name.clone(), source })?;
             let finished = [served, crate::motion::finish(raw, false)];
             if let Some(dir) = &args.previews {
                 write_preview(dir, id, s, seed, &finished[0], &keys)?;
@@ -138,9 +137,9 @@ pub(super) fn model_rows(
     id: &str,
     test: (&[Song], &[Dance]),
     extra: &[Song],
-    args: &EvalArgs,
+    args: &EvalOptions,
     reference: &ReferenceStats,
-) -> Result<ModelRows, MetricsError> {
+) -> Result<ModelRows, EvalError> {
     let keyed = args.key_poses > 0 && model.info().capabilities.key_poses;
     let (songs, dances) = test;
     let keys_of = |i: usize| if keyed { key_poses_of(&dances[i], args.key_poses, args.seed + i as u64) } else { Vec::new() };
@@ -155,17 +154,17 @@ pub(super) fn model_rows(
 }
 
 /// Writes the contact sheet of `model`'s dance to `song` with `seed` into `dir`.
-fn write_preview(dir: &Path, model: &str, song: &Song, seed: u64, motion: &Motion, keys: &[KeyPose]) -> Result<(), MetricsError> {
+fn write_preview(dir: &Path, model: &str, song: &Song, seed: u64, motion: &Motion, keys: &[KeyPose]) -> Result<(), EvalError> {
     use crate::report::preview::{write_png, Caption, Sheet};
     let stem = song.name.rsplit_once('.').map_or(song.name.as_str(), |(stem, _)| stem);
     let name: String = format!("{model}_{stem}_seed{seed}.png")
         .chars()
         .map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' })
         .collect();
-    std::fs::create_dir_all(dir).map_err(|source| MetricsError::Io { path: dir.display().to_string(), source })?;
+    std::fs::create_dir_all(dir).map_err(|source| EvalError::Io { path: dir.to_path_buf(), source })?;
     let caption = Caption { model: model.to_string(), seed, song: Some(song.name.clone()), style: None };
     let key_pose_times: Vec<f64> = keys.iter().map(|k| k.time_s).collect();
     let sheet = Sheet { motion, beat_times: &song.beats, key_pose_times: &key_pose_times, song_duration_s: song.audio.duration_s, caption: &caption };
     let path = dir.join(name);
-    write_png(&path, &sheet).map_err(|e| MetricsError::Io { path: path.display().to_string(), source: std::io::Error::other(e) })
+    write_png(&path, &sheet).map_err(|source| EvalError::Preview { path, source })
 }

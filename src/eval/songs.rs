@@ -5,8 +5,8 @@ use std::path::{Path, PathBuf};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 
+use super::EvalError;
 use crate::audio::{self, DecodedAudio};
-use crate::metrics::MetricsError;
 use crate::motion::dataset::Dance;
 use crate::motion::{KeyPose, MOTION_FPS};
 
@@ -18,14 +18,10 @@ pub(super) struct Song {
     pub(super) beats: Vec<f64>,
 }
 
-fn audio_err(e: audio::AudioError) -> MetricsError {
-    MetricsError::NotEnoughData(format!("audio: {e}"))
-}
-
 /// The test dance's song cut to the span the dance covers, with beats from the whole song.
-pub(super) fn song_segment(d: &Dance) -> Result<Song, MetricsError> {
-    let full = audio::decode_path(&d.audio_path).map_err(audio_err)?;
-    let analysis = audio::analyze(&full).map_err(audio_err)?;
+pub(super) fn song_segment(d: &Dance) -> Result<Song, EvalError> {
+    let full = audio::decode_path(&d.audio_path)?;
+    let analysis = audio::analyze(&full)?;
     let start = d.song_time_s(0);
     let dur = d.motion.duration_s();
     let sr = full.sample_rate as f64;
@@ -37,16 +33,16 @@ pub(super) fn song_segment(d: &Dance) -> Result<Song, MetricsError> {
 }
 
 /// An extra song, whole.
-pub(super) fn whole_song(path: &Path) -> Result<Song, MetricsError> {
-    let audio = audio::decode_path(path).map_err(audio_err)?;
-    let analysis = audio::analyze(&audio).map_err(audio_err)?;
+pub(super) fn whole_song(path: &Path) -> Result<Song, EvalError> {
+    let audio = audio::decode_path(path)?;
+    let analysis = audio::analyze(&audio)?;
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     Ok(Song { name, audio, beats: analysis.beat_times })
 }
 /// The audio files of a folder, sorted by name.
-pub(super) fn songs_in(dir: &Path) -> Result<Vec<PathBuf>, MetricsError> {
+pub(super) fn songs_in(dir: &Path) -> Result<Vec<PathBuf>, EvalError> {
     let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|source| MetricsError::Io { path: dir.display().to_string(), source })?
+        .map_err(|source| EvalError::Io { path: dir.to_path_buf(), source })?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_file() && audio::decode_path(p).is_ok())
         .collect();

@@ -8,11 +8,12 @@
 //!   ceiling a model's "agrees" share can be read against.
 use serde::{Deserialize, Serialize};
 
+use super::EvalError;
+
 use crate::metrics::physical::seed_distance_m;
 use crate::metrics::reference::ReferenceStats;
 use crate::metrics::score::score_dance;
 use crate::models::motion_style::MotionStyle;
-use crate::metrics::MetricsError;
 use crate::audio::DecodedAudio;
 use crate::models::dancenet::style::most_probable;
 use crate::models::{DanceModel, DanceStyle, GenerateRequest, Progress};
@@ -64,11 +65,11 @@ pub struct RealStyles {
 }
 
 /// Classifies real dances `(id, motion)`, their style from the id.
-pub fn real_styles(classifier: &MotionStyle, dances: &[(&str, &Motion)]) -> Result<RealStyles, MetricsError> {
+pub fn real_styles(classifier: &MotionStyle, dances: &[(&str, &Motion)]) -> Result<RealStyles, EvalError> {
     let mut out = Vec::new();
     for (id, m) in dances {
         let Some(truth) = DanceStyle::of_dance_id(id) else { continue };
-        let p = classifier.classify(m).map_err(|e| MetricsError::Reference(format!("motion style classifier on {id}: {e}")))?;
+        let p = classifier.classify(m).map_err(|source| EvalError::Classifier { on: format!(" on {id}"), source })?;
         out.push((id.to_string(), truth, most_probable(&p)));
     }
     let accuracy = out.iter().filter(|(_, a, b)| a == b).count() as f64 / out.len().max(1) as f64;
@@ -84,7 +85,7 @@ pub fn style_control(
     classifier: Option<&MotionStyle>,
     reference: &ReferenceStats,
     progress: &mut dyn Progress,
-) -> Result<StyleControl, MetricsError> {
+) -> Result<StyleControl, EvalError> {
     let mut asked = Vec::new();
     // served[style][song]
     let mut served: Vec<Vec<Motion>> = Vec::new();
@@ -93,13 +94,13 @@ pub fn style_control(
         let mut motions = Vec::new();
         for s in songs {
             let req = GenerateRequest { style: Some(style), ..GenerateRequest::plain(s.audio, seed) };
-            let raw = model.generate(&req, progress).map_err(|e| MetricsError::Reference(format!("{id} ({}) on {}: {e}", style.name(), s.name)))?.motion;
-            let m = super::as_served(raw, &[]).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
+            let raw = model.generate(&req, progress).map_err(|source| EvalError::Generate { model: format!("{id} ({})", style.name()), song: s.name.to_string(), source })?.motion;
+            let m = super::as_served(raw, &[]).map_err(|source| EvalError::Export { model: id.into(), song: s.name.to_string(), source })?;
             let sc = score_dance(&m, s.beats, &[], reference)?;
             passing += usize::from(sc.scores.verdict.pass);
             speed += sc.scores.physical.mean_speed_m_s;
             if let Some(c) = classifier {
-                let p = c.classify(&m).map_err(|e| MetricsError::Reference(format!("motion style classifier: {e}")))?;
+                let p = c.classify(&m).map_err(|source| EvalError::Classifier { on: String::new(), source })?;
                 classified[most_probable(&p).index()] += 1;
             }
             motions.push(m);

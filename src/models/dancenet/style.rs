@@ -116,7 +116,7 @@ impl StyleConfig {
 }
 
 /// What the fully connected layer reads of the Bi-LSTM.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Readout {
     /// The forward direction's last state and the backward direction's first.

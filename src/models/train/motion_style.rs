@@ -17,16 +17,23 @@ use crate::motion::dataset::Dataset;
 use crate::motion::Motion;
 
 /// Options of one training run (the card gives the run behind the committed weights).
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct Options {
-    #[command(flatten)]
     pub common: CommonOptions,
-    #[command(flatten)]
     pub schedule: ClassifyOptions,
     /// Windows of no style ([`no_style_windows`]) added to each batch with a uniform target
     /// (0: none).
-    #[arg(long, default_value_t = 4)]
     pub no_style_per_batch: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            common: CommonOptions::default(),
+            schedule: ClassifyOptions::default(),
+            no_style_per_batch: 4,
+        }
+    }
 }
 
 /// How many windows of no style are made (each batch draws from them).
