@@ -7,7 +7,7 @@
 //!     cropped to the test dance's length: real motion that ignores this music. A rhythm metric
 //!     that cannot tell Real from Mismatched real measures nothing.
 //!   - two rows per served model: as served (after [`crate::motion::finish`], feet planted, and
-//!     the export's rigid skeleton: what motion.json holds) and
+//!     [`crate::motion::serve`], the export's rigid skeleton: what motion.json holds) and
 //!     the network's raw output; each dance is generated once and finished both ways.
 //! - **Extra songs**: every audio file of `../shared/audio` (and of each `--songs` folder), whole,
 //!   danced by each model; no real dance exists for them, so only model rows.
@@ -136,8 +136,9 @@ pub enum EvalError {
     Generate { model: String, song: String, source: ModelError },
     #[error("{model} on {song}: export: {source}")]
     Export { model: String, song: String, source: MotionError },
-    #[error("motion style classifier{on}: {source}")]
-    Classifier { on: String, source: StyleError },
+    /// `dance`: the real dance being classified, if it was one.
+    #[error("motion style classifier{}: {source}", .dance.as_ref().map(|d| format!(" on {d}")).unwrap_or_default())]
+    Classifier { dance: Option<String>, source: StyleError },
     #[error("{path}: {source}")]
     Preview { path: PathBuf, source: PreviewError },
     #[error("i/o error on {path}: {source}")]
@@ -300,7 +301,7 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
         let ids: Vec<String> = if args.models.is_empty() { registry.list().into_iter().map(|m| m.id.0).collect() } else { args.models.clone() };
         // The motion style classifier, for style control (absent: distances and verdicts only).
         let classifier_dir = args.models_dir.join(crate::models::motion_style::ID);
-        let classifier = if classifier_dir.is_dir() { Some(MotionStyle::load(&classifier_dir).map_err(|source| EvalError::Classifier { on: String::new(), source })?) } else { None };
+        let classifier = if classifier_dir.is_dir() { Some(MotionStyle::load(&classifier_dir).map_err(|source| EvalError::Classifier { dance: None, source })?) } else { None };
         for id in &ids {
             let model = registry
                 .get(&ModelId(id.clone()))

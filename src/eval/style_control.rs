@@ -9,13 +9,12 @@
 use serde::{Deserialize, Serialize};
 
 use super::EvalError;
-
+use crate::audio::DecodedAudio;
 use crate::metrics::physical::seed_distance_m;
 use crate::metrics::reference::ReferenceStats;
 use crate::metrics::score::score_dance;
-use crate::models::motion_style::MotionStyle;
-use crate::audio::DecodedAudio;
 use crate::models::dancenet::style::most_probable;
+use crate::models::motion_style::MotionStyle;
 use crate::models::{DanceModel, DanceStyle, GenerateRequest, Progress};
 use crate::motion::Motion;
 
@@ -69,7 +68,7 @@ pub fn real_styles(classifier: &MotionStyle, dances: &[(&str, &Motion)]) -> Resu
     let mut out = Vec::new();
     for (id, m) in dances {
         let Some(truth) = DanceStyle::of_dance_id(id) else { continue };
-        let p = classifier.classify(m).map_err(|source| EvalError::Classifier { on: format!(" on {id}"), source })?;
+        let p = classifier.classify(m).map_err(|source| EvalError::Classifier { dance: Some(id.to_string()), source })?;
         out.push((id.to_string(), truth, most_probable(&p)));
     }
     let accuracy = out.iter().filter(|(_, a, b)| a == b).count() as f64 / out.len().max(1) as f64;
@@ -100,7 +99,7 @@ pub fn style_control(
             passing += usize::from(sc.scores.verdict.pass);
             speed += sc.scores.physical.mean_speed_m_s;
             if let Some(c) = classifier {
-                let p = c.classify(&m).map_err(|source| EvalError::Classifier { on: String::new(), source })?;
+                let p = c.classify(&m).map_err(|source| EvalError::Classifier { dance: None, source })?;
                 classified[most_probable(&p).index()] += 1;
             }
             motions.push(m);
