@@ -13,6 +13,7 @@ pub mod dancenet;
 pub mod folder;
 pub mod keypose_transformer;
 pub mod layers;
+pub mod motion_style;
 pub mod train;
 pub mod tsmt;
 

@@ -174,15 +174,13 @@ pub fn render(
     caption: &Caption,
     on_stage: &mut dyn FnMut(Stage),
 ) -> Result<JobFiles, WorkerError> {
-    use crate::motion::export::{prepare_anchored, served_motion, write_all_rig, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
+    use crate::motion::export::{write_all_rig, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
     std::fs::create_dir_all(dir)?;
     on_stage(Stage::Export);
-    let anchors: Vec<usize> = key_poses.iter().map(|k| (k.time_s * model_motion.fps).round() as usize).collect();
-    let rig = prepare_anchored(model_motion, &anchors)?;
-    write_all_rig(&rig, dir)?;
+    let served = crate::motion::serve(model_motion, key_poses)?;
+    write_all_rig(&served.rig, dir)?;
     // The report and the preview judge what the user downloads: the rigid skeleton's motion.
-    let served = served_motion(&rig);
-    let motion = &served;
+    let motion = &served.motion;
     on_stage(Stage::Report);
     let analysis = audio::analyze(audio)?;
     let reference = crate::metrics::reference::ReferenceStats::builtin()?;

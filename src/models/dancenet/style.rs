@@ -17,7 +17,7 @@
 //!   30-s windows every 15 s ([`HOP_S`]), the last window aligned to the song's end; a song shorter
 //!   than 30 s is one shorter window.
 //!
-//! The same network over motion is the motion style metric (`crate::metrics::style`);
+//! The same network over motion is the motion style metric (`crate::models::motion_style`);
 //! [`WindowedClassifier`] and [`evaluate`] serve both. The model card is
 //! `models/dancenet/STYLE_CARD.md`; `choreo train dancenet-style` writes the files.
 use std::ops::Range;
@@ -116,7 +116,7 @@ impl StyleConfig {
 }
 
 /// What the fully connected layer reads of the Bi-LSTM.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Readout {
     /// The forward direction's last state and the backward direction's first.
