@@ -274,7 +274,7 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
             let cells: Vec<String> = stage_names.iter().map(|&s| get(s)).collect();
             // The autoregressive loop's cost per motion frame (a TSMT "step").
             let decode_s: f64 = stages.iter().filter(|(n, _)| *n == Stage::Generate).map(|(_, d)| d.as_secs_f64()).sum();
-            let frames = (audio.duration_s * crate::motion::MOTION_FPS).floor().max(1.0);
+            let frames = crate::motion::validate::song_frames(audio.duration_s, crate::motion::MOTION_FPS) as f64;
             let per_frame = if decode_s > 0.0 { format!("{:.2}", 1000.0 * decode_s / frames) } else { "–".into() };
             table += &format!("| {} | {name} | {:.0} | {} | {total:.2} | {per_min:.2} | {per_frame} | {target} |\n", model.0, audio.duration_s, cells.join(" | "));
             if k >= n_timed {
