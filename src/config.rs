@@ -33,6 +33,16 @@ pub enum ConfigError {
     Invalid { field: &'static str, message: String },
 }
 
+impl ConfigError {
+    /// Stable kebab-case name of the failure.
+    pub fn code(&self) -> &'static str {
+        match self {
+            ConfigError::Load(_) => "config-load",
+            ConfigError::Invalid { .. } => "config-invalid",
+        }
+    }
+}
+
 /// A secret that never prints: `Debug` and `Display` show `[redacted]`.
 #[derive(Clone, Deserialize, PartialEq, Eq)]
 #[serde(transparent)]

@@ -16,6 +16,12 @@
 //! 6. **export + report** (`motion` exporters, `metrics`, `report`): BVH, JSON, glb, the
 //!    report of how well it dances, and `preview.png`, a contact sheet to see it at a glance.
 //!
+//! Beside the flow, `eval` (`choreo eval`) runs the models on the test split and on whole songs
+//! and judges them with `metrics`: it sits above `models` and `metrics`, and `metrics` measures
+//! motion without knowing any model. The command line (flags, printed tables, progress bar)
+//! lives in the binary (`src/cli/`); the library takes plain option structs whose `Default` is
+//! the committed schedule.
+//!
 //! # Who owns libtorch
 //! Only worker threads (tokio blocking threads) and the CLI's `train`/`generate`/`eval` call into
 //! libtorch. Each worker runs with one intra-op thread, so N workers never oversubscribe the cores.
@@ -23,11 +29,12 @@ pub mod api;
 pub mod artifacts;
 pub mod audio;
 pub mod config;
-pub mod error;
+pub mod eval;
 pub mod metrics;
 pub mod models;
 pub mod motion;
 pub mod queue;
 pub mod report;
+pub mod stage;
 pub mod telemetry;
 pub mod worker;

@@ -3,6 +3,7 @@
 //! Metrics go through the `metrics` facade into one process-wide Prometheus recorder, rendered
 //! by `GET /metrics`. Names are constants here so the worker, the API and the tests agree.
 use crate::config::LogFormat;
+use crate::stage::Stage;
 use metrics_exporter_prometheus::{Matcher, PrometheusBuilder, PrometheusHandle};
 use std::sync::OnceLock;
 use std::time::Instant;
@@ -116,20 +117,20 @@ pub fn init_tracing(format: LogFormat, default_level: &str) {
 /// Records how long a stage took when dropped, so early returns are timed too.
 pub struct StageTimer {
     kind: &'static str,
-    stage: &'static str,
+    stage: Stage,
     start: Instant,
 }
 
 impl StageTimer {
     /// Starts timing `stage` of a job of `kind`.
-    pub fn start(kind: &'static str, stage: &'static str) -> Self {
+    pub fn start(kind: &'static str, stage: Stage) -> Self {
         Self { kind, stage, start: Instant::now() }
     }
 }
 
 impl Drop for StageTimer {
     fn drop(&mut self) {
-        metrics::histogram!(STAGE_DURATION, "kind" => self.kind, "stage" => self.stage)
+        metrics::histogram!(STAGE_DURATION, "kind" => self.kind, "stage" => self.stage.as_str())
             .record(self.start.elapsed().as_secs_f64());
     }
 }

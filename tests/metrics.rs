@@ -363,7 +363,7 @@ fn report_rejects_a_motion_with_the_wrong_joint_count() {
 
 mod real_data {
     use super::*;
-    use choreo::metrics::eval::{evaluate, EvalArgs};
+    use choreo::eval::{evaluate, EvalOptions};
     use choreo::motion::dataset::Dataset;
     use std::path::PathBuf;
 
@@ -379,24 +379,8 @@ mod real_data {
         None
     }
 
-    fn args(root: PathBuf) -> EvalArgs {
-        EvalArgs {
-            models: vec![],
-            real_only: true,
-            split: "test".into(),
-            songs: vec![],
-            no_shared_songs: true,
-            json: None,
-            data: root,
-            models_dir: "models".into(),
-            seed: 0,
-            seeds: 2,
-            key_poses: 0,
-            previews: None,
-            mismatch_per_song: 3,
-            write_reference: false,
-            reference_out: "unused".into(),
-        }
+    fn args(root: PathBuf) -> EvalOptions {
+        EvalOptions { real_only: true, no_shared_songs: true, data: root, mismatch_per_song: 3, ..EvalOptions::default() }
     }
 
     #[test]
@@ -404,7 +388,7 @@ mod real_data {
         let Some(root) = data_root() else { return };
         let out = tempfile::tempdir().expect("tempdir");
         let path = out.path().join("ref.json");
-        let fresh = choreo::metrics::eval::write_reference(&root, &path).expect("regenerate");
+        let fresh = choreo::eval::write_reference(&root, &path).expect("regenerate");
         let builtin = ReferenceStats::builtin().expect("builtin");
         assert_eq!(fresh.dances, builtin.dances);
         // Equal up to float parsing (the committed file is read back through serde_json).
@@ -630,7 +614,7 @@ mod physical_real {
 /// come from the cards: above what answering "waltz" everywhere scores, and below every seed
 /// tried.
 mod style_classifiers {
-    use choreo::metrics::style::MotionStyle;
+    use choreo::models::motion_style::MotionStyle;
     use choreo::models::dancenet::style::{most_probable, windows, DanceResult, ServedStyle};
     use choreo::models::DanceStyle;
     use choreo::motion::dataset::Dataset;
@@ -731,7 +715,7 @@ mod style_classifiers {
     fn motion_style_classifier_beats_its_floor_and_reads_a_still_body_as_no_style() {
         let Some(ds) = dataset() else { return };
         one_thread();
-        let ms = MotionStyle::load(&models().join(choreo::metrics::style::ID)).expect("the committed classifier loads");
+        let ms = MotionStyle::load(&models().join(choreo::models::motion_style::ID)).expect("the committed classifier loads");
         let (len, hop) = (ms.file().window, ms.file().hop);
         let mut tally = Tally::default();
         for id in ds.test_ids() {
@@ -768,7 +752,7 @@ mod style_classifiers {
 #[test]
 #[ignore = "prints the motion style card's probe table"]
 fn style_probes() {
-    use choreo::metrics::style::MotionStyle;
+    use choreo::models::motion_style::MotionStyle;
     use choreo::models::{Cancelled, GenerateRequest, Progress, Registry};
     use choreo::motion::dataset::Dataset;
     use ndarray::{Array3, Axis};
@@ -776,7 +760,7 @@ fn style_probes() {
 
     struct Quiet;
     impl Progress for Quiet {
-        fn report(&mut self, _: &str, _: f32) -> Result<(), Cancelled> {
+        fn report(&mut self, _: choreo::stage::Stage, _: f32) -> Result<(), Cancelled> {
             Ok(())
         }
     }
@@ -784,7 +768,7 @@ fn style_probes() {
     tch::set_num_threads(1);
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let ds = Dataset::open(&root.join(choreo::motion::dataset::DEFAULT_ROOT)).expect("the dataset");
-    let ms = MotionStyle::load(&root.join("models").join(choreo::metrics::style::ID)).expect("the classifier");
+    let ms = MotionStyle::load(&root.join("models").join(choreo::models::motion_style::ID)).expect("the classifier");
     let remade = |frames: usize, f: &dyn Fn(usize, usize, usize) -> f32| Motion { fps: 25.0, positions: Array3::from_shape_fn((frames, NUM_JOINTS, 3), |(t, j, k)| f(t, j, k)) };
     println!("probabilities: cha-cha rumba tango waltz");
     for id in ds.test_ids().iter().chain(std::iter::once(&"DANCE_T_5".to_string())) {

@@ -6,6 +6,7 @@ mod postgres;
 
 use chrono::Utc;
 use choreo::audio::AudioFormat;
+use choreo::stage::Stage;
 use choreo::queue::{
     Beat, Idempotency, JobFiles, JobFilter, JobId, JobKind, LeasePolicy, NewJob, Outcome, PgStore, QueueError, Registered,
     Song, SongId, SqliteStore, Status, Store,
@@ -198,15 +199,15 @@ async fn complete_stores_the_outcome_once(db: TestDb) {
     assert!(store.complete(analysis.id, "w", Outcome::Analysis(outcome)).await.expect("complete"));
     assert!(!store.complete(analysis.id, "w", Outcome::Files(JobFiles::default())).await.expect("twice"), "a finished job stays finished");
     let done = store.job(analysis.id).await.expect("job");
-    assert_eq!((done.status, done.progress, done.stage.as_deref()), (Status::Succeeded, 1.0, Some("done")));
+    assert_eq!((done.status, done.progress, done.stage), (Status::Succeeded, 1.0, Some(Stage::Done)));
     assert_eq!(store.song(song).await.expect("song").analysis.map(|a| a.beat_times), Some(vec![0.5, 1.0]));
 
     store.register(analyze(song, 1)).await.expect("register");
     let files = store.claim("w", p).await.expect("claim").expect("job");
-    let beat = store.heartbeat(files.id, "w", "model", 0.4, p).await.expect("beat");
+    let beat = store.heartbeat(files.id, "w", Stage::Generate.as_str(), 0.4, p).await.expect("beat");
     assert_eq!(beat, Beat::Held { cancel_requested: false });
     let running = store.job(files.id).await.expect("job");
-    assert_eq!((running.stage.as_deref(), running.progress), (Some("model"), 0.4));
+    assert_eq!((running.stage, running.progress), (Some(Stage::Generate), 0.4));
     // The style a model chose on the user's behalf is stored with the files.
     let style = choreo::models::StyleChoice { style: choreo::models::DanceStyle::Rumba, predicted: true, probabilities: vec![0.1, 0.7, 0.05, 0.15] };
     let written = JobFiles { files: vec!["motion.bvh".into(), "report.json".into()], style: Some(style) };

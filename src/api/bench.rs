@@ -26,6 +26,18 @@ pub enum BenchError {
     Protocol(String),
 }
 
+impl BenchError {
+    /// Stable kebab-case name of the failure; a wrapped error keeps its own code.
+    pub fn code(&self) -> &'static str {
+        match self {
+            BenchError::Start(e) => e.code(),
+            BenchError::Io(_) => "bench-io",
+            BenchError::Queue(e) => e.code(),
+            BenchError::Protocol(_) => "bench-bad-response",
+        }
+    }
+}
+
 /// What to run.
 #[derive(Clone, Debug)]
 pub struct HttpBench {

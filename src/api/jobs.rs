@@ -114,8 +114,9 @@ pub struct JobView {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub style: Option<crate::models::StyleChoice>,
     pub status: Status,
-    /// What the job is doing now (`decode`, `analyze`, `model`, `export`, `done`).
-    pub stage: Option<String>,
+    /// What the job is doing now: one kind of work (`decode-audio`, `analyze`, `features`, `encode`,
+    /// `generate`, `export`), or `claimed` / `done` as the queue marks it.
+    pub stage: Option<crate::stage::Stage>,
     /// 0..=1.
     pub progress: f64,
     pub priority: i64,

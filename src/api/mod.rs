@@ -88,6 +88,20 @@ pub enum StartError {
     Artifacts(#[from] crate::artifacts::ArtifactError),
 }
 
+impl StartError {
+    /// Stable kebab-case name of the failure; a wrapped module error keeps its own code.
+    pub fn code(&self) -> &'static str {
+        match self {
+            StartError::DataDir { .. } => "data-dir",
+            StartError::Bind { .. } => "bind",
+            StartError::Config(e) => e.code(),
+            StartError::Queue(e) => e.code(),
+            StartError::Models(_) => "models-load",
+            StartError::Artifacts(e) => e.code(),
+        }
+    }
+}
+
 /// All routes, with auth on `/v1`, CORS, request ids and tracing.
 pub fn router(state: AppState) -> Router {
     let v1 = Router::new()

@@ -110,7 +110,7 @@ pub enum ApiError {
 
 impl ApiError {
     /// Stable kebab-case code.
-    pub fn code(&self) -> &str {
+    pub fn code(&self) -> &'static str {
         match self {
             ApiError::MalformedJson(_) => "malformed-json",
             ApiError::NotJson => "not-json",

@@ -13,39 +13,6 @@ use serde::Serialize;
 use super::features::{dance_revolution, FrameGrid};
 use super::{decode_path, decode_path_at, AudioError};
 
-/// `choreo bench audio` flags.
-#[derive(Clone, Debug, clap::Args)]
-pub struct BenchArgs {
-    /// Folder of songs to time (every mp3/wav/flac/ogg/m4a in it).
-    #[arg(long, default_value = "../shared/audio")]
-    pub songs: PathBuf,
-    /// Motion frame rate of the DanceRevolution feature set.
-    #[arg(long, default_value_t = 25.0)]
-    pub fps: f64,
-    /// Length of the long song (built by concatenating the songs) for the memory check; 0 skips it.
-    #[arg(long, default_value_t = 15.0)]
-    pub long_minutes: f64,
-    /// Python used to run tools/librosa_reference.py (it creates .venv-librosa on first use).
-    #[arg(long, default_value = "python3")]
-    pub python: PathBuf,
-    /// Time choreo only.
-    #[arg(long)]
-    pub no_librosa: bool,
-}
-
-impl BenchArgs {
-    /// Runs the benchmark from the repository root (the working directory).
-    pub fn run(&self) -> Result<Vec<BenchRow>, AudioError> {
-        run(&BenchOptions {
-            songs_dir: self.songs.clone(),
-            fps: self.fps,
-            long_minutes: self.long_minutes,
-            python: (!self.no_librosa).then(|| self.python.clone()),
-            repo_root: std::env::current_dir()?,
-        })
-    }
-}
-
 /// What to benchmark.
 #[derive(Clone, Debug)]
 pub struct BenchOptions {
@@ -59,6 +26,23 @@ pub struct BenchOptions {
     pub python: Option<PathBuf>,
     /// Repository root (where tools/librosa_reference.py lives).
     pub repo_root: PathBuf,
+}
+
+/// The Python that runs tools/librosa_reference.py by default (it creates .venv-librosa on first
+/// use).
+pub const PYTHON: &str = "python3";
+
+impl Default for BenchOptions {
+    /// The committed benchmark, run from the repository root (the working directory).
+    fn default() -> Self {
+        Self {
+            songs_dir: PathBuf::from("../shared/audio"),
+            fps: 25.0,
+            long_minutes: 15.0,
+            python: Some(PathBuf::from(PYTHON)),
+            repo_root: PathBuf::from("."),
+        }
+    }
 }
 
 /// One row of the table.
@@ -211,38 +195,5 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<BenchRow>, AudioError> {
             }
         }
     }
-    print_table(&rows, opts.fps);
     Ok(rows)
-}
-
-fn print_table(rows: &[BenchRow], fps: f64) {
-    let f = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |x| format!("{x:.p$}"));
-    println!("decode + DanceRevolution features (438-d, {fps} fps), one thread each");
-    println!("peak MB: growth of this process's resident memory while the song is processed (0 when it fits in memory an earlier song freed)");
-    println!(
-        "| {:<28} | {:>7} | {:>9} | {:>10} | {:>9} | {:>10} | {:>7} | {:>10} |",
-        "song", "len s", "decode s", "features s", "choreo s", "librosa s", "speedup", "peak MB"
-    );
-    println!("|{:-<30}|{:-<9}|{:-<11}|{:-<12}|{:-<11}|{:-<12}|{:-<9}|{:-<12}|", "", "", "", "", "", "", "", "");
-    for r in rows {
-        println!(
-            "| {:<28} | {:>7.1} | {:>9.3} | {:>10.3} | {:>9.3} | {:>10} | {:>7} | {:>10} |",
-            r.song,
-            r.duration_s,
-            r.rust_decode_s,
-            r.rust_features_s,
-            r.rust_total_s,
-            f(r.librosa_total_s, 3),
-            f(r.speedup, 1),
-            f(r.rust_peak_mb, 1)
-        );
-    }
-    let (rs, ls): (f64, f64) = rows
-        .iter()
-        .filter(|r| r.librosa_total_s.is_some())
-        .map(|r| (r.rust_total_s, r.librosa_total_s.unwrap_or(0.0)))
-        .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
-    if ls > 0.0 {
-        println!("total: choreo {rs:.2} s, librosa {ls:.2} s, speedup {:.1}x", ls / rs);
-    }
 }

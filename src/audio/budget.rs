@@ -5,6 +5,7 @@
 //! signal is up (a server shutdown, a cancelled job) [`AudioError::Cancelled`], so the thread
 //! doing the work returns instead of burning a core on a file nobody will get an answer for.
 use super::AudioError;
+use crate::stage::Stage;
 use std::time::{Duration, Instant};
 
 /// The limits one piece of audio work runs under.
@@ -26,7 +27,7 @@ impl<'a> Budget<'a> {
     }
 
     /// `Err` when the work must end now: stopped, or past its budget while in `stage`.
-    pub fn check(&self, stage: &'static str) -> Result<(), AudioError> {
+    pub fn check(&self, stage: Stage) -> Result<(), AudioError> {
         if self.stop.is_some_and(|stop| stop()) {
             return Err(AudioError::Cancelled);
         }
@@ -45,16 +46,16 @@ mod tests {
 
     #[test]
     fn stops_when_asked_and_when_over_budget() {
-        assert!(Budget::unlimited().check("decode").is_ok());
+        assert!(Budget::unlimited().check(Stage::DecodeAudio).is_ok());
         let flag = Cell::new(false);
         let stop = || flag.get();
         let budget = Budget::new(Some(Duration::from_secs(60)), Some(&stop));
-        assert!(budget.check("decode").is_ok());
+        assert!(budget.check(Stage::DecodeAudio).is_ok());
         flag.set(true);
-        assert!(matches!(budget.check("decode"), Err(AudioError::Cancelled)));
+        assert!(matches!(budget.check(Stage::DecodeAudio), Err(AudioError::Cancelled)));
         let over = Budget::new(Some(Duration::ZERO), None);
         std::thread::sleep(Duration::from_millis(2));
-        assert!(matches!(over.check("analysis"), Err(AudioError::TimedOut { stage: "analysis", .. })));
+        assert!(matches!(over.check(Stage::Analyze), Err(AudioError::TimedOut { stage: Stage::Analyze, .. })));
     }
 
     #[test]

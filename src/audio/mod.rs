@@ -9,13 +9,17 @@
 //! Every function here returns `AudioError` for bad input and never panics on user audio.
 use serde::{Deserialize, Serialize};
 
+use crate::stage::Stage;
+
 pub mod bench;
 pub mod budget;
 pub mod chroma;
 pub mod decode;
 pub mod dsp;
 pub mod features;
+pub mod mp4;
 pub mod onset;
+mod resample;
 pub mod rhythm;
 
 pub use budget::Budget;
@@ -81,7 +85,7 @@ pub enum AudioError {
     #[error("librosa reference run failed: {0}")]
     Reference(String),
     #[error("{stage} took longer than its {limit_s} s budget and was abandoned")]
-    TimedOut { stage: &'static str, limit_s: f64 },
+    TimedOut { stage: Stage, limit_s: f64 },
     #[error("stopped: the server is shutting down or the job was cancelled")]
     Cancelled,
 }
@@ -137,7 +141,7 @@ pub fn analyze(audio: &DecodedAudio) -> Result<Analysis, AudioError> {
 /// [`analyze`], checking `budget` between its stages (resampling, mel spectrogram, onsets,
 /// tempo, beats, downbeats).
 pub fn analyze_within(audio: &DecodedAudio, budget: &Budget) -> Result<Analysis, AudioError> {
-    budget.check("analysis")?;
+    budget.check(Stage::Analyze)?;
     // Decoded at the analysis rate already (the worker does that), the samples are used as they are.
     let y: std::borrow::Cow<[f32]> = if audio.sample_rate == ANALYSIS_SR {
         std::borrow::Cow::Borrowed(&audio.samples)

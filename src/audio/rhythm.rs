@@ -24,6 +24,7 @@ use rustfft::num_complex::Complex32;
 use super::dsp;
 use super::onset::{onset_strength_from_db, Aggregate};
 use super::{Analysis, AudioError, Budget, N_FFT, N_MELS};
+use crate::stage::Stage;
 
 /// Autocorrelation tempogram, `[frames, win_length]`, librosa `feature.tempogram`
 /// (centred with a linear ramp to zero, periodic Hann window, max-normalised per frame).
@@ -251,7 +252,7 @@ pub fn analyze_mono_within(y: &[f32], sr: u32, hop: usize, budget: &Budget) -> R
     if y.iter().any(|v| !v.is_finite()) {
         return Err(AudioError::NonFinite);
     }
-    let stage = "analysis";
+    let stage = Stage::Analyze;
     budget.check(stage)?;
     let mut mel_db = dsp::melspectrogram(y, sr, N_FFT, hop, N_MELS);
     budget.check(stage)?;

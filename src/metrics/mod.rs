@@ -11,9 +11,10 @@
 //! - [`physical`]: floor contact, ground penetration, pops, liveliness, seed sensitivity, and
 //!   issue 10's pass/fail verdict on them.
 //! - [`reference`]: the committed train-split statistics; [`score`]: one dance and a set;
-//!   [`eval`]: `choreo eval`; [`skeleton_map`]: AIST++ joints on our 23-joint skeleton.
-//! - [`style`]: a motion style classifier (motion only, no music) to check that a dance asked
-//!   for in a style looks like it.
+//!   [`skeleton_map`]: AIST++ joints on our 23-joint skeleton.
+//!
+//! Measures only: they take motion (and beats), never a model. The harness that runs the models
+//! and scores them with these measures is the `eval` module (`choreo eval`), a layer above.
 //!
 //! # BAS on dance-with-melody: read it with its chance level
 //! FACT's BAS uses σ = 0.05 s, so kinematic beats at *random* times already score about
@@ -30,7 +31,6 @@
 //! chance), never by BAS alone.
 pub mod beats;
 pub mod diversity;
-pub mod eval;
 pub mod features;
 pub mod fid;
 pub mod kinematics;
@@ -39,8 +39,6 @@ pub mod plausibility;
 pub mod reference;
 pub mod score;
 pub mod skeleton_map;
-pub mod style;
-pub mod style_control;
 
 /// Errors from computing metrics or loading their reference statistics.
 #[derive(Debug, thiserror::Error)]
@@ -49,10 +47,23 @@ pub enum MetricsError {
     JointCount { got: usize, want: usize },
     #[error("not enough data: {0}")]
     NotEnoughData(String),
-    #[error("reference statistics: {0}")]
-    Reference(String),
+    #[error("reference statistics: the dances have different frame rates")]
+    MixedFrameRates,
     #[error("i/o error on {path}: {source}")]
     Io { path: String, source: std::io::Error },
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),
+}
+
+impl MetricsError {
+    /// Stable kebab-case name of the failure.
+    pub fn code(&self) -> &'static str {
+        match self {
+            MetricsError::JointCount { .. } => "metrics-joint-count",
+            MetricsError::NotEnoughData(_) => "metrics-not-enough-data",
+            MetricsError::MixedFrameRates => "metrics-mixed-frame-rates",
+            MetricsError::Io { .. } => "metrics-io",
+            MetricsError::Json(_) => "metrics-json",
+        }
+    }
 }

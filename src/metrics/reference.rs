@@ -184,7 +184,7 @@ impl ReferenceStats {
     pub fn compute(source: &str, names: Vec<String>, motions: &[Motion]) -> Result<Self, MetricsError> {
         let fps = motions.first().map(|m| m.fps).ok_or_else(|| MetricsError::NotEnoughData("no dances".into()))?;
         if motions.iter().any(|m| (m.fps - fps).abs() > 1e-9) {
-            return Err(MetricsError::Reference("dances have different frame rates".into()));
+            return Err(MetricsError::MixedFrameRates);
         }
         let body_scale = body_scale(motions);
         let mut kin = Vec::new();

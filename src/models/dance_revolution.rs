@@ -24,6 +24,7 @@ use super::layers::{sinusoid, Lstm, LstmState};
 use super::{to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::dataset::NormStats;
 use crate::motion::repr::RootStart;
+use crate::stage::Stage;
 
 
 /// Hyper-parameters, with the paper's symbols.
@@ -489,10 +490,10 @@ impl DanceModel for Served {
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let fps = self.file.fps;
-        let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
-        progress.report("features", 0.0)?;
+        let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
+        progress.report(Stage::Features, 0.0)?;
         let music = self.music(req.audio, n)?;
-        progress.report("features", 1.0)?;
+        progress.report(Stage::Features, 1.0)?;
         let seed_poses = match req.seed_motion {
             Some(m) => {
                 let root = crate::motion::skeleton::body_centre_track(m.positions.view());
@@ -504,13 +505,13 @@ impl DanceModel for Served {
         let out = self.pool.with(|model| tch::no_grad(|| -> Result<Tensor, ModelError> {
             let mut cancelled = false;
             let z = model.encoder.forward_chunked(&music, 1000, |f| {
-                cancelled = progress.report("encode", f).is_err();
+                cancelled = progress.report(Stage::Encode, f).is_err();
                 !cancelled
             });
             let z = z.ok_or(Cancelled)?;
             let guard = self.file.extra.stall_guard.as_ref().map(|g| (g, &self.file.pose_norm));
             let y = model.decode(&z, req.seed, seed_poses.as_ref(), guard, self.file.extra.warm_up_frames, 250, |f| {
-                cancelled = progress.report("decode", f).is_err();
+                cancelled = progress.report(Stage::Generate, f).is_err();
                 !cancelled
             });
             y.ok_or(ModelError::Cancelled(Cancelled))

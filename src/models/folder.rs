@@ -57,7 +57,7 @@ pub struct Nothing {}
 /// Reads `dir/model.json`, or says the model is missing.
 pub fn read<F: DeserializeOwned>(dir: &Path, id: &str) -> Result<F, ModelError> {
     let text = std::fs::read_to_string(dir.join(MODEL_FILE)).map_err(|_| ModelError::MissingWeights(id.into(), dir.display().to_string()))?;
-    serde_json::from_str(&text).map_err(|e| ModelError::Invalid(format!("{id}/{MODEL_FILE}: {e}")))
+    serde_json::from_str(&text).map_err(|e| ModelError::BadModelFile(format!("{id}/{MODEL_FILE}: {e}")))
 }
 
 /// Reads `model.json` and loads the weights into a pool of networks built by `build`.
@@ -86,7 +86,7 @@ impl SeedClips {
     pub fn draw(seqs: &[&Array2<f32>], count: usize, frames: usize, seed: u64) -> Result<Self, ModelError> {
         let usable: Vec<&&Array2<f32>> = seqs.iter().filter(|s| s.nrows() > frames + 50).collect();
         if usable.is_empty() || count == 0 {
-            return Err(ModelError::Invalid(format!("no dance longer than {frames} frames for seed clips")));
+            return Err(ModelError::Input(format!("no dance longer than {frames} frames for seed clips")));
         }
         let mut rng = StdRng::seed_from_u64(seed);
         let width = usable[0].ncols();
@@ -109,7 +109,7 @@ impl SeedClips {
         let clips = read_clips(path)?;
         let (k, f, d) = clips.dim();
         if d != width || k == 0 || f == 0 {
-            return Err(ModelError::Invalid(format!("{}: clips are {k}×{f}×{d}", path.display())));
+            return Err(ModelError::BadModelFile(format!("{}: clips are {k}×{f}×{d}", path.display())));
         }
         Ok(Self { clips })
     }
@@ -136,10 +136,10 @@ pub fn write_clips(clips: &Array3<f32>, path: &Path) -> Result<(), ModelError> {
 /// Reads clips written by [`write_clips`], any shape.
 pub fn read_clips(path: &Path) -> Result<Array3<f32>, ModelError> {
     let named = Tensor::read_safetensors(path)?;
-    let t = named.into_iter().find(|(n, _)| n == CLIPS).map(|(_, t)| t).ok_or_else(|| ModelError::Invalid(format!("{}: no `{CLIPS}` tensor", path.display())))?;
+    let t = named.into_iter().find(|(n, _)| n == CLIPS).map(|(_, t)| t).ok_or_else(|| ModelError::BadModelFile(format!("{}: no `{CLIPS}` tensor", path.display())))?;
     let (k, f, d) = t.size3()?;
     let data = Vec::<f32>::try_from(t.to_kind(tch::Kind::Float).contiguous().view([-1]))?;
-    Array3::from_shape_vec((k as usize, f as usize, d as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))
+    Array3::from_shape_vec((k as usize, f as usize, d as usize), data).map_err(|e| ModelError::BadModelFile(e.to_string()))
 }
 
 #[cfg(test)]

@@ -5,6 +5,7 @@
 //! progress through [`Progress`], which also carries cancellation.
 use crate::audio::DecodedAudio;
 use crate::motion::{KeyPose, Motion};
+use crate::stage::Stage;
 use serde::{Deserialize, Serialize};
 
 pub mod dance_revolution;
@@ -12,6 +13,7 @@ pub mod dancenet;
 pub mod folder;
 pub mod keypose_transformer;
 pub mod layers;
+pub mod motion_style;
 pub mod train;
 pub mod tsmt;
 
@@ -168,8 +170,9 @@ pub struct Cancelled;
 
 /// Receives progress; returning `Err(Cancelled)` stops the model at this checkpoint.
 pub trait Progress {
-    /// `stage` is a short name ("features", "encode", "decode"); `fraction` is 0..=1 within it.
-    fn report(&mut self, stage: &str, fraction: f32) -> Result<(), Cancelled>;
+    /// `stage` is the model's own work ([`Stage::Features`], [`Stage::Encode`], [`Stage::Generate`]);
+    /// `fraction` is 0..=1 within it.
+    fn report(&mut self, stage: Stage, fraction: f32) -> Result<(), Cancelled>;
 }
 
 /// Errors a model can raise.
@@ -185,10 +188,37 @@ pub enum ModelError {
     Audio(#[from] crate::audio::AudioError),
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
+    /// A model folder's files cannot be read, or disagree with each other (a JSON that does not
+    /// parse, a tensor missing or of the wrong shape, a normalisation for other features).
+    #[error("model file: {0}")]
+    BadModelFile(String),
+    /// What the model was given it cannot use: a song too short to classify, non-finite
+    /// features, training data with nothing to fit.
     #[error("invalid input: {0}")]
-    Invalid(String),
+    Input(String),
+    /// Arrays the code itself put together do not fit (a bug, not the input's fault).
+    #[error("shape: {0}")]
+    Shape(String),
     #[error("motion: {0}")]
     Motion(#[from] crate::motion::MotionError),
+}
+
+impl ModelError {
+    /// Stable kebab-case name of the failure. The worker reports every model failure to clients
+    /// as `model-failed` (see `WorkerError::code`); this finer code goes to the logs.
+    pub fn code(&self) -> &'static str {
+        match self {
+            ModelError::Cancelled(_) => "cancelled",
+            ModelError::Unsupported(..) => "model-unsupported-input",
+            ModelError::MissingWeights(..) => "model-missing-weights",
+            ModelError::Audio(e) => e.code(),
+            ModelError::Torch(_) => "model-torch",
+            ModelError::BadModelFile(_) => "model-file-invalid",
+            ModelError::Input(_) => "model-input-invalid",
+            ModelError::Shape(_) => "model-shape",
+            ModelError::Motion(e) => e.code(),
+        }
+    }
 }
 
 /// `[r, c]` ndarray → tensor (a copy in standard layout).
@@ -202,7 +232,7 @@ pub fn to_tensor(m: &ndarray::Array2<f32>) -> tch::Tensor {
 pub fn to_array(t: &tch::Tensor) -> Result<ndarray::Array2<f32>, ModelError> {
     let (r, c) = t.size2()?;
     let data: Vec<f32> = Vec::<f32>::try_from(t.contiguous().view([-1]))?;
-    ndarray::Array2::from_shape_vec((r as usize, c as usize), data).map_err(|e| ModelError::Invalid(e.to_string()))
+    ndarray::Array2::from_shape_vec((r as usize, c as usize), data).map_err(|e| ModelError::Shape(e.to_string()))
 }
 
 /// Smooths every column of `[T, D]` feature rows over time (Gaussian, σ `sigma` frames, scipy's

@@ -30,19 +30,20 @@
 //!   a real clip of the train split drawn by the job's seed ([`SeedClips`]).
 //!
 //! Sizes differ from the paper to train on one CPU core; the model card says where and why.
-use std::path::Path;
-
-use ndarray::{s, Array2};
-use rand::rngs::StdRng;
-use rand::{Rng, SeedableRng};
+use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 use tch::nn;
 use tch::{Device, Kind, Tensor};
 
-use super::folder::{self, SeedClips, SEED_CLIPS_FILE};
 use super::layers::{sinusoid, Dims, KvCache, Stack};
-use super::{smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
-use crate::motion::repr::{self, RootStart, FEATURE_DIM};
+use super::ModelError;
+use crate::motion::repr::{self, FEATURE_DIM};
+
+pub mod sampling;
+pub mod served;
+
+pub use sampling::{Sampling, StallGuard};
+pub use served::{Generation, ModelFile, Schedule, Served, Serving};
 
 /// The API id.
 pub const ID: &str = "tsmt";
@@ -135,7 +136,7 @@ impl Bins {
     /// each side.
     pub fn fit<'a>(rows: impl IntoIterator<Item = &'a Array2<f32>>, n: usize) -> Result<Self, ModelError> {
         let rows: Vec<&Array2<f32>> = rows.into_iter().collect();
-        let d = rows.first().map(|r| r.ncols()).ok_or_else(|| ModelError::Invalid("no rows to fit bins on".into()))?;
+        let d = rows.first().map(|r| r.ncols()).ok_or_else(|| ModelError::Input("no rows to fit bins on".into()))?;
         let (mut lo, mut hi) = (Vec::with_capacity(d), Vec::with_capacity(d));
         for c in 0..d {
             let col: Vec<f32> = rows.iter().flat_map(|r| r.column(c).to_vec()).collect();
@@ -363,320 +364,16 @@ impl Tsmt {
         }
         z.view([-1]).apply(&self.w_x)
     }
-
-    /// Generates `n` frames of tokens after the context `prefix` `[m ≥ 1, coords]`, frame t
-    /// from the last frames and row t of `audio_vectors` ([`Self::audio_logit_vectors`]).
-    /// `on_step(done)` is called before the first frame and every 250 frames, and may stop it.
-    pub fn sample(&self, prefix: &Array2<i64>, audio_vectors: &Tensor, sampling: Sampling, seed: u64, on_step: impl FnMut(usize) -> bool) -> Option<Array2<i64>> {
-        self.sample_guarded(prefix, audio_vectors, sampling, None, seed, on_step)
-    }
-
-    /// [`Self::sample`] with an optional [`StallGuard`] and the metres per bin of each joint
-    /// coordinate (the first `POSE_DIM` coordinates) it measures motion with.
-    pub fn sample_guarded(
-        &self,
-        prefix: &Array2<i64>,
-        audio_vectors: &Tensor,
-        sampling: Sampling,
-        guard: Option<(&StallGuard, &[f32])>,
-        seed: u64,
-        mut on_step: impl FnMut(usize) -> bool,
-    ) -> Option<Array2<i64>> {
-        let c = self.config.coords as usize;
-        let n = audio_vectors.size()[0] as usize;
-        let mut out = Array2::<i64>::zeros((n, c));
-        let mut caches = self.pose.stack.new_caches();
-        let mut rng = StdRng::seed_from_u64(seed ^ 0x7357_0000_D0CE);
-        let tensor_of = |row: ndarray::ArrayView1<'_, i64>| Tensor::from_slice(&row.to_vec());
-        // The context, all but its last frame, fills the caches (at most the window's worth).
-        let m = prefix.nrows();
-        let keep = (m as i64).min(self.config.window) as usize;
-        let first = m - keep;
-        let mut wx = Tensor::zeros([1], (Kind::Float, Device::Cpu));
-        for (k, t) in (first..m).enumerate() {
-            wx = self.step(&tensor_of(prefix.row(t)), k as i64, &mut caches);
-        }
-        let mut pos = keep as i64;
-        let mut probs = vec![0f32; self.config.n_bins as usize];
-        // Says the loop has begun (a stage clock starts timing it here, however short the song).
-        if !on_step(0) {
-            return None;
-        }
-        // The last frames drawn, for the guard.
-        let mut recent: std::collections::VecDeque<Vec<i64>> = std::collections::VecDeque::new();
-        for t in 0..n {
-            let logits = self.logits(&(wx.shallow_clone() + audio_vectors.get(t as i64))); // [coords, n_bins]
-            let flat: Vec<f32> = Vec::<f32>::try_from(logits.contiguous().view([-1])).ok()?;
-            let now = match guard {
-                Some((g, widths)) if recent.len() >= g.window_frames && reach_m(&recent, widths) < g.min_reach_m => g.boosted(sampling),
-                _ => sampling,
-            };
-            for (ci, row) in flat.chunks(self.config.n_bins as usize).enumerate() {
-                out[[t, ci]] = now.draw(row, &mut probs, &mut rng) as i64;
-            }
-            if let Some((g, _)) = guard {
-                recent.push_back(out.row(t).to_vec());
-                while recent.len() > g.window_frames {
-                    recent.pop_front();
-                }
-            }
-            wx = self.step(&tensor_of(out.row(t)), pos, &mut caches);
-            pos += 1;
-            if (t + 1) % 250 == 0 && !on_step(t + 1) {
-                return None;
-            }
-        }
-        Some(out)
-    }
-}
-
-/// How far the pose has come within `frames` (tokens, oldest first): the largest, over the
-/// earlier frames, of the mean distance (m) of the root-relative joints from where they are in
-/// the last frame, from the metres per bin of each joint coordinate (`widths`, `POSE_DIM` long).
-/// A bin or two of sampling jitter adds a centimetre or so; a dancer who moves reaches tens.
-fn reach_m(frames: &std::collections::VecDeque<Vec<i64>>, widths: &[f32]) -> f32 {
-    let joints = widths.len() / 3;
-    let Some(last) = frames.back() else { return 0.0 };
-    if joints == 0 || last.len() < 3 * joints {
-        return 0.0;
-    }
-    frames
-        .iter()
-        .map(|f| {
-            let sum: f32 = (0..joints)
-                .map(|j| (0..3).map(|c| ((last[3 * j + c] - f[3 * j + c]) as f32 * widths[3 * j + c]).powi(2)).sum::<f32>().sqrt())
-                .sum();
-            sum / joints as f32
-        })
-        .fold(0.0, f32::max)
-}
-
-/// A served guard against stalls (not in the paper): a sampled model that reaches a held pose
-/// (mostly a dance's closing pose) can stay in it for minutes, since each coordinate's likeliest
-/// bin is its previous one. While no pose of the last `window_frames` frames is more than
-/// `min_reach_m` (mean over joints, root-relative) from the newest ([`reach_m`]), draws use the
-/// temperature times `boost` (and twice the top-k) until the dancer moves again.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-pub struct StallGuard {
-    pub min_reach_m: f32,
-    pub window_frames: usize,
-    pub boost: f64,
-}
-
-impl StallGuard {
-    fn boosted(&self, s: Sampling) -> Sampling {
-        Sampling { temperature: s.temperature * self.boost, top_k: if s.top_k == 0 { 0 } else { s.top_k * 2 } }
-    }
-}
-
-/// How logits become a draw (§3.4): temperature, then the `top_k` likeliest bins.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-pub struct Sampling {
-    pub temperature: f64,
-    /// 0 keeps every bin.
-    pub top_k: usize,
-}
-
-impl Default for Sampling {
-    fn default() -> Self {
-        Self { temperature: 1.0, top_k: 0 }
-    }
-}
-
-impl Sampling {
-    /// Draws a bin from one coordinate's `logits`; `probs` is scratch of the same length.
-    pub fn draw(&self, logits: &[f32], probs: &mut [f32], rng: &mut StdRng) -> usize {
-        let t = self.temperature.max(1e-3) as f32;
-        let k = if self.top_k == 0 { logits.len() } else { self.top_k.min(logits.len()) };
-        // The k-th largest logit is the cut (ties at the cut are kept).
-        let cut = if k < logits.len() {
-            let mut sorted: Vec<f32> = logits.to_vec();
-            let (_, kth, _) = sorted.select_nth_unstable_by(k - 1, |a, b| b.total_cmp(a));
-            *kth
-        } else {
-            f32::NEG_INFINITY
-        };
-        let max = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let mut total = 0f32;
-        for (p, &l) in probs.iter_mut().zip(logits) {
-            *p = if l >= cut { ((l - max) / t).exp() } else { 0.0 };
-            total += *p;
-        }
-        let mut u = rng.gen::<f32>() * total;
-        for (i, &p) in probs.iter().enumerate() {
-            if u < p {
-                return i;
-            }
-            u -= p;
-        }
-        // Rounding left u past the end: the last bin with any mass.
-        probs.iter().rposition(|&p| p > 0.0).unwrap_or(0)
-    }
-}
-
-/// The run behind the committed weights, beside the common record.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct Schedule {
-    pub window: usize,
-    pub stride: usize,
-    /// Standard deviation (bins) of the noise added to the pose stream's input tokens.
-    pub input_noise_bins: f64,
-    /// Share of each window's frames scored per step (1: all; see `train::tsmt::Options`).
-    #[serde(default = "one")]
-    pub loss_frames: f64,
-    /// Windows whose last second was slower than this (m/s, root-relative joints) were left out
-    /// (0: none).
-    #[serde(default)]
-    pub min_window_speed: f64,
-    pub steps: usize,
-}
-
-fn one() -> f64 {
-    1.0
-}
-
-/// `model.json`'s own fields: the bins, the default sampling and the de-quantisation.
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct Serving {
-    pub bins: Bins,
-    /// Used where a job gives no `temperature` / `top_k`.
-    pub sampling: Sampling,
-    /// σ, in frames, of the Gaussian that smooths the sampled bin centres over time before the
-    /// motion is rebuilt (0: none). Each coordinate is drawn on its own, so a joint's three
-    /// coordinates jitter by a bin or two from frame to frame; at 25 fps one 4-mm bin of jitter
-    /// is already ~2.5 m/s² of acceleration, and the model card measures what is left.
-    #[serde(default)]
-    pub smooth_frames: f64,
-    /// σ, in frames, of a second Gaussian over the root height once it is rebuilt from the
-    /// clearance (0: none). The height is the clearance minus the lowest foot point's local
-    /// height, and which point is lowest hops between feet and heel/toe as each coordinate is
-    /// drawn on its own: the whole body then rises or drops by up to 0.2 m in a frame (4–6 m/s).
-    #[serde(default)]
-    pub smooth_height_frames: f64,
-    /// The stall guard, if any ([`StallGuard`]).
-    #[serde(default)]
-    pub stall_guard: Option<StallGuard>,
-}
-
-/// `model.json`.
-pub type ModelFile = folder::ModelFile<Config, Schedule, Serving>;
-
-/// A trained TSMT, ready to serve.
-pub struct Served {
-    file: ModelFile,
-    clips: Option<SeedClips>,
-    pool: InstancePool<Tsmt>,
-}
-
-/// What one generation made: the feature rows (foot clearance as the height) and the root start.
-pub struct Generation {
-    pub features: Array2<f32>,
-    pub start: RootStart,
-}
-
-impl Served {
-    /// Loads `dir/model.json`, `dir/weights.safetensors` and `dir/seed_clips.safetensors`.
-    pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| Tsmt::new(p, f.config.clone()))?;
-        let path = dir.join(SEED_CLIPS_FILE);
-        let clips = if path.exists() { Some(SeedClips::load(&path, FEATURE_DIM)?) } else { None };
-        Ok(Self { file, clips, pool })
-    }
-
-    /// The model's description file.
-    pub fn file(&self) -> &ModelFile {
-        &self.file
-    }
-
-    /// Generates `n` frames of features (clearance heights) for `audio`. The context is the seed
-    /// motion's features (which then open the dance), else a drawn clip (context only).
-    pub fn generate_features(&self, req: &GenerateRequest<'_>, n: usize, progress: &mut dyn Progress) -> Result<Generation, ModelError> {
-        let fps = self.file.fps;
-        let bins = &self.file.extra.bins;
-        let sampling = Sampling {
-            temperature: req.temperature.unwrap_or(self.file.extra.sampling.temperature),
-            top_k: req.top_k.map(|k| k as usize).unwrap_or(self.file.extra.sampling.top_k),
-        };
-        progress.report("features", 0.0)?;
-        let feats = crate::audio::features::tsmt(req.audio, fps, 0.0, n)?;
-        let music = to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0);
-        progress.report("features", 1.0)?;
-        // The opening: the request's seed motion (kept as the dance's first frames), or a real clip.
-        let (context, opening, start) = match req.seed_motion {
-            Some(m) if m.num_frames() > 0 => {
-                let keep = m.num_frames().min(n);
-                let root = crate::motion::skeleton::body_centre_track(m.positions.view());
-                let (mut f, start) = repr::to_features(m.positions.view(), root.view())?;
-                let floor = repr::floor_of_features(f.view());
-                repr::height_to_clearance(&mut f, floor);
-                let f = f.slice(s![..keep, ..]).to_owned();
-                (bins.tokens(&f), Some(f), start)
-            }
-            _ => {
-                let clip = match &self.clips {
-                    Some(c) => c.pick(req.seed),
-                    None => return Err(ModelError::Invalid(format!("{ID}: no seed motion and no {SEED_CLIPS_FILE}"))),
-                };
-                (bins.tokens(&clip), None, RootStart::default())
-            }
-        };
-        let opened = opening.as_ref().map_or(0, |o| o.nrows());
-        let out = self.pool.with(|model| {
-            tch::no_grad(|| -> Result<Option<Array2<i64>>, ModelError> {
-                let mut cancelled = false;
-                let Some(vectors) = model.audio_logit_vectors(&music, |f| {
-                    cancelled = progress.report("encode", f).is_err();
-                    !cancelled
-                }) else {
-                    return Ok(None);
-                };
-                let rest = vectors.narrow(0, opened as i64, (n - opened) as i64);
-                let total = (n - opened).max(1);
-                let widths: Vec<f32> = (0..repr::POSE_DIM).map(|c| (bins.hi[c] - bins.lo[c]) / bins.n as f32).collect();
-                let guard = self.file.extra.stall_guard.as_ref().map(|g| (g, widths.as_slice()));
-                Ok(model.sample_guarded(&context, &rest, sampling, guard, req.seed, |done| progress.report("decode", done as f32 / total as f32).is_ok()))
-            })
-        })??;
-        let Some(tokens) = out else { return Err(Cancelled.into()) };
-        let mut sampled = bins.values(&tokens);
-        smooth_columns(&mut sampled, 0, self.file.extra.smooth_frames);
-        let features = match opening {
-            Some(o) => ndarray::concatenate(ndarray::Axis(0), &[o.view(), sampled.view()]).map_err(|e| ModelError::Invalid(e.to_string()))?,
-            None => sampled,
-        };
-        Ok(Generation { features, start })
-    }
-}
-
-impl DanceModel for Served {
-    fn info(&self) -> ModelInfo {
-        ModelInfo {
-            id: ModelId(ID.into()),
-            paper: "Li et al., Learning to Generate Diverse Dance Motions with Transformer, 2020 (two-stream motion transformer)".into(),
-            capabilities: Capabilities { key_poses: false, seed_motion: true, style: false, temperature: true, top_k: true },
-        }
-    }
-
-    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
-        self.refuse_unsupported(req)?;
-        let n = ((req.audio.duration_s * self.file.fps).floor() as usize).max(1);
-        let mut g = self.generate_features(req, n, progress)?;
-        repr::clearance_to_height(&mut g.features);
-        // The root height follows the lowest foot point, which hops between feet and points as
-        // their coordinates are drawn; smoothing the height itself (not the clearance) keeps the
-        // body from jumping with it. The opening (a request's seed motion) is kept.
-        let keep = req.seed_motion.map_or(0, |m| m.num_frames().min(n));
-        let mut h = g.features.column(repr::ROOT_Y).to_owned().insert_axis(ndarray::Axis(1));
-        smooth_columns(&mut h, keep, self.file.extra.smooth_height_frames);
-        g.features.column_mut(repr::ROOT_Y).assign(&h.column(0));
-        let (motion, _root) = repr::from_features(g.features.view(), g.start, self.file.fps)?;
-        Ok(motion.into())
-    }
 }
 
 #[cfg(test)]
 mod tests {
+    use super::sampling::reach_m;
     use super::*;
+    use crate::models::smooth_columns;
+    use ndarray::s;
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
     use tch::nn::OptimizerConfig;
 
     fn model(seed: i64) -> (nn::VarStore, Tsmt) {

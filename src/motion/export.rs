@@ -482,28 +482,3 @@ pub fn export_dance(
     let m = prepare_with_root(&dance.motion, dance.center.view())?;
     write_atomic(out, &render(&m, format)?)
 }
-
-/// `choreo export DANCE_ID --format bvh|json|glb --out FILE`: a dataset dance through the same
-/// exporter generated dances use.
-#[derive(Clone, Debug, clap::Args)]
-pub struct ExportArgs {
-    /// Dataset dance id, e.g. DANCE_W_3.
-    pub dance_id: String,
-    /// Output format: bvh, json or glb.
-    #[arg(long, value_parser = ["bvh", "json", "glb"])]
-    pub format: String,
-    /// Output file.
-    #[arg(long)]
-    pub out: PathBuf,
-    /// The dance-with-melody folder.
-    #[arg(long, default_value = super::dataset::DEFAULT_ROOT)]
-    pub dataset: PathBuf,
-}
-
-impl ExportArgs {
-    /// Runs the export.
-    pub fn run(&self) -> Result<(), MotionError> {
-        let format: Format = self.format.parse()?;
-        export_dance(&self.dataset, &self.dance_id, format, &self.out)
-    }
-}

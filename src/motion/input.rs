@@ -31,64 +31,10 @@ use serde::{Deserialize, Serialize};
 
 use super::rig::{self, RIG_JOINTS};
 use super::skeleton::JOINT_NAMES;
-use super::validate::{self, InputError, MAX_SEED_FPS};
+pub use super::input_error::JointSet;
+use super::input_error::InputError;
+use super::validate::{self, MAX_SEED_FPS};
 use super::{KeyPose, Motion, MOTION_FPS, NUM_JOINTS};
-
-/// Which joints a pose lists.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
-#[serde(rename_all = "lowercase")]
-pub enum JointSet {
-    /// motion.json's `joint_names` (26): `body_centre`, the 23 dataset joints, `pelvis`, `neck`.
-    Choreo,
-    /// The 23 dataset joints in the dataset's order.
-    Dataset,
-}
-
-impl JointSet {
-    /// Joints a pose of this set lists.
-    pub const fn joint_count(self) -> usize {
-        match self {
-            JointSet::Choreo => RIG_JOINTS,
-            JointSet::Dataset => NUM_JOINTS,
-        }
-    }
-
-    /// The name the API uses.
-    pub const fn name(self) -> &'static str {
-        match self {
-            JointSet::Choreo => "choreo",
-            JointSet::Dataset => "dataset",
-        }
-    }
-
-    /// The set `asked` for, or the one with `count` joints; an error naming both otherwise.
-    pub fn resolve(
-        what: &str,
-        asked: Option<JointSet>,
-        count: usize,
-    ) -> Result<JointSet, InputError> {
-        let by_count = [JointSet::Choreo, JointSet::Dataset]
-            .into_iter()
-            .find(|s| s.joint_count() == count);
-        match (asked, by_count) {
-            (Some(set), Some(found)) if set == found => Ok(set),
-            (None, Some(found)) => Ok(found),
-            _ => Err(InputError::WrongJointCount {
-                what: what.to_string(),
-                got: count,
-                asked,
-            }),
-        }
-    }
-
-    /// Index in a pose of this set of dataset joint `j`.
-    const fn index_of(self, j: usize) -> usize {
-        match self {
-            JointSet::Choreo => rig::rig_index(j),
-            JointSet::Dataset => j,
-        }
-    }
-}
 
 /// One frame of a BVH file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]

@@ -19,6 +19,7 @@ pub mod dataset;
 pub mod export;
 pub mod feet;
 pub mod input;
+pub mod input_error;
 pub mod repr;
 pub mod rig;
 pub mod rotations;
@@ -46,6 +47,24 @@ pub fn finish(mut motion: Motion, plant_feet: bool) -> Motion {
         feet::plant_feet(motion.positions.view_mut(), motion.fps);
     }
     motion
+}
+
+/// A finished dance as a user downloads it: the export's rigid skeleton ([`rig::RigMotion`], what
+/// the BVH, JSON and glb carry) and the motion that skeleton draws (what motion.json holds, and
+/// what the report, the preview and `choreo eval` judge).
+pub struct Served {
+    pub rig: rig::RigMotion,
+    pub motion: Motion,
+}
+
+/// The export step after [`finish`]: fits the rigid skeleton to `finished` with the key poses'
+/// frames as anchors ([`export::prepare_anchored`]). Jobs, `choreo generate` and `choreo eval`
+/// all go through it, so what is scored is what is served.
+pub fn serve(finished: &Motion, key_poses: &[KeyPose]) -> Result<Served, MotionError> {
+    let anchors: Vec<usize> = key_poses.iter().map(|k| (k.time_s * finished.fps).round() as usize).collect();
+    let rig = export::prepare_anchored(finished, &anchors)?;
+    let motion = export::served_motion(&rig);
+    Ok(Served { rig, motion })
 }
 
 impl Motion {

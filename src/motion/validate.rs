@@ -27,7 +27,8 @@
 //! outside [`TOTAL_RATIO`] = 0.5–1.5 × the dataset's (a collapsed or inflated skeleton, such as
 //! centimetres sent as metres). Every frame of the dataset passes (`tests/motion.rs`).
 use super::bvh::Bvh;
-use super::input::JointSet;
+pub use super::input_error::InputError;
+use super::input_error::JointSet;
 use super::skeleton::{body_centre, JOINT_NAMES, PARENTS};
 use super::{KeyPose, Motion, MotionError, NUM_JOINTS};
 
@@ -45,83 +46,6 @@ pub const TOTAL_RATIO: (f32, f32) = (0.5, 1.5);
 pub const MAX_SEED_FRAMES: usize = 15_000;
 /// Highest seed-motion frame rate accepted.
 pub const MAX_SEED_FPS: f64 = 240.0;
-
-/// Why user-supplied motion was refused (HTTP 422).
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum InputError {
-    #[error("{what} is not a finite number")]
-    NonFinite { what: String },
-    #[error("{what} has {got} joints; {}", joint_sets_wanted(*.asked))]
-    WrongJointCount {
-        what: String,
-        got: usize,
-        /// The joint set the input named, if it named one.
-        asked: Option<JointSet>,
-    },
-    #[error("{what}: bone {joint} is {length_m:.3} m long, at most {max_m:.3} m is plausible (are the units metres?)")]
-    AbsurdBone {
-        what: String,
-        joint: &'static str,
-        length_m: f32,
-        max_m: f32,
-    },
-    #[error("{what}: bone lengths sum to {total_m:.2} m, plausible is {min_m:.2}–{max_m:.2} m (are the units metres?)")]
-    AbsurdSize {
-        what: String,
-        total_m: f32,
-        min_m: f32,
-        max_m: f32,
-    },
-    #[error("key pose {index} at {time_s} s lands on frame {frame}, but the dance has {frames} frames at {fps} fps: times from 0 to under {limit_s:.3} s")]
-    TimeOutsideSong {
-        index: usize,
-        time_s: f64,
-        /// `round(time_s · fps)`.
-        frame: i64,
-        frames: usize,
-        fps: f64,
-        /// `(frames − ½) / fps`, the first time past the last frame.
-        limit_s: f64,
-    },
-    #[error("key poses {first} and {second} ({first_s} s and {second_s} s) fall on the same frame {frame}")]
-    DuplicateTime {
-        first: usize,
-        second: usize,
-        first_s: f64,
-        second_s: f64,
-        frame: usize,
-    },
-    #[error("{0}")]
-    Malformed(String),
-}
-
-/// The accepted joint sets, for a wrong count: which one was asked for, if any, and both.
-fn joint_sets_wanted(asked: Option<JointSet>) -> String {
-    let both = format!(
-        "send {} joints in motion.json's `joint_names` order (joint_set \"choreo\") or {} in the dataset's order (joint_set \"dataset\")",
-        JointSet::Choreo.joint_count(),
-        JointSet::Dataset.joint_count()
-    );
-    match asked {
-        Some(set) => format!("joint_set \"{}\" has {}: {both}", set.name(), set.joint_count()),
-        None => both,
-    }
-}
-
-impl InputError {
-    /// Stable kebab-case code for problem responses.
-    pub fn code(&self) -> &'static str {
-        match self {
-            InputError::NonFinite { .. } => "non-finite",
-            InputError::WrongJointCount { .. } => "wrong-joint-count",
-            InputError::AbsurdBone { .. } => "absurd-bone-length",
-            InputError::AbsurdSize { .. } => "absurd-skeleton-size",
-            InputError::TimeOutsideSong { .. } => "time-outside-song",
-            InputError::DuplicateTime { .. } => "duplicate-time",
-            InputError::Malformed(_) => "malformed-motion",
-        }
-    }
-}
 
 /// Checks one pose `[23][3]` (any origin): finite, joint count, plausible bone lengths.
 pub fn check_pose(what: &str, joints: &[[f64; 3]], root: [f64; 3]) -> Result<(), InputError> {
@@ -171,7 +95,8 @@ pub fn check_pose(what: &str, joints: &[[f64; 3]], root: [f64; 3]) -> Result<(),
 }
 
 /// Frames a model makes for a song of `duration_s` seconds at `fps`: `⌊duration_s · fps⌋`, at least
-/// one.
+/// one. The one rule: every model's `generate`, the style classifier and the API's key-pose check
+/// call it, so a key pose the API accepted always lands on a frame the model makes.
 pub fn song_frames(duration_s: f64, fps: f64) -> usize {
     let n = (duration_s * fps).floor();
     if n.is_finite() && n >= 1.0 {

@@ -10,7 +10,9 @@
 //! Handlers and workers see only the traits. Two stores keep the same contract (the tests in
 //! `tests/queue.rs` run against both): [`SqliteStore`], one file beside one process, and
 //! [`PgStore`], one database shared by API and worker processes on many hosts (`FOR UPDATE SKIP
-//! LOCKED`, `LISTEN/NOTIFY`). [`open`] picks one from the configured database URL.
+//! LOCKED`, `LISTEN/NOTIFY`). Both are one [`sql::SqlStore`]: the rules are written once in
+//! `sql.rs`, and `sqlite.rs` and `postgres.rs` hold only their dialect (`sql::Dialect`) and how
+//! they connect. [`open`] picks one from the configured database URL.
 use crate::audio::{Analysis, AudioFormat};
 use crate::models::ModelId;
 use crate::motion::KeyPose;
@@ -277,8 +279,8 @@ pub struct Job {
     pub id: JobId,
     pub kind: JobKind,
     pub status: Status,
-    /// Short name of what the job is doing now.
-    pub stage: Option<String>,
+    /// What the job is doing now; a stored name this build does not know reads as none.
+    pub stage: Option<crate::stage::Stage>,
     /// 0..=1 within the whole job.
     pub progress: f64,
     pub priority: i64,

@@ -1,20 +1,91 @@
-//! What the SQLite and PostgreSQL job stores share: column lists, the backoff cap and the
-//! conversions between stored integers (epoch milliseconds) and times.
+//! The queue's rules, written once for both SQL stores.
 //!
-//! The row mappers stay in each store: the two drivers' row types differ, and ids are TEXT in
-//! SQLite but UUID in PostgreSQL.
-use super::QueueError;
+//! [`SqlStore`] implements [`JobStore`] and [`SongStore`] over any sqlx database that is a
+//! [`Dialect`]: every statement and flow (register with its idempotency key, claim, heartbeat,
+//! complete, fail, cancel, the requeue of expired leases, songs) is here, once. Both drivers bind
+//! `$N` placeholders, and both schemas keep times as integer milliseconds and JSON as TEXT, so
+//! the same SQL runs on each. What is left apart is what truly differs between the two
+//! databases, the [`Dialect`]: how ids are stored, row locking, the backoff arithmetic and
+//! notifications (`sqlite.rs`, `postgres.rs`).
+//!
+//! Every write runs in a transaction begun by [`SqlStore::begin`] and ended by
+//! [`SqlStore::commit`], so how a write becomes durable is decided in one place.
+//!
+//! Generic sqlx code has to spell out what it asks of the driver (an executor for its
+//! connections, encodings of the Rust types it binds and reads); those bounds sit on the three
+//! `impl` blocks below and are met by both SQLite and PostgreSQL.
+use super::{
+    Beat, Idempotency, Job, JobFiles, JobFilter, JobId, JobKind, JobStore, LeasePolicy, NewJob, Outcome, QueueError,
+    Registered, Requeued, Song, SongId, SongStore, Status, StoreFuture,
+};
 use chrono::{DateTime, TimeZone, Utc};
+use sqlx::{ColumnIndex, Database, Decode, Encode, Executor, IntoArguments, Pool, Row, Transaction, Type};
+use std::str::FromStr;
+use std::sync::Arc;
 use std::time::Duration;
+use tokio::sync::Notify;
+use tokio_util::sync::CancellationToken;
+use uuid::Uuid;
 
 /// Cap on the backoff exponent, so `1 << n` cannot overflow.
 pub const MAX_BACKOFF_DOUBLINGS: i64 = 16;
 
-/// The columns a job row is read from, in `job_from_row`'s order.
+/// The columns a job row is read from.
 pub const JOB_COLUMNS: &str = "id, options, status, stage, progress, priority, attempts, max_attempts, cancel_requested, \
      error, result, created_at, started_at, finished_at";
 /// The columns a song row is read from.
 pub const SONG_COLUMNS: &str = "id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, analysis, created_at";
+
+/// What differs between the SQL of the two stores; everything else is one statement for both.
+pub trait Dialect: Database {
+    /// How an id is stored: hyphenated TEXT in SQLite, UUID in PostgreSQL.
+    type Id: for<'q> Encode<'q, Self> + for<'r> Decode<'r, Self> + Type<Self> + Send + Sync + 'static;
+
+    /// Ends the sub-select that picks the rows a claim or the reaper updates. PostgreSQL has
+    /// many writers and skips rows another transaction is taking; SQLite has one writer and
+    /// needs nothing.
+    const SKIP_LOCKED: &'static str;
+
+    /// `2^min(attempts - 1, cap)` as a 64-bit integer, the retry backoff's factor.
+    fn backoff_factor(cap: &str) -> String;
+
+    /// An id as stored.
+    fn id(id: Uuid) -> Self::Id;
+
+    /// Rows a statement changed (sqlx has no driver-independent accessor).
+    fn rows_affected(done: &Self::QueryResult) -> u64;
+
+    /// A stored id back to a UUID.
+    fn uuid(id: Self::Id) -> Result<Uuid, uuid::Error>;
+
+    /// Wakes `wake` whenever a job becomes claimable in another process, until `shutdown`
+    /// ([`JobStore::watch`]).
+    fn watch(pool: &Pool<Self>, wake: Arc<Notify>, shutdown: CancellationToken) -> StoreFuture<'_, ()>;
+}
+
+/// The jobs and songs of one SQL database: [`super::SqliteStore`] or [`super::PgStore`].
+#[derive(Debug)]
+pub struct SqlStore<D: Database> {
+    pool: Pool<D>,
+}
+
+impl<D: Database> Clone for SqlStore<D> {
+    fn clone(&self) -> Self {
+        Self { pool: self.pool.clone() }
+    }
+}
+
+impl<D: Database> SqlStore<D> {
+    /// A store over a pool whose migrations have run.
+    pub(super) fn from_pool(pool: Pool<D>) -> Self {
+        Self { pool }
+    }
+
+    /// The pool, for tests and tools that inspect the database.
+    pub fn pool(&self) -> &Pool<D> {
+        &self.pool
+    }
+}
 
 /// Now, in epoch milliseconds (how both stores keep times).
 pub fn now_ms() -> i64 {
@@ -39,4 +110,490 @@ pub fn ms(d: Duration) -> i64 {
 /// A stored value that does not parse.
 pub fn corrupt(what: &str, e: impl std::fmt::Display) -> QueueError {
     QueueError::Corrupt(format!("{what}: {e}"))
+}
+
+fn format_name(song: &Song) -> Result<String, QueueError> {
+    match serde_json::to_value(song.format).map_err(|e| corrupt("song format", e))? {
+        serde_json::Value::String(s) => Ok(s),
+        other => Err(corrupt("song format", other)),
+    }
+}
+
+impl<D> SqlStore<D>
+where
+    D: Dialect,
+    for<'c> &'c mut D::Connection: Executor<'c, Database = D>,
+    for<'q> D::Arguments<'q>: IntoArguments<'q, D>,
+    for<'q> i64: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> f64: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> bool: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> String: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> &'q str: Encode<'q, D> + Type<D>,
+    for<'q> Option<String>: Encode<'q, D>,
+    for<'q> Option<&'q str>: Encode<'q, D>,
+    for<'q> Option<D::Id>: Encode<'q, D>,
+    &'static str: ColumnIndex<D::Row>,
+{
+    /// Starts the transaction a write runs in. Every write begins here and ends in
+    /// [`Self::commit`] (or is rolled back when dropped), so one place decides how writes are
+    /// made durable. Each write transaction starts with its write: in SQLite it then takes the
+    /// write lock at once, so a waiting writer is handled by the busy timeout.
+    async fn begin(&self) -> Result<Transaction<'static, D>, QueueError> {
+        Ok(self.pool.begin().await?)
+    }
+
+    /// Commits a write begun by [`Self::begin`]; callers answer only after it returns.
+    async fn commit(tx: Transaction<'static, D>) -> Result<(), QueueError> {
+        Ok(tx.commit().await?)
+    }
+
+    fn job_from_row(row: &D::Row) -> Result<Job, QueueError> {
+        let options: String = row.try_get("options")?;
+        let status: String = row.try_get("status")?;
+        let result: Option<String> = row.try_get("result")?;
+        Ok(Job {
+            id: JobId(D::uuid(row.try_get("id")?).map_err(|e| corrupt("job id", e))?),
+            kind: serde_json::from_str::<JobKind>(&options).map_err(|e| corrupt("job options", e))?,
+            status: Status::from_str(&status).map_err(|e| corrupt("job status", e))?,
+            stage: crate::stage::Stage::from_stored(row.try_get::<Option<String>, _>("stage")?.as_deref()),
+            progress: row.try_get("progress")?,
+            priority: row.try_get("priority")?,
+            attempts: row.try_get::<i64, _>("attempts")?.try_into().map_err(|e| corrupt("attempts", e))?,
+            max_attempts: row.try_get::<i64, _>("max_attempts")?.try_into().map_err(|e| corrupt("max_attempts", e))?,
+            cancel_requested: row.try_get("cancel_requested")?,
+            error: row.try_get("error")?,
+            files: match result {
+                Some(json) => serde_json::from_str(&json).map_err(|e| corrupt("job result", e))?,
+                None => JobFiles::default(),
+            },
+            created_at: to_time(row.try_get("created_at")?)?,
+            started_at: opt_time(row.try_get("started_at")?)?,
+            finished_at: opt_time(row.try_get("finished_at")?)?,
+        })
+    }
+
+    fn song_from_row(row: &D::Row) -> Result<Song, QueueError> {
+        let format: String = row.try_get("format")?;
+        let analysis: Option<String> = row.try_get("analysis")?;
+        Ok(Song {
+            id: SongId(D::uuid(row.try_get("id")?).map_err(|e| corrupt("song id", e))?),
+            filename: row.try_get("filename")?,
+            format: serde_json::from_value(serde_json::Value::String(format)).map_err(|e| corrupt("song format", e))?,
+            duration_s: row.try_get("duration_s")?,
+            sample_rate: row.try_get::<i64, _>("sample_rate")?.try_into().map_err(|e| corrupt("sample_rate", e))?,
+            channels: row.try_get::<i64, _>("channels")?.try_into().map_err(|e| corrupt("channels", e))?,
+            sha256: row.try_get("sha256")?,
+            size_bytes: row.try_get::<i64, _>("size_bytes")?.try_into().map_err(|e| corrupt("size_bytes", e))?,
+            analysis: analysis.map(|json| serde_json::from_str(&json)).transpose().map_err(|e| corrupt("analysis", e))?,
+            created_at: to_time(row.try_get("created_at")?)?,
+        })
+    }
+
+    /// Inserts a queued job: the one statement that creates a job. `None` when its idempotency
+    /// key is already taken.
+    async fn insert_job(conn: &mut D::Connection, job: &NewJob, now: i64) -> Result<Option<Job>, QueueError> {
+        let options = serde_json::to_string(&job.kind).map_err(|e| corrupt("job options", e))?;
+        let (key, hash) = match &job.idempotency {
+            Some(Idempotency { key, request_hash }) => (Some(key.as_str()), Some(request_hash.as_str())),
+            None => (None, None),
+        };
+        let sql = format!(
+            "INSERT INTO jobs (id, kind, song_id, model, options, status, priority, max_attempts, run_after, \
+             idempotency_key, request_hash, created_at) VALUES ($1, $2, $3, $4, $5, 'queued', $6, $7, $8, $9, $10, $8) \
+             ON CONFLICT (idempotency_key) DO NOTHING RETURNING {JOB_COLUMNS}"
+        );
+        let row = sqlx::query(&sql)
+            .bind(D::id(JobId::new().0))
+            .bind(job.kind.name())
+            .bind(D::id(job.kind.song_id().0))
+            .bind(job.kind.model().map(|m| m.0.clone()))
+            .bind(options)
+            .bind(job.priority)
+            .bind(i64::from(job.max_attempts))
+            .bind(now)
+            .bind(key)
+            .bind(hash)
+            .fetch_optional(conn)
+            .await?;
+        row.as_ref().map(Self::job_from_row).transpose()
+    }
+}
+
+impl<D> JobStore for SqlStore<D>
+where
+    D: Dialect,
+    for<'c> &'c mut D::Connection: Executor<'c, Database = D>,
+    for<'q> D::Arguments<'q>: IntoArguments<'q, D>,
+    for<'q> i64: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> f64: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> bool: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> String: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> &'q str: Encode<'q, D> + Type<D>,
+    for<'q> Option<String>: Encode<'q, D>,
+    for<'q> Option<&'q str>: Encode<'q, D>,
+    for<'q> Option<D::Id>: Encode<'q, D>,
+    &'static str: ColumnIndex<D::Row>,
+{
+    fn register(&self, job: NewJob) -> StoreFuture<'_, Registered> {
+        Box::pin(async move {
+            let song = job.kind.song_id();
+            let exists = sqlx::query("SELECT 1 FROM songs WHERE id = $1").bind(D::id(song.0)).fetch_optional(&self.pool).await?;
+            if exists.is_none() {
+                return Err(QueueError::SongNotFound(song));
+            }
+            let mut tx = self.begin().await?;
+            let created = Self::insert_job(&mut tx, &job, now_ms()).await?;
+            Self::commit(tx).await?;
+            if let Some(created) = created {
+                return Ok(Registered::Created(created));
+            }
+            // Only the idempotency key can conflict: the id is fresh.
+            let Some(idem) = &job.idempotency else {
+                return Err(QueueError::Corrupt("insert of a job without idempotency key returned nothing".into()));
+            };
+            let sql = format!("SELECT {JOB_COLUMNS}, request_hash FROM jobs WHERE idempotency_key = $1");
+            let row = sqlx::query(&sql).bind(&idem.key).fetch_one(&self.pool).await?;
+            let existing = Self::job_from_row(&row)?;
+            let hash: Option<String> = row.try_get("request_hash")?;
+            if hash.as_deref() == Some(idem.request_hash.as_str()) {
+                Ok(Registered::Existing(existing))
+            } else {
+                Err(QueueError::IdempotencyConflict(existing.id))
+            }
+        })
+    }
+
+    fn claim<'a>(&'a self, owner: &'a str, policy: LeasePolicy) -> StoreFuture<'a, Option<Job>> {
+        Box::pin(async move {
+            let now = now_ms();
+            // One statement selects and leases the job, so two workers never get the same one.
+            let sql = format!(
+                "UPDATE jobs SET status = 'running', attempts = attempts + 1, lease_owner = $1, \
+                 lease_expires_at = $2, heartbeat_at = $3, started_at = COALESCE(started_at, $3), \
+                 stage = 'claimed', progress = 0 \
+                 WHERE id = (SELECT id FROM jobs WHERE status = 'queued' AND run_after <= $3 \
+                             ORDER BY priority DESC, run_after, id LIMIT 1{}) \
+                 RETURNING {JOB_COLUMNS}",
+                D::SKIP_LOCKED
+            );
+            let mut tx = self.begin().await?;
+            let row = sqlx::query(&sql)
+                .bind(owner)
+                .bind(now + ms(policy.lease))
+                .bind(now)
+                .fetch_optional(&mut *tx)
+                .await?;
+            Self::commit(tx).await?;
+            row.as_ref().map(Self::job_from_row).transpose()
+        })
+    }
+
+    fn heartbeat<'a>(
+        &'a self,
+        id: JobId,
+        owner: &'a str,
+        stage: &'a str,
+        progress: f64,
+        policy: LeasePolicy,
+    ) -> StoreFuture<'a, Beat> {
+        Box::pin(async move {
+            let now = now_ms();
+            let mut tx = self.begin().await?;
+            let row = sqlx::query(
+                "UPDATE jobs SET heartbeat_at = $1, lease_expires_at = $2, stage = $3, progress = $4 \
+                 WHERE id = $5 AND lease_owner = $6 AND status = 'running' RETURNING cancel_requested",
+            )
+            .bind(now)
+            .bind(now + ms(policy.lease))
+            .bind(stage)
+            .bind(progress.clamp(0.0, 1.0))
+            .bind(D::id(id.0))
+            .bind(owner)
+            .fetch_optional(&mut *tx)
+            .await?;
+            Self::commit(tx).await?;
+            Ok(match row {
+                Some(row) => Beat::Held { cancel_requested: row.try_get("cancel_requested")? },
+                None => Beat::Lost,
+            })
+        })
+    }
+
+    fn complete<'a>(&'a self, id: JobId, owner: &'a str, outcome: Outcome) -> StoreFuture<'a, bool> {
+        Box::pin(async move {
+            let files = match &outcome {
+                Outcome::Files(files) => Some(serde_json::to_string(files).map_err(|e| corrupt("job result", e))?),
+                Outcome::Analysis(_) => None,
+            };
+            let mut tx = self.begin().await?;
+            let row = sqlx::query(
+                "UPDATE jobs SET status = 'succeeded', stage = 'done', progress = 1, result = $1, error = NULL, \
+                 finished_at = $2, lease_owner = NULL, lease_expires_at = NULL \
+                 WHERE id = $3 AND lease_owner = $4 AND status = 'running' RETURNING song_id",
+            )
+            .bind(files)
+            .bind(now_ms())
+            .bind(D::id(id.0))
+            .bind(owner)
+            .fetch_optional(&mut *tx)
+            .await?;
+            let Some(row) = row else {
+                tx.rollback().await?;
+                return Ok(false);
+            };
+            if let Outcome::Analysis(analysis) = &outcome {
+                let song_id: D::Id = row.try_get("song_id")?;
+                let json = serde_json::to_string(analysis).map_err(|e| corrupt("analysis", e))?;
+                sqlx::query("UPDATE songs SET analysis = $1 WHERE id = $2").bind(json).bind(song_id).execute(&mut *tx).await?;
+            }
+            Self::commit(tx).await?;
+            Ok(true)
+        })
+    }
+
+    fn fail<'a>(&'a self, id: JobId, owner: &'a str, error: &'a str, retry: bool, policy: LeasePolicy) -> StoreFuture<'a, bool> {
+        Box::pin(async move {
+            let now = now_ms();
+            let sql = format!(
+                "UPDATE jobs SET \
+                   status = CASE WHEN $1 AND attempts < max_attempts AND NOT cancel_requested THEN 'queued' \
+                                 WHEN cancel_requested THEN 'cancelled' ELSE 'failed' END, \
+                   finished_at = CASE WHEN $1 AND attempts < max_attempts AND NOT cancel_requested THEN NULL ELSE $2 END, \
+                   run_after = $2 + $3 * {}, \
+                   error = $5, lease_owner = NULL, lease_expires_at = NULL \
+                 WHERE id = $6 AND lease_owner = $7 AND status = 'running'",
+                D::backoff_factor("$4")
+            );
+            let mut tx = self.begin().await?;
+            let done = sqlx::query(&sql)
+                .bind(retry)
+                .bind(now)
+                .bind(ms(policy.backoff))
+                .bind(MAX_BACKOFF_DOUBLINGS)
+                .bind(error)
+                .bind(D::id(id.0))
+                .bind(owner)
+                .execute(&mut *tx)
+                .await?;
+            Self::commit(tx).await?;
+            Ok(D::rows_affected(&done) == 1)
+        })
+    }
+
+    fn finish_cancelled<'a>(&'a self, id: JobId, owner: &'a str) -> StoreFuture<'a, bool> {
+        Box::pin(async move {
+            let mut tx = self.begin().await?;
+            let done = sqlx::query(
+                "UPDATE jobs SET status = 'cancelled', finished_at = $1, lease_owner = NULL, lease_expires_at = NULL \
+                 WHERE id = $2 AND lease_owner = $3 AND status = 'running'",
+            )
+            .bind(now_ms())
+            .bind(D::id(id.0))
+            .bind(owner)
+            .execute(&mut *tx)
+            .await?;
+            Self::commit(tx).await?;
+            Ok(D::rows_affected(&done) == 1)
+        })
+    }
+
+    fn cancel(&self, id: JobId) -> StoreFuture<'_, Job> {
+        Box::pin(async move {
+            // In the SET of both databases, every column reads the row as it was before.
+            let sql = format!(
+                "UPDATE jobs SET \
+                   status = CASE WHEN status = 'queued' THEN 'cancelled' ELSE status END, \
+                   finished_at = CASE WHEN status = 'queued' THEN $1 ELSE finished_at END, \
+                   cancel_requested = CASE WHEN status IN ('queued', 'running') THEN TRUE ELSE cancel_requested END \
+                 WHERE id = $2 RETURNING {JOB_COLUMNS}"
+            );
+            let mut tx = self.begin().await?;
+            let row = sqlx::query(&sql).bind(now_ms()).bind(D::id(id.0)).fetch_optional(&mut *tx).await?;
+            Self::commit(tx).await?;
+            match row {
+                Some(row) => Self::job_from_row(&row),
+                None => Err(QueueError::JobNotFound(id)),
+            }
+        })
+    }
+
+    fn requeue_expired(&self, policy: LeasePolicy) -> StoreFuture<'_, Requeued> {
+        Box::pin(async move {
+            let now = now_ms();
+            // Every worker process runs a reaper; with many writers, skipping locked rows keeps
+            // two reapers (or a reaper and a late heartbeat) from waiting on each other, and the
+            // row lock from counting a lease twice.
+            let sql = format!(
+                "UPDATE jobs SET \
+                   status = CASE WHEN cancel_requested THEN 'cancelled' \
+                                 WHEN attempts >= max_attempts THEN 'failed' ELSE 'queued' END, \
+                   finished_at = CASE WHEN cancel_requested OR attempts >= max_attempts THEN $1 ELSE NULL END, \
+                   error = 'lease expired on attempt ' || attempts || ' of ' || max_attempts || \
+                           ' (the worker died or hung)' || COALESCE('; last error: ' || error, ''), \
+                   run_after = $1 + $2 * {}, \
+                   lease_owner = NULL, lease_expires_at = NULL \
+                 WHERE id IN (SELECT id FROM jobs WHERE status = 'running' AND lease_expires_at < $1{}) \
+                 RETURNING id, status",
+                D::backoff_factor("$3"),
+                D::SKIP_LOCKED
+            );
+            let mut tx = self.begin().await?;
+            let rows = sqlx::query(&sql)
+                .bind(now)
+                .bind(ms(policy.backoff))
+                .bind(MAX_BACKOFF_DOUBLINGS)
+                .fetch_all(&mut *tx)
+                .await?;
+            Self::commit(tx).await?;
+            let mut out = Requeued::default();
+            for row in rows {
+                let id = JobId(D::uuid(row.try_get("id")?).map_err(|e| corrupt("job id", e))?);
+                let status: String = row.try_get("status")?;
+                match Status::from_str(&status).map_err(|e| corrupt("job status", e))? {
+                    Status::Queued => out.requeued.push(id),
+                    Status::Failed => out.failed.push(id),
+                    Status::Cancelled => out.cancelled.push(id),
+                    other @ (Status::Running | Status::Succeeded) => {
+                        return Err(corrupt("requeue", format!("job {id} became {other}")));
+                    }
+                }
+            }
+            Ok(out)
+        })
+    }
+
+    fn job(&self, id: JobId) -> StoreFuture<'_, Job> {
+        Box::pin(async move {
+            let sql = format!("SELECT {JOB_COLUMNS} FROM jobs WHERE id = $1");
+            match sqlx::query(&sql).bind(D::id(id.0)).fetch_optional(&self.pool).await? {
+                Some(row) => Self::job_from_row(&row),
+                None => Err(QueueError::JobNotFound(id)),
+            }
+        })
+    }
+
+    fn jobs(&self, filter: JobFilter) -> StoreFuture<'_, Vec<Job>> {
+        Box::pin(async move {
+            // Each parameter is bound with its type, so `$n IS NULL` needs no cast.
+            let sql = format!(
+                "SELECT {JOB_COLUMNS} FROM jobs WHERE ($1 IS NULL OR status = $1) AND ($2 IS NULL OR model = $2) \
+                 AND ($3 IS NULL OR id < $3) ORDER BY id DESC LIMIT $4"
+            );
+            let rows = sqlx::query(&sql)
+                .bind(filter.status.map(Status::as_str))
+                .bind(filter.model)
+                .bind(filter.before.map(|id| D::id(id.0)))
+                .bind(i64::from(filter.limit))
+                .fetch_all(&self.pool)
+                .await?;
+            rows.iter().map(Self::job_from_row).collect()
+        })
+    }
+
+    fn counts(&self) -> StoreFuture<'_, Vec<(Status, u64)>> {
+        Box::pin(async move {
+            let rows = sqlx::query("SELECT status, COUNT(*) AS n FROM jobs GROUP BY status").fetch_all(&self.pool).await?;
+            let mut counts: Vec<(Status, u64)> = Status::ALL.iter().map(|s| (*s, 0)).collect();
+            for row in rows {
+                let status: String = row.try_get("status")?;
+                let status = Status::from_str(&status).map_err(|e| corrupt("job status", e))?;
+                let n: i64 = row.try_get("n")?;
+                if let Some(slot) = counts.iter_mut().find(|(s, _)| *s == status) {
+                    slot.1 = u64::try_from(n).unwrap_or(0);
+                }
+            }
+            Ok(counts)
+        })
+    }
+
+    fn ping(&self) -> StoreFuture<'_, ()> {
+        Box::pin(async move {
+            sqlx::query("SELECT 1").execute(&self.pool).await?;
+            Ok(())
+        })
+    }
+
+    fn watch(&self, wake: Arc<Notify>, shutdown: CancellationToken) -> StoreFuture<'_, ()> {
+        D::watch(&self.pool, wake, shutdown)
+    }
+}
+
+impl<D> SongStore for SqlStore<D>
+where
+    D: Dialect,
+    for<'c> &'c mut D::Connection: Executor<'c, Database = D>,
+    for<'q> D::Arguments<'q>: IntoArguments<'q, D>,
+    for<'q> i64: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> f64: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> bool: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> String: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> &'q str: Encode<'q, D> + Type<D>,
+    for<'q> Option<String>: Encode<'q, D>,
+    for<'q> Option<&'q str>: Encode<'q, D>,
+    for<'q> Option<D::Id>: Encode<'q, D>,
+    &'static str: ColumnIndex<D::Row>,
+{
+    fn add_song(&self, song: Song, analyze: NewJob) -> StoreFuture<'_, (Song, bool)> {
+        Box::pin(async move {
+            let now = now_ms();
+            let mut tx = self.begin().await?;
+            let sql = format!(
+                "INSERT INTO songs (id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, created_at) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) ON CONFLICT (sha256) DO NOTHING RETURNING {SONG_COLUMNS}"
+            );
+            let inserted = sqlx::query(&sql)
+                .bind(D::id(song.id.0))
+                .bind(&song.filename)
+                .bind(format_name(&song)?)
+                .bind(song.duration_s)
+                .bind(i64::from(song.sample_rate))
+                .bind(i64::from(song.channels))
+                .bind(&song.sha256)
+                .bind(i64::try_from(song.size_bytes).map_err(|e| corrupt("size_bytes", e))?)
+                .bind(now)
+                .fetch_optional(&mut *tx)
+                .await?;
+            let Some(row) = inserted else {
+                // The conflicting row is committed (SQLite has one writer; PostgreSQL's ON
+                // CONFLICT waits for the other transaction), so a fresh read in this one sees it.
+                let sql = format!("SELECT {SONG_COLUMNS} FROM songs WHERE sha256 = $1");
+                let row = sqlx::query(&sql).bind(&song.sha256).fetch_one(&mut *tx).await?;
+                let existing = Self::song_from_row(&row)?;
+                Self::commit(tx).await?;
+                return Ok((existing, false));
+            };
+            let stored = Self::song_from_row(&row)?;
+            if Self::insert_job(&mut tx, &analyze, now).await?.is_none() {
+                return Err(QueueError::Corrupt("analyze job insert returned nothing".into()));
+            }
+            Self::commit(tx).await?;
+            Ok((stored, true))
+        })
+    }
+
+    fn song(&self, id: SongId) -> StoreFuture<'_, Song> {
+        Box::pin(async move {
+            let sql = format!("SELECT {SONG_COLUMNS} FROM songs WHERE id = $1");
+            match sqlx::query(&sql).bind(D::id(id.0)).fetch_optional(&self.pool).await? {
+                Some(row) => Self::song_from_row(&row),
+                None => Err(QueueError::SongNotFound(id)),
+            }
+        })
+    }
+
+    fn song_by_sha256<'a>(&'a self, sha256: &'a str) -> StoreFuture<'a, Option<Song>> {
+        Box::pin(async move {
+            let sql = format!("SELECT {SONG_COLUMNS} FROM songs WHERE sha256 = $1");
+            let row = sqlx::query(&sql).bind(sha256).fetch_optional(&self.pool).await?;
+            row.as_ref().map(Self::song_from_row).transpose()
+        })
+    }
+
+    fn analyze_job(&self, song: SongId) -> StoreFuture<'_, Option<Job>> {
+        Box::pin(async move {
+            let sql = format!("SELECT {JOB_COLUMNS} FROM jobs WHERE song_id = $1 AND kind = 'analyze' ORDER BY id DESC LIMIT 1");
+            let row = sqlx::query(&sql).bind(D::id(song.0)).fetch_optional(&self.pool).await?;
+            row.as_ref().map(Self::job_from_row).transpose()
+        })
+    }
 }

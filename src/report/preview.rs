@@ -122,6 +122,21 @@ pub enum PreviewError {
     Io { path: String, source: std::io::Error },
 }
 
+impl PreviewError {
+    /// Stable kebab-case name of the failure.
+    pub fn code(&self) -> &'static str {
+        match self {
+            PreviewError::Empty => "preview-empty",
+            PreviewError::Joints(_) => "preview-joints",
+            PreviewError::Fps(_) => "preview-fps",
+            PreviewError::Font(_) => "preview-font",
+            PreviewError::Draw(_) => "preview-draw",
+            PreviewError::Encode(_) => "preview-encode",
+            PreviewError::Io { .. } => "preview-io",
+        }
+    }
+}
+
 impl<E: std::error::Error + Send + Sync> From<DrawingAreaErrorKind<E>> for PreviewError {
     fn from(e: DrawingAreaErrorKind<E>) -> Self {
         PreviewError::Draw(e.to_string())

@@ -13,6 +13,7 @@ use crate::artifacts::{Artifact, ArtifactStore};
 use crate::audio::AudioError;
 use crate::models::{Cancelled, ModelError, ModelId, Progress, Registry};
 use crate::queue::{Beat, DataDir, Job, JobStore, LeasePolicy, Outcome, QueueError, Song, Store};
+use crate::stage::Stage;
 use crate::telemetry;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
@@ -88,6 +89,8 @@ impl WorkerError {
         match self {
             WorkerError::Queue(e) => e.code(),
             WorkerError::Audio(e) => e.code(),
+            // Stable for clients: no model failure is one a client can fix (the API refuses what a
+            // model does not take before a job exists); the finer `ModelError::code` is logged.
             WorkerError::Model(_) => "model-failed",
             WorkerError::ModelUnavailable(_) => "model-unavailable",
             WorkerError::InvalidOptions(_) => "invalid-job-options",
@@ -174,16 +177,17 @@ impl Drop for Alive {
 /// The live state of one running job, shared by its blocking thread and its heartbeat task.
 #[derive(Debug, Default)]
 struct JobState {
-    stage_progress: Mutex<(String, f64)>,
+    /// The stage last reported (none yet: the job is as the queue claimed it) and the progress.
+    stage_progress: Mutex<(Option<Stage>, f64)>,
     cancel: AtomicBool,
     lease_lost: AtomicBool,
 }
 
 impl JobState {
-    fn snapshot(&self) -> (String, f64) {
+    fn snapshot(&self) -> (Option<Stage>, f64) {
         match self.stage_progress.lock() {
-            Ok(guard) => guard.clone(),
-            Err(poisoned) => poisoned.into_inner().clone(),
+            Ok(guard) => *guard,
+            Err(poisoned) => *poisoned.into_inner(),
         }
     }
 }
@@ -194,14 +198,13 @@ pub struct JobProgress {
 }
 
 impl Progress for JobProgress {
-    fn report(&mut self, stage: &str, fraction: f32) -> Result<(), Cancelled> {
+    fn report(&mut self, stage: Stage, fraction: f32) -> Result<(), Cancelled> {
         {
             let mut guard = match self.state.stage_progress.lock() {
                 Ok(guard) => guard,
                 Err(poisoned) => poisoned.into_inner(),
             };
-            guard.0.clear();
-            guard.0.push_str(stage);
+            guard.0 = Some(stage);
             // Stages report their own 0..1; the job's progress never goes backwards.
             let fraction = f64::from(fraction);
             if fraction.is_finite() {
@@ -430,6 +433,7 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
             metrics::counter!(telemetry::JOBS_FINISHED, "kind" => kind, "status" => outcome).increment(1);
             match &result {
                 Ok(_) => tracing::info!(seconds = started.elapsed().as_secs_f64(), "job succeeded"),
+                Err(WorkerError::Model(m)) => tracing::warn!(error = %m, model_error = m.code(), outcome, "job did not succeed"),
                 Err(e) => tracing::warn!(error = %e, outcome, "job did not succeed"),
             }
         }
@@ -475,7 +479,8 @@ async fn heartbeat_loop(
             _ = tokio::time::sleep(ctx.heartbeat) => {}
         }
         let (stage, progress) = state.snapshot();
-        match ctx.store.heartbeat(id, &owner, &stage, progress, ctx.policy).await {
+        let stage = stage.unwrap_or(Stage::Claimed);
+        match ctx.store.heartbeat(id, &owner, stage.as_str(), progress, ctx.policy).await {
             Ok(Beat::Held { cancel_requested }) => {
                 if cancel_requested {
                     state.cancel.store(true, Ordering::Relaxed);

@@ -6,6 +6,7 @@ use crate::models::{Cancelled, GenerateRequest, Progress, Registry};
 use crate::motion::{KeyPose, Motion};
 use crate::queue::{DataDir, GenerateOptions, Job, JobFiles, JobKind, Outcome, SeedMotion, Song};
 use crate::report::preview::{self, Caption};
+use crate::stage::Stage;
 use crate::telemetry::StageTimer;
 use std::cell::RefCell;
 use std::path::Path;
@@ -47,7 +48,7 @@ impl Pipeline {
     fn budgeted<T>(
         &self,
         progress: &mut dyn Progress,
-        stage: &'static str,
+        stage: Stage,
         fraction: f32,
         work: impl FnOnce(&Budget) -> Result<T, AudioError>,
     ) -> Result<T, WorkerError> {
@@ -59,10 +60,10 @@ impl Pipeline {
 
     #[tracing::instrument(skip_all, fields(song_id = %song.id))]
     fn decode(&self, kind: &'static str, song: &Song, keep: Keep, progress: &mut dyn Progress) -> Result<DecodedAudio, WorkerError> {
-        let _timer = StageTimer::start(kind, "decode");
+        let _timer = StageTimer::start(kind, Stage::DecodeAudio);
         let path = self.data.song_path(song.id, song.format);
         let max_duration_s = self.max_duration_s;
-        let decoded = self.budgeted(progress, "decode", 0.0, |budget| {
+        let decoded = self.budgeted(progress, Stage::DecodeAudio, 0.0, |budget| {
             audio::decode_file(&path, &DecodeOptions { keep, max_duration_s, budget })
         })?;
         Ok(decoded.audio)
@@ -70,12 +71,12 @@ impl Pipeline {
 
     #[tracing::instrument(skip_all, fields(job_id = %job.id))]
     fn analyze(&self, job: &Job, song: &Song, progress: &mut dyn Progress) -> Result<Outcome, WorkerError> {
-        progress.report("decode", 0.0)?;
+        progress.report(Stage::DecodeAudio, 0.0)?;
         // Decoded straight to the analysis rate: the song never exists at its native rate.
         let decoded = self.decode("analyze", song, Keep::At(audio::ANALYSIS_SR), progress)?;
-        progress.report("analyze", 0.5)?;
-        let _timer = StageTimer::start("analyze", "analyze");
-        let analysis = self.budgeted(progress, "analyze", 0.5, |budget| audio::analyze_within(&decoded, budget))?;
+        progress.report(Stage::Analyze, 0.5)?;
+        let _timer = StageTimer::start("analyze", Stage::Analyze);
+        let analysis = self.budgeted(progress, Stage::Analyze, 0.5, |budget| audio::analyze_within(&decoded, budget))?;
         Ok(Outcome::Analysis(analysis))
     }
 
@@ -88,12 +89,12 @@ impl Pipeline {
         progress: &mut dyn Progress,
     ) -> Result<Outcome, WorkerError> {
         let model = self.registry.get(&options.model).ok_or_else(|| WorkerError::ModelUnavailable(options.model.clone()))?;
-        progress.report("decode", 0.0)?;
+        progress.report(Stage::DecodeAudio, 0.0)?;
         let decoded = self.decode("generate", song, Keep::AtMost(GENERATE_MAX_SR), progress)?;
         let seed_motion = options.seed_motion.as_ref().map(seed_motion).transpose()?;
-        progress.report("model", MODEL_START)?;
+        // The model's first stage is its features; each stage it reports is timed as it goes.
+        progress.report(Stage::Features, MODEL_START)?;
         let generated = {
-            let _timer = StageTimer::start("generate", "model");
             let request = GenerateRequest {
                 audio: &decoded,
                 seed: options.seed,
@@ -103,11 +104,11 @@ impl Pipeline {
                 temperature: options.temperature,
                 top_k: options.top_k,
             };
-            model.generate(&request, &mut Scaled { inner: progress, from: MODEL_START, to: MODEL_END })?
+            model.generate(&request, &mut Scaled { inner: progress, from: MODEL_START, to: MODEL_END, timer: None })?
         };
         let motion = crate::motion::finish(generated.motion, options.plant_feet);
-        progress.report("export", MODEL_END)?;
-        let _timer = StageTimer::start("generate", "export");
+        progress.report(Stage::Export, MODEL_END)?;
+        let _timer = StageTimer::start("generate", Stage::Export);
         let caption = Caption { model: options.model.0.clone(), seed: options.seed, song: Some(song.filename.clone()), style: generated.style };
         let files = render(&self.data.job_dir(job.id), &motion, &decoded, &options.key_poses, &caption, &mut |_| {})?;
         Ok(Outcome::Files(files))
@@ -123,15 +124,21 @@ impl Execute for Pipeline {
     }
 }
 
-/// Maps a model's own 0..1 into a slice of the job's progress.
+/// Maps a model's own 0..1 into a slice of the job's progress, and times each stage the model
+/// reports (the timer of one stage is dropped, and recorded, when the next begins).
 struct Scaled<'a> {
     inner: &'a mut dyn Progress,
     from: f32,
     to: f32,
+    timer: Option<(Stage, StageTimer)>,
 }
 
 impl Progress for Scaled<'_> {
-    fn report(&mut self, stage: &str, fraction: f32) -> Result<(), Cancelled> {
+    fn report(&mut self, stage: Stage, fraction: f32) -> Result<(), Cancelled> {
+        if self.timer.as_ref().is_none_or(|(s, _)| *s != stage) {
+            self.timer = None;
+            self.timer = Some((stage, StageTimer::start("generate", stage)));
+        }
         let fraction = if fraction.is_finite() { fraction.clamp(0.0, 1.0) } else { 0.0 };
         self.inner.report(stage, self.from + (self.to - self.from) * fraction)
     }
@@ -165,18 +172,16 @@ pub fn render(
     audio: &DecodedAudio,
     key_poses: &[KeyPose],
     caption: &Caption,
-    on_stage: &mut dyn FnMut(&str),
+    on_stage: &mut dyn FnMut(Stage),
 ) -> Result<JobFiles, WorkerError> {
-    use crate::motion::export::{prepare_anchored, served_motion, write_all_rig, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
+    use crate::motion::export::{write_all_rig, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
     std::fs::create_dir_all(dir)?;
-    on_stage("export");
-    let anchors: Vec<usize> = key_poses.iter().map(|k| (k.time_s * model_motion.fps).round() as usize).collect();
-    let rig = prepare_anchored(model_motion, &anchors)?;
-    write_all_rig(&rig, dir)?;
+    on_stage(Stage::Export);
+    let served = crate::motion::serve(model_motion, key_poses)?;
+    write_all_rig(&served.rig, dir)?;
     // The report and the preview judge what the user downloads: the rigid skeleton's motion.
-    let served = served_motion(&rig);
-    let motion = &served;
-    on_stage("report");
+    let motion = &served.motion;
+    on_stage(Stage::Report);
     let analysis = audio::analyze(audio)?;
     let reference = crate::metrics::reference::ReferenceStats::builtin()?;
     let mut report = crate::report::build(motion, &analysis, key_poses, &reference)?;
@@ -230,7 +235,7 @@ mod tests {
     struct StopAfter(usize);
 
     impl Progress for StopAfter {
-        fn report(&mut self, _stage: &str, _fraction: f32) -> Result<(), Cancelled> {
+        fn report(&mut self, _stage: Stage, _fraction: f32) -> Result<(), Cancelled> {
             if self.0 == 0 {
                 return Err(Cancelled);
             }

@@ -26,6 +26,19 @@ pub enum StartError {
     Artifacts(#[from] crate::artifacts::ArtifactError),
 }
 
+impl StartError {
+    /// Stable kebab-case name of the failure; a wrapped module error keeps its own code.
+    pub fn code(&self) -> &'static str {
+        match self {
+            StartError::DataDir { .. } => "data-dir",
+            StartError::Config(e) => e.code(),
+            StartError::Queue(e) => e.code(),
+            StartError::Models(_) => "models-load",
+            StartError::Artifacts(e) => e.code(),
+        }
+    }
+}
+
 /// Running workers of one process.
 pub struct WorkerProcess {
     shutdown: CancellationToken,

@@ -1,5 +1,6 @@
 //! Worker tests against a real SQLite file, with an executor whose behaviour each song names.
 use super::*;
+use crate::stage::Stage;
 use crate::audio::{Analysis, AudioFormat};
 use crate::queue::{JobId, JobKind, NewJob, SongId, SongStore, SqliteStore, Status};
 
@@ -12,7 +13,7 @@ impl Execute for Scripted {
             "panic" => panic!("injected fault"),
             "slow" => {
                 for i in 0..1000 {
-                    progress.report("slow", i as f32 / 1000.0)?;
+                    progress.report(Stage::Analyze, i as f32 / 1000.0)?;
                     std::thread::sleep(Duration::from_millis(10));
                 }
                 Err(WorkerError::Export("slow job was never cancelled".into()))
@@ -105,7 +106,7 @@ async fn a_cancelled_running_job_stops_at_its_next_checkpoint() {
     loop {
         let job = store.job(slow).await.expect("job");
         if job.status == Status::Running && job.progress > 0.0 {
-            assert_eq!(job.stage.as_deref(), Some("slow"));
+            assert_eq!(job.stage, Some(Stage::Analyze));
             break;
         }
         assert!(Instant::now() < deadline, "job never showed progress: {job:?}");

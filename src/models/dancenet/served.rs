@@ -16,6 +16,7 @@ use crate::models::{smooth_columns, to_tensor, Cancelled, Capabilities, DanceMod
 use crate::motion::repr::RootStart;
 use crate::motion::rig::Rig;
 use crate::motion::rotations;
+use crate::stage::Stage;
 
 /// A trained DanceNet, ready to serve.
 pub struct Served {
@@ -42,7 +43,7 @@ impl Served {
         let rig = Rig::from_offsets(&file.extra.rig)?;
         let width = (file.config.pose_dim + file.config.contacts) as usize;
         if rotations::Layout::of(&rig).dim() != file.config.pose_dim as usize {
-            return Err(ModelError::Invalid(format!("{ID}: the rig's features are not {} wide", file.config.pose_dim)));
+            return Err(ModelError::BadModelFile(format!("{ID}: the rig's features are not {} wide", file.config.pose_dim)));
         }
         let clips = SeedClips::load(&dir.join(SEED_CLIPS_FILE), width)?;
         let style = if dir.join(super::style::STYLE_FILE).exists() { Some(ServedStyle::load(dir)?) } else { None };
@@ -70,9 +71,9 @@ impl Served {
         let fps = self.file.fps;
         let d = self.file.config.pose_dim as usize;
         let sampling = Sampling { temperature: req.temperature.unwrap_or(self.file.extra.sampling.temperature), ..self.file.extra.sampling };
-        progress.report("features", 0.0)?;
+        progress.report(Stage::Features, 0.0)?;
         let feats = crate::audio::features::dancenet(req.audio, fps, 0.0, n)?;
-        progress.report("features", 1.0)?;
+        progress.report(Stage::Features, 1.0)?;
         let style = self.style_of(req, &feats)?;
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0);
         // The context (normalised features and contacts) and how many of its frames open the dance.
@@ -82,7 +83,7 @@ impl Served {
                 let keep = m.num_frames().min(n);
                 let enc = rotations::encode(&self.rig, m.positions.slice(s![..keep, .., ..]), fps)?;
                 let feats = self.file.pose_norm.normalize(&enc.features)?;
-                let rows = concatenate(Axis(1), &[feats.view(), enc.contacts.view()]).map_err(|e| ModelError::Invalid(e.to_string()))?;
+                let rows = concatenate(Axis(1), &[feats.view(), enc.contacts.view()]).map_err(|e| ModelError::Shape(e.to_string()))?;
                 (rows, keep, enc.start)
             }
             _ => (self.clips.pick(req.seed), 0, RootStart::default()),
@@ -92,7 +93,7 @@ impl Served {
             tch::no_grad(|| -> Result<Option<Array2<f32>>, ModelError> {
                 let mut cancelled = false;
                 let Some(code) = model.encoder.encode_song(&music, |f| {
-                    cancelled = progress.report("encode", f).is_err();
+                    cancelled = progress.report(Stage::Encode, f).is_err();
                     !cancelled
                 }) else {
                     return Ok(None);
@@ -108,11 +109,11 @@ impl Served {
                 };
                 let total = (n - opening).max(1);
                 let mut rng = StdRng::seed_from_u64(req.seed ^ 0xDA_2CE_2E7);
-                Ok(model.sample(&ctx, &rows, style.style.index(), sampling, &mut rng, |done| progress.report("decode", done as f32 / total as f32).is_ok()))
+                Ok(model.sample(&ctx, &rows, style.style.index(), sampling, &mut rng, |done| progress.report(Stage::Generate, done as f32 / total as f32).is_ok()))
             })
         })??;
         let Some(sampled) = out else { return Err(Cancelled.into()) };
-        let rows = if opening > 0 { concatenate(Axis(0), &[context.view(), sampled.view()]).map_err(|e| ModelError::Invalid(e.to_string()))? } else { sampled };
+        let rows = if opening > 0 { concatenate(Axis(0), &[context.view(), sampled.view()]).map_err(|e| ModelError::Shape(e.to_string()))? } else { sampled };
         let mut features = self.file.pose_norm.denormalize(&rows.slice(s![.., ..d]).to_owned())?;
         // σ of 2 frames (0.08 s, served) keeps 60 % of a 2-Hz movement and removes what is faster
         // than 5 Hz.
@@ -132,7 +133,7 @@ impl DanceModel for Served {
 
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
-        let n = ((req.audio.duration_s * self.file.fps).floor() as usize).max(1);
+        let n = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
         let g = self.generate_features(req, n, progress)?;
         let motion = rotations::decode(&self.rig, g.features.view(), g.start, self.file.fps)?;
         Ok(Generated { motion, style: Some(g.style) })

@@ -17,7 +17,7 @@
 //!   30-s windows every 15 s ([`HOP_S`]), the last window aligned to the song's end; a song shorter
 //!   than 30 s is one shorter window.
 //!
-//! The same network over motion is the motion style metric (`crate::metrics::style`);
+//! The same network over motion is the motion style metric (`crate::models::motion_style`);
 //! [`WindowedClassifier`] and [`evaluate`] serve both. The model card is
 //! `models/dancenet/STYLE_CARD.md`; `choreo train dancenet-style` writes the files.
 use std::ops::Range;
@@ -116,7 +116,7 @@ impl StyleConfig {
 }
 
 /// What the fully connected layer reads of the Bi-LSTM.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Readout {
     /// The forward direction's last state and the backward direction's first.
@@ -204,10 +204,10 @@ pub fn window_probabilities(model: &StyleClassifier, x: &Array2<f32>, len: usize
     let (n, f) = x.dim();
     let min = model.config().min_frames();
     if n < min {
-        return Err(ModelError::Invalid(format!("{n} frames is too short to classify (at least {min})")));
+        return Err(ModelError::Input(format!("{n} frames is too short to classify (at least {min})")));
     }
     if f as i64 != model.config().input_dim {
-        return Err(ModelError::Invalid(format!("{f} features per frame, the classifier takes {}", model.config().input_dim)));
+        return Err(ModelError::Shape(format!("{f} features per frame, the classifier takes {}", model.config().input_dim)));
     }
     let parts: Vec<Tensor> = windows(n, len, hop).into_iter().map(|w| crate::models::to_tensor(&x.slice(s![w, ..]).to_owned())).collect();
     let batch = Tensor::stack(&parts, 0); // [windows, len, F]
@@ -308,7 +308,7 @@ impl WindowedClassifier {
     /// Loads `weights` into networks of `config`.
     pub fn load(weights: PathBuf, config: StyleConfig, norm: NormStats, window: usize, hop: usize) -> Result<Self, ModelError> {
         if norm.dim() as i64 != config.input_dim {
-            return Err(ModelError::Invalid(format!("normalisation has {} features, the configuration {}", norm.dim(), config.input_dim)));
+            return Err(ModelError::BadModelFile(format!("normalisation has {} features, the configuration {}", norm.dim(), config.input_dim)));
         }
         let pool = InstancePool::new(weights, move |p| StyleClassifier::new(p, &config))?;
         Ok(Self { norm, window, hop, pool })
@@ -318,9 +318,9 @@ impl WindowedClassifier {
     /// softmax over the windows.
     pub fn probabilities(&self, raw: &Array2<f32>) -> Result<[f32; STYLES], ModelError> {
         if raw.iter().any(|v| !v.is_finite()) {
-            return Err(ModelError::Invalid("features are not finite".into()));
+            return Err(ModelError::Input("features are not finite".into()));
         }
-        let x = self.norm.normalize(raw).map_err(|e| ModelError::Invalid(e.to_string()))?;
+        let x = self.norm.normalize(raw).map_err(|e| ModelError::Shape(e.to_string()))?;
         let probs = self.pool.with(|m| window_probabilities(m, &x, self.window, self.hop))??;
         let mean = Vec::<f32>::try_from(probs.mean_dim(0, false, Kind::Float))?;
         let mut out = [0f32; STYLES];
@@ -389,7 +389,7 @@ impl ServedStyle {
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
         let path = dir.join(STYLE_FILE);
         let text = std::fs::read_to_string(&path).map_err(|_| ModelError::MissingWeights(format!("{FOLDER} style classifier"), path.display().to_string()))?;
-        let file: StyleFile = serde_json::from_str(&text).map_err(|e| ModelError::Invalid(format!("{}: {e}", path.display())))?;
+        let file: StyleFile = serde_json::from_str(&text).map_err(|e| ModelError::BadModelFile(format!("{}: {e}", path.display())))?;
         let classifier = WindowedClassifier::load(dir.join(STYLE_WEIGHTS_FILE), file.config.clone(), file.music_norm.clone(), file.window, file.hop)?;
         Ok(Self { file, classifier })
     }
@@ -407,7 +407,7 @@ impl ServedStyle {
 
     /// [`ServedStyle::predict`] of a whole decoded song.
     pub fn predict_song(&self, audio: &crate::audio::DecodedAudio) -> Result<[f32; STYLES], ModelError> {
-        let n = ((audio.duration_s * self.file.fps).floor() as usize).max(1);
+        let n = crate::motion::validate::song_frames(audio.duration_s, self.file.fps);
         self.predict(&crate::audio::features::dancenet(audio, self.file.fps, 0.0, n)?)
     }
 }
@@ -527,11 +527,11 @@ mod tests {
         // A song shorter than the window is one window; one shorter than the network's reach,
         // the wrong width, or NaN, an error.
         assert!(s.predict(&raw.slice(s![..30, ..]).to_owned()).is_ok());
-        assert!(matches!(s.predict(&raw.slice(s![..5, ..]).to_owned()), Err(ModelError::Invalid(_))));
-        assert!(matches!(s.predict(&raw.slice(s![.., ..14]).to_owned()), Err(ModelError::Invalid(_))));
+        assert!(matches!(s.predict(&raw.slice(s![..5, ..]).to_owned()), Err(ModelError::Input(_))));
+        assert!(matches!(s.predict(&raw.slice(s![.., ..14]).to_owned()), Err(ModelError::Shape(_))));
         let mut bad = raw.clone();
         bad[[3, 3]] = f32::NAN;
-        assert!(matches!(s.predict(&bad), Err(ModelError::Invalid(_))));
+        assert!(matches!(s.predict(&bad), Err(ModelError::Input(_))));
     }
 
     #[test]

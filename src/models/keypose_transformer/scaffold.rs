@@ -70,10 +70,10 @@ impl PoseBank {
     pub fn new(clips: Array3<f32>) -> Result<Self, ModelError> {
         let (k, l, d) = clips.dim();
         if k == 0 || l < 2 || d < POSE_DIM {
-            return Err(ModelError::Invalid(format!("pose bank of shape [{k}, {l}, {d}]")));
+            return Err(ModelError::BadModelFile(format!("pose bank of shape [{k}, {l}, {d}]")));
         }
         if clips.iter().any(|v| !v.is_finite()) {
-            return Err(ModelError::Invalid("pose bank has non-finite values".into()));
+            return Err(ModelError::BadModelFile("pose bank has non-finite values".into()));
         }
         let speeds = if d == FEATURE_DIM { Self::step_speeds(&clips)? } else { Array2::zeros((0, 0)) };
         Ok(Self { clips, speeds })
@@ -87,7 +87,7 @@ impl PoseBank {
             let mut f = clip.to_owned();
             f.column_mut(repr::ROOT_Y).fill(0.0);
             let fps = crate::motion::MOTION_FPS;
-            let (motion, _) = repr::from_features(f.view(), repr::RootStart::default(), fps).map_err(|e| ModelError::Invalid(e.to_string()))?;
+            let (motion, _) = repr::from_features(f.view(), repr::RootStart::default(), fps).map_err(|e| ModelError::BadModelFile(e.to_string()))?;
             let v = crate::metrics::kinematics::mean_speed(motion.positions.view(), fps);
             out.row_mut(c).assign(&ndarray::Array1::from(v));
         }

@@ -14,6 +14,7 @@ use super::{Config, KeyposeTransformer};
 use crate::models::folder;
 use crate::models::{to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
 use crate::motion::repr::{self, RootStart, POSE_DIM};
+use crate::stage::Stage;
 
 /// The API id.
 pub const ID: &str = "keypose-transformer";
@@ -187,12 +188,12 @@ impl DanceModel for Served {
     fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let fps = self.file.fps;
-        let n = ((req.audio.duration_s * fps).floor() as usize).max(1);
+        let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
         let keys = local_keys(req.key_poses, n, fps)?;
-        progress.report("features", 0.0)?;
+        progress.report(Stage::Features, 0.0)?;
         let feats = crate::audio::features::keypose(req.audio, fps, 0.0, n)?;
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?);
-        progress.report("features", 1.0)?;
+        progress.report(Stage::Features, 1.0)?;
         let given = match req.seed_motion {
             Some(m) if m.num_frames() > 0 => {
                 // The network continues from the seed's last T′ frames, so the root starts there.
@@ -219,7 +220,7 @@ impl DanceModel for Served {
         let scaffold = plan.map(|p| p.poses).unwrap_or_default();
         let out = self.pool.with(|model| {
             generate_features(model, &self.file, &music, seed.as_ref().map(|(f, s)| (f, *s)), keep_seed, &keys, &scaffold, |done, total| {
-                progress.report("decode", done as f32 / total as f32).is_ok()
+                progress.report(Stage::Generate, done as f32 / total as f32).is_ok()
             })
         })?;
         let Some(mut g) = out? else { return Err(Cancelled.into()) };

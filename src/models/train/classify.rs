@@ -28,38 +28,45 @@ use crate::motion::dataset::NormStats;
 pub const SAMPLING: &str = "style uniform, then dance in proportion to its window starts, then a uniform start, afresh each epoch";
 
 /// The schedule flags both trainers take.
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct ClassifyOptions {
-    #[arg(long, default_value_t = 40)]
     pub epochs: usize,
-    #[arg(long, default_value_t = 32)]
     pub batch: usize,
     /// Training windows drawn per epoch (see the class balance in `models::train::classify`).
-    #[arg(long, default_value_t = 512)]
     pub windows_per_epoch: usize,
-    #[arg(long, default_value_t = 2e-3)]
     pub lr: f64,
-    #[arg(long, default_value_t = 12)]
     pub seed: u64,
     /// Leave fold `K/N` of the train split's dances out of training and score them beside the
     /// test split (a leave-dances-out check; write it with `--out` elsewhere, never over the
     /// committed folder). Each style's dances, in split order, go to fold i mod N; a style with
     /// one train dance (the tango) is never left out.
-    #[arg(long)]
     pub hold_out: Option<String>,
     /// Class balance β: a style's share of the windows is proportional to its number of dances
     /// to the power 1 − β (1: every style a quarter; 0: as many as its dances).
-    #[arg(long, default_value_t = 1.0)]
     pub balance: f64,
     /// Max-pool stride after each convolution [default: the configuration's].
-    #[arg(long)]
     pub pool: Option<i64>,
     /// Dropout before the FC layer [default: the configuration's].
-    #[arg(long)]
     pub dropout: Option<f64>,
     /// What the FC layer reads of the Bi-LSTM [default: the configuration's].
-    #[arg(long, value_enum)]
     pub readout: Option<Readout>,
+}
+
+impl Default for ClassifyOptions {
+    fn default() -> Self {
+        Self {
+            epochs: 40,
+            batch: 32,
+            windows_per_epoch: 512,
+            lr: 2e-3,
+            seed: 12,
+            hold_out: None,
+            balance: 1.0,
+            pool: None,
+            dropout: None,
+            readout: None,
+        }
+    }
 }
 
 impl ClassifyOptions {

@@ -7,39 +7,46 @@ use crate::models::dance_revolution::{curriculum_q, Config, Curriculum, DanceRev
 
 /// Options of one training run; the defaults reproduce the committed weights' schedule (the
 /// card gives the runs).
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct Options {
-    #[command(flatten)]
     pub common: CommonOptions,
-    #[arg(long, default_value_t = 60)]
     pub epochs: usize,
-    #[arg(long, default_value_t = 32)]
     pub batch: usize,
     /// Training window in frames (10 s at 25 fps; see the model card for why).
-    #[arg(long, default_value_t = 250)]
     pub window: usize,
     /// Stride between window starts, in frames.
-    #[arg(long, default_value_t = 125)]
     pub stride: usize,
-    #[arg(long, default_value_t = 1e-3)]
     pub lr: f64,
     /// `p`: ground-truth frames per curriculum segment (paper: 10).
-    #[arg(long, default_value_t = 10)]
     pub p: i64,
     /// `λ`: the curriculum grows q = ⌊λ·epoch⌋.
-    #[arg(long, default_value_t = 0.75)]
     pub lambda: f64,
     /// Upper bound on q, so late epochs stay within the window.
-    #[arg(long, default_value_t = 40)]
     pub q_max: i64,
-    #[arg(long, default_value_t = 2021)]
     pub seed: u64,
     /// The curriculum epoch the first epoch of this run counts as (continuing a run).
-    #[arg(long, default_value_t = 0)]
     pub first_epoch: usize,
     /// Train the encoder at position offsets drawn over a whole 15-minute song (default), or at 0 only.
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub random_positions: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            common: CommonOptions::default(),
+            epochs: 60,
+            batch: 32,
+            window: 250,
+            stride: 125,
+            lr: 1e-3,
+            p: 10,
+            lambda: 0.75,
+            q_max: 40,
+            seed: 2021,
+            first_epoch: 0,
+            random_positions: true,
+        }
+    }
 }
 
 /// Trains and writes the model folder; returns the per-epoch log.

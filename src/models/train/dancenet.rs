@@ -18,70 +18,77 @@ use crate::motion::rig::Rig;
 use crate::motion::rotations;
 
 /// Options of one training run (the card gives the run behind the committed weights).
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct Options {
-    #[command(flatten)]
     pub common: CommonOptions,
-    #[arg(long, default_value_t = 50)]
     pub epochs: usize,
-    #[arg(long, default_value_t = 32)]
     pub batch: usize,
     /// Training window, frames (the context encoder's 8 s).
-    #[arg(long, default_value_t = 200)]
     pub window: usize,
     /// Stride between window starts, frames.
-    #[arg(long, default_value_t = 20)]
     pub stride: usize,
-    #[arg(long, default_value_t = 1e-3)]
     pub lr: f64,
     /// λ, the weight of the foot-contact loss.
-    #[arg(long, default_value_t = 0.5)]
     pub lambda_foot: f64,
     /// σ_in: standard deviation of the Gaussian noise on the decoder's input frames (normalised
     /// units; the targets stay clean), so it learns to come back from its own samples.
-    #[arg(long, default_value_t = 0.1)]
     pub input_noise: f64,
     /// Correlation from frame to frame of that noise (AR(1)); 0 is independent per frame. Noise
     /// independent per frame taught the decoder to undo a frame-to-frame zig-zag, and on its own
     /// (smooth) samples it then made one: its means alternated direction on 57 % of frames.
-    #[arg(long, default_value_t = 0.9)]
     pub input_coherence: f64,
     /// Standard deviation of a constant offset added to each window's input frames (normalised
     /// units; per window and dimension): a history that has drifted off the real dances, which
     /// the decoder must learn to come back from since the targets stay clean. Sampling drifts:
     /// every draw adds its own error to what the decoder reads next.
-    #[arg(long, default_value_t = 0.1)]
     pub input_offset: f64,
     /// Standard deviation per frame of a random walk added to the input frames (normalised
     /// units): drift that grows within the window.
-    #[arg(long, default_value_t = 0.01)]
     pub input_walk: f64,
     /// Frames of each window that are context only (default: the receptive field, so every
     /// scored frame sees real history, never zero padding).
-    #[arg(long)]
     pub warmup: Option<usize>,
     /// Windows of the rarer styles repeat `(waltz frames / style frames)^p` times (at most 4), so
     /// the style input is learned from more than waltz; 0 trains on the data as it is.
-    #[arg(long, default_value_t = 0.5)]
     pub style_balance: f64,
     /// Mixture components (the paper: 1).
-    #[arg(long)]
     pub mixtures: Option<i64>,
     /// Leading frame columns whose mixture means are absolute rather than relative to the current
     /// frame (default: all; 4 makes only the root's absolute, see `dancenet::Config::absolute_dims`).
-    #[arg(long)]
     pub absolute_dims: Option<i64>,
     /// Default sampling temperature written into `model.json` (served: 0.8; see the model card).
-    #[arg(long, default_value_t = 0.8)]
     pub temperature: f64,
     /// Default coherence ρ of the sampling draws written into `model.json` (`dancenet::Sampling`).
-    #[arg(long, default_value_t = 0.95)]
     pub coherence: f64,
     /// σ (frames) of the served smoothing written into `model.json` (`dancenet::Serving`).
-    #[arg(long, default_value_t = 2.0)]
     pub smooth_frames: f64,
-    #[arg(long, default_value_t = 2020)]
     pub seed: u64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            common: CommonOptions::default(),
+            epochs: 50,
+            batch: 32,
+            window: 200,
+            stride: 20,
+            lr: 1e-3,
+            lambda_foot: 0.5,
+            input_noise: 0.1,
+            input_coherence: 0.9,
+            input_offset: 0.1,
+            input_walk: 0.01,
+            warmup: None,
+            style_balance: 0.5,
+            mixtures: None,
+            absolute_dims: None,
+            temperature: 0.8,
+            coherence: 0.95,
+            smooth_frames: 2.0,
+            seed: 2020,
+        }
+    }
 }
 
 /// Seed clips kept in the folder, and their length in frames (past the receptive field).
@@ -113,7 +120,7 @@ fn prepare(dances: &[Dance], rig: &Rig) -> Result<(Vec<Prepared>, f64), TrainErr
         let n = t * crate::motion::NUM_JOINTS;
         err_sum += seed_distance_m(&dance.motion, &back) * n as f64;
         err_n += n;
-        let frames = concatenate(Axis(1), &[enc.features.view(), enc.contacts.view()]).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
+        let frames = concatenate(Axis(1), &[enc.features.view(), enc.contacts.view()]).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
         tracing::info!(dance = %id, frames = t, "loaded");
         out.push(Prepared { id: id.clone(), style, music, frames });
     }
@@ -126,8 +133,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     // One skeleton for every dance, fitted on the train split: rotations are relative to its
     // rest pose, which must be the same for all.
     let train_dances = ds.load_all(ds.train_ids())?;
-    let all_pos = concatenate(Axis(0), &train_dances.iter().map(|d| d.motion.positions.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
-    let all_root = concatenate(Axis(0), &train_dances.iter().map(|d| d.center.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
+    let all_pos = concatenate(Axis(0), &train_dances.iter().map(|d| d.motion.positions.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
+    let all_root = concatenate(Axis(0), &train_dances.iter().map(|d| d.center.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
     let rig = Rig::fit(all_pos.view(), all_root.view())?;
     drop((all_pos, all_root));
     let (train_raw, fit_err) = prepare(&train_dances, &rig)?;
@@ -142,7 +149,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         seqs.iter()
             .map(|p| {
                 let feats = pose_norm.normalize(&p.frames.slice(ndarray::s![.., ..d]).to_owned())?;
-                let poses = concatenate(Axis(1), &[feats.view(), p.frames.slice(ndarray::s![.., d..])]).map_err(|e| TrainError::Model(crate::models::ModelError::Invalid(e.to_string())))?;
+                let poses = concatenate(Axis(1), &[feats.view(), p.frames.slice(ndarray::s![.., d..])]).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
                 Ok(Sequence { id: p.id.clone(), music: music_norm.normalize(&p.music)?, poses })
             })
             .collect()

@@ -13,16 +13,23 @@ use crate::models::DanceStyle;
 use crate::motion::dataset::Dataset;
 
 /// Options of one training run (the card gives the run behind the committed weights).
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct Options {
-    #[command(flatten)]
     pub common: CommonOptions,
-    #[command(flatten)]
     pub schedule: ClassifyOptions,
     /// Roll each training window's chroma by a random 0–11 semitones (a song's key says nothing
     /// of its style, and 37 songs are few enough to be told apart by their keys).
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub transpose: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            common: CommonOptions::default(),
+            schedule: ClassifyOptions::default(),
+            transpose: true,
+        }
+    }
 }
 
 /// Rolls the chroma columns ([`CHROMA`]) of a window by a random number of semitones.
@@ -43,7 +50,7 @@ pub fn songs(ds: &Dataset, ids: &[String]) -> Result<Vec<Labelled>, TrainError> 
         .map(|id| {
             let dance = ds.load(id)?;
             let audio = crate::audio::decode_path(&dance.audio_path)?;
-            let n = ((audio.duration_s * FPS).floor() as usize).max(1);
+            let n = crate::motion::validate::song_frames(audio.duration_s, FPS);
             let features = crate::audio::features::dancenet(&audio, FPS, 0.0, n)?;
             let style = DanceStyle::of_dance_id(id).ok_or_else(|| crate::motion::MotionError::UnknownDance { id: id.clone() })?;
             tracing::info!(song = %id, seconds = audio.duration_s, "features");

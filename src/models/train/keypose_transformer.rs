@@ -27,49 +27,56 @@ use crate::motion::repr::{self, POSE_DIM};
 use crate::motion::{KeyPose, NUM_JOINTS};
 
 /// Options of one training run; the model card gives the runs (and flags) behind the committed weights.
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct Options {
-    #[command(flatten)]
     pub common: CommonOptions,
-    #[arg(long, default_value_t = 200)]
     pub epochs: usize,
-    #[arg(long, default_value_t = 32)]
     pub batch: usize,
     /// Stride between training window starts, in frames.
-    #[arg(long, default_value_t = 10)]
     pub stride: usize,
-    #[arg(long, default_value_t = 5e-4)]
     pub lr: f64,
     /// `λ`: weight of the key-pose terms in ω(t).
-    #[arg(long, default_value_t = 3.0)]
     pub lambda: f64,
     /// `σ`: width of each key-pose term in ω(t), frames.
-    #[arg(long, default_value_t = 3.0)]
     pub sigma: f64,
     /// Weight of the L1 on frame differences (velocities) beside the pose term: the pose term alone
     /// lets a regression average fast motion away.
-    #[arg(long, default_value_t = 5.0)]
     pub velocity_weight: f64,
     /// Frames between the scaffold poses the served model draws (0: none); see the scaffold module.
-    #[arg(long, default_value_t = 25)]
     pub scaffold_spacing: usize,
     /// Clips of the served pose bank, and their length in frames.
-    #[arg(long, default_value_t = 32)]
     pub bank_clips: usize,
-    #[arg(long, default_value_t = 200)]
     pub bank_frames: usize,
     /// Key poses per training window are drawn uniformly from 0..=max_keys.
-    #[arg(long, default_value_t = 6)]
     pub max_keys: usize,
     /// Key poses per test dance in the consistency evaluation.
-    #[arg(long, default_value_t = 4)]
     pub eval_keys: usize,
-    #[arg(long, default_value_t = 2023)]
     pub seed: u64,
     /// Do not train: re-run the test-split evaluation of the model already in `--out` and rewrite
     /// its `eval.json`.
-    #[arg(long)]
     pub eval_only: bool,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            common: CommonOptions::default(),
+            epochs: 200,
+            batch: 32,
+            stride: 10,
+            lr: 5e-4,
+            lambda: 3.0,
+            sigma: 3.0,
+            velocity_weight: 5.0,
+            scaffold_spacing: 25,
+            bank_clips: 32,
+            bank_frames: 200,
+            max_keys: 6,
+            eval_keys: 4,
+            seed: 2023,
+            eval_only: false,
+        }
+    }
 }
 
 /// Key-pose consistency on the test split, written to `eval.json`.

@@ -35,6 +35,22 @@ pub enum TrainError {
     InvalidOption(String),
 }
 
+impl TrainError {
+    /// Stable kebab-case name of the failure.
+    pub fn code(&self) -> &'static str {
+        match self {
+            TrainError::Motion(e) => e.code(),
+            TrainError::Audio(e) => e.code(),
+            TrainError::Torch(_) => "train-libtorch",
+            TrainError::Io { .. } => "train-io",
+            TrainError::Json(_) => "train-json",
+            TrainError::Model(_) => "train-model",
+            TrainError::NoWindows(_) => "train-no-windows",
+            TrainError::InvalidOption(_) => "train-invalid-option",
+        }
+    }
+}
+
 /// Computes a feature matrix `[n_frames, F]` at `fps` whose row i is the music at `start_s + i/fps`.
 pub type FeatureFn = fn(&DecodedAudio, f64, f64, usize) -> Result<Array2<f32>, crate::audio::AudioError>;
 
@@ -64,27 +80,34 @@ pub fn load_sequences(ds: &Dataset, ids: &[String], features: FeatureFn) -> Resu
 }
 
 /// Options every trainer takes, flattened into each model's own `Options`.
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct CommonOptions {
     /// The dance-with-melody folder.
-    #[arg(long, default_value = "../shared/data/dance-with-melody")]
     pub data: PathBuf,
     /// The model folder to write [default: models/<id>].
-    #[arg(long)]
     pub out: Option<PathBuf>,
     /// libtorch intra-op threads.
-    #[arg(long, default_value_t = 2)]
     pub threads: i32,
     /// Stop after this many minutes even if epochs remain (the weights are saved either way).
-    #[arg(long)]
     pub max_minutes: Option<f64>,
     /// Start from these weights (same configuration), e.g. to continue a committed run; the log
     /// is then appended to, not replaced.
-    #[arg(long)]
     pub init: Option<PathBuf>,
     /// Use the tiny test configuration (for smoke runs, never for committed weights).
-    #[arg(long)]
     pub tiny: bool,
+}
+
+impl Default for CommonOptions {
+    fn default() -> Self {
+        Self {
+            data: PathBuf::from("../shared/data/dance-with-melody"),
+            out: None,
+            threads: 2,
+            max_minutes: None,
+            init: None,
+            tiny: false,
+        }
+    }
 }
 
 impl CommonOptions {
@@ -351,9 +374,9 @@ pub mod keypose_transformer;
 pub mod motion_style;
 pub mod tsmt;
 
-/// `choreo train <model>`: one variant per trainable model.
-#[derive(Clone, Debug, clap::Subcommand)]
-pub enum TrainCommand {
+/// One training run (`choreo train <model>`): one variant per trainable model, with its options.
+#[derive(Clone, Debug)]
+pub enum Training {
     /// DanceRevolution (Huang et al., ICLR 2021).
     DanceRevolution(dance_revolution::Options),
     /// DanceNet (Zhuang et al. 2020): dilated gated causal convolutions, mixture output, style control.
@@ -368,7 +391,7 @@ pub enum TrainCommand {
     MotionStyle(motion_style::Options),
 }
 
-impl TrainCommand {
+impl Training {
     /// Trains (or evaluates) and says what it wrote.
     pub fn run(&self) -> Result<String, TrainError> {
         match self {

@@ -1,4 +1,4 @@
-//! `choreo train motion-style`: the motion style classifier of `metrics::style` on the train
+//! `choreo train motion-style`: the motion style classifier of `models::motion_style` on the train
 //! split's real motion, in 10-s windows drawn class-balanced at random offsets
 //! (`models::train::classify`), with windows of no style beside them ([`no_style_windows`]).
 //! Writes `weights.safetensors`, `model.json` (with the test split's accuracy) and
@@ -10,23 +10,30 @@ use rand_distr::{Distribution, Normal};
 
 use super::classify::{fit, Additions, ClassifyOptions, Fold, Splits};
 use super::{CommonOptions, FolderFiles, TrainError};
-use crate::metrics::style::{config, features, MotionStyleFile, FPS, HOP_S, ID, WINDOW_S};
+use crate::models::motion_style::{config, features, MotionStyleFile, FPS, HOP_S, ID, WINDOW_S};
 use crate::models::dancenet::style::{Labelled, StyleConfig};
 use crate::models::DanceStyle;
 use crate::motion::dataset::Dataset;
 use crate::motion::Motion;
 
 /// Options of one training run (the card gives the run behind the committed weights).
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct Options {
-    #[command(flatten)]
     pub common: CommonOptions,
-    #[command(flatten)]
     pub schedule: ClassifyOptions,
     /// Windows of no style ([`no_style_windows`]) added to each batch with a uniform target
     /// (0: none).
-    #[arg(long, default_value_t = 4)]
     pub no_style_per_batch: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            common: CommonOptions::default(),
+            schedule: ClassifyOptions::default(),
+            no_style_per_batch: 4,
+        }
+    }
 }
 
 /// How many windows of no style are made (each batch draws from them).

@@ -14,51 +14,58 @@ use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
 use crate::motion::repr;
 
 /// Options of one training run (the card gives the run behind the committed weights).
-#[derive(Clone, Debug, clap::Args)]
+#[derive(Clone, Debug)]
 pub struct Options {
-    #[command(flatten)]
     pub common: CommonOptions,
-    #[arg(long, default_value_t = 200)]
     pub epochs: usize,
-    #[arg(long, default_value_t = 32)]
     pub batch: usize,
     /// Stride between window starts, in frames (the window is the configuration's context).
-    #[arg(long, default_value_t = 20)]
     pub stride: usize,
-    #[arg(long, default_value_t = 1e-3)]
     pub lr: f64,
     /// Standard deviation, in bins, of Gaussian noise added to the pose stream's input tokens
     /// (the targets stay clean), so that the model learns to come back from its own draws.
-    #[arg(long, default_value_t = 2.0)]
     pub input_noise_bins: f64,
     /// Default sampling temperature written into `model.json`.
-    #[arg(long, default_value_t = 1.0)]
     pub temperature: f64,
     /// Default top-k written into `model.json` (0: every bin).
-    #[arg(long, default_value_t = 20)]
     pub top_k: usize,
     /// Share of each window's predicted frames scored per step (drawn afresh every batch):
     /// the 300-bin read-out is most of a step's cost, so scoring a quarter of the frames gives
     /// about three times the steps for the same minutes.
-    #[arg(long, default_value_t = 0.25)]
     pub loss_frames: f64,
     /// Windows whose last second's mean root-relative joint speed is below this (m/s) are not
     /// trained on (the dancer comes to a stand, mostly a dance's closing hold). 0 keeps all (the
     /// served weights; 0.15 was tried, see the model card).
-    #[arg(long, default_value_t = 0.0)]
     pub min_window_speed: f64,
     /// De-quantisation σ (frames) written into `model.json` (see `tsmt::Serving`).
-    #[arg(long, default_value_t = 1.0)]
     pub smooth_frames: f64,
     /// De-quantisation σ (frames) of the height column (see `tsmt::Serving`).
-    #[arg(long, default_value_t = 4.0)]
     pub smooth_height_frames: f64,
     /// The stall guard's reach (m) written into `model.json` (0: no guard; `tsmt::StallGuard`,
     /// over 2 s, temperature × 1.5).
-    #[arg(long, default_value_t = 0.22)]
     pub stall_reach: f64,
-    #[arg(long, default_value_t = 2020)]
     pub seed: u64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            common: CommonOptions::default(),
+            epochs: 200,
+            batch: 32,
+            stride: 20,
+            lr: 1e-3,
+            input_noise_bins: 2.0,
+            temperature: 1.0,
+            top_k: 20,
+            loss_frames: 0.25,
+            min_window_speed: 0.0,
+            smooth_frames: 1.0,
+            smooth_height_frames: 4.0,
+            stall_reach: 0.22,
+            seed: 2020,
+        }
+    }
 }
 
 /// Seed clips kept in the folder, and their length in frames.

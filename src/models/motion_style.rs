@@ -168,7 +168,7 @@ impl MotionStyle {
     pub fn load(dir: &Path) -> Result<Self, StyleError> {
         let file: MotionStyleFile = folder::read(dir, ID)?;
         if file.config.input_dim != FEATURE_DIM as i64 {
-            return Err(ModelError::Invalid(format!("{ID}: {} input features, these features are {FEATURE_DIM}", file.config.input_dim)).into());
+            return Err(ModelError::BadModelFile(format!("{ID}: {} input features, these features are {FEATURE_DIM}", file.config.input_dim)).into());
         }
         let classifier = WindowedClassifier::load(dir.join(folder::WEIGHTS_FILE), file.config.clone(), file.pose_norm.clone(), file.window, file.hop)?;
         Ok(Self { file, classifier })

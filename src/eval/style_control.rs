@@ -1,20 +1,20 @@
 //! Style control, for models that dance a style asked for (DanceNet): every song danced once in
 //! each of the four styles with one seed, then
 //! - how far apart the styles' dances are (root-relative pose distance, the seed-sensitivity
-//!   measure of [`super::physical::seed_distance_m`]): a style input that changes nothing reads 0;
+//!   measure of [`crate::metrics::physical::seed_distance_m`]): a style input that changes nothing reads 0;
 //! - whether each dance still passes issue 10's plausibility verdict, and how fast it moves;
-//! - what a classifier trained on real motion alone ([`super::style::MotionStyle`]) says each
+//! - what a classifier trained on real motion alone ([`crate::models::motion_style::MotionStyle`]) says each
 //!   dance is, beside what it says of the real test dances: its accuracy on real dances is the
 //!   ceiling a model's "agrees" share can be read against.
 use serde::{Deserialize, Serialize};
 
-use super::physical::seed_distance_m;
-use super::reference::ReferenceStats;
-use super::score::score_dance;
-use super::style::MotionStyle;
-use super::MetricsError;
+use super::EvalError;
 use crate::audio::DecodedAudio;
+use crate::metrics::physical::seed_distance_m;
+use crate::metrics::reference::ReferenceStats;
+use crate::metrics::score::score_dance;
 use crate::models::dancenet::style::most_probable;
+use crate::models::motion_style::MotionStyle;
 use crate::models::{DanceModel, DanceStyle, GenerateRequest, Progress};
 use crate::motion::Motion;
 
@@ -64,11 +64,11 @@ pub struct RealStyles {
 }
 
 /// Classifies real dances `(id, motion)`, their style from the id.
-pub fn real_styles(classifier: &MotionStyle, dances: &[(&str, &Motion)]) -> Result<RealStyles, MetricsError> {
+pub fn real_styles(classifier: &MotionStyle, dances: &[(&str, &Motion)]) -> Result<RealStyles, EvalError> {
     let mut out = Vec::new();
     for (id, m) in dances {
         let Some(truth) = DanceStyle::of_dance_id(id) else { continue };
-        let p = classifier.classify(m).map_err(|e| MetricsError::Reference(format!("motion style classifier on {id}: {e}")))?;
+        let p = classifier.classify(m).map_err(|source| EvalError::Classifier { dance: Some(id.to_string()), source })?;
         out.push((id.to_string(), truth, most_probable(&p)));
     }
     let accuracy = out.iter().filter(|(_, a, b)| a == b).count() as f64 / out.len().max(1) as f64;
@@ -84,7 +84,7 @@ pub fn style_control(
     classifier: Option<&MotionStyle>,
     reference: &ReferenceStats,
     progress: &mut dyn Progress,
-) -> Result<StyleControl, MetricsError> {
+) -> Result<StyleControl, EvalError> {
     let mut asked = Vec::new();
     // served[style][song]
     let mut served: Vec<Vec<Motion>> = Vec::new();
@@ -93,13 +93,13 @@ pub fn style_control(
         let mut motions = Vec::new();
         for s in songs {
             let req = GenerateRequest { style: Some(style), ..GenerateRequest::plain(s.audio, seed) };
-            let raw = model.generate(&req, progress).map_err(|e| MetricsError::Reference(format!("{id} ({}) on {}: {e}", style.name(), s.name)))?.motion;
-            let m = super::eval::as_served(raw, &[]).map_err(|e| MetricsError::Reference(format!("{id} on {}: export: {e}", s.name)))?;
+            let raw = model.generate(&req, progress).map_err(|source| EvalError::Generate { model: format!("{id} ({})", style.name()), song: s.name.to_string(), source })?.motion;
+            let m = super::as_served(raw, &[]).map_err(|source| EvalError::Export { model: id.into(), song: s.name.to_string(), source })?;
             let sc = score_dance(&m, s.beats, &[], reference)?;
             passing += usize::from(sc.scores.verdict.pass);
             speed += sc.scores.physical.mean_speed_m_s;
             if let Some(c) = classifier {
-                let p = c.classify(&m).map_err(|e| MetricsError::Reference(format!("motion style classifier: {e}")))?;
+                let p = c.classify(&m).map_err(|source| EvalError::Classifier { dance: None, source })?;
                 classified[most_probable(&p).index()] += 1;
             }
             motions.push(m);

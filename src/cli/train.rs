@@ -1,0 +1,352 @@
+//! `choreo train <model>`: the arguments of each trainer. Every default is the library's
+//! `Default` (the schedule behind the committed weights), read here so the two cannot drift.
+use std::path::PathBuf;
+
+use anyhow::Context;
+use choreo::models::dancenet::style::Readout;
+use choreo::models::train::{self, Training};
+
+/// `choreo train <model>`: one variant per trainable model.
+#[derive(Clone, Debug, clap::Subcommand)]
+pub enum TrainArgs {
+    /// DanceRevolution (Huang et al., ICLR 2021).
+    DanceRevolution(DanceRevolutionArgs),
+    /// DanceNet (Zhuang et al. 2020): dilated gated causal convolutions, mixture output, style control.
+    Dancenet(DancenetArgs),
+    /// Key-pose controllable cross-modal transformer.
+    KeyposeTransformer(KeyposeTransformerArgs),
+    /// TSMT, the two-stream motion transformer over discretised poses (Li et al. 2020).
+    Tsmt(TsmtArgs),
+    /// DanceNet's musical style classifier (Zhuang et al. 2020): song → style, into models/dancenet/style.*.
+    DancenetStyle(DancenetStyleArgs),
+    /// The motion style classifier the metrics use: motion → style, into models/motion-style/.
+    MotionStyle(MotionStyleArgs),
+}
+
+impl From<TrainArgs> for Training {
+    fn from(a: TrainArgs) -> Self {
+        match a {
+            TrainArgs::DanceRevolution(o) => Training::DanceRevolution(o.into()),
+            TrainArgs::Dancenet(o) => Training::Dancenet(o.into()),
+            TrainArgs::KeyposeTransformer(o) => Training::KeyposeTransformer(o.into()),
+            TrainArgs::Tsmt(o) => Training::Tsmt(o.into()),
+            TrainArgs::DancenetStyle(o) => Training::DancenetStyle(o.into()),
+            TrainArgs::MotionStyle(o) => Training::MotionStyle(o.into()),
+        }
+    }
+}
+
+/// Trains (or evaluates) and prints what it wrote.
+pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
+    choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "info");
+    println!("{}", Training::from(args.clone()).run().context("choreo train")?);
+    Ok(())
+}
+
+/// `--readout`, as the library's [`Readout`] (the flag's values and their help).
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum ReadoutArg {
+    /// The forward direction's last state and the backward direction's first.
+    Last,
+    /// The mean over time of the outputs of both directions.
+    Mean,
+}
+
+fn readout_parser() -> impl clap::builder::TypedValueParser<Value = Readout> {
+    use clap::builder::TypedValueParser as _;
+    clap::builder::EnumValueParser::<ReadoutArg>::new().map(|r| match r {
+        ReadoutArg::Last => Readout::Last,
+        ReadoutArg::Mean => Readout::Mean,
+    })
+}
+
+args_into! {
+    /// Options every trainer takes, flattened into each model's own `Options`.
+    pub struct CommonArgs => train::CommonOptions {
+        /// The dance-with-melody folder.
+        #[arg(long, default_value_os_t = train::CommonOptions::default().data)]
+        data: PathBuf,
+        /// The model folder to write [default: models/<id>].
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// libtorch intra-op threads.
+        #[arg(long, default_value_t = train::CommonOptions::default().threads)]
+        threads: i32,
+        /// Stop after this many minutes even if epochs remain (the weights are saved either way).
+        #[arg(long)]
+        max_minutes: Option<f64>,
+        /// Start from these weights (same configuration), e.g. to continue a committed run; the log
+        /// is then appended to, not replaced.
+        #[arg(long)]
+        init: Option<PathBuf>,
+        /// Use the tiny test configuration (for smoke runs, never for committed weights).
+        #[arg(long)]
+        tiny: bool,
+    }
+}
+
+args_into! {
+    /// The schedule flags both trainers take.
+    pub struct ClassifyArgs => train::classify::ClassifyOptions {
+        #[arg(long, default_value_t = train::classify::ClassifyOptions::default().epochs)]
+        epochs: usize,
+        #[arg(long, default_value_t = train::classify::ClassifyOptions::default().batch)]
+        batch: usize,
+        /// Training windows drawn per epoch (see the class balance in `models::train::classify`).
+        #[arg(long, default_value_t = train::classify::ClassifyOptions::default().windows_per_epoch)]
+        windows_per_epoch: usize,
+        #[arg(long, default_value_t = train::classify::ClassifyOptions::default().lr)]
+        lr: f64,
+        #[arg(long, default_value_t = train::classify::ClassifyOptions::default().seed)]
+        seed: u64,
+        /// Leave fold `K/N` of the train split's dances out of training and score them beside the
+        /// test split (a leave-dances-out check; write it with `--out` elsewhere, never over the
+        /// committed folder). Each style's dances, in split order, go to fold i mod N; a style with
+        /// one train dance (the tango) is never left out.
+        #[arg(long)]
+        hold_out: Option<String>,
+        /// Class balance β: a style's share of the windows is proportional to its number of dances
+        /// to the power 1 − β (1: every style a quarter; 0: as many as its dances).
+        #[arg(long, default_value_t = train::classify::ClassifyOptions::default().balance)]
+        balance: f64,
+        /// Max-pool stride after each convolution [default: the configuration's].
+        #[arg(long)]
+        pool: Option<i64>,
+        /// Dropout before the FC layer [default: the configuration's].
+        #[arg(long)]
+        dropout: Option<f64>,
+        /// What the FC layer reads of the Bi-LSTM [default: the configuration's].
+        #[arg(long, value_parser = readout_parser())]
+        readout: Option<Readout>,
+    }
+}
+
+args_into! {
+    /// Options of one training run; the defaults reproduce the committed weights' schedule (the
+    /// card gives the runs).
+    pub struct DanceRevolutionArgs => train::dance_revolution::Options {
+        #[command(flatten)]
+        common: CommonArgs,
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().epochs)]
+        epochs: usize,
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().batch)]
+        batch: usize,
+        /// Training window in frames (10 s at 25 fps; see the model card for why).
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().window)]
+        window: usize,
+        /// Stride between window starts, in frames.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().stride)]
+        stride: usize,
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().lr)]
+        lr: f64,
+        /// `p`: ground-truth frames per curriculum segment (paper: 10).
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().p)]
+        p: i64,
+        /// `λ`: the curriculum grows q = ⌊λ·epoch⌋.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().lambda)]
+        lambda: f64,
+        /// Upper bound on q, so late epochs stay within the window.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().q_max)]
+        q_max: i64,
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().seed)]
+        seed: u64,
+        /// The curriculum epoch the first epoch of this run counts as (continuing a run).
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().first_epoch)]
+        first_epoch: usize,
+        /// Train the encoder at position offsets drawn over a whole 15-minute song (default), or at 0 only.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().random_positions, action = clap::ArgAction::Set)]
+        random_positions: bool,
+    }
+}
+
+args_into! {
+    /// Options of one training run (the card gives the run behind the committed weights).
+    pub struct DancenetArgs => train::dancenet::Options {
+        #[command(flatten)]
+        common: CommonArgs,
+        #[arg(long, default_value_t = train::dancenet::Options::default().epochs)]
+        epochs: usize,
+        #[arg(long, default_value_t = train::dancenet::Options::default().batch)]
+        batch: usize,
+        /// Training window, frames (the context encoder's 8 s).
+        #[arg(long, default_value_t = train::dancenet::Options::default().window)]
+        window: usize,
+        /// Stride between window starts, frames.
+        #[arg(long, default_value_t = train::dancenet::Options::default().stride)]
+        stride: usize,
+        #[arg(long, default_value_t = train::dancenet::Options::default().lr)]
+        lr: f64,
+        /// λ, the weight of the foot-contact loss.
+        #[arg(long, default_value_t = train::dancenet::Options::default().lambda_foot)]
+        lambda_foot: f64,
+        /// σ_in: standard deviation of the Gaussian noise on the decoder's input frames (normalised
+        /// units; the targets stay clean), so it learns to come back from its own samples.
+        #[arg(long, default_value_t = train::dancenet::Options::default().input_noise)]
+        input_noise: f64,
+        /// Correlation from frame to frame of that noise (AR(1)); 0 is independent per frame. Noise
+        /// independent per frame taught the decoder to undo a frame-to-frame zig-zag, and on its own
+        /// (smooth) samples it then made one: its means alternated direction on 57 % of frames.
+        #[arg(long, default_value_t = train::dancenet::Options::default().input_coherence)]
+        input_coherence: f64,
+        /// Standard deviation of a constant offset added to each window's input frames (normalised
+        /// units; per window and dimension): a history that has drifted off the real dances, which
+        /// the decoder must learn to come back from since the targets stay clean. Sampling drifts:
+        /// every draw adds its own error to what the decoder reads next.
+        #[arg(long, default_value_t = train::dancenet::Options::default().input_offset)]
+        input_offset: f64,
+        /// Standard deviation per frame of a random walk added to the input frames (normalised
+        /// units): drift that grows within the window.
+        #[arg(long, default_value_t = train::dancenet::Options::default().input_walk)]
+        input_walk: f64,
+        /// Frames of each window that are context only (default: the receptive field, so every
+        /// scored frame sees real history, never zero padding).
+        #[arg(long)]
+        warmup: Option<usize>,
+        /// Windows of the rarer styles repeat `(waltz frames / style frames)^p` times (at most 4), so
+        /// the style input is learned from more than waltz; 0 trains on the data as it is.
+        #[arg(long, default_value_t = train::dancenet::Options::default().style_balance)]
+        style_balance: f64,
+        /// Mixture components (the paper: 1).
+        #[arg(long)]
+        mixtures: Option<i64>,
+        /// Leading frame columns whose mixture means are absolute rather than relative to the current
+        /// frame (default: all; 4 makes only the root's absolute, see `dancenet::Config::absolute_dims`).
+        #[arg(long)]
+        absolute_dims: Option<i64>,
+        /// Default sampling temperature written into `model.json` (served: 0.8; see the model card).
+        #[arg(long, default_value_t = train::dancenet::Options::default().temperature)]
+        temperature: f64,
+        /// Default coherence ρ of the sampling draws written into `model.json` (`dancenet::Sampling`).
+        #[arg(long, default_value_t = train::dancenet::Options::default().coherence)]
+        coherence: f64,
+        /// σ (frames) of the served smoothing written into `model.json` (`dancenet::Serving`).
+        #[arg(long, default_value_t = train::dancenet::Options::default().smooth_frames)]
+        smooth_frames: f64,
+        #[arg(long, default_value_t = train::dancenet::Options::default().seed)]
+        seed: u64,
+    }
+}
+
+args_into! {
+    /// Options of one training run; the model card gives the runs (and flags) behind the committed weights.
+    pub struct KeyposeTransformerArgs => train::keypose_transformer::Options {
+        #[command(flatten)]
+        common: CommonArgs,
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().epochs)]
+        epochs: usize,
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().batch)]
+        batch: usize,
+        /// Stride between training window starts, in frames.
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().stride)]
+        stride: usize,
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().lr)]
+        lr: f64,
+        /// `λ`: weight of the key-pose terms in ω(t).
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().lambda)]
+        lambda: f64,
+        /// `σ`: width of each key-pose term in ω(t), frames.
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().sigma)]
+        sigma: f64,
+        /// Weight of the L1 on frame differences (velocities) beside the pose term: the pose term alone
+        /// lets a regression average fast motion away.
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().velocity_weight)]
+        velocity_weight: f64,
+        /// Frames between the scaffold poses the served model draws (0: none); see the scaffold module.
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().scaffold_spacing)]
+        scaffold_spacing: usize,
+        /// Clips of the served pose bank, and their length in frames.
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().bank_clips)]
+        bank_clips: usize,
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().bank_frames)]
+        bank_frames: usize,
+        /// Key poses per training window are drawn uniformly from 0..=max_keys.
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().max_keys)]
+        max_keys: usize,
+        /// Key poses per test dance in the consistency evaluation.
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().eval_keys)]
+        eval_keys: usize,
+        #[arg(long, default_value_t = train::keypose_transformer::Options::default().seed)]
+        seed: u64,
+        /// Do not train: re-run the test-split evaluation of the model already in `--out` and rewrite
+        /// its `eval.json`.
+        #[arg(long)]
+        eval_only: bool,
+    }
+}
+
+args_into! {
+    /// Options of one training run (the card gives the run behind the committed weights).
+    pub struct TsmtArgs => train::tsmt::Options {
+        #[command(flatten)]
+        common: CommonArgs,
+        #[arg(long, default_value_t = train::tsmt::Options::default().epochs)]
+        epochs: usize,
+        #[arg(long, default_value_t = train::tsmt::Options::default().batch)]
+        batch: usize,
+        /// Stride between window starts, in frames (the window is the configuration's context).
+        #[arg(long, default_value_t = train::tsmt::Options::default().stride)]
+        stride: usize,
+        #[arg(long, default_value_t = train::tsmt::Options::default().lr)]
+        lr: f64,
+        /// Standard deviation, in bins, of Gaussian noise added to the pose stream's input tokens
+        /// (the targets stay clean), so that the model learns to come back from its own draws.
+        #[arg(long, default_value_t = train::tsmt::Options::default().input_noise_bins)]
+        input_noise_bins: f64,
+        /// Default sampling temperature written into `model.json`.
+        #[arg(long, default_value_t = train::tsmt::Options::default().temperature)]
+        temperature: f64,
+        /// Default top-k written into `model.json` (0: every bin).
+        #[arg(long, default_value_t = train::tsmt::Options::default().top_k)]
+        top_k: usize,
+        /// Share of each window's predicted frames scored per step (drawn afresh every batch):
+        /// the 300-bin read-out is most of a step's cost, so scoring a quarter of the frames gives
+        /// about three times the steps for the same minutes.
+        #[arg(long, default_value_t = train::tsmt::Options::default().loss_frames)]
+        loss_frames: f64,
+        /// Windows whose last second's mean root-relative joint speed is below this (m/s) are not
+        /// trained on (the dancer comes to a stand, mostly a dance's closing hold). 0 keeps all (the
+        /// served weights; 0.15 was tried, see the model card).
+        #[arg(long, default_value_t = train::tsmt::Options::default().min_window_speed)]
+        min_window_speed: f64,
+        /// De-quantisation σ (frames) written into `model.json` (see `tsmt::Serving`).
+        #[arg(long, default_value_t = train::tsmt::Options::default().smooth_frames)]
+        smooth_frames: f64,
+        /// De-quantisation σ (frames) of the height column (see `tsmt::Serving`).
+        #[arg(long, default_value_t = train::tsmt::Options::default().smooth_height_frames)]
+        smooth_height_frames: f64,
+        /// The stall guard's reach (m) written into `model.json` (0: no guard; `tsmt::StallGuard`,
+        /// over 2 s, temperature × 1.5).
+        #[arg(long, default_value_t = train::tsmt::Options::default().stall_reach)]
+        stall_reach: f64,
+        #[arg(long, default_value_t = train::tsmt::Options::default().seed)]
+        seed: u64,
+    }
+}
+
+args_into! {
+    /// Options of one training run (the card gives the run behind the committed weights).
+    pub struct DancenetStyleArgs => train::dancenet_style::Options {
+        #[command(flatten)]
+        common: CommonArgs,
+        #[command(flatten)]
+        schedule: ClassifyArgs,
+        /// Roll each training window's chroma by a random 0–11 semitones (a song's key says nothing
+        /// of its style, and 37 songs are few enough to be told apart by their keys).
+        #[arg(long, default_value_t = train::dancenet_style::Options::default().transpose, action = clap::ArgAction::Set)]
+        transpose: bool,
+    }
+}
+
+args_into! {
+    /// Options of one training run (the card gives the run behind the committed weights).
+    pub struct MotionStyleArgs => train::motion_style::Options {
+        #[command(flatten)]
+        common: CommonArgs,
+        #[command(flatten)]
+        schedule: ClassifyArgs,
+        /// Windows of no style ([`no_style_windows`]) added to each batch with a uniform target
+        /// (0: none).
+        #[arg(long, default_value_t = train::motion_style::Options::default().no_style_per_batch)]
+        no_style_per_batch: usize,
+    }
+}

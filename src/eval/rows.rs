@@ -1,0 +1,170 @@
+//! The rows of `choreo eval`: scored dances grouped into a row (diversity, multimodality, seed
+//! distance), and each model's dances, generated once and finished both ways.
+use std::path::Path;
+
+use super::songs::{key_poses_of, Song};
+use super::{as_served, EvalDance, EvalError, EvalOptions, EvalRow};
+use crate::metrics::diversity::diversity;
+use crate::metrics::physical::seed_distance_m;
+use crate::metrics::reference::ReferenceStats;
+use crate::metrics::score::{multimodality, score_dance, score_set, ScoredDance};
+use crate::models::{Cancelled, GenerateRequest, Progress};
+use crate::motion::dataset::Dance;
+use crate::motion::{KeyPose, Motion};
+
+/// A progress sink for the CLI: never cancels.
+pub(super) struct Quiet;
+impl Progress for Quiet {
+    fn report(&mut self, _stage: crate::stage::Stage, _fraction: f32) -> Result<(), Cancelled> {
+        Ok(())
+    }
+}
+
+pub(super) fn crop(m: &Motion, frames: usize) -> Motion {
+    let n = frames.min(m.positions.dim().0);
+    Motion { fps: m.fps, positions: m.positions.slice(ndarray::s![..n, .., ..]).to_owned() }
+}
+
+/// A row of scored dances; `per_song` groups the indices of dances of one song (different
+/// seeds), with their motions, for multimodality and the seed distance.
+pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: Option<Vec<Vec<(usize, Motion)>>>, reference: &ReferenceStats) -> EvalRow {
+    let dances: Vec<ScoredDance> = scored.iter().map(|(_, s)| s.clone()).collect();
+    let mut scores = score_set(&dances, reference);
+    // The paper's diversity measures: dances grouped by song (each dance alone without groups).
+    let normed: Vec<Vec<Vec<f64>>> = dances.iter().map(|s| s.features.kinetic.iter().map(|r| reference.kinetic.normalise(r)).collect()).collect();
+    let song_groups: Vec<Vec<usize>> = match &per_song {
+        Some(groups) => groups.iter().map(|g| g.iter().map(|(i, _)| *i).collect()).collect(),
+        None => (0..dances.len()).map(|i| vec![i]).collect(),
+    };
+    let by_song: Vec<Vec<&[Vec<f64>]>> = song_groups.iter().map(|g| g.iter().map(|&i| normed[i].as_slice()).collect()).collect();
+    let diversity_v = diversity(&by_song);
+    let (mut multimodality_v, mut seed_mean, mut seed_min) = (None, None, None);
+    if let Some(groups) = per_song {
+        let g: Vec<Vec<&ScoredDance>> = groups.iter().map(|ix| ix.iter().map(|(i, _)| &dances[*i]).collect()).collect();
+        multimodality_v = multimodality(&g, reference);
+        let per_pair: Vec<f64> = groups
+            .iter()
+            .flat_map(|grp| {
+                let mut d = Vec::new();
+                for a in 0..grp.len() {
+                    for b in a + 1..grp.len() {
+                        d.push(seed_distance_m(&grp[a].1, &grp[b].1));
+                    }
+                }
+                d
+            })
+            .filter(|x| !x.is_nan())
+            .collect();
+        if !per_pair.is_empty() {
+            seed_mean = Some(per_pair.iter().sum::<f64>() / per_pair.len() as f64);
+            seed_min = per_pair.iter().copied().reduce(f64::min);
+        }
+        scores.mean.verdict = scores.mean.verdict.clone().with_seed_distance(seed_min);
+    }
+    EvalRow {
+        name: name.into(),
+        scores,
+        multimodality: multimodality_v,
+        seed_distance_m: seed_mean,
+        seed_distance_min_m: seed_min,
+        diversity: diversity_v,
+        dances: scored.into_iter().map(|(e, _)| e).collect(),
+    }
+}
+
+/// The rows of one model: as served (feet planted) and as the network made them, on the test
+/// songs and on the extra songs. Each dance is generated once and finished both ways.
+pub(super) struct ModelRows {
+    pub(super) test: [EvalRow; 2],
+    pub(super) extra: Option<[EvalRow; 2]>,
+}
+
+/// A model's dances of a list of songs, finished both ways, grouped by song.
+#[derive(Default)]
+struct Danced {
+    scored: [Vec<(EvalDance, ScoredDance)>; 2],
+    per_song: [Vec<Vec<(usize, Motion)>>; 2],
+}
+
+fn dance_songs(
+    model: &dyn crate::models::DanceModel,
+    id: &str,
+    songs: &[Song],
+    keys_of: impl Fn(usize) -> Vec<KeyPose>,
+    args: &EvalOptions,
+    reference: &ReferenceStats,
+) -> Result<Danced, EvalError> {
+    let mut out = Danced::default();
+    for (i, s) in songs.iter().enumerate() {
+        let keys = keys_of(i);
+        let mut groups: [Vec<(usize, Motion)>; 2] = Default::default();
+        for seed in args.seed..args.seed + args.seeds.max(1) {
+            let req = GenerateRequest { key_poses: &keys, ..GenerateRequest::plain(&s.audio, seed) };
+            let raw = model.generate(&req, &mut Quiet).map_err(|source| EvalError::Generate { model: id.into(), song: s.name.clone(), source })?.motion;
+            // The motion stage every job runs (feet planted), and the network's motion as it came.
+            // Served: planted and exported through the rigid skeleton, as motion.json holds it.
+            let served = as_served(raw.clone(), &keys).map_err(|source| EvalError::Export { model: id.into(), song: s.name.clone(), source })?;
+            let finished = [served, crate::motion::finish(raw, false)];
+            if let Some(dir) = &args.previews {
+                write_preview(dir, id, s, seed, &finished[0], &keys)?;
+            }
+            for (v, m) in finished.into_iter().enumerate() {
+                let sc = score_dance(&m, &s.beats, &keys, reference)?;
+                groups[v].push((out.scored[v].len(), m.clone()));
+                let e = EvalDance { song: s.name.clone(), motion: format!("{id}@{seed}"), seconds: m.duration_s(), scores: sc.scores.clone() };
+                out.scored[v].push((e, sc));
+            }
+        }
+        for (v, g) in groups.into_iter().enumerate() {
+            out.per_song[v].push(g);
+        }
+    }
+    Ok(out)
+}
+
+/// Names of the two rows of a model.
+fn row_names(base: &str) -> [String; 2] {
+    [base.to_string(), format!("{base} (raw network output, feet not planted)")]
+}
+
+fn rows_of(d: Danced, names: &[String; 2], reference: &ReferenceStats) -> [EvalRow; 2] {
+    let Danced { scored: [s0, s1], per_song: [g0, g1] } = d;
+    [row(&names[0], s0, Some(g0), reference), row(&names[1], s1, Some(g1), reference)]
+}
+
+pub(super) fn model_rows(
+    model: &dyn crate::models::DanceModel,
+    id: &str,
+    test: (&[Song], &[Dance]),
+    extra: &[Song],
+    args: &EvalOptions,
+    reference: &ReferenceStats,
+) -> Result<ModelRows, EvalError> {
+    let keyed = args.key_poses > 0 && model.info().capabilities.key_poses;
+    let (songs, dances) = test;
+    let keys_of = |i: usize| if keyed { key_poses_of(&dances[i], args.key_poses, args.seed + i as u64) } else { Vec::new() };
+    let base = if keyed { format!("{id} + {} key poses", args.key_poses) } else { id.to_string() };
+    let test_rows = rows_of(dance_songs(model, id, songs, keys_of, args, reference)?, &row_names(&base), reference);
+    let extra_rows = if extra.is_empty() {
+        None
+    } else {
+        Some(rows_of(dance_songs(model, id, extra, |_| Vec::new(), args, reference)?, &row_names(id), reference))
+    };
+    Ok(ModelRows { test: test_rows, extra: extra_rows })
+}
+
+/// Writes the contact sheet of `model`'s dance to `song` with `seed` into `dir`.
+fn write_preview(dir: &Path, model: &str, song: &Song, seed: u64, motion: &Motion, keys: &[KeyPose]) -> Result<(), EvalError> {
+    use crate::report::preview::{write_png, Caption, Sheet};
+    let stem = song.name.rsplit_once('.').map_or(song.name.as_str(), |(stem, _)| stem);
+    let name: String = format!("{model}_{stem}_seed{seed}.png")
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' })
+        .collect();
+    std::fs::create_dir_all(dir).map_err(|source| EvalError::Io { path: dir.to_path_buf(), source })?;
+    let caption = Caption { model: model.to_string(), seed, song: Some(song.name.clone()), style: None };
+    let key_pose_times: Vec<f64> = keys.iter().map(|k| k.time_s).collect();
+    let sheet = Sheet { motion, beat_times: &song.beats, key_pose_times: &key_pose_times, song_duration_s: song.audio.duration_s, caption: &caption };
+    let path = dir.join(name);
+    write_png(&path, &sheet).map_err(|source| EvalError::Preview { path, source })
+}

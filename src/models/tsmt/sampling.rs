@@ -1,0 +1,160 @@
+//! §3.4 inference: each coordinate sampled (seeded RNG, `temperature`, `top_k`), one frame at a
+//! time against the pose stream's key/value caches, and the served stall guard (not in the paper).
+use ndarray::Array2;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+use tch::{Device, Kind, Tensor};
+
+use super::Tsmt;
+
+impl Tsmt {
+    /// Generates `n` frames of tokens after the context `prefix` `[m ≥ 1, coords]`, frame t
+    /// from the last frames and row t of `audio_vectors` ([`Self::audio_logit_vectors`]).
+    /// `on_step(done)` is called before the first frame and every 250 frames, and may stop it.
+    pub fn sample(&self, prefix: &Array2<i64>, audio_vectors: &Tensor, sampling: Sampling, seed: u64, on_step: impl FnMut(usize) -> bool) -> Option<Array2<i64>> {
+        self.sample_guarded(prefix, audio_vectors, sampling, None, seed, on_step)
+    }
+
+    /// [`Self::sample`] with an optional [`StallGuard`] and the metres per bin of each joint
+    /// coordinate (the first `POSE_DIM` coordinates) it measures motion with.
+    pub fn sample_guarded(
+        &self,
+        prefix: &Array2<i64>,
+        audio_vectors: &Tensor,
+        sampling: Sampling,
+        guard: Option<(&StallGuard, &[f32])>,
+        seed: u64,
+        mut on_step: impl FnMut(usize) -> bool,
+    ) -> Option<Array2<i64>> {
+        let c = self.config.coords as usize;
+        let n = audio_vectors.size()[0] as usize;
+        let mut out = Array2::<i64>::zeros((n, c));
+        let mut caches = self.pose.stack.new_caches();
+        let mut rng = StdRng::seed_from_u64(seed ^ 0x7357_0000_D0CE);
+        let tensor_of = |row: ndarray::ArrayView1<'_, i64>| Tensor::from_slice(&row.to_vec());
+        // The context, all but its last frame, fills the caches (at most the window's worth).
+        let m = prefix.nrows();
+        let keep = (m as i64).min(self.config.window) as usize;
+        let first = m - keep;
+        let mut wx = Tensor::zeros([1], (Kind::Float, Device::Cpu));
+        for (k, t) in (first..m).enumerate() {
+            wx = self.step(&tensor_of(prefix.row(t)), k as i64, &mut caches);
+        }
+        let mut pos = keep as i64;
+        let mut probs = vec![0f32; self.config.n_bins as usize];
+        // Says the loop has begun (a stage clock starts timing it here, however short the song).
+        if !on_step(0) {
+            return None;
+        }
+        // The last frames drawn, for the guard.
+        let mut recent: std::collections::VecDeque<Vec<i64>> = std::collections::VecDeque::new();
+        for t in 0..n {
+            let logits = self.logits(&(wx.shallow_clone() + audio_vectors.get(t as i64))); // [coords, n_bins]
+            let flat: Vec<f32> = Vec::<f32>::try_from(logits.contiguous().view([-1])).ok()?;
+            let now = match guard {
+                Some((g, widths)) if recent.len() >= g.window_frames && reach_m(&recent, widths) < g.min_reach_m => g.boosted(sampling),
+                _ => sampling,
+            };
+            for (ci, row) in flat.chunks(self.config.n_bins as usize).enumerate() {
+                out[[t, ci]] = now.draw(row, &mut probs, &mut rng) as i64;
+            }
+            if let Some((g, _)) = guard {
+                recent.push_back(out.row(t).to_vec());
+                while recent.len() > g.window_frames {
+                    recent.pop_front();
+                }
+            }
+            wx = self.step(&tensor_of(out.row(t)), pos, &mut caches);
+            pos += 1;
+            if (t + 1) % 250 == 0 && !on_step(t + 1) {
+                return None;
+            }
+        }
+        Some(out)
+    }
+}
+
+/// How far the pose has come within `frames` (tokens, oldest first): the largest, over the
+/// earlier frames, of the mean distance (m) of the root-relative joints from where they are in
+/// the last frame, from the metres per bin of each joint coordinate (`widths`, `POSE_DIM` long).
+/// A bin or two of sampling jitter adds a centimetre or so; a dancer who moves reaches tens.
+pub(super) fn reach_m(frames: &std::collections::VecDeque<Vec<i64>>, widths: &[f32]) -> f32 {
+    let joints = widths.len() / 3;
+    let Some(last) = frames.back() else { return 0.0 };
+    if joints == 0 || last.len() < 3 * joints {
+        return 0.0;
+    }
+    frames
+        .iter()
+        .map(|f| {
+            let sum: f32 = (0..joints)
+                .map(|j| (0..3).map(|c| ((last[3 * j + c] - f[3 * j + c]) as f32 * widths[3 * j + c]).powi(2)).sum::<f32>().sqrt())
+                .sum();
+            sum / joints as f32
+        })
+        .fold(0.0, f32::max)
+}
+
+/// A served guard against stalls (not in the paper): a sampled model that reaches a held pose
+/// (mostly a dance's closing pose) can stay in it for minutes, since each coordinate's likeliest
+/// bin is its previous one. While no pose of the last `window_frames` frames is more than
+/// `min_reach_m` (mean over joints, root-relative) from the newest ([`reach_m`]), draws use the
+/// temperature times `boost` (and twice the top-k) until the dancer moves again.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct StallGuard {
+    pub min_reach_m: f32,
+    pub window_frames: usize,
+    pub boost: f64,
+}
+
+impl StallGuard {
+    fn boosted(&self, s: Sampling) -> Sampling {
+        Sampling { temperature: s.temperature * self.boost, top_k: if s.top_k == 0 { 0 } else { s.top_k * 2 } }
+    }
+}
+
+/// How logits become a draw (§3.4): temperature, then the `top_k` likeliest bins.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct Sampling {
+    pub temperature: f64,
+    /// 0 keeps every bin.
+    pub top_k: usize,
+}
+
+impl Default for Sampling {
+    fn default() -> Self {
+        Self { temperature: 1.0, top_k: 0 }
+    }
+}
+
+impl Sampling {
+    /// Draws a bin from one coordinate's `logits`; `probs` is scratch of the same length.
+    pub fn draw(&self, logits: &[f32], probs: &mut [f32], rng: &mut StdRng) -> usize {
+        let t = self.temperature.max(1e-3) as f32;
+        let k = if self.top_k == 0 { logits.len() } else { self.top_k.min(logits.len()) };
+        // The k-th largest logit is the cut (ties at the cut are kept).
+        let cut = if k < logits.len() {
+            let mut sorted: Vec<f32> = logits.to_vec();
+            let (_, kth, _) = sorted.select_nth_unstable_by(k - 1, |a, b| b.total_cmp(a));
+            *kth
+        } else {
+            f32::NEG_INFINITY
+        };
+        let max = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
+        let mut total = 0f32;
+        for (p, &l) in probs.iter_mut().zip(logits) {
+            *p = if l >= cut { ((l - max) / t).exp() } else { 0.0 };
+            total += *p;
+        }
+        let mut u = rng.gen::<f32>() * total;
+        for (i, &p) in probs.iter().enumerate() {
+            if u < p {
+                return i;
+            }
+            u -= p;
+        }
+        // Rounding left u past the end: the last bin with any mass.
+        probs.iter().rposition(|&p| p > 0.0).unwrap_or(0)
+    }
+}
