@@ -42,7 +42,7 @@ impl TestDb {
     async fn postgres() -> Self {
         let server = tokio::task::spawn_blocking(postgres::Postgres::start).await.expect("start postgres");
         let url = choreo::config::Secret::new(server.url());
-        let store = PgStore::connect(&url).await.expect("connect postgres");
+        let store = PgStore::connect(&url, std::time::Duration::from_secs(3)).await.expect("connect postgres");
         Self { store: Arc::new(store.clone()), events: Events::Postgres(store), _dir: None, _server: Some(server) }
     }
 

@@ -261,7 +261,7 @@ impl Server {
         if stale > 0 {
             tracing::info!(files = stale, "removed uploads cut off by a previous process");
         }
-        let store: Arc<dyn Store> = crate::queue::open(&config.database()?).await?;
+        let store: Arc<dyn Store> = crate::queue::open(&config.database()?, Duration::from_secs_f64(config.db_timeout_s)).await?;
         let artifacts = crate::artifacts::open(&config, data.clone())?;
         crate::artifacts::sweep::spawn(store.clone(), data.clone(), Duration::from_secs_f64(config.sweep_grace_s));
         let registry = Arc::new(Registry::load(&config.models_dir)?);

@@ -269,10 +269,19 @@ impl ApiError {
             sqlx::Error::Io(io) if is_out_of_space(io) => Some(ApiError::InsufficientStorage("database: no space left".into())),
             sqlx::Error::Io(_) => Some(ApiError::ServiceUnavailable(format!("database: {e}"))),
             sqlx::Error::Database(db) => {
-                // SQLite's SQLITE_FULL (13), PostgreSQL's disk_full (53100).
                 let code = db.code();
+                // SQLite's SQLITE_FULL (13), PostgreSQL's disk_full (53100).
                 let full = matches!(code.as_deref(), Some("13") | Some("53100")) || db.message().contains("disk is full");
-                full.then(|| ApiError::InsufficientStorage("database: no space left".into()))
+                // PostgreSQL's connection exceptions (class 08) and a server shutting down or
+                // starting (57P01-57P03): the database is unreachable for now, not broken.
+                let gone = code.as_deref().is_some_and(|c| c.starts_with("08") || matches!(c, "57P01" | "57P02" | "57P03"));
+                if full {
+                    Some(ApiError::InsufficientStorage("database: no space left".into()))
+                } else if gone {
+                    Some(ApiError::ServiceUnavailable(format!("database: {e}")))
+                } else {
+                    None
+                }
             }
             _ => None,
         }

@@ -525,3 +525,64 @@ async fn a_full_disk_acknowledges_nothing_it_cannot_keep_and_recovers() {
         assert_eq!((runs, successes), (1, 1), "job {id} ran once and succeeded once");
     }
 }
+
+/// GET `path` until it answers `want` (bounded); how long it took.
+async fn answers(client: &reqwest::Client, serve: &Serve, path: &str, want: StatusCode, limit: Duration) -> Duration {
+    let start = Instant::now();
+    loop {
+        let last = match client.get(serve.url(path)).send().await {
+            Ok(response) if response.status() == want => return start.elapsed(),
+            Ok(response) => format!("{}: {}", response.status(), response.text().await.unwrap_or_default()),
+            Err(e) => e.to_string(),
+        };
+        assert!(start.elapsed() < limit, "GET {path} did not answer {want} within {limit:?}; last: {last}");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn postgres_stopped_answers_503_within_5_s_and_recovers() {
+    let mut db = tokio::task::spawn_blocking(crate::postgres::Postgres::start).await.expect("start postgres");
+    let url = db.url();
+    let mut serve = Serve::start(Options { env: &[("CHOREO_DATABASE_URL", &url)], ..Options::default() });
+    let client = client();
+    answers(&client, &serve, "/readyz", StatusCode::OK, Duration::from_secs(10)).await;
+    assert_eq!(client.get(serve.url("/v1/jobs")).send().await.expect("GET jobs").status(), StatusCode::OK);
+
+    let db = tokio::task::spawn_blocking(move || {
+        db.stop();
+        db
+    })
+    .await
+    .expect("stop postgres");
+    // Every call that needs the database fails fast with a problem, not a hang or a 500.
+    for (method, path) in [("GET", "/v1/jobs"), ("GET", "/v1/jobs/0191f0a0-0000-7000-8000-000000000000"), ("POST", "/v1/jobs")] {
+        let start = Instant::now();
+        let request = match method {
+            "POST" => client.post(serve.url(path)).json(&json!({"song_id": "0191f0a0-0000-7000-8000-000000000000", "model": "dance-revolution"})),
+            _ => client.get(serve.url(path)),
+        };
+        let response = request.send().await.expect("request");
+        let took = start.elapsed();
+        assert!(took < Duration::from_secs(5), "{method} {path} took {took:?} with PostgreSQL stopped");
+        crate::helpers::expect_problem(response, StatusCode::SERVICE_UNAVAILABLE, "service-unavailable").await;
+        eprintln!("{method} {path}: 503 in {took:?}");
+    }
+    let start = Instant::now();
+    let ready = client.get(serve.url("/readyz")).send().await.expect("readyz");
+    assert_eq!(ready.status(), StatusCode::SERVICE_UNAVAILABLE);
+    assert!(start.elapsed() < Duration::from_secs(5), "/readyz took {:?}", start.elapsed());
+
+    let mut db = db;
+    let db = tokio::task::spawn_blocking(move || {
+        db.restart();
+        db
+    })
+    .await
+    .expect("restart postgres");
+    let took = answers(&client, &serve, "/readyz", StatusCode::OK, Duration::from_secs(15)).await;
+    eprintln!("ready again {took:?} after PostgreSQL restarted");
+    answers(&client, &serve, "/v1/jobs", StatusCode::OK, Duration::from_secs(5)).await;
+    serve.assert_alive();
+    drop(db);
+}
