@@ -1,5 +1,8 @@
 //! Metrics checked against their peers (fixtures from `tools/metrics_reference.py`: scipy,
 //! mir_eval, scipy.linalg.sqrtm), on hand-computable motions, and on the real data.
+#[path = "common/models.rs"]
+mod common_models;
+
 use choreo::metrics::beats::{self, bas_bailando, bas_fact, fact_order, kinematic_beats_bailando, kinematic_beats_fact};
 use choreo::metrics::features::{geometric_features, kinetic_features, BodyScale};
 use choreo::metrics::fid::{frechet_distance, mean_pairwise_distance, Gaussian, ZNorm};
@@ -429,7 +432,7 @@ mod real_data {
         let mut a = args(root);
         a.real_only = false;
         a.models = vec!["dance-revolution".into()];
-        a.models_dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models");
+        a.models_dir = crate::common_models::models_dir();
         a.songs = vec![dir.path().to_path_buf()];
         let r = evaluate(&a).expect("eval");
         let names: Vec<&str> = r.rows.iter().map(|x| x.name.as_str()).collect();
@@ -643,7 +646,7 @@ mod style_classifiers {
     }
 
     fn models() -> PathBuf {
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models")
+        crate::common_models::models_dir()
     }
 
     /// Windows and dances right, per style.
