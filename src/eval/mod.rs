@@ -177,6 +177,13 @@ pub struct EvalRow {
     pub seed_distance_m: Option<f64>,
     /// The smallest seed distance of any song pair (the verdict's value).
     pub seed_distance_min_m: Option<f64>,
+    /// Song sensitivity: the root-relative distance (m) between dances of the same seed on two
+    /// different songs, per song pair and seed, averaged (model rows only).
+    #[serde(default)]
+    pub song_distance_m: Option<f64>,
+    /// The smallest such distance (issue 25's bar: ≥ 0.15 m; two real dances are 0.34 apart).
+    #[serde(default)]
+    pub song_distance_min_m: Option<f64>,
     /// TSMT's A-seq-D, I-seq-D and S-music-D ([`crate::metrics::diversity`]) on z-normalised kinetic
     /// windows; S-music-D only where one song has dances from several seeds.
     #[serde(default)]

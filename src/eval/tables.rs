@@ -148,6 +148,20 @@ fn worst_key_error(r: &EvalRow) -> Option<f64> {
     r.scores.mean.verdict.get(crate::metrics::physical::names::KEY_POSES).and_then(|c| c.value)
 }
 
+/// Issue 25's bars on each row: tempo-locked dances (step rate within 3 % of 1/6…1 of the beat
+/// rate; real dances 32 of 43), the stillest arms (≥ 0.43 m/s), the worst knees (≤ 6 %), and
+/// the same seed on two songs (≥ 0.15 m apart).
+fn musicality_table(rows: &[EvalRow]) -> String {
+    let mut out = String::from("| Motion | n | tempo-locked ↑ | arms min (m/s) ↑ | knees backwards max ↓ | same seed, two songs min (m) ↑ |\n|---|---|---|---|---|---|\n");
+    for r in rows {
+        let m = &r.scores.musicality;
+        let locked = if m.measured == 0 { "–".into() } else { format!("{}/{} ({:.0} %)", m.tempo_locked, m.measured, 100.0 * m.tempo_locked_share) };
+        let cells = [r.name.clone(), r.scores.dances.to_string(), locked, f2(m.arm_speed_min_m_s), format!("{:.1} %", 100.0 * m.knee_backward_max), opt(r.song_distance_min_m)];
+        out.push_str(&format!("| {} |\n", cells.join(" | ")));
+    }
+    out
+}
+
 /// The Markdown `choreo eval` prints: per section, a scores table and a physical-plausibility
 /// table (the verdict: each criterion as the row's worst dance has it; the values beside it are
 /// every frame of the row pooled).
@@ -159,6 +173,8 @@ pub fn markdown(result: &EvalResult) -> String {
     out += &physical_table(&result.rows, reference.as_ref());
     out += "\n### TSMT's measures (diversity on z-normalised kinetic 5-s windows, beat P/R/F ±0.1 s)\n\n";
     out += &paper_table(&result.rows);
+    out += "\n### Musicality (issue 25: tempo lock, arms, knees, song sensitivity)\n\n";
+    out += &musicality_table(&result.rows);
     if !result.extra_rows.is_empty() {
         out += &format!("\n## Extra songs, whole ({})\n\n### Scores\n\n", result.extra_songs.join(", "));
         out += &scores_table(&result.extra_rows);
@@ -166,6 +182,8 @@ pub fn markdown(result: &EvalResult) -> String {
         out += &physical_table(&result.extra_rows, reference.as_ref());
         out += "\n### TSMT's measures\n\n";
         out += &paper_table(&result.extra_rows);
+        out += "\n### Musicality\n\n";
+        out += &musicality_table(&result.extra_rows);
     }
     if !result.style_control.is_empty() {
         out += "\n## Style control (every song above, test and extra, in each style)\n\n";

@@ -68,8 +68,9 @@ pub struct TempoLock {
     pub locked: bool,
 }
 
-/// The three measures of this module for one dance.
-#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+/// The three measures of this module for one dance (`Default`: nothing measured, for reports
+/// written before they existed).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct Musicality {
     /// `None` when the dance is shorter than 2 s or has fewer than 4 beats.
     pub tempo_lock: Option<TempoLock>,
@@ -88,6 +89,55 @@ impl Musicality {
             tempo_lock: tempo_lock(p, motion.fps, beat_times_s),
             arm_speed_m_s: arm_speed_m_s(p, motion.fps),
             knee_backward_share: knee_backward_share(p),
+        }
+    }
+}
+
+/// A set of dances against issue 25's bars: the share tempo-locked, the stillest arms, the worst
+/// knees (each bar is on every dance, so the set reports its extremes, not its means).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct MusicalitySummary {
+    /// Dances with a measurable step rate.
+    pub measured: usize,
+    /// Of those, tempo-locked within [`TEMPO_LOCK_TOLERANCE`].
+    pub tempo_locked: usize,
+    /// `tempo_locked / measured` (NaN when none was measured).
+    pub tempo_locked_share: f64,
+    /// The slowest dance's arms (m/s).
+    pub arm_speed_min_m_s: f64,
+    /// The worst dance's share of knee-frames bent backwards.
+    pub knee_backward_max: f64,
+}
+
+impl MusicalitySummary {
+    /// Summarises the dances' measures.
+    pub fn of<'a>(dances: impl IntoIterator<Item = &'a Musicality>) -> Self {
+        let mut s = Self { arm_speed_min_m_s: f64::INFINITY, ..Self::default() };
+        let mut any = false;
+        for m in dances {
+            any = true;
+            if let Some(lock) = m.tempo_lock {
+                s.measured += 1;
+                s.tempo_locked += usize::from(lock.locked);
+            }
+            s.arm_speed_min_m_s = s.arm_speed_min_m_s.min(m.arm_speed_m_s);
+            s.knee_backward_max = s.knee_backward_max.max(m.knee_backward_share);
+        }
+        if !any {
+            s.arm_speed_min_m_s = f64::NAN;
+        }
+        s.tempo_locked_share = if s.measured == 0 { f64::NAN } else { s.tempo_locked as f64 / s.measured as f64 };
+        s
+    }
+
+    /// The mean dance, for a set's `mean` scores: arms and knees averaged, no tempo lock (a
+    /// set's tempo lock is [`MusicalitySummary::tempo_locked_share`]).
+    pub fn mean<'a>(dances: impl IntoIterator<Item = &'a Musicality> + Clone) -> Musicality {
+        let n = dances.clone().into_iter().count().max(1) as f64;
+        Musicality {
+            tempo_lock: None,
+            arm_speed_m_s: dances.clone().into_iter().map(|m| m.arm_speed_m_s).sum::<f64>() / n,
+            knee_backward_share: dances.into_iter().map(|m| m.knee_backward_share).sum::<f64>() / n,
         }
     }
 }
