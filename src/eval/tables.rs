@@ -162,28 +162,29 @@ fn musicality_table(rows: &[EvalRow]) -> String {
     out
 }
 
+/// One section's tables; `notes` follow the titles of TSMT's table and the musicality table.
+fn section(rows: &[EvalRow], reference: Option<&ReferenceStats>, notes: [&str; 2]) -> String {
+    let mut out = String::from("### Scores\n\n");
+    out += &scores_table(rows);
+    out += "\n### Physical plausibility\n\n";
+    out += &physical_table(rows, reference);
+    out += &format!("\n### TSMT's measures{}\n\n", notes[0]);
+    out += &paper_table(rows);
+    out += &format!("\n### Musicality{}\n\n", notes[1]);
+    out += &musicality_table(rows);
+    out
+}
+
 /// The Markdown `choreo eval` prints: per section, a scores table and a physical-plausibility
 /// table (the verdict: each criterion as the row's worst dance has it; the values beside it are
 /// every frame of the row pooled).
 pub fn markdown(result: &EvalResult) -> String {
     let reference = ReferenceStats::builtin().ok();
-    let mut out = format!("## {} split ({} songs, each cut to its dance)\n\n### Scores\n\n", result.split, result.rows.first().map_or(0, |r| r.scores.dances));
-    out += &scores_table(&result.rows);
-    out += "\n### Physical plausibility\n\n";
-    out += &physical_table(&result.rows, reference.as_ref());
-    out += "\n### TSMT's measures (diversity on z-normalised kinetic 5-s windows, beat P/R/F ±0.1 s)\n\n";
-    out += &paper_table(&result.rows);
-    out += "\n### Musicality (issue 25: tempo lock, arms, knees, song sensitivity)\n\n";
-    out += &musicality_table(&result.rows);
+    let mut out = format!("## {} split ({} songs, each cut to its dance)\n\n", result.split, result.rows.first().map_or(0, |r| r.scores.dances));
+    out += &section(&result.rows, reference.as_ref(), [" (diversity on z-normalised kinetic 5-s windows, beat P/R/F ±0.1 s)", " (issue 25: tempo lock, arms, knees, song sensitivity)"]);
     if !result.extra_rows.is_empty() {
-        out += &format!("\n## Extra songs, whole ({})\n\n### Scores\n\n", result.extra_songs.join(", "));
-        out += &scores_table(&result.extra_rows);
-        out += "\n### Physical plausibility\n\n";
-        out += &physical_table(&result.extra_rows, reference.as_ref());
-        out += "\n### TSMT's measures\n\n";
-        out += &paper_table(&result.extra_rows);
-        out += "\n### Musicality\n\n";
-        out += &musicality_table(&result.extra_rows);
+        out += &format!("\n## Extra songs, whole ({})\n\n", result.extra_songs.join(", "));
+        out += &section(&result.extra_rows, reference.as_ref(), ["", ""]);
     }
     if !result.style_control.is_empty() {
         out += "\n## Style control (every song above, test and extra, in each style)\n\n";
