@@ -439,6 +439,13 @@ mod real_data {
         assert_eq!(names, ["Real", "Mismatched real", "dance-revolution", "dance-revolution (raw network output, feet not planted)"]);
         assert_eq!(r.extra_songs, ["trumpet_loop_90bpm.ogg"]);
         assert_eq!(r.extra_rows.len(), 2, "the extra song has its own rows");
+        // The tempo section: the extra song at 0.85× and 1.2× (sox), two seeds each.
+        assert_eq!(r.tempo.len(), 1, "{:?}", r.tempo);
+        let t = &r.tempo[0];
+        assert_eq!((t.model.as_str(), t.tempi.as_slice(), t.dances), ("dance-revolution", &[0.85, 1.2][..], 4));
+        assert!((t.followed_ratio - 1.2 / 0.85).abs() < 1e-9);
+        assert!(t.measured <= 4 && t.tempo_locked <= t.measured && t.step_rate_ratios.len() <= 2, "{t:?}");
+        assert!(t.step_rate_ratios.iter().all(|x| x.is_finite() && *x > 0.0), "{t:?}");
         assert!(r.rows.iter().all(|x| x.dances.iter().all(|d| d.song != "trumpet_loop_90bpm.ogg")), "test rows hold test songs only");
         for pair in [&r.rows[2..4], &r.extra_rows[..]] {
             let (served, raw) = (&pair[0], &pair[1]);

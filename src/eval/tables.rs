@@ -186,6 +186,10 @@ pub fn markdown(result: &EvalResult) -> String {
         out += &format!("\n## Extra songs, whole ({})\n\n", result.extra_songs.join(", "));
         out += &section(&result.extra_rows, reference.as_ref(), ["", ""]);
     }
+    if !result.tempo.is_empty() {
+        out += "\n## Tempo: the extra songs slower and faster (sox, pitch kept)\n\n";
+        out += &super::tempo::markdown(&result.tempo);
+    }
     if !result.style_control.is_empty() {
         out += "\n## Style control (every song above, test and extra, in each style)\n\n";
         out += &super::style_control::markdown(&result.style_control, result.real_styles.as_ref());
