@@ -854,5 +854,11 @@ mod musicality_real {
         assert!((lo - 0.43).abs() < 0.01 && (med - 0.61).abs() < 0.01 && (hi - 1.44).abs() < 0.01, "arms {lo:.3}/{med:.3}/{hi:.3} m/s");
         let worst_knee = knees.iter().copied().fold(0.0, f64::max);
         assert!((0.04..=0.05).contains(&worst_knee), "worst knee share {worst_knee}");
+        // The committed reference (train split only) holds what these functions give.
+        let committed = choreo::metrics::reference::ReferenceStats::builtin().expect("reference").musicality;
+        assert_eq!(committed.summary.measured, 37);
+        assert!(committed.summary.tempo_locked <= within_3 && committed.within_2_percent <= within_2, "{committed:?}");
+        assert!(committed.arm_speed_range_m_s[0] >= lo - 1e-9 && committed.arm_speed_range_m_s[1] <= hi + 1e-9, "{committed:?}");
+        assert!(committed.summary.knee_backward_max <= worst_knee + 1e-12, "{committed:?}");
     }
 }

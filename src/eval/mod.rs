@@ -39,7 +39,7 @@ use rand::SeedableRng;
 use crate::metrics::diversity::Diversity;
 use crate::metrics::reference::ReferenceStats;
 use crate::metrics::score::{score_dance, SetScores};
-use crate::audio::AudioError;
+use crate::audio::{self, AudioError};
 use crate::metrics::MetricsError;
 use crate::models::motion_style::{MotionStyle, StyleError};
 use crate::models::{ModelError, ModelId, Registry};
@@ -235,8 +235,16 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, EvalEr
     let ds = Dataset::open(data)?;
     let ids = ds.train_ids().to_vec();
     let dances = ds.load_all(&ids)?;
+    // Each dance's song beats on the dance's clock, for the musicality figures.
+    let mut beats = Vec::with_capacity(dances.len());
+    for d in &dances {
+        let start = d.song_time_s(0);
+        beats.push(audio::analyze(&audio::decode_path(&d.audio_path)?)?.beat_times.iter().map(|t| t - start).collect::<Vec<f64>>());
+    }
     let motions: Vec<Motion> = dances.into_iter().map(|d| d.motion).collect();
-    let stats = ReferenceStats::compute("dance-with-melody train split", ids, &motions)?;
+    let mut stats = ReferenceStats::compute("dance-with-melody train split", ids, &motions)?;
+    let paired: Vec<(&Motion, &[f64])> = motions.iter().zip(&beats).map(|(m, b)| (m, b.as_slice())).collect();
+    stats.musicality = crate::metrics::musicality::MusicalityReference::compute(&paired);
     stats.write(out)?;
     Ok(stats)
 }

@@ -142,6 +142,35 @@ impl MusicalitySummary {
     }
 }
 
+/// What the real dances measure (`reference_train.json`, `choreo eval --write-reference`), each
+/// against its own song's beats.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct MusicalityReference {
+    /// The bars on the set (tempo-locked share, stillest arms, worst knees).
+    pub summary: MusicalitySummary,
+    /// Dances whose step rate is within 2 % of a fraction of the beat rate.
+    pub within_2_percent: usize,
+    /// Slowest and fastest dance's arms (m/s).
+    pub arm_speed_range_m_s: [f64; 2],
+    /// The median dance's arms (m/s).
+    pub arm_speed_median_m_s: f64,
+}
+
+impl MusicalityReference {
+    /// Measures real dances, each with the song's beats on its own clock.
+    pub fn compute(dances: &[(&Motion, &[f64])]) -> Self {
+        let all: Vec<Musicality> = dances.iter().map(|(m, beats)| Musicality::of(m, beats)).collect();
+        let mut arms: Vec<f64> = all.iter().map(|m| m.arm_speed_m_s).collect();
+        arms.sort_by(f64::total_cmp);
+        Self {
+            summary: MusicalitySummary::of(&all),
+            within_2_percent: all.iter().filter(|m| m.tempo_lock.is_some_and(|l| l.distance <= 0.02)).count(),
+            arm_speed_range_m_s: [arms.first().copied().unwrap_or(f64::NAN), arms.last().copied().unwrap_or(f64::NAN)],
+            arm_speed_median_m_s: arms.get(arms.len() / 2).copied().unwrap_or(f64::NAN),
+        }
+    }
+}
+
 /// The beat rate (Hz) of the beats within `[0, duration_s]`: `(n − 1) / (last − first)`.
 pub fn beat_rate_hz(beat_times_s: &[f64], duration_s: f64) -> Option<f64> {
     let inside: Vec<f64> = beat_times_s.iter().copied().filter(|t| (0.0..=duration_s).contains(t)).collect();
