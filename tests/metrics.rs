@@ -1,5 +1,8 @@
 //! Metrics checked against their peers (fixtures from `tools/metrics_reference.py`: scipy,
 //! mir_eval, scipy.linalg.sqrtm), on hand-computable motions, and on the real data.
+#[path = "common/models.rs"]
+mod common_models;
+
 use choreo::metrics::beats::{self, bas_bailando, bas_fact, fact_order, kinematic_beats_bailando, kinematic_beats_fact};
 use choreo::metrics::features::{geometric_features, kinetic_features, BodyScale};
 use choreo::metrics::fid::{frechet_distance, mean_pairwise_distance, Gaussian, ZNorm};
@@ -429,13 +432,20 @@ mod real_data {
         let mut a = args(root);
         a.real_only = false;
         a.models = vec!["dance-revolution".into()];
-        a.models_dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models");
+        a.models_dir = crate::common_models::models_dir();
         a.songs = vec![dir.path().to_path_buf()];
         let r = evaluate(&a).expect("eval");
         let names: Vec<&str> = r.rows.iter().map(|x| x.name.as_str()).collect();
         assert_eq!(names, ["Real", "Mismatched real", "dance-revolution", "dance-revolution (raw network output, feet not planted)"]);
         assert_eq!(r.extra_songs, ["trumpet_loop_90bpm.ogg"]);
         assert_eq!(r.extra_rows.len(), 2, "the extra song has its own rows");
+        // The tempo section: the extra song at 0.85× and 1.2× (sox), two seeds each.
+        assert_eq!(r.tempo.len(), 1, "{:?}", r.tempo);
+        let t = &r.tempo[0];
+        assert_eq!((t.model.as_str(), t.tempi.as_slice(), t.dances), ("dance-revolution", &[0.85, 1.2][..], 4));
+        assert!((t.followed_ratio - 1.2 / 0.85).abs() < 1e-9);
+        assert!(t.measured <= 4 && t.tempo_locked <= t.measured && t.step_rate_ratios.len() <= 2, "{t:?}");
+        assert!(t.step_rate_ratios.iter().all(|x| x.is_finite() && *x > 0.0), "{t:?}");
         assert!(r.rows.iter().all(|x| x.dances.iter().all(|d| d.song != "trumpet_loop_90bpm.ogg")), "test rows hold test songs only");
         for pair in [&r.rows[2..4], &r.extra_rows[..]] {
             let (served, raw) = (&pair[0], &pair[1]);
@@ -643,7 +653,7 @@ mod style_classifiers {
     }
 
     fn models() -> PathBuf {
-        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models")
+        crate::common_models::models_dir()
     }
 
     /// Windows and dances right, per style.
@@ -800,5 +810,55 @@ fn style_probes() {
             let motion = choreo::motion::finish(g.motion, true);
             println!("{id:11} {:18} {}", info.id.0, fmt(ms.classify(&motion).expect("classifies")));
         }
+    }
+}
+
+/// Issue 25's musicality measures on all 43 real dances, each against its own song's beats: the
+/// figures the issue states (and the model cards compare against) are what these functions give.
+mod musicality_real {
+    use choreo::audio;
+    use choreo::metrics::musicality::Musicality;
+    use choreo::motion::dataset::Dataset;
+    use std::path::PathBuf;
+
+    #[test]
+    fn real_dances_step_at_a_fraction_of_the_beat_move_their_arms_and_bend_their_knees_forwards() {
+        let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(choreo::motion::dataset::DEFAULT_ROOT);
+        if !root.is_dir() {
+            assert!(std::env::var("CI").as_deref() != Ok("true"), "../shared/data/dance-with-melody is missing; the musicality tests need it under CI=true");
+            eprintln!("skipping: {} not found", root.display());
+            return;
+        }
+        let data = Dataset::open(&root).expect("dataset opens");
+        let (mut within_2, mut within_3, mut arms, mut knees) = (0, 0, Vec::new(), Vec::new());
+        let ids = data.all_ids();
+        for id in &ids {
+            let d = data.load(id).expect("dance loads");
+            let song = audio::decode_path(&d.audio_path).expect("song decodes");
+            let start = d.song_time_s(0);
+            let beats: Vec<f64> = audio::analyze(&song).expect("analysis").beat_times.iter().map(|t| t - start).collect();
+            let m = Musicality::of(&d.motion, &beats);
+            let lock = m.tempo_lock.expect("every real dance has a step rate");
+            within_2 += usize::from(lock.distance <= 0.02);
+            within_3 += usize::from(lock.locked);
+            eprintln!("{id}: step/beat {:.3} (nearest {:.3}, {:.1} %), arms {:.2} m/s, knees back {:.1} %", lock.ratio, lock.fraction, 100.0 * lock.distance, m.arm_speed_m_s, 100.0 * m.knee_backward_share);
+            arms.push(m.arm_speed_m_s);
+            knees.push(m.knee_backward_share);
+        }
+        assert_eq!(ids.len(), 43);
+        // numpy on the same beats (Hann, 16× zero-padding, beats inside the dance) gives 28 and 32.
+        assert!((27..=29).contains(&within_2), "within 2 %: {within_2} of 43");
+        assert!((31..=33).contains(&within_3), "within 3 %: {within_3} of 43");
+        arms.sort_by(f64::total_cmp);
+        let (lo, med, hi) = (arms[0], arms[21], arms[42]);
+        assert!((lo - 0.43).abs() < 0.01 && (med - 0.61).abs() < 0.01 && (hi - 1.44).abs() < 0.01, "arms {lo:.3}/{med:.3}/{hi:.3} m/s");
+        let worst_knee = knees.iter().copied().fold(0.0, f64::max);
+        assert!((0.04..=0.05).contains(&worst_knee), "worst knee share {worst_knee}");
+        // The committed reference (train split only) holds what these functions give.
+        let committed = choreo::metrics::reference::ReferenceStats::builtin().expect("reference").musicality;
+        assert_eq!(committed.summary.measured, 37);
+        assert!(committed.summary.tempo_locked <= within_3 && committed.within_2_percent <= within_2, "{committed:?}");
+        assert!(committed.arm_speed_range_m_s[0] >= lo - 1e-9 && committed.arm_speed_range_m_s[1] <= hi + 1e-9, "{committed:?}");
+        assert!(committed.summary.knee_backward_max <= worst_knee + 1e-12, "{committed:?}");
     }
 }

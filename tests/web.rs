@@ -10,6 +10,9 @@
 #[allow(dead_code)]
 #[path = "api/helpers.rs"]
 mod helpers;
+#[path = "common/models.rs"]
+mod common_models;
+use common_models::models_dir;
 
 use helpers::{spawn_app, spawn_app_with, TestApp};
 use reqwest::StatusCode;
@@ -69,11 +72,6 @@ fn ready(test: &str, needs: &Needs) -> bool {
     false
 }
 
-fn models_dir() -> PathBuf {
-    let dir = root().join("models");
-    assert!(dir.join("keypose-transformer/weights.safetensors").is_file(), "the committed weights are missing from {}", dir.display());
-    dir
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {

@@ -55,6 +55,13 @@ pub struct EvalArgs {
     /// Train dances paired with each test song in the Mismatched-real row.
     #[arg(long, default_value_t = defaults().mismatch_per_song)]
     pub mismatch_per_song: usize,
+    /// Tempo factors every extra song is also danced at (sox, pitch kept), for the tempo
+    /// section, e.g. --tempi 0.8,1.25.
+    #[arg(long, value_delimiter = ',', default_values_t = defaults().tempi)]
+    pub tempi: Vec<f64>,
+    /// No tempo section.
+    #[arg(long)]
+    pub no_tempo: bool,
     /// Recompute the reference statistics from the train split, write them to
     /// src/metrics/reference_train.json (or --reference-out) and exit.
     #[arg(long)]
@@ -80,6 +87,7 @@ impl EvalArgs {
             key_poses: self.key_poses,
             previews: self.previews.clone(),
             mismatch_per_song: self.mismatch_per_song,
+            tempi: if self.no_tempo { Vec::new() } else { self.tempi.clone() },
         }
     }
 }

@@ -28,6 +28,7 @@
 mod rows;
 mod songs;
 pub mod style_control;
+pub mod tempo;
 pub mod tables;
 
 use std::path::{Path, PathBuf};
@@ -38,7 +39,7 @@ use rand::SeedableRng;
 use crate::metrics::diversity::Diversity;
 use crate::metrics::reference::ReferenceStats;
 use crate::metrics::score::{score_dance, SetScores};
-use crate::audio::AudioError;
+use crate::audio::{self, AudioError};
 use crate::metrics::MetricsError;
 use crate::models::motion_style::{MotionStyle, StyleError};
 use crate::models::{ModelError, ModelId, Registry};
@@ -88,6 +89,9 @@ pub struct EvalOptions {
     pub previews: Option<PathBuf>,
     /// Train dances paired with each test song in the Mismatched-real row.
     pub mismatch_per_song: usize,
+    /// Tempo factors every extra song is also danced at (with sox; [`tempo`]); empty: no tempo
+    /// section.
+    pub tempi: Vec<f64>,
 }
 
 impl Default for EvalOptions {
@@ -105,6 +109,7 @@ impl Default for EvalOptions {
             key_poses: 0,
             previews: None,
             mismatch_per_song: 1,
+            tempi: tempo::TEMPI.to_vec(),
         }
     }
 }
@@ -177,6 +182,13 @@ pub struct EvalRow {
     pub seed_distance_m: Option<f64>,
     /// The smallest seed distance of any song pair (the verdict's value).
     pub seed_distance_min_m: Option<f64>,
+    /// Song sensitivity: the root-relative distance (m) between dances of the same seed on two
+    /// different songs, per song pair and seed, averaged (model rows only).
+    #[serde(default)]
+    pub song_distance_m: Option<f64>,
+    /// The smallest such distance (issue 25's bar: ≥ 0.15 m; two real dances are 0.34 apart).
+    #[serde(default)]
+    pub song_distance_min_m: Option<f64>,
     /// TSMT's A-seq-D, I-seq-D and S-music-D ([`crate::metrics::diversity`]) on z-normalised kinetic
     /// windows; S-music-D only where one song has dances from several seeds.
     #[serde(default)]
@@ -213,6 +225,9 @@ pub struct EvalResult {
     /// The motion style classifier on the real test dances (when it and a style model ran).
     #[serde(default)]
     pub real_styles: Option<style_control::RealStyles>,
+    /// Each model on every extra song at each of [`EvalOptions::tempi`].
+    #[serde(default)]
+    pub tempo: Vec<tempo::TempoRow>,
 }
 
 /// Recomputes the reference statistics from the train split and writes them.
@@ -220,15 +235,23 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, EvalEr
     let ds = Dataset::open(data)?;
     let ids = ds.train_ids().to_vec();
     let dances = ds.load_all(&ids)?;
+    // Each dance's song beats on the dance's clock, for the musicality figures.
+    let mut beats = Vec::with_capacity(dances.len());
+    for d in &dances {
+        let start = d.song_time_s(0);
+        beats.push(audio::analyze(&audio::decode_path(&d.audio_path)?)?.beat_times.iter().map(|t| t - start).collect::<Vec<f64>>());
+    }
     let motions: Vec<Motion> = dances.into_iter().map(|d| d.motion).collect();
-    let stats = ReferenceStats::compute("dance-with-melody train split", ids, &motions)?;
+    let mut stats = ReferenceStats::compute("dance-with-melody train split", ids, &motions)?;
+    let paired: Vec<(&Motion, &[f64])> = motions.iter().zip(&beats).map(|(m, b)| (m, b.as_slice())).collect();
+    stats.musicality = crate::metrics::musicality::MusicalityReference::compute(&paired);
     stats.write(out)?;
     Ok(stats)
 }
 
 /// A model's motion as a user downloads it: feet planted (the motion stage every job runs), then
 /// fitted to the export's rigid skeleton with the key poses as anchors (what motion.json holds).
-fn as_served(raw: Motion, keys: &[KeyPose]) -> Result<Motion, MotionError> {
+pub(super) fn as_served(raw: Motion, keys: &[KeyPose]) -> Result<Motion, MotionError> {
     Ok(crate::motion::serve(&crate::motion::finish(raw, true), keys)?.motion)
 }
 
@@ -279,7 +302,7 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
     // Models, on the test songs and on the extra songs.
     let mut extra_rows = Vec::new();
     let mut extra_names = Vec::new();
-    let (mut style_control, mut real_styles) = (Vec::new(), None);
+    let (mut style_control, mut real_styles, mut tempo_rows) = (Vec::new(), None, Vec::new());
     if !args.real_only {
         let registry = Registry::load(&args.models_dir).map_err(EvalError::Models)?;
         let mut folders: Vec<PathBuf> = Vec::new();
@@ -291,10 +314,11 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
             }
         }
         folders.extend(args.songs.iter().cloned());
-        let mut extra = Vec::new();
+        let (mut extra, mut extra_paths) = (Vec::new(), Vec::new());
         for dir in &folders {
             for p in songs_in(dir)? {
                 extra.push(whole_song(&p)?);
+                extra_paths.push(p);
             }
         }
         extra_names = extra.iter().map(|s| s.name.clone()).collect();
@@ -311,6 +335,9 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
             if let Some(e) = r.extra {
                 extra_rows.extend(e);
             }
+            if !args.tempi.is_empty() && !extra_paths.is_empty() {
+                tempo_rows.push(tempo::tempo_row(model.as_ref(), id, &extra_paths, args)?);
+            }
             if model.info().capabilities.style {
                 let all: Vec<style_control::StyleSong<'_>> =
                     songs.iter().chain(&extra).map(|s| style_control::StyleSong { name: &s.name, audio: &s.audio, beats: &s.beats }).collect();
@@ -322,5 +349,5 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
             real_styles = Some(style_control::real_styles(c, &real)?);
         }
     }
-    Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows, extra_songs: extra_names, extra_rows, style_control, real_styles })
+    Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows, extra_songs: extra_names, extra_rows, style_control, real_styles, tempo: tempo_rows })
 }

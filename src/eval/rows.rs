@@ -39,7 +39,22 @@ pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: O
     let by_song: Vec<Vec<&[Vec<f64>]>> = song_groups.iter().map(|g| g.iter().map(|&i| normed[i].as_slice()).collect()).collect();
     let diversity_v = diversity(&by_song);
     let (mut multimodality_v, mut seed_mean, mut seed_min) = (None, None, None);
+    let (mut song_mean, mut song_min) = (None, None);
     if let Some(groups) = per_song {
+        // The same seed (the same place in each song's group) on every pair of songs.
+        let mut per_song_pair = Vec::new();
+        for a in 0..groups.len() {
+            for b in a + 1..groups.len() {
+                for (x, y) in groups[a].iter().zip(&groups[b]) {
+                    per_song_pair.push(seed_distance_m(&x.1, &y.1));
+                }
+            }
+        }
+        per_song_pair.retain(|x| !x.is_nan());
+        if !per_song_pair.is_empty() {
+            song_mean = Some(per_song_pair.iter().sum::<f64>() / per_song_pair.len() as f64);
+            song_min = per_song_pair.iter().copied().reduce(f64::min);
+        }
         let g: Vec<Vec<&ScoredDance>> = groups.iter().map(|ix| ix.iter().map(|(i, _)| &dances[*i]).collect()).collect();
         multimodality_v = multimodality(&g, reference);
         let per_pair: Vec<f64> = groups
@@ -67,6 +82,8 @@ pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: O
         multimodality: multimodality_v,
         seed_distance_m: seed_mean,
         seed_distance_min_m: seed_min,
+        song_distance_m: song_mean,
+        song_distance_min_m: song_min,
         diversity: diversity_v,
         dances: scored.into_iter().map(|(e, _)| e).collect(),
     }

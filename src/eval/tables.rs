@@ -148,24 +148,47 @@ fn worst_key_error(r: &EvalRow) -> Option<f64> {
     r.scores.mean.verdict.get(crate::metrics::physical::names::KEY_POSES).and_then(|c| c.value)
 }
 
+/// Issue 25's bars on each row: tempo-locked dances (step rate within 3 % of 1/6…1 of the beat
+/// rate; real dances 32 of 43), the stillest arms (≥ 0.43 m/s), the worst knees (≤ 6 %), and
+/// the same seed on two songs (≥ 0.15 m apart).
+fn musicality_table(rows: &[EvalRow]) -> String {
+    let mut out = String::from("| Motion | n | tempo-locked ↑ | arms min (m/s) ↑ | knees backwards max ↓ | same seed, two songs min (m) ↑ |\n|---|---|---|---|---|---|\n");
+    for r in rows {
+        let m = &r.scores.musicality;
+        let locked = if m.measured == 0 { "–".into() } else { format!("{}/{} ({:.0} %)", m.tempo_locked, m.measured, 100.0 * m.tempo_locked_share) };
+        let cells = [r.name.clone(), r.scores.dances.to_string(), locked, f2(m.arm_speed_min_m_s), format!("{:.1} %", 100.0 * m.knee_backward_max), opt(r.song_distance_min_m)];
+        out.push_str(&format!("| {} |\n", cells.join(" | ")));
+    }
+    out
+}
+
+/// One section's tables; `notes` follow the titles of TSMT's table and the musicality table.
+fn section(rows: &[EvalRow], reference: Option<&ReferenceStats>, notes: [&str; 2]) -> String {
+    let mut out = String::from("### Scores\n\n");
+    out += &scores_table(rows);
+    out += "\n### Physical plausibility\n\n";
+    out += &physical_table(rows, reference);
+    out += &format!("\n### TSMT's measures{}\n\n", notes[0]);
+    out += &paper_table(rows);
+    out += &format!("\n### Musicality{}\n\n", notes[1]);
+    out += &musicality_table(rows);
+    out
+}
+
 /// The Markdown `choreo eval` prints: per section, a scores table and a physical-plausibility
 /// table (the verdict: each criterion as the row's worst dance has it; the values beside it are
 /// every frame of the row pooled).
 pub fn markdown(result: &EvalResult) -> String {
     let reference = ReferenceStats::builtin().ok();
-    let mut out = format!("## {} split ({} songs, each cut to its dance)\n\n### Scores\n\n", result.split, result.rows.first().map_or(0, |r| r.scores.dances));
-    out += &scores_table(&result.rows);
-    out += "\n### Physical plausibility\n\n";
-    out += &physical_table(&result.rows, reference.as_ref());
-    out += "\n### TSMT's measures (diversity on z-normalised kinetic 5-s windows, beat P/R/F ±0.1 s)\n\n";
-    out += &paper_table(&result.rows);
+    let mut out = format!("## {} split ({} songs, each cut to its dance)\n\n", result.split, result.rows.first().map_or(0, |r| r.scores.dances));
+    out += &section(&result.rows, reference.as_ref(), [" (diversity on z-normalised kinetic 5-s windows, beat P/R/F ±0.1 s)", " (issue 25: tempo lock, arms, knees, song sensitivity)"]);
     if !result.extra_rows.is_empty() {
-        out += &format!("\n## Extra songs, whole ({})\n\n### Scores\n\n", result.extra_songs.join(", "));
-        out += &scores_table(&result.extra_rows);
-        out += "\n### Physical plausibility\n\n";
-        out += &physical_table(&result.extra_rows, reference.as_ref());
-        out += "\n### TSMT's measures\n\n";
-        out += &paper_table(&result.extra_rows);
+        out += &format!("\n## Extra songs, whole ({})\n\n", result.extra_songs.join(", "));
+        out += &section(&result.extra_rows, reference.as_ref(), ["", ""]);
+    }
+    if !result.tempo.is_empty() {
+        out += "\n## Tempo: the extra songs slower and faster (sox, pitch kept)\n\n";
+        out += &super::tempo::markdown(&result.tempo);
     }
     if !result.style_control.is_empty() {
         out += "\n## Style control (every song above, test and extra, in each style)\n\n";

@@ -34,6 +34,7 @@ pub mod diversity;
 pub mod features;
 pub mod fid;
 pub mod kinematics;
+pub mod musicality;
 pub mod physical;
 pub mod plausibility;
 pub mod reference;

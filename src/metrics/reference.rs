@@ -87,6 +87,10 @@ pub struct ReferenceStats {
     pub geometric_dance: FeatureStats,
     /// Floor contact, pops and speed of the train dances ([`super::physical`]).
     pub physical: PhysicalReference,
+    /// Tempo lock, arms and knees of the train dances against their songs
+    /// ([`super::musicality`]; filled by `choreo eval --write-reference`, which has the songs).
+    #[serde(default)]
+    pub musicality: super::musicality::MusicalityReference,
 }
 
 /// The committed statistics, compiled into the binary.
@@ -211,6 +215,8 @@ impl ReferenceStats {
             kinetic_dance: FeatureStats::fit(WHOLE_DANCE, WHOLE_DANCE, &kin_dance)?,
             geometric_dance: FeatureStats::fit(WHOLE_DANCE, WHOLE_DANCE, &geo_dance)?,
             physical: PhysicalReference::compute(motions),
+            // Needs the songs' beats, which the caller has (`choreo eval --write-reference`).
+            musicality: Default::default(),
         })
     }
 

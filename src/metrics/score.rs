@@ -2,6 +2,7 @@
 use super::beats::{beats_within, kinematic_beats_bailando, kinematic_beats_fact, rhythm_scores, RhythmScores};
 use super::fid::{frechet_distance, mean_pairwise_distance, Gaussian};
 use super::kinematics::{foot_skating, freezing, key_pose_errors_cm, smoothness_cv, FootSkating, Freezing};
+use super::musicality::{Musicality, MusicalitySummary};
 use super::physical::{physical_series, verdict, PhysicalScores, PhysicalSeries, Verdict};
 use super::plausibility::{plausibility, Plausibility};
 use super::reference::{dance_features, geometric_windows, kinetic_windows, FeatureStats, ReferenceStats, CURVE_WINDOW_S};
@@ -52,6 +53,10 @@ pub struct DanceScores {
     pub physical: PhysicalScores,
     /// Issue 10's thresholds applied (the seed criterion only where two seeds are compared).
     pub verdict: Verdict,
+    /// Does it go with this song: tempo lock, arm liveliness, knee direction
+    /// ([`super::musicality`]).
+    #[serde(default)]
+    pub musicality: Musicality,
 }
 
 /// One dance scored, with the series a report plots and the features a set-level FID pools.
@@ -129,6 +134,7 @@ pub fn score_dance(motion: &Motion, music_beats: &[f64], key_poses: &[KeyPose], 
         key_pose_error_cm: if key_errors.is_empty() { None } else { Some(key_errors.iter().sum::<f64>() / key_errors.len() as f64) },
         verdict: verdict(&physical, &key_errors, None),
         physical,
+        musicality: Musicality::of(motion, &music),
     };
     Ok(ScoredDance { scores, music_beats: music, kinematic_beats: kb, freezing: fr, features, physical: series })
 }
@@ -185,6 +191,9 @@ pub struct SetScores {
     pub div_k: f64,
     /// Div_g over all windows pooled.
     pub div_g: f64,
+    /// Issue 25's bars on the set: tempo-locked share, stillest arms, worst knees.
+    #[serde(default)]
+    pub musicality: MusicalitySummary,
 }
 
 fn mean_of(v: impl Iterator<Item = f64>) -> f64 {
@@ -238,6 +247,7 @@ pub fn score_set(dances: &[ScoredDance], reference: &ReferenceStats) -> SetScore
         key_pose_error_cm: if kp.is_empty() { None } else { Some(mean_of(kp.into_iter())) },
         physical: PhysicalSeries::pooled(dances.iter().map(|s| &s.physical)).scores(reference.physical.pooled.mean_speed_m_s),
         verdict: Verdict::worst(d().map(|s| &s.verdict)),
+        musicality: MusicalitySummary::mean(d().map(|s| &s.musicality)),
     };
     let kin_dance: Vec<Vec<f64>> = dances.iter().map(|s| s.features.kinetic_dance.clone()).collect();
     let geo_dance: Vec<Vec<f64>> = dances.iter().map(|s| s.features.geometric_dance.clone()).collect();
@@ -251,6 +261,7 @@ pub fn score_set(dances: &[ScoredDance], reference: &ReferenceStats) -> SetScore
         dances_passing: d().filter(|s| s.verdict.pass).count(),
         div_k: diversity(&reference.kinetic, &kin),
         div_g: diversity(&reference.geometric, &geo),
+        musicality: MusicalitySummary::of(d().map(|s| &s.musicality)),
     }
 }
 

@@ -8,9 +8,10 @@ use crate::scale::spawn;
 use object_store::ObjectStoreExt;
 use reqwest::StatusCode;
 use serde_json::{json, Value};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
+use crate::common_models::models_dir;
 
 const BUCKET: &str = "choreo-test";
 const PREFIX: &str = "run";
@@ -48,11 +49,6 @@ impl Drop for Moto {
     }
 }
 
-fn models_dir() -> PathBuf {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
-    assert!(dir.join("dance-revolution/weights.safetensors").is_file(), "the committed weights are missing from {}", dir.display());
-    dir
-}
 
 /// `choreo <args>` on its own data dir, with the shared database and bucket.
 fn choreo(args: &[&str], data_dir: &Path, database_url: &str, endpoint: &str) -> tokio::process::Command {

@@ -4,13 +4,8 @@
 use crate::helpers::{expect_problem, short_song, spawn_app_with};
 use reqwest::StatusCode;
 use serde_json::{json, Value};
-use std::path::Path;
+use crate::common_models::models_dir;
 
-fn models_dir() -> std::path::PathBuf {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
-    assert!(dir.join("dancenet/weights.safetensors").is_file(), "the committed dancenet weights are missing from {}", dir.display());
-    dir
-}
 
 /// Mean distance (m) between the root-relative joints of two motion.json documents, frame by frame.
 fn pose_distance(a: &Value, b: &Value) -> f64 {

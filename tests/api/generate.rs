@@ -3,13 +3,8 @@
 use crate::helpers::{expect_problem, short_song, spawn_app_with};
 use reqwest::StatusCode;
 use serde_json::{json, Value};
-use std::path::Path;
+use crate::common_models::models_dir;
 
-fn models_dir() -> std::path::PathBuf {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
-    assert!(dir.join("dance-revolution/weights.safetensors").is_file(), "the committed weights are missing from {}", dir.display());
-    dir
-}
 
 async fn generate(app: &crate::helpers::TestApp, song_id: &str, seed: u64) -> String {
     app.dance(&json!({"song_id": song_id, "model": "dance-revolution", "seed": seed})).await

@@ -166,8 +166,7 @@ async fn a_job_for_an_unknown_model_lists_the_available_ones() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_dance_job_runs_to_its_files_and_honours_idempotency() {
     // The committed dance-revolution weights: a real model, run on CPU.
-    let models = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
-    let app = spawn_app_with(|c| c.models_dir = models).await;
+    let app = spawn_app_with(|c| c.models_dir = crate::common_models::models_dir()).await;
     let listed: Value = app.get("/v1/models").await.json().await.expect("json");
     assert!(listed.as_array().expect("array").iter().any(|m| m["id"] == "dance-revolution"), "{listed}");
     let song = app.upload_ok(&short_song()).await;

@@ -33,7 +33,7 @@ async fn keypose_transformer_passes_through_four_real_key_poses() {
         })
         .collect();
 
-    let app = spawn_app_with(|c| c.models_dir = root.join("models")).await;
+    let app = spawn_app_with(|c| c.models_dir = crate::common_models::models_dir()).await;
     let song = app.upload_ok(&dance.audio_path).await;
     let song_id = song["id"].as_str().expect("song id");
     let duration = song["duration_s"].as_f64().expect("duration");

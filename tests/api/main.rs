@@ -2,6 +2,8 @@
 //! One module per endpoint or concern; `helpers::spawn_app()` starts the service.
 mod artifacts;
 mod bad_input;
+#[path = "../common/models.rs"]
+mod common_models;
 mod concurrency;
 mod crash;
 mod dancenet;

@@ -4,12 +4,10 @@ use choreo::report::preview::{HEIGHT, WIDTH};
 use reqwest::StatusCode;
 use serde_json::{json, Value};
 use std::collections::HashSet;
-use std::path::Path;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_generate_job_serves_its_contact_sheet_as_png() {
-    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
-    assert!(models.join("dance-revolution/weights.safetensors").is_file(), "the committed weights are missing from {}", models.display());
+    let models = crate::common_models::models_dir();
     // One worker: the second job waits behind the first, so it can be cancelled while queued.
     let app = spawn_app_with(|c| {
         c.models_dir = models;

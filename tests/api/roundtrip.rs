@@ -5,7 +5,7 @@
 use crate::helpers::{expect_problem, short_song, spawn_app_with, TestApp};
 use reqwest::StatusCode;
 use serde_json::{json, Value};
-use std::path::{Path, PathBuf};
+use crate::common_models::models_dir;
 
 /// The consistency target: mean per-joint distance between a key pose and the result at
 /// its frame, both relative to the body centre, cm.
@@ -17,13 +17,6 @@ const FPS: f64 = 25.0;
 /// Half-width of the window around each key in which acceleration is measured, frames (0.5 s).
 const ACCEL_WINDOW: usize = 12;
 
-fn models_dir() -> PathBuf {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
-    for id in ["keypose-transformer", "dance-revolution"] {
-        assert!(dir.join(id).join("weights.safetensors").is_file(), "the committed {id} weights are missing from {}", dir.display());
-    }
-    dir
-}
 
 /// Submits a job, asserts 202, waits, asserts it succeeded; returns its id.
 async fn run(app: &TestApp, body: Value) -> String {

@@ -1,0 +1,121 @@
+//! The tempo section of `choreo eval` (issue 25): does a model follow the music's tempo?
+//!
+//! The data cannot tell: every waltz in it is near 87 bpm, every cha-cha 115–127, so a model
+//! that steps at one fixed rate looks tempo-locked on its own genre. So every extra song is also
+//! danced slower and faster, the same music with its pitch kept (`sox … tempo F`, Debian's
+//! `sox`; a time-stretch in Rust would be a second, hand-written implementation of what sox does
+//! well), and each model's dances are measured there: the share tempo-locked
+//! ([`crate::metrics::musicality`]), and, per song and seed, the ratio of the step rates at the
+//! fastest and the slowest tempo, which is `fast / slow` (1.41 for 1.2 / 0.85) for a dancer who
+//! follows the tempo and 1 for a metronome.
+use std::path::Path;
+use std::process::Command;
+
+use super::as_served;
+use super::songs::{whole_song, Song};
+use super::{EvalError, EvalOptions};
+use crate::metrics::musicality::Musicality;
+use crate::models::{DanceModel, GenerateRequest};
+
+/// The tempi every extra song is also danced at (`Default` of [`EvalOptions::tempi`]).
+pub const TEMPI: [f64; 2] = [0.85, 1.2];
+
+/// One model's dances of the stretched songs.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct TempoRow {
+    pub model: String,
+    /// The tempo factors danced (besides the original).
+    pub tempi: Vec<f64>,
+    /// Dances (songs × tempi × seeds).
+    pub dances: usize,
+    /// Of those with a measurable step rate, how many are tempo-locked.
+    pub measured: usize,
+    pub tempo_locked: usize,
+    /// Per song and seed: step rate at the fastest tempo over the step rate at the slowest.
+    pub step_rate_ratios: Vec<f64>,
+    /// Median of `step_rate_ratios` (NaN without any).
+    pub step_rate_ratio_median: f64,
+    /// What a dancer who follows the tempo gives: fastest / slowest factor.
+    pub followed_ratio: f64,
+}
+
+/// `song` at `factor` × its tempo (pitch kept), written by sox into `dir` and decoded.
+fn stretched(song: &Path, factor: f64, dir: &Path) -> Result<Song, EvalError> {
+    let stem = song.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let out = dir.join(format!("{stem}@{factor}x.wav"));
+    let status = Command::new("sox")
+        .arg(song)
+        .arg(&out)
+        .args(["tempo", &factor.to_string()])
+        .status()
+        .map_err(|source| EvalError::Io { path: "sox (Debian's sox package; scripts/setup.sh --test installs it)".into(), source })?;
+    if !status.success() {
+        return Err(EvalError::Io { path: out, source: std::io::Error::other(format!("sox exited with {status}")) });
+    }
+    whole_song(&out)
+}
+
+/// Every song of `paths` at every factor of `args.tempi`, danced by `model` with the eval's
+/// seeds, as served.
+pub(super) fn tempo_row(model: &dyn DanceModel, id: &str, paths: &[std::path::PathBuf], args: &EvalOptions) -> Result<TempoRow, EvalError> {
+    let dir = tempfile::tempdir().map_err(|source| EvalError::Io { path: std::env::temp_dir(), source })?;
+    let mut tempi = args.tempi.clone();
+    tempi.sort_by(f64::total_cmp);
+    let (mut dances, mut measured, mut locked, mut ratios) = (0, 0, 0, Vec::new());
+    for path in paths {
+        // step rate per (tempo, seed)
+        let mut steps: Vec<Vec<Option<f64>>> = Vec::new();
+        for &factor in &tempi {
+            let song = stretched(path, factor, dir.path())?;
+            let mut per_seed = Vec::new();
+            for seed in args.seed..args.seed + args.seeds.max(1) {
+                let raw = model
+                    .generate(&GenerateRequest::plain(&song.audio, seed), &mut super::rows::Quiet)
+                    .map_err(|source| EvalError::Generate { model: id.into(), song: song.name.clone(), source })?
+                    .motion;
+                let served = as_served(raw, &[]).map_err(|source| EvalError::Export { model: id.into(), song: song.name.clone(), source })?;
+                let m = Musicality::of(&served, &song.beats);
+                dances += 1;
+                if let Some(lock) = m.tempo_lock {
+                    measured += 1;
+                    locked += usize::from(lock.locked);
+                }
+                per_seed.push(m.tempo_lock.map(|l| l.step_hz));
+            }
+            steps.push(per_seed);
+        }
+        if let (Some(slow), Some(fast)) = (steps.first(), steps.last()) {
+            if tempi.len() >= 2 {
+                ratios.extend(slow.iter().zip(fast).filter_map(|(s, f)| Some(f.as_ref()? / s.as_ref()?)));
+            }
+        }
+    }
+    let mut sorted = ratios.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = if sorted.is_empty() { f64::NAN } else { sorted[sorted.len() / 2] };
+    let followed = match (tempi.first(), tempi.last()) {
+        (Some(a), Some(b)) if tempi.len() >= 2 => b / a,
+        _ => f64::NAN,
+    };
+    Ok(TempoRow {
+        model: id.into(),
+        tempi,
+        dances,
+        measured,
+        tempo_locked: locked,
+        step_rate_ratios: ratios,
+        step_rate_ratio_median: median,
+        followed_ratio: followed,
+    })
+}
+
+/// The section's Markdown table.
+pub fn markdown(rows: &[TempoRow]) -> String {
+    let mut out = String::from("| Model | tempi | n | tempo-locked ↑ | step-rate ratio fast/slow (median) | a dancer who follows |\n|---|---|---|---|---|---|\n");
+    for r in rows {
+        let tempi: Vec<String> = r.tempi.iter().map(|t| format!("{t}×")).collect();
+        let locked = if r.measured == 0 { "–".into() } else { format!("{}/{} ({:.0} %)", r.tempo_locked, r.measured, 100.0 * r.tempo_locked as f64 / r.measured as f64) };
+        out += &format!("| {} | {} | {} | {} | {:.2} | {:.2} |\n", r.model, tempi.join(", "), r.dances, locked, r.step_rate_ratio_median, r.followed_ratio);
+    }
+    out
+}
