@@ -20,6 +20,8 @@ pub const SETTINGS: &[&str] = &[
     "max_job_body_bytes", "cors_origins", "auth_token", "log_format", "log_level", "lease_s", "heartbeat_s",
     "max_attempts", "retry_backoff_s", "poll_s", "database_url",
     "artifacts_url", "s3_endpoint", "s3_region",
+    "max_connections", "fd_reserve", "header_timeout_s", "body_timeout_s", "write_timeout_s", "max_part_header_bytes",
+    "db_timeout_s", "sweep_grace_s",
 ];
 
 /// Errors from loading or checking the configuration.
@@ -138,6 +140,27 @@ pub struct Config {
     pub s3_endpoint: Option<String>,
     /// The bucket's region.
     pub s3_region: String,
+    /// Most HTTP connections open at once; further ones get `503 too-many-connections` and are
+    /// closed. Lowered at start-up to the open-file limit less `fd_reserve`.
+    pub max_connections: usize,
+    /// File handles kept free of sockets for workers, the database and result files.
+    pub fd_reserve: u64,
+    /// Time a client has to send a request's head, counted from the connection's opening or the
+    /// previous response (so it is also the keep-alive idle timeout), in seconds.
+    pub header_timeout_s: f64,
+    /// Longest pause between two pieces of a request body, in seconds (`408 body-timeout`).
+    pub body_timeout_s: f64,
+    /// Longest a response write may wait on a client that does not read, in seconds; then the
+    /// connection is closed.
+    pub write_timeout_s: f64,
+    /// Largest header block of one multipart part (field name and file name included), in bytes.
+    pub max_part_header_bytes: usize,
+    /// How long a database call may wait for a connection, and `/readyz` for the database's
+    /// answer, in seconds.
+    pub db_timeout_s: f64,
+    /// Crash leftovers (temp files, files without a database row) older than this are removed at
+    /// start-up, in seconds.
+    pub sweep_grace_s: f64,
 }
 
 impl Default for Config {
@@ -164,6 +187,14 @@ impl Default for Config {
             artifacts_url: None,
             s3_endpoint: None,
             s3_region: "us-east-1".into(),
+            max_connections: 1024,
+            fd_reserve: 256,
+            header_timeout_s: 10.0,
+            body_timeout_s: 15.0,
+            write_timeout_s: 30.0,
+            max_part_header_bytes: 8 * 1024,
+            db_timeout_s: 3.0,
+            sweep_grace_s: 3600.0,
         }
     }
 }
@@ -201,6 +232,14 @@ struct Defaults {
     retry_backoff_s: f64,
     poll_s: f64,
     s3_region: String,
+    max_connections: usize,
+    fd_reserve: u64,
+    header_timeout_s: f64,
+    body_timeout_s: f64,
+    write_timeout_s: f64,
+    max_part_header_bytes: usize,
+    db_timeout_s: f64,
+    sweep_grace_s: f64,
 }
 
 impl Defaults {
@@ -224,6 +263,14 @@ impl Defaults {
             retry_backoff_s: d.retry_backoff_s,
             poll_s: d.poll_s,
             s3_region: d.s3_region,
+            max_connections: d.max_connections,
+            fd_reserve: d.fd_reserve,
+            header_timeout_s: d.header_timeout_s,
+            body_timeout_s: d.body_timeout_s,
+            write_timeout_s: d.write_timeout_s,
+            max_part_header_bytes: d.max_part_header_bytes,
+            db_timeout_s: d.db_timeout_s,
+            sweep_grace_s: d.sweep_grace_s,
         }
     }
 }
@@ -274,6 +321,25 @@ impl Config {
         }
         if !(self.poll_s.is_finite() && self.poll_s > 0.0) {
             return invalid("poll_s", "must be a positive number of seconds");
+        }
+        if self.max_connections == 0 {
+            return invalid("max_connections", "must be at least 1");
+        }
+        for (field, value) in [
+            ("header_timeout_s", self.header_timeout_s),
+            ("body_timeout_s", self.body_timeout_s),
+            ("write_timeout_s", self.write_timeout_s),
+            ("db_timeout_s", self.db_timeout_s),
+        ] {
+            if !(value.is_finite() && value > 0.0) {
+                return invalid(field, "must be a positive number of seconds");
+            }
+        }
+        if self.max_part_header_bytes < 256 {
+            return invalid("max_part_header_bytes", "must be at least 256 (a part's Content-Disposition needs room)");
+        }
+        if !(self.sweep_grace_s.is_finite() && self.sweep_grace_s >= 0.0) {
+            return invalid("sweep_grace_s", "must be zero or a positive number of seconds");
         }
         self.database()?;
         if let Some(url) = &self.artifacts_url {

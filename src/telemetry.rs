@@ -23,6 +23,16 @@ pub const JOB_DURATION: &str = "choreo_job_duration_seconds";
 pub const STAGE_DURATION: &str = "choreo_stage_duration_seconds";
 /// Counter: HTTP responses, by `status` class.
 pub const HTTP_RESPONSES: &str = "choreo_http_responses_total";
+/// Counter: connections refused because `max_connections` were open.
+pub const CONNECTIONS_REFUSED: &str = "choreo_connections_refused_total";
+/// Counter: failed accepts (out of file handles, most often).
+pub const ACCEPT_ERRORS: &str = "choreo_accept_errors_total";
+/// Counter: log lines that could not be written (a closed or full stderr) and were dropped.
+pub const LOG_WRITE_ERRORS: &str = "choreo_log_write_errors_total";
+/// Counter: workers restarted after dying.
+pub const WORKER_RESTARTS: &str = "choreo_worker_restarts_total";
+/// Counter: claims that failed because the store did not answer or could not write.
+pub const CLAIM_ERRORS: &str = "choreo_claim_errors_total";
 
 /// Buckets for job and stage durations: from 10 ms to 10 minutes.
 const DURATION_BUCKETS: &[f64] = &[0.01, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0];
@@ -57,12 +67,47 @@ fn describe() {
     metrics::describe_histogram!(JOB_DURATION, metrics::Unit::Seconds, "Wall time of one job attempt");
     metrics::describe_histogram!(STAGE_DURATION, metrics::Unit::Seconds, "Wall time of one job stage");
     metrics::describe_counter!(HTTP_RESPONSES, "HTTP responses by status class");
+    metrics::describe_counter!(CONNECTIONS_REFUSED, "Connections refused at the max_connections cap");
+    metrics::describe_counter!(ACCEPT_ERRORS, "Failed accepts of HTTP connections");
+    metrics::describe_counter!(LOG_WRITE_ERRORS, "Log lines dropped because the log sink failed");
+    metrics::describe_counter!(WORKER_RESTARTS, "Workers restarted after dying");
+    metrics::describe_counter!(CLAIM_ERRORS, "Failed claims (store unreachable or unwritable)");
+}
+
+/// Log output that cannot fail: a line that stderr does not take (a closed pipe, a full disk
+/// behind a redirect) is dropped and counted in [`LOG_WRITE_ERRORS`], never a panic or an error
+/// for the code that logged it. A log sink that fails must not stop the work it describes.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Stderr;
+
+impl std::io::Write for Stderr {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if std::io::stderr().write_all(buf).is_err() {
+            metrics::counter!(LOG_WRITE_ERRORS).increment(1);
+        }
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        let _ = std::io::stderr().flush();
+        Ok(())
+    }
+}
+
+impl tracing_subscriber::fmt::MakeWriter<'_> for Stderr {
+    type Writer = Stderr;
+
+    fn make_writer(&self) -> Self::Writer {
+        Stderr
+    }
 }
 
 /// Starts the global tracing subscriber; a second call (tests) is a no-op.
 pub fn init_tracing(format: LogFormat, default_level: &str) {
     let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_level));
-    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr);
+    // log_internal_errors(false): tracing-subscriber would otherwise report a failed write with
+    // eprintln!, which panics when stderr is closed.
+    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(Stderr).log_internal_errors(false);
     let _ = match format {
         LogFormat::Pretty => builder.try_init(),
         LogFormat::Json => builder.json().flatten_event(true).try_init(),

@@ -42,7 +42,7 @@ impl TestDb {
     async fn postgres() -> Self {
         let server = tokio::task::spawn_blocking(postgres::Postgres::start).await.expect("start postgres");
         let url = choreo::config::Secret::new(server.url());
-        let store = PgStore::connect(&url).await.expect("connect postgres");
+        let store = PgStore::connect(&url, std::time::Duration::from_secs(3)).await.expect("connect postgres");
         Self { store: Arc::new(store.clone()), events: Events::Postgres(store), _dir: None, _server: Some(server) }
     }
 
@@ -327,8 +327,8 @@ contract!(
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn postgres_notifies_watchers_of_new_jobs() {
     let server = tokio::task::spawn_blocking(postgres::Postgres::start).await.expect("start postgres");
-    let api = PgStore::connect(&choreo::config::Secret::new(server.socket_url())).await.expect("connect over the socket");
-    let worker = PgStore::connect(&choreo::config::Secret::new(server.url())).await.expect("connect over TCP");
+    let api = PgStore::connect(&choreo::config::Secret::new(server.socket_url()), std::time::Duration::from_secs(3)).await.expect("connect over the socket");
+    let worker = PgStore::connect(&choreo::config::Secret::new(server.url()), std::time::Duration::from_secs(3)).await.expect("connect over TCP");
     let wake = Arc::new(Notify::new());
     let shutdown = CancellationToken::new();
     // Created before the watcher starts, so its wake-up on listening cannot be missed.

@@ -69,6 +69,8 @@ where
         let bytes = Bytes::from_request(req, state).await.map_err(|e| {
             if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
                 ApiError::BodyTooLarge { limit: state.config.max_job_body_bytes }
+            } else if super::multipart::caused_by::<tower_http::timeout::TimeoutError>(&e) {
+                ApiError::BodyTimeout { seconds: state.config.body_timeout_s }
             } else {
                 ApiError::MalformedJson(e.body_text())
             }

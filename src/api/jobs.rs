@@ -274,7 +274,10 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
         (status = 404, description = "The song does not exist", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "The body is over max_job_body_bytes", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
+        (status = 408, description = "The body stalled for more than body_timeout_s", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set), the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The database is unreachable; nothing was queued, send it again shortly", body = Problem, content_type = "application/problem+json"),
+        (status = 507, description = "The server is out of storage; nothing was queued", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
@@ -477,12 +480,15 @@ pub async fn result(State(state): State<AppState>, Path((id, file)): Path<(Strin
     if !job.files.files.iter().any(|f| f == name) {
         return Err(ApiError::ResultNotFound(format!("job {} did not write {name}", job.id)));
     }
-    let bytes = state
+    let file = state
         .artifacts
-        .read(crate::artifacts::Artifact::Result(job.id, name))
+        .stream(crate::artifacts::Artifact::Result(job.id, name))
         .await
-        .map_err(|e| ApiError::Internal(format!("reading {name} of job {}: {e}", job.id)))?;
-    Ok(([(header::CONTENT_TYPE, content_type(name))], Body::from(bytes)).into_response())
+        .map_err(|e| ApiError::artifact(&format!("reading {name} of job {}", job.id), &e))?;
+    // Streamed with backpressure: a client that stops reading holds one chunk, not the file.
+    let headers =
+        [(header::CONTENT_TYPE, HeaderValue::from_static(content_type(name))), (header::CONTENT_LENGTH, HeaderValue::from(file.len))];
+    Ok((headers, Body::from_stream(file.body)).into_response())
 }
 
 /// The bytes of a PNG image.

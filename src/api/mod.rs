@@ -16,7 +16,7 @@ use axum::routing::get;
 use axum::Router;
 use metrics_exporter_prometheus::PrometheusHandle;
 use std::net::SocketAddr;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicUsize;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::{Notify, Semaphore};
@@ -24,12 +24,15 @@ use tokio::task::JoinHandle;
 use tokio_util::sync::CancellationToken;
 use tower_http::cors::{AllowOrigin, CorsLayer};
 use tower_http::request_id::{MakeRequestUuid, PropagateRequestIdLayer, SetRequestIdLayer};
+use tower_http::timeout::RequestBodyTimeoutLayer;
 use tower_http::trace::TraceLayer;
 use utoipa_swagger_ui::SwaggerUi;
 
 pub mod bench;
 pub mod extract;
 pub mod jobs;
+pub mod listen;
+pub mod multipart;
 pub mod openapi;
 pub mod problem;
 pub mod songs;
@@ -42,6 +45,9 @@ pub use problem::ApiError;
 pub const REQUEST_ID: HeaderName = HeaderName::from_static("x-request-id");
 /// Room for multipart boundaries and headers above the file size limit.
 const MULTIPART_OVERHEAD: u64 = 64 * 1024;
+/// Longest `x-request-id` taken from a client; a longer one (or one with other than visible
+/// ASCII) is replaced by a fresh id, since it is echoed and copied into every log line.
+pub const MAX_REQUEST_ID_CHARS: usize = 128;
 
 /// What every handler shares.
 #[derive(Clone)]
@@ -57,7 +63,8 @@ pub struct AppState {
     pub metrics: PrometheusHandle,
     /// Bounds concurrent upload decodes, so memory stays bounded under many uploads.
     pub decode_permits: Arc<Semaphore>,
-    pub workers_running: Arc<AtomicBool>,
+    /// Workers of this process running right now (0 in an API-only process, or once they stop).
+    pub workers_alive: Arc<AtomicUsize>,
     /// Whether this process runs workers (`false` under `choreo serve --no-workers`).
     pub runs_workers: bool,
     /// Cancelled when the server stops; in-flight upload decodes watch it and return.
@@ -135,6 +142,9 @@ pub fn router(state: AppState) -> Router {
         .layer(PropagateRequestIdLayer::new(REQUEST_ID))
         .layer(TraceLayer::new_for_http().make_span_with(request_span))
         .layer(SetRequestIdLayer::new(REQUEST_ID, MakeRequestUuid))
+        .layer(middleware::from_fn(cap_request_id))
+        // The longest pause between two pieces of any request body.
+        .layer(RequestBodyTimeoutLayer::new(Duration::from_secs_f64(state.config.body_timeout_s)))
         .with_state(state)
 }
 
@@ -152,17 +162,31 @@ fn cors(config: &Config) -> CorsLayer {
         .max_age(Duration::from_secs(3600))
 }
 
+/// Drops a client's `x-request-id` that is too long or not visible ASCII, so a fresh one is made.
+async fn cap_request_id(mut req: Request, next: Next) -> Response {
+    let acceptable = |v: &axum::http::HeaderValue| {
+        let bytes = v.as_bytes();
+        !bytes.is_empty() && bytes.len() <= MAX_REQUEST_ID_CHARS && bytes.iter().all(|b| b.is_ascii_graphic())
+    };
+    if req.headers().get_all(REQUEST_ID).iter().any(|v| !acceptable(v)) || req.headers().get_all(REQUEST_ID).iter().count() > 1 {
+        req.headers_mut().remove(REQUEST_ID);
+    }
+    next.run(req).await
+}
+
+/// The token of an `Authorization` header's `Bearer` credentials (the scheme is
+/// case-insensitive, RFC 9110 §11.1).
+fn bearer_token(value: &str) -> Option<&str> {
+    let (scheme, token) = value.trim().split_once(' ')?;
+    scheme.eq_ignore_ascii_case("bearer").then(|| token.trim_start_matches(' '))
+}
+
 /// Demands `Authorization: Bearer <token>` when a token is configured.
 async fn require_bearer(State(state): State<AppState>, req: Request, next: Next) -> Response {
     let Some(token) = &state.config.auth_token else {
         return next.run(req).await;
     };
-    let given = req
-        .headers()
-        .get(header::AUTHORIZATION)
-        .and_then(|v| v.to_str().ok())
-        .and_then(|v| v.strip_prefix("Bearer "))
-        .unwrap_or("");
+    let given = req.headers().get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()).and_then(bearer_token).unwrap_or("");
     if constant_time_eq(given.as_bytes(), token.expose().as_bytes()) {
         next.run(req).await
     } else {
@@ -237,8 +261,9 @@ impl Server {
         if stale > 0 {
             tracing::info!(files = stale, "removed uploads cut off by a previous process");
         }
-        let store: Arc<dyn Store> = crate::queue::open(&config.database()?).await?;
+        let store: Arc<dyn Store> = crate::queue::open(&config.database()?, Duration::from_secs_f64(config.db_timeout_s)).await?;
         let artifacts = crate::artifacts::open(&config, data.clone())?;
+        crate::artifacts::sweep::spawn(store.clone(), data.clone(), Duration::from_secs_f64(config.sweep_grace_s));
         let registry = Arc::new(Registry::load(&config.models_dir)?);
         let workers = config.worker_count();
         tracing::info!(
@@ -266,7 +291,7 @@ impl Server {
             wake: ctx.wake.clone(),
             metrics: metrics.clone(),
             decode_permits: Arc::new(Semaphore::new(std::thread::available_parallelism().map_or(1, |n| n.get()))),
-            workers_running: Arc::new(AtomicBool::new(false)),
+            workers_alive: ctx.alive.clone(),
             runs_workers: run_workers,
             shutdown: shutdown.clone(),
         };
@@ -276,13 +301,7 @@ impl Server {
             .map_err(|source| StartError::Bind { bind: config.bind.clone(), source })?;
         let addr = listener.local_addr().map_err(|source| StartError::Bind { bind: config.bind.clone(), source })?;
 
-        let worker_handles = if run_workers {
-            let handles = crate::worker::start(ctx, workers, shutdown.clone());
-            state.workers_running.store(true, Ordering::Relaxed);
-            handles
-        } else {
-            Vec::new()
-        };
+        let worker_handles = if run_workers { crate::worker::start(ctx, workers, shutdown.clone()) } else { Vec::new() };
         let upkeep = tokio::spawn({
             let shutdown = shutdown.clone();
             async move {
@@ -296,11 +315,9 @@ impl Server {
             }
         });
         let app = router(state.clone());
-        let http = tokio::spawn({
-            let shutdown = shutdown.clone();
-            async move { axum::serve(listener, app).with_graceful_shutdown(shutdown.cancelled_owned()).await }
-        });
-        tracing::info!(%addr, "listening");
+        let limits = listen::Limits::new(&config);
+        let http = tokio::spawn(listen::serve(listener, app, limits, shutdown.clone()));
+        tracing::info!(%addr, max_connections = limits.max_connections, "listening");
         Ok(Self { addr, state, shutdown, http, workers: worker_handles, upkeep })
     }
 
@@ -317,7 +334,6 @@ impl Server {
     /// Stops taking requests and jobs; running jobs stop at their next checkpoint and are requeued.
     pub async fn stop(self) {
         self.shutdown.cancel();
-        self.state.workers_running.store(false, Ordering::Relaxed);
         match self.http.await {
             Ok(Ok(())) => {}
             Ok(Err(e)) => tracing::error!(error = %e, "http server ended with an error"),
@@ -336,7 +352,16 @@ impl Server {
 
 #[cfg(test)]
 mod tests {
-    use super::constant_time_eq;
+    use super::{bearer_token, constant_time_eq};
+
+    #[test]
+    fn the_bearer_scheme_is_case_insensitive() {
+        assert_eq!(bearer_token("Bearer abc"), Some("abc"));
+        assert_eq!(bearer_token("bearer abc"), Some("abc"));
+        assert_eq!(bearer_token("BEARER  abc"), Some("abc"));
+        assert_eq!(bearer_token("Basic abc"), None);
+        assert_eq!(bearer_token("Bearerabc"), None);
+    }
 
     #[test]
     fn token_comparison_is_exact() {

@@ -5,6 +5,9 @@ use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use serde::Serialize;
 
+/// What `Retry-After` says on a 503 or 507, in seconds.
+const RETRY_AFTER_S: &str = "5";
+
 /// The media type of problem bodies.
 pub const PROBLEM_JSON: &str = "application/problem+json";
 
@@ -91,6 +94,16 @@ pub enum ApiError {
     MethodNotAllowed,
     #[error("the server is not ready: {0}")]
     NotReady(String),
+    #[error("the request body stalled for more than {seconds} s; send it without long pauses")]
+    BodyTimeout { seconds: f64 },
+    #[error("a multipart part's headers (field name, file name, content type) are longer than {limit} bytes")]
+    PartHeaderTooLarge { limit: usize },
+    #[error("the server has {limit} connections open, its most; try again shortly")]
+    TooManyConnections { limit: usize },
+    #[error("the server is out of storage ({0}); nothing was stored, try again later")]
+    InsufficientStorage(String),
+    #[error("a service the server depends on is unavailable ({0}); try again shortly")]
+    ServiceUnavailable(String),
     #[error("internal error: {0}")]
     Internal(String),
 }
@@ -127,6 +140,11 @@ impl ApiError {
             ApiError::NoRoute => "not-found",
             ApiError::MethodNotAllowed => "method-not-allowed",
             ApiError::NotReady(_) => "not-ready",
+            ApiError::BodyTimeout { .. } => "body-timeout",
+            ApiError::PartHeaderTooLarge { .. } => "part-header-too-large",
+            ApiError::TooManyConnections { .. } => "too-many-connections",
+            ApiError::InsufficientStorage(_) => "insufficient-storage",
+            ApiError::ServiceUnavailable(_) => "service-unavailable",
             ApiError::Internal(_) => "internal",
         }
     }
@@ -166,6 +184,11 @@ impl ApiError {
             ApiError::NoRoute => StatusCode::NOT_FOUND,
             ApiError::MethodNotAllowed => StatusCode::METHOD_NOT_ALLOWED,
             ApiError::NotReady(_) => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::BodyTimeout { .. } => StatusCode::REQUEST_TIMEOUT,
+            ApiError::PartHeaderTooLarge { .. } => StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE,
+            ApiError::TooManyConnections { .. } => StatusCode::SERVICE_UNAVAILABLE,
+            ApiError::InsufficientStorage(_) => StatusCode::INSUFFICIENT_STORAGE,
+            ApiError::ServiceUnavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
         }
     }
@@ -208,15 +231,71 @@ impl ApiError {
     }
 }
 
+/// Whether an I/O error means the disk (or the quota, or the file size limit) is full.
+pub fn is_out_of_space(e: &std::io::Error) -> bool {
+    matches!(e.kind(), std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded | std::io::ErrorKind::FileTooLarge)
+        || e.raw_os_error().is_some_and(|n| n == libc::ENOSPC || n == libc::EDQUOT || n == libc::EFBIG)
+}
+
+impl ApiError {
+    /// A failed write or read of the server's own storage, without the server's paths: out of
+    /// space is `507 insufficient-storage`, anything else `500 internal`.
+    pub fn storage(doing: &str, e: &std::io::Error) -> Self {
+        if is_out_of_space(e) {
+            ApiError::InsufficientStorage(format!("{doing}: no space left"))
+        } else {
+            // io::Error's Display can carry a path (tempfile adds one); its kind cannot.
+            ApiError::Internal(format!("{doing}: {}", e.kind()))
+        }
+    }
+
+    /// The API error for a failed artifact read or write (`doing` says which).
+    pub fn artifact(doing: &str, e: &crate::artifacts::ArtifactError) -> Self {
+        use crate::artifacts::ArtifactError;
+        match e {
+            ArtifactError::NotFound(key) => ApiError::Internal(format!("{doing}: {key} is missing from the artifact store")),
+            ArtifactError::Io { source, .. } => ApiError::storage(doing, source),
+            ArtifactError::Bucket { .. } => ApiError::ServiceUnavailable(format!("{doing}: {e}")),
+            ArtifactError::Config(_) => ApiError::Internal(format!("{doing}: {e}")),
+        }
+    }
+
+    /// The API error for a database failure: unreachable is `503`, full is `507`.
+    fn database(e: &sqlx::Error) -> Option<Self> {
+        match e {
+            sqlx::Error::PoolTimedOut | sqlx::Error::PoolClosed | sqlx::Error::WorkerCrashed | sqlx::Error::Tls(_) => {
+                Some(ApiError::ServiceUnavailable(format!("database: {e}")))
+            }
+            sqlx::Error::Io(io) if is_out_of_space(io) => Some(ApiError::InsufficientStorage("database: no space left".into())),
+            sqlx::Error::Io(_) => Some(ApiError::ServiceUnavailable(format!("database: {e}"))),
+            sqlx::Error::Database(db) => {
+                let code = db.code();
+                // SQLite's SQLITE_FULL (13), PostgreSQL's disk_full (53100).
+                let full = matches!(code.as_deref(), Some("13") | Some("53100")) || db.message().contains("disk is full");
+                // PostgreSQL's connection exceptions (class 08) and a server shutting down or
+                // starting (57P01-57P03): the database is unreachable for now, not broken.
+                let gone = code.as_deref().is_some_and(|c| c.starts_with("08") || matches!(c, "57P01" | "57P02" | "57P03"));
+                if full {
+                    Some(ApiError::InsufficientStorage("database: no space left".into()))
+                } else if gone {
+                    Some(ApiError::ServiceUnavailable(format!("database: {e}")))
+                } else {
+                    None
+                }
+            }
+            _ => None,
+        }
+    }
+}
+
 impl From<QueueError> for ApiError {
     fn from(e: QueueError) -> Self {
         match e {
             QueueError::SongNotFound(id) => ApiError::SongNotFound(id.to_string()),
             QueueError::JobNotFound(id) => ApiError::JobNotFound(format!("job {id} does not exist")),
             QueueError::IdempotencyConflict(id) => ApiError::IdempotencyConflict(id),
-            other @ (QueueError::Database(_) | QueueError::Migrate(_) | QueueError::Corrupt(_)) => {
-                ApiError::Internal(other.to_string())
-            }
+            QueueError::Database(db) => ApiError::database(&db).unwrap_or_else(|| ApiError::Internal(format!("database: {db}"))),
+            other @ (QueueError::Migrate(_) | QueueError::Corrupt(_)) => ApiError::Internal(other.to_string()),
         }
     }
 }
@@ -229,10 +308,13 @@ impl IntoResponse for ApiError {
         }
         let mut response = (status, axum::Json(self.problem())).into_response();
         response.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
-        if matches!(self, ApiError::BodyTooLarge { .. }) {
+        if matches!(self, ApiError::BodyTooLarge { .. } | ApiError::BodyTimeout { .. } | ApiError::PartHeaderTooLarge { .. }) {
             // The rest of the body is never read; hyper drops the connection after the answer,
             // so a keep-alive client must not send its next request into it.
             response.headers_mut().insert(header::CONNECTION, HeaderValue::from_static("close"));
+        }
+        if status == StatusCode::SERVICE_UNAVAILABLE || status == StatusCode::INSUFFICIENT_STORAGE {
+            response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from_static(RETRY_AFTER_S));
         }
         if matches!(self, ApiError::Unauthorized) {
             response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));

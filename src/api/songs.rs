@@ -4,15 +4,16 @@
 //! sha256 computed; it is decoded with symphonia (the format comes from decoding, never the
 //! name), renamed into place under its id, and an analyze job is queued in the same transaction
 //! that records the song.
+use super::multipart::{self, Form};
 use super::problem::{ApiError, Problem};
 use super::AppState;
 use crate::artifacts::Artifact;
 use crate::audio::{self, Analysis, AudioError, AudioFormat, Budget, DecodeOptions, Keep};
 use crate::queue::{JobKind, NewJob, Song, SongId, Status};
-use axum::extract::multipart::{Field, Multipart, MultipartRejection};
-use axum::extract::{Path, State};
+use axum::extract::{Path, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::Json;
+use axum::RequestExt;
 use chrono::{DateTime, Utc};
 use serde::Serialize;
 use sha2::{Digest, Sha256};
@@ -102,11 +103,11 @@ struct Received {
     sha256: String,
 }
 
-async fn receive(state: &AppState, mut field: Field<'_>) -> Result<Received, ApiError> {
+async fn receive(state: &AppState, mut field: multer::Field<'static>) -> Result<Received, ApiError> {
     let filename = check_filename(field.file_name())?;
     let limit = state.config.max_upload_bytes;
-    let tmp = state.data.temp_file().map_err(|e| ApiError::Internal(format!("temp file: {e}")))?;
-    let std_file = tmp.as_file().try_clone().map_err(|e| ApiError::Internal(format!("temp file: {e}")))?;
+    let tmp = state.data.temp_file().map_err(|e| ApiError::storage("creating the upload's temp file", &e))?;
+    let std_file = tmp.as_file().try_clone().map_err(|e| ApiError::storage("opening the upload's temp file", &e))?;
     let mut out = tokio::fs::File::from_std(std_file);
     let mut hasher = Sha256::new();
     let mut size: u64 = 0;
@@ -114,18 +115,17 @@ async fn receive(state: &AppState, mut field: Field<'_>) -> Result<Received, Api
         let chunk = match field.chunk().await {
             Ok(Some(chunk)) => chunk,
             Ok(None) => break,
-            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => return Err(ApiError::FileTooLarge { limit }),
-            Err(e) => return Err(ApiError::InvalidMultipart(e.body_text())),
+            Err(e) => return Err(multipart::error(&e, &state.config)),
         };
         size += chunk.len() as u64;
         if size > limit {
             return Err(ApiError::FileTooLarge { limit });
         }
         hasher.update(&chunk);
-        out.write_all(&chunk).await.map_err(|e| ApiError::Internal(format!("writing upload: {e}")))?;
+        out.write_all(&chunk).await.map_err(|e| ApiError::storage("writing the upload", &e))?;
     }
-    out.flush().await.map_err(|e| ApiError::Internal(format!("writing upload: {e}")))?;
-    out.sync_all().await.map_err(|e| ApiError::Internal(format!("writing upload: {e}")))?;
+    out.flush().await.map_err(|e| ApiError::storage("writing the upload", &e))?;
+    out.sync_all().await.map_err(|e| ApiError::storage("writing the upload", &e))?;
     if size == 0 {
         return Err(ApiError::EmptyFile);
     }
@@ -138,8 +138,9 @@ async fn receive(state: &AppState, mut field: Field<'_>) -> Result<Received, Api
 /// dropped, within [`DRAIN_LIMIT_BYTES`] and [`DRAIN_TIMEOUT`], so the client gets the error
 /// response on a connection it can keep using. A client still sending when the server answers
 /// and closes would otherwise see a broken pipe instead of the answer.
-async fn read_form(state: &AppState, multipart: Result<Multipart, MultipartRejection>) -> Result<Option<Received>, UploadError> {
-    let mut multipart = multipart.map_err(|e| UploadError::before_body_end(ApiError::InvalidMultipart(e.body_text())))?;
+async fn read_form(state: &AppState, request: Request) -> Result<Option<Received>, UploadError> {
+    let (parts, body) = request.with_limited_body().into_parts();
+    let mut multipart = multipart::form(&parts.headers, body, state.config.max_part_header_bytes).map_err(UploadError::before_body_end)?;
     match read_fields(state, &mut multipart).await {
         Ok(received) => Ok(received),
         Err(error) => {
@@ -149,16 +150,13 @@ async fn read_form(state: &AppState, multipart: Result<Multipart, MultipartRejec
     }
 }
 
-async fn read_fields(state: &AppState, multipart: &mut Multipart) -> Result<Option<Received>, ApiError> {
+async fn read_fields(state: &AppState, multipart: &mut Form) -> Result<Option<Received>, ApiError> {
     let mut received = None;
     loop {
         let field = match multipart.next_field().await {
             Ok(Some(field)) => field,
             Ok(None) => return Ok(received),
-            Err(e) if e.status() == StatusCode::PAYLOAD_TOO_LARGE => {
-                return Err(ApiError::FileTooLarge { limit: state.config.max_upload_bytes });
-            }
-            Err(e) => return Err(ApiError::InvalidMultipart(e.body_text())),
+            Err(e) => return Err(multipart::error(&e, &state.config)),
         };
         match field.name() {
             Some("file") if received.is_none() => received = Some(receive(state, field).await?),
@@ -175,7 +173,7 @@ pub const DRAIN_LIMIT_BYTES: u64 = 16 * 1024 * 1024;
 const DRAIN_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// Reads and drops the rest of a multipart body; true when it ended within the limits.
-async fn drain(multipart: &mut Multipart) -> bool {
+async fn drain(multipart: &mut Form) -> bool {
     let work = async {
         let mut budget = DRAIN_LIMIT_BYTES;
         loop {
@@ -244,18 +242,18 @@ impl axum::response::IntoResponse for UploadError {
         (status = 201, description = "Song stored; analysis queued", body = SongView),
         (status = 200, description = "These bytes were uploaded before", body = SongView),
         (status = 400, description = "Empty file, wrong field, bad file name or bad multipart", body = Problem, content_type = "application/problem+json"),
+        (status = 408, description = "The body stalled for more than body_timeout_s", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Over the size limit", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Not audio, or not decodable", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Over the duration limit, cut short, an unsupported sample rate, or a decode past audio_timeout_s", body = Problem, content_type = "application/problem+json"),
-        (status = 503, description = "The server is shutting down; send the upload again when it is back", body = Problem, content_type = "application/problem+json"),
+        (status = 431, description = "A part's headers are longer than max_part_header_bytes", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The server is shutting down, or its database is unreachable; send the upload again when it is back", body = Problem, content_type = "application/problem+json"),
+        (status = 507, description = "The server is out of storage; nothing was stored", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
-pub async fn upload(
-    State(state): State<AppState>,
-    multipart: Result<Multipart, MultipartRejection>,
-) -> Result<(StatusCode, HeaderMap, Json<SongView>), UploadError> {
-    let received = read_form(&state, multipart).await?;
+pub async fn upload(State(state): State<AppState>, request: Request) -> Result<(StatusCode, HeaderMap, Json<SongView>), UploadError> {
+    let received = read_form(&state, request).await?;
     let received = received.ok_or(ApiError::MissingFile)?;
 
     if let Some(existing) = state.store.song_by_sha256(&received.sha256).await.map_err(ApiError::from)? {
@@ -292,10 +290,13 @@ pub async fn upload(
 
     let id = SongId::new();
     let path = state.data.song_path(id, decoded.format);
-    received.file.persist(&path).map_err(|e| ApiError::Internal(format!("storing song: {}", e.error)))?;
+    received.file.persist(&path).map_err(|e| ApiError::storage("storing the song", &e.error))?;
     // Published before its analyze job exists, so any worker that claims the job finds it.
     let artifact = Artifact::Song(id, decoded.format);
-    state.artifacts.publish(artifact).await.map_err(|e| ApiError::Internal(format!("storing song: {e}")))?;
+    if let Err(e) = state.artifacts.publish(artifact).await {
+        forget(&state, artifact).await;
+        return Err(ApiError::artifact("storing the song", &e).into());
+    }
     let song = Song {
         id,
         filename: received.filename,
@@ -314,7 +315,14 @@ pub async fn upload(
         max_attempts: state.config.max_attempts,
         idempotency: None,
     };
-    let (stored, created) = state.store.add_song(song, analyze).await.map_err(ApiError::from)?;
+    let (stored, created) = match state.store.add_song(song, analyze).await {
+        Ok(added) => added,
+        Err(e) => {
+            // No row names the file: remove it now rather than leave it to the start-up sweep.
+            forget(&state, artifact).await;
+            return Err(ApiError::from(e).into());
+        }
+    };
     if !created {
         // Another upload of the same bytes won the race; keep its file, drop ours.
         if let Err(e) = state.artifacts.remove(artifact).await {
@@ -325,6 +333,13 @@ pub async fn upload(
     state.wake.notify_waiters();
     tracing::info!(song_id = %stored.id, format = ?stored.format, duration_s = stored.duration_s, "song stored");
     Ok((StatusCode::CREATED, location(stored.id), Json(view(&state, stored).await?)))
+}
+
+/// Removes a stored song whose row was never written.
+async fn forget(state: &AppState, artifact: Artifact<'_>) {
+    if let Err(e) = state.artifacts.remove(artifact).await {
+        tracing::warn!(error = %e, "could not remove a song file whose row was not written; the start-up sweep will");
+    }
 }
 
 /// Analysis is quick and everything else needs it, so it runs before dances.
@@ -400,15 +415,18 @@ pub async fn audio(State(state): State<AppState>, Path(id): Path<String>) -> Res
     use axum::response::IntoResponse;
     let id = SongId::from_str(&id).map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
     let song = state.store.song(id).await?;
-    // Through the artifact store: with a bucket, another API host may have taken the upload.
-    let path = state.artifacts.fetch(Artifact::Song(song.id, song.format)).await.map_err(|e| ApiError::Internal(format!("fetching song {}: {e}", song.id)))?;
-    let file = tokio::fs::File::open(&path).await.map_err(|e| ApiError::Internal(format!("opening song {}: {e}", song.id)))?;
-    // Streamed: a song may be up to max_upload_bytes.
-    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::new(file));
-    let headers = [
-        (header::CONTENT_TYPE, HeaderValue::from_static(audio_mime(song.format))),
-        (header::CONTENT_LENGTH, HeaderValue::from(song.size_bytes)),
-    ];
+    // Through the artifact store: with a bucket, another API host may have taken the upload; it
+    // is cached in this host's data dir, then streamed from there.
+    let path = state
+        .artifacts
+        .fetch(Artifact::Song(song.id, song.format))
+        .await
+        .map_err(|e| ApiError::artifact(&format!("fetching song {}", song.id), &e))?;
+    let file = tokio::fs::File::open(&path).await.map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?;
+    let len = file.metadata().await.map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?.len();
+    // Streamed with backpressure: a song may be up to max_upload_bytes.
+    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::with_capacity(file, crate::artifacts::STREAM_CHUNK_BYTES));
+    let headers = [(header::CONTENT_TYPE, HeaderValue::from_static(audio_mime(song.format))), (header::CONTENT_LENGTH, HeaderValue::from(len))];
     Ok((headers, body).into_response())
 }
 

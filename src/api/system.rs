@@ -24,7 +24,7 @@ pub async fn healthz() -> Json<Health> {
     Json(Health { status: "ok".into() })
 }
 
-/// The database answers and the workers run.
+/// The database answers (within `db_timeout_s`) and at least one worker runs.
 #[utoipa::path(
     get,
     path = "/readyz",
@@ -37,11 +37,15 @@ pub async fn healthz() -> Json<Health> {
 )]
 pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiError> {
     // An API-only process (`serve --no-workers`) is ready when its database answers.
-    if state.runs_workers && !state.workers_running.load(Ordering::Relaxed) {
-        return Err(ApiError::NotReady("workers are not running".into()));
+    if state.runs_workers && state.workers_alive.load(Ordering::SeqCst) == 0 {
+        return Err(ApiError::NotReady("no worker is running".into()));
     }
-    state.store.ping().await.map_err(|e| ApiError::NotReady(format!("database: {e}")))?;
-    Ok(Json(Health { status: "ready".into() }))
+    let limit = std::time::Duration::from_secs_f64(state.config.db_timeout_s);
+    match tokio::time::timeout(limit, state.store.ping()).await {
+        Ok(Ok(())) => Ok(Json(Health { status: "ready".into() })),
+        Ok(Err(e)) => Err(ApiError::NotReady(format!("database: {e}"))),
+        Err(_) => Err(ApiError::NotReady(format!("the database did not answer within {} s", state.config.db_timeout_s))),
+    }
 }
 
 /// Prometheus text: jobs by status, queue depth, busy workers, job and stage durations.

@@ -3,10 +3,11 @@
 //! Credentials come from the standard AWS environment (`AWS_ACCESS_KEY_ID`,
 //! `AWS_SECRET_ACCESS_KEY`, `AWS_SESSION_TOKEN`), never from `config.toml`, so they stay out of
 //! files and logs. `s3_endpoint` points at any S3-compatible server (MinIO, moto, Ceph, R2).
-use super::{Artifact, ArtifactError, ArtifactFuture, ArtifactStore};
+use super::{Artifact, ArtifactError, ArtifactFuture, ArtifactStore, ArtifactStream};
 use crate::queue::files::write_atomic;
 use crate::queue::DataDir;
 use bytes::Bytes;
+use futures::{StreamExt, TryStreamExt};
 use object_store::aws::AmazonS3Builder;
 use object_store::path::Path as ObjectPath;
 use object_store::{ObjectStore, ObjectStoreExt, PutPayload};
@@ -92,8 +93,14 @@ impl ArtifactStore for BucketArtifacts {
         })
     }
 
-    fn read<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, Bytes> {
-        Box::pin(async move { self.get(&artifact).await })
+    fn stream<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ArtifactStream> {
+        Box::pin(async move {
+            // The object's body streams from the bucket as the client reads it.
+            let got = self.bucket.get(&self.location(&artifact)).await.map_err(|e| Self::bucket_error(&artifact, e))?;
+            let len = got.meta.size;
+            let body = got.into_stream().map_err(std::io::Error::other).boxed();
+            Ok(ArtifactStream { len, body })
+        })
     }
 
     fn remove<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ()> {

@@ -1,7 +1,7 @@
 //! The data dir as the artifact store: every artifact is already in place when published.
-use super::{Artifact, ArtifactError, ArtifactFuture, ArtifactStore};
+use super::{Artifact, ArtifactError, ArtifactFuture, ArtifactStore, ArtifactStream, STREAM_CHUNK_BYTES};
 use crate::queue::DataDir;
-use bytes::Bytes;
+use futures::StreamExt;
 use std::path::PathBuf;
 
 /// Artifacts in the local data dir, shared by the processes of one host.
@@ -42,10 +42,12 @@ impl ArtifactStore for LocalArtifacts {
         })
     }
 
-    fn read<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, Bytes> {
+    fn stream<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ArtifactStream> {
         Box::pin(async move {
-            let bytes = tokio::fs::read(artifact.local_path(&self.data)).await.map_err(|e| io(&artifact, e))?;
-            Ok(Bytes::from(bytes))
+            let file = tokio::fs::File::open(artifact.local_path(&self.data)).await.map_err(|e| io(&artifact, e))?;
+            let len = file.metadata().await.map_err(|e| io(&artifact, e))?.len();
+            let body = tokio_util::io::ReaderStream::with_capacity(file, STREAM_CHUNK_BYTES).boxed();
+            Ok(ArtifactStream { len, body })
         })
     }
 

@@ -16,11 +16,13 @@ use crate::audio::AudioFormat;
 use crate::queue::{DataDir, JobId, SongId};
 use bytes::Bytes;
 use futures::future::BoxFuture;
+use futures::stream::BoxStream;
 use std::path::PathBuf;
 use std::sync::Arc;
 
 pub mod bucket;
 pub mod local;
+pub mod sweep;
 
 pub use bucket::BucketArtifacts;
 pub use local::LocalArtifacts;
@@ -92,14 +94,25 @@ impl Artifact<'_> {
 /// A future returned by an artifact store.
 pub type ArtifactFuture<'a, T> = BoxFuture<'a, Result<T, ArtifactError>>;
 
+/// Bytes read from a file or a bucket at a time when streaming an artifact.
+pub const STREAM_CHUNK_BYTES: usize = 64 * 1024;
+
+/// An artifact's bytes, read as they are consumed: the reader holds one chunk at a time, so a
+/// client that reads slowly costs a buffer, not the file.
+pub struct ArtifactStream {
+    /// Its size in bytes.
+    pub len: u64,
+    pub body: BoxStream<'static, Result<Bytes, std::io::Error>>,
+}
+
 /// Where songs and results are kept.
 pub trait ArtifactStore: Send + Sync {
     /// Stores the file at `artifact`'s local path (written there atomically) as the artifact.
     fn publish<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ()>;
     /// A local path holding the artifact, fetched into the data dir if it is not there.
     fn fetch<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, PathBuf>;
-    /// The artifact's bytes.
-    fn read<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, Bytes>;
+    /// The artifact's bytes, streamed (see [`ArtifactStream`]).
+    fn stream<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ArtifactStream>;
     /// Removes the artifact and its local copy (an upload that lost a race to its twin).
     fn remove<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ()>;
 }

@@ -439,11 +439,12 @@ pub trait Store: JobStore + SongStore {}
 
 impl<T: JobStore + SongStore> Store for T {}
 
-/// Opens the store `database` names, running its migrations.
-pub async fn open(database: &crate::config::Database) -> Result<Arc<dyn Store>, QueueError> {
+/// Opens the store `database` names, running its migrations. `timeout` bounds how long a call
+/// waits for a PostgreSQL connection (the config's `db_timeout_s`).
+pub async fn open(database: &crate::config::Database, timeout: Duration) -> Result<Arc<dyn Store>, QueueError> {
     use crate::config::Database;
     Ok(match database {
         Database::Sqlite(path) => Arc::new(SqliteStore::open(path).await?),
-        Database::Postgres(url) => Arc::new(PgStore::connect(url).await?),
+        Database::Postgres(url) => Arc::new(PgStore::connect(url, timeout).await?),
     })
 }

@@ -21,8 +21,6 @@ use uuid::Uuid;
 
 /// The channel the job trigger notifies (see `migrations/postgres/`).
 pub const CHANNEL: &str = "choreo_jobs";
-/// How long a query waits for a pooled connection.
-const ACQUIRE_TIMEOUT: Duration = Duration::from_secs(30);
 /// Connections per process: workers hold none while a job runs, so a few serve many.
 const MAX_CONNECTIONS: u32 = 8;
 /// Pause before listening again after the notification connection failed.
@@ -97,11 +95,14 @@ impl Dialect for Postgres {
 impl SqlStore<Postgres> {
     /// Connects to `url` (`postgres://user:password@host:port/db`, or `?host=/socket/dir`) and
     /// runs the migrations; many processes may do this at once (sqlx takes an advisory lock).
-    pub async fn connect(url: &Secret) -> Result<Self, QueueError> {
+    /// A query waits at most `acquire_timeout` for a connection (the config's `db_timeout_s`):
+    /// while the server is down, sqlx keeps trying to connect until then, so this is how long a
+    /// request waits before it is answered `503`.
+    pub async fn connect(url: &Secret, acquire_timeout: Duration) -> Result<Self, QueueError> {
         let options = PgConnectOptions::from_str(url.expose())?;
         let pool = PgPoolOptions::new()
             .max_connections(MAX_CONNECTIONS)
-            .acquire_timeout(ACQUIRE_TIMEOUT)
+            .acquire_timeout(acquire_timeout)
             .connect_with(options)
             .await?;
         sqlx::migrate!("./migrations/postgres").run(&pool).await?;

@@ -9,7 +9,11 @@
 //! notifications (`sqlite.rs`, `postgres.rs`).
 //!
 //! Every write runs in a transaction begun by [`SqlStore::begin`] and ended by
-//! [`SqlStore::commit`], so how a write becomes durable is decided in one place.
+//! [`SqlStore::commit`], so how a write becomes durable is decided in one place. A write that
+//! does not end in a successful commit closes its connection instead of returning it to the
+//! pool ([`Write`]): after a failed COMMIT (a full disk) the connection may still be inside the
+//! transaction, and the next write on it would become a savepoint whose release "succeeds"
+//! without anything reaching the disk.
 //!
 //! Generic sqlx code has to spell out what it asks of the driver (an executor for its
 //! connections, encodings of the Rust types it binds and reads); those bounds sit on the three
@@ -19,7 +23,8 @@ use super::{
     Registered, Requeued, Song, SongId, SongStore, Status, StoreFuture,
 };
 use chrono::{DateTime, TimeZone, Utc};
-use sqlx::{ColumnIndex, Database, Decode, Encode, Executor, IntoArguments, Pool, Row, Transaction, Type};
+use sqlx::pool::PoolConnection;
+use sqlx::{ColumnIndex, Database, Decode, Encode, Executor, IntoArguments, Pool, Row, TransactionManager, Type};
 use std::str::FromStr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -87,6 +92,38 @@ impl<D: Database> SqlStore<D> {
     }
 }
 
+/// A write in progress: a pooled connection inside the transaction [`SqlStore::begin`] opened.
+///
+/// Ended by [`SqlStore::commit`] or [`SqlStore::rollback`]. If it is dropped without either
+/// succeeding (an error, a failed COMMIT, a cancelled request), the connection is closed rather
+/// than pooled: closing rolls back whatever the database still holds open, and no later write
+/// can run inside a transaction nobody will commit.
+pub(super) struct Write<D: Database> {
+    conn: PoolConnection<D>,
+    ended: bool,
+}
+
+impl<D: Database> std::ops::Deref for Write<D> {
+    type Target = D::Connection;
+    fn deref(&self) -> &D::Connection {
+        &self.conn
+    }
+}
+
+impl<D: Database> std::ops::DerefMut for Write<D> {
+    fn deref_mut(&mut self) -> &mut D::Connection {
+        &mut self.conn
+    }
+}
+
+impl<D: Database> Drop for Write<D> {
+    fn drop(&mut self) {
+        if !self.ended {
+            self.conn.close_on_drop();
+        }
+    }
+}
+
 /// Now, in epoch milliseconds (how both stores keep times).
 pub fn now_ms() -> i64 {
     Utc::now().timestamp_millis()
@@ -138,13 +175,32 @@ where
     /// [`Self::commit`] (or is rolled back when dropped), so one place decides how writes are
     /// made durable. Each write transaction starts with its write: in SQLite it then takes the
     /// write lock at once, so a waiting writer is handled by the busy timeout.
-    async fn begin(&self) -> Result<Transaction<'static, D>, QueueError> {
-        Ok(self.pool.begin().await?)
+    async fn begin(&self) -> Result<Write<D>, QueueError> {
+        let conn = self.pool.acquire().await?;
+        // Until BEGIN succeeds the write is not ended: a failed BEGIN closes the connection too.
+        let mut write = Write { conn, ended: false };
+        if D::TransactionManager::get_transaction_depth(&*write) != 0 {
+            // A pooled connection is never inside a transaction (`Write` closes those); if one
+            // is, BEGIN would only open a savepoint, so refuse it rather than write into it.
+            return Err(QueueError::Database(sqlx::Error::Protocol("pooled connection inside a transaction".into())));
+        }
+        D::TransactionManager::begin(&mut *write, None).await?;
+        Ok(write)
     }
 
-    /// Commits a write begun by [`Self::begin`]; callers answer only after it returns.
-    async fn commit(tx: Transaction<'static, D>) -> Result<(), QueueError> {
-        Ok(tx.commit().await?)
+    /// Commits a write begun by [`Self::begin`]; callers answer only after it returns. When the
+    /// COMMIT fails, the connection is closed (see [`Write`]) and the error goes to the caller.
+    async fn commit(mut write: Write<D>) -> Result<(), QueueError> {
+        D::TransactionManager::commit(&mut *write).await?;
+        write.ended = true;
+        Ok(())
+    }
+
+    /// Rolls back a write that found nothing to do; its connection goes back to the pool.
+    async fn rollback(mut write: Write<D>) -> Result<(), QueueError> {
+        D::TransactionManager::rollback(&mut *write).await?;
+        write.ended = true;
+        Ok(())
     }
 
     fn job_from_row(row: &D::Row) -> Result<Job, QueueError> {
@@ -338,7 +394,7 @@ where
             .fetch_optional(&mut *tx)
             .await?;
             let Some(row) = row else {
-                tx.rollback().await?;
+                Self::rollback(tx).await?;
                 return Ok(false);
             };
             if let Outcome::Analysis(analysis) = &outcome {

@@ -4,14 +4,18 @@
 //! its [`Execute`] on a blocking thread with one libtorch intra-op thread, and write the outcome
 //! back. While the job runs, a heartbeat task extends the lease, copies stage and progress to
 //! the job row, and reads back `cancel_requested`; the job sees that flag at its next
-//! [`Progress::report`] checkpoint. A panic inside a job fails that job and the worker goes on.
+//! [`Progress::report`] checkpoint. A panic inside a job fails that job and the worker goes on;
+//! a worker that dies anyway (a panic outside a job) is restarted after a pause, and
+//! [`Context::alive`] counts the workers running, for `/readyz`. While the store fails (full
+//! disk, database down) a worker waits longer between claims, up to [`MAX_CLAIM_BACKOFF`], and
+//! goes back to its normal pace at the first claim that works.
 use crate::artifacts::{Artifact, ArtifactStore};
 use crate::audio::AudioError;
 use crate::models::{Cancelled, ModelError, ModelId, Progress, Registry};
 use crate::queue::{Beat, DataDir, Job, JobStore, LeasePolicy, Outcome, QueueError, Song, Store};
 use crate::stage::Stage;
 use crate::telemetry;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tokio::sync::Notify;
@@ -139,6 +143,35 @@ pub struct Context {
     pub poll: Duration,
     /// Woken when a job is registered, so idle workers claim it at once.
     pub wake: Arc<Notify>,
+    /// Workers running right now (a dead one is restarted after a pause).
+    pub alive: Arc<AtomicUsize>,
+    /// The data dir's root, taken out of error messages stored on jobs.
+    pub data_root: std::path::PathBuf,
+}
+
+/// The longest a worker waits between claims while the store keeps failing.
+pub const MAX_CLAIM_BACKOFF: Duration = Duration::from_secs(5);
+/// The first pause before a dead worker is restarted; it doubles with each death in a row.
+const RESTART_PAUSE: Duration = Duration::from_millis(100);
+/// The longest pause before a restart.
+const MAX_RESTART_PAUSE: Duration = Duration::from_secs(5);
+/// A worker that ran this long before dying starts its pauses over.
+const HEALTHY_RUN: Duration = Duration::from_secs(60);
+
+/// Counts one running worker while it lives; dropped on return or while a panic unwinds.
+struct Alive(Arc<AtomicUsize>);
+
+impl Alive {
+    fn new(count: &Arc<AtomicUsize>) -> Self {
+        count.fetch_add(1, Ordering::SeqCst);
+        Self(count.clone())
+    }
+}
+
+impl Drop for Alive {
+    fn drop(&mut self) {
+        self.0.fetch_sub(1, Ordering::SeqCst);
+    }
 }
 
 /// The live state of one running job, shared by its blocking thread and its heartbeat task.
@@ -198,8 +231,7 @@ pub fn start(ctx: Context, count: usize, shutdown: CancellationToken) -> Vec<Joi
     let mut handles: Vec<JoinHandle<()>> = (0..count)
         .map(|n| {
             let owner = format!("{prefix}-w{n}");
-            let span = tracing::info_span!("worker", worker = %owner);
-            tokio::spawn(worker_loop(ctx.clone(), owner, shutdown.clone()).instrument(span))
+            tokio::spawn(supervise(ctx.clone(), owner, shutdown.clone()))
         })
         .collect();
     handles.push(tokio::spawn(watch(ctx.clone(), shutdown.clone())));
@@ -237,12 +269,42 @@ async fn reaper(ctx: Context, shutdown: CancellationToken) {
     }
 }
 
+/// Runs one worker, and runs it again, after a growing pause, whenever it dies.
+async fn supervise(ctx: Context, owner: String, shutdown: CancellationToken) {
+    let mut pause = RESTART_PAUSE;
+    loop {
+        let span = tracing::info_span!("worker", worker = %owner);
+        let started = Instant::now();
+        let run = tokio::spawn(worker_loop(ctx.clone(), owner.clone(), shutdown.clone()).instrument(span)).await;
+        let Err(death) = run else { return };
+        metrics::counter!(telemetry::WORKER_RESTARTS).increment(1);
+        if shutdown.is_cancelled() {
+            return;
+        }
+        if started.elapsed() > HEALTHY_RUN {
+            pause = RESTART_PAUSE;
+        }
+        tracing::error!(worker = %owner, error = %death, pause_s = pause.as_secs_f64(), "worker died; restarting it");
+        tokio::select! {
+            _ = shutdown.cancelled() => return,
+            _ = tokio::time::sleep(pause) => {}
+        }
+        pause = (pause * 2).min(MAX_RESTART_PAUSE);
+    }
+}
+
 async fn worker_loop(ctx: Context, owner: String, shutdown: CancellationToken) {
+    let _alive = Alive::new(&ctx.alive);
     tracing::debug!("worker started");
+    let mut backoff = ctx.poll;
     while !shutdown.is_cancelled() {
         // Register interest before claiming, so a job registered in between still wakes us.
         let woken = ctx.wake.notified();
-        match ctx.store.claim(&owner, ctx.policy).await {
+        let claimed = ctx.store.claim(&owner, ctx.policy).await;
+        if claimed.is_ok() {
+            backoff = ctx.poll;
+        }
+        match claimed {
             Ok(Some(job)) => {
                 let span = tracing::info_span!("job", job_id = %job.id, kind = job.kind.name(), attempt = job.attempts);
                 run_job(&ctx, &owner, job, &shutdown).instrument(span).await;
@@ -255,11 +317,15 @@ async fn worker_loop(ctx: Context, owner: String, shutdown: CancellationToken) {
                 }
             }
             Err(e) => {
-                tracing::error!(error = %e, "claiming a job failed; retrying after the poll interval");
+                // The store cannot take the claim (full disk, database down): wait longer each
+                // time rather than hammer it; the first claim that works resets the pace.
+                metrics::counter!(telemetry::CLAIM_ERRORS).increment(1);
+                tracing::error!(error = %e, retry_in_s = backoff.as_secs_f64(), "claiming a job failed; backing off");
                 tokio::select! {
                     _ = shutdown.cancelled() => {}
-                    _ = tokio::time::sleep(ctx.poll) => {}
+                    _ = tokio::time::sleep(backoff) => {}
                 }
+                backoff = (backoff * 2).min(MAX_CLAIM_BACKOFF.max(ctx.poll));
             }
         }
     }
@@ -356,7 +422,7 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
             .await
             .map(|held| (held, "interrupted")),
         Err(e) => {
-            let message = format!("{} ({})", e, e.code());
+            let message = without_paths(&format!("{} ({})", e, e.code()), &ctx.data_root);
             ctx.store.fail(job.id, owner, &message, e.is_retryable(), ctx.policy).await.map(|held| (held, "failed"))
         }
     };
@@ -374,6 +440,16 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
         Ok((false, _)) => tracing::warn!("lease lost before the outcome was written; the queue owns the job now"),
         Err(e) => tracing::error!(error = %e, "writing the job outcome failed; its lease will expire and it will be retried"),
     }
+}
+
+/// `message` with the data dir's absolute path taken out: job errors are shown to API clients,
+/// and the server's layout is none of their business (`songs/<id>.ogg` says enough).
+fn without_paths(message: &str, root: &std::path::Path) -> String {
+    let root = root.to_string_lossy();
+    if root.is_empty() {
+        return message.to_string();
+    }
+    message.replace(&format!("{}/", root.trim_end_matches('/')), "").replace(root.as_ref(), "data dir")
 }
 
 async fn publish(ctx: &Context, id: crate::queue::JobId, files: &crate::queue::JobFiles) -> Result<(), WorkerError> {
@@ -440,6 +516,8 @@ pub fn context(
         heartbeat: Duration::from_secs_f64(config.heartbeat_s),
         poll: Duration::from_secs_f64(config.poll_s),
         wake: Arc::new(Notify::new()),
+        alive: Arc::new(AtomicUsize::new(0)),
+        data_root: std::path::absolute(&config.data_dir).unwrap_or_else(|_| config.data_dir.clone()),
     }
 }
 

@@ -51,7 +51,7 @@ impl WorkerProcess {
     pub async fn start(config: &Config) -> Result<Self, StartError> {
         let data = DataDir::create(&config.data_dir)
             .map_err(|source| StartError::DataDir { path: config.data_dir.display().to_string(), source })?;
-        let store = crate::queue::open(&config.database()?).await?;
+        let store = crate::queue::open(&config.database()?, std::time::Duration::from_secs_f64(config.db_timeout_s)).await?;
         let artifacts = crate::artifacts::open(config, data.clone())?;
         let registry = Arc::new(Registry::load(&config.models_dir)?);
         let ctx: Context = super::context(store.clone(), artifacts, registry, data, config);

@@ -64,6 +64,8 @@ fn context(store: Arc<SqliteStore>, data: &std::path::Path) -> Context {
         heartbeat: Duration::from_millis(50),
         poll: Duration::from_millis(20),
         wake: Arc::new(Notify::new()),
+        alive: Arc::default(),
+        data_root: data.to_path_buf(),
     }
 }
 

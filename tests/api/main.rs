@@ -15,11 +15,13 @@ mod hostile;
 mod hostile_files;
 mod jobs;
 mod keypose;
+mod limits;
 mod models;
 mod openapi;
 #[path = "../common/postgres.rs"]
 mod postgres;
 mod preview;
+mod resilience;
 mod roundtrip;
 mod scale;
 mod schemathesis;

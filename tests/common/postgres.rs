@@ -77,28 +77,71 @@ impl Postgres {
             .output()
             .expect("run initdb");
         assert!(out.status.success(), "initdb failed: {}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
-        let log = std::fs::File::create(dir.path().join("postgres.log")).expect("log file");
+        std::fs::File::create(dir.path().join("postgres.log")).expect("log file");
         if is_root() {
             let status = Command::new("chown").arg("postgres:postgres").arg(dir.path().join("postgres.log")).status().expect("chown");
             assert!(status.success());
         }
-        // Durability is not under test: no fsync makes each test's server start and run faster.
         let port = free_port();
-        let child = command(&bin.join("postgres"))
+        let child = Self::spawn(&bin, dir.path(), port);
+        let mut server = Self { dir, child, port };
+        server.wait_ready();
+        server
+    }
+
+    /// Starts the postmaster on `port` over the data dir in `dir`.
+    fn spawn(bin: &Path, dir: &Path, port: u16) -> Child {
+        let log = std::fs::OpenOptions::new().append(true).open(dir.join("postgres.log")).expect("log file");
+        // Durability is not under test: no fsync makes each test's server start and run faster.
+        command(&bin.join("postgres"))
             .arg("-D")
-            .arg(&data)
+            .arg(dir.join("data"))
             .args(["-p", &port.to_string(), "-c", "listen_addresses=127.0.0.1", "-c", "fsync=off"])
             .args(["-c", "synchronous_commit=off", "-c", "full_page_writes=off", "-c", "max_connections=200"])
             .arg("-k")
-            .arg(dir.path())
+            .arg(dir)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
             .stderr(log)
             .spawn()
-            .expect("spawn postgres");
-        let mut server = Self { dir, child, port };
-        server.wait_ready();
-        server
+            .expect("spawn postgres")
+    }
+
+    /// Stops the server as an operator would (`pg_ctl stop -m fast`, SIGINT: sessions are ended,
+    /// then a checkpoint). Not SIGQUIT: with `synchronous_commit=off` a crash loses the last
+    /// commits, the migrations among them.
+    pub fn stop(&mut self) {
+        Self::signal(&mut self.child, libc::SIGINT);
+    }
+
+    /// Starts the stopped server again, on the same port over the same data.
+    pub fn restart(&mut self) {
+        // The log must say "ready" anew: start it over.
+        std::fs::write(self.dir.path().join("postgres.log"), b"").expect("truncate log");
+        self.child = Self::spawn(&bin_dir(), self.dir.path(), self.port);
+        self.wait_ready();
+    }
+
+    /// Sends `signal` to the postmaster and waits (bounded) for it to exit; kills it after 10 s.
+    fn signal(child: &mut Child, signal: libc::c_int) {
+        if let Ok(Some(_)) = child.try_wait() {
+            return;
+        }
+        if let Ok(pid) = i32::try_from(child.id()) {
+            // SAFETY: kill only sends a signal to our own child.
+            unsafe {
+                libc::kill(pid, signal);
+            }
+        }
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while Instant::now() < deadline {
+            if let Ok(Some(_)) = child.try_wait() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = child.kill();
+        let _ = child.wait();
     }
 
     fn wait_ready(&mut self) {
@@ -142,20 +185,6 @@ impl Postgres {
 impl Drop for Postgres {
     fn drop(&mut self) {
         // SIGQUIT: immediate shutdown, the postmaster ends its backends and exits.
-        if let Ok(pid) = i32::try_from(self.child.id()) {
-            // SAFETY: kill only sends a signal to our own child.
-            unsafe {
-                libc::kill(pid, libc::SIGQUIT);
-            }
-        }
-        let deadline = Instant::now() + Duration::from_secs(10);
-        while Instant::now() < deadline {
-            if let Ok(Some(_)) = self.child.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
+        Self::signal(&mut self.child, libc::SIGQUIT);
     }
 }
