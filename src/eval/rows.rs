@@ -25,6 +25,15 @@ pub(super) fn crop(m: &Motion, frames: usize) -> Motion {
     Motion { fps: m.fps, positions: m.positions.slice(ndarray::s![..n, .., ..]).to_owned() }
 }
 
+/// Mean and smallest of the distances that are numbers (none without any).
+fn mean_and_min(mut distances: Vec<f64>) -> (Option<f64>, Option<f64>) {
+    distances.retain(|x| !x.is_nan());
+    if distances.is_empty() {
+        return (None, None);
+    }
+    (Some(distances.iter().sum::<f64>() / distances.len() as f64), distances.iter().copied().reduce(f64::min))
+}
+
 /// A row of scored dances; `per_song` groups the indices of dances of one song (different
 /// seeds), with their motions, for multimodality and the seed distance.
 pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: Option<Vec<Vec<(usize, Motion)>>>, reference: &ReferenceStats) -> EvalRow {
@@ -50,11 +59,7 @@ pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: O
                 }
             }
         }
-        per_song_pair.retain(|x| !x.is_nan());
-        if !per_song_pair.is_empty() {
-            song_mean = Some(per_song_pair.iter().sum::<f64>() / per_song_pair.len() as f64);
-            song_min = per_song_pair.iter().copied().reduce(f64::min);
-        }
+        (song_mean, song_min) = mean_and_min(per_song_pair);
         let g: Vec<Vec<&ScoredDance>> = groups.iter().map(|ix| ix.iter().map(|(i, _)| &dances[*i]).collect()).collect();
         multimodality_v = multimodality(&g, reference);
         let per_pair: Vec<f64> = groups
@@ -68,12 +73,8 @@ pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: O
                 }
                 d
             })
-            .filter(|x| !x.is_nan())
             .collect();
-        if !per_pair.is_empty() {
-            seed_mean = Some(per_pair.iter().sum::<f64>() / per_pair.len() as f64);
-            seed_min = per_pair.iter().copied().reduce(f64::min);
-        }
+        (seed_mean, seed_min) = mean_and_min(per_pair);
         scores.mean.verdict = scores.mean.verdict.clone().with_seed_distance(seed_min);
     }
     EvalRow {

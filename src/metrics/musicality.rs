@@ -34,6 +34,15 @@ use crate::motion::Motion;
 /// The fractions of the beat rate real dancers step at (1/6: a waltz whose tracker counts double
 /// time; 2/3 and 1: fast figures).
 pub const TEMPO_FRACTIONS: [f64; 6] = [1.0 / 6.0, 1.0 / 4.0, 1.0 / 3.0, 1.0 / 2.0, 2.0 / 3.0, 1.0];
+/// How [`TEMPO_FRACTIONS`] are written, in their order.
+const FRACTION_NAMES: [&str; 6] = ["1/6", "1/4", "1/3", "1/2", "2/3", "1"];
+
+/// The nearest of [`TEMPO_FRACTIONS`] to `q`, written as a fraction ("1/2").
+pub fn fraction_name(q: f64) -> &'static str {
+    let nearest = (0..TEMPO_FRACTIONS.len()).min_by(|&a, &b| (TEMPO_FRACTIONS[a] - q).abs().total_cmp(&(TEMPO_FRACTIONS[b] - q).abs())).unwrap_or(0);
+    FRACTION_NAMES[nearest]
+}
+
 /// A dance is tempo-locked when its step-rate ratio is within this relative distance of a
 /// fraction (issue 25's bar: 3 %).
 pub const TEMPO_LOCK_TOLERANCE: f64 = 0.03;

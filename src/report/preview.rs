@@ -286,18 +286,10 @@ fn draw_title<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, sheet: &Sheet<'
     let m = crate::metrics::musicality::Musicality::of(sheet.motion, sheet.beat_times);
     if let Some(lock) = m.tempo_lock {
         let mark = if lock.locked { "locked" } else { "off" };
-        parts.push(format!("steps {:.2}× beat ({mark}, {:+.0} % from {})", lock.ratio, 100.0 * (lock.ratio / lock.fraction - 1.0), fraction_name(lock.fraction)));
+        parts.push(format!("steps {:.2}× beat ({mark}, {:+.0} % from {})", lock.ratio, 100.0 * (lock.ratio / lock.fraction - 1.0), crate::metrics::musicality::fraction_name(lock.fraction)));
     }
     parts.push(format!("arms {:.2} m/s", m.arm_speed_m_s));
     area.draw_text(&parts.join("  ·  "), &font(24).pos(Pos::new(HPos::Left, VPos::Center)), (16, TITLE_H as i32 / 2))
-}
-
-/// 1/2 for 0.5, and so on for [`crate::metrics::musicality::TEMPO_FRACTIONS`].
-fn fraction_name(q: f64) -> &'static str {
-    const NAMES: [&str; 6] = ["1/6", "1/4", "1/3", "1/2", "2/3", "1"];
-    let fractions = crate::metrics::musicality::TEMPO_FRACTIONS;
-    let nearest = (0..fractions.len()).min_by(|&a, &b| (fractions[a] - q).abs().total_cmp(&(fractions[b] - q).abs())).unwrap_or(0);
-    NAMES[nearest]
 }
 
 /// Which way a row of figures looks at the dancer.
