@@ -46,6 +46,11 @@ pub mod dance_revolution_cols {
     pub const BEAT: usize = 437;
     /// Width of the set.
     pub const DIM: usize = 438;
+    /// The beat clock ([`crate::audio::clock`]) after the paper's columns, when a model's
+    /// configuration asks for it ([`super::dance_revolution_clock_at`]).
+    pub const CLOCK: Range<usize> = 438..443;
+    /// Width of the set with the clock.
+    pub const DIM_WITH_CLOCK: usize = 443;
 }
 
 /// Width of the DanceNet set.
@@ -183,18 +188,29 @@ pub fn dance_revolution(audio: &DecodedAudio, fps: f64, n_frames: usize) -> Resu
 
 /// [`dance_revolution`] with row i at time `start_s + i / fps`.
 pub fn dance_revolution_at(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Result<Array2<f32>, AudioError> {
+    dance_revolution_set(audio, fps, start_s, n_frames, false)
+}
+
+/// [`dance_revolution_at`] with the beat clock of its own beats appended (`[n_frames, 443]`,
+/// [`dance_revolution_cols::CLOCK`]): bars from [`downbeats`] of the same mel spectrogram.
+pub fn dance_revolution_clock_at(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Result<Array2<f32>, AudioError> {
+    dance_revolution_set(audio, fps, start_s, n_frames, true)
+}
+
+fn dance_revolution_set(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize, clock: bool) -> Result<Array2<f32>, AudioError> {
     use dance_revolution_cols as c;
     let p = prepare(audio, fps, start_s, n_frames)?;
     let (g, rows) = (p.grid, p.rows.clone());
-    let mut out = Array2::<f32>::zeros((n_frames, c::DIM));
-    {
+    let mut out = Array2::<f32>::zeros((n_frames, if clock { c::DIM_WITH_CLOCK } else { c::DIM }));
+    let mel_for_bars = {
         let mut mel = mel_power(&p.y, &g);
         power_to_db_ref_max_inplace(&mut mel);
         let mfcc = mfcc_from_db(mel.view(), 20);
-        drop(mel);
         put(&mut out, c::MFCC, &mfcc, &rows);
         put(&mut out, c::DMFCC, &delta(&mfcc, 3), &rows);
-    }
+        // The downbeat finder compares bass flux and spectra, which a dB offset does not change.
+        clock.then_some(mel)
+    };
     let (harmonic, percussive) = hpss_signal(&p.y, N_FFT, g.hop);
     drop(p);
     let onset = onset_strength(&percussive, g.sr, N_FFT, g.hop, Aggregate::Median);
@@ -208,6 +224,11 @@ pub fn dance_revolution_at(audio: &DecodedAudio, fps: f64, start_s: f64, n_frame
     put_col(out.column_mut(c::ONSET), &onset, &rows);
     let beats = beats_from_onset(&onset, &g);
     put_col(out.column_mut(c::BEAT), &one_hot(&beats, onset.len()), &rows);
+    if let Some(mel) = mel_for_bars {
+        let bars = downbeats(&beats, &mel, g.sr);
+        let clock = super::clock::beat_clock(&beats, &bars, onset.len(), g.fps);
+        put(&mut out, c::CLOCK, &clock, &rows);
+    }
     Ok(out)
 }
 

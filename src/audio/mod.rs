@@ -14,6 +14,7 @@ use crate::stage::Stage;
 pub mod bench;
 pub mod budget;
 pub mod chroma;
+pub mod clock;
 pub mod decode;
 pub mod dsp;
 pub mod features;

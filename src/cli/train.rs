@@ -156,6 +156,21 @@ args_into! {
         /// Train the encoder at position offsets drawn over a whole 15-minute song (default), or at 0 only.
         #[arg(long, default_value_t = train::dance_revolution::Options::default().random_positions, action = clap::ArgAction::Set)]
         random_positions: bool,
+        /// Append the beat clock (beat and bar phase as sin/cos, tempo) to the music features.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().beat_clock, action = clap::ArgAction::Set)]
+        beat_clock: bool,
+        /// Slowest tempo factor a training window is drawn at (music and dance resampled together).
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().min_tempo)]
+        min_tempo: f64,
+        /// Fastest tempo factor a training window is drawn at.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().max_tempo)]
+        max_tempo: f64,
+        /// Mirror half the training windows left ↔ right.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().mirror, action = clap::ArgAction::Set)]
+        mirror: bool,
+        /// Weight of the L1 loss on frame-to-frame pose change.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().velocity_weight)]
+        velocity_weight: f64,
     }
 }
 

@@ -50,6 +50,10 @@ pub struct Config {
     pub lstm_layers: i64,
     /// Dropout in the encoder during training.
     pub dropout: f64,
+    /// The music features end with the beat clock ([`crate::audio::clock`], issue 25): weights
+    /// trained before it read the paper's 438 columns only.
+    #[serde(default)]
+    pub beat_clock: bool,
 }
 
 impl Config {
@@ -66,12 +70,13 @@ impl Config {
             hidden: 256,
             lstm_layers: 3,
             dropout: 0.1,
+            beat_clock: false,
         }
     }
 
     /// A tiny configuration for tests: same blocks, a fraction of the width.
     pub fn tiny(music_dim: i64, pose_dim: i64) -> Self {
-        Self { music_dim, pose_dim, d_z: 16, n_layers: 1, n_heads: 2, k: 8, d_ff: 32, hidden: 32, lstm_layers: 2, dropout: 0.0 }
+        Self { music_dim, pose_dim, d_z: 16, n_layers: 1, n_heads: 2, k: 8, d_ff: 32, hidden: 32, lstm_layers: 2, dropout: 0.0, beat_clock: false }
     }
 }
 
@@ -472,7 +477,8 @@ impl Served {
 
     /// Music features of a whole song, normalised, as `[1, n, F]`.
     fn music(&self, audio: &crate::audio::DecodedAudio, n: usize) -> Result<Tensor, ModelError> {
-        let feats = crate::audio::features::dance_revolution(audio, self.file.fps, n)?;
+        let features = if self.file.config.beat_clock { crate::audio::features::dance_revolution_clock_at } else { crate::audio::features::dance_revolution_at };
+        let feats = features(audio, self.file.fps, 0.0, n)?;
         Ok(to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0))
     }
 }

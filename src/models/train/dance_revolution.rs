@@ -2,7 +2,10 @@
 //! (paper §3.3) on the train split of dance-with-melody.
 use tch::{Device, Kind, Tensor};
 
-use super::{batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError, Trainer};
+use rand::SeedableRng;
+
+use super::augment::{Augment, MusicLayout};
+use super::{batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, TrainError, Trainer, Windows};
 use crate::models::dance_revolution::{curriculum_q, Config, Curriculum, DanceRevolution, ModelFile, Serving, ID};
 
 /// Options of one training run; the defaults reproduce the committed weights' schedule (the
@@ -28,6 +31,15 @@ pub struct Options {
     pub first_epoch: usize,
     /// Train the encoder at position offsets drawn over a whole 15-minute song (default), or at 0 only.
     pub random_positions: bool,
+    /// Append the beat clock to the music features (`audio::clock`, issue 25).
+    pub beat_clock: bool,
+    /// Windows at tempo factors in `[min_tempo, max_tempo]` and mirrored (`train::augment`).
+    pub min_tempo: f64,
+    pub max_tempo: f64,
+    pub mirror: bool,
+    /// Weight of an L1 loss on frame-to-frame pose change beside the pose loss: a pose loss alone
+    /// is met best by the mean pose where a motion is uncertain, which froze the arms (issue 25).
+    pub velocity_weight: f64,
 }
 
 impl Default for Options {
@@ -45,17 +57,25 @@ impl Default for Options {
             seed: 2021,
             first_epoch: 0,
             random_positions: true,
+            beat_clock: true,
+            min_tempo: 0.8,
+            max_tempo: 1.25,
+            mirror: true,
+            velocity_weight: 3.0,
         }
     }
 }
 
 /// Trains and writes the model folder; returns the per-epoch log.
 pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
-    let data = Data::load(&opts.common.data, crate::audio::features::dance_revolution_at, |_| Ok(()))?;
+    let features = if opts.beat_clock { crate::audio::features::dance_revolution_clock_at } else { crate::audio::features::dance_revolution_at };
+    let data = Data::load(&opts.common.data, features, |_| Ok(()))?;
     let base = if opts.common.tiny { Config::tiny(0, 0) } else { Config::cpu() };
-    let config = Config { music_dim: data.music_norm.dim() as i64, pose_dim: data.pose_norm.dim() as i64, ..base };
+    let config = Config { music_dim: data.music_norm.dim() as i64, pose_dim: data.pose_norm.dim() as i64, beat_clock: opts.beat_clock, ..base };
+    let augment = Augment { min_tempo: opts.min_tempo, max_tempo: opts.max_tempo, mirror: opts.mirror };
+    let windows = Windows::new(&data, MusicLayout::dance_revolution(opts.beat_clock), augment);
     let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| DanceRevolution::new(p, config.clone()))?;
-    let (train, test) = (&data.train, &data.test);
+    let test = &data.test;
     // Windows hold window + 1 frames: frame 0 is only the decoder's first input.
     let len = opts.window + 1;
     let curriculum = Curriculum { window: opts.window, p: opts.p, lambda: opts.lambda, q_max: opts.q_max };
@@ -65,13 +85,15 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         5,
         |epoch, opt, _| {
             let q = curriculum_q(opts.lambda, epoch).min(opts.q_max);
-            let starts = window_starts(train, len, opts.stride, opts.seed + epoch as u64);
+            let starts = window_starts(&data.train_raw, augment.source_len(len), opts.stride, opts.seed + epoch as u64);
             if starts.is_empty() {
                 return Err(TrainError::NoWindows(len));
             }
+            let mut rng = rand::rngs::StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x2545_F491_4F6C_DD1D));
             let (mut total, mut batches) = (0.0, 0);
             for (bi, chunk) in starts.chunks(opts.batch).enumerate() {
-                let loss = window_loss(&model, train, chunk, len, opts.p, q, opts.seed ^ ((epoch * 100_003 + bi) as u64), true, opts.random_positions);
+                let (music, poses) = windows.train_batch(chunk, len, &mut rng)?;
+                let loss = window_loss(&model, &music, &poses, opts.p, q, opts.seed ^ ((epoch * 100_003 + bi) as u64), true, opts.random_positions, opts.velocity_weight);
                 opt.backward_step_clip(&loss, 1.0);
                 total += loss.double_value(&[]);
                 batches += 1;
@@ -80,11 +102,23 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 let starts = window_starts(test, len, opts.window, 0);
                 let losses: Vec<f64> = starts
                     .chunks(opts.batch)
-                    .map(|c| window_loss(&model, test, c, len, opts.p, q, 7, false, opts.random_positions).double_value(&[]))
+                    .map(|c| {
+                        let music = batch_tensor(test, c, len, |s| &s.music, Device::Cpu);
+                        let poses = batch_tensor(test, c, len, |s| &s.poses, Device::Cpu);
+                        // The test loss stays the pose L1 alone, comparable with earlier runs.
+                        window_loss(&model, &music, &poses, opts.p, q, 7, false, opts.random_positions, 0.0).double_value(&[])
+                    })
                     .collect();
                 (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
             });
-            Ok(EpochResult { train_loss: total / batches as f64, test_loss, note: format!("p={} q={q} random_positions={}", opts.p, opts.random_positions) })
+            Ok(EpochResult {
+                train_loss: total / batches as f64,
+                test_loss,
+                note: format!(
+                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={}",
+                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight
+                ),
+            })
         },
         |t| ModelFile {
             config: config.clone(),
@@ -98,13 +132,22 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     Ok(trainer.logs)
 }
 
-/// Mean L1 between the curriculum forward pass and the ground truth over a batch of windows.
+/// Mean L1 between the curriculum forward pass and the ground truth over a batch of windows
+/// (`music`, `poses`: `[b, len, ·]`, normalised), plus `velocity_weight` × the L1 of their
+/// frame-to-frame changes.
 #[allow(clippy::too_many_arguments)]
-fn window_loss(model: &DanceRevolution, seqs: &[Sequence], starts: &[(usize, usize)], len: usize, p: i64, q: i64, seed: u64, train: bool, random_positions: bool) -> Tensor {
-    let music = batch_tensor(seqs, starts, len, |s| &s.music, Device::Cpu).narrow(1, 1, len as i64 - 1);
-    let poses = batch_tensor(seqs, starts, len, |s| &s.poses, Device::Cpu);
+fn window_loss(model: &DanceRevolution, music: &Tensor, poses: &Tensor, p: i64, q: i64, seed: u64, train: bool, random_positions: bool, velocity_weight: f64) -> Tensor {
+    let len = poses.size()[1];
+    let music = music.narrow(1, 1, len - 1);
     // A position offset drawn per batch over the whole range a served song uses (issue 10 §5).
-    let start = if random_positions { (seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11) as i64 % (crate::models::dance_revolution::MAX_POSITION - len as i64).max(1) } else { 0 };
-    let pred = model.forward_curriculum(&music, &poses, start, p, q, seed, train);
-    (pred - poses.narrow(1, 1, len as i64 - 1)).abs().mean(Kind::Float)
+    let start = if random_positions { (seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11) as i64 % (crate::models::dance_revolution::MAX_POSITION - len).max(1) } else { 0 };
+    let pred = model.forward_curriculum(&music, poses, start, p, q, seed, train);
+    let truth = poses.narrow(1, 1, len - 1);
+    let loss = (&pred - &truth).abs().mean(Kind::Float);
+    if velocity_weight > 0.0 {
+        let step = |x: &Tensor| x.narrow(1, 1, len - 2) - x.narrow(1, 0, len - 2);
+        loss + (step(&pred) - step(&truth)).abs().mean(Kind::Float) * velocity_weight
+    } else {
+        loss
+    }
 }

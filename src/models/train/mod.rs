@@ -216,11 +216,11 @@ impl Trainer {
     pub fn with_files<M>(common: &CommonOptions, id: &str, files: FolderFiles, lr: f64, seed: u64, build: impl FnOnce(&nn::Path) -> M) -> Result<(Self, M), TrainError> {
         tch::set_num_threads(common.threads);
         tch::manual_seed(seed as i64);
-        let mut vs = nn::VarStore::new(Device::Cpu);
+        let vs = nn::VarStore::new(Device::Cpu);
         let model = build(&vs.root());
         if let Some(init) = &common.init {
-            vs.load(init)?;
-            tracing::info!(from = %init.display(), "initialised from earlier weights");
+            let widened = load_widened(&vs, init)?;
+            tracing::info!(from = %init.display(), ?widened, "initialised from earlier weights");
         }
         let opt = nn::Adam::default().build(&vs, lr)?;
         let out = common.out_dir(id);
@@ -281,6 +281,38 @@ impl Trainer {
     }
 }
 
+/// Loads earlier weights into `vs`, where a variable may be wider than the saved one along one
+/// axis (a network given new input columns, e.g. the beat clock): the saved values fill the
+/// leading slice and the rest start at zero, so the widened network computes exactly what the
+/// earlier one did until training moves the new weights. Returns the widened variables' names.
+pub fn load_widened(vs: &nn::VarStore, path: &Path) -> Result<Vec<String>, TrainError> {
+    let saved: std::collections::HashMap<String, Tensor> = Tensor::read_safetensors(path)?.into_iter().collect();
+    let mut widened = Vec::new();
+    let mut vars: Vec<(String, Tensor)> = vs.variables().into_iter().collect();
+    vars.sort_by(|a, b| a.0.cmp(&b.0));
+    tch::no_grad(|| -> Result<(), TrainError> {
+        for (name, mut var) in vars {
+            let src = saved.get(&name).ok_or_else(|| TrainError::InvalidOption(format!("--init {}: no variable {name}", path.display())))?;
+            let (want, have) = (var.size(), src.size());
+            if want == have {
+                var.copy_(src);
+                continue;
+            }
+            let differing: Vec<usize> = (0..want.len()).filter(|&d| want.len() == have.len() && want[d] != have[d]).collect();
+            match differing.as_slice() {
+                [d] if want[*d] > have[*d] => {
+                    let _ = var.zero_();
+                    var.narrow(*d as i64, 0, have[*d]).copy_(src);
+                    widened.push(name);
+                }
+                _ => return Err(TrainError::InvalidOption(format!("--init {}: {name} is {have:?}, the network's is {want:?}", path.display()))),
+            }
+        }
+        Ok(())
+    })?;
+    Ok(widened)
+}
+
 /// Writes `weights.safetensors` and `model.json` into `dir`, each atomically.
 pub fn save_folder<F: Serialize>(vs: &nn::VarStore, dir: &Path, file: &F) -> Result<(), TrainError> {
     save_files(vs, dir, FolderFiles::MODEL, file)
@@ -297,6 +329,43 @@ pub fn save_files<F: Serialize>(vs: &nn::VarStore, dir: &Path, files: FolderFile
 /// Normalisation for music and poses, fitted on the given (train) sequences.
 pub fn fit_normalizers(seqs: &[Sequence]) -> Result<(NormStats, NormStats), TrainError> {
     Ok((NormStats::fit(seqs.iter().map(|s| &s.music))?, NormStats::fit(seqs.iter().map(|s| &s.poses))?))
+}
+
+/// Training windows drawn from the raw train split, varied by [`augment::Augment`] and
+/// normalised with the split's statistics.
+pub struct Windows<'a> {
+    data: &'a Data,
+    layout: augment::MusicLayout,
+    augment: augment::Augment,
+    partner: Vec<usize>,
+}
+
+impl<'a> Windows<'a> {
+    pub fn new(data: &'a Data, layout: augment::MusicLayout, augment: augment::Augment) -> Self {
+        Self { data, layout, augment, partner: augment::mirror_joints() }
+    }
+
+    /// `[b, len, ·]` normalised music and poses of the windows starting at `starts` (sequence,
+    /// frame) of the raw train split, each at its own drawn tempo and mirroring. The starts must
+    /// leave [`augment::Augment::source_len`] frames.
+    pub fn train_batch(&self, starts: &[(usize, usize)], len: usize, rng: &mut impl rand::Rng) -> Result<(Tensor, Tensor), TrainError> {
+        let (mut music, mut poses) = (Vec::with_capacity(starts.len()), Vec::with_capacity(starts.len()));
+        for &(i, f0) in starts {
+            let seq = &self.data.train_raw[i];
+            let (f, mirror) = self.augment.draw(rng);
+            let m = augment::stretch_music(seq.music.view(), f0, len, f, &self.layout);
+            let mut p = augment::stretch_poses(seq.poses.view(), f0, len, f);
+            if mirror {
+                if p.ncols() != crate::motion::repr::FEATURE_DIM {
+                    return Err(TrainError::InvalidOption(format!("mirroring needs the {}-column pose rows, not {}", crate::motion::repr::FEATURE_DIM, p.ncols())));
+                }
+                augment::mirror_poses(&mut p, &self.partner);
+            }
+            music.push(crate::models::to_tensor(&self.data.music_norm.normalize(&m)?));
+            poses.push(crate::models::to_tensor(&self.data.pose_norm.normalize(&p)?));
+        }
+        Ok((Tensor::stack(&music, 0), Tensor::stack(&poses, 0)))
+    }
 }
 
 /// Every window start `(sequence, frame)` of `len` frames with stride `stride`, shuffled by `seed`.
@@ -366,6 +435,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
 }
+pub mod augment;
 pub mod classify;
 pub mod dance_revolution;
 pub mod dancenet;
@@ -415,5 +485,35 @@ impl Training {
             Self::DancenetStyle(o) => dancenet_style::train(o),
             Self::MotionStyle(o) => motion_style::train(o),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A network given two more input columns, initialised from the narrower one's weights,
+    /// computes exactly what it did while those columns are anything at all times zero weights:
+    /// on inputs whose new columns are zero the outputs are equal.
+    #[test]
+    fn widened_weights_compute_what_the_narrow_ones_did() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("narrow.safetensors");
+        let narrow_vs = nn::VarStore::new(Device::Cpu);
+        let narrow = nn::linear(narrow_vs.root() / "embed", 3, 4, Default::default());
+        narrow_vs.save(&path).unwrap();
+        let wide_vs = nn::VarStore::new(Device::Cpu);
+        let wide = nn::linear(wide_vs.root() / "embed", 5, 4, Default::default());
+        assert_eq!(load_widened(&wide_vs, &path).unwrap(), vec!["embed.weight".to_string()]);
+        let x = Tensor::from_slice(&[0.5f32, -1.0, 2.0]).view([1, 3]);
+        let x_wide = Tensor::from_slice(&[0.5f32, -1.0, 2.0, 0.0, 0.0]).view([1, 5]);
+        use tch::nn::Module;
+        let (a, b) = (narrow.forward(&x), wide.forward(&x_wide));
+        assert!((a - b).abs().max().double_value(&[]) < 1e-6);
+        // A shape that is not a widening is refused by name.
+        let other_vs = nn::VarStore::new(Device::Cpu);
+        let _ = nn::linear(other_vs.root() / "embed", 2, 4, Default::default());
+        let err = load_widened(&other_vs, &path).unwrap_err().to_string();
+        assert!(err.contains("embed.weight"), "{err}");
     }
 }

@@ -1,0 +1,251 @@
+//! Training windows at other tempi and mirrored (issue 25).
+//!
+//! The data's tempi cluster by style (every waltz near 87 BPM, every cha-cha 115–127), so a network
+//! never sees one figure danced at two tempi and learns a step rate per style, not per song. Each
+//! window is therefore drawn at a tempo factor `f` in `[min, max]` (log-uniform): `f > 1` plays
+//! music and dance faster together. The feature frames are resampled in time, which is what a
+//! tempo change does to onset, chroma and MFCC frames; the columns whose meaning a tempo change
+//! alters are corrected: one-hot marks (beats) stay one-hot and move with their frame, per-frame
+//! rates (ΔMFCC, root and yaw velocity) scale by `f`, the tempogram's lag axis shrinks by `f`,
+//! and the beat clock's tempo gains `log2 f`. Mirroring (left ↔ right) doubles the dances; the
+//! music is unchanged by it.
+use std::ops::Range;
+
+use ndarray::{s, Array2, ArrayView2};
+use rand::Rng;
+
+use crate::audio::clock;
+use crate::motion::repr::{POSE_DIM, ROOT_VX, YAW_VEL};
+use crate::motion::skeleton::JOINT_NAMES;
+
+/// What each music column means to a tempo change.
+#[derive(Clone, Debug, Default)]
+pub struct MusicLayout {
+    /// Columns of 0/1 marks (beat, downbeat one-hots).
+    pub one_hot: Vec<usize>,
+    /// Columns holding a per-frame rate of change (scale with the tempo).
+    pub rates: Vec<Range<usize>>,
+    /// A tempogram block: column `k` is the onset autocorrelation at lag `k` frames.
+    pub lags: Option<Range<usize>>,
+    /// First column of a [`clock::beat_clock`] block.
+    pub clock: Option<usize>,
+}
+
+impl MusicLayout {
+    /// The DanceRevolution set, with or without its beat clock.
+    pub fn dance_revolution(beat_clock: bool) -> Self {
+        use crate::audio::features::dance_revolution_cols as c;
+        Self { one_hot: vec![c::BEAT], rates: vec![c::DMFCC], lags: Some(c::TEMPOGRAM), clock: beat_clock.then_some(c::CLOCK.start) }
+    }
+}
+
+/// How training windows are varied.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Augment {
+    /// Slowest tempo factor (e.g. 0.8).
+    pub min_tempo: f64,
+    /// Fastest tempo factor (e.g. 1.25).
+    pub max_tempo: f64,
+    /// Mirror half the windows left ↔ right.
+    pub mirror: bool,
+}
+
+impl Augment {
+    /// No augmentation: windows as danced.
+    pub const NONE: Self = Self { min_tempo: 1.0, max_tempo: 1.0, mirror: false };
+
+    /// Source frames a window of `len` output frames may span at the fastest tempo.
+    pub fn source_len(&self, len: usize) -> usize {
+        ((len.saturating_sub(1)) as f64 * self.max_tempo.max(1.0)).ceil() as usize + 1
+    }
+
+    /// A tempo factor and a mirror flag for one window.
+    pub fn draw(&self, rng: &mut impl Rng) -> (f64, bool) {
+        let (lo, hi) = (self.min_tempo.ln(), self.max_tempo.ln());
+        let f = if hi > lo { rng.gen_range(lo..hi).exp() } else { 1.0 };
+        (f, self.mirror && rng.gen_bool(0.5))
+    }
+}
+
+/// Linear interpolation of `src`'s rows at fractional frame `t`.
+fn lerp_row(src: ArrayView2<'_, f32>, t: f64, out: &mut [f32]) {
+    let last = src.nrows() - 1;
+    let i = (t.floor().max(0.0) as usize).min(last);
+    let j = (i + 1).min(last);
+    let w = (t - i as f64).clamp(0.0, 1.0) as f32;
+    for (k, o) in out.iter_mut().enumerate() {
+        *o = src[[i, k]] * (1.0 - w) + src[[j, k]] * w;
+    }
+}
+
+/// `len` rows of `src` from frame `start` at tempo `f`: output row j is source time `start + j·f`.
+fn resample(src: ArrayView2<'_, f32>, start: usize, len: usize, f: f64) -> Array2<f32> {
+    let mut out = Array2::<f32>::zeros((len, src.ncols()));
+    for (j, mut row) in out.outer_iter_mut().enumerate() {
+        lerp_row(src, start as f64 + j as f64 * f, row.as_slice_mut().expect("standard layout"));
+    }
+    out
+}
+
+/// Music window at tempo `f` (see the module doc for each column kind).
+pub fn stretch_music(src: ArrayView2<'_, f32>, start: usize, len: usize, f: f64, layout: &MusicLayout) -> Array2<f32> {
+    let mut out = resample(src, start, len, f);
+    if (f - 1.0).abs() < 1e-12 {
+        return out;
+    }
+    for &c in &layout.one_hot {
+        out.column_mut(c).fill(0.0);
+        let span = ((len - 1) as f64 * f).ceil() as usize + 1;
+        for k in start..(start + span).min(src.nrows()) {
+            if src[[k, c]] > 0.5 {
+                let j = ((k - start) as f64 / f).round() as usize;
+                if j < len {
+                    out[[j, c]] = 1.0;
+                }
+            }
+        }
+    }
+    for r in &layout.rates {
+        out.slice_mut(s![.., r.clone()]).mapv_inplace(|v| v * f as f32);
+    }
+    if let Some(lags) = &layout.lags {
+        // A figure that repeated every L frames now repeats every L/f: lag k reads old lag k·f.
+        let n = lags.len();
+        let block = out.slice(s![.., lags.clone()]).to_owned();
+        for (j, row) in block.outer_iter().enumerate() {
+            for k in 0..n {
+                let t = k as f64 * f;
+                let i = t.floor() as usize;
+                let v = if i + 1 < n {
+                    let w = (t - i as f64) as f32;
+                    row[i] * (1.0 - w) + row[i + 1] * w
+                } else {
+                    0.0
+                };
+                out[[j, lags.start + k]] = v;
+            }
+        }
+    }
+    if let Some(c0) = layout.clock {
+        use clock::cols;
+        for mut row in out.outer_iter_mut() {
+            for (a, b) in [(cols::BEAT_SIN, cols::BEAT_COS), (cols::BAR_SIN, cols::BAR_COS)] {
+                // Interpolating across a wrap shortens the vector; the phase is its angle.
+                let (x, y) = (row[c0 + a], row[c0 + b]);
+                let r = (x * x + y * y).sqrt();
+                if r > 1e-6 {
+                    row[c0 + a] = x / r;
+                    row[c0 + b] = y / r;
+                }
+            }
+            row[c0 + cols::TEMPO] += f.log2() as f32;
+        }
+    }
+    out
+}
+
+/// Pose window (the `motion::repr` 73-column rows) at tempo `f`: local joints and root height
+/// interpolated, per-frame root and yaw velocities scaled by `f`.
+pub fn stretch_poses(src: ArrayView2<'_, f32>, start: usize, len: usize, f: f64) -> Array2<f32> {
+    let mut out = resample(src, start, len, f);
+    if (f - 1.0).abs() > 1e-12 {
+        for c in [ROOT_VX, ROOT_VX + 1, YAW_VEL] {
+            out.column_mut(c).mapv_inplace(|v| v * f as f32);
+        }
+    }
+    out
+}
+
+/// The joint each joint becomes in the mirror image (`right_*` ↔ `left_*`, `head_right` ↔ `head_left`).
+pub fn mirror_joints() -> Vec<usize> {
+    let swap = |n: &str| -> String {
+        if let Some(r) = n.strip_prefix("right_") {
+            format!("left_{r}")
+        } else if let Some(r) = n.strip_prefix("left_") {
+            format!("right_{r}")
+        } else if let Some(r) = n.strip_suffix("_right") {
+            format!("{r}_left")
+        } else if let Some(r) = n.strip_suffix("_left") {
+            format!("{r}_right")
+        } else {
+            n.to_string()
+        }
+    };
+    JOINT_NAMES.iter().map(|n| JOINT_NAMES.iter().position(|m| *m == swap(n)).unwrap_or_else(|| panic!("joint {n} has no mirror"))).collect()
+}
+
+/// Mirrors pose rows in place, left ↔ right: in the facing frame x is the lateral axis, so each
+/// joint takes its partner's coordinates with x negated, the root's lateral velocity and the
+/// yaw velocity change sign.
+pub fn mirror_poses(rows: &mut Array2<f32>, partner: &[usize]) {
+    for mut row in rows.outer_iter_mut() {
+        let old: Vec<f32> = row.slice(s![..POSE_DIM]).to_vec();
+        for (j, &p) in partner.iter().enumerate() {
+            row[3 * j] = -old[3 * p];
+            row[3 * j + 1] = old[3 * p + 1];
+            row[3 * j + 2] = old[3 * p + 2];
+        }
+        row[ROOT_VX] = -row[ROOT_VX];
+        row[YAW_VEL] = -row[YAW_VEL];
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::repr::FEATURE_DIM;
+    use ndarray::Array1;
+
+    #[test]
+    fn beats_stay_one_hot_and_move_with_their_frames() {
+        let mut m = Array2::<f32>::zeros((100, 3));
+        for k in (0..100).step_by(10) {
+            m[[k, 0]] = 1.0;
+        }
+        m.column_mut(1).assign(&Array1::linspace(0.0, 99.0, 100));
+        let layout = MusicLayout { one_hot: vec![0], rates: vec![2..3], ..Default::default() };
+        m.column_mut(2).fill(1.0);
+        let out = stretch_music(m.view(), 0, 40, 2.0, &layout);
+        let marks: Vec<usize> = (0..40).filter(|&j| out[[j, 0]] == 1.0).collect();
+        assert_eq!(marks, vec![0, 5, 10, 15, 20, 25, 30, 35]);
+        assert!(out.column(0).iter().all(|&v| v == 0.0 || v == 1.0));
+        assert!((out[[7, 1]] - 14.0).abs() < 1e-5);
+        assert!((out[[7, 2]] - 2.0).abs() < 1e-6);
+    }
+
+    #[test]
+    fn the_clock_keeps_unit_phases_and_gains_the_tempo() {
+        let beats: Vec<usize> = (0..20).map(|i| 10 * i).collect();
+        let c = clock::beat_clock(&beats, &[], 200, 25.0);
+        let layout = MusicLayout { clock: Some(0), ..Default::default() };
+        let out = stretch_music(c.view(), 0, 80, 1.25, &layout);
+        for row in out.outer_iter() {
+            assert!(((row[0] * row[0] + row[1] * row[1]) - 1.0).abs() < 1e-4);
+            assert!((row[clock::cols::TEMPO] - (2.5f32.log2() + 1.25f32.log2())).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn a_tempogram_peak_moves_to_the_shorter_lag() {
+        let mut m = Array2::<f32>::zeros((50, 40));
+        m.column_mut(20).fill(1.0);
+        let layout = MusicLayout { lags: Some(0..40), ..Default::default() };
+        let out = stretch_music(m.view(), 0, 20, 1.25, &layout);
+        assert!((out[[3, 16]] - 1.0).abs() < 1e-5, "lag 20 at ×1.25 is lag 16");
+    }
+
+    #[test]
+    fn mirroring_twice_is_the_identity_and_swaps_the_wrists() {
+        let partner = mirror_joints();
+        let rw = JOINT_NAMES.iter().position(|n| *n == "right_wrist").unwrap();
+        let lw = JOINT_NAMES.iter().position(|n| *n == "left_wrist").unwrap();
+        assert_eq!(partner[rw], lw);
+        let orig = Array2::from_shape_fn((3, FEATURE_DIM), |(i, k)| (i * 100 + k) as f32 * 0.01);
+        let mut m = orig.clone();
+        mirror_poses(&mut m, &partner);
+        assert_eq!(m[[1, 3 * lw]], -orig[[1, 3 * rw]]);
+        assert_eq!(m[[1, 3 * lw + 1]], orig[[1, 3 * rw + 1]]);
+        mirror_poses(&mut m, &partner);
+        assert_eq!(m, orig);
+    }
+}
