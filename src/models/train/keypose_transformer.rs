@@ -265,12 +265,14 @@ fn pose_bank(ds: &Dataset, train: &[Sequence], opts: &Options) -> Result<PoseBan
     for (c, &(i, at)) in picks.iter().enumerate() {
         let seq = &train[i];
         bank.slice_mut(s![c, .., ..]).assign(&seq.poses.slice(s![at..at + frames, ..]));
-        if !analysed.contains_key(&i) {
-            let dance = ds.load(&seq.id)?;
-            let analysis = crate::audio::analyze(&crate::audio::decode_path(&dance.audio_path)?)?;
-            analysed.insert(i, (dance, analysis));
-        }
-        let (dance, analysis) = &analysed[&i];
+        let (dance, analysis) = match analysed.entry(i) {
+            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::hash_map::Entry::Vacant(e) => {
+                let dance = ds.load(&seq.id)?;
+                let analysis = crate::audio::analyze(&crate::audio::decode_path(&dance.audio_path)?)?;
+                e.insert((dance, analysis))
+            }
+        };
         let fps = dance.motion.fps;
         let first = dance.song_time_s(at);
         let on_clip = |times: &[f64]| -> Vec<f64> { times.iter().map(|t| (t - first) * fps).filter(|f| *f >= 0.0 && *f <= (frames - 1) as f64).collect() };
