@@ -286,6 +286,10 @@ args_into! {
         /// its `eval.json`.
         #[arg(long)]
         eval_only: bool,
+        /// Do not train: redraw the pose bank with each clip's source and beats into `--out`
+        /// (`pose_bank.safetensors`, `pose_bank.json`).
+        #[arg(long)]
+        bank_only: bool,
     }
 }
 

@@ -24,7 +24,9 @@
 //!
 //! This file holds the network. [`keys`] maps key poses into pose space and pulls the result
 //! through them; [`scaffold`] draws the seed motion and the scaffold of real poses that make the
-//! seed matter; [`served`] loads a trained folder and serves it.
+//! seed and the song matter, retimed onto the song's beats by [`beats`]; [`served`] loads a
+//! trained folder and serves it.
+pub mod beats;
 pub mod keys;
 pub mod scaffold;
 pub mod served;

@@ -1,16 +1,28 @@
-//! The seed matters: a bank of short real clips from the train split (`pose_bank.safetensors`),
-//! from which each job's seed draws the seed motion and a scaffold of poses.
+//! The seed matters, and so does the song: a bank of short real clips from the train split
+//! (`pose_bank.safetensors`, with each clip's source and beats in `pose_bank.json`), from which each
+//! job draws the seed motion and a scaffold of poses.
 //!
 //! A deterministic regression network started from the mean pose gives the same small, averaged
 //! motion for every seed (the failure the plausibility issue measured: 0.15–0.20 m/s and seeds 1
 //! and 2 identical). The paper's model composes a dance *between key poses*; so when the user gives
-//! few of them, the job's seed draws the rest: the first `T′` frames of a random bank clip start
-//! the dance, and every `spacing` frames a pose of the same clip, in its real order and timing,
-//! is handed to the network as a key pose it is *not* held to (no exact pass, unlike the user's).
-//! When a clip runs out, the next continues from the bank frame nearest the current pose (among
-//! a seeded half of the other clips), so the scaffold has no jump a dancer could not make. The
-//! network still makes every frame: the transitions, the timing against the music, the travel,
-//! the facing and the height. Scaffold poses keep away from user keys by one spacing.
+//! few of them, the scaffold supplies the rest: real poses handed to the network as key poses it is
+//! *not* held to (no exact pass, unlike the user's). The network still makes every frame: the
+//! transitions, the travel, the facing and the height. Scaffold poses keep away from user keys.
+//!
+//! **Following the music** ([`PoseBank::scaffold_to`], issue 25): the song's beats, tempo, meter
+//! and energy ([`SongCues`]) choose the clips: those whose own beat period is near the song's (or
+//! twice or half of it), in the song's meter (waltz clips for three beats a bar) and whose music
+//! had the energy of the song around the frame they enter; the job's seed draws among the best few,
+//! so two seeds still dance differently and one seed dances differently to two songs. Each clip is
+//! retimed so that its own beats fall on the song's ([`super::beats::TimeMap`]): the seed rows are
+//! the clip resampled at the song's pace, and a scaffold pose sits on every beat (every other beat
+//! when beats come faster than [`MIN_SPACING`] frames, on half beats too when slower than
+//! [`MAX_SPACING`]), read from the clip at the matching point of its own beat. When a clip runs out
+//! of beats the next continues from the beat-grid position nearest the current pose among a seeded
+//! share of the good candidates, so the scaffold has no jump a dancer could not make.
+//!
+//! A bank without `pose_bank.json` keeps the earlier scaffold ([`PoseBank::scaffold`]): the seed
+//! alone draws a clip, posed every `spacing` frames in the clip's own timing.
 //!
 //! The dance starts on a lively stretch: the seed redraws (up to [`START_TRIES`] times) a clip and
 //! start whose first 5 s move at least as fast as the slowest real dance. 14 of the 32 clips
@@ -25,6 +37,9 @@ use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 
+use serde::{Deserialize, Serialize};
+
+use super::beats::{median_step, row_at, SongCues, TimeMap};
 use super::keys::LocalKey;
 use crate::models::ModelError;
 use crate::motion::repr::{self, FEATURE_DIM, POSE_DIM};
@@ -40,6 +55,72 @@ pub const START_TRIES: usize = 16;
 /// The bank file in a model folder (`models::folder::write_clips`: `[clips, frames, features]`,
 /// denormalised, in the model's root-height representation).
 pub const POSE_BANK_FILE: &str = "pose_bank.safetensors";
+/// Where each bank clip came from and its beats, beside [`POSE_BANK_FILE`].
+pub const POSE_BANK_META_FILE: &str = "pose_bank.json";
+
+/// Scaffold poses come no closer than this (frames): beats faster than that get a pose every
+/// other beat. 8 frames gave more pops than 12 when the spacing was fixed.
+pub const MIN_SPACING: f64 = 8.0;
+/// Scaffold poses come no further apart than this (frames): slower beats get half-beat poses
+/// too. A fixed 25-frame spacing made dances of 0.34–0.41 m/s; with 20 here a waltz's beats
+/// (17 frames at 87 BPM) got a pose each and a test dance moved 0.48 m/s as served, under the
+/// verdict's 0.5.
+pub const MAX_SPACING: f64 = 14.0;
+/// Good candidates the seed chooses among, at least (when the bank holds that many).
+pub const MIN_CANDIDATES: usize = 4;
+/// Good candidates the seed chooses among, at most.
+pub const MAX_CANDIDATES: usize = 8;
+/// Candidates within this score of the best are all good.
+const SCORE_MARGIN: f64 = 0.15;
+/// Score added for a clip danced in another meter than the song's.
+const METER_PENALTY: f64 = 0.2;
+/// Weight of the energy term (|ln| of the song's local energy over the clip's music's).
+const ENERGY_WEIGHT: f64 = 0.1;
+/// A clip entered by a continuation has at least this many song beats left in it.
+const MIN_RUN_BEATS: f64 = 4.0;
+
+/// One bank clip's source: the train dance, its first frame there, the dance's style, and the
+/// beats of the dance's song on the clip's frames.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ClipInfo {
+    /// Train dance id (`DANCE_W_3`).
+    pub dance: String,
+    /// The dance's motion frame of the clip's frame 0.
+    pub start: usize,
+    pub style: crate::motion::dataset::Style,
+    /// Beats of the song (`audio::analyze`) on the clip's frames (fractional, ascending, within it).
+    pub beats: Vec<f64>,
+    /// Beats per bar of the song's analysis (3 or 4).
+    pub bar: usize,
+    /// Mean onset strength of the music under the clip (`audio::features::keypose`'s onset column).
+    pub energy: f64,
+}
+
+impl ClipInfo {
+    /// Median beat period, frames; none with fewer than two beats.
+    pub fn period(&self) -> Option<f64> {
+        median_step(&self.beats)
+    }
+
+    /// Beats per bar of the style: a waltz has three, the other styles four. The style is the
+    /// dataset's own label; the song's analysis misreads 3 of 30 waltzes as 4/4.
+    pub fn meter(&self) -> usize {
+        if self.style == crate::motion::dataset::Style::Waltz {
+            3
+        } else {
+            4
+        }
+    }
+}
+
+/// `pose_bank.json`: how the bank was made, and every clip's [`ClipInfo`] (in the bank's order).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BankMeta {
+    /// The command and settings that drew the bank.
+    pub made_by: String,
+    pub fps: f64,
+    pub clips: Vec<ClipInfo>,
+}
 
 /// Real clips the seed draws from.
 #[derive(Clone, Debug)]
@@ -48,6 +129,17 @@ pub struct PoseBank {
     /// `[clips, frames − 1]` mean joint speed of each frame step (m/s at 25 fps, the root height
     /// aside); empty for a bank without root columns.
     speeds: Array2<f64>,
+    /// Each clip's source and beats; none for a bank written before they were kept.
+    meta: Option<BankMeta>,
+}
+
+/// A stretch of the scaffold danced from one clip: `u` of the clip's beats per song beat, from
+/// beat position `q` (fractional beat index of the clip) on the song beat the run starts at.
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    clip: usize,
+    q: f64,
+    u: f64,
 }
 
 /// What one seed drew: the seed motion and the scaffold poses.
@@ -76,7 +168,26 @@ impl PoseBank {
             return Err(ModelError::BadModelFile("pose bank has non-finite values".into()));
         }
         let speeds = if d == FEATURE_DIM { Self::step_speeds(&clips)? } else { Array2::zeros((0, 0)) };
-        Ok(Self { clips, speeds })
+        Ok(Self { clips, speeds, meta: None })
+    }
+
+    /// The bank with each clip's source and beats (one [`ClipInfo`] per clip, beats within it).
+    pub fn with_meta(mut self, meta: BankMeta) -> Result<Self, ModelError> {
+        let (k, l, _) = self.clips.dim();
+        if meta.clips.len() != k {
+            return Err(ModelError::BadModelFile(format!("{POSE_BANK_META_FILE} describes {} clips, the bank holds {k}", meta.clips.len())));
+        }
+        let bad = meta.clips.iter().any(|c| c.beats.iter().any(|b| !b.is_finite() || *b < 0.0 || *b > (l - 1) as f64) || c.beats.windows(2).any(|p| p[1] <= p[0]) || !c.energy.is_finite());
+        if bad {
+            return Err(ModelError::BadModelFile(format!("{POSE_BANK_META_FILE}: beats outside their clip, out of order, or a non-finite energy")));
+        }
+        self.meta = Some(meta);
+        Ok(self)
+    }
+
+    /// Each clip's source and beats, when the bank has them.
+    pub fn meta(&self) -> Option<&BankMeta> {
+        self.meta.as_ref()
     }
 
     /// Mean joint speed of every frame step of every clip, decoded with the root at height 0.
@@ -103,14 +214,26 @@ impl PoseBank {
         steps.sum() / steps.len() as f64
     }
 
-    /// Reads a bank written by [`PoseBank::save`].
+    /// Reads a bank written by [`PoseBank::save`], with [`POSE_BANK_META_FILE`] when it lies beside.
     pub fn load(path: &Path) -> Result<Self, ModelError> {
-        Self::new(crate::models::folder::read_clips(path)?)
+        let bank = Self::new(crate::models::folder::read_clips(path)?)?;
+        let meta_path = path.with_file_name(POSE_BANK_META_FILE);
+        if !meta_path.exists() {
+            return Ok(bank);
+        }
+        let text = std::fs::read_to_string(&meta_path).map_err(|e| ModelError::BadModelFile(format!("{}: {e}", meta_path.display())))?;
+        let meta: BankMeta = serde_json::from_str(&text).map_err(|e| ModelError::BadModelFile(format!("{}: {e}", meta_path.display())))?;
+        bank.with_meta(meta)
     }
 
-    /// Writes the bank as safetensors.
+    /// Writes the bank as safetensors, and its [`BankMeta`] beside it when it has one.
     pub fn save(&self, path: &Path) -> Result<(), ModelError> {
-        crate::models::folder::write_clips(&self.clips, path)
+        crate::models::folder::write_clips(&self.clips, path)?;
+        if let Some(meta) = &self.meta {
+            let text = serde_json::to_string_pretty(meta).map_err(|e| ModelError::BadModelFile(e.to_string()))?;
+            std::fs::write(path.with_file_name(POSE_BANK_META_FILE), text + "\n").map_err(|e| ModelError::BadModelFile(e.to_string()))?;
+        }
+        Ok(())
     }
 
     /// `[clips, frames, features]`.
@@ -148,6 +271,164 @@ impl PoseBank {
             frame += spacing;
         }
         Scaffold { seed: seed_rows, poses, start: origin }
+    }
+
+    /// Clips ranked by how well they suit the song around song frame `at`, best first:
+    /// `(clip, u, score)`, `u` the clip beats per song beat it would dance at (½, 1 or 2: the one
+    /// that plays it nearest its own pace). The score adds the pace error `|log₂ rate|`, a
+    /// [`METER_PENALTY`] for another meter and the energy term. Clips with fewer than two beats
+    /// are left out.
+    fn ranked(meta: &BankMeta, cues: &SongCues, at: f64) -> Vec<(usize, f64, f64)> {
+        let e_song = cues.energy_at(at);
+        let mut out: Vec<(usize, f64, f64)> = meta
+            .clips
+            .iter()
+            .enumerate()
+            .filter_map(|(c, info)| {
+                let pc = info.period()?;
+                // The clip plays at rate u·pc/period (clip frames per song frame).
+                let (u, pace) = [0.5, 1.0, 2.0].map(|u| (u, (u * pc / cues.period).log2().abs())).into_iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
+                let meter = if info.meter() == cues.bar { 0.0 } else { METER_PENALTY };
+                let energy = if e_song > 0.0 && info.energy > 0.0 { ENERGY_WEIGHT * (e_song / info.energy).ln().abs() } else { 0.0 };
+                Some((c, u, pace + meter + energy))
+            })
+            .collect();
+        out.sort_by(|a, b| a.2.total_cmp(&b.2).then(a.0.cmp(&b.0)));
+        out
+    }
+
+    /// The good candidates of a ranking: those within [`SCORE_MARGIN`] of the best, at least
+    /// [`MIN_CANDIDATES`] and at most [`MAX_CANDIDATES`].
+    fn good(ranked: &[(usize, f64, f64)]) -> Vec<(usize, f64)> {
+        let Some(best) = ranked.first().map(|r| r.2) else { return Vec::new() };
+        let within = ranked.iter().filter(|r| r.2 <= best + SCORE_MARGIN).count();
+        ranked.iter().take(within.clamp(MIN_CANDIDATES, MAX_CANDIDATES)).map(|r| (r.0, r.1)).collect()
+    }
+
+    /// What `seed` draws for a dance of `frames` frames to the song of `cues` with seed length
+    /// `ts`, kept away from the user's `keys` (module doc); none for a bank without
+    /// [`BankMeta`] or without a clip of two beats.
+    pub fn scaffold_to(&self, seed: u64, cues: &SongCues, frames: usize, ts: usize, keys: &[LocalKey]) -> Option<Scaffold> {
+        let meta = self.meta.as_ref()?;
+        let (_, l, _) = self.clips.dim();
+        let ts = ts.min(l);
+        // Beat index → clip frame of every clip.
+        let beat_maps: Vec<Option<TimeMap>> = meta.clips.iter().map(|c| TimeMap::new(c.beats.iter().enumerate().map(|(j, b)| (j as f64, *b)))).collect();
+        let last_beat = |c: usize| meta.clips[c].beats.len().saturating_sub(1) as f64;
+        let mut rng = StdRng::seed_from_u64(seed ^ 0x5CAF_F01D);
+        let need = frames.clamp(ts, START_STRETCH);
+        let good: Vec<(usize, f64)> = Self::good(&Self::ranked(meta, cues, need as f64 / 2.0)).into_iter().filter(|g| beat_maps[g.0].is_some()).collect();
+        if good.is_empty() {
+            return None;
+        }
+        let (s0, period) = (cues.beats[0], cues.period);
+        // Every draw is made, so what follows does not depend on which was taken.
+        let draws: Vec<Run> = (0..START_TRIES)
+            .map(|_| {
+                let (clip, u) = good[rng.gen_range(0..good.len())];
+                let room = (last_beat(clip) - u * MIN_RUN_BEATS).floor().max(0.0) as usize;
+                Run { clip, q: rng.gen_range(0..=room) as f64, u }
+            })
+            .collect();
+        // The clip frames a run covers over the first stretch, and its pace there as retimed.
+        let stretch = |r: &Run| -> f64 {
+            let Some(map) = beat_maps[r.clip].as_ref() else { return 0.0 };
+            let a = map.at(r.q + r.u * (0.0 - s0) / period).max(0.0);
+            let b = map.at(r.q + r.u * (need as f64 - s0) / period).min((l - 1) as f64);
+            if b <= a + 1.0 {
+                return 0.0;
+            }
+            self.pace(r.clip, a as usize, (b - a) as usize) * (b - a) / need as f64
+        };
+        let mut run = draws.iter().copied().find(|r| stretch(r) >= LIVELY_M_S).unwrap_or(draws[0]);
+        // Walk the song's beats: (song frame, run index, clip beat position, clip frame).
+        let mut runs = vec![run];
+        let mut points: Vec<(f64, usize, f64, f64)> = Vec::with_capacity(cues.beats.len());
+        let mut run_start = 0usize;
+        for (i, &s) in cues.beats.iter().enumerate() {
+            let mut q = run.q + run.u * (i - run_start) as f64;
+            if q > last_beat(run.clip) + 1e-9 {
+                let &(_, r, _, f) = points.last()?;
+                let here = row_at(self.clips.slice(s![runs[r].clip, .., ..]), f);
+                let (clip, q2, u) = self.continue_to(meta, &beat_maps, cues, s, run.clip, &here, &mut rng)?;
+                run = Run { clip, q: q2 + u, u };
+                runs.push(run);
+                run_start = i;
+                q = run.q;
+            }
+            let f = beat_maps[run.clip].as_ref()?.at(q);
+            points.push((s, runs.len() - 1, q, f));
+        }
+        // The seed rows: the first clip at the song's pace.
+        let first: Vec<(f64, f64)> = points.iter().filter(|p| p.1 == 0).map(|p| (p.0, p.3)).collect();
+        let start_clip = runs[0].clip;
+        let rows = self.clips.slice(s![start_clip, .., ..]);
+        let to_clip = TimeMap::new(first)?;
+        let seed_rows = super::beats::resample_rows(rows, &to_clip, ts);
+        let start = (start_clip, to_clip.at(0.0).clamp(0.0, (l - 1) as f64).round() as usize);
+        tracing::debug!(period, bar = cues.bar, runs = ?runs.iter().map(|r| (r.clip, r.q, r.u)).collect::<Vec<_>>(), "scaffold runs");
+        // Poses on beats (every other one when fast, half beats too when slow).
+        let every = if period < MIN_SPACING { 2 } else { 1 };
+        // Poses per beat: 1, or 2 (half beats) when beats are slow.
+        let per_beat = if period > MAX_SPACING { 2 } else { 1 };
+        let spacing = period * every as f64 / per_beat as f64;
+        let mut at: Vec<(f64, usize, f64)> = Vec::new();
+        for (i, p) in points.iter().enumerate() {
+            if i % every == 0 {
+                at.push((p.0, runs[p.1].clip, p.3));
+            }
+            let Some(next) = points.get(i + 1) else { continue };
+            for k in 1..per_beat {
+                // A share of the beat on in this run, or, where the next beat starts a run, that
+                // much before it in that one (whose first position is nearest this beat's pose).
+                let w = k as f64 / per_beat as f64;
+                let (r, q) = if next.1 == p.1 { (runs[p.1], p.2 + runs[p.1].u * w) } else { (runs[next.1], next.2 - runs[next.1].u * (1.0 - w)) };
+                at.push((p.0 + (next.0 - p.0) * w, r.clip, beat_maps[r.clip].as_ref()?.at(q)));
+            }
+        }
+        let first_pose = ts as f64 - 1.0 + spacing / 2.0;
+        let keep_off = spacing.ceil() as usize;
+        let poses = at
+            .into_iter()
+            .filter(|(s, _, _)| *s >= first_pose && s.round() < frames as f64)
+            .map(|(s, c, f)| (s.round() as usize, c, f))
+            .filter(|(frame, _, _)| !keys.iter().any(|k| k.frame.abs_diff(*frame) < keep_off))
+            .map(|(frame, c, f)| {
+                let mut pose = row_at(self.clips.slice(s![c, .., ..]), f);
+                pose.truncate(POSE_DIM);
+                (frame, pose)
+            })
+            .collect();
+        Some(Scaffold { seed: seed_rows, poses, start })
+    }
+
+    /// Where the scaffold goes on at song frame `at` when clip `from` has run out of beats: among
+    /// a seeded two thirds of the good candidates there (`from` aside), the clip and beat
+    /// (a whole one, so its beats stay on the song's) whose pose is nearest to `here`, with at least [`MIN_RUN_BEATS`] song beats left
+    /// after it: `(clip, q, u)`.
+    #[allow(clippy::too_many_arguments)]
+    fn continue_to(&self, meta: &BankMeta, beat_maps: &[Option<TimeMap>], cues: &SongCues, at: f64, from: usize, here: &[f32], rng: &mut StdRng) -> Option<(usize, f64, f64)> {
+        let k = meta.clips.len();
+        let ranked: Vec<(usize, f64, f64)> = Self::ranked(meta, cues, at).into_iter().filter(|r| (r.0 != from || k == 1) && beat_maps[r.0].is_some()).collect();
+        let mut good = Self::good(&ranked);
+        good.shuffle(rng);
+        good.truncate((2 * good.len()).div_ceil(3).max(1));
+        let here = ndarray::ArrayView1::from(here);
+        let mut best: Option<(usize, f64, f64, f32)> = None;
+        for &(c, u) in &good {
+            let (Some(map), n) = (beat_maps[c].as_ref(), meta.clips[c].beats.len()) else { continue };
+            let mut q = 0.0;
+            while q + u * MIN_RUN_BEATS <= (n - 1) as f64 {
+                let pose = row_at(self.clips.slice(s![c, .., ..]), map.at(q));
+                let d = distance(here, ndarray::ArrayView1::from(&pose));
+                if best.is_none_or(|b| d < b.3) {
+                    best = Some((c, q, u, d));
+                }
+                q += 1.0;
+            }
+        }
+        // No candidate has that much room: the best-ranked clip from its first beat.
+        best.map(|b| (b.0, b.1, b.2)).or_else(|| ranked.first().map(|r| (r.0, 0.0, r.1)))
     }
 
     /// The bank frame, `spacing` frames after the one nearest to clip `from`'s frame `at`, among a
@@ -225,6 +506,110 @@ mod tests {
         let a = b.scaffold(3, 200, 5, 10, std::slice::from_ref(&key));
         assert!(a.poses.iter().all(|(f, _)| f.abs_diff(50) >= 10));
         assert!(b.scaffold(3, 200, 5, 0, &[]).poses.is_empty());
+    }
+
+    /// A bank of `periods.len()` clips of 200 frames, clip c's frame f holding c·1000 + f in every
+    /// coordinate, its beats every `periods[c]` frames from frame 3.
+    fn beat_bank(periods: &[f64]) -> PoseBank {
+        let clips = Array3::from_shape_fn((periods.len(), 200, 73), |(c, f, _)| (c * 1000 + f) as f32);
+        let infos = periods
+            .iter()
+            .enumerate()
+            .map(|(c, &p)| ClipInfo {
+                dance: format!("DANCE_C_{c}"),
+                start: 0,
+                style: crate::motion::dataset::Style::ChaCha,
+                beats: (0..).map(|k| 3.0 + p * k as f64).take_while(|b| *b <= 199.0).collect(),
+                bar: 4,
+                energy: 1.0,
+            })
+            .collect();
+        PoseBank::new(clips).unwrap().with_meta(BankMeta { made_by: "test".into(), fps: 25.0, clips: infos }).unwrap()
+    }
+
+    /// A song of `n` frames with beats every `period` frames from frame `first`, four a bar.
+    fn song(period: f64, first: f64, n: usize) -> SongCues {
+        let beats: Vec<f64> = (0..).map(|k| (first + period * k as f64) / 25.0).take_while(|t| *t * 25.0 < n as f64).collect();
+        let down: Vec<f64> = beats.iter().step_by(4).copied().collect();
+        SongCues::new(&beats, &down, &vec![1.0; n], 25.0, n, 12.0)
+    }
+
+    #[test]
+    fn retimed_clips_put_their_beats_on_the_songs_beats() {
+        let b = beat_bank(&[12.0; 6]);
+        // Song beats every 10 frames from frame 4: clips of 12-frame beats play 1.2 times as fast.
+        let cues = song(10.0, 4.0, 400);
+        for seed in 0..6 {
+            let sc = b.scaffold_to(seed, &cues, 400, 25, &[]).unwrap();
+            assert!(sc.poses.len() > 30);
+            let mut last: Option<(usize, f32)> = None;
+            for (frame, pose) in &sc.poses {
+                // On a song beat, and the clip's pose on one of its own beats.
+                assert_eq!((frame - 4) % 10, 0, "seed {seed}: pose at {frame}");
+                let (clip, at) = ((pose[0] / 1000.0).floor() as usize, pose[0] % 1000.0);
+                assert!(((at - 3.0) / 12.0 - ((at - 3.0) / 12.0).round()).abs() < 1e-3, "seed {seed}: clip frame {at}");
+                // Within a clip the clip's time only moves forward, one clip beat per song beat.
+                if let Some((c, a)) = last.filter(|l| l.0 == clip) {
+                    assert!((at - a - 12.0).abs() < 1e-3, "seed {seed}: {a} → {at} in clip {c}");
+                }
+                last = Some((clip, at));
+            }
+            // The seed rows are the first clip played at the song's pace: 1.2 clip frames a frame.
+            let steps: Vec<f32> = sc.seed.column(0).windows(2).into_iter().map(|w| w[1] - w[0]).collect();
+            assert!(steps.iter().all(|d| (d - 1.2).abs() < 1e-3), "{steps:?}");
+        }
+    }
+
+    #[test]
+    fn the_song_chooses_the_clips_and_the_seed_chooses_among_them() {
+        // Clips 0–4 beat every 10 frames, clips 5–9 every 16.
+        let b = beat_bank(&[10.0, 10.0, 10.0, 10.0, 10.0, 16.0, 16.0, 16.0, 16.0, 16.0]);
+        let (fast, slow) = (song(10.0, 0.0, 300), song(16.0, 0.0, 300));
+        let clips = |sc: &Scaffold| -> Vec<usize> { sc.poses.iter().map(|p| (p.1[0] / 1000.0).floor() as usize).chain([sc.start.0]).collect() };
+        let mut starts = std::collections::BTreeSet::new();
+        for seed in 0..8 {
+            let (a, z) = (b.scaffold_to(seed, &fast, 300, 25, &[]).unwrap(), b.scaffold_to(seed, &slow, 300, 25, &[]).unwrap());
+            assert!(clips(&a).iter().all(|&c| c < 5), "seed {seed}: {:?}", clips(&a));
+            assert!(clips(&z).iter().all(|&c| c >= 5), "seed {seed}: {:?}", clips(&z));
+            assert_ne!(a.poses, z.poses);
+            starts.insert(a.start.0);
+        }
+        assert!(starts.len() >= 2, "the seed draws among the good clips: {starts:?}");
+        // Same seed, same song: the same scaffold.
+        assert_eq!(b.scaffold_to(3, &fast, 300, 25, &[]).unwrap().poses, b.scaffold_to(3, &fast, 300, 25, &[]).unwrap().poses);
+    }
+
+    #[test]
+    fn beat_scaffold_keeps_away_from_user_keys_and_thins_fast_beats() {
+        let b = beat_bank(&[12.0; 4]);
+        let key = LocalKey { frame: 100, local: vec![0.0; POSE_DIM], yaw: 0.0 };
+        let sc = b.scaffold_to(1, &song(12.0, 0.0, 300), 300, 25, std::slice::from_ref(&key)).unwrap();
+        assert!(sc.poses.iter().all(|(f, _)| f.abs_diff(100) >= 12));
+        assert!(sc.poses.iter().all(|(f, _)| *f >= 25 && *f < 300));
+        // Beats every 6 frames: a pose every other beat.
+        let fast = b.scaffold_to(1, &song(6.0, 0.0, 300), 300, 25, &[]).unwrap();
+        assert!(fast.poses.windows(2).all(|p| p[1].0 - p[0].0 == 12), "{:?}", fast.poses.iter().map(|p| p.0).collect::<Vec<_>>());
+        // Beats every 24 frames: poses on half beats too.
+        let slow = b.scaffold_to(1, &song(24.0, 0.0, 300), 300, 25, &[]).unwrap();
+        assert!(slow.poses.len() > 20);
+        assert!(slow.poses.windows(2).all(|p| p[1].0 - p[0].0 == 12));
+        // Without the clips' beats there is no music-following scaffold.
+        assert!(bank().scaffold_to(1, &song(12.0, 0.0, 300), 300, 5, &[]).is_none());
+    }
+
+    #[test]
+    fn bank_meta_round_trips_beside_the_bank_and_is_checked() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join(POSE_BANK_FILE);
+        let b = beat_bank(&[12.0, 15.0]);
+        b.save(&p).unwrap();
+        assert!(dir.path().join(POSE_BANK_META_FILE).exists());
+        assert_eq!(PoseBank::load(&p).unwrap().meta(), b.meta());
+        let mut meta = b.meta().unwrap().clone();
+        meta.clips[0].beats.push(250.0);
+        assert!(PoseBank::new(b.clips.clone()).unwrap().with_meta(meta.clone()).is_err());
+        meta.clips.pop();
+        assert!(PoseBank::new(b.clips.clone()).unwrap().with_meta(meta).is_err());
     }
 
     #[test]

@@ -1,5 +1,6 @@
 //! A trained key-pose transformer folder (`model.json`, `weights.safetensors`, `pose_bank.safetensors`)
-//! and the served generation path: seed and scaffold drawn by the job's seed ([`super::scaffold`]),
+//! and the served generation path: seed and scaffold drawn by the job's seed to the song's beats
+//! ([`super::scaffold`]),
 //! the network over overlapping windows, root height from the predicted foot clearance, and the
 //! exact pass through the user's key poses ([`super::keys`]).
 use std::path::Path;
@@ -9,6 +10,7 @@ use serde::{Deserialize, Serialize};
 use tch::Tensor;
 
 use super::keys::{bridge_keys, jump_frames, local_keys, normalize_key, pass_through_keys, pass_through_yaws, LocalKey, BRIDGE_HALF, JUMP_HALF};
+use super::beats::SongCues;
 use super::scaffold::{PoseBank, Scaffold, POSE_BANK_FILE};
 use super::{Config, KeyposeTransformer};
 use crate::models::folder;
@@ -170,9 +172,22 @@ impl Served {
         &self.file
     }
 
-    /// The seed rows and scaffold the job's seed draws, or none without a pose bank.
-    pub fn scaffold(&self, seed: u64, frames: usize, keys: &[LocalKey]) -> Option<Scaffold> {
-        self.bank.as_ref().map(|b| b.scaffold(seed, frames, self.file.config.seed_len as usize, self.file.extra.scaffold_spacing, keys))
+    /// The seed rows and scaffold the job's seed draws for the song of `cues`, or none without a
+    /// pose bank. A bank without its clips' beats ([`super::scaffold::BankMeta`]) draws by the seed alone.
+    pub fn scaffold(&self, seed: u64, cues: &SongCues, frames: usize, keys: &[LocalKey]) -> Option<Scaffold> {
+        let bank = self.bank.as_ref()?;
+        let ts = self.file.config.seed_len as usize;
+        let on = self.file.extra.scaffold_spacing > 0;
+        on.then(|| bank.scaffold_to(seed, cues, frames, ts, keys)).flatten().or_else(|| Some(bank.scaffold(seed, frames, ts, self.file.extra.scaffold_spacing, keys)))
+    }
+
+    /// What the scaffold hears of the song: the analysis's beats and downbeats (the ones the
+    /// report measures against) and the onset strength of the model's own features `[n, 15]`.
+    pub fn cues(&self, audio: &crate::audio::DecodedAudio, feats: &Array2<f32>) -> Result<SongCues, ModelError> {
+        let analysis = crate::audio::analyze(audio)?;
+        let onset: Vec<f32> = feats.column(crate::audio::features::KEYPOSE_DIM - 1).to_vec();
+        let fallback = self.file.extra.scaffold_spacing.max(1) as f64;
+        Ok(SongCues::new(&analysis.beat_times, &analysis.downbeat_times, &onset, self.file.fps, feats.nrows(), fallback))
     }
 }
 
@@ -193,6 +208,8 @@ impl DanceModel for Served {
         progress.report(Stage::Features, 0.0)?;
         let feats = crate::audio::features::keypose(req.audio, fps, 0.0, n)?;
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?);
+        // Only a bank with its clips' beats listens to the song; the analysis is skipped without.
+        let cues = if self.bank.as_ref().is_some_and(|b| b.meta().is_some()) { Some(self.cues(req.audio, &feats)?) } else { None };
         progress.report(Stage::Features, 1.0)?;
         let given = match req.seed_motion {
             Some(m) if m.num_frames() > 0 => {
@@ -213,7 +230,10 @@ impl DanceModel for Served {
         // The dance continues on a given seed's floor, so its frames come back where they were.
         let floor = given.as_ref().map_or(0.0, |g| g.2);
         let given = given.map(|(f, s, _)| (f, s));
-        let plan = self.scaffold(req.seed, n, &keys);
+        let plan = match &cues {
+            Some(cues) => self.scaffold(req.seed, cues, n, &keys),
+            None => self.bank.as_ref().map(|b| b.scaffold(req.seed, n, self.file.config.seed_len as usize, self.file.extra.scaffold_spacing, &keys)),
+        };
         let keep_seed = given.is_some();
         // A given seed motion wins over the drawn one; the scaffold stays either way.
         let seed = given.or_else(|| plan.as_ref().map(|p| (p.seed.clone(), RootStart::default())));

@@ -15,7 +15,7 @@ use tch::{Device, Kind, Tensor};
 
 use super::{batch_tensor, load_sequences, window_starts, write_atomic, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError, Trainer};
 use crate::models::folder;
-use crate::models::keypose_transformer::scaffold::{PoseBank, POSE_BANK_FILE};
+use crate::models::keypose_transformer::scaffold::{BankMeta, ClipInfo, PoseBank, POSE_BANK_FILE};
 use crate::models::keypose_transformer::served::RootHeight;
 use crate::models::to_tensor;
 use crate::models::keypose_transformer::{
@@ -55,6 +55,9 @@ pub struct Options {
     /// Do not train: re-run the test-split evaluation of the model already in `--out` and rewrite
     /// its `eval.json`.
     pub eval_only: bool,
+    /// Do not train: redraw the pose bank (the same clips for the same `--seed`, `--bank-clips` and
+    /// `--bank-frames`) with each clip's source and beats, into `--out`.
+    pub bank_only: bool,
 }
 
 impl Default for Options {
@@ -75,6 +78,7 @@ impl Default for Options {
             eval_keys: 4,
             seed: 2023,
             eval_only: false,
+            bank_only: false,
         }
     }
 }
@@ -146,6 +150,16 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         write_atomic(&out.join("eval.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
         return Ok(Vec::new());
     }
+    if opts.bank_only {
+        let ds = Dataset::open(&opts.common.data)?;
+        let mut train = load_sequences(&ds, ds.train_ids(), crate::audio::features::keypose)?;
+        train.iter_mut().for_each(|s| to_clearance(&mut s.poses));
+        std::fs::create_dir_all(&out).map_err(|source| TrainError::Io { path: out.clone(), source })?;
+        let bank = pose_bank(&ds, &train, opts)?;
+        bank.save(&out.join(POSE_BANK_FILE))?;
+        tracing::info!(clips = opts.bank_clips, out = %out.display(), "pose bank redrawn");
+        return Ok(Vec::new());
+    }
     let data = Data::load(&opts.common.data, crate::audio::features::keypose, |seq| {
         to_clearance(&mut seq.poses);
         Ok(())
@@ -164,7 +178,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         training: t.record(opts.lr, opts.batch, opts.seed, KeySampling { steps: steps.get(), max_keys: opts.max_keys, velocity_weight: opts.velocity_weight }),
         extra: Serving { root_height: RootHeight::FootClearance, scaffold_spacing: opts.scaffold_spacing },
     };
-    pose_bank(&data.train_raw, opts.bank_clips, opts.bank_frames, opts.seed)?
+    pose_bank(&data.dataset, &data.train_raw, opts)?
         .save(&trainer.out.join(POSE_BANK_FILE))
         .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?;
     trainer.run(
@@ -212,29 +226,74 @@ fn to_clearance(poses: &mut Array2<f32>) {
 }
 
 /// `clips` clips of `frames` frames from the train dances (features as the model predicts them,
-/// denormalised), at seeded starts spread over the dances in proportion to their length.
-fn pose_bank(train: &[Sequence], clips: usize, frames: usize, seed: u64) -> Result<PoseBank, TrainError> {
+/// denormalised), at seeded starts spread over the dances in proportion to their length: the
+/// dance (index into `train`) and start frame of each.
+fn bank_picks(train: &[Sequence], clips: usize, frames: usize, seed: u64) -> Result<Vec<(usize, usize)>, TrainError> {
     let mut rng = StdRng::seed_from_u64(seed ^ 0xBA_4C);
-    let long: Vec<&Sequence> = train.iter().filter(|s| s.poses.nrows() >= frames).collect();
-    let total: usize = long.iter().map(|s| s.poses.nrows() - frames + 1).sum();
+    let long: Vec<usize> = (0..train.len()).filter(|&i| train[i].poses.nrows() >= frames).collect();
+    let total: usize = long.iter().map(|&i| train[i].poses.nrows() - frames + 1).sum();
     if long.is_empty() || clips == 0 {
         return Err(TrainError::NoWindows(frames));
     }
-    let width = long[0].poses.ncols();
-    let mut bank = ndarray::Array3::<f32>::zeros((clips, frames, width));
+    let mut picks = Vec::with_capacity(clips);
     for c in 0..clips {
         // Stratified over the concatenated start positions, jittered within each stratum.
         let mut at = (c * total) / clips + rng.gen_range(0..(total / clips).max(1));
-        for seq in &long {
-            let n = seq.poses.nrows() - frames + 1;
+        for &i in &long {
+            let n = train[i].poses.nrows() - frames + 1;
             if at < n {
-                bank.slice_mut(s![c, .., ..]).assign(&seq.poses.slice(s![at..at + frames, ..]));
+                picks.push((i, at));
                 break;
             }
             at -= n;
         }
     }
-    PoseBank::new(bank).map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))
+    Ok(picks)
+}
+
+/// The pose bank ([`bank_picks`] with the options' seed, clip count and length) with each clip's
+/// source, style and song beats: every train dance's song is analysed (`audio::analyze`) and its
+/// beats put on the clip's frames; the energy is the mean onset strength of the dance's music
+/// features (`train[..].music`, `audio::features::keypose`, raw) under the clip.
+fn pose_bank(ds: &Dataset, train: &[Sequence], opts: &Options) -> Result<PoseBank, TrainError> {
+    let (clips, frames) = (opts.bank_clips, opts.bank_frames);
+    let picks = bank_picks(train, clips, frames, opts.seed)?;
+    let width = train[picks[0].0].poses.ncols();
+    let mut bank = ndarray::Array3::<f32>::zeros((clips, frames, width));
+    let mut infos = Vec::with_capacity(clips);
+    let mut analysed: std::collections::HashMap<usize, (crate::motion::dataset::Dance, crate::audio::Analysis)> = std::collections::HashMap::new();
+    for (c, &(i, at)) in picks.iter().enumerate() {
+        let seq = &train[i];
+        bank.slice_mut(s![c, .., ..]).assign(&seq.poses.slice(s![at..at + frames, ..]));
+        let (dance, analysis) = match analysed.entry(i) {
+            std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::hash_map::Entry::Vacant(e) => {
+                let dance = ds.load(&seq.id)?;
+                let analysis = crate::audio::analyze(&crate::audio::decode_path(&dance.audio_path)?)?;
+                e.insert((dance, analysis))
+            }
+        };
+        let fps = dance.motion.fps;
+        let first = dance.song_time_s(at);
+        let on_clip = |times: &[f64]| -> Vec<f64> { times.iter().map(|t| (t - first) * fps).filter(|f| *f >= 0.0 && *f <= (frames - 1) as f64).collect() };
+        let beats = on_clip(&analysis.beat_times);
+        let bar = crate::models::keypose_transformer::beats::median_step(&analysis.downbeat_times)
+            .zip(crate::models::keypose_transformer::beats::median_step(&analysis.beat_times))
+            .map_or(4, |(d, b)| if (d / b).round() as usize == 3 { 3 } else { 4 });
+        let onset = seq.music.slice(s![at..at + frames, crate::audio::features::KEYPOSE_DIM - 1]);
+        let energy = onset.iter().map(|v| f64::from(*v)).sum::<f64>() / frames as f64;
+        tracing::info!(clip = c, dance = %seq.id, start = at, beats = beats.len(), tempo = analysis.tempo_bpm, bar, energy, "bank clip");
+        infos.push(ClipInfo { dance: seq.id.clone(), start: at, style: dance.style, beats, bar, energy });
+    }
+    let meta = BankMeta {
+        made_by: format!(
+            "choreo train keypose-transformer --bank-only --seed {} --bank-clips {clips} --bank-frames {frames}: {clips} clips of {frames} frames from the train split at seeded starts spread over the dances in proportion to their length (the clips training writes for the same options); beats from audio::analyze of each dance's whole song, put on the clip's frames with Dance::song_time_s; energy = mean onset strength (audio::features::keypose column 14) under the clip",
+            opts.seed
+        ),
+        fps: crate::motion::MOTION_FPS,
+        clips: infos,
+    };
+    Ok(PoseBank::new(bank)?.with_meta(meta)?)
 }
 
 /// Draws 0..=max_keys distinct key frames in `[T′, T)` (the seed already fixes the first frames).

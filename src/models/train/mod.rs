@@ -476,7 +476,11 @@ impl Training {
             Self::KeyposeTransformer(o) => {
                 let logs = keypose_transformer::train(o)?;
                 let out = o.common.out_dir(crate::models::keypose_transformer::ID);
-                Ok(if o.eval_only { format!("evaluated {} (eval.json rewritten)", out.display()) } else { format!("trained {} epochs into {}", logs.len(), out.display()) })
+                Ok(if o.eval_only {
+                    format!("evaluated {} (eval.json rewritten)", out.display())
+                } else if o.bank_only {
+                    format!("redrew the pose bank in {}", out.display())
+                } else { format!("trained {} epochs into {}", logs.len(), out.display()) })
             }
             Self::Tsmt(o) => {
                 let logs = tsmt::train(o)?;
