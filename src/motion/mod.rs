@@ -14,6 +14,7 @@ use std::path::PathBuf;
 
 use ndarray::Array3;
 
+pub mod beat_align;
 pub mod bvh;
 pub mod dataset;
 pub mod export;
