@@ -267,7 +267,7 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, EvalEr
 /// export's rigid skeleton with the key poses as anchors (what motion.json holds). `beats` are
 /// the song's on the dance's clock. Also what the beat-align stage did.
 pub(super) fn as_served(raw: Motion, keys: &[KeyPose], beats: &[f64]) -> Result<(Motion, BeatAlignSummary), MotionError> {
-    let (finished, summary) = crate::motion::after_model(raw, beats, keys, crate::motion::MotionStages::default());
+    let (finished, summary) = crate::motion::after_model(raw, beats, keys, 0.0, crate::motion::MotionStages::default());
     Ok((crate::motion::serve(&finished, keys)?.motion, summary.unwrap_or_default()))
 }
 

@@ -56,6 +56,8 @@ pub const GRID_FRACTIONS: [f64; 6] = [1.0 / 6.0, 1.0 / 4.0, 1.0 / 3.0, 1.0 / 2.0
 pub const SLOPE_RANGE: (f64, f64) = (0.7, 1.4);
 /// The band searched for the motion's step rate (Hz), the metric's.
 pub const STEP_BAND_HZ: (f64, f64) = (0.25, 3.0);
+/// The metric's tempo-lock tolerance (3 %): a grid this close to the band's edge is left out.
+const LOCK_TOLERANCE: f64 = 0.03;
 /// Half-width of the band-pass around the step rate, in natural log of frequency (±28 %): narrow
 /// enough for one minimum per cycle, wide enough to follow a rhythm that wanders.
 pub const BAND_WIDTH_LN: f64 = 0.25;
@@ -154,7 +156,12 @@ pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> War
     let mut best: Option<(f64, f64, Vec<Pair>, f64, usize)> = None; // (cost, q, pairs, locked s, grid points)
     for &q in &GRID_FRACTIONS {
         let slope = q * clock.rate_hz / step_hz;
-        if !(SLOPE_RANGE.0..=SLOPE_RANGE.1).contains(&slope) {
+        // A grid outside the band the step rate is read in (with the lock's tolerance) cannot be
+        // the served dance's step rate: a waltz at 87 bpm stepped every 6 beats (0.24 Hz) reads
+        // as 0.25 Hz, 4 % off (eval 2026-11-25: dancenet's four waltz test dances).
+        let grid_hz = q * clock.rate_hz;
+        let in_band = grid_hz >= STEP_BAND_HZ.0 * (1.0 + LOCK_TOLERANCE) && grid_hz <= STEP_BAND_HZ.1 / (1.0 + LOCK_TOLERANCE);
+        if !in_band || !(SLOPE_RANGE.0..=SLOPE_RANGE.1).contains(&slope) {
             continue;
         }
         for start in grid_phases(q) {
@@ -568,6 +575,21 @@ mod tests {
 
     fn beats_for(seconds: f64, period: f64) -> Vec<f64> {
         beats(seconds, period, 0.1)
+    }
+
+    #[test]
+    fn a_grid_below_the_step_band_is_not_chosen() {
+        // 87 bpm: every 6 beats is 0.24 Hz, under the metric's 0.25 Hz floor. Steps at 0.25 Hz
+        // would need almost no warp onto it, and are left alone (every 4 beats is out of reach);
+        // steps at 0.33 Hz go to every 4 beats (0.36 Hz).
+        let beats = beats(90.0, 60.0 / 87.0, 0.2);
+        let (_, s) = align(&periodic(90.0, 0.25), &beats, &[]);
+        assert!(!s.applied, "{s:?}");
+        let motion = periodic(90.0, 0.33);
+        let (aligned, s) = align(&motion, &beats, &[]);
+        assert!(s.applied && s.grid_fraction == 0.25, "{s:?}");
+        let after = tempo_lock(aligned.positions.view(), FPS, &beats).expect("measured");
+        assert!(after.locked, "{after:?} {s:?}");
     }
 
     #[test]

@@ -70,10 +70,14 @@ impl Default for MotionStages {
 /// The motion stages after any model, in order: [`beat_align::align`] (timing first, so the feet
 /// are planted on the motion that is served; the key poses' frames map to themselves), then
 /// [`finish`]. `beat_times_s` are the song's beats on the dance's clock. Jobs, `choreo generate`
-/// and `choreo eval` all go through it. The summary is `None` when alignment was not asked for.
-pub fn after_model(motion: Motion, beat_times_s: &[f64], key_poses: &[KeyPose], stages: MotionStages) -> (Motion, Option<beat_align::BeatAlignSummary>) {
+/// and `choreo eval` all go through it. `seed_s`: the length of the seed motion the request
+/// brought (0 without), whose frames open the dance as they are: every frame of that span is
+/// fixed, so the warp is the identity there. The summary is `None` when alignment was not asked for.
+pub fn after_model(motion: Motion, beat_times_s: &[f64], key_poses: &[KeyPose], seed_s: f64, stages: MotionStages) -> (Motion, Option<beat_align::BeatAlignSummary>) {
     let (motion, summary) = if stages.beat_align {
-        let fixed: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
+        let seed_frames = (seed_s * motion.fps).ceil().max(0.0) as usize;
+        let mut fixed: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
+        fixed.extend((0..=seed_frames.min(motion.num_frames())).map(|f| f as f64 / motion.fps));
         let (aligned, summary) = beat_align::align(&motion, beat_times_s, &fixed);
         (aligned, Some(summary))
     } else {

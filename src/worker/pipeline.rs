@@ -118,7 +118,7 @@ impl Pipeline {
         let finished = {
             let _timer = StageTimer::start("generate", Stage::BeatAlign);
             let stages = MotionStages { beat_align: true, plant_feet: options.plant_feet };
-            after_model(generated.motion, analysis, decoded.duration_s, &options.key_poses, stages)
+            after_model(generated.motion, analysis, decoded.duration_s, &options.key_poses, seed_motion.as_ref(), stages)
         };
         progress.report(Stage::Export, MODEL_END)?;
         let _timer = StageTimer::start("generate", Stage::Export);
@@ -189,9 +189,11 @@ pub struct Finished {
 /// The motion stages after a model ([`crate::motion::after_model`]: beat alignment, then the feet
 /// planted), with the network's own tempo lock measured before them for the report. Jobs and
 /// `choreo generate` both call it, so both serve the same dance.
-pub fn after_model(model_motion: Motion, analysis: Analysis, song_duration_s: f64, key_poses: &[KeyPose], stages: MotionStages) -> Finished {
+/// `seed_motion`: the request's, whose frames open the dance and are kept as they are.
+pub fn after_model(model_motion: Motion, analysis: Analysis, song_duration_s: f64, key_poses: &[KeyPose], seed_motion: Option<&Motion>, stages: MotionStages) -> Finished {
     let tempo_lock_before = crate::metrics::musicality::tempo_lock(model_motion.positions.view(), model_motion.fps, &analysis.beat_times);
-    let (motion, summary) = crate::motion::after_model(model_motion, &analysis.beat_times, key_poses, stages);
+    let seed_s = seed_motion.map_or(0.0, Motion::duration_s);
+    let (motion, summary) = crate::motion::after_model(model_motion, &analysis.beat_times, key_poses, seed_s, stages);
     Finished {
         motion,
         analysis,

@@ -124,7 +124,7 @@ pub fn generate_decoded(
     clock.report(Stage::Analyze, 0.0)?;
     let analysis = audio::analyze(request.audio)?;
     clock.report(Stage::BeatAlign, 0.0)?;
-    let finished = super::pipeline::after_model(generated.motion, analysis, request.audio.duration_s, request.key_poses, stages);
+    let finished = super::pipeline::after_model(generated.motion, analysis, request.audio.duration_s, request.key_poses, request.seed_motion, stages);
     let files = super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| clock.enter(stage))?;
     Ok(Generated { motion: finished.motion, files: files.files.iter().map(|f| out.join(f)).collect(), stages: clock.finish() })
 }
