@@ -81,7 +81,7 @@ pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: O
     let raw: Option<Vec<&crate::metrics::musicality::Musicality>> = scored.iter().map(|(e, _)| e.musicality_raw.as_ref()).collect();
     EvalRow {
         name: name.into(),
-        musicality_raw: raw.filter(|r| !r.is_empty()).map(|r| crate::metrics::musicality::MusicalitySummary::of(r)),
+        musicality_raw: raw.filter(|r| !r.is_empty()).map(crate::metrics::musicality::MusicalitySummary::of),
         scores,
         multimodality: multimodality_v,
         seed_distance_m: seed_mean,
