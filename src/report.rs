@@ -47,6 +47,22 @@ pub struct Report {
     /// The style danced, for models that dance one: asked for, or predicted from the song.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub style: Option<crate::models::StyleChoice>,
+    /// What the beat-align stage did ([`crate::motion::beat_align`]), with the network's own
+    /// tempo lock before it; absent where the stage did not run (`choreo generate
+    /// --no-beat-align`, reports written before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beat_align: Option<BeatAlignReport>,
+}
+
+/// The beat-align stage in report.json: its summary, and the tempo lock of the motion as the
+/// network made it (`scores.musicality.tempo_lock` is the served dance's), so a report shows
+/// how much of the lock is the network's own.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct BeatAlignReport {
+    #[serde(flatten)]
+    pub summary: crate::motion::beat_align::BeatAlignSummary,
+    /// `None` where the network's dance is too short or has too few beats to measure.
+    pub tempo_lock_before: Option<crate::metrics::musicality::TempoLock>,
 }
 
 /// Builds the report of `motion` danced to the song `analysis` describes (motion frame 0 at song
@@ -66,6 +82,7 @@ pub fn build(motion: &Motion, analysis: &Analysis, key_poses: &[KeyPose], refere
         reference: format!("{} ({} dances)", reference.source, reference.dances.len()),
         model_key_pose_error_cm: None,
         style: None,
+        beat_align: None,
     })
 }
 

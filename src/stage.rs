@@ -29,6 +29,9 @@ pub enum Stage {
     Encode,
     /// A model's autoregressive loop, one frame (or key pose) after another.
     Generate,
+    /// The network's steps moved onto the song's beats ([`crate::motion::beat_align`]), then the
+    /// feet planted ([`crate::motion::finish`]).
+    BeatAlign,
     /// The rigid skeleton and the files a client downloads (BVH, JSON, glb).
     Export,
     /// report.json and the preview contact sheet.
@@ -39,13 +42,14 @@ pub enum Stage {
 
 impl Stage {
     /// Every stage, in the order a generate job meets them.
-    pub const ALL: [Stage; 9] = [
+    pub const ALL: [Stage; 10] = [
         Stage::Claimed,
         Stage::DecodeAudio,
         Stage::Analyze,
         Stage::Features,
         Stage::Encode,
         Stage::Generate,
+        Stage::BeatAlign,
         Stage::Export,
         Stage::Report,
         Stage::Done,
@@ -60,6 +64,7 @@ impl Stage {
             Stage::Features => "features",
             Stage::Encode => "encode",
             Stage::Generate => "generate",
+            Stage::BeatAlign => "beat-align",
             Stage::Export => "export",
             Stage::Report => "report",
             Stage::Done => "done",

@@ -446,18 +446,23 @@ mod real_data {
         assert!((t.followed_ratio - 1.2 / 0.85).abs() < 1e-9);
         assert!(t.measured <= 4 && t.tempo_locked <= t.measured && t.step_rate_ratios.len() <= 2, "{t:?}");
         assert!(t.step_rate_ratios.iter().all(|x| x.is_finite() && *x > 0.0), "{t:?}");
+        assert!(t.measured_raw <= 4 && t.tempo_locked_raw <= t.measured_raw && t.step_rate_ratios_raw.len() <= 2, "{t:?}");
         assert!(r.rows.iter().all(|x| x.dances.iter().all(|d| d.song != "trumpet_loop_90bpm.ogg")), "test rows hold test songs only");
         for pair in [&r.rows[2..4], &r.extra_rows[..]] {
             let (served, raw) = (&pair[0], &pair[1]);
             assert_eq!(served.scores.dances, raw.scores.dances);
             assert_eq!(served.scores.dances, 2 * served.dances.iter().map(|d| &d.song).collect::<std::collections::BTreeSet<_>>().len(), "two seeds per song");
-            // One dance per seed, finished twice: grounding and planting move whole frames (down
-            // and sideways), and the served one is then fitted to one rigid skeleton (bone lengths
-            // fixed, within a centimetre here), so the root-relative poses (hence the seed
-            // distance) agree to a centimetre, and the served dance is on the floor at least once
-            // in any two seconds.
+            // One dance per seed, finished twice: the served one is beat-aligned (the same poses,
+            // retimed: each seed's dance by its own warp, so the frames compared between seeds
+            // shift), grounded and planted (whole frames moved down and sideways), then fitted to
+            // one rigid skeleton, so the root-relative poses' seed distance stays within a few
+            // centimetres of the raw one's (0.291 vs 0.297 m on the test songs, 2026-11-25), and
+            // the served dance is on the floor at least once in any two seconds.
             let (a, b) = (served.seed_distance_m.expect("seed pairs"), raw.seed_distance_m.expect("seed pairs"));
-            assert!((a - b).abs() < 0.01, "{a} vs {b}");
+            assert!((a - b).abs() < 0.05, "{a} vs {b}");
+            // Every served dance says what beat alignment did and keeps the network's own musicality.
+            assert!(served.musicality_raw.is_some() && served.dances.iter().all(|d| d.beat_align.is_some() && d.musicality_raw.is_some()));
+            assert!(raw.dances.iter().all(|d| d.beat_align.is_none()));
             let p = &served.scores.mean.physical;
             assert!(p.lowest_foot_m.p5.abs() < 0.05, "{p:?}");
             assert!(served.scores.mean.verdict.get("seed-distance").is_some_and(|c| c.pass.is_some()));

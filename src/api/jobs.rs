@@ -115,7 +115,7 @@ pub struct JobView {
     pub style: Option<crate::models::StyleChoice>,
     pub status: Status,
     /// What the job is doing now: one kind of work (`decode-audio`, `analyze`, `features`, `encode`,
-    /// `generate`, `export`), or `claimed` / `done` as the queue marks it.
+    /// `generate`, `beat-align`, `export`), or `claimed` / `done` as the queue marks it.
     pub stage: Option<crate::stage::Stage>,
     /// 0..=1.
     pub progress: f64,

@@ -36,6 +36,10 @@ args_into! {
         /// Keep the model's motion as it came: do not plant the feet (`motion::feet`).
         #[arg(long)]
         no_plant_feet: bool,
+        /// Keep the network's timing: do not move its steps onto the song's beats
+        /// (`motion::beat_align`), to see what the network does on its own.
+        #[arg(long)]
+        no_beat_align: bool,
         /// The style to dance (models that take one): waltz, rumba, cha-cha or tango. Default: the
         /// model's classifier picks one from the song.
         #[arg(long)]

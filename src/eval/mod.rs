@@ -6,9 +6,11 @@
 //!   - **Mismatched real**: each test song paired with a real *train* dance (chosen by the seed),
 //!     cropped to the test dance's length: real motion that ignores this music. A rhythm metric
 //!     that cannot tell Real from Mismatched real measures nothing.
-//!   - two rows per served model: as served (after [`crate::motion::finish`], feet planted, and
-//!     [`crate::motion::serve`], the export's rigid skeleton: what motion.json holds) and
-//!     the network's raw output; each dance is generated once and finished both ways.
+//!   - two rows per served model: as served (after [`crate::motion::after_model`], the steps
+//!     moved onto the beats and the feet planted, and [`crate::motion::serve`], the export's rigid
+//!     skeleton: what motion.json holds) and the network's raw output; each dance is generated
+//!     once and finished both ways. Every model dance also keeps the network's own musicality
+//!     (`musicality_raw`), so the served row shows the tempo lock before and after beat alignment.
 //! - **Extra songs**: every audio file of `../shared/audio` (and of each `--songs` folder), whole,
 //!   danced by each model; no real dance exists for them, so only model rows.
 //!
@@ -44,6 +46,7 @@ use crate::metrics::MetricsError;
 use crate::models::motion_style::{MotionStyle, StyleError};
 use crate::models::{ModelError, ModelId, Registry};
 use crate::motion::dataset::{Dance, Dataset};
+use crate::motion::beat_align::BeatAlignSummary;
 use crate::motion::{KeyPose, Motion, MotionError};
 use crate::report::preview::PreviewError;
 use rows::{crop, model_rows, row, Quiet};
@@ -189,6 +192,10 @@ pub struct EvalRow {
     /// The smallest such distance (issue 25's bar: ≥ 0.15 m; two real dances are 0.34 apart).
     #[serde(default)]
     pub song_distance_min_m: Option<f64>,
+    /// The tempo lock, arms and knees of the network's own motion, before the beat-align stage
+    /// and the feet (model rows only; `scores.musicality` is the row's motion's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub musicality_raw: Option<crate::metrics::musicality::MusicalitySummary>,
     /// TSMT's A-seq-D, I-seq-D and S-music-D ([`crate::metrics::diversity`]) on z-normalised kinetic
     /// windows; S-music-D only where one song has dances from several seeds.
     #[serde(default)]
@@ -206,6 +213,12 @@ pub struct EvalDance {
     pub motion: String,
     pub seconds: f64,
     pub scores: crate::metrics::score::DanceScores,
+    /// Model dances: the network's own motion's musicality, before beat alignment and the feet.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub musicality_raw: Option<crate::metrics::musicality::Musicality>,
+    /// Served model dances: what the beat-align stage did.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beat_align: Option<BeatAlignSummary>,
 }
 
 /// Everything `choreo eval` computed.
@@ -249,10 +262,13 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, EvalEr
     Ok(stats)
 }
 
-/// A model's motion as a user downloads it: feet planted (the motion stage every job runs), then
-/// fitted to the export's rigid skeleton with the key poses as anchors (what motion.json holds).
-pub(super) fn as_served(raw: Motion, keys: &[KeyPose]) -> Result<Motion, MotionError> {
-    Ok(crate::motion::serve(&crate::motion::finish(raw, true), keys)?.motion)
+/// A model's motion as a user downloads it: its steps moved onto the song's beats and its feet
+/// planted (the motion stages every job runs, [`crate::motion::after_model`]), then fitted to the
+/// export's rigid skeleton with the key poses as anchors (what motion.json holds). `beats` are
+/// the song's on the dance's clock. Also what the beat-align stage did.
+pub(super) fn as_served(raw: Motion, keys: &[KeyPose], beats: &[f64]) -> Result<(Motion, BeatAlignSummary), MotionError> {
+    let (finished, summary) = crate::motion::after_model(raw, beats, keys, 0.0, crate::motion::MotionStages::default());
+    Ok((crate::motion::serve(&finished, keys)?.motion, summary.unwrap_or_default()))
 }
 
 /// Runs the evaluation and returns the rows (printing nothing; without [`SHARED_SONGS`] the
@@ -273,7 +289,7 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
     let mut real = Vec::new();
     for (d, s) in eval_dances.iter().zip(&songs) {
         let sc = score_dance(&d.motion, &s.beats, &[], &reference)?;
-        real.push((EvalDance { song: s.name.clone(), motion: d.id.clone(), seconds: d.motion.duration_s(), scores: sc.scores.clone() }, sc));
+        real.push((EvalDance { song: s.name.clone(), motion: d.id.clone(), seconds: d.motion.duration_s(), scores: sc.scores.clone(), musicality_raw: None, beat_align: None }, sc));
     }
     rows.push(row("Real", real, None, &reference));
 
@@ -294,7 +310,7 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
         for o in candidates.choose_multiple(&mut rng, args.mismatch_per_song.max(1)) {
             let m = crop(&o.motion, t);
             let sc = score_dance(&m, &s.beats, &[], &reference)?;
-            mism.push((EvalDance { song: s.name.clone(), motion: o.id.clone(), seconds: m.duration_s(), scores: sc.scores.clone() }, sc));
+            mism.push((EvalDance { song: s.name.clone(), motion: o.id.clone(), seconds: m.duration_s(), scores: sc.scores.clone(), musicality_raw: None, beat_align: None }, sc));
         }
     }
     rows.push(row("Mismatched real", mism, None, &reference));

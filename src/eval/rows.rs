@@ -1,5 +1,6 @@
 //! The rows of `choreo eval`: scored dances grouped into a row (diversity, multimodality, seed
-//! distance), and each model's dances, generated once and finished both ways.
+//! distance), and each model's dances, generated once and finished both ways (served: beat-aligned,
+//! planted, exported; raw: the network's motion as it came).
 use std::path::Path;
 
 use super::songs::{key_poses_of, Song};
@@ -77,8 +78,10 @@ pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: O
         (seed_mean, seed_min) = mean_and_min(per_pair);
         scores.mean.verdict = scores.mean.verdict.clone().with_seed_distance(seed_min);
     }
+    let raw: Option<Vec<&crate::metrics::musicality::Musicality>> = scored.iter().map(|(e, _)| e.musicality_raw.as_ref()).collect();
     EvalRow {
         name: name.into(),
+        musicality_raw: raw.filter(|r| !r.is_empty()).map(crate::metrics::musicality::MusicalitySummary::of),
         scores,
         multimodality: multimodality_v,
         seed_distance_m: seed_mean,
@@ -90,7 +93,7 @@ pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: O
     }
 }
 
-/// The rows of one model: as served (feet planted) and as the network made them, on the test
+/// The rows of one model: as served (beat-aligned, feet planted) and as the network made them, on the test
 /// songs and on the extra songs. Each dance is generated once and finished both ways.
 pub(super) struct ModelRows {
     pub(super) test: [EvalRow; 2],
@@ -121,15 +124,25 @@ fn dance_songs(
             let raw = model.generate(&req, &mut Quiet).map_err(|source| EvalError::Generate { model: id.into(), song: s.name.clone(), source })?.motion;
             // The motion stage every job runs (feet planted), and the network's motion as it came.
             // Served: planted and exported through the rigid skeleton, as motion.json holds it.
-            let served = as_served(raw.clone(), &keys).map_err(|source| EvalError::Export { model: id.into(), song: s.name.clone(), source })?;
+            // Served: beat-aligned, planted and exported through the rigid skeleton.
+            let (served, aligned) = as_served(raw.clone(), &keys, &s.beats).map_err(|source| EvalError::Export { model: id.into(), song: s.name.clone(), source })?;
             let finished = [served, crate::motion::finish(raw, false)];
             if let Some(dir) = &args.previews {
                 write_preview(dir, id, s, seed, &finished[0], &keys)?;
             }
-            for (v, m) in finished.into_iter().enumerate() {
-                let sc = score_dance(&m, &s.beats, &keys, reference)?;
-                groups[v].push((out.scored[v].len(), m.clone()));
-                let e = EvalDance { song: s.name.clone(), motion: format!("{id}@{seed}"), seconds: m.duration_s(), scores: sc.scores.clone() };
+            let scored = [score_dance(&finished[0], &s.beats, &keys, reference)?, score_dance(&finished[1], &s.beats, &keys, reference)?];
+            // Both rows keep the network's own musicality beside their own.
+            let raw_musicality = scored[1].scores.musicality;
+            for (v, (m, sc)) in finished.into_iter().zip(scored).enumerate() {
+                let e = EvalDance {
+                    song: s.name.clone(),
+                    motion: format!("{id}@{seed}"),
+                    seconds: m.duration_s(),
+                    scores: sc.scores.clone(),
+                    musicality_raw: Some(raw_musicality),
+                    beat_align: (v == 0).then(|| aligned.clone()),
+                };
+                groups[v].push((out.scored[v].len(), m));
                 out.scored[v].push((e, sc));
             }
         }

@@ -94,7 +94,7 @@ pub fn style_control(
         for s in songs {
             let req = GenerateRequest { style: Some(style), ..GenerateRequest::plain(s.audio, seed) };
             let raw = model.generate(&req, progress).map_err(|source| EvalError::Generate { model: format!("{id} ({})", style.name()), song: s.name.to_string(), source })?.motion;
-            let m = super::as_served(raw, &[]).map_err(|source| EvalError::Export { model: id.into(), song: s.name.to_string(), source })?;
+            let (m, _) = super::as_served(raw, &[], s.beats).map_err(|source| EvalError::Export { model: id.into(), song: s.name.to_string(), source })?;
             let sc = score_dance(&m, s.beats, &[], reference)?;
             passing += usize::from(sc.scores.verdict.pass);
             speed += sc.scores.physical.mean_speed_m_s;

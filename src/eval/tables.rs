@@ -151,12 +151,20 @@ fn worst_key_error(r: &EvalRow) -> Option<f64> {
 /// Issue 25's bars on each row: tempo-locked dances (step rate within 3 % of 1/6…1 of the beat
 /// rate; real dances 32 of 43), the stillest arms (≥ 0.43 m/s), the worst knees (≤ 6 %), and
 /// the same seed on two songs (≥ 0.15 m apart).
+/// Beside the row's own tempo lock, the network's before the beat-align stage (model rows).
 fn musicality_table(rows: &[EvalRow]) -> String {
-    let mut out = String::from("| Motion | n | tempo-locked ↑ | arms min (m/s) ↑ | knees backwards max ↓ | same seed, two songs min (m) ↑ |\n|---|---|---|---|---|---|\n");
+    let mut out = String::from("| Motion | n | tempo-locked ↑ | network's own (before beat-align) | arms min (m/s) ↑ | knees backwards max ↓ | same seed, two songs min (m) ↑ |\n|---|---|---|---|---|---|---|\n");
+    let locked = |m: &crate::metrics::musicality::MusicalitySummary| {
+        if m.measured == 0 {
+            "–".to_string()
+        } else {
+            format!("{}/{} ({:.0} %)", m.tempo_locked, m.measured, 100.0 * m.tempo_locked_share)
+        }
+    };
     for r in rows {
         let m = &r.scores.musicality;
-        let locked = if m.measured == 0 { "–".into() } else { format!("{}/{} ({:.0} %)", m.tempo_locked, m.measured, 100.0 * m.tempo_locked_share) };
-        let cells = [r.name.clone(), r.scores.dances.to_string(), locked, f2(m.arm_speed_min_m_s), format!("{:.1} %", 100.0 * m.knee_backward_max), opt(r.song_distance_min_m)];
+        let own = r.musicality_raw.as_ref().map_or_else(|| "–".to_string(), locked);
+        let cells = [r.name.clone(), r.scores.dances.to_string(), locked(m), own, f2(m.arm_speed_min_m_s), format!("{:.1} %", 100.0 * m.knee_backward_max), opt(r.song_distance_min_m)];
         out.push_str(&format!("| {} |\n", cells.join(" | ")));
     }
     out

@@ -35,6 +35,16 @@ pub struct TempoRow {
     pub step_rate_ratios: Vec<f64>,
     /// Median of `step_rate_ratios` (NaN without any).
     pub step_rate_ratio_median: f64,
+    /// The same for the network's own motion, before the beat-align stage (and the feet): how much
+    /// of the lock and the tempo-following is the network's.
+    #[serde(default)]
+    pub measured_raw: usize,
+    #[serde(default)]
+    pub tempo_locked_raw: usize,
+    #[serde(default)]
+    pub step_rate_ratios_raw: Vec<f64>,
+    #[serde(default)]
+    pub step_rate_ratio_median_raw: f64,
     /// What a dancer who follows the tempo gives: fastest / slowest factor.
     pub followed_ratio: f64,
 }
@@ -56,15 +66,16 @@ fn stretched(song: &Path, factor: f64, dir: &Path) -> Result<Song, EvalError> {
 }
 
 /// Every song of `paths` at every factor of `args.tempi`, danced by `model` with the eval's
-/// seeds, as served.
+/// seeds, as served and as the network made it.
 pub(super) fn tempo_row(model: &dyn DanceModel, id: &str, paths: &[std::path::PathBuf], args: &EvalOptions) -> Result<TempoRow, EvalError> {
     let dir = tempfile::tempdir().map_err(|source| EvalError::Io { path: std::env::temp_dir(), source })?;
     let mut tempi = args.tempi.clone();
     tempi.sort_by(f64::total_cmp);
-    let (mut dances, mut measured, mut locked, mut ratios) = (0, 0, 0, Vec::new());
+    // [served, the network's own] for each count.
+    let (mut dances, mut measured, mut locked, mut ratios) = (0, [0; 2], [0; 2], [Vec::new(), Vec::new()]);
     for path in paths {
-        // step rate per (tempo, seed)
-        let mut steps: Vec<Vec<Option<f64>>> = Vec::new();
+        // step rate per (tempo, seed), served and the network's own
+        let mut steps: Vec<Vec<[Option<f64>; 2]>> = Vec::new();
         for &factor in &tempi {
             let song = stretched(path, factor, dir.path())?;
             let mut per_seed = Vec::new();
@@ -73,26 +84,34 @@ pub(super) fn tempo_row(model: &dyn DanceModel, id: &str, paths: &[std::path::Pa
                     .generate(&GenerateRequest::plain(&song.audio, seed), &mut super::rows::Quiet)
                     .map_err(|source| EvalError::Generate { model: id.into(), song: song.name.clone(), source })?
                     .motion;
-                let served = as_served(raw, &[]).map_err(|source| EvalError::Export { model: id.into(), song: song.name.clone(), source })?;
-                let m = Musicality::of(&served, &song.beats);
+                let own = Musicality::of(&raw, &song.beats).tempo_lock;
+                let (served, _) = as_served(raw, &[], &song.beats).map_err(|source| EvalError::Export { model: id.into(), song: song.name.clone(), source })?;
+                let lock = Musicality::of(&served, &song.beats).tempo_lock;
                 dances += 1;
-                if let Some(lock) = m.tempo_lock {
-                    measured += 1;
-                    locked += usize::from(lock.locked);
+                for (n, lock) in [lock, own].into_iter().enumerate() {
+                    if let Some(lock) = lock {
+                        measured[n] += 1;
+                        locked[n] += usize::from(lock.locked);
+                    }
                 }
-                per_seed.push(m.tempo_lock.map(|l| l.step_hz));
+                per_seed.push([lock, own].map(|l| l.map(|l| l.step_hz)));
             }
             steps.push(per_seed);
         }
         if let (Some(slow), Some(fast)) = (steps.first(), steps.last()) {
             if tempi.len() >= 2 {
-                ratios.extend(slow.iter().zip(fast).filter_map(|(s, f)| Some(f.as_ref()? / s.as_ref()?)));
+                for (n, r) in ratios.iter_mut().enumerate() {
+                    r.extend(slow.iter().zip(fast).filter_map(|(s, f)| Some(f[n].as_ref()? / s[n].as_ref()?)));
+                }
             }
         }
     }
-    let mut sorted = ratios.clone();
-    sorted.sort_by(f64::total_cmp);
-    let median = if sorted.is_empty() { f64::NAN } else { sorted[sorted.len() / 2] };
+    let median = |r: &[f64]| {
+        let mut sorted = r.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        if sorted.is_empty() { f64::NAN } else { sorted[sorted.len() / 2] }
+    };
+    let [ratios, ratios_raw] = ratios;
     let followed = match (tempi.first(), tempi.last()) {
         (Some(a), Some(b)) if tempi.len() >= 2 => b / a,
         _ => f64::NAN,
@@ -101,21 +120,35 @@ pub(super) fn tempo_row(model: &dyn DanceModel, id: &str, paths: &[std::path::Pa
         model: id.into(),
         tempi,
         dances,
-        measured,
-        tempo_locked: locked,
+        measured: measured[0],
+        tempo_locked: locked[0],
+        step_rate_ratio_median: median(&ratios),
         step_rate_ratios: ratios,
-        step_rate_ratio_median: median,
+        measured_raw: measured[1],
+        tempo_locked_raw: locked[1],
+        step_rate_ratio_median_raw: median(&ratios_raw),
+        step_rate_ratios_raw: ratios_raw,
         followed_ratio: followed,
     })
 }
 
-/// The section's Markdown table.
+/// The section's Markdown table: served (beat-aligned) and the network's own, side by side.
 pub fn markdown(rows: &[TempoRow]) -> String {
-    let mut out = String::from("| Model | tempi | n | tempo-locked ↑ | step-rate ratio fast/slow (median) | a dancer who follows |\n|---|---|---|---|---|---|\n");
+    let mut out = String::from("| Model | tempi | n | tempo-locked ↑ served | network's own | step-rate ratio fast/slow (median) served | network's own | a dancer who follows |\n|---|---|---|---|---|---|---|---|\n");
+    let share = |locked: usize, measured: usize| if measured == 0 { "–".into() } else { format!("{locked}/{measured} ({:.0} %)", 100.0 * locked as f64 / measured as f64) };
     for r in rows {
         let tempi: Vec<String> = r.tempi.iter().map(|t| format!("{t}×")).collect();
-        let locked = if r.measured == 0 { "–".into() } else { format!("{}/{} ({:.0} %)", r.tempo_locked, r.measured, 100.0 * r.tempo_locked as f64 / r.measured as f64) };
-        out += &format!("| {} | {} | {} | {} | {:.2} | {:.2} |\n", r.model, tempi.join(", "), r.dances, locked, r.step_rate_ratio_median, r.followed_ratio);
+        out += &format!(
+            "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} |\n",
+            r.model,
+            tempi.join(", "),
+            r.dances,
+            share(r.tempo_locked, r.measured),
+            share(r.tempo_locked_raw, r.measured_raw),
+            r.step_rate_ratio_median,
+            r.step_rate_ratio_median_raw,
+            r.followed_ratio
+        );
     }
     out
 }

@@ -6,6 +6,7 @@
 //!   frame) with its exact inverse, and foot-contact labels.
 //! - [`rotations`]: DanceNet's rotation features (root changes, 6-D local rotations, end
 //!   effectors) with their inverse through the rig.
+//! - [`beat_align`]: the served stage that moves a network's steps onto the song's beats.
 //! - [`input`] and [`validate`]: key poses and seed motion as users send them (either joint set,
 //!   or BVH), made canonical and checked by the rules the API and the models share.
 //!
@@ -14,6 +15,7 @@ use std::path::PathBuf;
 
 use ndarray::Array3;
 
+pub mod beat_align;
 pub mod bvh;
 pub mod dataset;
 pub mod export;
@@ -47,6 +49,41 @@ pub fn finish(mut motion: Motion, plant_feet: bool) -> Motion {
         feet::plant_feet(motion.positions.view_mut(), motion.fps);
     }
     motion
+}
+
+/// Which motion stages run after a model: jobs run both; `choreo generate --no-beat-align` and
+/// `--no-plant-feet` leave one out (to see what a stage does).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MotionStages {
+    /// [`beat_align::align`]: the network's steps onto the song's beats.
+    pub beat_align: bool,
+    /// [`finish`]: the dance kept on the floor and its feet planted.
+    pub plant_feet: bool,
+}
+
+impl Default for MotionStages {
+    fn default() -> Self {
+        Self { beat_align: true, plant_feet: true }
+    }
+}
+
+/// The motion stages after any model, in order: [`beat_align::align`] (timing first, so the feet
+/// are planted on the motion that is served; the key poses' frames map to themselves), then
+/// [`finish`]. `beat_times_s` are the song's beats on the dance's clock. Jobs, `choreo generate`
+/// and `choreo eval` all go through it. `seed_s`: the length of the seed motion the request
+/// brought (0 without), whose frames open the dance as they are: every frame of that span is
+/// fixed, so the warp is the identity there. The summary is `None` when alignment was not asked for.
+pub fn after_model(motion: Motion, beat_times_s: &[f64], key_poses: &[KeyPose], seed_s: f64, stages: MotionStages) -> (Motion, Option<beat_align::BeatAlignSummary>) {
+    let (motion, summary) = if stages.beat_align {
+        let seed_frames = (seed_s * motion.fps).ceil().max(0.0) as usize;
+        let mut fixed: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
+        fixed.extend((0..=seed_frames.min(motion.num_frames())).map(|f| f as f64 / motion.fps));
+        let (aligned, summary) = beat_align::align(&motion, beat_times_s, &fixed);
+        (aligned, Some(summary))
+    } else {
+        (motion, None)
+    };
+    (finish(motion, stages.plant_feet), summary)
 }
 
 /// A finished dance as a user downloads it: the export's rigid skeleton ([`rig::RigMotion`], what

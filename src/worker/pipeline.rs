@@ -1,11 +1,12 @@
 //! The work of each job kind: decode → analyse, or decode → model → export + report.
 use super::{Execute, WorkerError};
-use crate::audio::{self, AudioError, Budget, DecodeOptions, DecodedAudio, Keep};
+use crate::audio::{self, Analysis, AudioError, Budget, DecodeOptions, DecodedAudio, Keep};
 use crate::config::Config;
 use crate::models::{Cancelled, GenerateRequest, Progress, Registry};
-use crate::motion::{KeyPose, Motion};
+use crate::motion::{KeyPose, Motion, MotionStages};
 use crate::queue::{DataDir, GenerateOptions, Job, JobFiles, JobKind, Outcome, SeedMotion, Song};
 use crate::report::preview::{self, Caption};
+use crate::report::BeatAlignReport;
 use crate::stage::Stage;
 use crate::telemetry::StageTimer;
 use std::cell::RefCell;
@@ -106,11 +107,23 @@ impl Pipeline {
             };
             model.generate(&request, &mut Scaled { inner: progress, from: MODEL_START, to: MODEL_END, timer: None })?
         };
-        let motion = crate::motion::finish(generated.motion, options.plant_feet);
+        // The song's beats, once: the beat-align stage moves the steps onto them, and the report
+        // measures the served dance against them.
+        progress.report(Stage::Analyze, MODEL_END)?;
+        let analysis = {
+            let _timer = StageTimer::start("generate", Stage::Analyze);
+            self.budgeted(progress, Stage::Analyze, MODEL_END, |budget| audio::analyze_within(&decoded, budget))?
+        };
+        progress.report(Stage::BeatAlign, MODEL_END)?;
+        let finished = {
+            let _timer = StageTimer::start("generate", Stage::BeatAlign);
+            let stages = MotionStages { beat_align: true, plant_feet: options.plant_feet };
+            after_model(generated.motion, analysis, decoded.duration_s, &options.key_poses, seed_motion.as_ref(), stages)
+        };
         progress.report(Stage::Export, MODEL_END)?;
         let _timer = StageTimer::start("generate", Stage::Export);
         let caption = Caption { model: options.model.0.clone(), seed: options.seed, song: Some(song.filename.clone()), style: generated.style };
-        let files = render(&self.data.job_dir(job.id), &motion, &decoded, &options.key_poses, &caption, &mut |_| {})?;
+        let files = render(&self.data.job_dir(job.id), &finished, &options.key_poses, &caption, &mut |_| {})?;
         Ok(Outcome::Files(files))
     }
 }
@@ -160,33 +173,56 @@ fn seed_motion(seed: &SeedMotion) -> Result<Motion, WorkerError> {
     Ok(Motion { fps: seed.fps, positions })
 }
 
+/// A dance after the motion stages, with what they knew: the input of [`render`].
+pub struct Finished {
+    /// Beat-aligned and feet planted: what the export fits its rigid skeleton to.
+    pub motion: Motion,
+    /// The song's analysis (beats on the dance's clock: motion frame 0 is song time 0).
+    pub analysis: Analysis,
+    /// The song's length (s), for the preview's time axis.
+    pub song_duration_s: f64,
+    /// The beat-align stage's summary and the network's tempo lock before it (none where the
+    /// stage did not run).
+    pub beat_align: Option<BeatAlignReport>,
+}
+
+/// The motion stages after a model ([`crate::motion::after_model`]: beat alignment, then the feet
+/// planted), with the network's own tempo lock measured before them for the report. Jobs and
+/// `choreo generate` both call it, so both serve the same dance.
+/// `seed_motion`: the request's, whose frames open the dance and are kept as they are.
+pub fn after_model(model_motion: Motion, analysis: Analysis, song_duration_s: f64, key_poses: &[KeyPose], seed_motion: Option<&Motion>, stages: MotionStages) -> Finished {
+    let tempo_lock_before = crate::metrics::musicality::tempo_lock(model_motion.positions.view(), model_motion.fps, &analysis.beat_times);
+    let seed_s = seed_motion.map_or(0.0, Motion::duration_s);
+    let (motion, summary) = crate::motion::after_model(model_motion, &analysis.beat_times, key_poses, seed_s, stages);
+    Finished {
+        motion,
+        analysis,
+        song_duration_s,
+        beat_align: summary.map(|summary| BeatAlignReport { summary, tempo_lock_before }),
+    }
+}
+
 /// File name of a generate job's report.
 pub const REPORT_FILE: &str = "report.json";
 
 /// The last two stages of a dance, shared by jobs and the CLI: export (BVH, JSON, glb) and the
 /// report (report.json and the contact sheet preview.png, titled by `caption`), each file written
 /// atomically into `dir`. `on_stage` hears each stage as it starts.
-pub fn render(
-    dir: &Path,
-    model_motion: &Motion,
-    audio: &DecodedAudio,
-    key_poses: &[KeyPose],
-    caption: &Caption,
-    on_stage: &mut dyn FnMut(Stage),
-) -> Result<JobFiles, WorkerError> {
+pub fn render(dir: &Path, finished: &Finished, key_poses: &[KeyPose], caption: &Caption, on_stage: &mut dyn FnMut(Stage)) -> Result<JobFiles, WorkerError> {
     use crate::motion::export::{write_all_rig, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
     std::fs::create_dir_all(dir)?;
     on_stage(Stage::Export);
+    let model_motion = &finished.motion;
     let served = crate::motion::serve(model_motion, key_poses)?;
     write_all_rig(&served.rig, dir)?;
     // The report and the preview judge what the user downloads: the rigid skeleton's motion.
     let motion = &served.motion;
     on_stage(Stage::Report);
-    let analysis = audio::analyze(audio)?;
     let reference = crate::metrics::reference::ReferenceStats::builtin()?;
-    let mut report = crate::report::build(motion, &analysis, key_poses, &reference)?;
+    let mut report = crate::report::build(motion, &finished.analysis, key_poses, &reference)?;
     report.model_key_pose_error_cm = crate::metrics::kinematics::key_pose_error_cm(model_motion.positions.view(), model_motion.fps, key_poses);
     report.style = caption.style.clone();
+    report.beat_align = finished.beat_align.clone();
     let text = serde_json::to_vec_pretty(&report).map_err(|e| WorkerError::Export(format!("report.json: {e}")))?;
     write_atomic(&dir.join(REPORT_FILE), &text)?;
     let key_pose_times: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
@@ -194,7 +230,7 @@ pub fn render(
         motion,
         beat_times: &report.music_beat_times,
         key_pose_times: &key_pose_times,
-        song_duration_s: audio.duration_s,
+        song_duration_s: finished.song_duration_s,
         caption,
     };
     let png = preview::render_png(&sheet).map_err(|e| WorkerError::Export(format!("{}: {e}", preview::PREVIEW_FILE)))?;

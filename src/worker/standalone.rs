@@ -1,12 +1,12 @@
 //! The generate pipeline outside the queue: `choreo generate` and `choreo bench generate` run
-//! exactly the stages a job runs (decode → model → export + report), reporting to a callback
+//! exactly the stages a job runs (decode → model → analysis → beat-align + feet → export + report), reporting to a callback
 //! (the CLI's progress bar) or a stage clock instead of a job row.
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use crate::audio::{self, DecodedAudio};
 use crate::models::{Cancelled, DanceStyle, GenerateRequest, ModelId, Progress, Registry};
-use crate::motion::{KeyPose, Motion};
+use crate::motion::{KeyPose, Motion, MotionStages};
 use crate::report::preview::Caption;
 use crate::stage::Stage;
 
@@ -30,6 +30,9 @@ pub struct GenerateSong {
     pub models_dir: PathBuf,
     /// Keep the model's motion as it came: do not plant the feet (`motion::feet`).
     pub no_plant_feet: bool,
+    /// Keep the network's timing: do not move its steps onto the song's beats
+    /// (`motion::beat_align`), to see what the network does on its own.
+    pub no_beat_align: bool,
     /// The style to dance (models that take one): waltz, rumba, cha-cha or tango. `None`: the
     /// model's classifier picks one from the song.
     pub style: Option<String>,
@@ -50,6 +53,7 @@ impl Default for GenerateSong {
             key_poses: None,
             models_dir: PathBuf::from("models"),
             no_plant_feet: false,
+            no_beat_align: false,
             style: None,
             temperature: None,
             top_k: None,
@@ -101,14 +105,14 @@ impl Progress for StageClock<'_> {
     }
 }
 
-/// Runs model → export → report on a decoded song (named `song` in the preview's title) into
-/// `out`, timing every stage.
+/// Runs model → analysis → beat-align + feet → export → report on a decoded song (named `song` in
+/// the preview's title) into `out`, timing every stage.
 pub fn generate_decoded(
     registry: &Registry,
     model: &ModelId,
     song: Option<String>,
     request: &GenerateRequest<'_>,
-    plant_feet: bool,
+    stages: MotionStages,
     out: &Path,
     on_progress: &mut dyn FnMut(Stage, f32),
 ) -> Result<Generated, WorkerError> {
@@ -117,9 +121,12 @@ pub fn generate_decoded(
     let mut clock = StageClock { current: None, done: Vec::new(), on_progress };
     let generated = model.generate(request, &mut clock)?;
     let caption = Caption { model: id, seed: request.seed, song, style: generated.style };
-    let motion = crate::motion::finish(generated.motion, plant_feet);
-    let files = super::pipeline::render(out, &motion, request.audio, request.key_poses, &caption, &mut |stage| clock.enter(stage))?;
-    Ok(Generated { motion, files: files.files.iter().map(|f| out.join(f)).collect(), stages: clock.finish() })
+    clock.report(Stage::Analyze, 0.0)?;
+    let analysis = audio::analyze(request.audio)?;
+    clock.report(Stage::BeatAlign, 0.0)?;
+    let finished = super::pipeline::after_model(generated.motion, analysis, request.audio.duration_s, request.key_poses, request.seed_motion, stages);
+    let files = super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| clock.enter(stage))?;
+    Ok(Generated { motion: finished.motion, files: files.files.iter().map(|f| out.join(f)).collect(), stages: clock.finish() })
 }
 
 /// `choreo generate`: a dance for one song. `on_progress` hears the stage and the share of the
@@ -141,10 +148,13 @@ pub fn generate(args: &GenerateSong, on_progress: &mut dyn FnMut(Stage, f64)) ->
         .map_err(|e| WorkerError::InvalidOptions(format!("key poses: {e}")))?;
     // Progress over the whole run: decode 0–5%, features 5–25%, encode 25–35%, frame loop 35–90%.
     let span = |stage: Stage| match stage {
-        Stage::Claimed | Stage::DecodeAudio | Stage::Analyze => (0.0, 0.05),
+        Stage::Claimed | Stage::DecodeAudio => (0.0, 0.05),
+        // The song's beats, after the model (for the beat-align stage and the report).
+        Stage::Analyze => (0.88, 0.88),
         Stage::Features => (0.05, 0.25),
         Stage::Encode => (0.25, 0.35),
-        Stage::Generate => (0.35, 0.90),
+        Stage::Generate => (0.35, 0.88),
+        Stage::BeatAlign => (0.88, 0.90),
         Stage::Export | Stage::Report | Stage::Done => (0.90, 0.95),
     };
     let mut on_stage_progress = |stage: Stage, f: f32| {
@@ -157,7 +167,8 @@ pub fn generate(args: &GenerateSong, on_progress: &mut dyn FnMut(Stage, f64)) ->
     };
     let request = GenerateRequest { key_poses: &key_poses, style, temperature: args.temperature, top_k: args.top_k, ..GenerateRequest::plain(&audio, args.seed) };
     let song = args.song.file_name().map(|n| n.to_string_lossy().into_owned());
-    let mut g = generate_decoded(&registry, &ModelId(args.model.clone()), song, &request, !args.no_plant_feet, &args.out, &mut on_stage_progress)?;
+    let stages = MotionStages { beat_align: !args.no_beat_align, plant_feet: !args.no_plant_feet };
+    let mut g = generate_decoded(&registry, &ModelId(args.model.clone()), song, &request, stages, &args.out, &mut on_stage_progress)?;
     g.stages.insert(0, (Stage::DecodeAudio, decode));
     Ok(g)
 }
@@ -239,7 +250,7 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
     }
     let n_timed = songs.len();
     songs.extend(scaling);
-    let stage_names = [Stage::DecodeAudio, Stage::Features, Stage::Encode, Stage::Generate, Stage::Export, Stage::Report];
+    let stage_names = [Stage::DecodeAudio, Stage::Features, Stage::Encode, Stage::Generate, Stage::Analyze, Stage::BeatAlign, Stage::Export, Stage::Report];
     let mut table = format!(
         "| model | song | music s | {} | total s | s per music min | generate ms per frame | 3-min target |\n|---|---|---|{}---|---|---|---|\n",
         stage_names.map(Stage::as_str).join(" | "),
@@ -252,7 +263,7 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
         let mut scaled: Vec<(f64, f64, f64)> = Vec::new();
         for (k, (name, audio, decode)) in songs.iter().enumerate() {
             let request = GenerateRequest::plain(audio, 0);
-            let g = generate_decoded(&registry, model, Some(name.clone()), &request, true, out.path(), &mut |_, _| {})?;
+            let g = generate_decoded(&registry, model, Some(name.clone()), &request, MotionStages::default(), out.path(), &mut |_, _| {})?;
             let mut stages = vec![(Stage::DecodeAudio, *decode)];
             stages.extend(g.stages);
             // "–" for a stage this model does not have (the key-pose transformer has no separate encode).
