@@ -8,13 +8,14 @@
 //! The correction is a pole-vector flip. The knee turns about the hip–ankle line, which keeps both
 //! bone lengths (hip–knee, knee–ankle) and the hip and ankle where they are. With the knee's
 //! angle φ about that line measured from the foot's heel → toe direction (both taken
-//! perpendicular to the line), a knee within [`LEFT_ALONE_DEG`] of the foot stays: real dancers
-//! turn a foot out under a slightly hyperextended knee, and a knee just behind the line is that,
-//! not a knee bending backwards. Past it the knee is folded forward: |φ| from [`LEFT_ALONE_DEG`]
-//! to 180° maps linearly onto [`LEFT_ALONE_DEG`] down to 0°, so a knee pointing straight back
-//! points straight ahead, on the side it was. The map is continuous in the pose (identity at the
-//! fold), so a knee that drifts backwards turns back instead, and nothing pops; it at most doubles
-//! the knee's angular speed about the line. Weights make the remaining edges continuous: a knee
+//! perpendicular to the line), a knee behind the line (|φ| > [`LEFT_ALONE_DEG`] = 90°) is mirrored
+//! to π − φ: in front, as far to the side as it was. The mirror moves a knee just behind the line by
+//! almost nothing (at 90° it is the identity), so the corrected knee is a continuous function of
+//! the pose: a knee that drifts backwards glides along the side and turns back, and nothing pops;
+//! the knee keeps its angular speed about the line. (Folding only knees past 120°, to leave a real
+//! dancer's foot turned out under a slightly hyperextended knee alone, left tsmt at 10–15 %: most
+//! of its backward knees lie at 120–140°.)
+//! Weights make the remaining edges continuous: a knee
 //! straighter than [`STRAIGHT_DEG`] is left alone (its direction means nothing) and fully corrected
 //! from [`KNEE_BENT_DEG`] on, and a foot pointed along the leg (no heel → toe direction across it)
 //! is left alone likewise.
@@ -31,8 +32,9 @@ const KNEES: [usize; 2] = [8, 17];
 pub const KNEE_BENT_DEG: f64 = 15.0;
 /// A knee bent less than this is left alone; between the two the correction fades in.
 pub const STRAIGHT_DEG: f64 = 10.0;
-/// Knees within this angle (degrees, about the hip–ankle line) of the foot's direction stay.
-pub const LEFT_ALONE_DEG: f64 = 120.0;
+/// Knees within this angle (degrees, about the hip–ankle line) of the foot's direction stay;
+/// past it |φ| maps linearly onto [`LEFT_ALONE_DEG`]…0 (at 90°: the mirror).
+pub const LEFT_ALONE_DEG: f64 = 90.0;
 /// Share of the foot's heel → toe length that must lie across the hip–ankle line for it to give a
 /// direction (fully from twice this).
 const FOOT_ACROSS: f64 = 0.2;
@@ -132,9 +134,8 @@ mod tests {
 
     #[test]
     fn forward_straight_and_sideways_knees_stay() {
-        // Forward, straight, sideways, and just behind the line beside a foot turned out (100°).
-        let behind = (-0.1f32 * 10f32.to_radians().sin(), 0.1 * 10f32.to_radians().cos());
-        for (z, x) in [(0.1, 0.0), (0.2, -0.05), (-0.02, 0.0), (0.0, 0.1), behind] {
+        // Forward, straight (slightly behind), sideways.
+        for (z, x) in [(0.1, 0.0), (0.2, -0.05), (-0.02, 0.0), (0.0, 0.1)] {
             let mut p = legs(z, x);
             let before = p.clone();
             assert_eq!(bend_forward(p.view_mut()), 0, "knee at z {z}, x {x}");
@@ -187,6 +188,6 @@ mod tests {
         }
         let share = moved as f64 / frames as f64;
         println!("real dances: {moved} of {frames} knee-frames moved ({:.2} %) in {dances_moved} dances; largest knee move ≤ {max_move:.3} m", 100.0 * share);
-        assert!(share < 0.02, "{:.1} % of real knee-frames moved", 100.0 * share);
+        assert!(share < 0.05, "{:.1} % of real knee-frames moved", 100.0 * share);
     }
 }
