@@ -22,6 +22,7 @@ pub mod export;
 pub mod feet;
 pub mod input;
 pub mod input_error;
+pub mod knees;
 pub mod repr;
 pub mod rig;
 pub mod rotations;
@@ -40,11 +41,13 @@ pub struct Motion {
     pub positions: Array3<f32>,
 }
 
-/// The motion stage after any model, before export: the dance kept on the floor ([`feet::ground`])
-/// and the feet planted ([`feet::plant_feet`]), unless the caller asked for the model's motion as
-/// it came. Jobs, `choreo generate` and `choreo eval` all go through it.
+/// The motion stage after any model, before export: the dance kept on the floor ([`feet::ground`]),
+/// the feet planted ([`feet::plant_feet`]) and backward knees turned forward
+/// ([`knees::bend_forward`]), unless the caller asked for the model's motion as it came. Jobs,
+/// `choreo generate` and `choreo eval` all go through it.
 pub fn finish(mut motion: Motion, plant_feet: bool) -> Motion {
     if plant_feet {
+        knees::bend_forward(motion.positions.view_mut());
         feet::ground(motion.positions.view_mut(), motion.fps);
         feet::plant_feet(motion.positions.view_mut(), motion.fps);
     }

@@ -1,0 +1,193 @@
+//! Knees that bend forwards: a served step after any model (in [`super::finish`]).
+//!
+//! A network that draws each joint coordinate on its own (tsmt) or regresses joints without a
+//! rig can put a bent knee behind the hip–ankle line, against the foot: a knee bending the wrong
+//! way (`metrics::musicality`'s knee direction counts them; real dances at most 5.8 % of
+//! knee-frames, tsmt's network up to 35 % on unseen songs).
+//!
+//! The correction is a pole-vector flip. The knee turns about the hip–ankle line, which keeps both
+//! bone lengths (hip–knee, knee–ankle) and the hip and ankle where they are. With the knee's
+//! angle φ about that line measured from the foot's heel → toe direction (both taken
+//! perpendicular to the line), a knee behind the line (|φ| > [`LEFT_ALONE_DEG`] = 90°) is mirrored
+//! to π − φ: in front, as far to the side as it was. The mirror moves a knee just behind the line by
+//! almost nothing (at 90° it is the identity), so the corrected knee is a continuous function of
+//! the pose: a knee that drifts backwards glides along the side and turns back, and nothing pops;
+//! the knee keeps its angular speed about the line. (Folding only knees past 120°, to leave a real
+//! dancer's foot turned out under a slightly hyperextended knee alone, left tsmt at 10–15 %: most
+//! of its backward knees lie at 120–140°.)
+//! Weights make the remaining edges continuous: a knee
+//! straighter than [`STRAIGHT_DEG`] is left alone (its direction means nothing) and fully corrected
+//! from [`KNEE_BENT_DEG`] on, and a foot pointed along the leg (no heel → toe direction across it)
+//! is left alone likewise.
+use nalgebra::{Unit, UnitQuaternion, Vector3};
+use ndarray::ArrayViewMut3;
+
+use super::skeleton::{ANKLES, HEELS, HIPS, TOES};
+
+/// Knees, right and left (between [`HIPS`] and [`ANKLES`]).
+const KNEES: [usize; 2] = [8, 17];
+
+/// A knee bent at least this much (degrees between thigh and shin) is fully corrected when it
+/// points backwards (the musicality metric's threshold).
+pub const KNEE_BENT_DEG: f64 = 15.0;
+/// A knee bent less than this is left alone; between the two the correction fades in.
+pub const STRAIGHT_DEG: f64 = 10.0;
+/// Knees within this angle (degrees, about the hip–ankle line) of the foot's direction stay;
+/// past it |φ| maps linearly onto [`LEFT_ALONE_DEG`]…0 (at 90°: the mirror).
+pub const LEFT_ALONE_DEG: f64 = 90.0;
+/// Share of the foot's heel → toe length that must lie across the hip–ankle line for it to give a
+/// direction (fully from twice this).
+const FOOT_ACROSS: f64 = 0.2;
+
+fn smoothstep(lo: f64, hi: f64, x: f64) -> f64 {
+    let t = ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// Turns backward knees forward, in place on world positions `[T, J, 3]` (the dataset's 23
+/// joints; see the module doc). Returns the number of knee-frames moved.
+pub fn bend_forward(mut positions: ArrayViewMut3<'_, f32>) -> usize {
+    let (frames, joints, _) = positions.dim();
+    if joints < super::NUM_JOINTS {
+        return 0;
+    }
+    let mut moved = 0;
+    for f in 0..frames {
+        for leg in 0..2 {
+            let at = |p: &ArrayViewMut3<'_, f32>, j: usize| Vector3::new(f64::from(p[[f, j, 0]]), f64::from(p[[f, j, 1]]), f64::from(p[[f, j, 2]]));
+            let (hip, knee, ankle) = (at(&positions, HIPS[leg]), at(&positions, KNEES[leg]), at(&positions, ANKLES[leg]));
+            let Some(turned) = forward_knee(hip, knee, ankle, at(&positions, HEELS[leg]), at(&positions, TOES[leg])) else { continue };
+            for c in 0..3 {
+                positions[[f, KNEES[leg], c]] = turned[c] as f32;
+            }
+            moved += 1;
+        }
+    }
+    moved
+}
+
+/// Where the knee goes (see the module doc), or `None` where it stays.
+fn forward_knee(hip: Vector3<f64>, knee: Vector3<f64>, ankle: Vector3<f64>, heel: Vector3<f64>, toe: Vector3<f64>) -> Option<Vector3<f64>> {
+    let line = Unit::try_new(ankle - hip, 1e-9)?;
+    let off_line = |v: Vector3<f64>| v - line.into_inner() * v.dot(&line);
+    let bend = (knee - hip).angle(&(ankle - knee)).to_degrees();
+    let foot = toe - heel;
+    let across = off_line(foot);
+    let weight = smoothstep(STRAIGHT_DEG, KNEE_BENT_DEG, bend) * smoothstep(FOOT_ACROSS, 2.0 * FOOT_ACROSS, across.norm() / foot.norm().max(1e-9));
+    let forward = Unit::try_new(across, 1e-9)?;
+    let side = line.cross(&forward);
+    let k = off_line(knee - hip);
+    let phi = k.dot(&side).atan2(k.dot(&forward));
+    let fold = LEFT_ALONE_DEG.to_radians();
+    if weight <= 0.0 || phi.abs() <= fold {
+        return None;
+    }
+    // |φ| in (fold, π] onto [0, fold), on φ's side, reached by turning about the hip–ankle line,
+    // so both bone lengths hold.
+    let target = (fold - (phi.abs() - fold) * fold / (std::f64::consts::PI - fold)).copysign(phi);
+    let turn = (target - phi) * weight;
+    Some(hip + UnitQuaternion::from_axis_angle(&line, turn) * (knee - hip))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::motion::NUM_JOINTS;
+    use ndarray::Array3;
+
+    /// One frame of legs: hips at y = 0, ankles at y = −0.8, toes towards +z, each knee `knee_z`
+    /// in front of its hip–ankle line (negative: behind) and `knee_x` to the side.
+    fn legs(knee_z: f32, knee_x: f32) -> Array3<f32> {
+        let mut p = Array3::<f32>::zeros((1, NUM_JOINTS, 3));
+        for (leg, x) in [(0usize, -0.1f32), (1, 0.1)] {
+            let set = |p: &mut Array3<f32>, j: usize, v: [f32; 3]| (0..3).for_each(|c| p[[0, j, c]] = v[c]);
+            set(&mut p, HIPS[leg], [x, 0.0, 0.0]);
+            set(&mut p, KNEES[leg], [x + knee_x, -0.4, knee_z]);
+            set(&mut p, ANKLES[leg], [x, -0.8, 0.0]);
+            set(&mut p, HEELS[leg], [x, -0.85, -0.05]);
+            set(&mut p, TOES[leg], [x, -0.87, 0.12]);
+        }
+        p
+    }
+
+    fn dist(p: &Array3<f32>, a: usize, b: usize) -> f32 {
+        (0..3).map(|c| (p[[0, a, c]] - p[[0, b, c]]).powi(2)).sum::<f32>().sqrt()
+    }
+
+    #[test]
+    fn a_backward_knee_comes_forward_with_its_bone_lengths() {
+        let mut p = legs(-0.1, 0.03);
+        let before = p.clone();
+        assert_eq!(bend_forward(p.view_mut()), 2);
+        for leg in 0..2 {
+            let k = KNEES[leg];
+            assert!(p[[0, k, 2]] > 0.08, "knee now {} in front", p[[0, k, 2]]);
+            assert!(p[[0, k, 0]] - p[[0, HIPS[leg], 0]] > 0.0, "the knee keeps its side");
+            assert!((dist(&p, k, HIPS[leg]) - dist(&before, k, HIPS[leg])).abs() < 1e-5);
+            assert!((dist(&p, k, ANKLES[leg]) - dist(&before, k, ANKLES[leg])).abs() < 1e-5);
+        }
+        // Nothing but the knees moved.
+        for j in (0..NUM_JOINTS).filter(|j| !KNEES.contains(j)) {
+            assert_eq!(p.slice(ndarray::s![0, j, ..]), before.slice(ndarray::s![0, j, ..]));
+        }
+    }
+
+    #[test]
+    fn forward_straight_and_sideways_knees_stay() {
+        // Forward, straight (slightly behind), sideways.
+        for (z, x) in [(0.1, 0.0), (0.2, -0.05), (-0.02, 0.0), (0.0, 0.1)] {
+            let mut p = legs(z, x);
+            let before = p.clone();
+            assert_eq!(bend_forward(p.view_mut()), 0, "knee at z {z}, x {x}");
+            assert_eq!(p, before);
+        }
+    }
+
+    #[test]
+    fn a_knee_drifting_backwards_glides_without_a_pop() {
+        // The knee circles the hip–ankle line in small steps; the corrected knee moves no more per
+        // step than the input does, times the fold's factor (2).
+        let steps = 400;
+        let r = 0.1f32;
+        let mut prev: Option<[f32; 3]> = None;
+        for i in 0..=steps {
+            let a = i as f32 / steps as f32 * std::f32::consts::TAU;
+            let mut p = legs(r * a.cos(), r * a.sin());
+            bend_forward(p.view_mut());
+            let k = [p[[0, KNEES[0], 0]], p[[0, KNEES[0], 1]], p[[0, KNEES[0], 2]]];
+            let behind_limit = -r * (LEFT_ALONE_DEG.to_radians() - std::f64::consts::FRAC_PI_2).sin() as f32;
+            assert!(k[2] >= behind_limit - 1e-5, "step {i}: knee behind at {}", k[2]);
+            if let Some(q) = prev {
+                let d = (0..3).map(|c| (k[c] - q[c]).powi(2)).sum::<f32>().sqrt();
+                assert!(d <= 2.05 * r * std::f32::consts::TAU / steps as f32, "step {i}: knee jumped {d}");
+            }
+            prev = Some(k);
+        }
+    }
+
+    /// The 43 real dances (where `../shared` holds them): how many knee-frames move and how far.
+    /// Prints the figures the model card quotes; real knees must barely move.
+    #[test]
+    fn real_dances_are_nearly_unchanged() {
+        let Ok(ds) = crate::motion::dataset::Dataset::open_default() else { return };
+        let (mut frames, mut moved, mut max_move, mut dances_moved) = (0usize, 0usize, 0f32, 0usize);
+        for id in ds.all_ids() {
+            let Ok(d) = ds.load(&id) else { continue };
+            let mut p = d.motion.positions.clone();
+            let n = bend_forward(p.view_mut());
+            let dance_max = (&p - &d.motion.positions).mapv(f32::abs).fold(0f32, |a, &v| a.max(v));
+            // Over the three coordinates of a knee: at most √3 times the largest coordinate move.
+            max_move = max_move.max(dance_max * 3f32.sqrt());
+            frames += 2 * p.dim().0;
+            moved += n;
+            dances_moved += usize::from(n > 0);
+            println!("{id}: {n} knee-frames of {} moved, largest coordinate move {:.3} m", 2 * p.dim().0, dance_max);
+        }
+        if frames == 0 {
+            return;
+        }
+        let share = moved as f64 / frames as f64;
+        println!("real dances: {moved} of {frames} knee-frames moved ({:.2} %) in {dances_moved} dances; largest knee move ≤ {max_move:.3} m", 100.0 * share);
+        assert!(share < 0.05, "{:.1} % of real knee-frames moved", 100.0 * share);
+    }
+}
