@@ -57,11 +57,12 @@ impl Default for Options {
             seed: 2021,
             first_epoch: 0,
             random_positions: true,
-            beat_clock: true,
-            min_tempo: 0.8,
-            max_tempo: 1.25,
-            mirror: true,
-            velocity_weight: 3.0,
+            // The served weights' schedule: issue 25's runs (the model card) set these by flag.
+            beat_clock: false,
+            min_tempo: 1.0,
+            max_tempo: 1.0,
+            mirror: false,
+            velocity_weight: 0.0,
         }
     }
 }
