@@ -7,6 +7,7 @@
 //! - [`rotations`]: DanceNet's rotation features (root changes, 6-D local rotations, end
 //!   effectors) with their inverse through the rig.
 //! - [`beat_align`]: the served stage that moves a network's steps onto the song's beats.
+//! - [`retarget`]: the dance on another skeleton (Mixamo, VRM, SMPL, an uploaded rig).
 //! - [`input`] and [`validate`]: key poses and seed motion as users send them (either joint set,
 //!   or BVH), made canonical and checked by the rules the API and the models share.
 //!
@@ -24,6 +25,7 @@ pub mod input;
 pub mod input_error;
 pub mod knees;
 pub mod repr;
+pub mod retarget;
 pub mod rig;
 pub mod rotations;
 pub mod skeleton;
