@@ -18,7 +18,7 @@
 //! Weights make the remaining edges continuous: a knee
 //! straighter than [`STRAIGHT_DEG`] is left alone (its direction means nothing) and fully corrected
 //! from [`KNEE_BENT_DEG`] on, and a foot pointed along the leg (no heel → toe direction across it)
-//! is left alone likewise.
+//! or along its own shin ([`POINTED_COS`]: a leg flicked back) is left alone likewise.
 use nalgebra::{Unit, UnitQuaternion, Vector3};
 use ndarray::ArrayViewMut3;
 
@@ -38,6 +38,14 @@ pub const LEFT_ALONE_DEG: f64 = 90.0;
 /// Share of the foot's heel → toe length that must lie across the hip–ankle line for it to give a
 /// direction (fully from twice this).
 const FOOT_ACROSS: f64 = 0.2;
+
+/// A pointed foot gives the knee no direction: where the cosine between heel → toe and the shin
+/// (knee → ankle) passes the first value the correction fades out, gone at the second. Standing,
+/// the foot lies across the shin (cosine about 0–0.2); a leg flicked back with a pointed foot
+/// (real dances do it, e.g. in the first 1.6 s of DANCE_C_2, C_4 and R_5: cosine 0.66) points the
+/// foot backwards along the shin, and the knee, bent the right way, would be turned through up
+/// to 0.66 m.
+const POINTED_COS: (f64, f64) = (0.4, 0.6);
 
 fn smoothstep(lo: f64, hi: f64, x: f64) -> f64 {
     let t = ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
@@ -73,7 +81,11 @@ fn forward_knee(hip: Vector3<f64>, knee: Vector3<f64>, ankle: Vector3<f64>, heel
     let bend = (knee - hip).angle(&(ankle - knee)).to_degrees();
     let foot = toe - heel;
     let across = off_line(foot);
-    let weight = smoothstep(STRAIGHT_DEG, KNEE_BENT_DEG, bend) * smoothstep(FOOT_ACROSS, 2.0 * FOOT_ACROSS, across.norm() / foot.norm().max(1e-9));
+    let shin = Unit::try_new(ankle - knee, 1e-9)?;
+    let along_shin = foot.dot(&shin) / foot.norm().max(1e-9);
+    let weight = smoothstep(STRAIGHT_DEG, KNEE_BENT_DEG, bend)
+        * smoothstep(FOOT_ACROSS, 2.0 * FOOT_ACROSS, across.norm() / foot.norm().max(1e-9))
+        * (1.0 - smoothstep(POINTED_COS.0, POINTED_COS.1, along_shin));
     let forward = Unit::try_new(across, 1e-9)?;
     let side = line.cross(&forward);
     let k = off_line(knee - hip);
@@ -165,17 +177,42 @@ mod tests {
         }
     }
 
+    #[test]
+    fn a_leg_flicked_back_with_a_pointed_foot_stays() {
+        // Thigh forward and down, shin back and up, the foot pointed along the shin: the knee is
+        // bent the right way, but the foot's heel → toe lies behind the hip–ankle line.
+        let mut p = legs(0.0, 0.0);
+        let (hip, knee, ankle) = (Vector3::new(-0.1, 0.0, 0.0), Vector3::new(-0.1, -0.4, 0.15), Vector3::new(-0.1, -0.45, -0.3));
+        let shin = (ankle - knee).normalize();
+        let heel = ankle - shin * 0.05 + Vector3::new(0.0, 0.03, 0.0);
+        let toe = ankle + shin * 0.15;
+        for (j, v) in [(HIPS[0], hip), (KNEES[0], knee), (ANKLES[0], ankle), (HEELS[0], heel), (TOES[0], toe)] {
+            (0..3).for_each(|c| p[[0, j, c]] = v[c] as f32);
+        }
+        let before = p.clone();
+        assert_eq!(bend_forward(p.view_mut()), 0);
+        assert_eq!(p, before);
+    }
+
     /// The 43 real dances (where `../shared` holds them): how many knee-frames move and how far.
     /// Prints the figures the model card quotes; real knees must barely move.
     #[test]
     fn real_dances_are_nearly_unchanged() {
-        let Ok(ds) = crate::motion::dataset::Dataset::open_default() else { return };
-        let (mut frames, mut moved, mut max_move, mut dances_moved) = (0usize, 0usize, 0f32, 0usize);
+        let ds = match crate::motion::dataset::Dataset::open_default() {
+            Ok(ds) => ds,
+            Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => panic!("../shared is needed under CI=true: {e}"),
+            Err(e) => return eprintln!("skipping: {e}"),
+        };
+        let (mut frames, mut moved, mut max_move, mut dances_moved, mut far) = (0usize, 0usize, 0f32, 0usize, 0usize);
         for id in ds.all_ids() {
             let Ok(d) = ds.load(&id) else { continue };
             let mut p = d.motion.positions.clone();
             let n = bend_forward(p.view_mut());
             let dance_max = (&p - &d.motion.positions).mapv(f32::abs).fold(0f32, |a, &v| a.max(v));
+            far += (0..p.dim().0)
+                .flat_map(|f| KNEES.map(|k| (f, k)))
+                .filter(|&(f, k)| (0..3).map(|c| (p[[f, k, c]] - d.motion.positions[[f, k, c]]).powi(2)).sum::<f32>() > 0.2 * 0.2)
+                .count();
             // Over the three coordinates of a knee: at most √3 times the largest coordinate move.
             max_move = max_move.max(dance_max * 3f32.sqrt());
             frames += 2 * p.dim().0;
@@ -188,6 +225,10 @@ mod tests {
         }
         let share = moved as f64 / frames as f64;
         println!("real dances: {moved} of {frames} knee-frames moved ({:.2} %) in {dances_moved} dances; largest knee move ≤ {max_move:.3} m", 100.0 * share);
-        assert!(share < 0.05, "{:.1} % of real knee-frames moved", 100.0 * share);
+        assert!(share < 0.035, "{:.1} % of real knee-frames moved", 100.0 * share);
+        // Before the pointed-foot rule, 18 knee-frames moved more than 20 cm (legs flicked back in
+        // the first 1.6 s of DANCE_C_2, C_4, R_5); the 4 left are DANCE_C_4's first second, where
+        // the heel marker sits 19 cm below the ankle (a capture glitch, no foot direction to trust).
+        assert!(far <= 4, "{far} real knee-frames moved more than 20 cm");
     }
 }
