@@ -3,7 +3,7 @@
 //! CONTRACT (lead owns this folder): the worker builds a [`GenerateRequest`], calls
 //! [`DanceModel::generate`] on a blocking thread, and gets a [`Motion`] back. Models report
 //! progress through [`Progress`], which also carries cancellation.
-use crate::audio::DecodedAudio;
+use crate::audio::{Analysis, DecodedAudio};
 use crate::motion::{KeyPose, Motion};
 use crate::stage::Stage;
 use serde::{Deserialize, Serialize};
@@ -154,12 +154,16 @@ pub struct GenerateRequest<'a> {
     pub temperature: Option<f64>,
     /// Keeps the `k` likeliest choices when sampling, when [`Capabilities::top_k`].
     pub top_k: Option<u32>,
+    /// The song's beats, when the caller has analysed it already (jobs and `choreo generate` do,
+    /// before the model, for the beat-align stage and the report): a model that listens to the
+    /// beats uses these rather than analysing the song a second time, unbudgeted.
+    pub analysis: Option<&'a Analysis>,
 }
 
 impl<'a> GenerateRequest<'a> {
     /// A request with only the song and the seed: no key poses, no seed motion, model defaults.
     pub fn plain(audio: &'a DecodedAudio, seed: u64) -> Self {
-        Self { audio, seed, key_poses: &[], seed_motion: None, style: None, temperature: None, top_k: None }
+        Self { audio, seed, key_poses: &[], seed_motion: None, style: None, temperature: None, top_k: None, analysis: None }
     }
 }
 

@@ -93,6 +93,13 @@ impl Pipeline {
         progress.report(Stage::DecodeAudio, 0.0)?;
         let decoded = self.decode("generate", song, Keep::AtMost(GENERATE_MAX_SR), progress)?;
         let seed_motion = options.seed_motion.as_ref().map(seed_motion).transpose()?;
+        // The song's beats, once, within the job's budget: a model that listens to them
+        // (keypose-transformer's scaffold), the beat-align stage and the report all use these.
+        progress.report(Stage::Analyze, MODEL_START)?;
+        let analysis = {
+            let _timer = StageTimer::start("generate", Stage::Analyze);
+            self.budgeted(progress, Stage::Analyze, MODEL_START, |budget| audio::analyze_within(&decoded, budget))?
+        };
         // The model's first stage is its features; each stage it reports is timed as it goes.
         progress.report(Stage::Features, MODEL_START)?;
         let generated = {
@@ -104,15 +111,9 @@ impl Pipeline {
                 style: options.style,
                 temperature: options.temperature,
                 top_k: options.top_k,
+                analysis: Some(&analysis),
             };
             model.generate(&request, &mut Scaled { inner: progress, from: MODEL_START, to: MODEL_END, timer: None })?
-        };
-        // The song's beats, once: the beat-align stage moves the steps onto them, and the report
-        // measures the served dance against them.
-        progress.report(Stage::Analyze, MODEL_END)?;
-        let analysis = {
-            let _timer = StageTimer::start("generate", Stage::Analyze);
-            self.budgeted(progress, Stage::Analyze, MODEL_END, |budget| audio::analyze_within(&decoded, budget))?
         };
         progress.report(Stage::BeatAlign, MODEL_END)?;
         let finished = {

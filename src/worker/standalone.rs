@@ -119,10 +119,20 @@ pub fn generate_decoded(
     let id = model.0.clone();
     let model = registry.get(model).ok_or_else(|| WorkerError::ModelUnavailable(model.clone()))?;
     let mut clock = StageClock { current: None, done: Vec::new(), on_progress };
-    let generated = model.generate(request, &mut clock)?;
-    let caption = Caption { model: id, seed: request.seed, song, style: generated.style };
+    // The song's beats, once, before the model (as a job does): the model may listen to them, the
+    // beat-align stage and the report use them.
     clock.report(Stage::Analyze, 0.0)?;
-    let analysis = audio::analyze(request.audio)?;
+    let own;
+    let analysis = match request.analysis {
+        Some(a) => a,
+        None => {
+            own = audio::analyze(request.audio)?;
+            &own
+        }
+    };
+    let generated = model.generate(&GenerateRequest { analysis: Some(analysis), ..*request }, &mut clock)?;
+    let caption = Caption { model: id, seed: request.seed, song, style: generated.style };
+    let analysis = analysis.clone();
     clock.report(Stage::BeatAlign, 0.0)?;
     let finished = super::pipeline::after_model(generated.motion, analysis, request.audio.duration_s, request.key_poses, request.seed_motion, stages);
     let files = super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| clock.enter(stage))?;
@@ -149,9 +159,9 @@ pub fn generate(args: &GenerateSong, on_progress: &mut dyn FnMut(Stage, f64)) ->
     // Progress over the whole run: decode 0–5%, features 5–25%, encode 25–35%, frame loop 35–90%.
     let span = |stage: Stage| match stage {
         Stage::Claimed | Stage::DecodeAudio => (0.0, 0.05),
-        // The song's beats, after the model (for the beat-align stage and the report).
-        Stage::Analyze => (0.88, 0.88),
-        Stage::Features => (0.05, 0.25),
+        // The song's beats, before the model (for it, the beat-align stage and the report).
+        Stage::Analyze => (0.05, 0.08),
+        Stage::Features => (0.08, 0.25),
         Stage::Encode => (0.25, 0.35),
         Stage::Generate => (0.35, 0.88),
         Stage::BeatAlign => (0.88, 0.90),
