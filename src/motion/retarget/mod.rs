@@ -6,6 +6,16 @@
 //! ([`HumanBone`], the VRM 1.0 humanoid vocabulary, which every naming convention we read maps
 //! onto). The solver only ever sees that description, so a built-in and an uploaded rig take the
 //! same path.
+//!
+//! - [`retarget`] (`solve.rs`): the solver, choreo's rig onto any target (its module doc says how).
+//! - [`mixamo`], [`vrm`], [`smpl`]: the built-in targets and their files (`.vrma`, `.npz`);
+//!   `body.rs` is the reference body the first two share.
+//! - [`from_motion_json`] (`source.rs`): a job's motion.json back into the rig motion it was.
+//!
+//! Crates: `nalgebra` for rotations (already choreo's), `serde_json` for the `.vrma`'s glTF JSON
+//! (its extension is plain JSON that `gltf-json`'s typed structs do not carry), `ndarray-npy` for
+//! the `.npy` arrays and `zip` for the `.npz` container (numpy's own format, stored as
+//! `numpy.savez` does; `zip` was already built for the API docs).
 use serde::{Deserialize, Serialize};
 
 use super::rig::Rig;

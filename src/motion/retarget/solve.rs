@@ -25,8 +25,9 @@
 //!    the plane of the knee (the shortest arcs, so the twist stays), the foot keeping its world
 //!    rotation. Hands and head are not solved for: they follow their chains.
 //!
-//! Like three.js's `SkeletonUtils.retarget`, rotations carry over through the rest poses; unlike
-//! it, bone directions come from choreo's positions and the feet are solved afterwards.
+//! Rotations carry over through the two rest poses, as animation retargeting usually does; bone
+//! directions come from choreo's positions (so a rest pose that differs, an average dancing pose
+//! against a T-pose, costs nothing), and the feet are solved afterwards.
 use std::collections::HashMap;
 
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
