@@ -178,7 +178,8 @@ mod tests {
         assert_eq!(e.reference_out, PathBuf::from(choreo::eval::REFERENCE_PATH));
         let Command::Generate(g) = parse(&["generate", "song.ogg", "--out", "o"]) else { panic!("generate") };
         let want = choreo::worker::standalone::GenerateSong { song: "song.ogg".into(), out: "o".into(), ..Default::default() };
-        same(&choreo::worker::standalone::GenerateSong::from(g), &want);
+        assert_eq!(g.rig, "choreo");
+        same(&choreo::worker::standalone::GenerateSong::from(g.song), &want);
         let Command::Bench { what: BenchCommand::Generate(b) } = parse(&["bench", "generate"]) else { panic!("bench generate") };
         same(&choreo::worker::standalone::BenchOptions::from(b), &choreo::worker::standalone::BenchOptions::default());
         let Command::Bench { what: BenchCommand::Audio(a) } = parse(&["bench", "audio"]) else { panic!("bench audio") };

@@ -236,3 +236,6 @@ impl RetargetError {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

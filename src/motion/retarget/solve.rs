@@ -40,6 +40,9 @@ pub const DROP_WINDOW: usize = 4;
 /// A leg is never stretched past this share of its length (a straight knee has no bend plane).
 const MAX_REACH: f64 = 0.999;
 
+/// World positions and rotations of every joint of one frame.
+type WorldPose = (Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>);
+
 /// Choreo joints the solver reads, by name (motion.json's `joint_names`).
 const CHOREO_JOINTS: [&str; 19] = [
     "pelvis",
@@ -375,7 +378,7 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
         |set: &[HumanBone]| mean(set.iter().filter_map(|b| bones.get(b)).map(|&j| rest[j]));
 
     // Choreo's world poses, its floor, and the frames each foot stands flat (heel and toe down).
-    let choreo_frames: Vec<(Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>)> = (0..t_len)
+    let choreo_frames: Vec<WorldPose> = (0..t_len)
         .map(|t| fk_frame(&src.rig, &src.root_translation[t], &src.rotations[t]))
         .collect();
     let foot_points: Vec<usize> = ["left_heel", "left_toe", "right_heel", "right_toe"]

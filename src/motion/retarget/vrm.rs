@@ -185,10 +185,10 @@ impl Bin {
 
 /// Packs a glTF JSON document and its binary buffer as a .glb (both chunks padded to 4 bytes).
 pub(super) fn glb(mut json: Vec<u8>, mut bin: Vec<u8>) -> Result<Vec<u8>, String> {
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let total = 12 + 8 + json.len() + 8 + bin.len();
