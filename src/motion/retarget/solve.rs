@@ -18,12 +18,17 @@
 //!    turn from the torso.
 //! 3. **Scale.** The target's hips go where choreo's hips go, scaled by the ratio of leg lengths
 //!    (thigh + shin), the floor (choreo's, the 1st percentile of its lowest foot point) on y = 0.
-//! 4. **Foot IK.** Each ankle's goal is choreo's ankle scaled the same way, its height measured
-//!    from the flat-foot height of either skeleton, so a foot choreo has on the floor is on the
-//!    floor and a lifted one is lifted as much (scaled). Where a goal is out of reach the hips are
-//!    lowered (smoothed over ±[`DROP_WINDOW`] frames); then a two-bone IK turns thigh and shin in
-//!    the plane of the knee (the shortest arcs, so the twist stays), the foot keeping its world
-//!    rotation. Hands and head are not solved for: they follow their chains.
+//! 4. **Foot IK.** A foot near the floor (choreo's lowest point of it within
+//!    [`crate::motion::feet::SUPPORT_HEIGHT_M`]) aims its ankle at choreo's ankle scaled the same
+//!    way, its height measured from the flat-foot height of either skeleton (per foot for choreo,
+//!    whose markers sit differently on either foot), so a foot choreo has on the floor is on the
+//!    floor and a lifted one is lifted as much (scaled). A lifted foot (twice that high) aims at
+//!    choreo's hip-to-ankle vector scaled by its own leg's ratio, from the target's hip, which
+//!    keeps the knee's angle (choreo's two legs differ by 2-3 cm, a target's need not); in
+//!    between, a blend. Where a goal is out of reach the hips are lowered (smoothed over
+//!    ±[`DROP_WINDOW`] frames); then a two-bone IK turns thigh and shin in the plane of the knee
+//!    (the shortest arcs, so the twist stays), the foot keeping its world rotation. Hands and
+//!    head are not solved for: they follow their chains.
 //!
 //! Rotations carry over through the two rest poses, as animation retargeting usually does; bone
 //! directions come from choreo's positions (so a rest pose that differs, an average dancing pose
@@ -495,31 +500,31 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
         .fold(f64::INFINITY, f64::min);
     let target_ankle_h =
         0.5 * (tb(HumanBone::LeftFoot).y + tb(HumanBone::RightFoot).y) - target_floor;
-    // Choreo's flat-foot ankle height: the median over the frames its foot stands flat (the rest
-    // pose's, when it never does).
-    let choreo_ankle_h = {
-        let mut h: Vec<f64> = ["left_ankle", "right_ankle"]
-            .iter()
-            .zip(&flat_frames)
-            .flat_map(|(ankle, frames)| {
-                frames
-                    .iter()
-                    .map(|&t| choreo_frames[t].0[choreo[ankle]].y - choreo_floor)
-            })
-            .collect();
+    // Choreo's flat-foot ankle height per foot: the median over the frames that foot stands flat
+    // (markers sit a little differently on either foot); both feet's median, or the rest pose's,
+    // for a foot that never does.
+    let flat_height = |ankle: &str, frames: &[usize]| -> Option<f64> {
+        let mut h: Vec<f64> = frames.iter().map(|&t| choreo_frames[t].0[choreo[ankle]].y - choreo_floor).collect();
         h.sort_by(f64::total_cmp);
-        match h.get(h.len() / 2) {
-            Some(&m) => m,
-            None => {
-                let heel = ["left_heel", "right_heel"]
-                    .iter()
-                    .filter_map(|s| choreo.get(s))
-                    .map(|&k| choreo_rest[k].y)
-                    .fold(f64::INFINITY, f64::min);
-                cr("left_ankle").y - heel.min(cr("left_toe").y)
-            }
-        }
+        h.get(h.len() / 2).copied()
     };
+    let both: Vec<usize> = flat_frames.concat();
+    let fallback = flat_height("left_ankle", &both).unwrap_or_else(|| {
+        let heel = ["left_heel", "right_heel"].iter().filter_map(|s| choreo.get(s)).map(|&k| choreo_rest[k].y).fold(f64::INFINITY, f64::min);
+        cr("left_ankle").y - heel.min(cr("left_toe").y)
+    });
+    let choreo_ankle_h = [
+        flat_height("left_ankle", &flat_frames[0]).unwrap_or(fallback),
+        flat_height("right_ankle", &flat_frames[1]).unwrap_or(fallback),
+    ];
+    // Each leg's own ratio: choreo's legs differ by up to 2-3 cm (marker placement), the target's
+    // need not, so a lifted foot keeps its knee angle with its own leg's ratio.
+    let side_scale = [
+        leg(&tb(HumanBone::LeftUpperLeg), &tb(HumanBone::LeftLowerLeg), &tb(HumanBone::LeftFoot))
+            / leg(&cr("left_hip"), &cr("left_knee"), &cr("left_ankle")),
+        leg(&tb(HumanBone::RightUpperLeg), &tb(HumanBone::RightLowerLeg), &tb(HumanBone::RightFoot))
+            / leg(&cr("right_hip"), &cr("right_knee"), &cr("right_ankle")),
+    ];
     let to_target =
         |p: &Vector3<f64>| Vector3::new(p.x * scale, (p.y - choreo_floor) * scale, p.z * scale);
 
@@ -543,13 +548,33 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     }
 
     // 4: ankle goals, the hips lowered where a goal is out of reach, then two-bone IK.
+    // A foot near the floor goes to its floor goal (the ankle over choreo's, at the target's own
+    // flat-foot height plus choreo's lift, scaled); a lifted one to its reach goal (choreo's
+    // hip-to-ankle vector at its leg's own ratio, from the target's hip), which keeps the knee's
+    // angle; in between, a blend by the lowest foot point's height.
     let goals: Vec<[Vector3<f64>; 2]> = choreo_frames
         .iter()
-        .map(|(pos, _)| {
-            LEGS.map(|(_, _, _, ankle)| {
-                let a = to_target(&pos[choreo[ankle]]);
-                Vector3::new(a.x, target_ankle_h + a.y - scale * choreo_ankle_h, a.z)
-            })
+        .zip(&worlds)
+        .zip(&roots)
+        .map(|(((pos, _), w), root)| {
+            let p = fk_world(&target.rig, &prepared.order, root, w);
+            let mut out = [Vector3::zeros(); 2];
+            for (k, (thigh, _, _, ankle)) in LEGS.iter().enumerate() {
+                let side = if k == 0 { "left" } else { "right" };
+                let a = to_target(&pos[choreo[*ankle]]);
+                let floor_goal = Vector3::new(a.x, target_ankle_h + a.y - scale * choreo_ankle_h[k], a.z);
+                let hip = pos[choreo[format!("{side}_hip").as_str()]];
+                let reach_goal = p[prepared.bones[thigh]] + side_scale[k] * (pos[choreo[*ankle]] - hip);
+                let low = [format!("{side}_heel"), format!("{side}_toe")]
+                    .iter()
+                    .filter_map(|n| choreo.get(n.as_str()))
+                    .map(|&j| pos[j].y - choreo_floor)
+                    .fold(f64::INFINITY, f64::min);
+                let support = crate::motion::feet::SUPPORT_HEIGHT_M;
+                let on_floor = ((2.0 * support - low) / support).clamp(0.0, 1.0);
+                out[k] = floor_goal * on_floor + reach_goal * (1.0 - on_floor);
+            }
+            out
         })
         .collect();
     let mut drop = vec![0.0f64; t_len];
