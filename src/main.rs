@@ -30,6 +30,7 @@ fn main() -> anyhow::Result<()> {
         Command::Bench { what: BenchCommand::Audio(args) } => cli::bench::audio(args),
         Command::Eval(args) => cli::eval::run(args),
         Command::Export(args) => cli::export::run(args),
+        Command::Retarget(args) => cli::retarget::run(args),
     }
 }
 

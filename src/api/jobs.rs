@@ -362,7 +362,7 @@ pub async fn create(
     Ok(response)
 }
 
-fn parse_job_id(id: &str) -> Result<JobId, ApiError> {
+pub(super) fn parse_job_id(id: &str) -> Result<JobId, ApiError> {
     JobId::from_str(id).map_err(|_| ApiError::JobNotFound(format!("{id:?} is not a job id")))
 }
 

@@ -29,6 +29,7 @@ use tower_http::trace::TraceLayer;
 use utoipa_swagger_ui::SwaggerUi;
 
 pub mod bench;
+pub mod downloads;
 pub mod extract;
 pub mod jobs;
 pub mod listen;
@@ -116,6 +117,10 @@ pub fn router(state: AppState) -> Router {
         )
         .route("/jobs/{id}", get(jobs::get).delete(jobs::cancel))
         .route("/jobs/{id}/preview.png", get(jobs::preview))
+        .route("/jobs/{id}/motion.bvh", get(downloads::motion_bvh))
+        .route("/jobs/{id}/motion.glb", get(downloads::motion_glb))
+        .route("/jobs/{id}/motion.vrma", get(downloads::motion_vrma))
+        .route("/jobs/{id}/motion.smpl.npz", get(downloads::motion_smpl))
         .route("/jobs/{id}/{file}", get(jobs::result))
         .route("/models", get(system::models))
         .layer(axum::extract::DefaultBodyLimit::max(

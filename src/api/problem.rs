@@ -74,6 +74,8 @@ pub enum ApiError {
     SongNotFound(String),
     #[error("{0}")]
     JobNotFound(String),
+    #[error("rig {0} does not exist")]
+    RigNotFound(String),
     #[error("model `{model}` is not available; use one of the available models")]
     UnknownModel { model: String, available: Vec<String> },
     #[error("job {id} is {status}; results exist once it has succeeded")]
@@ -129,6 +131,7 @@ impl ApiError {
             ApiError::Audio(e) => e.code(),
             ApiError::Truncated { .. } => "audio-truncated",
             ApiError::SongNotFound(_) => "song-not-found",
+            ApiError::RigNotFound(_) => "rig-not-found",
             ApiError::JobNotFound(_) => "job-not-found",
             ApiError::UnknownModel { .. } => "unknown-model",
             ApiError::JobNotFinished { .. } => "job-not-finished",
@@ -173,6 +176,7 @@ impl ApiError {
             ApiError::Audio(_) => StatusCode::INTERNAL_SERVER_ERROR,
             ApiError::Truncated { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::SongNotFound(_) => StatusCode::NOT_FOUND,
+            ApiError::RigNotFound(_) => StatusCode::NOT_FOUND,
             ApiError::JobNotFound(_) => StatusCode::NOT_FOUND,
             ApiError::UnknownModel { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::JobNotFinished { .. } => StatusCode::CONFLICT,

@@ -74,9 +74,26 @@ args_into! {
     }
 }
 
+/// `choreo generate`: the generation arguments and the rig to add.
+#[derive(Clone, Debug, clap::Args)]
+pub struct GenerateCmd {
+    #[command(flatten)]
+    pub song: GenerateArgs,
+    /// Also write the dance on this skeleton beside the others: mixamo (motion.mixamo.bvh and
+    /// .glb), vrm (motion.vrm.bvh, .glb and motion.vrma) or smpl (motion.smpl.bvh, .glb and
+    /// motion.smpl.npz); choreo (the default) adds nothing.
+    #[arg(long, default_value = "choreo")]
+    pub rig: String,
+}
+
 /// `choreo generate`: a dance for one song, with a progress bar on stderr; prints each stage's
 /// time (stderr) and the files written (stdout).
-pub fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
+pub fn generate(cmd: &GenerateCmd) -> anyhow::Result<()> {
+    // An unknown rig fails before the generation, not after it.
+    if cmd.rig != "choreo" {
+        super::retarget::target(&cmd.rig)?;
+    }
+    let args = &cmd.song;
     // Warnings (and RUST_LOG's choice) from the models reach the terminal.
     choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "warn");
     let mut bar: Option<indicatif::ProgressBar> = None;
@@ -93,6 +110,9 @@ pub fn generate(args: &GenerateArgs) -> anyhow::Result<()> {
         eprintln!("{:<14} {:>8.3} s", stage.as_str(), d.as_secs_f64());
     }
     for file in &g.files {
+        println!("{}", file.display());
+    }
+    for file in super::retarget::beside(&args.out, &cmd.rig)? {
         println!("{}", file.display());
     }
     Ok(())

@@ -31,6 +31,7 @@ pub mod bench;
 pub mod eval;
 pub mod export;
 pub mod generate;
+pub mod retarget;
 pub mod train;
 
 #[derive(Parser)]
@@ -58,8 +59,9 @@ pub enum Command {
     Doctor(ServiceArgs),
     /// Score Real, Mismatched-real and models on the test split (Markdown table + JSON).
     Eval(eval::EvalArgs),
-    /// Generate a dance for a song: motion.bvh, motion.json, motion.glb, report.json and preview.png.
-    Generate(generate::GenerateArgs),
+    /// Generate a dance for a song: motion.bvh, motion.json, motion.glb, report.json and preview.png
+    /// (`--rig`: also the dance on a Mixamo, VRM or SMPL skeleton).
+    Generate(generate::GenerateCmd),
     /// Train a model on the train split of dance-with-melody and write its folder under models/.
     Train {
         #[command(subcommand)]
@@ -67,6 +69,8 @@ pub enum Command {
     },
     /// Write a dataset dance as BVH, JSON or glb through the exporter generated dances use.
     Export(export::ExportArgs),
+    /// Put a motion.json's dance on another skeleton (Mixamo, VRM, SMPL): BVH, glb, .vrma or .npz.
+    Retarget(retarget::RetargetArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -174,7 +178,8 @@ mod tests {
         assert_eq!(e.reference_out, PathBuf::from(choreo::eval::REFERENCE_PATH));
         let Command::Generate(g) = parse(&["generate", "song.ogg", "--out", "o"]) else { panic!("generate") };
         let want = choreo::worker::standalone::GenerateSong { song: "song.ogg".into(), out: "o".into(), ..Default::default() };
-        same(&choreo::worker::standalone::GenerateSong::from(g), &want);
+        assert_eq!(g.rig, "choreo");
+        same(&choreo::worker::standalone::GenerateSong::from(g.song), &want);
         let Command::Bench { what: BenchCommand::Generate(b) } = parse(&["bench", "generate"]) else { panic!("bench generate") };
         same(&choreo::worker::standalone::BenchOptions::from(b), &choreo::worker::standalone::BenchOptions::default());
         let Command::Bench { what: BenchCommand::Audio(a) } = parse(&["bench", "audio"]) else { panic!("bench audio") };

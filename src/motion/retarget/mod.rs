@@ -6,9 +6,32 @@
 //! ([`HumanBone`], the VRM 1.0 humanoid vocabulary, which every naming convention we read maps
 //! onto). The solver only ever sees that description, so a built-in and an uploaded rig take the
 //! same path.
+//!
+//! - [`retarget`] (`solve.rs`): the solver, choreo's rig onto any target (its module doc says how).
+//! - [`mixamo`], [`vrm`], [`smpl`]: the built-in targets and their files (`.vrma`, `.npz`);
+//!   `body.rs` is the reference body the first two share.
+//! - [`from_motion_json`] (`source.rs`): a job's motion.json back into the rig motion it was.
+//!
+//! Crates: `nalgebra` for rotations (already choreo's), `serde_json` for the `.vrma`'s glTF JSON
+//! (its extension is plain JSON that `gltf-json`'s typed structs do not carry), `ndarray-npy` for
+//! the `.npy` arrays and `zip` for the `.npz` container (numpy's own format, stored as
+//! `numpy.savez` does; `zip` was already built for the API docs).
 use serde::{Deserialize, Serialize};
 
 use super::rig::Rig;
+
+mod body;
+pub mod mixamo;
+pub mod smpl;
+mod solve;
+mod source;
+pub mod vrm;
+
+pub use mixamo::mixamo;
+pub use smpl::{smpl, smpl_npz};
+pub use solve::{retarget, REQUIRED};
+pub use source::from_motion_json;
+pub use vrm::{vrm, vrma_bytes};
 
 /// A humanoid bone, named as in VRM 1.0's `VRMC_vrm.humanoid.humanBones` (body bones; fingers,
 /// eyes and jaw are not in choreo's capture and stay unmapped).
@@ -117,3 +140,102 @@ pub struct TargetSkeleton {
     /// drive (they keep their rest rotation).
     pub humanoid: Vec<Option<HumanBone>>,
 }
+
+/// The built-in targets' names (`choreo`, the dance's own rig, is no target: nothing to solve).
+pub const BUILTINS: [&str; 3] = ["mixamo", "vrm", "smpl"];
+
+/// A built-in target by name ([`BUILTINS`]).
+pub fn builtin(name: &str) -> Option<TargetSkeleton> {
+    match name {
+        "mixamo" => Some(mixamo()),
+        "vrm" => Some(vrm()),
+        "smpl" => Some(smpl()),
+        _ => None,
+    }
+}
+
+/// The files a retargeted dance is written as.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// BVH ([`crate::motion::bvh::write_bvh`]), any target.
+    Bvh,
+    /// glTF binary with a skin and one animation ([`crate::motion::export::glb_bytes`]), any target.
+    Glb,
+    /// VRM Animation ([`vrma_bytes`]); the dance is put on [`vrm`].
+    Vrma,
+    /// AMASS-style SMPL parameters ([`smpl_npz`]); the dance is put on [`smpl`].
+    SmplNpz,
+}
+
+/// The bytes of `src` (a dance on choreo's rig) on `target` as `format`; [`Format::Vrma`] and
+/// [`Format::SmplNpz`] have their own target and ignore `target`.
+pub fn render(
+    src: &super::rig::RigMotion,
+    target: &TargetSkeleton,
+    format: Format,
+) -> Result<Vec<u8>, RetargetError> {
+    let export = |e: super::MotionError| RetargetError::Write {
+        format: "bvh/glb",
+        reason: e.to_string(),
+    };
+    match format {
+        Format::Bvh => super::bvh::write_bvh(&retarget(src, target)?)
+            .map(String::into_bytes)
+            .map_err(export),
+        Format::Glb => super::export::glb_bytes(&retarget(src, target)?).map_err(export),
+        Format::Vrma => {
+            let target = vrm();
+            vrma_bytes(&retarget(src, &target)?, &target)
+        }
+        Format::SmplNpz => smpl_npz(&retarget(src, &smpl())?),
+    }
+}
+
+/// Why a dance could not be put on a target skeleton.
+#[derive(Debug, thiserror::Error)]
+pub enum RetargetError {
+    #[error("the target skeleton is malformed: {0}")]
+    InvalidTarget(String),
+    #[error("the target skeleton has no `{}` bone; a dance needs hips, spine, head, both upper and lower arms, upper and lower legs and feet", .0.vrm_name())]
+    MissingBone(HumanBone),
+    #[error("two joints of the target skeleton are the `{}` bone", .0.vrm_name())]
+    DuplicateBone(HumanBone),
+    #[error("the motion is not on choreo's skeleton (motion.json's joints): {0}")]
+    NotChoreoMotion(String),
+    #[error("the motion has no frames")]
+    EmptyMotion,
+    #[error("writing the {format} file failed: {reason}")]
+    Write {
+        format: &'static str,
+        reason: String,
+    },
+}
+
+impl RetargetError {
+    /// Stable kebab-case name of the failure.
+    pub fn code(&self) -> &'static str {
+        match self {
+            RetargetError::InvalidTarget(_) => "invalid-target-skeleton",
+            RetargetError::MissingBone(_) => "target-bone-missing",
+            RetargetError::DuplicateBone(_) => "target-bone-duplicated",
+            RetargetError::NotChoreoMotion(_) => "not-choreo-motion",
+            RetargetError::EmptyMotion => "empty-motion",
+            RetargetError::Write { .. } => "retarget-write-failed",
+        }
+    }
+
+    /// Whether the error is the caller's (their skeleton or motion), not the server's.
+    pub fn is_client_error(&self) -> bool {
+        match self {
+            RetargetError::InvalidTarget(_)
+            | RetargetError::MissingBone(_)
+            | RetargetError::DuplicateBone(_)
+            | RetargetError::NotChoreoMotion(_)
+            | RetargetError::EmptyMotion => true,
+            RetargetError::Write { .. } => false,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;
