@@ -22,6 +22,7 @@ mod openapi;
 mod postgres;
 mod preview;
 mod resilience;
+mod rigs;
 mod roundtrip;
 mod scale;
 mod schemathesis;

@@ -11,6 +11,7 @@ use serde::{Deserialize, Serialize};
 use super::rig::Rig;
 
 pub mod names;
+pub mod uploaded;
 
 /// A humanoid bone, named as in VRM 1.0's `VRMC_vrm.humanoid.humanBones` (body bones; fingers,
 /// eyes and jaw are not in choreo's capture and stay unmapped).

@@ -278,6 +278,27 @@ pub fn map_skeleton(
         }
     }
 
+    // A "shoulder" that goes straight on to the elbow, with no upper arm between (choreo's own
+    // rig, marker sets), is where the upper arm starts: it is the upper arm.
+    for (shoulder, upper, lower) in [
+        (
+            HumanBone::LeftShoulder,
+            HumanBone::LeftUpperArm,
+            HumanBone::LeftLowerArm,
+        ),
+        (
+            HumanBone::RightShoulder,
+            HumanBone::RightUpperArm,
+            HumanBone::RightLowerArm,
+        ),
+    ] {
+        if !taken.contains(&upper) && taken.contains(&lower) {
+            if let Some(b) = bones.iter_mut().find(|b| **b == Some(shoulder)) {
+                *b = Some(upper);
+            }
+        }
+    }
+
     for (name, bone) in overrides {
         let Some(j) = names.iter().position(|s| s == name) else {
             continue;
@@ -539,6 +560,28 @@ mod tests {
         let overrides = BTreeMap::from([("Bone.007".to_string(), Some(B::Neck))]);
         let bones = map_skeleton(&names, &parents, &overrides);
         assert_eq!((bones[4], bones[5]), (None, Some(B::Neck)));
+    }
+
+    #[test]
+    fn a_shoulder_joint_that_goes_straight_to_the_elbow_is_the_upper_arm() {
+        let (names, parents) = skeleton(&[
+            ("body_centre", None),
+            ("spine", Some(0)),
+            ("left_shoulder", Some(1)),
+            ("left_elbow", Some(2)),
+            ("left_forearm", Some(3)),
+            ("left_wrist", Some(4)),
+            ("pelvis", Some(0)),
+        ]);
+        let m = mapped(&names, &map_skeleton(&names, &parents, &BTreeMap::new()));
+        assert_eq!(m["left_shoulder"], B::LeftUpperArm);
+        assert_eq!(m["left_elbow"], B::LeftLowerArm);
+        assert!(
+            !m.contains_key("left_forearm"),
+            "the forearm marker repeats the lower arm: {m:?}"
+        );
+        assert_eq!(m["left_wrist"], B::LeftHand);
+        assert_eq!(m["pelvis"], B::Hips);
     }
 
     #[test]
