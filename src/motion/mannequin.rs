@@ -4,12 +4,14 @@
 //! No third-party asset: every bone (parent `p` → joint `j`, longer than [`MIN_BONE_M`]) gets a
 //! capsule from `p`'s rest position to `j`'s, its radius sized by the bone's length; the bones
 //! into both ends of a left/right pair of siblings (shoulders, hips) get a bar between the two,
-//! so the trunk reads as shoulders and a pelvis; a bone between two joints whose names say
-//! "head" is a head-sized capsule. Each vertex is bound to one joint, with weight 1: a capsule
-//! on the bone `p → j` to `p`, because the forward kinematics moves that bone rigidly with `p`'s
-//! frame (`pos[j] = pos[p] + rot[p] · offset[j]`), and a bar to the joint the pair hangs from.
-//! Rigid pieces cannot candy-wrap; the round ends of neighbouring capsules overlap at the
-//! joints, so no gap opens when a joint bends (a jointed artist's mannequin).
+//! and a thick trunk joins the lowest bar to the highest; a bone between two joints whose names
+//! say "head" is a head-sized capsule. Limbs are rigid: each vertex of a capsule on the bone
+//! `p → j` is bound to `p` alone, because the forward kinematics moves that bone rigidly with
+//! `p`'s frame (`pos[j] = pos[p] + rot[p] · offset[j]`), and a bar to the joint the pair hangs
+//! from. Rigid pieces cannot candy-wrap; the round ends of neighbouring capsules overlap at the
+//! joints, so no gap opens when a joint bends (a jointed artist's mannequin). Only the trunk
+//! bends: it is bound to the hips' joint at the bottom and the shoulders' at the top, blended
+//! smoothly along its side.
 //!
 //! The mesh is in the rest pose, the bind pose of the skin [`super::export::glb_bytes`] writes
 //! (world rest position of each joint, identity rotations), so its inverse bind matrices are the
@@ -36,6 +38,8 @@ const HEAD_RADIUS_M: f64 = 0.085;
 /// Vertices around a capsule, and rings on each of its round ends.
 const AROUND: usize = 12;
 const END_RINGS: usize = 4;
+/// Rings along the trunk's side, where its two joints blend.
+const TRUNK_RINGS: usize = 6;
 
 /// A skinned triangle mesh in the rest pose.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -44,8 +48,10 @@ pub struct Mesh {
     pub positions: Vec<[f32; 3]>,
     /// Unit normals.
     pub normals: Vec<[f32; 3]>,
-    /// The one rig joint each vertex follows (weight 1).
-    pub joints: Vec<u16>,
+    /// The two rig joints each vertex follows (the same one twice for a rigid piece)...
+    pub joints: Vec<[u16; 2]>,
+    /// ... and the second one's weight (the first has the rest).
+    pub weights: Vec<f32>,
     /// Triangles, counter-clockwise seen from outside.
     pub indices: Vec<u32>,
 }
@@ -90,6 +96,21 @@ fn mirrored(a: &str, b: &str) -> bool {
 impl Mesh {
     /// Appends a capsule from `a` to `b` of radius `r`, every vertex bound to `joint`.
     fn capsule(&mut self, a: Vector3<f64>, b: Vector3<f64>, r: f64, joint: u16) {
+        self.blended_capsule(a, b, r, (joint, joint), 0);
+    }
+
+    /// Appends a capsule from `a` to `b` of radius `r` with `mid_rings` rings along its side,
+    /// its vertices bound to `joints.0` at `a`'s end and to `joints.1` at `b`'s, blended
+    /// smoothly in between.
+    fn blended_capsule(
+        &mut self,
+        a: Vector3<f64>,
+        b: Vector3<f64>,
+        r: f64,
+        joints: (u16, u16),
+        mid_rings: usize,
+    ) {
+        use std::f64::consts::{FRAC_PI_2, TAU};
         let axis = b - a;
         let len = axis.norm();
         let w = if len > 1e-9 { axis / len } else { Vector3::y() };
@@ -103,31 +124,30 @@ impl Mesh {
         let v = w.cross(&u);
         let base = self.positions.len() as u32;
         // Rings from the pole behind `a` to the pole past `b`: latitude −90° … 0° around `a`,
-        // then 0° … 90° around `b`.
-        let rings = 2 * (END_RINGS + 1);
-        for ring in 0..rings {
-            let (centre, lat) = if ring <= END_RINGS {
-                (
-                    a,
-                    -std::f64::consts::FRAC_PI_2 * (1.0 - ring as f64 / END_RINGS as f64),
-                )
-            } else {
-                (
-                    b,
-                    std::f64::consts::FRAC_PI_2
-                        * ((ring - END_RINGS - 1) as f64 / END_RINGS as f64),
-                )
-            };
+        // the side rings, then 0° … 90° around `b`. Each: (centre, latitude, share of `b`'s joint).
+        let mut rings: Vec<(Vector3<f64>, f64, f64)> = Vec::new();
+        for k in 0..=END_RINGS {
+            rings.push((a, -FRAC_PI_2 * (1.0 - k as f64 / END_RINGS as f64), 0.0));
+        }
+        for k in 1..=mid_rings {
+            let t = k as f64 / (mid_rings + 1) as f64;
+            rings.push((a + axis * t, 0.0, t * t * (3.0 - 2.0 * t)));
+        }
+        for k in 0..=END_RINGS {
+            rings.push((b, FRAC_PI_2 * (k as f64 / END_RINGS as f64), 1.0));
+        }
+        for &(centre, lat, share) in &rings {
             for k in 0..AROUND {
-                let lon = std::f64::consts::TAU * k as f64 / AROUND as f64;
+                let lon = TAU * k as f64 / AROUND as f64;
                 let n = w * lat.sin() + (u * lon.cos() + v * lon.sin()) * lat.cos();
                 let p = centre + n * r;
                 self.positions.push([p.x as f32, p.y as f32, p.z as f32]);
                 self.normals.push([n.x as f32, n.y as f32, n.z as f32]);
-                self.joints.push(joint);
+                self.joints.push([joints.0, joints.1]);
+                self.weights.push(share as f32);
             }
         }
-        for ring in 0..rings - 1 {
+        for ring in 0..rings.len() - 1 {
             for k in 0..AROUND {
                 let k2 = (k + 1) % AROUND;
                 let (i0, i1) = (
@@ -167,6 +187,8 @@ pub fn build(rig: &Rig) -> Result<Mesh, MotionError> {
     }
     // Bars between left/right siblings, bound to the joint they hang from.
     let mut children: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    // (joint, middle, width) of each bar.
+    let mut bars: Vec<(usize, Vector3<f64>, f64)> = Vec::new();
     for (j, p) in rig.parents.iter().enumerate() {
         if let Some(p) = p {
             children.entry(*p).or_default().push(j);
@@ -179,8 +201,20 @@ pub fn build(rig: &Rig) -> Result<Mesh, MotionError> {
                     && (rest[a] - rest[b]).norm() >= MIN_BONE_M
                 {
                     mesh.capsule(rest[a], rest[b], BAR_RADIUS_M, p as u16);
+                    bars.push((p, (rest[a] + rest[b]) / 2.0, (rest[a] - rest[b]).norm()));
                 }
             }
+        }
+    }
+    // The trunk: from the lowest bar's middle (the hips) to the highest's (the shoulders), bound
+    // to the lower bar's joint at the bottom and the upper's at the top, blended between.
+    if let (Some(low), Some(high)) = (
+        bars.iter().min_by(|x, y| x.1.y.total_cmp(&y.1.y)),
+        bars.iter().max_by(|x, y| x.1.y.total_cmp(&y.1.y)),
+    ) {
+        if (high.1 - low.1).norm() >= 0.1 {
+            let r = (0.6 * 0.5 * low.2.max(high.2)).clamp(0.07, 0.14);
+            mesh.blended_capsule(low.1, high.1, r, (low.0 as u16, high.0 as u16), TRUNK_RINGS);
         }
     }
     Ok(mesh)
@@ -273,13 +307,15 @@ pub fn attach(
     let joints: Vec<u8> = mesh
         .joints
         .iter()
-        .flat_map(|&j| [j, 0, 0, 0])
+        .flat_map(|&[a, b]| [a, b, 0, 0])
         .flat_map(u16::to_le_bytes)
         .collect();
     let v = view(root, bin, &joints, array);
     let joints = accessor(root, v, count, C::U16, T::Vec4, None);
-    let weights: Vec<u8> = (0..count)
-        .flat_map(|_| [1.0f32, 0.0, 0.0, 0.0])
+    let weights: Vec<u8> = mesh
+        .weights
+        .iter()
+        .flat_map(|&w| [1.0 - w, w, 0.0, 0.0])
         .flat_map(f32::to_le_bytes)
         .collect();
     let v = view(root, bin, &weights, array);
@@ -394,7 +430,7 @@ mod tests {
         // The thigh (left_hip → left_knee) follows left_hip; the head capsule is head-sized.
         let rest = rest_positions(&rig);
         let thigh: Vec<_> = (0..mesh.positions.len())
-            .filter(|&i| mesh.joints[i] == 1)
+            .filter(|&i| mesh.joints[i] == [1, 1])
             .collect();
         assert_eq!(thigh.len(), per_capsule);
         for &i in &thigh {
@@ -405,7 +441,7 @@ mod tests {
             assert!((d - 0.055).abs() < 1e-4, "thigh vertex {d} m from its bone");
         }
         let head = (0..mesh.positions.len())
-            .filter(|&i| mesh.joints[i] == 6)
+            .filter(|&i| mesh.joints[i] == [6, 6])
             .count();
         assert_eq!(head, per_capsule);
         for nrm in &mesh.normals {
