@@ -227,7 +227,7 @@ fn view(
     bytes: &[u8],
     target: gj::buffer::Target,
 ) -> gj::Index<gj::buffer::View> {
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let offset = bin.len();
