@@ -69,8 +69,10 @@ impl From<&UploadedRig> for RigView {
     }
 }
 
-/// The multipart form of a rig upload.
+/// The multipart form of a rig upload: `file` and, optionally, `mapping` (any other field is
+/// refused with 422).
 #[derive(utoipa::ToSchema)]
+#[serde(deny_unknown_fields)]
 #[allow(dead_code)]
 pub struct RigUploadForm {
     /// The skeleton in its rest pose: BVH (text; metres, centimetres or millimetres) or glb
