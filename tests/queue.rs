@@ -290,6 +290,39 @@ async fn concurrent_claims_take_each_job_once(db: TestDb) {
     }
 }
 
+async fn rigs_keep_their_skeleton_and_mapping(db: TestDb) {
+    use choreo::motion::retarget::uploaded::{RigFormat, Units};
+    use choreo::motion::retarget::{HumanBone, TargetSkeleton};
+    use choreo::motion::rig::Rig;
+    use choreo::queue::{RigId, UploadedRig};
+    let store = db.store.as_ref();
+    let skeleton = TargetSkeleton {
+        rig: Rig {
+            names: vec!["Hips".into(), "Spine".into(), "Bone.001".into()],
+            parents: vec![None, Some(0), Some(1)],
+            offsets: vec![nalgebra::Vector3::new(0.0, 0.95, 0.0), nalgebra::Vector3::new(0.0, 0.1, 0.0), nalgebra::Vector3::new(0.0, 0.125, 0.0)],
+        },
+        humanoid: vec![Some(HumanBone::Hips), Some(HumanBone::Spine), None],
+    };
+    let rig = UploadedRig {
+        id: RigId::new(),
+        filename: "mine.bvh".into(),
+        format: RigFormat::Bvh,
+        units: Units::Cm,
+        sha256: "abc".into(),
+        size_bytes: 123,
+        skeleton: skeleton.clone(),
+        created_at: Utc::now(),
+    };
+    let stored = store.add_rig(rig.clone()).await.expect("add rig");
+    let read = store.rig(rig.id).await.expect("read rig");
+    for got in [&stored, &read] {
+        assert_eq!((got.id, got.filename.as_str(), got.format, got.units, got.size_bytes), (rig.id, "mine.bvh", RigFormat::Bvh, Units::Cm, 123));
+        assert_eq!(got.skeleton, skeleton);
+    }
+    assert!(matches!(store.rig(RigId::new()).await, Err(QueueError::RigNotFound(_))));
+}
+
 macro_rules! contract {
     ($($name:ident),* $(,)?) => {
         mod sqlite {
@@ -320,6 +353,7 @@ contract!(
     songs_are_one_per_content_and_jobs_page_newest_first,
     higher_priority_runs_first,
     concurrent_claims_take_each_job_once,
+    rigs_keep_their_skeleton_and_mapping,
 );
 
 /// PostgreSQL only: a job queued through one connection pool (another process) wakes a watcher

@@ -1,7 +1,8 @@
 //! The page at `/` in a real browser: Playwright (`tests/web/flow.mjs`, npm `playwright-core`)
 //! drives Debian's chromium through the whole flow against two real servers, the page from one
 //! and the API from another origin with a bearer token and CORS: upload (file input and drop),
-//! key poses, submit, progress, playback in sync with the song, scrub, loop, compare, report
+//! key poses, submit, progress, playback in sync with the song, scrub, the mannequin (its skin
+//! on its joints at two times) and the stick toggle, rig upload and pick, loop, compare, report
 //! plots, downloads and deep links. Also: the embedded assets, and that `web/dist` is what
 //! `web/src` builds to.
 //!
@@ -123,6 +124,11 @@ async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
         assert!(sync["audio_advanced_s"].as_f64().expect("advanced") > 1.0, "{phase}: the song did not play: {sync}");
     }
     assert!(summary["sync"].as_object().is_some_and(|s| s.len() >= 3), "playing, looping and deep link were measured: {summary}");
+    // The mannequin drawn and moving with the song, its skin on its joints; a rig upload mapped.
+    let mannequin = &summary["mannequin"];
+    assert!(mannequin["triangles"].as_u64().is_some_and(|n| n > 1000), "{summary}");
+    assert!(mannequin["travel_m"].as_f64().is_some_and(|m| m > 0.05), "{summary}");
+    assert!(summary["rig"]["mapped"].as_u64().is_some_and(|n| n >= 13), "{summary}");
     let shots = summary["screenshots"].as_array().expect("screenshots");
     assert!(shots.len() >= 6, "{summary}");
     for shot in shots {

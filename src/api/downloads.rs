@@ -29,18 +29,21 @@ pub struct RigQuery {
 }
 
 /// The target a `rig` names: `None` for choreo's own rig (nothing to retarget), a built-in by
-/// name, else (for now) 404 `rig-not-found`. Uploaded rigs plug in here as one more arm.
-pub async fn resolve_rig(_state: &AppState, _job: &Job, rig: &str) -> Result<Option<TargetSkeleton>, ApiError> {
+/// name, else an uploaded rig by id (`POST /v1/rigs`); anything else is 404 `rig-not-found`.
+pub async fn resolve_rig(state: &AppState, _job: &Job, rig: &str) -> Result<Option<TargetSkeleton>, ApiError> {
     if rig == "choreo" {
         return Ok(None);
     }
-    match retarget::builtin(rig) {
-        Some(target) => Ok(Some(target)),
-        None => Err(ApiError::RigNotFound(format!(
+    if let Some(target) = retarget::builtin(rig) {
+        return Ok(Some(target));
+    }
+    super::rigs::target_skeleton(state, rig).await.map(Some).map_err(|e| match e {
+        ApiError::RigNotFound(_) => ApiError::RigNotFound(format!(
             "{rig:?} (rigs are choreo, {}, or the id of an uploaded rig)",
             retarget::BUILTINS.join(", ")
-        ))),
-    }
+        )),
+        other => other,
+    })
 }
 
 /// A succeeded generate job, or the answer the result routes give when there is none.

@@ -36,6 +36,7 @@ pub mod listen;
 pub mod multipart;
 pub mod openapi;
 pub mod problem;
+pub mod rigs;
 pub mod songs;
 pub mod system;
 pub mod web;
@@ -109,6 +110,8 @@ pub fn router(state: AppState) -> Router {
         .route("/songs", axum::routing::post(songs::upload))
         .route("/songs/{id}", get(songs::get))
         .route("/songs/{id}/audio", get(songs::audio))
+        .route("/rigs", axum::routing::post(rigs::upload))
+        .route("/rigs/{id}", get(rigs::get))
         .route(
             "/jobs",
             get(jobs::list).post(jobs::create).layer(axum::extract::DefaultBodyLimit::max(

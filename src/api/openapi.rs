@@ -3,7 +3,7 @@
 //! The modifiers state what the middleware does for every `/v1` route, so the document says
 //! exactly what the server does: the bearer token is optional (only a server with `auth_token`
 //! set asks for it, and then answers 401), and the ids that `POST /v1/songs` and `POST /v1/jobs`
-//! return are linked to the operations that take them.
+//! return (and `POST /v1/rigs`) are linked to the operations that take them.
 use serde_json::{json, Value};
 use utoipa::openapi::path::{Operation, PathItem};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
@@ -21,6 +21,8 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
         super::songs::upload,
         super::songs::get,
         super::songs::audio,
+        super::rigs::upload,
+        super::rigs::get,
         super::jobs::create,
         super::jobs::list,
         super::jobs::get,
@@ -39,6 +41,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
     modifiers(&BearerAuth),
     tags(
         (name = "songs", description = "Upload songs; read their analysis"),
+        (name = "rigs", description = "Your own skeletons (BVH or glb) to take dances onto"),
         (name = "jobs", description = "Dances: submit, follow, cancel, download"),
         (name = "models", description = "The models this server has"),
         (name = "system", description = "Health, readiness, metrics"),
@@ -93,7 +96,10 @@ fn add_links(spec: &mut Value) {
         "GetJobPreview": { "operationId": "getJobPreview", "parameters": { "id": "$response.body#/id" } },
         "GetSong": { "operationId": "getSong", "parameters": { "id": "$response.body#/song_id" } },
     });
-    for (path, status, links) in [("/v1/songs", "201", &song), ("/v1/songs", "200", &song), ("/v1/jobs", "202", &job)] {
+    let rig = json!({
+        "GetRig": { "operationId": "getRig", "parameters": { "id": "$response.body#/id" } },
+    });
+    for (path, status, links) in [("/v1/songs", "201", &song), ("/v1/songs", "200", &song), ("/v1/jobs", "202", &job), ("/v1/rigs", "201", &rig)] {
         if let Some(response) = spec.pointer_mut(&format!("/paths/{}/post/responses/{status}", path.replace('/', "~1"))) {
             response["links"] = links.clone();
         }

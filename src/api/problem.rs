@@ -1,5 +1,6 @@
 //! RFC 9457 problem+json errors: every failure has a stable `code` and says what to fix.
 use crate::audio::AudioError;
+use crate::motion::retarget::uploaded::RigFileError;
 use crate::queue::{JobId, QueueError, Status};
 use axum::http::{header, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
@@ -76,6 +77,8 @@ pub enum ApiError {
     JobNotFound(String),
     #[error("rig {0} does not exist")]
     RigNotFound(String),
+    #[error("{0}")]
+    Rig(RigFileError),
     #[error("model `{model}` is not available; use one of the available models")]
     UnknownModel { model: String, available: Vec<String> },
     #[error("job {id} is {status}; results exist once it has succeeded")]
@@ -132,6 +135,7 @@ impl ApiError {
             ApiError::Truncated { .. } => "audio-truncated",
             ApiError::SongNotFound(_) => "song-not-found",
             ApiError::RigNotFound(_) => "rig-not-found",
+            ApiError::Rig(e) => e.code(),
             ApiError::JobNotFound(_) => "job-not-found",
             ApiError::UnknownModel { .. } => "unknown-model",
             ApiError::JobNotFinished { .. } => "job-not-finished",
@@ -177,6 +181,8 @@ impl ApiError {
             ApiError::Truncated { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::SongNotFound(_) => StatusCode::NOT_FOUND,
             ApiError::RigNotFound(_) => StatusCode::NOT_FOUND,
+            ApiError::Rig(e) if e.is_unsupported_media() => StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            ApiError::Rig(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::JobNotFound(_) => StatusCode::NOT_FOUND,
             ApiError::UnknownModel { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::JobNotFinished { .. } => StatusCode::CONFLICT,
@@ -225,6 +231,9 @@ impl ApiError {
                     available.join(", "),
                     if available.is_empty() { " (no model is trained on this server yet)" } else { "" }
                 );
+            }
+            ApiError::Rig(e) => {
+                problem.field = Some(e.field().into());
             }
             ApiError::JobNotFinished { status, .. } | ApiError::AlreadyFinished { status, .. } => {
                 problem.job_status = Some(*status);
@@ -297,6 +306,7 @@ impl From<QueueError> for ApiError {
         match e {
             QueueError::SongNotFound(id) => ApiError::SongNotFound(id.to_string()),
             QueueError::JobNotFound(id) => ApiError::JobNotFound(format!("job {id} does not exist")),
+            QueueError::RigNotFound(id) => ApiError::RigNotFound(id.to_string()),
             QueueError::IdempotencyConflict(id) => ApiError::IdempotencyConflict(id),
             QueueError::Database(db) => ApiError::database(&db).unwrap_or_else(|| ApiError::Internal(format!("database: {db}"))),
             other @ (QueueError::Migrate(_) | QueueError::Corrupt(_)) => ApiError::Internal(other.to_string()),

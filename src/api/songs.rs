@@ -96,14 +96,14 @@ fn check_filename(name: Option<&str>) -> Result<String, ApiError> {
 }
 
 /// An upload streamed to disk.
-struct Received {
-    file: tempfile::NamedTempFile,
-    filename: String,
-    size: u64,
-    sha256: String,
+pub(super) struct Received {
+    pub(super) file: tempfile::NamedTempFile,
+    pub(super) filename: String,
+    pub(super) size: u64,
+    pub(super) sha256: String,
 }
 
-async fn receive(state: &AppState, mut field: multer::Field<'static>) -> Result<Received, ApiError> {
+pub(super) async fn receive(state: &AppState, mut field: multer::Field<'static>) -> Result<Received, ApiError> {
     let filename = check_filename(field.file_name())?;
     let limit = state.config.max_upload_bytes;
     let tmp = state.data.temp_file().map_err(|e| ApiError::storage("creating the upload's temp file", &e))?;
@@ -173,7 +173,7 @@ pub const DRAIN_LIMIT_BYTES: u64 = 16 * 1024 * 1024;
 const DRAIN_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
 
 /// Reads and drops the rest of a multipart body; true when it ended within the limits.
-async fn drain(multipart: &mut Form) -> bool {
+pub(super) async fn drain(multipart: &mut Form) -> bool {
     let work = async {
         let mut budget = DRAIN_LIMIT_BYTES;
         loop {
@@ -202,12 +202,12 @@ async fn drain(multipart: &mut Form) -> bool {
 /// connection after the response, and a keep-alive client must not send its next request into it.
 #[derive(Debug)]
 pub struct UploadError {
-    error: ApiError,
-    body_unread: bool,
+    pub(super) error: ApiError,
+    pub(super) body_unread: bool,
 }
 
 impl UploadError {
-    fn before_body_end(error: ApiError) -> Self {
+    pub(super) fn before_body_end(error: ApiError) -> Self {
         Self { error, body_unread: true }
     }
 }

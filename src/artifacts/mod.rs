@@ -13,7 +13,8 @@
 //!
 //! Artifacts never change once written (names come from ids), so a cached copy is never stale.
 use crate::audio::AudioFormat;
-use crate::queue::{DataDir, JobId, SongId};
+use crate::motion::retarget::uploaded::RigFormat;
+use crate::queue::{DataDir, JobId, RigId, SongId};
 use bytes::Bytes;
 use futures::future::BoxFuture;
 use futures::stream::BoxStream;
@@ -68,6 +69,8 @@ impl ArtifactError {
 pub enum Artifact<'a> {
     /// An uploaded song, in the format decoding found.
     Song(SongId, AudioFormat),
+    /// An uploaded rig, in the format its bytes are.
+    Rig(RigId, RigFormat),
     /// One result file of a generate job (a name from `queue::files::RESULT_FILES`).
     Result(JobId, &'a str),
 }
@@ -78,6 +81,7 @@ impl Artifact<'_> {
     pub fn key(&self) -> String {
         match self {
             Artifact::Song(id, format) => format!("songs/{id}.{}", crate::queue::files::extension(*format)),
+            Artifact::Rig(id, format) => format!("rigs/{id}.{}", format.extension()),
             Artifact::Result(id, file) => format!("jobs/{id}/{file}"),
         }
     }
@@ -86,6 +90,7 @@ impl Artifact<'_> {
     pub fn local_path(&self, data: &DataDir) -> PathBuf {
         match self {
             Artifact::Song(id, format) => data.song_path(*id, *format),
+            Artifact::Rig(id, format) => data.rig_path(*id, *format),
             Artifact::Result(id, file) => data.job_dir(*id).join(file),
         }
     }

@@ -11,7 +11,8 @@ use choreo::motion::retarget::{self, Format, TargetSkeleton};
 pub struct RetargetArgs {
     /// A motion.json: a job's, `choreo generate`'s or `choreo export --format json`'s.
     pub motion: PathBuf,
-    /// The target: mixamo, vrm or smpl (built in), or a BVH file whose skeleton stands in a rest pose.
+    /// The target: mixamo, vrm or smpl (built in), or a BVH or glb file whose skeleton stands in a rest pose
+    /// (joints mapped by name, as `POST /v1/rigs` maps them).
     #[arg(long)]
     pub rig: String,
     /// Output file, by extension: .bvh or .glb (any rig), .vrma (vrm), .npz (smpl).
@@ -25,13 +26,13 @@ pub fn target(rig: &str) -> anyhow::Result<TargetSkeleton> {
         return Ok(t);
     }
     if Path::new(rig).is_file() {
-        bail!(
-            "{rig}: skeletons from files are not read yet; use a built-in rig ({})",
-            retarget::BUILTINS.join(", ")
-        );
+        // The same reader `POST /v1/rigs` uses: BVH or glb in a rest pose, joints mapped by name.
+        let bytes = std::fs::read(rig).with_context(|| format!("reading {rig}"))?;
+        let read = retarget::uploaded::read(&bytes, &Default::default()).with_context(|| format!("reading the skeleton of {rig}"))?;
+        return Ok(read.skeleton);
     }
     bail!(
-        "unknown rig {rig:?}: use {} or a BVH file",
+        "unknown rig {rig:?}: use {} or a BVH or glb file",
         retarget::BUILTINS.join(", ")
     )
 }

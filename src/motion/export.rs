@@ -276,7 +276,7 @@ pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
         ]);
     }
     let ibm_acc = add(&mut root, &ibm, gj::accessor::Type::Mat4, n, None);
-    root.push(gj::Skin {
+    let skin = root.push(gj::Skin {
         extensions: None,
         extras: Default::default(),
         inverse_bind_matrices: Some(ibm_acc),
@@ -350,6 +350,8 @@ pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
         name: Some("dance".into()),
         samplers,
     });
+    // A figure for viewers to show (issue 26): the skin's mannequin, made from the rig.
+    super::mannequin::attach(&mut root, &mut bin, &m.rig, skin, scene)?;
     while bin.len() % 4 != 0 {
         bin.push(0);
     }

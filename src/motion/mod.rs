@@ -24,6 +24,7 @@ pub mod feet;
 pub mod input;
 pub mod input_error;
 pub mod knees;
+pub mod mannequin;
 pub mod repr;
 pub mod retarget;
 pub mod rig;

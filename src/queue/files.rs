@@ -3,12 +3,14 @@
 //! ```text
 //! <data_dir>/choreo.sqlite        jobs, songs, job_events
 //! <data_dir>/songs/<song id>.<format>
+//! <data_dir>/rigs/<rig id>.bvh|glb
 //! <data_dir>/jobs/<job id>/motion.bvh, motion.json, motion.glb, report.json, preview.png
 //! <data_dir>/tmp/                 uploads in flight; renamed into place when complete
 //! ```
 //! Names come from ids and the decoded format only, never from user input, so no upload can
 //! name a path outside the data dir.
-use super::{JobId, SongId};
+use super::{JobId, RigId, SongId};
+use crate::motion::retarget::uploaded::RigFormat;
 use crate::audio::AudioFormat;
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -36,7 +38,7 @@ pub fn extension(format: AudioFormat) -> &'static str {
 impl DataDir {
     /// Creates the layout under `root` if missing.
     pub fn create(root: &Path) -> std::io::Result<Self> {
-        for sub in ["songs", "jobs", "tmp"] {
+        for sub in ["songs", "rigs", "jobs", "tmp"] {
             std::fs::create_dir_all(root.join(sub))?;
         }
         Ok(Self { root: root.to_path_buf() })
@@ -50,6 +52,11 @@ impl DataDir {
     /// Where an uploaded song lives.
     pub fn song_path(&self, id: SongId, format: AudioFormat) -> PathBuf {
         self.root.join("songs").join(format!("{id}.{}", extension(format)))
+    }
+
+    /// Where an uploaded rig's file lives.
+    pub fn rig_path(&self, id: RigId, format: RigFormat) -> PathBuf {
+        self.root.join("rigs").join(format!("{id}.{}", format.extension()))
     }
 
     /// Where a job's results live.

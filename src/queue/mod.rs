@@ -15,6 +15,8 @@
 //! they connect. [`open`] picks one from the configured database URL.
 use crate::audio::{Analysis, AudioFormat};
 use crate::models::ModelId;
+use crate::motion::retarget::uploaded::{RigFormat, Units};
+use crate::motion::retarget::TargetSkeleton;
 use crate::motion::KeyPose;
 use chrono::{DateTime, Utc};
 use futures::future::BoxFuture;
@@ -36,7 +38,7 @@ pub use files::DataDir;
 pub use postgres::PgStore;
 pub use sqlite::SqliteStore;
 
-/// Errors from the job and song store.
+/// Errors from the job, song and rig store.
 #[derive(Debug, thiserror::Error)]
 pub enum QueueError {
     #[error("database: {0}")]
@@ -49,6 +51,8 @@ pub enum QueueError {
     SongNotFound(SongId),
     #[error("job {0} not found")]
     JobNotFound(JobId),
+    #[error("rig {0} not found")]
+    RigNotFound(RigId),
     #[error("the Idempotency-Key was already used for a different request (job {0})")]
     IdempotencyConflict(JobId),
 }
@@ -62,6 +66,7 @@ impl QueueError {
             QueueError::Corrupt(_) => "corrupt-row",
             QueueError::SongNotFound(_) => "song-not-found",
             QueueError::JobNotFound(_) => "job-not-found",
+            QueueError::RigNotFound(_) => "rig-not-found",
             QueueError::IdempotencyConflict(_) => "idempotency-key-reused",
         }
     }
@@ -74,6 +79,7 @@ impl QueueError {
             QueueError::Corrupt(_) => false,
             QueueError::SongNotFound(_) => false,
             QueueError::JobNotFound(_) => false,
+            QueueError::RigNotFound(_) => false,
             QueueError::IdempotencyConflict(_) => false,
         }
     }
@@ -122,6 +128,10 @@ typed_id!(
 typed_id!(
     /// A song's id: a UUID v7; the stored file is named by it, never by the upload's name.
     SongId
+);
+typed_id!(
+    /// An uploaded rig's id: a UUID v7, naming its stored file as a song's id does.
+    RigId
 );
 
 /// Where a job is in its life.
@@ -379,6 +389,23 @@ pub struct Song {
     pub created_at: DateTime<Utc>,
 }
 
+/// An uploaded rig (a skeleton to retarget dances onto), as stored.
+#[derive(Clone, Debug)]
+pub struct UploadedRig {
+    pub id: RigId,
+    /// The upload's own name, for display only.
+    pub filename: String,
+    /// Found from the bytes.
+    pub format: RigFormat,
+    /// The unit the file's rest pose was read in (the skeleton is in metres).
+    pub units: Units,
+    pub sha256: String,
+    pub size_bytes: u64,
+    /// The skeleton read from the file, with its humanoid mapping.
+    pub skeleton: TargetSkeleton,
+    pub created_at: DateTime<Utc>,
+}
+
 /// A future returned by a store.
 pub type StoreFuture<'a, T> = BoxFuture<'a, Result<T, QueueError>>;
 
@@ -434,10 +461,18 @@ pub trait SongStore: Send + Sync {
     fn analyze_job(&self, song: SongId) -> StoreFuture<'_, Option<Job>>;
 }
 
-/// Everything the service stores.
-pub trait Store: JobStore + SongStore {}
+/// The uploaded rigs.
+pub trait RigStore: Send + Sync {
+    /// Stores a new rig (its file is already published).
+    fn add_rig(&self, rig: UploadedRig) -> StoreFuture<'_, UploadedRig>;
+    /// One rig.
+    fn rig(&self, id: RigId) -> StoreFuture<'_, UploadedRig>;
+}
 
-impl<T: JobStore + SongStore> Store for T {}
+/// Everything the service stores.
+pub trait Store: JobStore + SongStore + RigStore {}
+
+impl<T: JobStore + SongStore + RigStore> Store for T {}
 
 /// Opens the store `database` names, running its migrations. `timeout` bounds how long a call
 /// waits for a PostgreSQL connection (the config's `db_timeout_s`).

@@ -1,6 +1,6 @@
 //! The queue's rules, written once for both SQL stores.
 //!
-//! [`SqlStore`] implements [`JobStore`] and [`SongStore`] over any sqlx database that is a
+//! [`SqlStore`] implements [`JobStore`], [`SongStore`] and (in `sql/rigs.rs`) [`super::RigStore`] over any sqlx database that is a
 //! [`Dialect`]: every statement and flow (register with its idempotency key, claim, heartbeat,
 //! complete, fail, cancel, the requeue of expired leases, songs) is here, once. Both drivers bind
 //! `$N` placeholders, and both schemas keep times as integer milliseconds and JSON as TEXT, so
@@ -31,6 +31,8 @@ use std::time::Duration;
 use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 use uuid::Uuid;
+
+mod rigs;
 
 /// Cap on the backoff exponent, so `1 << n` cannot overflow.
 pub const MAX_BACKOFF_DOUBLINGS: i64 = 16;

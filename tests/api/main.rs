@@ -23,6 +23,7 @@ mod postgres;
 mod preview;
 mod resilience;
 mod retarget;
+mod rigs;
 mod roundtrip;
 mod scale;
 mod schemathesis;

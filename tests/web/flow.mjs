@@ -2,7 +2,8 @@
 // choreo servers (started by tests/web.rs): the page from PAGE_URL, the API on another origin
 // (API_URL, bearer token TOKEN, CORS allowing PAGE_URL). Upload by file input and by drop, key
 // poses from the library and from an earlier dance's frame (one joint dragged), submit, progress,
-// playback in sync with the song, scrub, loop, compare, report plots, downloads, deep links.
+// playback in sync with the song, scrub, the mannequin and the stick toggle, rigs (pick, upload,
+// mapping, downloads), loop, compare, report plots, downloads, deep links.
 //
 //   PAGE_URL=… API_URL=… TOKEN=… SONG=path OUT_DIR=dir node tests/web/flow.mjs
 //
@@ -11,6 +12,7 @@
 import { chromium } from 'playwright-core';
 import { mkdtempSync, readFileSync, writeFileSync, mkdirSync } from 'node:fs';
 import { join, basename } from 'node:path';
+import { fileURLToPath } from 'node:url';
 
 const env = (name) => {
   const value = process.env[name];
@@ -310,6 +312,66 @@ async function run(context) {
   summary.pose_error_at_frame_m = await poseError(page, keyMotion);
   check(Math.abs(summary.pose_error_at_frame_m.time_s * 25 - 50) < 1e-3 && summary.pose_error_at_frame_m.worst_joint < 0.01,
     `at frame 50 the drawn joints are motion.json's: ${JSON.stringify(summary.pose_error_at_frame_m)}`);
+
+  // 8b. The mannequin (in every motion.glb) is what is drawn, and it moves with the song: at two
+  // times of the song the mesh vertex nearest each wrist and ankle (at rest) is still at that
+  // joint, and the joints have moved between the two. The stick view is a toggle; it draws no
+  // pole from the floor (only limbs between joints of the skeleton).
+  await page.locator('#player-section').scrollIntoViewIfNeeded();
+  check(await page.evaluate(() => window.choreoPlayer.view) === 'figure', 'the mannequin is the default view');
+  const ends = ['left_wrist', 'right_wrist', 'left_ankle', 'right_ankle'];
+  const figureAt = async (t, name) => {
+    await setRange(page, '#scrub', t);
+    await page.waitForFunction((s) => Math.abs(window.choreoPlayer.animationTime - s) < 1e-3, t, { timeout: 10_000 });
+    const figure = await page.evaluate((n) => new Promise((r) => requestAnimationFrame(() => r(window.choreoPlayer.figure(n)))), ends);
+    await shot(page, name);
+    check(figure && figure.shown && figure.triangles > 1000, `the mannequin is drawn at ${t} s: ${JSON.stringify(figure)}`);
+    for (const joint of ends) {
+      const j = figure.joints[joint];
+      const off = Math.hypot(...j.vertex.map((v, k) => v - j.joint[k]));
+      check(j.rest_distance < 0.04 && off < j.rest_distance + 0.02, `at ${t} s the mannequin's ${joint} vertex is ${off.toFixed(3)} m from the joint (rest ${j.rest_distance.toFixed(3)})`);
+    }
+    return figure;
+  };
+  const early = await figureAt(1.0, '04b-mannequin-1s');
+  const late = await figureAt(3.0, '04c-mannequin-3s');
+  const travel = Math.max(...ends.map((j) => Math.hypot(...early.joints[j].vertex.map((v, k) => v - late.joints[j].vertex[k]))));
+  check(travel > 0.05, `the mannequin moved between 1 s and 3 s (${travel.toFixed(3)} m)`);
+  summary.mannequin = { triangles: early.triangles, travel_m: travel, wrist_off_m: Math.hypot(...early.joints.left_wrist.vertex.map((v, k) => v - early.joints.left_wrist.joint[k])) };
+  await page.click('#stick-view');
+  check(await page.evaluate(() => window.choreoPlayer.view) === 'sticks', 'the toggle shows the stick figure');
+  check(!(await page.evaluate(() => window.choreoPlayer.figure([]).shown)), 'the mannequin is hidden in the stick view');
+  const limbs = await page.evaluate(() => window.choreoPlayer.limbs());
+  check(limbs.length >= 20 && limbs.every(([from, to]) => keyMotion.joint_names.includes(from) && keyMotion.joint_names.includes(to)) || false,
+    `every stick limb joins two joints (no pole from the floor): ${JSON.stringify(limbs)}`);
+  await shot(page, '04d-sticks');
+  await page.click('#stick-view');
+  check(await page.evaluate(() => window.choreoPlayer.view) === 'figure', 'the toggle brings the mannequin back');
+
+  // 8c. Rigs: the picker's downloads name the rig; an uploaded BVH shows its mapping.
+  const rigButtons = () => page.$$eval('#rig-downloads button', (bs) => bs.map((b) => b.dataset.file));
+  check(JSON.stringify(await rigButtons()) === JSON.stringify(['motion.bvh', 'motion.glb']), `choreo's downloads: ${await rigButtons()}`);
+  await page.selectOption('#rig', 'mixamo');
+  check(JSON.stringify(await rigButtons()) === JSON.stringify(['motion.bvh?rig=mixamo', 'motion.glb?rig=mixamo']), `mixamo's downloads: ${await rigButtons()}`);
+  await page.selectOption('#rig', 'vrm');
+  check(JSON.stringify(await rigButtons()) === JSON.stringify(['motion.vrma']), `vrm's download: ${await rigButtons()}`);
+  await page.selectOption('#rig', 'smpl');
+  check(JSON.stringify(await rigButtons()) === JSON.stringify(['motion.smpl.npz']), `smpl's download: ${await rigButtons()}`);
+  const rigPost = page.waitForResponse((r) => r.url() === `${API}/v1/rigs` && r.request().method() === 'POST');
+  await page.setInputFiles('#rig-file', fileURLToPath(new URL('../fixtures/rig_unreal_cm.bvh', import.meta.url)));
+  const rigResponse = await rigPost;
+  check(rigResponse.status() === 201, `the rig upload answered ${rigResponse.status()}`);
+  const rig = await rigResponse.json();
+  await page.waitForFunction(() => !document.getElementById('rig-mapping').hidden, null, { timeout: 10_000 });
+  const rows = await page.$$eval('#rig-mapping-rows tr', (trs) => trs.map((tr) => [...tr.cells].map((c) => c.textContent)));
+  check(rows.some(([j, b]) => j === 'pelvis' && b === 'hips') && rows.some(([j, b]) => j === 'upperarm_l' && b === 'leftUpperArm'), `the mapping is shown: ${JSON.stringify(rows)}`);
+  check(rows.length === Object.keys(rig.mapping).length, 'every mapped joint is listed');
+  check(await page.$eval('#rig', (e) => e.value) === rig.id, 'the uploaded rig is picked');
+  check(JSON.stringify(await rigButtons()) === JSON.stringify([`motion.bvh?rig=${rig.id}`, `motion.glb?rig=${rig.id}`]), `the uploaded rig's downloads: ${await rigButtons()}`);
+  summary.rig = { id: rig.id, mapped: rows.length, units: rig.units };
+  await page.locator('#player-section').scrollIntoViewIfNeeded();
+  await shot(page, '04e-rig-uploaded');
+  await page.selectOption('#rig', 'choreo');
 
   // 9. Loop 1–2.5 s, chosen by dragging across the strip, and play through the loop end twice.
   const duration = song.duration_s;

@@ -62,6 +62,16 @@ export class Api {
     return this.json('/v1/songs', { method: 'POST', body: form });
   }
 
+  /** POST /v1/rigs: a skeleton (BVH or glb) in its rest pose, with an optional mapping object. */
+  uploadRig(file, mapping = null) {
+    const form = new FormData();
+    form.append('file', file, file.name);
+    if (mapping) form.append('mapping', JSON.stringify(mapping));
+    return this.json('/v1/rigs', { method: 'POST', body: form });
+  }
+
+  rig(id) { return this.json(`/v1/rigs/${id}`); }
+
   /** POST /v1/jobs with an idempotency key, so a retried click makes one job. */
   createJob(body, key = crypto.randomUUID()) {
     return this.json('/v1/jobs', {

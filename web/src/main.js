@@ -25,6 +25,7 @@ const state = {
   chosen: null, // {joints, label}: the pose "Add" places
   watching: null, // id of the job whose progress is shown
   jobs: [], // recent generate jobs
+  rigs: {}, // id → RigView of the rigs uploaded from this page
 };
 const audioCache = new Map(); // song id → {url, peaks, duration}
 const motionCache = new Map(); // job id → motion.json
@@ -534,10 +535,110 @@ const openJob = guard(async (id, slot = 'a') => {
   container.hidden = false;
   const view = new ReportView(container, { api, job, report, motion, analysis: song.analysis });
   slots[slot] = { job, motion, report, view };
+  stage.setView($('stick-view').checked ? 'sticks' : 'figure');
+  if (slot === 'a') showRigDownloads();
   $(`view-${slot}`).dataset.jobId = job.id;
   dirty = true;
   document.dispatchEvent(new CustomEvent('choreo-opened', { detail: { slot, id: job.id } }));
 });
+
+// ---------------------------------------------------------------- character and rigs
+// The mannequin (in every motion.glb) or the stick figure; the rig the downloads are made for.
+$('stick-view').addEventListener('change', (e) => {
+  const view = e.target.checked ? 'sticks' : 'figure';
+  for (const stage of [stages.a, stages.b]) stage?.setView(view);
+  dirty = true;
+});
+
+/** The files of a job on rig `rig`: a built-in's name or an uploaded rig's id. */
+function rigFiles(rig) {
+  if (rig === 'vrm') return [['motion.vrma', 'VRM animation (.vrma)']];
+  if (rig === 'smpl') return [['motion.smpl.npz', 'SMPL (.npz)']];
+  const query = rig === 'choreo' ? '' : `?rig=${encodeURIComponent(rig)}`;
+  return [[`motion.bvh${query}`, 'BVH'], [`motion.glb${query}`, 'glb']];
+}
+
+/** Download buttons for the open dance on the chosen rig (fetched with the token, then saved). */
+function showRigDownloads() {
+  const box = $('rig-downloads');
+  box.replaceChildren();
+  const job = slots.a?.job;
+  if (!job) return;
+  const rig = $('rig').value;
+  const label = $('rig').selectedOptions[0]?.textContent ?? rig;
+  for (const [file, kind] of rigFiles(rig)) {
+    const button = document.createElement('button');
+    button.type = 'button';
+    button.textContent = `Download ${kind} · ${label}`;
+    button.dataset.file = file;
+    button.addEventListener('click', guard(async () => {
+      button.disabled = true;
+      try {
+        const blob = await api.blob(`/v1/jobs/${job.id}/${file}`);
+        const a = document.createElement('a');
+        a.href = URL.createObjectURL(blob);
+        a.download = `${job.id}-${rig}-${file.split('?')[0]}`;
+        document.body.append(a);
+        a.click();
+        a.remove();
+        setTimeout(() => URL.revokeObjectURL(a.href), 60_000);
+      } finally {
+        button.disabled = false;
+      }
+    }));
+    box.append(button);
+  }
+}
+$('rig').addEventListener('change', () => {
+  showRigDownloads();
+  const option = $('rig').selectedOptions[0];
+  if (option?.dataset.uploaded) showMapping(state.rigs[option.value]);
+  else $('rig-mapping').hidden = true;
+});
+
+/** Shows an uploaded rig's mapping: which of its joints drives which humanoid bone. */
+function showMapping(rig) {
+  if (!rig) return;
+  const rows = $('rig-mapping-rows');
+  rows.replaceChildren();
+  for (const [joint, bone] of Object.entries(rig.mapping)) {
+    const tr = document.createElement('tr');
+    for (const text of [joint, bone]) {
+      const td = document.createElement('td');
+      td.textContent = text;
+      tr.append(td);
+    }
+    rows.append(tr);
+  }
+  $('rig-mapping-title').textContent = `${rig.filename}: ${Object.keys(rig.mapping).length} joints mapped, ${rig.unmapped.length} left as they are (${rig.format}, read in ${rig.units})`;
+  $('rig-unmapped').textContent = rig.unmapped.length ? `Unmapped: ${rig.unmapped.join(', ')}` : '';
+  $('rig-mapping').hidden = false;
+  $('rig-mapping').open = true;
+}
+
+$('rig-file').addEventListener('change', guard(async (e) => {
+  const file = e.target.files?.[0];
+  if (!file) return;
+  $('rig-status').textContent = `Reading ${file.name}…`;
+  try {
+    const rig = await api.uploadRig(file);
+    state.rigs[rig.id] = rig;
+    const option = document.createElement('option');
+    option.value = rig.id;
+    option.dataset.uploaded = 'true';
+    option.textContent = `${rig.filename} (yours)`;
+    $('rig').append(option);
+    $('rig').value = rig.id;
+    $('rig-status').textContent = `${rig.filename}: rig ${rig.id.slice(0, 8)}…`;
+    showMapping(rig);
+    showRigDownloads();
+  } catch (err) {
+    $('rig-status').textContent = `${file.name} was refused: ${err.message}`;
+    throw err;
+  } finally {
+    e.target.value = '';
+  }
+}));
 
 $('take-pose').addEventListener('click', () => {
   if (!slots.a) return;
@@ -627,6 +728,12 @@ window.choreoPlayer = {
   get frameMs() { return frameMs; },
   /** A joint's world position (metres) in the main view, as drawn. */
   joint: (name) => stages.a.joint(name),
+  /** The main view's mannequin now (Stage.figure), or null. */
+  figure: (names) => stages.a.figure(names),
+  /** 'figure' or 'sticks': what the main view draws. */
+  get view() { return stages.a.shown; },
+  /** The stick view's limbs in the main view, [from, to] joint names. */
+  limbs: () => stages.a.limbs(),
   /** The key poses placed so far: [{time_s, joints, label}] (copies). */
   get keyPoses() { return state.keys.map((k) => ({ ...k, joints: clonePose(k.joints) })); },
   /** Where joint `name` of the selected key pose is drawn in the editor, client pixels. */

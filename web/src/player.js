@@ -1,7 +1,8 @@
-// The 3-D view of one dance: three.js plays the job's motion.glb (its skeleton and animation) and
-// draws a body of capsules between the animated joints. The view never keeps time itself: the
-// caller sets it from the song's audio element every frame (setTime), so the dance cannot drift
-// from the music.
+// The 3-D view of one dance: three.js plays the job's motion.glb (its skeleton, its animation and
+// the skinned mannequin the server builds into every glb) with an AnimationMixer. The stick view
+// (setView('sticks')) draws capsules between the animated joints instead. The view never keeps
+// time itself: the caller sets it from the song's audio element every frame (setTime), so the
+// dance cannot drift from the music.
 import {
   AmbientLight, CircleGeometry, Color, CylinderGeometry, DirectionalLight, GridHelper, Mesh,
   MeshBasicMaterial, MeshStandardMaterial, PerspectiveCamera, Scene, SphereGeometry, Vector3, WebGLRenderer,
@@ -63,6 +64,8 @@ export class Stage {
     this.shadow.rotation.x = -Math.PI / 2;
     this.shadow.position.y = 0.002;
     this.scene.add(this.shadow);
+    this.view = 'figure';
+    this.shown = 'figure';
     this.clear();
     new ResizeObserver(() => this.resize()).observe(container);
     this.resize();
@@ -81,6 +84,7 @@ export class Stage {
     for (const part of this.parts || []) this.scene.remove(part.mesh);
     this.root = null;
     this.parts = [];
+    this.figures = [];
     this.action = null;
     this.duration = 0;
     this.render();
@@ -98,11 +102,22 @@ export class Stage {
     this.action = this.mixer.clipAction(clip);
     this.action.play();
     this.duration = clip.duration;
+    // Only the skeleton's joints (GLTFLoader makes every skin joint a Bone): the scene node and
+    // the mannequin's node are not joints, so no limb is drawn from the origin to the root.
     this.bones = {};
-    this.root.traverse((node) => { if (node.name) this.bones[node.name] = node; });
+    this.figures = [];
+    this.root.traverse((node) => {
+      if (node.isBone && node.name) this.bones[node.name] = node;
+      if (node.isSkinnedMesh) {
+        // Its bounding sphere is the rest pose's; the dancer leaves it, so never cull it.
+        node.frustumCulled = false;
+        this.figures.push(node);
+      }
+    });
+    this.centre = this.bones.body_centre ?? Object.values(this.bones).find((b) => !b.parent?.isBone) ?? this.root;
     for (const node of Object.values(this.bones)) {
       const parent = node.parent;
-      if (!parent || !parent.name || !this.bones[parent.name]) continue;
+      if (!parent?.isBone) continue;
       const mesh = new Mesh(LIMB, MATERIALS[side(node.name)]);
       this.scene.add(mesh);
       this.parts.push({ kind: 'limb', mesh, from: parent, to: node, r: radius(node.name) });
@@ -120,8 +135,9 @@ export class Stage {
       this.scene.add(mesh);
       this.parts.push({ kind: 'ball', mesh, at: this.bones[name] });
     }
+    this.setView(this.view);
     this.setTime(0);
-    const centre = this.bones.body_centre?.getWorldPosition(new Vector3()) ?? new Vector3(0, 1, 0);
+    const centre = this.centre.getWorldPosition(new Vector3());
     this.controls.target.set(centre.x, 0.95, centre.z);
     this.camera.position.set(centre.x, 1.35, centre.z + 3.4);
     this.controls.update();
@@ -141,7 +157,7 @@ export class Stage {
         part.to.getWorldPosition(b);
         d.subVectors(b, a);
         const length = d.length();
-        part.mesh.visible = length > 0.01;
+        part.mesh.visible = this.shown === 'sticks' && length > 0.01;
         if (!part.mesh.visible) continue;
         part.mesh.position.addVectors(a, b).multiplyScalar(0.5);
         part.mesh.quaternion.copy(q.setFromUnitVectors(UP, d.divideScalar(length)));
@@ -155,7 +171,7 @@ export class Stage {
       }
     }
     // The camera follows the dancer across the floor, keeping the angle the user gave it.
-    const centre = this.bones.body_centre.getWorldPosition(a);
+    const centre = this.centre.getWorldPosition(a);
     this.shadow.position.x = centre.x;
     this.shadow.position.z = centre.z;
     const shift = new Vector3(centre.x - this.controls.target.x, 0, centre.z - this.controls.target.z).multiplyScalar(0.15);
@@ -163,6 +179,52 @@ export class Stage {
     this.camera.position.add(shift);
     this.controls.update();
     return this.action.time;
+  }
+
+  /** 'figure' (the skinned mannequin) or 'sticks' (capsules between the joints); a glb without a
+   * mannequin is always drawn as sticks. Returns the view shown. */
+  setView(view = 'figure') {
+    this.view = view;
+    const figure = view === 'figure' && this.figures.length > 0;
+    for (const mesh of this.figures) mesh.visible = figure;
+    for (const part of this.parts) part.mesh.visible = !figure;
+    this.shown = figure ? 'figure' : 'sticks';
+    this.render();
+    return this.shown;
+  }
+
+  /** The mannequin as drawn now: whether it is shown, its triangle count, and for each named
+   * joint the skinned world position of the mesh vertex nearest that joint at rest (the bind
+   * pose), with that joint's own position now: a skin that follows its skeleton keeps the two
+   * together. Null without a mannequin. */
+  figure(names = []) {
+    const mesh = this.figures[0];
+    if (!mesh) return null;
+    this.root.updateMatrixWorld(true);
+    const positions = mesh.geometry.getAttribute('position');
+    const v = new Vector3();
+    const joints = {};
+    for (const name of names) {
+      const bone = this.bones[name];
+      const index = bone ? mesh.skeleton.bones.indexOf(bone) : -1;
+      if (index < 0) continue;
+      // The joint's rest position: the inverse of its inverse bind matrix, applied to the origin.
+      const rest = new Vector3().applyMatrix4(mesh.skeleton.boneInverses[index].clone().invert());
+      let nearest = 0, best = Infinity;
+      for (let i = 0; i < positions.count; i++) {
+        const d = v.fromBufferAttribute(positions, i).distanceToSquared(rest);
+        if (d < best) { best = d; nearest = i; }
+      }
+      mesh.getVertexPosition(nearest, v); // a SkinnedMesh's applies its bones
+      v.applyMatrix4(mesh.matrixWorld);
+      joints[name] = { vertex: v.toArray(), joint: bone.getWorldPosition(new Vector3()).toArray(), rest_distance: Math.sqrt(best) };
+    }
+    return { shown: mesh.visible, triangles: (mesh.geometry.index?.count ?? 0) / 3, joints };
+  }
+
+  /** The stick view's limbs, [parent joint, joint] names: only between joints of the skeleton. */
+  limbs() {
+    return this.parts.filter((p) => p.kind === 'limb').map((p) => [p.from.name, p.to.name]);
   }
 
   /** The world position of a joint now, in metres. */

@@ -21,10 +21,12 @@ use serde::{Deserialize, Serialize};
 use super::rig::Rig;
 
 mod body;
+pub mod names;
 pub mod mixamo;
 pub mod smpl;
 mod solve;
 mod source;
+pub mod uploaded;
 pub mod vrm;
 
 pub use mixamo::mixamo;

@@ -1,0 +1,104 @@
+//! The rig statements of [`SqlStore`], for both stores (the rules in one place, as the queue's).
+use super::{corrupt, now_ms, to_time, Dialect, SqlStore, StoreFuture};
+use crate::motion::retarget::uploaded::SkeletonJson;
+use crate::motion::retarget::TargetSkeleton;
+use crate::queue::{QueueError, RigId, RigStore, UploadedRig};
+use sqlx::{ColumnIndex, Decode, Encode, Executor, IntoArguments, Row, Type};
+
+/// The columns a rig row is read from.
+const RIG_COLUMNS: &str = "id, filename, format, units, sha256, size_bytes, skeleton, created_at";
+
+/// A unit enum's stored text: its serde name (`bvh`, `cm`).
+fn stored_name<T: serde::Serialize>(what: &str, value: &T) -> Result<String, QueueError> {
+    match serde_json::to_value(value).map_err(|e| corrupt(what, e))? {
+        serde_json::Value::String(s) => Ok(s),
+        other => Err(corrupt(what, other)),
+    }
+}
+
+fn from_stored<T: serde::de::DeserializeOwned>(what: &str, text: String) -> Result<T, QueueError> {
+    serde_json::from_value(serde_json::Value::String(text)).map_err(|e| corrupt(what, e))
+}
+
+impl<D> SqlStore<D>
+where
+    D: Dialect,
+    for<'q> i64: Decode<'q, D> + Type<D>,
+    for<'q> String: Decode<'q, D> + Type<D>,
+    &'static str: ColumnIndex<D::Row>,
+{
+    fn rig_from_row(row: &D::Row) -> Result<UploadedRig, QueueError> {
+        let skeleton: String = row.try_get("skeleton")?;
+        let skeleton: SkeletonJson =
+            serde_json::from_str(&skeleton).map_err(|e| corrupt("rig skeleton", e))?;
+        Ok(UploadedRig {
+            id: RigId(D::uuid(row.try_get("id")?).map_err(|e| corrupt("rig id", e))?),
+            filename: row.try_get("filename")?,
+            format: from_stored("rig format", row.try_get("format")?)?,
+            units: from_stored("rig units", row.try_get("units")?)?,
+            sha256: row.try_get("sha256")?,
+            size_bytes: row
+                .try_get::<i64, _>("size_bytes")?
+                .try_into()
+                .map_err(|e| corrupt("size_bytes", e))?,
+            skeleton: TargetSkeleton::try_from(skeleton).map_err(|e| corrupt("rig skeleton", e))?,
+            created_at: to_time(row.try_get("created_at")?)?,
+        })
+    }
+}
+
+impl<D> RigStore for SqlStore<D>
+where
+    D: Dialect,
+    for<'c> &'c mut D::Connection: Executor<'c, Database = D>,
+    for<'q> D::Arguments<'q>: IntoArguments<'q, D>,
+    for<'q> i64: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> f64: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> bool: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> String: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> &'q str: Encode<'q, D> + Type<D>,
+    for<'q> Option<String>: Encode<'q, D>,
+    for<'q> Option<&'q str>: Encode<'q, D>,
+    for<'q> Option<D::Id>: Encode<'q, D>,
+    &'static str: ColumnIndex<D::Row>,
+{
+    fn add_rig(&self, rig: UploadedRig) -> StoreFuture<'_, UploadedRig> {
+        Box::pin(async move {
+            let skeleton = serde_json::to_string(&SkeletonJson::from(&rig.skeleton))
+                .map_err(|e| corrupt("rig skeleton", e))?;
+            let mut tx = self.begin().await?;
+            let sql = format!(
+                "INSERT INTO rigs (id, filename, format, units, sha256, size_bytes, skeleton, created_at) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8) RETURNING {RIG_COLUMNS}"
+            );
+            let row = sqlx::query(&sql)
+                .bind(D::id(rig.id.0))
+                .bind(&rig.filename)
+                .bind(stored_name("rig format", &rig.format)?)
+                .bind(stored_name("rig units", &rig.units)?)
+                .bind(&rig.sha256)
+                .bind(i64::try_from(rig.size_bytes).map_err(|e| corrupt("size_bytes", e))?)
+                .bind(skeleton)
+                .bind(now_ms())
+                .fetch_one(&mut *tx)
+                .await?;
+            let stored = Self::rig_from_row(&row)?;
+            Self::commit(tx).await?;
+            Ok(stored)
+        })
+    }
+
+    fn rig(&self, id: RigId) -> StoreFuture<'_, UploadedRig> {
+        Box::pin(async move {
+            let sql = format!("SELECT {RIG_COLUMNS} FROM rigs WHERE id = $1");
+            match sqlx::query(&sql)
+                .bind(D::id(id.0))
+                .fetch_optional(&self.pool)
+                .await?
+            {
+                Some(row) => Self::rig_from_row(&row),
+                None => Err(QueueError::RigNotFound(id)),
+            }
+        })
+    }
+}
