@@ -2,6 +2,7 @@
 //! exporters read back.
 use std::path::Path;
 
+use choreo::metrics::rotation_flips::RotationFlips;
 use choreo::motion::dataset::{Dataset, DEFAULT_ROOT};
 use choreo::motion::rig::{self, joint_errors};
 use choreo::motion::skeleton::JOINT_NAMES;
@@ -35,10 +36,21 @@ fn rigid_fit_error_over_every_dance() {
     let mut all = Vec::new();
     let mut per_joint: Vec<Vec<f32>> = vec![Vec::new(); NUM_JOINTS];
     let mut per_dance_mean = Vec::new();
+    let mut flips = Vec::new();
     for id in &ids {
         let dance = ds.load(id).expect("load");
-        let m = rig::fit_and_solve(dance.motion.positions.view(), dance.center.view(), dance.motion.fps, &[])
-            .expect("ik");
+        // As `choreo export ID --format bvh` fits it.
+        let m = choreo::motion::export::prepare_with_root(&dance.motion, dance.center.view()).expect("ik");
+        let f = RotationFlips::of(&m);
+        eprintln!(
+            "{id}: rotation flips > 60° on {:.2} % of steps, > 90° on {:.2} %, max {:.0}°, worst {:?} {:?}",
+            100.0 * f.share_over_60,
+            100.0 * f.share_over_90,
+            f.max_step_deg,
+            f.worst_joint,
+            f.joints_over_60
+        );
+        flips.push(f);
         // The root trajectory is carried exactly.
         for (t, r) in m.root_translation.iter().enumerate() {
             for c in 0..3 {
@@ -62,12 +74,28 @@ fn rigid_fit_error_over_every_dance() {
         all.len(), p50 * 100.0, p95 * 100.0, p99 * 100.0, max * 100.0);
     for (j, v) in per_joint.iter_mut().enumerate() {
         let mean = v.iter().sum::<f32>() / v.len() as f32;
-        eprintln!("  {:>15}: mean {:.2} cm, p95 {:.2} cm", JOINT_NAMES[j], mean * 100.0, percentile(v, 95.0) * 100.0);
+        eprintln!(
+            "  {:>15}: mean {:.2} cm, median {:.2} cm, p95 {:.2} cm",
+            JOINT_NAMES[j],
+            mean * 100.0,
+            percentile(v, 50.0) * 100.0,
+            percentile(v, 95.0) * 100.0
+        );
     }
     let mut means: Vec<f32> = per_dance_mean.iter().map(|(_, m)| *m).collect();
     let p95_dance = percentile(&mut means, 95.0);
     eprintln!("per-dance mean error: p50 {:.2} cm, p95 {:.2} cm, max {:.2} cm",
         percentile(&mut means, 50.0) * 100.0, p95_dance * 100.0, percentile(&mut means, 100.0) * 100.0);
+    let pooled = RotationFlips::pooled(flips.iter());
+    let worst = flips.iter().map(|f| f.share_over_60).fold(0.0, f64::max);
+    eprintln!(
+        "rotation flips over the 43 dances: > 60° on {:.3} % of steps (worst dance {:.3} %), > 90° on {:.3} %, worst joint {:?} {:?}",
+        100.0 * pooled.share_over_60,
+        100.0 * worst,
+        100.0 * pooled.share_over_90,
+        pooled.worst_joint,
+        pooled.joints_over_60
+    );
     // The mean per-joint error of a dance, 95th percentile over the 43 dances.
     assert!(p95_dance < 0.03, "per-dance mean rigid-fit error p95 {p95_dance} m");
     // Half of all joint-frames within 2 cm: the fit follows the data, not just on average.
