@@ -57,7 +57,9 @@ use super::skeleton::{JOINT_NAMES, PARENTS};
 use super::{MotionError, NUM_JOINTS};
 
 mod chain;
+mod continuity;
 mod least_squares;
+mod root;
 
 /// Joints in the rig: the body centre, the 23 dataset joints, and the branch joints.
 pub const RIG_JOINTS: usize = NUM_JOINTS + 1 + VIRTUAL.len();
