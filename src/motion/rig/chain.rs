@@ -5,13 +5,15 @@
 use nalgebra::{UnitQuaternion, Vector3};
 use ndarray::{ArrayView2, ArrayView3, Axis};
 
+use super::continuity::{is_motion, limit_turn, max_turn, twist, wahba_carried};
 use super::root::root_rotation;
-use super::continuity::{limit_turn, twist, wahba_carried};
 use super::{arc, targets, Rig, RigMotion};
 use crate::motion::MotionError;
 
 /// Inverse kinematics: local rotations of `rig` that follow `positions` around `root`, frame
-/// after frame (each frame's twists start from the previous frame's, so the frames are a motion).
+/// after frame: each frame's twists start from the previous frame's and no joint turns faster
+/// than a body does at `fps`, so the frames are a motion (with `fps` no number they are unrelated
+/// poses, each solved on its own).
 pub fn solve(
     rig: &Rig,
     positions: ArrayView3<'_, f32>,
@@ -51,6 +53,7 @@ pub fn solve(
     let mut rotations: Vec<Vec<UnitQuaternion<f64>>> = Vec::with_capacity(tg.len());
     let mut root_translation = Vec::with_capacity(tg.len());
     let mut carried_yaw = None;
+    let max = max_turn(fps);
     for (t, frame) in tg.iter().enumerate() {
         let mut pos = vec![Vector3::zeros(); n];
         let mut world = vec![UnitQuaternion::identity(); n];
@@ -63,7 +66,10 @@ pub fn solve(
             };
             // The previous frame's local rotation on this frame's parent: what the twist is
             // carried from.
-            let carried = rotations.last().map(|prev| parent_world * prev[j]);
+            let carried = rotations
+                .last()
+                .filter(|_| is_motion(fps))
+                .map(|prev| parent_world * prev[j]);
             let kids = &children[j];
             let w = match (rig.parents[j], kids.len()) {
                 // The root's children (spine and pelvis) share one rest direction, so a best fit
@@ -71,8 +77,9 @@ pub fn solve(
                 // to the next, the children turning back. The facing yaw tilted onto the spine
                 // settles the turn.
                 (None, _) => {
-                    let (r, yaw) = root_rotation(rig, positions.index_axis(Axis(0), t), frame, carried_yaw);
-                    carried_yaw = Some(yaw);
+                    let (r, yaw) =
+                        root_rotation(rig, positions.index_axis(Axis(0), t), frame, carried_yaw);
+                    carried_yaw = is_motion(fps).then_some(yaw);
                     r
                 }
                 (Some(_), 0) => parent_world,
@@ -84,18 +91,21 @@ pub fn solve(
                         carried.unwrap_or(parent_world)
                     } else {
                         let swing = arc(&rest_dir, &target_dir) * parent_world;
-                        let refs = twist_refs[j].iter().map(|&g| (swing * rest_rel(j, g), frame[g] - pos[j]));
+                        let refs = twist_refs[j]
+                            .iter()
+                            .map(|&g| (swing * rest_rel(j, g), frame[g] - pos[j]));
                         twist(swing, &target_dir, refs, carried)
                     }
                 }
                 (Some(_), _) => {
                     let rest: Vec<Vector3<f64>> = kids.iter().map(|&c| rig.offsets[c]).collect();
-                    let target: Vec<Vector3<f64>> = kids.iter().map(|&c| frame[c] - pos[j]).collect();
+                    let target: Vec<Vector3<f64>> =
+                        kids.iter().map(|&c| frame[c] - pos[j]).collect();
                     wahba_carried(&rest, &target, carried).unwrap_or(parent_world)
                 }
             };
             let w = match carried {
-                Some(c) => limit_turn(c, w),
+                Some(c) => limit_turn(c, w, max),
                 None => w,
             };
             world[j] = w;

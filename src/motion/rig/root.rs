@@ -30,13 +30,22 @@ fn facing(frame: ArrayView2<'_, f32>) -> (f64, f64) {
 /// (`target`, rig-indexed). The tilt keeps the root where the body centre track puts it as the
 /// body leans; the yaw settles the turn about the spine's offset, which the spine's and the
 /// pelvis's offsets (the root's two children, in one direction) leave free.
-pub(super) fn root_rotation(rig: &Rig, frame: ArrayView2<'_, f32>, target: &[Vector3<f64>], carried_yaw: Option<f64>) -> (UnitQuaternion<f64>, f64) {
+pub(super) fn root_rotation(
+    rig: &Rig,
+    frame: ArrayView2<'_, f32>,
+    target: &[Vector3<f64>],
+    carried_yaw: Option<f64>,
+) -> (UnitQuaternion<f64>, f64) {
     let (mut x, mut z) = facing(frame);
     if let Some(c) = carried_yaw {
         x += YAW_CARRY_M * c.sin();
         z += YAW_CARRY_M * c.cos();
     }
-    let yaw_angle = if x == 0.0 && z == 0.0 { carried_yaw.unwrap_or(0.0) } else { x.atan2(z) };
+    let yaw_angle = if x == 0.0 && z == 0.0 {
+        carried_yaw.unwrap_or(0.0)
+    } else {
+        x.atan2(z)
+    };
     let yaw = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), yaw_angle);
     let spine = rig_index(SPINE);
     let (rest, data) = (yaw * rig.offsets[spine], target[spine] - target[0]);
