@@ -2,6 +2,7 @@
 //! exporters read back.
 use std::path::Path;
 
+use choreo::metrics::rotation_flips::RotationFlips;
 use choreo::motion::dataset::{Dataset, DEFAULT_ROOT};
 use choreo::motion::rig::{self, joint_errors};
 use choreo::motion::skeleton::JOINT_NAMES;
@@ -35,10 +36,25 @@ fn rigid_fit_error_over_every_dance() {
     let mut all = Vec::new();
     let mut per_joint: Vec<Vec<f32>> = vec![Vec::new(); NUM_JOINTS];
     let mut per_dance_mean = Vec::new();
+    let mut flips = Vec::new();
+    let mut at_limit = 0;
     for id in &ids {
         let dance = ds.load(id).expect("load");
-        let m = rig::fit_and_solve(dance.motion.positions.view(), dance.center.view(), dance.motion.fps, &[])
-            .expect("ik");
+        // As `choreo export ID --format bvh` fits it.
+        let m = choreo::motion::export::prepare_with_root(&dance.motion, dance.center.view()).expect("ik");
+        let f = RotationFlips::of(&m);
+        eprintln!(
+            "{id}: rotation flips > 60° on {:.2} % of steps, > 90° on {:.2} %, max {:.0}°, worst {:?} {:?}",
+            100.0 * f.share_over_60,
+            100.0 * f.share_over_90,
+            f.max_step_deg,
+            f.worst_joint,
+            f.joints_over_60
+        );
+        // Steps on which some joint turns as far as the rig lets it (55° at 25 fps): where the
+        // data's own bones jump and the positions leave it.
+        at_limit += m.rotations.windows(2).filter(|w| w[0].iter().zip(&w[1]).any(|(a, b)| a.angle_to(b).to_degrees() > 54.9)).count();
+        flips.push(f);
         // The root trajectory is carried exactly.
         for (t, r) in m.root_translation.iter().enumerate() {
             for c in 0..3 {
@@ -62,12 +78,32 @@ fn rigid_fit_error_over_every_dance() {
         all.len(), p50 * 100.0, p95 * 100.0, p99 * 100.0, max * 100.0);
     for (j, v) in per_joint.iter_mut().enumerate() {
         let mean = v.iter().sum::<f32>() / v.len() as f32;
-        eprintln!("  {:>15}: mean {:.2} cm, p95 {:.2} cm", JOINT_NAMES[j], mean * 100.0, percentile(v, 95.0) * 100.0);
+        eprintln!(
+            "  {:>15}: mean {:.2} cm, median {:.2} cm, p95 {:.2} cm",
+            JOINT_NAMES[j],
+            mean * 100.0,
+            percentile(v, 50.0) * 100.0,
+            percentile(v, 95.0) * 100.0
+        );
     }
     let mut means: Vec<f32> = per_dance_mean.iter().map(|(_, m)| *m).collect();
     let p95_dance = percentile(&mut means, 95.0);
     eprintln!("per-dance mean error: p50 {:.2} cm, p95 {:.2} cm, max {:.2} cm",
         percentile(&mut means, 50.0) * 100.0, p95_dance * 100.0, percentile(&mut means, 100.0) * 100.0);
+    let pooled = RotationFlips::pooled(flips.iter());
+    let worst = flips.iter().map(|f| f.share_over_60).fold(0.0, f64::max);
+    eprintln!(
+        "rotation flips over the 43 dances: > 60° on {:.3} % of steps (worst dance {:.3} %), > 90° on {:.3} %, worst joint {:?} {:?}; at the turn limit on {:.3} %",
+        100.0 * pooled.share_over_60,
+        100.0 * worst,
+        100.0 * pooled.share_over_90,
+        pooled.worst_joint,
+        pooled.joints_over_60,
+        100.0 * at_limit as f64 / pooled.steps as f64
+    );
+    // Issue 26: no joint of an export turns past 60° between two frames on more than 0.1 % of
+    // the steps of any dance (1.66 % pooled, 7.17 % on DANCE_C_8, before the twist was carried).
+    assert!(worst <= 0.001, "a dance's rotations flip on {:.3} % of its steps", 100.0 * worst);
     // The mean per-joint error of a dance, 95th percentile over the 43 dances.
     assert!(p95_dance < 0.03, "per-dance mean rigid-fit error p95 {p95_dance} m");
     // Half of all joint-frames within 2 cm: the fit follows the data, not just on average.
@@ -384,7 +420,11 @@ fn captured_key_poses_come_back_within_3_cm() {
                 joints: (0..NUM_JOINTS).map(|j| [0, 1, 2].map(|c| f64::from(dance.motion.positions[[f, j, c]]))).collect(),
             })
             .collect();
-        let served = served_motion(&prepare_anchored(&dance.motion, frames).expect("export"));
+        let rig_motion = prepare_anchored(&dance.motion, frames).expect("export");
+        let flips = choreo::metrics::rotation_flips::RotationFlips::of(&rig_motion);
+        eprintln!("{id}: rotation flips > 60° on {:.3} % of steps ({:?})", 100.0 * flips.share_over_60, flips.joints_over_60);
+        assert!(flips.share_over_60 <= 0.001, "{id}: the least-squares export flips on {:.3} % of steps", 100.0 * flips.share_over_60);
+        let served = served_motion(&rig_motion);
         let errors = key_pose_errors_cm(served.positions.view(), fps, &keys);
         let acc = joint_acceleration(served.positions.view(), fps);
         let pops = key_pose_pops(&acc, fps, served.num_frames(), &keys);
@@ -429,9 +469,10 @@ fn captured_key_sets_of_every_dance() {
                 .collect();
             let anchors: Vec<usize> = (0..frames.len()).collect();
             let worst = |m: &rig::RigMotion| key_pose_errors_cm(served_motion(m).positions.view(), 25.0, &keys).into_iter().fold(0.0, f64::max);
-            fitted.push(worst(&rig::fit_and_solve(positions.view(), root.view(), 25.0, &anchors).expect("export")));
+            // Poses, not a motion (no frame rate): each frame solved on its own, no turn carried.
+            fitted.push(worst(&rig::fit_and_solve(positions.view(), root.view(), f64::NAN, &anchors).expect("export")));
             let median_rig = rig::Rig::fit(positions.view(), root.view()).expect("fit");
-            chain.push(worst(&rig::solve(&median_rig, positions.view(), root.view(), 25.0).expect("solve")));
+            chain.push(worst(&rig::solve(&median_rig, positions.view(), root.view(), f64::NAN).expect("solve")));
         }
     }
     let summary = |v: &mut Vec<f64>| {

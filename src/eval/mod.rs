@@ -40,6 +40,7 @@ use rand::SeedableRng;
 
 use crate::metrics::diversity::Diversity;
 use crate::metrics::reference::ReferenceStats;
+use crate::metrics::rotation_flips::RotationFlips;
 use crate::metrics::score::{score_dance, SetScores};
 use crate::audio::{self, AudioError};
 use crate::metrics::MetricsError;
@@ -267,8 +268,14 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, EvalEr
 /// export's rigid skeleton with the key poses as anchors (what motion.json holds). `beats` are
 /// the song's on the dance's clock. Also what the beat-align stage did.
 pub(super) fn as_served(raw: Motion, keys: &[KeyPose], beats: &[f64]) -> Result<(Motion, BeatAlignSummary), MotionError> {
+    as_served_measured(raw, keys, beats).map(|(m, summary, _)| (m, summary))
+}
+
+/// As [`as_served`], with the rotation flips of the exported rig (what motion.bvh carries).
+pub(super) fn as_served_measured(raw: Motion, keys: &[KeyPose], beats: &[f64]) -> Result<(Motion, BeatAlignSummary, RotationFlips), MotionError> {
     let (finished, summary) = crate::motion::after_model(raw, beats, keys, 0.0, crate::motion::MotionStages::default());
-    Ok((crate::motion::serve(&finished, keys)?.motion, summary.unwrap_or_default()))
+    let served = crate::motion::serve(&finished, keys)?;
+    Ok((served.motion, summary.unwrap_or_default(), RotationFlips::of(&served.rig)))
 }
 
 /// Runs the evaluation and returns the rows (printing nothing; without [`SHARED_SONGS`] the
@@ -288,7 +295,9 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
     // Real: each dance with its own music.
     let mut real = Vec::new();
     for (d, s) in eval_dances.iter().zip(&songs) {
-        let sc = score_dance(&d.motion, &s.beats, &[], &reference)?;
+        let mut sc = score_dance(&d.motion, &s.beats, &[], &reference)?;
+        // Its rotations as `choreo export` writes them.
+        sc.scores.rotation_flips = Some(RotationFlips::of(&crate::motion::export::prepare_with_root(&d.motion, d.center.view())?));
         real.push((EvalDance { song: s.name.clone(), motion: d.id.clone(), seconds: d.motion.duration_s(), scores: sc.scores.clone(), musicality_raw: None, beat_align: None }, sc));
     }
     rows.push(row("Real", real, None, &reference));

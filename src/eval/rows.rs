@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use super::songs::{key_poses_of, Song};
-use super::{as_served, EvalDance, EvalError, EvalOptions, EvalRow};
+use super::{as_served_measured, EvalDance, EvalError, EvalOptions, EvalRow};
 use crate::metrics::diversity::diversity;
 use crate::metrics::physical::seed_distance_m;
 use crate::metrics::reference::ReferenceStats;
@@ -125,12 +125,13 @@ fn dance_songs(
             // The motion stage every job runs (feet planted), and the network's motion as it came.
             // Served: planted and exported through the rigid skeleton, as motion.json holds it.
             // Served: beat-aligned, planted and exported through the rigid skeleton.
-            let (served, aligned) = as_served(raw.clone(), &keys, &s.beats).map_err(|source| EvalError::Export { model: id.into(), song: s.name.clone(), source })?;
+            let (served, aligned, flips) = as_served_measured(raw.clone(), &keys, &s.beats).map_err(|source| EvalError::Export { model: id.into(), song: s.name.clone(), source })?;
             let finished = [served, crate::motion::finish(raw, false)];
             if let Some(dir) = &args.previews {
                 write_preview(dir, id, s, seed, &finished[0], &keys)?;
             }
-            let scored = [score_dance(&finished[0], &s.beats, &keys, reference)?, score_dance(&finished[1], &s.beats, &keys, reference)?];
+            let mut scored = [score_dance(&finished[0], &s.beats, &keys, reference)?, score_dance(&finished[1], &s.beats, &keys, reference)?];
+            scored[0].scores.rotation_flips = Some(flips);
             // Both rows keep the network's own musicality beside their own.
             let raw_musicality = scored[1].scores.musicality;
             for (v, (m, sc)) in finished.into_iter().zip(scored).enumerate() {

@@ -73,7 +73,7 @@ fn scores_table(rows: &[EvalRow]) -> String {
     out
 }
 
-const PHYSICAL_HEADER: &str = "| Motion | n | Lowest foot p5 / median / p95 m | Below −5 cm | Deepest m | Accel median / p99 / p99.9 / max m/s² | Key pop max m/s² ↓ | Speed m/s | × real | Freeze L/F | Seed Δ m (min) | Key err cm (worst) ↓ | Verdict | Dances passing |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+const PHYSICAL_HEADER: &str = "| Motion | n | Lowest foot p5 / median / p95 m | Below −5 cm | Deepest m | Accel median / p99 / p99.9 / max m/s² | Key pop max m/s² ↓ | Speed m/s | × real | Freeze L/F | Seed Δ m (min) | Key err cm (worst) ↓ | Verdict | Dances passing | Rotation flips > 60° / > 90° (worst joint) ↓ |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
 
 /// TSMT's own measures (Li et al. 2020): its three diversities, authenticity and coherence, and
 /// beat precision/recall/F of FACT motion beats against music beats (±0.1 s).
@@ -101,8 +101,8 @@ fn paper_table(rows: &[EvalRow]) -> String {
 }
 
 /// One line of the physical table: `tail` is the seed distance, key error, verdict and passing cells.
-fn physical_cells(name: &str, n: usize, p: &PhysicalScores, freeze: f64, tail: [String; 4]) -> String {
-    let [seeds, key_err, verdict, passing] = tail;
+fn physical_cells(name: &str, n: usize, p: &PhysicalScores, freeze: f64, tail: [String; 5]) -> String {
+    let [seeds, key_err, verdict, passing, flips] = tail;
     let cells = [
         name.to_string(),
         n.to_string(),
@@ -118,6 +118,7 @@ fn physical_cells(name: &str, n: usize, p: &PhysicalScores, freeze: f64, tail: [
         key_err,
         verdict,
         passing,
+        flips,
     ];
     format!("| {} |\n", cells.join(" | "))
 }
@@ -128,7 +129,7 @@ fn physical_table(rows: &[EvalRow], reference: Option<&ReferenceStats>) -> Strin
     if let Some(r) = reference {
         let p = &r.physical;
         let name = format!("Real train (reference; speed per dance {:.2}–{:.2})", p.mean_speed_range_m_s[0], p.mean_speed_range_m_s[1]);
-        out.push_str(&physical_cells(&name, r.dances.len(), &p.pooled, f64::NAN, ["–".into(), "–".into(), "–".into(), "–".into()]));
+        out.push_str(&physical_cells(&name, r.dances.len(), &p.pooled, f64::NAN, ["–".into(), "–".into(), "–".into(), "–".into(), "–".into()]));
     }
     for r in rows {
         let m = &r.scores.mean;
@@ -138,9 +139,17 @@ fn physical_table(rows: &[EvalRow], reference: Option<&ReferenceStats>) -> Strin
         };
         let passing = format!("{}/{}", r.scores.dances_passing, r.scores.dances);
         let key_err = worst_key_error(r).map(f2).unwrap_or_else(|| "–".into());
-        out.push_str(&physical_cells(&r.name, r.scores.dances, &m.physical, m.freezing_ratio, [seeds, key_err, verdict_cell(&m.verdict), passing]));
+        out.push_str(&physical_cells(&r.name, r.scores.dances, &m.physical, m.freezing_ratio, [seeds, key_err, verdict_cell(&m.verdict), passing, flips_cell(m.rotation_flips.as_ref())]));
     }
     out
+}
+
+/// Rotation flips of a row's exported rigs: shares of frame steps past 60° and 90°, worst joint.
+fn flips_cell(f: Option<&crate::metrics::rotation_flips::RotationFlips>) -> String {
+    f.map_or_else(
+        || "–".into(),
+        |f| format!("{:.2} % / {:.2} % ({})", 100.0 * f.share_over_60, 100.0 * f.share_over_90, f.worst_joint.as_deref().unwrap_or("none")),
+    )
 }
 
 /// The row's worst key-pose error (cm), from its verdict.

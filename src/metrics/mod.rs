@@ -10,6 +10,8 @@
 //!   authenticity and coherence against real joint-angle limits (TSMT).
 //! - [`physical`]: floor contact, ground penetration, pops, liveliness, seed sensitivity, and
 //!   issue 10's pass/fail verdict on them.
+//! - [`rotation_flips`]: frame steps on which a rig joint's local rotation turns past 60° / 90°
+//!   (the exported rotations a skinned mesh follows; takes a `RigMotion`, not positions).
 //! - [`reference`]: the committed train-split statistics; [`score`]: one dance and a set;
 //!   [`skeleton_map`]: AIST++ joints on our 23-joint skeleton.
 //!
@@ -38,6 +40,7 @@ pub mod musicality;
 pub mod physical;
 pub mod plausibility;
 pub mod reference;
+pub mod rotation_flips;
 pub mod score;
 pub mod skeleton_map;
 

@@ -6,6 +6,7 @@ use super::musicality::{Musicality, MusicalitySummary};
 use super::physical::{physical_series, verdict, PhysicalScores, PhysicalSeries, Verdict};
 use super::plausibility::{plausibility, Plausibility};
 use super::reference::{dance_features, geometric_windows, kinetic_windows, FeatureStats, ReferenceStats, CURVE_WINDOW_S};
+use super::rotation_flips::RotationFlips;
 use super::MetricsError;
 use crate::motion::{skeleton as sk, KeyPose, Motion, NUM_JOINTS};
 
@@ -57,6 +58,11 @@ pub struct DanceScores {
     /// ([`super::musicality`]).
     #[serde(default)]
     pub musicality: Musicality,
+    /// Frame steps on which an exported joint's rotation turns past 60° / 90°
+    /// ([`super::rotation_flips`]): filled in where the dance went through the rig (the report,
+    /// `choreo eval`'s served and real rows), absent for positions alone.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rotation_flips: Option<RotationFlips>,
 }
 
 /// One dance scored, with the series a report plots and the features a set-level FID pools.
@@ -135,6 +141,7 @@ pub fn score_dance(motion: &Motion, music_beats: &[f64], key_poses: &[KeyPose], 
         verdict: verdict(&physical, &key_errors, None),
         physical,
         musicality: Musicality::of(motion, &music),
+        rotation_flips: None,
     };
     Ok(ScoredDance { scores, music_beats: music, kinematic_beats: kb, freezing: fr, features, physical: series })
 }
@@ -248,6 +255,10 @@ pub fn score_set(dances: &[ScoredDance], reference: &ReferenceStats) -> SetScore
         physical: PhysicalSeries::pooled(dances.iter().map(|s| &s.physical)).scores(reference.physical.pooled.mean_speed_m_s),
         verdict: Verdict::worst(d().map(|s| &s.verdict)),
         musicality: MusicalitySummary::mean(d().map(|s| &s.musicality)),
+        rotation_flips: {
+            let measured: Vec<&RotationFlips> = d().filter_map(|s| s.rotation_flips.as_ref()).collect();
+            (!measured.is_empty()).then(|| RotationFlips::pooled(measured.into_iter()))
+        },
     };
     let kin_dance: Vec<Vec<f64>> = dances.iter().map(|s| s.features.kinetic_dance.clone()).collect();
     let geo_dance: Vec<Vec<f64>> = dances.iter().map(|s| s.features.geometric_dance.clone()).collect();

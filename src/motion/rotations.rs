@@ -250,9 +250,17 @@ mod tests {
         r
     }
 
-    /// Positions of a rigid motion of `rig`: random local rotations, turning and travelling.
+    /// Positions of a rigid motion of `rig`: random local rotations, each turning steadily (up to
+    /// 0.1 rad a frame about each axis: a motion, which the rig keeps continuous, not unrelated
+    /// poses), the body turning and travelling.
     fn rigid_motion(rig: &Rig, t_len: usize) -> Array3<f32> {
         let mut rng = rand::rngs::StdRng::seed_from_u64(11);
+        let (pose, spin): (Vec<UnitQuaternion<f64>>, Vec<Vector3<f64>>) = (0..RIG_JOINTS)
+            .map(|_| {
+                let q = UnitQuaternion::from_euler_angles(rng.gen_range(-0.6..0.6), rng.gen_range(-0.6..0.6), rng.gen_range(-0.6..0.6));
+                (q, Vector3::new(rng.gen_range(-0.1..0.1), rng.gen_range(-0.1..0.1), rng.gen_range(-0.1..0.1)))
+            })
+            .unzip();
         let mut out = Array3::zeros((t_len, NUM_JOINTS, 3));
         for t in 0..t_len {
             let local: Vec<UnitQuaternion<f64>> = (0..RIG_JOINTS)
@@ -262,7 +270,7 @@ mod tests {
                     } else if rig.children(j).is_empty() {
                         UnitQuaternion::identity()
                     } else {
-                        UnitQuaternion::from_euler_angles(rng.gen_range(-0.6..0.6), rng.gen_range(-0.6..0.6), rng.gen_range(-0.6..0.6))
+                        UnitQuaternion::from_scaled_axis(spin[j] * t as f64) * pose[j]
                     }
                 })
                 .collect();

@@ -224,6 +224,7 @@ pub fn render(dir: &Path, finished: &Finished, key_poses: &[KeyPose], caption: &
     report.model_key_pose_error_cm = crate::metrics::kinematics::key_pose_error_cm(model_motion.positions.view(), model_motion.fps, key_poses);
     report.style = caption.style.clone();
     report.beat_align = finished.beat_align.clone();
+    report.scores.rotation_flips = Some(crate::metrics::rotation_flips::RotationFlips::of(&served.rig));
     let text = serde_json::to_vec_pretty(&report).map_err(|e| WorkerError::Export(format!("report.json: {e}")))?;
     write_atomic(&dir.join(REPORT_FILE), &text)?;
     let key_pose_times: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();

@@ -3,7 +3,8 @@
 use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
 use ndarray::{ArrayView2, ArrayView3, Axis};
 
-use super::chain::{rerooted, root_rotation, solve};
+use super::chain::solve;
+use super::continuity::{limit_turn, max_turn};
 use super::{fk_frame, rig_index, targets, Rig, RigMotion};
 use crate::motion::{skeleton, MotionError, NUM_JOINTS};
 
@@ -50,14 +51,9 @@ impl Rig {
     /// together without changing any joint.
     pub fn fit_lengths(&mut self, positions: ArrayView3<'_, f32>, root: ArrayView2<'_, f32>) -> Result<(), MotionError> {
         let tg = targets(positions, root)?;
-        let chain = solve(self, positions, root, 1.0)?; // (the frame rate is not used)
-        let mut poses: Vec<(Vector3<f64>, Vec<UnitQuaternion<f64>>)> = chain
-            .root_translation
-            .iter()
-            .zip(&chain.rotations)
-            .zip(positions.outer_iter().zip(&tg))
-            .map(|((r, l), (p, t))| (*r, rerooted(self, root_rotation(self, p, t), l)))
-            .collect();
+        // Unrelated poses, not a motion: no limit on how far a joint turns from one to the next.
+        let chain = solve(self, positions, root, f64::NAN)?;
+        let mut poses: Vec<(Vector3<f64>, Vec<UnitQuaternion<f64>>)> = chain.root_translation.into_iter().zip(chain.rotations).collect();
         for _ in 0..LENGTH_ROUNDS {
             poses = poses.iter().zip(&tg).map(|((r, l), t)| fit_frame(self, r, l, t)).collect();
             self.solve_lengths(&poses, &tg);
@@ -134,8 +130,12 @@ impl Rig {
 /// differ from the rig's the mismatch is spread over the body rather than piled on the ends of its
 /// chains, and the root sits where the body fits best.
 ///
-/// The root's own rotation is `root_rotation`'s (the facing yaw tilted onto the spine), as
-/// [`solve`] leaves it, kept through the fit.
+/// The root's own rotation is [`solve`]'s (the facing yaw tilted onto the spine), kept through
+/// the fit; so is every twist the positions leave free (the fit's pull towards its start holds
+/// them), which [`solve`] carries from frame to frame.
+///
+/// No joint turns faster than [`super::continuity::MAX_TURN_DEG_PER_S`] at `fps`, as in
+/// [`solve`] (`fps` no number: unrelated poses, each solved on its own).
 ///
 /// Each frame starts from its own chain solution, not from the previous frame's fit: started from
 /// the previous frame, the fits of a captured dance drift into a wrong pose within 20 s (mean joint
@@ -149,11 +149,20 @@ pub fn solve_least_squares(
 ) -> Result<RigMotion, MotionError> {
     let tg = targets(positions, root)?;
     let chain = solve(rig, positions, root, fps)?;
-    let (root_translation, rotations) = tg
+    let (root_translation, mut rotations): (Vec<_>, Vec<_>) = tg
         .iter()
         .enumerate()
         .map(|(t, frame)| fit_frame(rig, &chain.root_translation[t], &chain.rotations[t], frame))
         .unzip();
+    // The fit follows the data where its bones jump (the chain's start did not); the turns are
+    // limited again, as the chain limits them.
+    let max = max_turn(fps);
+    for t in 1..rotations.len() {
+        let (prev, cur) = rotations.split_at_mut(t);
+        for (p, c) in prev[t - 1].iter().zip(cur[0].iter_mut()) {
+            *c = limit_turn(*p, *c, max);
+        }
+    }
     Ok(RigMotion { rig: rig.clone(), fps, root_translation, rotations })
 }
 

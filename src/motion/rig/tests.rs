@@ -50,20 +50,82 @@ fn centred_error_cm(a: ArrayView2<'_, f32>, b: ArrayView2<'_, f32>) -> f64 {
     100.0 * sum / NUM_JOINTS as f64
 }
 
-/// A rigid skeleton posed with random rotations: IK must recover its positions exactly.
+/// A rigid skeleton posed with random rotations: IK must recover its positions exactly, of
+/// unrelated poses (no frame rate: no limit on the turns between them) and of a motion (each
+/// joint turning steadily, up to 8° a frame, from a random pose).
 #[test]
 fn ik_of_a_rigid_motion_is_exact() {
-    use rand::SeedableRng;
+    use rand::{Rng, SeedableRng};
     let mut rng = rand::rngs::StdRng::seed_from_u64(7);
     let rig = random_rig(&mut rng);
     let t_len = 20;
     let roots: Vec<Vector3<f64>> = (0..t_len).map(|t| Vector3::new(0.1 * t as f64, 1.0, 0.0)).collect();
-    let locals: Vec<Vec<UnitQuaternion<f64>>> =
+    let poses: Vec<Vec<UnitQuaternion<f64>>> =
         (0..t_len).map(|_| (0..RIG_JOINTS).map(|_| random_rotation(&mut rng, 1.0)).collect()).collect();
+    let spin: Vec<Vector3<f64>> = (0..RIG_JOINTS).map(|_| Vector3::from_fn(|_, _| rng.gen_range(-0.08..0.08))).collect();
+    let motion: Vec<Vec<UnitQuaternion<f64>>> =
+        (0..t_len).map(|t| (0..RIG_JOINTS).map(|j| UnitQuaternion::from_scaled_axis(spin[j] * t as f64) * poses[0][j]).collect()).collect();
+    for (locals, fps) in [(&poses, f64::NAN), (&motion, 25.0)] {
+        let (pos, root) = arrays(&rig, &roots, locals);
+        for m in [solve(&rig, pos.view(), root.view(), fps).expect("solve"), solve_least_squares(&rig, pos.view(), root.view(), fps).expect("solve")] {
+            let back = m.joint_positions();
+            let err = joint_errors(back.view(), pos.view()).fold(0.0f32, |a, &b| a.max(b));
+            assert!(err < 1e-4, "{fps} fps: max error {err} m");
+        }
+    }
+}
+
+/// A nearly straight right arm swinging forward and back while its elbow bend (±1.5°) changes
+/// side: the positions leave the arm's twist free, and a frame solved on its own picks it from
+/// whichever side the bend is on, half a turn apart. Carried from frame to frame (issue 26) no
+/// joint turns past 60° between frames, and the positions stay exact.
+#[test]
+fn a_straight_arm_keeps_its_twist() {
+    use crate::metrics::rotation_flips::RotationFlips;
+    use crate::motion::skeleton::JOINT_NAMES;
+    use rand::SeedableRng;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+    let mut rig = random_rig(&mut rng);
+    let arm = |name: &str| rig_index(JOINT_NAMES.iter().position(|n| *n == name).expect("joint"));
+    let (shoulder, elbow) = (arm("right_shoulder"), arm("right_elbow"));
+    let d = Vector3::new(-1.0, -0.3, 0.1).normalize();
+    for (name, len) in [("right_elbow", 0.30), ("right_forearm", 0.13), ("right_wrist", 0.12), ("right_hand_dir", 0.05)] {
+        rig.offsets[arm(name)] = d * len;
+    }
+    let swing_axis = Unit::new_normalize(d.cross(&Vector3::y()));
+    let bend_axis = Unit::new_normalize(d.cross(&swing_axis));
+    let t_len = 100;
+    let pose: Vec<UnitQuaternion<f64>> = (0..RIG_JOINTS).map(|_| random_rotation(&mut rng, 0.3)).collect();
+    let locals: Vec<Vec<UnitQuaternion<f64>>> = (0..t_len)
+        .map(|t| {
+            let s = std::f64::consts::TAU * t as f64 / t_len as f64;
+            let mut l = pose.clone();
+            for j in [arm("right_forearm"), arm("right_wrist")] {
+                l[j] = UnitQuaternion::identity();
+            }
+            l[shoulder] = UnitQuaternion::from_axis_angle(&swing_axis, 1.2 * s.sin());
+            l[elbow] = UnitQuaternion::from_axis_angle(&bend_axis, 1.5f64.to_radians() * (2.0 * s).sin());
+            l
+        })
+        .collect();
+    let roots = vec![Vector3::new(0.0, 1.0, 0.0); t_len];
     let (pos, root) = arrays(&rig, &roots, &locals);
+    let one_by_one: Vec<Vec<UnitQuaternion<f64>>> = (0..t_len)
+        .map(|t| {
+            let s = ndarray::s![t..t + 1, .., ..];
+            solve(&rig, pos.slice(s), root.slice(ndarray::s![t..t + 1, ..]), 25.0).expect("solve").rotations.remove(0)
+        })
+        .collect();
+    let before = RotationFlips::of(&RigMotion { rig: rig.clone(), fps: 25.0, root_translation: roots.clone(), rotations: one_by_one });
+    eprintln!("frame by frame: {before:?}");
+    assert!(before.steps_over_90 > 0, "the test's arm does not flip frame by frame: {before:?}");
     for m in [solve(&rig, pos.view(), root.view(), 25.0).expect("solve"), solve_least_squares(&rig, pos.view(), root.view(), 25.0).expect("solve")] {
-        let back = m.joint_positions();
-        let err = joint_errors(back.view(), pos.view()).fold(0.0f32, |a, &b| a.max(b));
+        let flips = RotationFlips::of(&m);
+        assert_eq!(flips.steps_over_60, 0, "{flips:?}");
+        // Not a slow spin either: the shoulder turns about as much as the swing (1.2 rad · 2π / 100 frames ≈ 4.3°).
+        let turn = (1..t_len).map(|t| m.rotations[t - 1][shoulder].angle_to(&m.rotations[t][shoulder]).to_degrees()).fold(0.0, f64::max);
+        assert!(turn < 10.0, "the shoulder turns {turn:.1}° in a frame");
+        let err = joint_errors(m.joint_positions().view(), pos.view()).fold(0.0f32, |a, &b| a.max(b));
         assert!(err < 1e-4, "max error {err} m");
     }
 }
@@ -103,8 +165,9 @@ fn a_thigh_the_key_frames_disagree_on_is_spread_over_the_body() {
         let back = m.joint_positions();
         (0..2).map(|t| centred_error_cm(back.index_axis(Axis(0), t), pos.index_axis(Axis(0), t))).fold(0.0, f64::max)
     };
-    let chain = worst(&solve(&Rig::fit(pos.view(), root.view()).expect("fit"), pos.view(), root.view(), 25.0).expect("solve"));
-    let fitted = worst(&fit_and_solve(pos.view(), root.view(), 25.0, &[0, 1]).expect("solve"));
+    let chain = worst(&solve(&Rig::fit(pos.view(), root.view()).expect("fit"), pos.view(), root.view(), f64::NAN).expect("solve"));
+    // Two key poses, not a motion (no frame rate): each solved on its own.
+    let fitted = worst(&fit_and_solve(pos.view(), root.view(), f64::NAN, &[0, 1]).expect("solve"));
     eprintln!("worst key frame error: chain on median lengths {chain:.2} cm, least squares {fitted:.2} cm");
     assert!(chain > 1.0, "the test's mismatch does not show in the chain IK: {chain:.2} cm");
     assert!(fitted < 0.5 * chain, "least squares {fitted:.2} cm against the chain's {chain:.2} cm");
