@@ -5,6 +5,7 @@
 //! directions, with the job's motion.json. Also: `rig=choreo` is the stored file, unknown rigs
 //! and parameters are refused, and an unfinished job answers as the other result routes do.
 //!
+//! An uploaded rig (the Unreal-named fixture, centimetres) goes through the same Blender check by its id.
 //! Needs Debian's blender, node with `tests/web/node_modules` (`npm ci`), chromium and numpy for
 //! /usr/bin/python3 (all from `scripts/setup.sh --test`); without them this fails under `CI=true`
 //! and prints a notice otherwise.
@@ -101,6 +102,21 @@ fn mixamo_name(k: &str) -> String {
     format!("mixamorig:{side}{bone}")
 }
 
+/// The Unreal-named fixture rig's bone for each landmark `angles` reads.
+fn unreal_name(k: &str) -> String {
+    let (side, rest) = k.split_once('_').expect("side_joint");
+    let bone = match rest {
+        "shoulder" => "upperarm",
+        "elbow" => "lowerarm",
+        "wrist" => "hand",
+        "hip" => "thigh",
+        "knee" => "calf",
+        "ankle" => "foot",
+        other => panic!("no landmark {other}"),
+    };
+    format!("{bone}_{}", &side[..1])
+}
+
 /// Per angle, the median over frames of |target − motion.json|; asserts each within the limit.
 fn compare(what: &str, motion: &Value, frames: &[usize], target: &dyn Fn(usize) -> Pose, n: &dyn Fn(&str) -> String) {
     let mut diffs: HashMap<&str, Vec<f64>> = HashMap::new();
@@ -170,6 +186,19 @@ async fn a_dance_goes_onto_mixamo_vrm_and_smpl_and_the_tools_read_it() {
     let vrma_path = write("motion.vrma", &vrma);
     let npz_path = write("motion.smpl.npz", &npz);
 
+    // An uploaded skeleton (Unreal names, centimetres, other proportions) by its id, both files.
+    let fixture = std::fs::read(root().join("tests/fixtures/rig_unreal_cm.bvh")).expect("rig fixture");
+    let form = reqwest::multipart::Form::new().part("file", reqwest::multipart::Part::bytes(fixture).file_name("mannequin.bvh"));
+    let response = app.client.post(app.url("/v1/rigs")).multipart(form).send().await.expect("POST /v1/rigs");
+    assert_eq!(response.status(), StatusCode::CREATED);
+    let rig: Value = response.json().await.expect("rig");
+    let rig_id = rig["id"].as_str().expect("rig id");
+    let unreal_bvh = bytes(&app, &format!("{base}/motion.bvh?rig={rig_id}")).await;
+    assert!(unreal_bvh.starts_with(b"HIERARCHY\nROOT pelvis\n"), "{}", String::from_utf8_lossy(&unreal_bvh[..40]));
+    let unreal_bvh_path = write("motion.unreal.bvh", &unreal_bvh);
+    let unreal_glb_path = write("motion.unreal.glb", &bytes(&app, &format!("{base}/motion.glb?rig={rig_id}")).await);
+    expect_problem(app.get(&format!("{base}/motion.bvh?rig=0191f0a0-0000-7000-8000-000000000000")).await, StatusCode::NOT_FOUND, "rig-not-found").await;
+
     // An unfinished job answers 409 like the other result routes (a second dance, asked for at once).
     let response = app.post_job(&json!({"song_id": song_id, "model": "keypose-transformer", "seed": 8}), None).await;
     let pending: Value = response.json().await.expect("job");
@@ -183,7 +212,10 @@ async fn a_dance_goes_onto_mixamo_vrm_and_smpl_and_the_tools_read_it() {
 
     smpl_npz_follows_the_dance(&npz_path, &motion, &frames);
     if have("Debian's blender", runs("blender", &["--version"])) {
-        blender_reads_the_mixamo_files(&bvh_path, &glb_path, dir.path(), &motion, &frames);
+        let mixamo: Vec<String> = choreo::motion::retarget::mixamo().rig.names;
+        blender_reads_the_files("mixamo", &bvh_path, &glb_path, dir.path(), &motion, &frames, &mixamo, &mixamo_name);
+        let unreal: Vec<String> = ["pelvis", "spine_03", "head", "upperarm_l", "lowerarm_r", "hand_l", "thigh_r", "calf_l", "foot_r", "ball_l"].map(String::from).to_vec();
+        blender_reads_the_files("uploaded", &unreal_bvh_path, &unreal_glb_path, dir.path(), &motion, &frames, &unreal, &unreal_name);
     }
     let node_ready = runs("node", &["--version"])
         && root().join("tests/web/node_modules/@pixiv/three-vrm-animation").is_dir()
@@ -194,10 +226,11 @@ async fn a_dance_goes_onto_mixamo_vrm_and_smpl_and_the_tools_read_it() {
     let _ = motion_path;
 }
 
-/// Blender imports both files onto one armature each with Mixamo's bone names; the angles between
-/// bones in its evaluated pose follow motion.json's.
-fn blender_reads_the_mixamo_files(bvh: &Path, glb: &Path, dir: &Path, motion: &Value, frames: &[usize]) {
-    let out = dir.join("blender.json");
+/// Blender imports both files onto one armature each with the rig's bone names (`names`, at
+/// least); the angles between bones in its evaluated pose follow motion.json's.
+#[allow(clippy::too_many_arguments)]
+fn blender_reads_the_files(rig: &str, bvh: &Path, glb: &Path, dir: &Path, motion: &Value, frames: &[usize], names: &[String], landmark: &dyn Fn(&str) -> String) {
+    let out = dir.join(format!("blender.{rig}.json"));
     let list = frames.iter().map(|f| f.to_string()).collect::<Vec<_>>().join(",");
     let script = root().join("tests/blender/check_retarget.py");
     let run = std::process::Command::new("blender")
@@ -212,13 +245,12 @@ fn blender_reads_the_mixamo_files(bvh: &Path, glb: &Path, dir: &Path, motion: &V
     let log = String::from_utf8_lossy(&run.stdout).to_string() + &String::from_utf8_lossy(&run.stderr);
     assert!(run.status.success(), "blender failed:\n{log}");
     let result: Value = serde_json::from_str(&std::fs::read_to_string(&out).expect("blender result")).expect("json");
-    let names: Vec<String> = choreo::motion::retarget::mixamo().rig.names;
     for kind in ["bvh", "glb"] {
         let r = &result[kind];
         assert!(r.get("error").is_none(), "{kind}: {}", r["error"]);
         assert_eq!(r["armatures"], 1, "{kind}: {r}");
         let bones: Vec<&str> = r["bones"].as_array().expect("bones").iter().filter_map(Value::as_str).collect();
-        for name in &names {
+        for name in names {
             assert!(bones.contains(&name.as_str()), "{kind}: Blender's armature lacks {name}: {bones:?}");
         }
         assert_eq!(r["frames"].as_u64(), motion["num_frames"].as_u64(), "{kind}: frame count");
@@ -230,7 +262,7 @@ fn blender_reads_the_mixamo_files(bvh: &Path, glb: &Path, dir: &Path, motion: &V
                 .map(|(k, v)| (k.clone(), Vector3::new(v[0].as_f64().unwrap(), v[1].as_f64().unwrap(), v[2].as_f64().unwrap())))
                 .collect()
         };
-        compare(&format!("Blender, motion.{kind}?rig=mixamo"), motion, frames, &pose, &mixamo_name);
+        compare(&format!("Blender, motion.{kind}?rig={rig}"), motion, frames, &pose, landmark);
     }
 }
 

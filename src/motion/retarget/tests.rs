@@ -96,6 +96,10 @@ fn every_target_points_its_bones_where_the_dance_does_and_keeps_its_feet_on_the_
         eprintln!("{label}: arm bones at most {worst_arm:.4}° off the dance's; lowest ankle {lowest:.3} m");
         assert!(worst_arm < 0.01, "{label}: an arm bone points {worst_arm}° off the dance's");
         assert!(lowest > 0.0, "{label}: an ankle went below the floor ({lowest} m)");
+        // No twist flips on the target either: its rotations come from choreo's continuous ones.
+        let flips = crate::metrics::rotation_flips::RotationFlips::of(&out);
+        eprintln!("{label}: {} of {} steps turn a joint past 60° (largest {:.1}°)", flips.steps_over_60, flips.steps, flips.max_step_deg);
+        assert!(flips.share_over_60 <= 0.001, "{label}: {flips:?}");
         // Quaternion tracks stay on one hemisphere frame to frame.
         for t in 1..out.num_frames() {
             for (a, b) in out.rotations[t - 1].iter().zip(&out.rotations[t]) {
