@@ -274,7 +274,7 @@ pub(super) fn as_served(raw: Motion, keys: &[KeyPose], beats: &[f64]) -> Result<
 /// As [`as_served`], with the rotation flips of the exported rig (what motion.bvh carries).
 pub(super) fn as_served_measured(raw: Motion, keys: &[KeyPose], beats: &[f64]) -> Result<(Motion, BeatAlignSummary, RotationFlips), MotionError> {
     let (finished, summary) = crate::motion::after_model(raw, beats, keys, 0.0, crate::motion::MotionStages::default());
-    let served = crate::motion::serve(&finished, keys)?;
+    let served = crate::motion::serve(&finished, keys, true)?;
     Ok((served.motion, summary.unwrap_or_default(), RotationFlips::of(&served.rig)))
 }
 

@@ -185,6 +185,9 @@ pub struct Finished {
     /// The beat-align stage's summary and the network's tempo lock before it (none where the
     /// stage did not run).
     pub beat_align: Option<BeatAlignReport>,
+    /// Whether the feet were planted (and the dance grounded): the export grounds its rigid
+    /// skeleton too ([`crate::motion::serve`]).
+    pub plant_feet: bool,
 }
 
 /// The motion stages after a model ([`crate::motion::after_model`]: beat alignment, then the feet
@@ -200,6 +203,7 @@ pub fn after_model(model_motion: Motion, analysis: Analysis, song_duration_s: f6
         analysis,
         song_duration_s,
         beat_align: summary.map(|summary| BeatAlignReport { summary, tempo_lock_before }),
+        plant_feet: stages.plant_feet,
     }
 }
 
@@ -214,7 +218,7 @@ pub fn render(dir: &Path, finished: &Finished, key_poses: &[KeyPose], caption: &
     std::fs::create_dir_all(dir)?;
     on_stage(Stage::Export);
     let model_motion = &finished.motion;
-    let served = crate::motion::serve(model_motion, key_poses)?;
+    let served = crate::motion::serve(model_motion, key_poses, finished.plant_feet)?;
     write_all_rig(&served.rig, dir)?;
     // The report and the preview judge what the user downloads: the rigid skeleton's motion.
     let motion = &served.motion;
