@@ -9,50 +9,20 @@ position of every joint and our JSON `positions` at the first, middle and last f
 
 Blender is z up; choreo (BVH, glTF, JSON) is y up. Both importers map (x, y, z) to (x, -z, y).
 """
-import builtins
 import json
+import os
 import sys
 import traceback
 
 import bpy
 import mathutils
 
-# Debian's Blender 3.4.1 BVH importer opens files with mode 'rU', gone in Python 3.11.
-_open = builtins.open
-
-
-def _open_without_u(file, mode="r", *args, **kwargs):
-    if isinstance(mode, str) and "U" in mode:
-        mode = mode.replace("U", "") or "r"
-    return _open(file, mode, *args, **kwargs)
-
-
-builtins.open = _open_without_u
-
-# Its glTF importer still uses numpy.bool, removed in numpy 1.24.
-try:
-    import numpy
-
-    if not hasattr(numpy, "bool"):
-        numpy.bool = bool
-except ImportError:
-    pass
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from blender_compat import builtin_open, keyframe_frames  # noqa: E402 (after the path)
 
 
 def y_up_to_blender(p):
     return mathutils.Vector((p[0], -p[2], p[1]))
-
-
-def keyframe_frames(objects):
-    frames = set()
-    for ob in objects:
-        ad = ob.animation_data
-        if ad is None or ad.action is None:
-            continue
-        for fc in ad.action.fcurves:
-            for kp in fc.keyframe_points:
-                frames.add(round(kp.co[0], 3))
-    return sorted(frames)
 
 
 def joint_world_positions(names):
@@ -113,7 +83,7 @@ def compare(kind, ref, importer):
 def main():
     argv = sys.argv[sys.argv.index("--") + 1:]
     bvh_path, glb_path, json_path, out_path = argv[:4]
-    with _open(json_path) as f:
+    with builtin_open(json_path) as f:
         ref = json.load(f)
     results = {}
     for kind, importer in (
@@ -127,7 +97,7 @@ def main():
             results[kind] = compare(kind, ref, importer)
         except Exception:
             results[kind] = {"kind": kind, "error": traceback.format_exc()}
-    with _open(out_path, "w") as f:
+    with builtin_open(out_path, "w") as f:
         json.dump(results, f, indent=1)
     print(json.dumps(results, indent=1))
 

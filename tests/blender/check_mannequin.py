@@ -12,31 +12,14 @@ that stays near its joint says the skin follows the bones; a forearm twist flip,
 wrong bone, would carry it away (candy-wrap).
 """
 import json
+import os
 import sys
 import traceback
 
 import bpy
 
-# Debian's Blender 3.4.1 glTF importer still uses numpy.bool, removed in numpy 1.24.
-try:
-    import numpy
-
-    if not hasattr(numpy, "bool"):
-        numpy.bool = bool
-except ImportError:
-    pass
-
-
-def keyframe_frames(objects):
-    frames = set()
-    for ob in objects:
-        ad = ob.animation_data
-        if ad is None or ad.action is None:
-            continue
-        for fc in ad.action.fcurves:
-            for kp in fc.keyframe_points:
-                frames.add(round(kp.co[0], 3))
-    return sorted(frames)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from blender_compat import keyframe_frames  # noqa: E402 (after the path)
 
 
 def evaluated_vertices(ob, indices):

@@ -8,45 +8,17 @@ FRAMES is a comma-separated list of frame indices (0-based, the dance's frames).
 holds, for each of "bvh" and "glb": the armatures' bone names, the frame count (from the
 action's keyframes), and per asked frame the head of every pose bone in choreo's axes (y up:
 Blender's (x, y, z) is choreo's (x, -z, y)). The caller compares angles between bones with
-motion.json's. Importer quirks of Debian's Blender 3.4.1 are patched as in check_import.py.
+motion.json's. Importer quirks of Debian's Blender 3.4.1 are patched by blender_compat.py.
 """
-import builtins
 import json
+import os
 import sys
 import traceback
 
 import bpy
 
-_open = builtins.open
-
-
-def _open_without_u(file, mode="r", *args, **kwargs):
-    if isinstance(mode, str) and "U" in mode:
-        mode = mode.replace("U", "") or "r"
-    return _open(file, mode, *args, **kwargs)
-
-
-builtins.open = _open_without_u
-
-try:
-    import numpy
-
-    if not hasattr(numpy, "bool"):
-        numpy.bool = bool
-except ImportError:
-    pass
-
-
-def keyframe_frames(objects):
-    frames = set()
-    for ob in objects:
-        ad = ob.animation_data
-        if ad is None or ad.action is None:
-            continue
-        for fc in ad.action.fcurves:
-            for kp in fc.keyframe_points:
-                frames.add(round(kp.co[0], 3))
-    return sorted(frames)
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from blender_compat import builtin_open, keyframe_frames  # noqa: E402 (after the path)
 
 
 def dump(importer, frames_wanted):
@@ -95,7 +67,7 @@ def main():
             results[kind] = dump(importer, frames)
         except Exception:
             results[kind] = {"error": traceback.format_exc()}
-    with _open(out_path, "w") as f:
+    with builtin_open(out_path, "w") as f:
         json.dump(results, f)
 
 
