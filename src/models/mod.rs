@@ -161,6 +161,14 @@ pub struct GenerateRequest<'a> {
 }
 
 impl<'a> GenerateRequest<'a> {
+    /// The song's analysis: the caller's ([`Self::analysis`]), else analysed here, unbudgeted.
+    pub fn analysis_or_analyze(&self) -> Result<std::borrow::Cow<'a, Analysis>, crate::audio::AudioError> {
+        match self.analysis {
+            Some(a) => Ok(std::borrow::Cow::Borrowed(a)),
+            None => crate::audio::analyze(self.audio).map(std::borrow::Cow::Owned),
+        }
+    }
+
     /// A request with only the song and the seed: no key poses, no seed motion, model defaults.
     pub fn plain(audio: &'a DecodedAudio, seed: u64) -> Self {
         Self { audio, seed, key_poses: &[], seed_motion: None, style: None, temperature: None, top_k: None, analysis: None }

@@ -122,17 +122,10 @@ pub fn generate_decoded(
     // The song's beats, once, before the model (as a job does): the model may listen to them, the
     // beat-align stage and the report use them.
     clock.report(Stage::Analyze, 0.0)?;
-    let own;
-    let analysis = match request.analysis {
-        Some(a) => a,
-        None => {
-            own = audio::analyze(request.audio)?;
-            &own
-        }
-    };
-    let generated = model.generate(&GenerateRequest { analysis: Some(analysis), ..*request }, &mut clock)?;
+    let analysis = request.analysis_or_analyze()?;
+    let generated = model.generate(&GenerateRequest { analysis: Some(&analysis), ..*request }, &mut clock)?;
     let caption = Caption { model: id, seed: request.seed, song, style: generated.style };
-    let analysis = analysis.clone();
+    let analysis = analysis.into_owned();
     clock.report(Stage::BeatAlign, 0.0)?;
     let finished = super::pipeline::after_model(generated.motion, analysis, request.audio.duration_s, request.key_poses, request.seed_motion, stages);
     let files = super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| clock.enter(stage))?;

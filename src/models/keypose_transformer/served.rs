@@ -182,17 +182,8 @@ impl Served {
     }
 
     /// What the scaffold hears of the song: the analysis's beats and downbeats (the ones the
-    /// report measures against: the caller's `analysis` when it has one, else analysed here) and
-    /// the onset strength of the model's own features `[n, 15]`.
-    pub fn cues(&self, audio: &crate::audio::DecodedAudio, analysis: Option<&crate::audio::Analysis>, feats: &Array2<f32>) -> Result<SongCues, ModelError> {
-        let own;
-        let analysis = match analysis {
-            Some(a) => a,
-            None => {
-                own = crate::audio::analyze(audio)?;
-                &own
-            }
-        };
+    /// report measures against) and the onset strength of the model's own features `[n, 15]`.
+    pub fn cues(&self, analysis: &crate::audio::Analysis, feats: &Array2<f32>) -> Result<SongCues, ModelError> {
         let onset: Vec<f32> = feats.column(crate::audio::features::KEYPOSE_DIM - 1).to_vec();
         let fallback = self.file.extra.scaffold_spacing.max(1) as f64;
         Ok(SongCues::new(&analysis.beat_times, &analysis.downbeat_times, &onset, self.file.fps, feats.nrows(), fallback))
@@ -217,7 +208,7 @@ impl DanceModel for Served {
         let feats = crate::audio::features::keypose(req.audio, fps, 0.0, n)?;
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?);
         // Only a bank with its clips' beats listens to the song; the analysis is skipped without.
-        let cues = if self.bank.as_ref().is_some_and(|b| b.meta().is_some()) { Some(self.cues(req.audio, req.analysis, &feats)?) } else { None };
+        let cues = if self.bank.as_ref().is_some_and(|b| b.meta().is_some()) { Some(self.cues(&*req.analysis_or_analyze()?, &feats)?) } else { None };
         progress.report(Stage::Features, 1.0)?;
         let given = match req.seed_motion {
             Some(m) if m.num_frames() > 0 => {
