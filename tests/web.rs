@@ -8,11 +8,11 @@
 //!
 //! Needs node, chromium, `npm ci` in `tests/web` and `web` (all from `scripts/setup.sh --test`)
 //! and `../shared/audio`; without them the tests fail under `CI=true` and print a notice otherwise.
+#[path = "common/models.rs"]
+mod common_models;
 #[allow(dead_code)]
 #[path = "api/helpers.rs"]
 mod helpers;
-#[path = "common/models.rs"]
-mod common_models;
 use common_models::models_dir;
 
 use helpers::{spawn_app, spawn_app_with, TestApp};
@@ -52,9 +52,15 @@ fn missing_prerequisites(needs: &Needs) -> Vec<String> {
     }
     if needs.browser_and_songs {
         if !chromium().is_file() {
-            missing.push(format!("{} (Debian's chromium package)", chromium().display()));
+            missing.push(format!(
+                "{} (Debian's chromium package)",
+                chromium().display()
+            ));
         }
-        if !root().join("../shared/audio/trumpet_loop_90bpm.ogg").is_file() {
+        if !root()
+            .join("../shared/audio/trumpet_loop_90bpm.ogg")
+            .is_file()
+        {
             missing.push("../shared/audio".to_string());
         }
     }
@@ -67,16 +73,27 @@ fn ready(test: &str, needs: &Needs) -> bool {
     if missing.is_empty() {
         return true;
     }
-    let message = format!("{test} needs {}: run `scripts/setup.sh --test` (or `make test`)", missing.join(", "));
-    assert!(std::env::var("CI").as_deref() != Ok("true"), "{message} (CI=true)");
+    let message = format!(
+        "{test} needs {}: run `scripts/setup.sh --test` (or `make test`)",
+        missing.join(", ")
+    );
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "{message} (CI=true)"
+    );
     eprintln!("NOTICE: skipping: {message}");
     false
 }
 
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
-    if !ready("the browser flow test", &Needs { node_modules: &["tests/web/node_modules/playwright-core"], browser_and_songs: true }) {
+    if !ready(
+        "the browser flow test",
+        &Needs {
+            node_modules: &["tests/web/node_modules/playwright-core"],
+            browser_and_songs: true,
+        },
+    ) {
         return;
     }
     // The page from one server; the API, with models, a token and CORS for the page, from another.
@@ -105,11 +122,20 @@ async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
         .output();
     let output = tokio::time::timeout(FLOW_LIMIT, run)
         .await
-        .unwrap_or_else(|_| panic!("the browser flow ran past {FLOW_LIMIT:?}; screenshots in {}", out.display()))
+        .unwrap_or_else(|_| {
+            panic!(
+                "the browser flow ran past {FLOW_LIMIT:?}; screenshots in {}",
+                out.display()
+            )
+        })
         .expect("run node tests/web/flow.mjs");
     let stdout = String::from_utf8_lossy(&output.stdout);
     eprintln!("{stdout}{}", String::from_utf8_lossy(&output.stderr));
-    assert!(output.status.success(), "the browser flow failed (above); screenshots in {}", out.display());
+    assert!(
+        output.status.success(),
+        "the browser flow failed (above); screenshots in {}",
+        out.display()
+    );
 
     // The script's own summary, checked again here: the numbers the issue asks for.
     let summary: serde_json::Value = stdout
@@ -120,20 +146,41 @@ async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
     for (phase, sync) in summary["sync"].as_object().expect("sync phases") {
         let worst = sync["worst_diff_s"].as_f64().expect("worst_diff_s");
         // Over the frames drawn in time; flow.mjs bounds the CPU-starved ones (see checkSync).
-        assert!(worst <= 1.0 / 25.0, "{phase}: |audioTime − animationTime| reached {worst} s");
-        assert!(sync["audio_advanced_s"].as_f64().expect("advanced") > 1.0, "{phase}: the song did not play: {sync}");
+        assert!(
+            worst <= 1.0 / 25.0,
+            "{phase}: |audioTime − animationTime| reached {worst} s"
+        );
+        assert!(
+            sync["audio_advanced_s"].as_f64().expect("advanced") > 1.0,
+            "{phase}: the song did not play: {sync}"
+        );
     }
-    assert!(summary["sync"].as_object().is_some_and(|s| s.len() >= 3), "playing, looping and deep link were measured: {summary}");
+    assert!(
+        summary["sync"].as_object().is_some_and(|s| s.len() >= 3),
+        "playing, looping and deep link were measured: {summary}"
+    );
     // The mannequin drawn and moving with the song, its skin on its joints; a rig upload mapped.
     let mannequin = &summary["mannequin"];
-    assert!(mannequin["triangles"].as_u64().is_some_and(|n| n > 1000), "{summary}");
-    assert!(mannequin["travel_m"].as_f64().is_some_and(|m| m > 0.05), "{summary}");
-    assert!(summary["rig"]["mapped"].as_u64().is_some_and(|n| n >= 13), "{summary}");
+    assert!(
+        mannequin["triangles"].as_u64().is_some_and(|n| n > 1000),
+        "{summary}"
+    );
+    assert!(
+        mannequin["travel_m"].as_f64().is_some_and(|m| m > 0.05),
+        "{summary}"
+    );
+    assert!(
+        summary["rig"]["mapped"].as_u64().is_some_and(|n| n >= 13),
+        "{summary}"
+    );
     let shots = summary["screenshots"].as_array().expect("screenshots");
     assert!(shots.len() >= 6, "{summary}");
     for shot in shots {
         let bytes = std::fs::read(shot.as_str().expect("path")).expect("screenshot file");
-        assert!(bytes.starts_with(b"\x89PNG") && bytes.len() > 10_000, "{shot} is a real PNG");
+        assert!(
+            bytes.starts_with(b"\x89PNG") && bytes.len() > 10_000,
+            "{shot} is a real PNG"
+        );
     }
     eprintln!("screenshots: {}", out.display());
     api.stop().await;
@@ -145,31 +192,77 @@ async fn the_page_and_its_assets_are_served_from_the_binary() {
     let app = spawn_app().await;
     let page = app.get("/").await;
     assert_eq!(page.status(), StatusCode::OK);
-    let csp = page.headers().get("content-security-policy").and_then(|v| v.to_str().ok()).unwrap_or("").to_string();
-    assert!(csp.contains("script-src 'self'") && csp.contains("default-src 'none'"), "{csp}");
-    assert!(page.headers()["content-type"].to_str().is_ok_and(|t| t.starts_with("text/html")));
+    let csp = page
+        .headers()
+        .get("content-security-policy")
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_string();
+    assert!(
+        csp.contains("script-src 'self'") && csp.contains("default-src 'none'"),
+        "{csp}"
+    );
+    assert!(page.headers()["content-type"]
+        .to_str()
+        .is_ok_and(|t| t.starts_with("text/html")));
     let html = page.text().await.expect("html");
-    assert!(html.contains(r#"src="/assets/app.js""#) && html.contains(r#"href="/assets/app.css""#), "{html}");
+    assert!(
+        html.contains(r#"src="/assets/app.js""#) && html.contains(r#"href="/assets/app.css""#),
+        "{html}"
+    );
     // Nothing is fetched from elsewhere: no absolute URL in the page's src or href attributes.
-    assert!(!html.contains("src=\"http") && !html.contains("href=\"http"), "{html}");
+    assert!(
+        !html.contains("src=\"http") && !html.contains("href=\"http"),
+        "{html}"
+    );
 
-    for (path, kind) in [("/assets/app.js", "text/javascript"), ("/assets/app.css", "text/css")] {
+    for (path, kind) in [
+        ("/assets/app.js", "text/javascript"),
+        ("/assets/app.css", "text/css"),
+    ] {
         let first = app.get(path).await;
         assert_eq!(first.status(), StatusCode::OK, "{path}");
-        assert!(first.headers()["content-type"].to_str().is_ok_and(|t| t.starts_with(kind)), "{path}");
+        assert!(
+            first.headers()["content-type"]
+                .to_str()
+                .is_ok_and(|t| t.starts_with(kind)),
+            "{path}"
+        );
         let etag = first.headers()["etag"].clone();
         let body = first.bytes().await.expect("body");
-        let on_disk = std::fs::read(root().join("web/dist").join(path.trim_start_matches("/assets/"))).expect("web/dist file");
-        assert_eq!(body.as_ref(), on_disk.as_slice(), "{path} is web/dist's file");
-        let again = app.client.get(app.url(path)).header("if-none-match", etag).send().await.expect("GET");
-        assert_eq!(again.status(), StatusCode::NOT_MODIFIED, "{path} with its ETag");
+        let on_disk = std::fs::read(
+            root()
+                .join("web/dist")
+                .join(path.trim_start_matches("/assets/")),
+        )
+        .expect("web/dist file");
+        assert_eq!(
+            body.as_ref(),
+            on_disk.as_slice(),
+            "{path} is web/dist's file"
+        );
+        let again = app
+            .client
+            .get(app.url(path))
+            .header("if-none-match", etag)
+            .send()
+            .await
+            .expect("GET");
+        assert_eq!(
+            again.status(),
+            StatusCode::NOT_MODIFIED,
+            "{path} with its ETag"
+        );
     }
     app.stop().await;
 }
 
 #[test]
 fn web_dist_is_what_web_src_builds_to() {
-    let needs = Needs { node_modules: &["web/node_modules/esbuild", "web/node_modules/three"], browser_and_songs: false };
+    let needs = Needs {
+        node_modules: &["web/node_modules/esbuild", "web/node_modules/three"],
+        browser_and_songs: false,
+    };
     if !ready("the web build check", &needs) {
         return;
     }
