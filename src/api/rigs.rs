@@ -206,6 +206,7 @@ pub async fn upload(
         .file
         .ok_or_else(|| ApiError::MissingField("file".into()))?;
     let overrides = parse_mapping(form.mapping.as_deref())?;
+    super::tenancy::check_storage(&state, &caller, received.size).await?;
     let bytes = tokio::fs::read(received.file.path())
         .await
         .map_err(|e| ApiError::storage("reading the upload", &e))?;

@@ -311,6 +311,7 @@ pub async fn upload(
             Json(view(&state, existing).await?),
         ));
     }
+    super::tenancy::check_storage(&state, &caller, received.size).await?;
 
     // Decode fully: that is the only proof the bytes are audio we can use. No samples are kept,
     // the header's length and rate are checked before decoding, and the decode stops at the
