@@ -577,6 +577,9 @@ async fn two_hundred_queued_jobs_do_not_hold_back_another_tenants_first_job(db: 
         finished < QUEUED / 2,
         "the busy tenant's queue was still long ({finished} of {QUEUED} done)"
     );
+    eprintln!(
+        "{db:?}: newcomer's first job waited {first_wait:?}, its dance {waited:?}; longest busy job {longest:?}, {finished} of {QUEUED} busy jobs done"
+    );
     assert!(
         first_wait <= longest + Duration::from_secs(1),
         "the newcomer's first job waited {first_wait:?} to start; one busy job takes up to {longest:?}"
