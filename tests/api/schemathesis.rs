@@ -29,10 +29,14 @@ async fn schemathesis_finds_no_mismatch_with_api_keys_on() {
     let store = &app.server.as_ref().expect("server").state().store;
     let (key, secret) =
         choreo::queue::NewKey::mint("schemathesis", false, choreo::queue::KeyLimits::default());
+    let id = key.id;
     store.add_key(key).await.expect("add key");
     let (other, _) = choreo::queue::NewKey::mint("other", false, Default::default());
     store.add_key(other).await.expect("add key");
     run(&app, Some(&secret)).await;
+    // The requests were the key's, not 401s for want of it.
+    let used = store.key(id).await.expect("key").last_used_at;
+    assert!(used.is_some(), "schemathesis never used the key");
     app.stop().await;
 }
 
