@@ -413,7 +413,10 @@ impl Config {
             );
         }
         if self.max_queued_jobs == Some(0) {
-            return invalid("max_queued_jobs", "must be at least 1; leave it unset for no limit");
+            return invalid(
+                "max_queued_jobs",
+                "must be at least 1; leave it unset for no limit",
+            );
         }
         if self.storage_quota_bytes == Some(0) {
             return invalid(

@@ -822,7 +822,10 @@ async fn claims_are_fair_between_tenants(db: TestDb) {
     // Nobody runs anything: b was never served, a just was, so b's job goes before a's
     // nineteen urgent ones.
     let second = store.claim("w", p).await.expect("claim").expect("a job");
-    assert_eq!(second.tenant, b, "b's only job is not starved by a's twenty");
+    assert_eq!(
+        second.tenant, b,
+        "b's only job is not starved by a's twenty"
+    );
     // b has one running and a none: a goes next, its highest priority first.
     store
         .register(job_of(b, sb.id, 0))

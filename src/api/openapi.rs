@@ -6,10 +6,10 @@
 //! (the caller's rate limit), and the ids that `POST /v1/songs` and `POST /v1/jobs`
 //! return (and `POST /v1/rigs`) are linked to the operations that take them.
 use serde_json::{json, Value};
-use utoipa::openapi::path::{Operation, PathItem};
-use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
 use utoipa::openapi::header::HeaderBuilder;
+use utoipa::openapi::path::{Operation, PathItem};
 use utoipa::openapi::schema::{ObjectBuilder, Type};
+use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
 use utoipa::openapi::{ContentBuilder, Ref, RefOr, ResponseBuilder};
 use utoipa::{Modify, OpenApi};
 
@@ -97,7 +97,11 @@ impl Modify for BearerAuth {
             .content(super::problem::PROBLEM_JSON, problem())
             .build();
         let retry_after = HeaderBuilder::new()
-            .schema(ObjectBuilder::new().schema_type(Type::Integer).minimum(Some(1)))
+            .schema(
+                ObjectBuilder::new()
+                    .schema_type(Type::Integer)
+                    .minimum(Some(1)),
+            )
             .description(Some("Seconds to wait before trying again"))
             .build();
         let rate_limited = |what: &str| {

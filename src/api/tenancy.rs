@@ -182,7 +182,9 @@ mod tests {
             panic!("the sixth request at once is refused")
         };
         assert_eq!(retry_after_s, 1);
-        limiter.admit(b, 5.0).expect("another tenant has its own budget");
+        limiter
+            .admit(b, 5.0)
+            .expect("another tenant has its own budget");
         std::thread::sleep(Duration::from_millis(250));
         limiter.admit(a, 5.0).expect("one interval later, one more");
     }

@@ -76,11 +76,7 @@ impl NewKey {
         let id = KeyId::new();
         let mut random = [0u8; 32];
         rand::rngs::OsRng.fill_bytes(&mut random);
-        let secret = format!(
-            "{SECRET_PREFIX}{}_{}",
-            id.0.simple(),
-            hex::encode(random)
-        );
+        let secret = format!("{SECRET_PREFIX}{}_{}", id.0.simple(), hex::encode(random));
         let key = NewKey {
             id,
             tenant: TenantId(id.0),

@@ -82,13 +82,7 @@ impl App {
     }
 
     fn store(&self) -> &std::sync::Arc<dyn choreo::queue::Store> {
-        &self
-            .app
-            .server
-            .as_ref()
-            .expect("server runs")
-            .state()
-            .store
+        &self.app.server.as_ref().expect("server runs").state().store
     }
 
     /// `method path` with `secret` as the bearer (none: no Authorization header).
@@ -259,7 +253,11 @@ async fn tenants_cannot_reach_each_others_songs_jobs_results_or_rigs(db: Db) {
         let mine = app.get(path, &a).await;
         assert_eq!(mine.status(), StatusCode::OK, "{path} as its owner");
         let theirs = app.get(path, &b).await;
-        assert_eq!(theirs.status(), StatusCode::NOT_FOUND, "{path} as another tenant");
+        assert_eq!(
+            theirs.status(),
+            StatusCode::NOT_FOUND,
+            "{path} as another tenant"
+        );
     }
     // A rig is found in the caller's tenant only, also as a download's `rig=`.
     let song_b = app.song(&b).await;
@@ -304,14 +302,19 @@ async fn tenants_cannot_reach_each_others_songs_jobs_results_or_rigs(db: Db) {
             .iter()
             .filter_map(|j| j["id"].as_str())
             .collect();
-        assert!(ids.contains(&own.as_str()) && !ids.contains(&other.as_str()), "{page}");
+        assert!(
+            ids.contains(&own.as_str()) && !ids.contains(&other.as_str()),
+            "{page}"
+        );
         let songs: Vec<&str> = page["items"]
             .as_array()
             .expect("items")
             .iter()
             .filter_map(|j| j["song_id"].as_str())
             .collect();
-        assert!(songs.iter().all(|s| *s == if secret == &a { &song_a } else { &song_b }));
+        assert!(songs
+            .iter()
+            .all(|s| *s == if secret == &a { &song_a } else { &song_b }));
     }
     app.stop().await;
 }
@@ -342,7 +345,12 @@ async fn unknown_and_revoked_keys_get_401_and_the_token_is_its_own_tenant(db: Db
     let mut forged = secret.clone();
     let last = if forged.ends_with('a') { "b" } else { "a" };
     forged.replace_range(forged.len() - 1.., last);
-    for given in [None, Some("nope"), Some(unknown.as_str()), Some(forged.as_str())] {
+    for given in [
+        None,
+        Some("nope"),
+        Some(unknown.as_str()),
+        Some(forged.as_str()),
+    ] {
         expect_problem(
             app.call(Method::GET, "/v1/jobs", given).await,
             StatusCode::UNAUTHORIZED,
@@ -360,7 +368,10 @@ async fn unknown_and_revoked_keys_get_401_and_the_token_is_its_own_tenant(db: Db
     )
     .await;
     let stored = app.store().key(id).await.expect("key");
-    assert!(stored.revoked_at.is_some() && stored.last_used_at.is_some(), "{stored:?}");
+    assert!(
+        stored.revoked_at.is_some() && stored.last_used_at.is_some(),
+        "{stored:?}"
+    );
     app.stop().await;
 
     // Without a token: once a key exists, even a revoked one, a request without a key is 401.
@@ -462,7 +473,10 @@ async fn queue_and_storage_quotas_refuse_what_would_pass_them(db: Db) {
         "storage-quota-exceeded",
     )
     .await;
-    assert!(body["detail"].as_str().unwrap_or("").contains("quota"), "{body}");
+    assert!(
+        body["detail"].as_str().unwrap_or("").contains("quota"),
+        "{body}"
+    );
     assert_eq!(
         app.upload(&capped, &short_song()).await.status(),
         StatusCode::OK
@@ -491,7 +505,12 @@ async fn queue_and_storage_quotas_refuse_what_would_pass_them(db: Db) {
     assert_eq!(accepted, 2, "the analyze job and 2 more make the 3 allowed");
     let refused = refused.expect("a 429 once 3 are queued or running");
     assert!(refused.headers().contains_key("retry-after"));
-    expect_problem(refused, StatusCode::TOO_MANY_REQUESTS, "too-many-queued-jobs").await;
+    expect_problem(
+        refused,
+        StatusCode::TOO_MANY_REQUESTS,
+        "too-many-queued-jobs",
+    )
+    .await;
     // Another key with its own limit is not held back by this one's queue.
     let roomy_job = json!({"song_id": roomy_song, "model": "dance-revolution", "priority": -100});
     for _ in 0..4 {
@@ -555,7 +574,9 @@ async fn two_hundred_queued_jobs_do_not_hold_back_another_tenants_first_job(db: 
         .find(|j| j["kind"] == "analyze")
         .cloned()
         .expect("the newcomer's analyze job");
-    let time = |v: &Value| chrono::DateTime::parse_from_rfc3339(v.as_str().expect("a time")).expect("time");
+    let time = |v: &Value| {
+        chrono::DateTime::parse_from_rfc3339(v.as_str().expect("a time")).expect("time")
+    };
     let first_wait = (time(&analyze["started_at"]) - time(&analyze["created_at"]))
         .to_std()
         .unwrap_or_default();
@@ -590,9 +611,7 @@ async fn two_hundred_queued_jobs_do_not_hold_back_another_tenants_first_job(db: 
         waited <= longest * 4 + Duration::from_secs(2),
         "the newcomer's first dance took {waited:?}; one busy job takes up to {longest:?}"
     );
-    let queued_ahead = app
-        .json("/v1/jobs?status=queued&limit=100", &busy)
-        .await["items"]
+    let queued_ahead = app.json("/v1/jobs?status=queued&limit=100", &busy).await["items"]
         .as_array()
         .map_or(0, Vec::len);
     assert!(queued_ahead > 0, "the busy tenant still had jobs queued");

@@ -6,7 +6,8 @@ use chrono::{DateTime, Utc};
 use sqlx::{ColumnIndex, Decode, Encode, Executor, IntoArguments, Row, Type};
 
 /// The columns a key row is read from.
-const KEY_COLUMNS: &str = "id, tenant_id, name, secret_sha256, admin, rate_limit_rps, max_queued_jobs, \
+const KEY_COLUMNS: &str =
+    "id, tenant_id, name, secret_sha256, admin, rate_limit_rps, max_queued_jobs, \
      storage_quota_bytes, created_at, last_used_at, revoked_at";
 
 fn to_i64(what: &str, n: Option<u64>) -> Result<Option<i64>, QueueError> {
@@ -84,7 +85,10 @@ where
                 .bind(key.admin)
                 .bind(key.limits.rate_limit_rps)
                 .bind(to_i64("max_queued_jobs", key.limits.max_queued_jobs)?)
-                .bind(to_i64("storage_quota_bytes", key.limits.storage_quota_bytes)?)
+                .bind(to_i64(
+                    "storage_quota_bytes",
+                    key.limits.storage_quota_bytes,
+                )?)
                 .bind(now_ms())
                 .fetch_one(&mut *tx)
                 .await?;
@@ -171,8 +175,7 @@ where
             .fetch_one(&self.pool)
             .await?;
             Ok(Usage {
-                queued_jobs: to_u64("queued jobs", Some(row.try_get("queued_jobs")?))?
-                    .unwrap_or(0),
+                queued_jobs: to_u64("queued jobs", Some(row.try_get("queued_jobs")?))?.unwrap_or(0),
                 stored_bytes: to_u64("stored bytes", Some(row.try_get("stored_bytes")?))?
                     .unwrap_or(0),
             })
