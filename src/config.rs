@@ -45,6 +45,7 @@ pub const SETTINGS: &[&str] = &[
     "max_part_header_bytes",
     "db_timeout_s",
     "sweep_grace_s",
+    "retention_days",
 ];
 
 /// Errors from loading or checking the configuration.
@@ -187,6 +188,9 @@ pub struct Config {
     /// Crash leftovers (temp files, files without a database row) older than this are removed at
     /// start-up, in seconds.
     pub sweep_grace_s: f64,
+    /// Songs and results are removed this many days (fractions allowed) after their last use;
+    /// unset keeps them until deleted.
+    pub retention_days: Option<f64>,
 }
 
 impl Default for Config {
@@ -221,6 +225,7 @@ impl Default for Config {
             max_part_header_bytes: 8 * 1024,
             db_timeout_s: 3.0,
             sweep_grace_s: 3600.0,
+            retention_days: None,
         }
     }
 }
@@ -387,6 +392,14 @@ impl Config {
                 "must be zero or a positive number of seconds",
             );
         }
+        if let Some(days) = self.retention_days {
+            if !(days.is_finite() && days > 0.0) || self.retention().is_none() {
+                return invalid(
+                    "retention_days",
+                    "must be a positive number of days (fractions allowed); leave it unset to keep everything",
+                );
+            }
+        }
         self.database()?;
         if let Some(url) = &self.artifacts_url {
             if url != "local"
@@ -417,6 +430,14 @@ impl Config {
                 .map(|n| n.get())
                 .unwrap_or(1)
         }
+    }
+
+    /// How long songs and results are kept after their last use; none without `retention_days`.
+    pub fn retention(&self) -> Option<std::time::Duration> {
+        let days = self.retention_days?;
+        std::time::Duration::try_from_secs_f64(days * 86_400.0)
+            .ok()
+            .filter(|d| !d.is_zero())
     }
 
     /// The SQLite database file used when `database_url` is unset.
