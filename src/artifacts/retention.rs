@@ -83,8 +83,8 @@ pub async fn expire(
 ) -> Result<Removed, QueueError> {
     let mut all = Removed::default();
     loop {
-        let cutoff = chrono::Utc::now()
-            - chrono::Duration::from_std(keep).unwrap_or(chrono::Duration::MAX);
+        let cutoff =
+            chrono::Utc::now() - chrono::Duration::from_std(keep).unwrap_or(chrono::Duration::MAX);
         let removed = store.expire(cutoff, BATCH, EXPIRED).await?;
         if let Err(e) = remove_files(artifacts, &removed).await {
             tracing::warn!(error = %e, "removing expired files failed; the sweep removes what is left");
@@ -134,7 +134,10 @@ mod tests {
 
     #[test]
     fn passes_come_a_tenth_of_the_retention_apart_within_bounds() {
-        assert_eq!(pass_every(Duration::from_secs(5)), Duration::from_millis(500));
+        assert_eq!(
+            pass_every(Duration::from_secs(5)),
+            Duration::from_millis(500)
+        );
         assert_eq!(pass_every(Duration::from_millis(10)), MIN_PASS);
         assert_eq!(pass_every(Duration::from_secs(30 * 86_400)), MAX_PASS);
     }

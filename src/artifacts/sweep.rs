@@ -44,7 +44,9 @@ pub fn spawn(
                     tracing::info!(?swept, "removed files no row names from the data dir")
                 }
                 Ok(_) => {}
-                Err(e) => tracing::warn!(error = %e, "the sweep of the data dir stopped; retrying next round"),
+                Err(e) => {
+                    tracing::warn!(error = %e, "the sweep of the data dir stopped; retrying next round")
+                }
             }
             tokio::select! {
                 _ = shutdown.cancelled() => return,

@@ -515,8 +515,7 @@ pub trait JobStore: Send + Sync {
     /// returns the job as it was, whose files are the caller's to remove. A queued or running
     /// job is not removed (cancel it first): no finished job with the id in scope is
     /// [`QueueError::JobNotFound`].
-    fn delete_job<'a>(&'a self, scope: Scope, id: JobId, reason: &'a str)
-        -> StoreFuture<'a, Job>;
+    fn delete_job<'a>(&'a self, scope: Scope, id: JobId, reason: &'a str) -> StoreFuture<'a, Job>;
     /// Records a use of the job's results (a download), which restarts its retention.
     fn touch_job(&self, id: JobId) -> StoreFuture<'_, ()>;
 }

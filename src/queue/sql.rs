@@ -681,12 +681,7 @@ where
     }
 
     // Deletion and retention: `sql/delete.rs`.
-    fn delete_job<'a>(
-        &'a self,
-        scope: Scope,
-        id: JobId,
-        reason: &'a str,
-    ) -> StoreFuture<'a, Job> {
+    fn delete_job<'a>(&'a self, scope: Scope, id: JobId, reason: &'a str) -> StoreFuture<'a, Job> {
         Box::pin(self.delete_finished_job(scope, id, reason))
     }
 

@@ -78,8 +78,12 @@ impl WorkerProcess {
             std::time::Duration::from_secs_f64(config.sweep_grace_s),
             shutdown.clone(),
         );
-        let retention =
-            crate::artifacts::retention::spawn(store, ctx.artifacts.clone(), config, shutdown.clone());
+        let retention = crate::artifacts::retention::spawn(
+            store,
+            ctx.artifacts.clone(),
+            config,
+            shutdown.clone(),
+        );
         let mut handles = super::start(ctx, count, shutdown.clone());
         handles.push(sweep);
         handles.extend(retention);
