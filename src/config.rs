@@ -48,6 +48,7 @@ pub const SETTINGS: &[&str] = &[
     "rate_limit_rps",
     "max_queued_jobs",
     "storage_quota_bytes",
+    "retention_days",
 ];
 
 /// Errors from loading or checking the configuration.
@@ -200,6 +201,9 @@ pub struct Config {
     /// Most bytes of songs, rigs and results a tenant may store; an upload past it answers `413
     /// storage-quota-exceeded`. Unset: no limit. A key's own `--storage-quota-bytes` overrides it.
     pub storage_quota_bytes: Option<u64>,
+    /// Songs and results are removed this many days (fractions allowed) after their last use;
+    /// unset keeps them until deleted.
+    pub retention_days: Option<f64>,
 }
 
 impl Default for Config {
@@ -237,6 +241,7 @@ impl Default for Config {
             rate_limit_rps: None,
             max_queued_jobs: None,
             storage_quota_bytes: None,
+            retention_days: None,
         }
     }
 }
@@ -424,6 +429,14 @@ impl Config {
                 "must be positive; leave it unset for no limit",
             );
         }
+        if let Some(days) = self.retention_days {
+            if !(days.is_finite() && days > 0.0) || self.retention().is_none() {
+                return invalid(
+                    "retention_days",
+                    "must be a positive number of days (fractions allowed); leave it unset to keep everything",
+                );
+            }
+        }
         self.database()?;
         if let Some(url) = &self.artifacts_url {
             if url != "local"
@@ -463,6 +476,14 @@ impl Config {
             max_queued_jobs: self.max_queued_jobs,
             storage_quota_bytes: self.storage_quota_bytes,
         }
+    }
+
+    /// How long songs and results are kept after their last use; none without `retention_days`.
+    pub fn retention(&self) -> Option<std::time::Duration> {
+        let days = self.retention_days?;
+        std::time::Duration::try_from_secs_f64(days * 86_400.0)
+            .ok()
+            .filter(|d| !d.is_zero())
     }
 
     /// The SQLite database file used when `database_url` is unset.

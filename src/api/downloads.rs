@@ -93,6 +93,7 @@ async fn render(
         .stream(Artifact::Result(job.id, JSON_FILE))
         .await
         .map_err(|e| ApiError::artifact(&doing, &e))?;
+    super::jobs::record_use(state, job.id).await;
     let bytes: Vec<u8> = file
         .body
         .try_fold(

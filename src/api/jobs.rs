@@ -515,7 +515,12 @@ pub async fn list(
     }))
 }
 
-/// Cancel a job: a queued one at once, a running one at its next progress checkpoint.
+/// Cancel a job that has not finished, or delete one that has.
+///
+/// A queued job is cancelled at once, a running one at its next progress checkpoint (202, the
+/// job). A finished job (succeeded, failed or cancelled) is deleted: its result files and its row
+/// (204); afterwards its id is 404, and `job_events` keeps a `deleted` line. So a second DELETE
+/// of a job the first one cancelled while queued deletes it.
 #[utoipa::path(
     delete,
     path = "/v1/jobs/{id}",
@@ -523,29 +528,42 @@ pub async fn list(
     tag = "jobs",
     params(("id" = String, Path, description = "Job id")),
     responses(
-        (status = 202, description = "Cancelled, or cancellation requested (status running, cancel_requested true)", body = JobView),
+        (status = 202, description = "The job had not finished: cancelled, or cancellation requested (status running, cancel_requested true)", body = JobView),
+        (status = 204, description = "The job had finished: its results and its row are deleted"),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
-        (status = 409, description = "The job already succeeded or failed", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The database or the artifact store is unreachable; nothing was deleted, send it again shortly", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
-pub async fn cancel(
+pub async fn cancel_or_delete(
     State(state): State<AppState>,
     caller: Caller,
     Path(id): Path<String>,
-) -> Result<(StatusCode, Json<JobView>), ApiError> {
-    let job = state
-        .store
-        .cancel(caller.scope(), parse_job_id(&id)?)
-        .await?;
-    match job.status {
-        Status::Succeeded | Status::Failed => Err(ApiError::AlreadyFinished {
-            id: job.id,
-            status: job.status,
-        }),
-        Status::Queued | Status::Running | Status::Cancelled => {
-            Ok((StatusCode::ACCEPTED, Json(job.into())))
-        }
+) -> Result<Response, ApiError> {
+    let id = parse_job_id(&id)?;
+    let job = state.store.job(caller.scope(), id).await?;
+    if !job.status.is_terminal() {
+        // Finished in between, it is shown as it is: its status says so.
+        let job = state.store.cancel(caller.scope(), id).await?;
+        return Ok((StatusCode::ACCEPTED, Json(JobView::from(job))).into_response());
+    }
+    // A finished job's files never change: removed first, a failure leaves the job as it was
+    // (its DELETE can be sent again) rather than files no row names.
+    state
+        .artifacts
+        .remove_results(id)
+        .await
+        .map_err(|e| ApiError::artifact(&format!("deleting the results of job {id}"), &e))?;
+    let reason = format!("deleted by its owner (DELETE /v1/jobs/{id})");
+    state.store.delete_job(caller.scope(), id, &reason).await?;
+    tracing::info!(job_id = %id, "job deleted");
+    Ok(StatusCode::NO_CONTENT.into_response())
+}
+
+/// Records a download of a job's result, which restarts its retention; a failure only logs.
+pub(super) async fn record_use(state: &AppState, id: JobId) {
+    if let Err(e) = state.store.touch_job(id).await {
+        tracing::warn!(job_id = %id, error = %e, "could not record a use of the job's results");
     }
 }
 
@@ -609,6 +627,7 @@ pub async fn result(
         .stream(crate::artifacts::Artifact::Result(job.id, name))
         .await
         .map_err(|e| ApiError::artifact(&format!("reading {name} of job {}", job.id), &e))?;
+    record_use(&state, job.id).await;
     // Streamed with backpressure: a client that stops reading holds one chunk, not the file.
     let headers = [
         (

@@ -118,7 +118,7 @@ impl StartError {
 pub fn router(state: AppState) -> Router {
     let v1 = Router::new()
         .route("/songs", axum::routing::post(songs::upload))
-        .route("/songs/{id}", get(songs::get))
+        .route("/songs/{id}", get(songs::get).delete(songs::delete))
         .route("/songs/{id}/audio", get(songs::audio))
         .route("/rigs", axum::routing::post(rigs::upload))
         .route("/rigs/{id}", get(rigs::get))
@@ -130,7 +130,7 @@ pub fn router(state: AppState) -> Router {
                     usize::try_from(state.config.max_job_body_bytes).unwrap_or(usize::MAX),
                 )),
         )
-        .route("/jobs/{id}", get(jobs::get).delete(jobs::cancel))
+        .route("/jobs/{id}", get(jobs::get).delete(jobs::cancel_or_delete))
         .route("/jobs/{id}/preview.png", get(jobs::preview))
         .route("/jobs/{id}/motion.bvh", get(downloads::motion_bvh))
         .route("/jobs/{id}/motion.glb", get(downloads::motion_glb))
@@ -274,11 +274,7 @@ impl Server {
         )
         .await?;
         let artifacts = crate::artifacts::open(&config, data.clone())?;
-        crate::artifacts::sweep::spawn(
-            store.clone(),
-            data.clone(),
-            Duration::from_secs_f64(config.sweep_grace_s),
-        );
+        let shutdown = CancellationToken::new();
         let registry = Arc::new(Registry::load(&config.models_dir)?);
         let workers = config.worker_count();
         tracing::info!(
@@ -305,7 +301,6 @@ impl Server {
             }
         }
         let metrics = telemetry::prometheus();
-        let shutdown = CancellationToken::new();
         let state = AppState {
             store,
             registry,
@@ -334,8 +329,23 @@ impl Server {
             source,
         })?;
 
+        // Stops with the server (`shutdown`); not awaited: a sweep holds nothing to finish.
+        crate::artifacts::sweep::spawn(
+            state.store.clone(),
+            state.data.clone(),
+            Duration::from_secs_f64(config.sweep_grace_s),
+            shutdown.clone(),
+        );
         let worker_handles = if run_workers {
-            crate::worker::start(ctx, workers, shutdown.clone())
+            let retention = crate::artifacts::retention::spawn(
+                state.store.clone(),
+                state.artifacts.clone(),
+                &config,
+                shutdown.clone(),
+            );
+            let mut handles = crate::worker::start(ctx, workers, shutdown.clone());
+            handles.extend(retention);
+            handles
         } else {
             Vec::new()
         };

@@ -24,12 +24,13 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
         super::songs::upload,
         super::songs::get,
         super::songs::audio,
+        super::songs::delete,
         super::rigs::upload,
         super::rigs::get,
         super::jobs::create,
         super::jobs::list,
         super::jobs::get,
-        super::jobs::cancel,
+        super::jobs::cancel_or_delete,
         super::jobs::result,
         super::jobs::preview,
         super::downloads::motion_bvh,
@@ -43,9 +44,9 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
     ),
     modifiers(&BearerAuth),
     tags(
-        (name = "songs", description = "Upload songs; read their analysis"),
+        (name = "songs", description = "Upload songs; read their analysis; delete them"),
         (name = "rigs", description = "Your own skeletons (BVH or glb) to take dances onto"),
-        (name = "jobs", description = "Dances: submit, follow, cancel, download"),
+        (name = "jobs", description = "Dances: submit, follow, cancel, download, delete"),
         (name = "models", description = "The models this server has"),
         (name = "system", description = "Health, readiness, metrics"),
     )
@@ -150,6 +151,7 @@ fn add_links(spec: &mut Value) {
             "requestBody": { "song_id": "$response.body#/id", "model": "dance-revolution" },
         },
         "GetSongAudio": { "operationId": "getSongAudio", "parameters": { "id": "$response.body#/id" } },
+        "DeleteSong": { "operationId": "deleteSong", "parameters": { "id": "$response.body#/id" } },
     });
     let job = json!({
         "GetJob": { "operationId": "getJob", "parameters": { "id": "$response.body#/id" } },

@@ -1,4 +1,4 @@
-//! `POST /v1/songs`, `GET /v1/songs/{id}` and `GET /v1/songs/{id}/audio`.
+//! `POST /v1/songs`, `GET /v1/songs/{id}`, `GET /v1/songs/{id}/audio` and `DELETE /v1/songs/{id}`.
 //!
 //! An upload streams to a temp file inside the data dir while its size is checked and its
 //! sha256 computed; it is decoded with symphonia (the format comes from decoding, never the
@@ -305,6 +305,7 @@ pub async fn upload(
         .await
         .map_err(ApiError::from)?
     {
+        record_use(&state, existing.id).await;
         return Ok((
             StatusCode::OK,
             location(existing.id),
@@ -404,6 +405,7 @@ pub async fn upload(
         if let Err(e) = state.artifacts.remove(artifact).await {
             tracing::warn!(error = %e, "could not remove a duplicate upload");
         }
+        record_use(&state, stored.id).await;
         return Ok((
             StatusCode::OK,
             location(stored.id),
@@ -423,6 +425,13 @@ pub async fn upload(
 async fn forget(state: &AppState, artifact: Artifact<'_>) {
     if let Err(e) = state.artifacts.remove(artifact).await {
         tracing::warn!(error = %e, "could not remove a song file whose row was not written; the start-up sweep will");
+    }
+}
+
+/// Records a use of the song, which restarts its retention; a failure only logs.
+async fn record_use(state: &AppState, id: SongId) {
+    if let Err(e) = state.store.touch_song(id).await {
+        tracing::warn!(song_id = %id, error = %e, "could not record a use of the song");
     }
 }
 
@@ -459,6 +468,46 @@ pub async fn get(
         .map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
     let song = state.store.song(caller.scope(), id).await?;
     Ok(Json(view(&state, song).await?))
+}
+
+/// Delete a song, its analysis, and every job made from it with its results.
+///
+/// Jobs of the song that are queued are dropped, and running ones stop at their next progress
+/// checkpoint, writing nothing more. Afterwards the song's id and its jobs' ids are 404, its file
+/// and its jobs' files are gone (from the data dir and the bucket), and `job_events` keeps a
+/// `deleted` line for each job.
+#[utoipa::path(
+    delete,
+    path = "/v1/songs/{id}",
+    operation_id = "deleteSong",
+    tag = "songs",
+    params(("id" = String, Path, description = "Song id")),
+    responses(
+        (status = 204, description = "The song, its analysis, its jobs and their results are deleted"),
+        (status = 404, description = "No such song", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The database is unreachable; nothing was deleted, send it again shortly", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn delete(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    let id = SongId::from_str(&id)
+        .map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
+    // Rows first, so nothing is claimed, served or listed from them any more; a running job's
+    // worker removes what it writes after this (`artifacts::retention::forget_if_deleted`).
+    let reason = format!("deleted with its song {id} (DELETE /v1/songs/{id})");
+    let removed = state.store.delete_song(caller.scope(), id, &reason).await?;
+    if let Err(e) =
+        crate::artifacts::retention::remove_files(state.artifacts.as_ref(), &removed).await
+    {
+        // No row names them now: the data dir's sweep removes what is left.
+        tracing::warn!(song_id = %id, error = %e, "a deleted song's files could not all be removed");
+    }
+    tracing::info!(song_id = %id, jobs = removed.jobs.len(), "song deleted");
+    Ok(StatusCode::NO_CONTENT)
 }
 
 /// The MIME type an uploaded song is served with, from the format its decode found.
@@ -519,6 +568,7 @@ pub async fn audio(
     let file = tokio::fs::File::open(&path)
         .await
         .map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?;
+    record_use(&state, song.id).await;
     let len = file
         .metadata()
         .await

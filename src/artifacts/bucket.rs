@@ -5,7 +5,7 @@
 //! files and logs. `s3_endpoint` points at any S3-compatible server (MinIO, moto, Ceph, R2).
 use super::{Artifact, ArtifactError, ArtifactFuture, ArtifactStore, ArtifactStream};
 use crate::queue::files::write_atomic;
-use crate::queue::DataDir;
+use crate::queue::{DataDir, JobId};
 use bytes::Bytes;
 use futures::{StreamExt, TryStreamExt};
 use object_store::aws::AmazonS3Builder;
@@ -145,6 +145,34 @@ impl ArtifactStore for BucketArtifacts {
                 Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(io(&artifact, e)),
                 _ => Ok(()),
             }
+        })
+    }
+
+    fn remove_results(&self, job: JobId) -> ArtifactFuture<'_, ()> {
+        Box::pin(async move {
+            // Listed rather than named: whatever a worker published under the job goes.
+            let dir = Artifact::Result(job, "");
+            let key = dir.key();
+            let prefix = self.location(&dir);
+            let objects: Vec<_> = self
+                .bucket
+                .list(Some(&prefix))
+                .map_ok(|meta| meta.location)
+                .try_collect()
+                .await
+                .map_err(|e| Self::bucket_error(&dir, e))?;
+            for location in objects {
+                match self.bucket.delete(&location).await {
+                    Ok(()) | Err(object_store::Error::NotFound { .. }) => {}
+                    Err(source) => {
+                        return Err(ArtifactError::Bucket {
+                            key: key.clone(),
+                            source,
+                        })
+                    }
+                }
+            }
+            super::remove_job_dir(&self.cache, job).await
         })
     }
 }

@@ -2,7 +2,7 @@
 use super::{
     Artifact, ArtifactError, ArtifactFuture, ArtifactStore, ArtifactStream, STREAM_CHUNK_BYTES,
 };
-use crate::queue::DataDir;
+use crate::queue::{DataDir, JobId};
 use futures::StreamExt;
 use std::path::PathBuf;
 
@@ -70,5 +70,9 @@ impl ArtifactStore for LocalArtifacts {
                 _ => Ok(()),
             }
         })
+    }
+
+    fn remove_results(&self, job: JobId) -> ArtifactFuture<'_, ()> {
+        Box::pin(super::remove_job_dir(&self.data, job))
     }
 }

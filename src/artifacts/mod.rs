@@ -23,6 +23,7 @@ use std::sync::Arc;
 
 pub mod bucket;
 pub mod local;
+pub mod retention;
 pub mod sweep;
 
 pub use bucket::BucketArtifacts;
@@ -125,6 +126,20 @@ pub trait ArtifactStore: Send + Sync {
     fn stream<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ArtifactStream>;
     /// Removes the artifact and its local copy (an upload that lost a race to its twin).
     fn remove<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ()>;
+    /// Removes every result of a job, whatever their names (a deleted or expired job), and its
+    /// local dir. Nothing there is not an error.
+    fn remove_results(&self, job: JobId) -> ArtifactFuture<'_, ()>;
+}
+
+/// Removes the local dir of a job's results; a missing one is fine.
+async fn remove_job_dir(data: &DataDir, job: JobId) -> Result<(), ArtifactError> {
+    match tokio::fs::remove_dir_all(data.job_dir(job)).await {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(ArtifactError::Io {
+            key: format!("jobs/{job}/"),
+            source: e,
+        }),
+        _ => Ok(()),
+    }
 }
 
 /// Where [`open`] keeps artifacts.

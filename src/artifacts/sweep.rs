@@ -1,15 +1,20 @@
-//! The start-up sweep of crash leftovers in the local data dir.
+//! The sweep of files no row names in the local data dir.
 //!
 //! A process killed mid-write leaves files no row names: a result's `.partial-*` temp file in a
 //! job dir, a song renamed into `songs/` whose row was never committed, a job dir of a job that
-//! does not exist. Nothing reads them, but they fill the disk. The sweep removes those older
-//! than the grace period (`sweep_grace_s`), so it never races a write in progress in another
-//! process sharing the data dir. It runs once, in the background, after the store opens.
+//! does not exist. A deletion whose file removal failed leaves the same, and so does another
+//! host's deletion of a song or result this host has a cached copy of (with a bucket, the data
+//! dir is each host's cache: `artifacts::retention`). Nothing reads them, but they fill the disk.
+//! The sweep removes those older than the grace period (`sweep_grace_s`), so it never races a
+//! write in progress in another process sharing the data dir. It runs in the background, once
+//! after the store opens and then every half grace period (at least every second, at most hourly).
 use crate::queue::{DataDir, JobId, QueueError, Scope, SongId, Store};
 use std::path::Path;
 use std::str::FromStr;
 use std::sync::Arc;
 use std::time::{Duration, SystemTime};
+use tokio::task::JoinHandle;
+use tokio_util::sync::CancellationToken;
 
 /// What one sweep removed.
 #[derive(Debug, Default, PartialEq, Eq)]
@@ -19,17 +24,36 @@ pub struct Swept {
     pub job_dirs: usize,
 }
 
-/// Runs [`sweep`] in the background and logs what it removed.
-pub fn spawn(store: Arc<dyn Store>, data: DataDir, grace: Duration) {
+/// How long between two sweeps for a grace period of `grace`.
+pub fn sweep_every(grace: Duration) -> Duration {
+    (grace / 2).clamp(Duration::from_secs(1), Duration::from_secs(3600))
+}
+
+/// Runs [`sweep`] in the background now and every [`sweep_every`], logging what it removed,
+/// until `shutdown`.
+pub fn spawn(
+    store: Arc<dyn Store>,
+    data: DataDir,
+    grace: Duration,
+    shutdown: CancellationToken,
+) -> JoinHandle<()> {
     tokio::spawn(async move {
-        match sweep(store.as_ref(), &data, grace).await {
-            Ok(swept) if swept != Swept::default() => {
-                tracing::info!(?swept, "removed crash leftovers from the data dir")
+        loop {
+            match sweep(store.as_ref(), &data, grace).await {
+                Ok(swept) if swept != Swept::default() => {
+                    tracing::info!(?swept, "removed files no row names from the data dir")
+                }
+                Ok(_) => {}
+                Err(e) => {
+                    tracing::warn!(error = %e, "the sweep of the data dir stopped; retrying next round")
+                }
             }
-            Ok(_) => {}
-            Err(e) => tracing::warn!(error = %e, "the start-up sweep of crash leftovers stopped"),
+            tokio::select! {
+                _ = shutdown.cancelled() => return,
+                _ = tokio::time::sleep(sweep_every(grace)) => {}
+            }
         }
-    });
+    })
 }
 
 fn older_than(path: &Path, grace: Duration) -> bool {

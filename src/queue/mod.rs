@@ -460,6 +460,20 @@ pub struct UploadedRig {
     pub created_at: DateTime<Utc>,
 }
 
+/// Rows a deletion or the retention sweep removed; their files are still to be removed.
+#[derive(Clone, Debug, Default)]
+pub struct Removed {
+    pub songs: Vec<Song>,
+    pub jobs: Vec<Job>,
+}
+
+impl Removed {
+    /// Whether nothing was removed.
+    pub fn is_empty(&self) -> bool {
+        self.songs.is_empty() && self.jobs.is_empty()
+    }
+}
+
 /// A future returned by a store.
 pub type StoreFuture<'a, T> = BoxFuture<'a, Result<T, QueueError>>;
 
@@ -508,6 +522,13 @@ pub trait JobStore: Send + Sync {
     /// Wakes `wake` whenever a job becomes claimable in another process, until `shutdown`.
     /// A store without notifications returns at once; workers then find such jobs by polling.
     fn watch(&self, wake: Arc<Notify>, shutdown: CancellationToken) -> StoreFuture<'_, ()>;
+    /// Removes a finished job's row, leaving a `deleted` line with `reason` in `job_events`;
+    /// returns the job as it was, whose files are the caller's to remove. A queued or running
+    /// job is not removed (cancel it first): no finished job with the id in scope is
+    /// [`QueueError::JobNotFound`].
+    fn delete_job<'a>(&'a self, scope: Scope, id: JobId, reason: &'a str) -> StoreFuture<'a, Job>;
+    /// Records a use of the job's results (a download), which restarts its retention.
+    fn touch_job(&self, id: JobId) -> StoreFuture<'_, ()>;
 }
 
 /// The song catalogue.
@@ -525,6 +546,29 @@ pub trait SongStore: Send + Sync {
     ) -> StoreFuture<'a, Option<Song>>;
     /// The latest analyze job of a song.
     fn analyze_job(&self, song: SongId) -> StoreFuture<'_, Option<Job>>;
+    /// Removes a song's row (its analysis with it) and the row of every job made from it,
+    /// whatever their status, in one transaction, leaving a `deleted` line with `reason` in
+    /// `job_events` for each job. A running job's worker finds its lease gone at its next
+    /// heartbeat and stops at its next checkpoint. Returns what was removed; its files are the
+    /// caller's to remove.
+    fn delete_song<'a>(
+        &'a self,
+        scope: Scope,
+        id: SongId,
+        reason: &'a str,
+    ) -> StoreFuture<'a, Removed>;
+    /// Records a use of the song (an upload of the same bytes, a download of its audio), which
+    /// restarts its retention.
+    fn touch_song(&self, id: SongId) -> StoreFuture<'_, ()>;
+    /// Removes, as [`SongStore::delete_song`] and [`JobStore::delete_job`] do, up to `limit`
+    /// finished generate jobs and up to `limit` songs last used before `cutoff`. A song is
+    /// removed only when no job made from it is queued, running or used since `cutoff`.
+    fn expire<'a>(
+        &'a self,
+        cutoff: DateTime<Utc>,
+        limit: u32,
+        reason: &'a str,
+    ) -> StoreFuture<'a, Removed>;
 }
 
 /// The uploaded rigs.

@@ -37,6 +37,7 @@ use tokio_util::sync::CancellationToken;
 use uuid::Uuid;
 
 mod keys;
+mod delete;
 mod rigs;
 
 /// Cap on the backoff exponent, so `1 << n` cannot overflow.
@@ -687,6 +688,15 @@ where
     fn watch(&self, wake: Arc<Notify>, shutdown: CancellationToken) -> StoreFuture<'_, ()> {
         D::watch(&self.pool, wake, shutdown)
     }
+
+    // Deletion and retention: `sql/delete.rs`.
+    fn delete_job<'a>(&'a self, scope: Scope, id: JobId, reason: &'a str) -> StoreFuture<'a, Job> {
+        Box::pin(self.delete_finished_job(scope, id, reason))
+    }
+
+    fn touch_job(&self, id: JobId) -> StoreFuture<'_, ()> {
+        Box::pin(self.record_use("jobs", id.0))
+    }
 }
 
 impl<D> SongStore for SqlStore<D>
@@ -796,5 +806,28 @@ where
                 .await?;
             row.as_ref().map(Self::job_from_row).transpose()
         })
+    }
+
+    // Deletion and retention: `sql/delete.rs`.
+    fn delete_song<'a>(
+        &'a self,
+        scope: Scope,
+        id: SongId,
+        reason: &'a str,
+    ) -> StoreFuture<'a, super::Removed> {
+        Box::pin(self.delete_song_and_jobs(scope, id, reason))
+    }
+
+    fn touch_song(&self, id: SongId) -> StoreFuture<'_, ()> {
+        Box::pin(self.record_use("songs", id.0))
+    }
+
+    fn expire<'a>(
+        &'a self,
+        cutoff: DateTime<Utc>,
+        limit: u32,
+        reason: &'a str,
+    ) -> StoreFuture<'a, super::Removed> {
+        Box::pin(self.expire_unused(cutoff, limit, reason))
     }
 }

@@ -497,7 +497,14 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
             }
         }
         Ok((false, _)) => {
-            tracing::warn!("lease lost before the outcome was written; the queue owns the job now")
+            tracing::warn!("lease lost before the outcome was written; the queue owns the job now");
+            // Or the job was deleted while it ran: then what it wrote meanwhile goes too.
+            crate::artifacts::retention::forget_if_deleted(
+                ctx.store.as_ref(),
+                ctx.artifacts.as_ref(),
+                job.id,
+            )
+            .await;
         }
         Err(e) => {
             tracing::error!(error = %e, "writing the job outcome failed; its lease will expire and it will be retried")

@@ -63,6 +63,7 @@ impl WorkerProcess {
         .await?;
         let artifacts = crate::artifacts::open(config, data.clone())?;
         let registry = Arc::new(Registry::load(&config.models_dir)?);
+        let data_dir = data.clone();
         let ctx: Context = super::context(store.clone(), artifacts, registry, data, config);
         let recovered = super::recover(store.as_ref(), ctx.policy).await?;
         if recovered != Requeued::default() {
@@ -70,7 +71,22 @@ impl WorkerProcess {
         }
         let count = config.worker_count();
         let shutdown = CancellationToken::new();
-        let handles = super::start(ctx, count, shutdown.clone());
+        // The worker side's upkeep of stored data: this host's data dir, and retention.
+        let sweep = crate::artifacts::sweep::spawn(
+            store.clone(),
+            data_dir,
+            std::time::Duration::from_secs_f64(config.sweep_grace_s),
+            shutdown.clone(),
+        );
+        let retention = crate::artifacts::retention::spawn(
+            store,
+            ctx.artifacts.clone(),
+            config,
+            shutdown.clone(),
+        );
+        let mut handles = super::start(ctx, count, shutdown.clone());
+        handles.push(sweep);
+        handles.extend(retention);
         Ok(Self {
             shutdown,
             handles,

@@ -13,17 +13,17 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-const BUCKET: &str = "choreo-test";
-const PREFIX: &str = "run";
+pub(crate) const BUCKET: &str = "choreo-test";
+pub(crate) const PREFIX: &str = "run";
 
 /// A moto S3 server on a free loopback port, killed on drop.
-struct Moto {
+pub(crate) struct Moto {
     child: Child,
-    endpoint: String,
+    pub(crate) endpoint: String,
 }
 
 impl Moto {
-    fn start() -> Self {
+    pub(crate) fn start() -> Self {
         let bin = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv-moto/bin/moto_server");
         assert!(
             bin.is_file(),
@@ -57,7 +57,7 @@ impl Drop for Moto {
 }
 
 /// `choreo <args>` on its own data dir, with the shared database and bucket.
-fn choreo(
+pub(crate) fn choreo(
     args: &[&str],
     data_dir: &Path,
     database_url: &str,
@@ -82,7 +82,7 @@ fn choreo(
 }
 
 /// Every file under `dir`, relative to it.
-fn files_under(dir: &Path) -> Vec<String> {
+pub(crate) fn files_under(dir: &Path) -> Vec<String> {
     let mut out = Vec::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(d) = stack.pop() {
@@ -98,7 +98,7 @@ fn files_under(dir: &Path) -> Vec<String> {
     out
 }
 
-async fn wait_job(client: &reqwest::Client, base: &str, id: &str) -> Value {
+pub(crate) async fn wait_job(client: &reqwest::Client, base: &str, id: &str) -> Value {
     let deadline = Instant::now() + Duration::from_secs(180);
     loop {
         let job: Value = client

@@ -153,7 +153,7 @@ async fn jobs_page_newest_first_with_a_cursor_and_filter() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_queued_job_is_cancelled_at_once_and_a_finished_one_cannot_be() {
+async fn a_queued_job_is_cancelled_at_once_and_a_finished_one_is_deleted() {
     // One worker and four long songs ahead of it keep the last job queued.
     let app = spawn_app_with(|c| c.workers = 1).await;
     for name in [
@@ -175,11 +175,6 @@ async fn a_queued_job_is_cancelled_at_once_and_a_finished_one_cannot_be() {
     assert_eq!(cancelled["status"], "cancelled", "{cancelled}");
     assert_eq!(cancelled["cancel_requested"], true);
     assert!(cancelled["finished_at"].is_string());
-    // Cancelling again is harmless.
-    assert_eq!(
-        app.delete(&format!("/v1/jobs/{id}")).await.status(),
-        StatusCode::ACCEPTED
-    );
 
     // Every other job still runs to the end; the cancelled one never starts.
     let page: Value = app
@@ -212,14 +207,20 @@ async fn a_queued_job_is_cancelled_at_once_and_a_finished_one_cannot_be() {
         .expect("json");
     assert_eq!(song["analysis_status"], "cancelled");
 
+    // A finished job (the cancelled one too) is deleted by DELETE: 204, then it is no more.
     let finished = finished.expect("a finished job");
-    let body = expect_problem(
-        app.delete(&format!("/v1/jobs/{finished}")).await,
-        StatusCode::CONFLICT,
-        "job-already-finished",
-    )
-    .await;
-    assert_eq!(body["job_status"], "succeeded");
+    for gone in [&finished, &id] {
+        assert_eq!(
+            app.delete(&format!("/v1/jobs/{gone}")).await.status(),
+            StatusCode::NO_CONTENT
+        );
+        expect_problem(
+            app.get(&format!("/v1/jobs/{gone}")).await,
+            StatusCode::NOT_FOUND,
+            "job-not-found",
+        )
+        .await;
+    }
     expect_problem(
         app.delete("/v1/jobs/01234567-89ab-7def-8123-456789abcdef")
             .await,

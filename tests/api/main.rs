@@ -7,6 +7,7 @@ mod common_models;
 mod concurrency;
 mod crash;
 mod dancenet;
+mod delete;
 mod generate;
 mod health;
 mod helpers;
