@@ -105,7 +105,8 @@ pub fn run(args: &KeysArgs, config: Config) -> anyhow::Result<()> {
                     storage_quota_bytes: limits.storage_quota_bytes,
                     ..config.clone()
                 }
-                .validate()?;
+                .validate()
+                .context("checking the key's limits (--rate-limit-rps, --max-queued-jobs, --storage-quota-bytes)")?;
                 let (key, secret) = NewKey::mint(&create.name, create.admin, limits);
                 let key = store.add_key(key).await.context("storing the key")?;
                 json!({"id": key.id, "name": key.name, "secret": secret})
