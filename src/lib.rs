@@ -37,4 +37,5 @@ pub mod queue;
 pub mod report;
 pub mod stage;
 pub mod telemetry;
+pub mod webhooks;
 pub mod worker;

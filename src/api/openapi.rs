@@ -29,6 +29,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
         super::jobs::cancel,
         super::jobs::result,
         super::jobs::preview,
+        super::events::events,
         super::downloads::motion_bvh,
         super::downloads::motion_glb,
         super::downloads::motion_vrma,

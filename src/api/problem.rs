@@ -116,6 +116,10 @@ pub enum ApiError {
     ServiceUnavailable(String),
     #[error("internal error: {0}")]
     Internal(String),
+    #[error("webhook_url is refused: {0}")]
+    WebhookUrlRefused(String),
+    #[error("this server has no webhook_secret (CHOREO_WEBHOOK_SECRET) to sign webhooks with; submit without webhook_url, or ask its operator to set one")]
+    WebhooksNotConfigured,
 }
 
 impl ApiError {
@@ -158,6 +162,8 @@ impl ApiError {
             ApiError::InsufficientStorage(_) => "insufficient-storage",
             ApiError::ServiceUnavailable(_) => "service-unavailable",
             ApiError::Internal(_) => "internal",
+            ApiError::WebhookUrlRefused(_) => "webhook-url-refused",
+            ApiError::WebhooksNotConfigured => "webhooks-not-configured",
         }
     }
 
@@ -205,6 +211,8 @@ impl ApiError {
             ApiError::InsufficientStorage(_) => StatusCode::INSUFFICIENT_STORAGE,
             ApiError::ServiceUnavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+            ApiError::WebhookUrlRefused(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::WebhooksNotConfigured => StatusCode::UNPROCESSABLE_ENTITY,
         }
     }
 
@@ -248,6 +256,9 @@ impl ApiError {
             }
             ApiError::Rig(e) => {
                 problem.field = Some(e.field().into());
+            }
+            ApiError::WebhookUrlRefused(_) | ApiError::WebhooksNotConfigured => {
+                problem.field = Some("webhook_url".into());
             }
             ApiError::JobNotFinished { status, .. } | ApiError::AlreadyFinished { status, .. } => {
                 problem.job_status = Some(*status);

@@ -36,6 +36,7 @@ use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 use uuid::Uuid;
 
+mod events;
 mod rigs;
 
 /// Cap on the backoff exponent, so `1 << n` cannot overflow.

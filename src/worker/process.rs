@@ -70,7 +70,8 @@ impl WorkerProcess {
         }
         let count = config.worker_count();
         let shutdown = CancellationToken::new();
-        let handles = super::start(ctx, count, shutdown.clone());
+        let mut handles = super::start(ctx, count, shutdown.clone());
+        handles.extend(crate::webhooks::spawn(store, config, shutdown.clone()));
         Ok(Self {
             shutdown,
             handles,
