@@ -14,9 +14,29 @@
 -- ~20. A line is written when the stage changes, or when progress crosses a 5 % step
 -- (⌊progress × 20⌋ changes): at most ~20 progress lines per attempt plus one per stage.
 
-ALTER TABLE job_events ADD COLUMN kind TEXT NOT NULL DEFAULT 'status';
-ALTER TABLE job_events ADD COLUMN stage TEXT;
-ALTER TABLE job_events ADD COLUMN progress REAL;
+-- A progress line has no `from_status`/`to_status` (NULL), so whatever counts status lines (attempts
+-- as `to_status = 'running'`, successes) counts them as before. SQLite cannot drop a NOT NULL, so
+-- the table is made again, its lines and their `seq` kept (so AUTOINCREMENT goes on from the
+-- highest): the triggers on `jobs` that write it name it, and fire on no statement in between.
+CREATE TEMP TABLE job_events_before AS SELECT * FROM job_events;
+DROP TABLE job_events;
+CREATE TABLE job_events (
+    seq         INTEGER PRIMARY KEY AUTOINCREMENT,
+    job_id      TEXT    NOT NULL,                 -- no foreign key: the audit line outlives its job
+    from_status TEXT,
+    to_status   TEXT,                             -- NULL on a progress line
+    attempt     INTEGER NOT NULL,
+    worker      TEXT,
+    error       TEXT,
+    at          INTEGER NOT NULL,
+    kind        TEXT    NOT NULL DEFAULT 'status',  -- status | progress
+    stage       TEXT,                             -- progress lines
+    progress    REAL                              -- progress lines
+);
+INSERT INTO job_events (seq, job_id, from_status, to_status, attempt, worker, error, at)
+SELECT seq, job_id, from_status, to_status, attempt, worker, error, at FROM job_events_before;
+DROP TABLE job_events_before;
+CREATE INDEX job_events_job ON job_events (job_id, seq);
 
 CREATE TRIGGER job_progressed AFTER UPDATE OF stage, progress ON jobs
 WHEN OLD.status = 'running' AND NEW.status = 'running' AND NEW.stage IS NOT NULL
@@ -24,7 +44,7 @@ WHEN OLD.status = 'running' AND NEW.status = 'running' AND NEW.stage IS NOT NULL
           OR CAST(NEW.progress * 20 AS INTEGER) <> CAST(OLD.progress * 20 AS INTEGER))
 BEGIN
     INSERT INTO job_events (job_id, kind, from_status, to_status, attempt, worker, error, at, stage, progress)
-    VALUES (NEW.id, 'progress', NEW.status, NEW.status, NEW.attempts, NEW.lease_owner, NULL,
+    VALUES (NEW.id, 'progress', NULL, NULL, NEW.attempts, NEW.lease_owner, NULL,
             CAST((julianday('now') - 2440587.5) * 86400000 AS INTEGER), NEW.stage, NEW.progress);
 END;
 

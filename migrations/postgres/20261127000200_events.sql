@@ -1,7 +1,9 @@
 -- Job events pushed to clients (issue 28); the SQLite migration of the same name explains the
 -- tables and triggers, which are the same here.
 
+-- A progress line has no from_status/to_status (NULL), so what counts status lines is unchanged.
 ALTER TABLE job_events
+    ALTER COLUMN to_status DROP NOT NULL,
     ADD COLUMN kind TEXT NOT NULL DEFAULT 'status',
     ADD COLUMN stage TEXT,
     ADD COLUMN progress DOUBLE PRECISION;
@@ -9,7 +11,7 @@ ALTER TABLE job_events
 CREATE FUNCTION choreo_job_progressed() RETURNS trigger LANGUAGE plpgsql AS $$
 BEGIN
     INSERT INTO job_events (job_id, kind, from_status, to_status, attempt, worker, error, at, stage, progress)
-    VALUES (NEW.id, 'progress', NEW.status, NEW.status, NEW.attempts, NEW.lease_owner, NULL,
+    VALUES (NEW.id, 'progress', NULL, NULL, NEW.attempts, NEW.lease_owner, NULL,
             (extract(epoch FROM clock_timestamp()) * 1000)::BIGINT, NEW.stage, NEW.progress);
     RETURN NULL;
 END;

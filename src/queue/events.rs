@@ -78,11 +78,7 @@ pub trait EventStore: Send + Sync {
     /// takes it after that.
     fn take_webhook(&self, hold: Duration) -> StoreFuture<'_, Option<WebhookDue>>;
     /// Logs an attempt and decides the delivery's fate, in one transaction.
-    fn webhook_attempted(
-        &self,
-        attempt: WebhookAttempt,
-        next: WebhookNext,
-    ) -> StoreFuture<'_, ()>;
+    fn webhook_attempted(&self, attempt: WebhookAttempt, next: WebhookNext) -> StoreFuture<'_, ()>;
     /// Every attempt to deliver the job's webhook, oldest first.
     fn webhook_attempts(&self, id: JobId) -> StoreFuture<'_, Vec<WebhookAttempt>>;
 }

@@ -7,9 +7,9 @@
 //! `webhook_allowed_hosts`. The check runs at submission (a 422 names why) and again before each
 //! delivery (DNS may have changed since), and the delivery connects to the very addresses
 //! checked, never following a redirect.
-use url::Url;
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr, SocketAddr};
 use std::time::Duration;
+use url::Url;
 
 /// Longest a webhook host's DNS lookup may take.
 const RESOLVE_TIMEOUT: Duration = Duration::from_secs(5);
@@ -214,7 +214,12 @@ mod tests {
 
     #[test]
     fn global_addresses_pass_and_every_special_block_is_named() {
-        for ip in ["93.184.215.14", "8.8.8.8", "2606:4700::1111", "2a00:1450:4001::200e"] {
+        for ip in [
+            "93.184.215.14",
+            "8.8.8.8",
+            "2606:4700::1111",
+            "2a00:1450:4001::200e",
+        ] {
             assert_eq!(kind(ip), None, "{ip}");
         }
         for (ip, expected) in [
@@ -244,19 +249,44 @@ mod tests {
     #[tokio::test]
     async fn urls_are_refused_by_scheme_host_and_address_unless_allowed() {
         let refused = |r: Result<Target, Refused>| r.err().map(|e| e.code());
-        assert_eq!(refused(check("ftp://example.com/x", &[]).await), Some("scheme"));
+        assert_eq!(
+            refused(check("ftp://example.com/x", &[]).await),
+            Some("scheme")
+        );
         assert_eq!(refused(check("not a url", &[]).await), Some("not-a-url"));
-        assert_eq!(refused(check("http://u:p@8.8.8.8/", &[]).await), Some("credentials"));
-        assert_eq!(refused(check("http://127.0.0.1:9000/hook", &[]).await), Some("not-global"));
-        assert_eq!(refused(check("http://[::1]:9000/hook", &[]).await), Some("not-global"));
-        assert_eq!(refused(check("http://localhost:9000/hook", &[]).await), Some("not-global"));
+        assert_eq!(
+            refused(check("http://u:p@8.8.8.8/", &[]).await),
+            Some("credentials")
+        );
+        assert_eq!(
+            refused(check("http://127.0.0.1:9000/hook", &[]).await),
+            Some("not-global")
+        );
+        assert_eq!(
+            refused(check("http://[::1]:9000/hook", &[]).await),
+            Some("not-global")
+        );
+        assert_eq!(
+            refused(check("http://localhost:9000/hook", &[]).await),
+            Some("not-global")
+        );
         // 2130706433 is 127.0.0.1 written as one number; the URL parser reads it as an address.
-        assert_eq!(refused(check("http://2130706433:9000/", &[]).await), Some("not-global"));
+        assert_eq!(
+            refused(check("http://2130706433:9000/", &[]).await),
+            Some("not-global")
+        );
         let allowed = vec!["127.0.0.1:9000".to_string(), "[::1]:9000".to_string()];
-        let target = check("http://127.0.0.1:9000/hook", &allowed).await.expect("allowed");
+        let target = check("http://127.0.0.1:9000/hook", &allowed)
+            .await
+            .expect("allowed");
         assert_eq!(target.addrs, vec!["127.0.0.1:9000".parse().expect("addr")]);
-        check("http://[::1]:9000/hook", &allowed).await.expect("allowed v6");
+        check("http://[::1]:9000/hook", &allowed)
+            .await
+            .expect("allowed v6");
         // The allowance is for that port only.
-        assert_eq!(refused(check("http://127.0.0.1:9001/", &allowed).await), Some("not-global"));
+        assert_eq!(
+            refused(check("http://127.0.0.1:9001/", &allowed).await),
+            Some("not-global")
+        );
     }
 }

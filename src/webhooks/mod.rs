@@ -99,9 +99,7 @@ impl Deliverer {
     /// The pause after failed attempt `attempt` (from 1).
     fn backoff(&self, attempt: u32) -> Duration {
         let doublings = attempt.saturating_sub(1).min(16);
-        self.backoff
-            .saturating_mul(1 << doublings)
-            .min(MAX_BACKOFF)
+        self.backoff.saturating_mul(1 << doublings).min(MAX_BACKOFF)
     }
 }
 
@@ -158,7 +156,10 @@ async fn attempt(
         Sent::Answered(code) => (Some(*code), Some(format!("the receiver answered {code}"))),
         Sent::Failed(e) => (None, Some(e.clone())),
         Sent::JobGone => (None, Some("the job no longer exists".to_string())),
-        Sent::Stopped => (None, Some("the server stopped during the attempt".to_string())),
+        Sent::Stopped => (
+            None,
+            Some("the server stopped during the attempt".to_string()),
+        ),
     };
     let now = Utc::now();
     let next = match sent {

@@ -28,9 +28,9 @@ where
         let attempt: i64 = row.try_get("attempt")?;
         let change = match kind.as_str() {
             "progress" => {
-                let Some(stage) =
-                    crate::stage::Stage::from_stored(row.try_get::<Option<String>, _>("stage")?.as_deref())
-                else {
+                let Some(stage) = crate::stage::Stage::from_stored(
+                    row.try_get::<Option<String>, _>("stage")?.as_deref(),
+                ) else {
                     return Ok(None);
                 };
                 let progress: Option<f64> = row.try_get("progress")?;
@@ -40,8 +40,8 @@ where
                 }
             }
             "status" => {
-                let to: String = row.try_get("to_status")?;
-                let Ok(to) = Status::from_str(&to) else {
+                let to: Option<String> = row.try_get("to_status")?;
+                let Some(Ok(to)) = to.as_deref().map(Status::from_str) else {
                     return Ok(None);
                 };
                 let from: Option<String> = row.try_get("from_status")?;
@@ -148,11 +148,7 @@ where
         })
     }
 
-    fn webhook_attempted(
-        &self,
-        attempt: WebhookAttempt,
-        next: WebhookNext,
-    ) -> StoreFuture<'_, ()> {
+    fn webhook_attempted(&self, attempt: WebhookAttempt, next: WebhookNext) -> StoreFuture<'_, ()> {
         Box::pin(async move {
             let at = attempt.at.timestamp_millis();
             let mut tx = self.begin().await?;
