@@ -291,3 +291,100 @@ async fn a_webhook_to_loopback_is_refused_at_submission_unless_allowed() {
     .await;
     app.stop().await;
 }
+
+fn webhook_config(c: &mut choreo::config::Config, receiver: std::net::SocketAddr, retry_s: f64) {
+    c.models_dir = models_dir();
+    c.webhook_secret = Some(Secret::new(SECRET));
+    c.webhook_allowed_hosts = vec![receiver.to_string()];
+    c.webhook_backoff_s = 0.2;
+    c.webhook_retry_s = retry_s;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_pending_delivery_survives_a_restart_and_retries_end_after_webhook_retry_s() {
+    // /flaky answers 500 until the test says otherwise.
+    let (receiver, addr) = start_receiver(u32::MAX).await;
+    let app = spawn_app_with(|c| webhook_config(c, addr, 60.0)).await;
+    let song = app.upload_ok(&short_song()).await;
+    let hook = format!("http://{addr}/flaky");
+    let body =
+        json!({"song_id": song["id"], "model": "dance-revolution", "seed": 4, "webhook_url": hook});
+    let response = app.post_job(&body, None).await;
+    assert_eq!(response.status(), StatusCode::ACCEPTED);
+    let id = response.json::<Value>().await.expect("job")["id"]
+        .as_str()
+        .expect("id")
+        .to_string();
+    app.wait_job(&id).await;
+    wait_for("two failed attempts", || {
+        receiver.got.lock().expect("lock").len() >= 2
+    })
+    .await;
+
+    // Stop the server with the delivery pending, let the receiver recover, start again.
+    let crate::helpers::TestApp {
+        server, data_dir, ..
+    } = app;
+    server.expect("server").stop().await;
+    let failed = receiver.got.lock().expect("lock").len();
+    *receiver.failures_left.lock().expect("lock") = 0;
+    let mut config = crate::helpers::test_config(data_dir.path());
+    webhook_config(&mut config, addr, 60.0);
+    let server = choreo::api::Server::start(config).await.expect("restart");
+    wait_for("the delivery after the restart", || {
+        receiver.got.lock().expect("lock").len() > failed
+    })
+    .await;
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    let got = receiver.got.lock().expect("lock").clone();
+    assert_eq!(
+        got.len(),
+        failed + 1,
+        "delivered once after the restart, then no more"
+    );
+    assert!(got.iter().all(|d| d.headers["webhook-id"] == id.as_str()));
+    let attempts = server
+        .state()
+        .store
+        .webhook_attempts(JobId::from_str(&id).expect("id"))
+        .await
+        .expect("attempts");
+    let numbers: Vec<u32> = attempts.iter().map(|a| a.attempt).collect();
+    let expected: Vec<u32> = (1..=numbers.len() as u32).collect();
+    assert_eq!(
+        numbers, expected,
+        "every attempt logged, in order: {attempts:?}"
+    );
+    assert_eq!(attempts.last().and_then(|a| a.status_code), Some(204));
+    assert!(attempts[..attempts.len() - 1]
+        .iter()
+        .all(|a| a.status_code == Some(500) || a.error.is_some()));
+    server.stop().await;
+
+    // A receiver that never recovers is given up `webhook_retry_s` after the job ended.
+    let (receiver, addr) = start_receiver(u32::MAX).await;
+    let app = spawn_app_with(|c| webhook_config(c, addr, 1.0)).await;
+    let song = app.upload_ok(&short_song()).await;
+    let body = json!({"song_id": song["id"], "model": "dance-revolution", "seed": 5, "webhook_url": format!("http://{addr}/flaky")});
+    let response = app.post_job(&body, None).await;
+    let id = response.json::<Value>().await.expect("job")["id"]
+        .as_str()
+        .expect("id")
+        .to_string();
+    app.wait_job(&id).await;
+    wait_for("a first attempt", || {
+        !receiver.got.lock().expect("lock").is_empty()
+    })
+    .await;
+    // Attempts at ~0, +0.2 s, +0.6 s; the next would be past the second.
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let given_up = receiver.got.lock().expect("lock").len();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    assert_eq!(
+        receiver.got.lock().expect("lock").len(),
+        given_up,
+        "no attempt after giving up"
+    );
+    assert!((1..=4).contains(&given_up), "{given_up} attempts in 1 s");
+    app.stop().await;
+}
