@@ -119,6 +119,17 @@ where
     fn take_webhook(&self, hold: Duration) -> StoreFuture<'_, Option<WebhookDue>> {
         Box::pin(async move {
             let now = now_ms();
+            // Most polls find nothing: a read answers them, so an idle loop takes no write lock
+            // (SQLite has one for the whole file, which the workers' heartbeats need).
+            let due = sqlx::query(
+                "SELECT job_id FROM webhooks WHERE state = 'pending' AND next_attempt_at <= $1 LIMIT 1",
+            )
+            .bind(now)
+            .fetch_optional(&self.pool)
+            .await?;
+            if due.is_none() {
+                return Ok(None);
+            }
             // One statement picks and holds the row, so two workers never attempt it at once.
             let sql = format!(
                 "UPDATE webhooks SET attempts = attempts + 1, next_attempt_at = $1 \
