@@ -9,7 +9,8 @@
 # exporters' round-trip test), schemathesis (PyPI) in .venv-schemathesis (the API test that
 # runs it against the real server), and for the page's browser test (tests/web.rs): Debian's
 # chromium, Node.js 20+ with npm, and `npm ci` of tests/web (playwright-core) and web (esbuild and
-# three.js, to check that web/dist is what web/src builds to). Building choreo never needs npm:
+# three.js, to check that web/dist is what web/src builds to), and the Standard Webhooks reference
+# library (PyPI standardwebhooks) in .venv-webhooks, which the webhook test verifies signatures with. Building choreo never needs npm:
 # the page's built files are committed under web/dist.
 #
 # Usage: scripts/setup.sh [--test]
@@ -24,6 +25,8 @@ SCHEMATHESIS="schemathesis==4.32.5"
 ST_VENV=.venv-schemathesis
 MOTO="moto[server]==5.2.5"
 MOTO_VENV=.venv-moto
+STANDARDWEBHOOKS="standardwebhooks==1.1.0"
+WH_VENV=.venv-webhooks
 
 with_tests=0
 case "${1:-}" in
@@ -132,6 +135,13 @@ if [[ $with_tests -eq 1 ]]; then
     log "installing $MOTO into $MOTO_VENV"
     "$MOTO_VENV/bin/pip" install --quiet "$MOTO"
     [[ -x "$MOTO_VENV/bin/moto_server" ]] || { log "moto_server is not runnable from $MOTO_VENV"; exit 1; }
+  fi
+  # The Standard Webhooks reference library (PyPI), pinned, in its own venv: tests/api/webhooks.rs
+  # verifies the signatures choreo sends with it (tests/webhooks/verify.py), not with our code.
+  if ! "$WH_VENV/bin/python" -c 'import importlib.metadata as m; assert m.version("standardwebhooks") == "'"${STANDARDWEBHOOKS#standardwebhooks==}"'"' 2>/dev/null; then
+    [[ -x "$WH_VENV/bin/pip" ]] || python3 -m venv "$WH_VENV"
+    log "installing $STANDARDWEBHOOKS into $WH_VENV"
+    "$WH_VENV/bin/pip" install --quiet "$STANDARDWEBHOOKS"
   fi
   if [[ ! -d ../shared/audio ]]; then
     log "warning: ../shared/audio is missing; the upload tests need it"

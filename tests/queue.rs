@@ -771,6 +771,7 @@ fn dance(song: SongId) -> NewJob {
             style: None,
             temperature: None,
             top_k: None,
+            webhook_url: None,
         }),
         ..analyze(song, 1)
     }

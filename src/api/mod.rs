@@ -31,6 +31,7 @@ use utoipa_swagger_ui::SwaggerUi;
 pub mod auth;
 pub mod bench;
 pub mod downloads;
+pub mod events;
 pub mod extract;
 pub mod jobs;
 pub mod listen;
@@ -131,6 +132,7 @@ pub fn router(state: AppState) -> Router {
                 )),
         )
         .route("/jobs/{id}", get(jobs::get).delete(jobs::cancel_or_delete))
+        .route("/jobs/{id}/events", get(events::events))
         .route("/jobs/{id}/preview.png", get(jobs::preview))
         .route("/jobs/{id}/motion.bvh", get(downloads::motion_bvh))
         .route("/jobs/{id}/motion.glb", get(downloads::motion_glb))
@@ -345,6 +347,12 @@ impl Server {
             );
             let mut handles = crate::worker::start(ctx, workers, shutdown.clone());
             handles.extend(retention);
+            // Webhooks are delivered on the worker side, with the workers.
+            handles.extend(crate::webhooks::spawn(
+                state.store.clone(),
+                &config,
+                shutdown.clone(),
+            ));
             handles
         } else {
             Vec::new()

@@ -33,6 +33,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
         super::jobs::cancel_or_delete,
         super::jobs::result,
         super::jobs::preview,
+        super::events::events,
         super::downloads::motion_bvh,
         super::downloads::motion_glb,
         super::downloads::motion_vrma,

@@ -122,6 +122,10 @@ pub enum ApiError {
     TooManyQueuedJobs { limit: u64 },
     #[error("this key stores {used} bytes of songs, rigs and results; {size} more would pass its {quota} byte quota: delete songs or results to make room")]
     StorageQuotaExceeded { used: u64, size: u64, quota: u64 },
+    #[error("webhook_url is refused: {0}")]
+    WebhookUrlRefused(String),
+    #[error("this server has no webhook_secret (CHOREO_WEBHOOK_SECRET) to sign webhooks with; submit without webhook_url, or ask its operator to set one")]
+    WebhooksNotConfigured,
 }
 
 impl ApiError {
@@ -167,6 +171,8 @@ impl ApiError {
             ApiError::RateLimited { .. } => "rate-limited",
             ApiError::TooManyQueuedJobs { .. } => "too-many-queued-jobs",
             ApiError::StorageQuotaExceeded { .. } => "storage-quota-exceeded",
+            ApiError::WebhookUrlRefused(_) => "webhook-url-refused",
+            ApiError::WebhooksNotConfigured => "webhooks-not-configured",
         }
     }
 
@@ -218,6 +224,8 @@ impl ApiError {
             ApiError::TooManyQueuedJobs { .. } => StatusCode::TOO_MANY_REQUESTS,
             // The upload is too large for the room the tenant has left: a smaller one may fit.
             ApiError::StorageQuotaExceeded { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            ApiError::WebhookUrlRefused(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::WebhooksNotConfigured => StatusCode::UNPROCESSABLE_ENTITY,
         }
     }
 
@@ -261,6 +269,9 @@ impl ApiError {
             }
             ApiError::Rig(e) => {
                 problem.field = Some(e.field().into());
+            }
+            ApiError::WebhookUrlRefused(_) | ApiError::WebhooksNotConfigured => {
+                problem.field = Some("webhook_url".into());
             }
             ApiError::JobNotFinished { status, .. } | ApiError::AlreadyFinished { status, .. } => {
                 problem.job_status = Some(*status);

@@ -29,12 +29,14 @@ use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 use uuid::Uuid;
 
+pub mod events;
 pub mod files;
 pub mod keys;
 pub mod postgres;
 pub mod sql;
 pub mod sqlite;
 
+pub use events::EventStore;
 pub use files::DataDir;
 pub use keys::{ApiKey, KeyLimits, NewKey, TenantStore, Usage};
 pub use postgres::PgStore;
@@ -271,6 +273,9 @@ pub struct GenerateOptions {
     /// Keep the k likeliest choices when sampling (models over discrete choices).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub top_k: Option<u32>,
+    /// Where the finished job is POSTed (`webhooks`); the outbox trigger reads it from here.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub webhook_url: Option<String>,
 }
 
 fn planted() -> bool {
@@ -580,9 +585,9 @@ pub trait RigStore: Send + Sync {
 }
 
 /// Everything the service stores.
-pub trait Store: JobStore + SongStore + RigStore + TenantStore {}
+pub trait Store: JobStore + SongStore + RigStore + TenantStore + EventStore {}
 
-impl<T: JobStore + SongStore + RigStore + TenantStore> Store for T {}
+impl<T: JobStore + SongStore + RigStore + TenantStore + EventStore> Store for T {}
 
 /// Opens the store `database` names, running its migrations. `timeout` bounds how long a call
 /// waits for a PostgreSQL connection (the config's `db_timeout_s`).

@@ -38,6 +38,7 @@ use uuid::Uuid;
 
 mod keys;
 mod delete;
+mod events;
 mod rigs;
 
 /// Cap on the backoff exponent, so `1 << n` cannot overflow.
