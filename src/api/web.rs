@@ -31,6 +31,8 @@ impl Asset {
 
 static INDEX: LazyLock<Asset> = LazyLock::new(|| Asset::new(include_str!("../../web/dist/index.html"), "text/html; charset=utf-8"));
 static SCRIPT: LazyLock<Asset> = LazyLock::new(|| Asset::new(include_str!("../../web/dist/app.js"), "text/javascript; charset=utf-8"));
+/// The `<choreo-player>` element for other pages (web/src/element.js): any page may load it.
+static PLAYER: LazyLock<Asset> = LazyLock::new(|| Asset::new(include_str!("../../web/dist/choreo-player.js"), "text/javascript; charset=utf-8"));
 static STYLE: LazyLock<Asset> = LazyLock::new(|| Asset::new(include_str!("../../web/dist/app.css"), "text/css; charset=utf-8"));
 
 /// Scripts and styles come from this origin only; the API may be on another (`connect-src`), and
@@ -38,13 +40,14 @@ static STYLE: LazyLock<Asset> = LazyLock::new(|| Asset::new(include_str!("../../
 const CONTENT_SECURITY_POLICY: &str = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; \
      media-src 'self' blob:; connect-src 'self' http: https:; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
 
-/// `GET /`, `/assets/app.js`, `/assets/app.css`: public, like `/docs`; the page asks for a token
+/// `GET /`, `/assets/app.js`, `/assets/app.css`, `/assets/choreo-player.js`: public, like `/docs`; the page asks for a token
 /// when the API needs one.
 pub fn routes() -> Router<AppState> {
     Router::new()
         .route("/", get(|headers: HeaderMap| async move { serve(&INDEX, &headers, true) }))
         .route("/assets/app.js", get(|headers: HeaderMap| async move { serve(&SCRIPT, &headers, false) }))
         .route("/assets/app.css", get(|headers: HeaderMap| async move { serve(&STYLE, &headers, false) }))
+        .route("/assets/choreo-player.js", get(|headers: HeaderMap| async move { serve(&PLAYER, &headers, false) }))
 }
 
 /// The asset, or 304 when the client's copy is current. `no-cache` makes browsers ask each time,

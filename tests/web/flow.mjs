@@ -173,12 +173,12 @@ async function run(context) {
   const plainModel = models.find((m) => !m.capabilities.key_poses) ?? models[0];
   check(keyModel, `a model that takes key poses is served: ${JSON.stringify(models)}`);
 
-  // 1. The page, its API on another origin, and no token yet: the API says 401 and the page says so.
+  // 1. The page, its API on another origin, and no API key yet: the API says 401 and the page says so.
   await page.goto(`${PAGE}/?api=${encodeURIComponent(API)}`);
-  await page.waitForFunction(() => /token/i.test(document.getElementById('api-status').textContent), null, { timeout: 20_000 });
-  check(consoleErrors.every((e) => e.includes('401')), `before the token, only 401s: ${consoleErrors}`);
+  await page.waitForFunction(() => /API key/i.test(document.getElementById('api-status').textContent), null, { timeout: 20_000 });
+  check(consoleErrors.every((e) => e.includes('401')), `before the key, only 401s: ${consoleErrors}`);
   consoleErrors.length = 0;
-  await page.fill('#api-token', TOKEN);
+  await page.fill('#api-key', TOKEN);
   await page.click('#api-connect');
   await page.waitForFunction(() => document.getElementById('api-status').textContent.startsWith('connected'), null, { timeout: 20_000 });
 
@@ -411,7 +411,7 @@ async function run(context) {
   check(json.num_frames === keyMotion.num_frames, 'the JSON download is the motion');
   summary.downloads = { bvh: bvh.length, glb: glb.length, json_frames: json.num_frames };
 
-  // 11. A deep link opens a dance (the token is remembered on the page's origin).
+  // 11. A deep link opens a dance (the key is remembered on the page's origin).
   const linked = await context.newPage();
   watch(linked, 'deep link');
   await linked.goto(`${PAGE}/?job=${firstJob}&api=${encodeURIComponent(API)}`);
@@ -429,12 +429,12 @@ async function run(context) {
   check(summary.pose_error_deep_link_m.worst_joint < 0.01, `deep link: at frame 40 a drawn joint is off: ${JSON.stringify(summary.pose_error_deep_link_m)}`);
   await linked.close();
 
-  // 12. The page served by the API server itself (same origin): the token typed, the link followed.
+  // 12. The page served by the API server itself (same origin): the key typed, the link followed.
   const same = await context.newPage();
   watch(same, 'same origin');
   await same.goto(`${API}/?job=${keyJob}`);
-  await same.waitForFunction(() => /token/i.test(document.getElementById('api-status').textContent), null, { timeout: 20_000 });
-  await same.fill('#api-token', TOKEN);
+  await same.waitForFunction(() => /API key/i.test(document.getElementById('api-status').textContent), null, { timeout: 20_000 });
+  await same.fill('#api-key', TOKEN);
   await same.click('#api-connect');
   await waitOpened(same, 'a', keyJob);
   await same.close();
