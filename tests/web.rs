@@ -99,6 +99,7 @@ async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
         .env("PAGE_URL", &page_origin)
         .env("API_URL", format!("http://{}", api.addr))
         .env("TOKEN", TOKEN)
+        .env("EXPECT_EVENTS", if spec_has_events() { "1" } else { "0" })
         .env("SONG", helpers::short_song())
         .env("OUT_DIR", &out)
         .env("CHROMIUM", chromium())
@@ -284,10 +285,13 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
     if !ready("the player element test", &Needs { node_modules: &["tests/web/node_modules/playwright-core"], browser_and_songs: true }) {
         return;
     }
+    // The sample page's own origin: a free port for player.mjs's page server, listed for CORS.
+    // (A made-up host would not do: Chromium keeps pages on public origins from loopback servers.)
+    let page_port = std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).expect("a free port").port();
     let app = spawn_app_with(|c| {
         c.models_dir = models_dir();
         c.auth_token = Some(choreo::config::Secret::new(TOKEN));
-        c.cors_origins = vec!["http://sample.test".to_string()];
+        c.cors_origins = vec![format!("http://127.0.0.1:{page_port}")];
     })
     .await;
     let song = app.upload_ok(&helpers::short_song()).await;
@@ -299,6 +303,7 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
         ("JOB_ID", job_id),
         ("SONG_ID", song_id),
         ("TOKEN", TOKEN.to_string()),
+        ("PAGE_PORT", page_port.to_string()),
         ("OUT_DIR", out.display().to_string()),
         ("CHROMIUM", chromium().display().to_string()),
     ];

@@ -5,7 +5,7 @@
 // playback in sync with the song, scrub, the mannequin and the stick toggle, rigs (pick, upload,
 // mapping, downloads), loop, compare, report plots, downloads, deep links.
 //
-//   PAGE_URL=… API_URL=… TOKEN=… SONG=path OUT_DIR=dir node tests/web/flow.mjs
+//   PAGE_URL=… API_URL=… TOKEN=… SONG=path OUT_DIR=dir [EXPECT_EVENTS=1] node tests/web/flow.mjs
 //
 // Prints one JSON summary line (prefixed "summary: ") and exits 0, or prints why and exits 1.
 // Screenshots go to OUT_DIR.
@@ -27,6 +27,8 @@ const OUT = env('OUT_DIR');
 const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
 const FRAME_S = 1 / 25;
 const JOB_TIMEOUT_MS = Number(process.env.JOB_TIMEOUT_MS || 300_000);
+const EXPECT_EVENTS = process.env.EXPECT_EVENTS === '1';
+const EVENTS_URL = /\/v1\/jobs\/[^/]+\/events$/;
 
 mkdirSync(OUT, { recursive: true });
 const summary = { screenshots: [], sync: {} };
@@ -49,7 +51,16 @@ async function apiJson(path) {
 function watch(page, name) {
   const allowed = [new URL(PAGE).origin, new URL(API).origin];
   page.on('pageerror', (e) => pageErrors.push(`${name}: ${e.message}`));
-  page.on('console', (m) => { if (m.type() === 'error') consoleErrors.push(`${name}: ${m.text()}`); });
+  page.on('console', (m) => {
+    if (m.type() !== 'error') return;
+    // A server without the job events route answers 404 there, and the page polls instead; with
+    // EXPECT_EVENTS=1 (the spec has the route) that 404 is an error like any other.
+    if (!EXPECT_EVENTS && / 404 /.test(m.text()) && EVENTS_URL.test(m.location().url ?? '')) {
+      summary.events_route_missing = (summary.events_route_missing ?? 0) + 1;
+      return;
+    }
+    consoleErrors.push(`${name}: ${m.text()}`);
+  });
   page.on('request', (r) => {
     const url = r.url();
     if (url.startsWith('blob:') || url.startsWith('data:')) return;

@@ -1,14 +1,15 @@
 // Drives Debian's chromium through web/sample/player.html, a page of someone else's that shows a
 // dance with <choreo-player> (run by tests/web.rs against a real choreo server): the sample's
-// server address and ids replaced by the test's, the page served from another origin
-// (http://sample.test, allowed by the server's cors_origins), with the api-key attribute when
-// TOKEN is set. Checks that the element loads, plays, and keeps the dance within one motion
+// server address and ids replaced by the test's, the page served by a small server of this
+// script on another origin (http://127.0.0.1:PAGE_PORT, which the choreo server's cors_origins
+// lists), with the api-key attribute when TOKEN is set. Checks that the element loads, plays, and keeps the dance within one motion
 // frame of the song.
 //
-//   API_URL=… JOB_ID=… SONG_ID=… [TOKEN=…] OUT_DIR=dir node tests/web/player.mjs
+//   API_URL=… JOB_ID=… SONG_ID=… PAGE_PORT=… [TOKEN=…] OUT_DIR=dir node tests/web/player.mjs
 //
 // Prints one JSON summary line (prefixed "summary: ") and exits 0, or prints why and exits 1.
 import { chromium } from 'playwright-core';
+import { createServer } from 'node:http';
 import { readFileSync, mkdirSync } from 'node:fs';
 import { join } from 'node:path';
 
@@ -22,7 +23,7 @@ const OUT = env('OUT_DIR');
 const TOKEN = process.env.TOKEN;
 const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
 const SAMPLE = new URL('../../web/sample/player.html', import.meta.url);
-const PAGE = 'http://sample.test/player.html';
+const PAGE = `http://127.0.0.1:${env('PAGE_PORT')}/player.html`;
 const FRAME_S = 1 / 25;
 
 function check(condition, message) {
@@ -36,6 +37,13 @@ let html = readFileSync(SAMPLE, 'utf8')
   .replaceAll('SONG_ID', env('SONG_ID'));
 if (TOKEN) html = html.replace('<choreo-player id="player"', `<choreo-player id="player" api-key="${TOKEN}"`);
 check(html.includes(`${API}/assets/choreo-player.js`), 'the sample loads the element from the server');
+
+// The page's own server: this page at /player.html, nothing else.
+const pages = createServer((req, res) => {
+  if (req.url === '/player.html') res.writeHead(200, { 'content-type': 'text/html; charset=utf-8' }).end(html);
+  else res.writeHead(404).end();
+});
+await new Promise((resolve) => pages.listen(Number(env('PAGE_PORT')), '127.0.0.1', resolve));
 
 mkdirSync(OUT, { recursive: true });
 const browser = await chromium.launch({
@@ -52,8 +60,7 @@ try {
   page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
   const requests = [];
   page.on('request', (r) => requests.push(r.url()));
-  // The page itself, from an origin of its own; everything else from the real server.
-  await page.route(PAGE, (route) => route.fulfill({ status: 200, contentType: 'text/html', body: html }));
+  page.on('response', (r) => { if (r.status() >= 400) errors.push(`${r.status()} ${r.url()}`); });
   await page.goto(PAGE);
   const loaded = await page.evaluate(async () => {
     const p = document.getElementById('player');
@@ -108,5 +115,6 @@ try {
   check(errors.length === 0, `no errors on the page: ${errors}`);
 } finally {
   await browser.close();
+  pages.close();
 }
 console.log('summary: ' + JSON.stringify(summary));
