@@ -16,12 +16,35 @@ pub const ENV_PREFIX: &str = "CHOREO_";
 /// The settings, by name; only these are read from `CHOREO_*`, so other tools' variables that
 /// share the prefix do not break start-up.
 pub const SETTINGS: &[&str] = &[
-    "bind", "data_dir", "models_dir", "workers", "max_upload_bytes", "max_duration_s", "audio_timeout_s",
-    "max_job_body_bytes", "cors_origins", "auth_token", "log_format", "log_level", "lease_s", "heartbeat_s",
-    "max_attempts", "retry_backoff_s", "poll_s", "database_url",
-    "artifacts_url", "s3_endpoint", "s3_region",
-    "max_connections", "fd_reserve", "header_timeout_s", "body_timeout_s", "write_timeout_s", "max_part_header_bytes",
-    "db_timeout_s", "sweep_grace_s",
+    "bind",
+    "data_dir",
+    "models_dir",
+    "workers",
+    "max_upload_bytes",
+    "max_duration_s",
+    "audio_timeout_s",
+    "max_job_body_bytes",
+    "cors_origins",
+    "auth_token",
+    "log_format",
+    "log_level",
+    "lease_s",
+    "heartbeat_s",
+    "max_attempts",
+    "retry_backoff_s",
+    "poll_s",
+    "database_url",
+    "artifacts_url",
+    "s3_endpoint",
+    "s3_region",
+    "max_connections",
+    "fd_reserve",
+    "header_timeout_s",
+    "body_timeout_s",
+    "write_timeout_s",
+    "max_part_header_bytes",
+    "db_timeout_s",
+    "sweep_grace_s",
 ];
 
 /// Errors from loading or checking the configuration.
@@ -30,7 +53,10 @@ pub enum ConfigError {
     #[error("configuration: {0}")]
     Load(#[from] Box<figment::Error>),
     #[error("configuration: {field}: {message}")]
-    Invalid { field: &'static str, message: String },
+    Invalid {
+        field: &'static str,
+        message: String,
+    },
 }
 
 impl ConfigError {
@@ -281,7 +307,10 @@ impl Config {
         let file = file.unwrap_or(Path::new(DEFAULT_CONFIG_FILE));
         let config: Config = Figment::from(Serialized::defaults(Defaults::new()))
             .merge(Toml::file(file))
-            .merge(Env::prefixed(ENV_PREFIX).filter(|key| SETTINGS.contains(&key.as_str().to_ascii_lowercase().as_str())))
+            .merge(
+                Env::prefixed(ENV_PREFIX)
+                    .filter(|key| SETTINGS.contains(&key.as_str().to_ascii_lowercase().as_str())),
+            )
             .merge(Serialized::defaults(overrides))
             .extract()
             .map_err(Box::new)?;
@@ -291,7 +320,12 @@ impl Config {
 
     /// Checks ranges that serde cannot.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let invalid = |field, message: &str| Err(ConfigError::Invalid { field, message: message.into() });
+        let invalid = |field, message: &str| {
+            Err(ConfigError::Invalid {
+                field,
+                message: message.into(),
+            })
+        };
         if self.bind.parse::<std::net::SocketAddr>().is_err() {
             return invalid("bind", "must be an IP:port address such as 127.0.0.1:8080");
         }
@@ -310,14 +344,20 @@ impl Config {
         if !(self.lease_s.is_finite() && self.lease_s > 0.0) {
             return invalid("lease_s", "must be a positive number of seconds");
         }
-        if !(self.heartbeat_s.is_finite() && self.heartbeat_s > 0.0 && self.heartbeat_s < self.lease_s) {
+        if !(self.heartbeat_s.is_finite()
+            && self.heartbeat_s > 0.0
+            && self.heartbeat_s < self.lease_s)
+        {
             return invalid("heartbeat_s", "must be positive and shorter than lease_s");
         }
         if self.max_attempts == 0 {
             return invalid("max_attempts", "must be at least 1");
         }
         if !(self.retry_backoff_s.is_finite() && self.retry_backoff_s >= 0.0) {
-            return invalid("retry_backoff_s", "must be zero or a positive number of seconds");
+            return invalid(
+                "retry_backoff_s",
+                "must be zero or a positive number of seconds",
+            );
         }
         if !(self.poll_s.is_finite() && self.poll_s > 0.0) {
             return invalid("poll_s", "must be a positive number of seconds");
@@ -336,20 +376,33 @@ impl Config {
             }
         }
         if self.max_part_header_bytes < 256 {
-            return invalid("max_part_header_bytes", "must be at least 256 (a part's Content-Disposition needs room)");
+            return invalid(
+                "max_part_header_bytes",
+                "must be at least 256 (a part's Content-Disposition needs room)",
+            );
         }
         if !(self.sweep_grace_s.is_finite() && self.sweep_grace_s >= 0.0) {
-            return invalid("sweep_grace_s", "must be zero or a positive number of seconds");
+            return invalid(
+                "sweep_grace_s",
+                "must be zero or a positive number of seconds",
+            );
         }
         self.database()?;
         if let Some(url) = &self.artifacts_url {
-            if url != "local" && !url.strip_prefix("s3://").is_some_and(|rest| !rest.is_empty() && !rest.starts_with('/')) {
+            if url != "local"
+                && !url
+                    .strip_prefix("s3://")
+                    .is_some_and(|rest| !rest.is_empty() && !rest.starts_with('/'))
+            {
                 return invalid("artifacts_url", "must be \"local\" or s3://bucket[/prefix]");
             }
         }
         if let Some(token) = &self.auth_token {
             if token.expose().is_empty() {
-                return invalid("auth_token", "must not be empty; leave it unset to turn auth off");
+                return invalid(
+                    "auth_token",
+                    "must not be empty; leave it unset to turn auth off",
+                );
             }
         }
         Ok(())
@@ -360,7 +413,9 @@ impl Config {
         if self.workers > 0 {
             self.workers
         } else {
-            std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1)
+            std::thread::available_parallelism()
+                .map(|n| n.get())
+                .unwrap_or(1)
         }
     }
 
@@ -378,14 +433,20 @@ impl Config {
         if let Some(path) = url.strip_prefix("sqlite://") {
             // sqlx's query options (`?mode=`) are not ours to take: the store sets its own.
             if path.is_empty() || path.contains('?') {
-                return Err(ConfigError::Invalid { field: "database_url", message: "sqlite://PATH needs a file path and no query".into() });
+                return Err(ConfigError::Invalid {
+                    field: "database_url",
+                    message: "sqlite://PATH needs a file path and no query".into(),
+                });
             }
             Ok(Database::Sqlite(PathBuf::from(path)))
         } else if url.starts_with("postgres://") || url.starts_with("postgresql://") {
             Ok(Database::Postgres(Secret::new(url)))
         } else {
             // The URL is not echoed: it may hold a password.
-            Err(ConfigError::Invalid { field: "database_url", message: "must start with sqlite:// or postgres://".into() })
+            Err(ConfigError::Invalid {
+                field: "database_url",
+                message: "must start with sqlite:// or postgres://".into(),
+            })
         }
     }
 }
@@ -396,7 +457,10 @@ mod tests {
 
     #[test]
     fn secret_never_prints() {
-        let config = Config { auth_token: Some(Secret::new("hunter2")), ..Config::default() };
+        let config = Config {
+            auth_token: Some(Secret::new("hunter2")),
+            ..Config::default()
+        };
         let shown = format!("{config:?} {}", Secret::new("hunter2"));
         assert!(!shown.contains("hunter2"), "{shown}");
         assert!(shown.contains("[redacted]"));
@@ -405,11 +469,18 @@ mod tests {
     #[test]
     fn layers_file_then_env_then_flags() {
         figment::Jail::expect_with(|jail| {
-            jail.create_file("c.toml", "bind = \"127.0.0.1:1\"\nworkers = 3\nmax_attempts = 7\n")?;
+            jail.create_file(
+                "c.toml",
+                "bind = \"127.0.0.1:1\"\nworkers = 3\nmax_attempts = 7\n",
+            )?;
             jail.set_env("CHOREO_BIND", "127.0.0.1:2");
             jail.set_env("CHOREO_DATA_DIR", "/tmp/x");
-            let overrides = Overrides { data_dir: Some("/tmp/y".into()), ..Overrides::default() };
-            let c = Config::load(Some(Path::new("c.toml")), &overrides).map_err(|e| e.to_string())?;
+            let overrides = Overrides {
+                data_dir: Some("/tmp/y".into()),
+                ..Overrides::default()
+            };
+            let c =
+                Config::load(Some(Path::new("c.toml")), &overrides).map_err(|e| e.to_string())?;
             assert_eq!(c.bind, "127.0.0.1:2");
             assert_eq!(c.data_dir, PathBuf::from("/tmp/y"));
             assert_eq!(c.workers, 3);
@@ -421,18 +492,32 @@ mod tests {
     #[test]
     fn database_url_picks_the_store_and_never_prints() {
         figment::Jail::expect_with(|jail| {
-            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default()).map_err(|e| e.to_string())?;
-            assert_eq!(c.database().map_err(|e| e.to_string())?, Database::Sqlite(PathBuf::from("data/choreo.sqlite")));
+            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default())
+                .map_err(|e| e.to_string())?;
+            assert_eq!(
+                c.database().map_err(|e| e.to_string())?,
+                Database::Sqlite(PathBuf::from("data/choreo.sqlite"))
+            );
             jail.set_env("CHOREO_DATABASE_URL", "sqlite:///tmp/q.sqlite");
-            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default()).map_err(|e| e.to_string())?;
-            assert_eq!(c.database().map_err(|e| e.to_string())?, Database::Sqlite(PathBuf::from("/tmp/q.sqlite")));
+            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default())
+                .map_err(|e| e.to_string())?;
+            assert_eq!(
+                c.database().map_err(|e| e.to_string())?,
+                Database::Sqlite(PathBuf::from("/tmp/q.sqlite"))
+            );
             jail.set_env("CHOREO_DATABASE_URL", "postgres://u:hunter2@db:5432/choreo");
-            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default()).map_err(|e| e.to_string())?;
+            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default())
+                .map_err(|e| e.to_string())?;
             assert!(matches!(c.database(), Ok(Database::Postgres(_))));
             assert!(!format!("{c:?} {:?}", c.database()).contains("hunter2"));
             jail.set_env("CHOREO_DATABASE_URL", "mysql://u:hunter2@db/choreo");
-            let err = Config::load(Some(Path::new("missing.toml")), &Overrides::default()).unwrap_err().to_string();
-            assert!(err.contains("database_url") && !err.contains("hunter2"), "{err}");
+            let err = Config::load(Some(Path::new("missing.toml")), &Overrides::default())
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains("database_url") && !err.contains("hunter2"),
+                "{err}"
+            );
             Ok(())
         });
     }
@@ -441,7 +526,8 @@ mod tests {
     fn rejects_a_bad_bind_address() {
         figment::Jail::expect_with(|jail| {
             jail.set_env("CHOREO_BIND", "not an address");
-            let err = Config::load(Some(Path::new("missing.toml")), &Overrides::default()).unwrap_err();
+            let err =
+                Config::load(Some(Path::new("missing.toml")), &Overrides::default()).unwrap_err();
             assert!(err.to_string().contains("bind"), "{err}");
             Ok(())
         });

@@ -10,12 +10,15 @@ use cli::{BenchCommand, Cli, Command, ServiceArgs};
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    let load = |args: &ServiceArgs| Config::load(cli.config.as_deref(), &args.overrides()).context("loading configuration");
+    let load = |args: &ServiceArgs| {
+        Config::load(cli.config.as_deref(), &args.overrides()).context("loading configuration")
+    };
     match &cli.command {
         Command::Serve(args) => serve(load(&args.service)?, !args.no_workers),
-        Command::Worker(args) => {
-            worker(Config::load(cli.config.as_deref(), &args.overrides()).context("loading configuration")?)
-        }
+        Command::Worker(args) => worker(
+            Config::load(cli.config.as_deref(), &args.overrides())
+                .context("loading configuration")?,
+        ),
         Command::Analyze { path } => analyze(path),
         Command::Doctor(args) => {
             for (name, value) in choreo::telemetry::doctor(&load(args)?) {
@@ -24,10 +27,16 @@ fn main() -> anyhow::Result<()> {
             Ok(())
         }
         Command::Generate(args) => cli::generate::generate(args),
-        Command::Bench { what: BenchCommand::Generate(args) } => cli::generate::bench(args),
+        Command::Bench {
+            what: BenchCommand::Generate(args),
+        } => cli::generate::bench(args),
         Command::Train { model } => cli::train::run(model),
-        Command::Bench { what: BenchCommand::Http(args) } => cli::bench::http(args, load(&args.service)?),
-        Command::Bench { what: BenchCommand::Audio(args) } => cli::bench::audio(args),
+        Command::Bench {
+            what: BenchCommand::Http(args),
+        } => cli::bench::http(args, load(&args.service)?),
+        Command::Bench {
+            what: BenchCommand::Audio(args),
+        } => cli::bench::audio(args),
         Command::Eval(args) => cli::eval::run(args),
         Command::Export(args) => cli::export::run(args),
         Command::Retarget(args) => cli::retarget::run(args),
@@ -55,7 +64,9 @@ fn serve(config: Config, with_workers: bool) -> anyhow::Result<()> {
 fn worker(config: Config) -> anyhow::Result<()> {
     choreo::telemetry::init_tracing(config.log_format, &config.log_level);
     cli::runtime()?.block_on(async {
-        let workers = choreo::worker::process::WorkerProcess::start(&config).await.context("starting the workers")?;
+        let workers = choreo::worker::process::WorkerProcess::start(&config)
+            .await
+            .context("starting the workers")?;
         // Tools and tests wait for this line.
         println!("choreo worker running {} workers", workers.count());
         shutdown_signal().await;
@@ -88,8 +99,10 @@ async fn shutdown_signal() {
 }
 
 fn analyze(path: &std::path::Path) -> anyhow::Result<()> {
-    let decoded = choreo::audio::decode_path(path).with_context(|| format!("decoding {}", path.display()))?;
-    let analysis = choreo::audio::analyze(&decoded).with_context(|| format!("analysing {}", path.display()))?;
+    let decoded =
+        choreo::audio::decode_path(path).with_context(|| format!("decoding {}", path.display()))?;
+    let analysis = choreo::audio::analyze(&decoded)
+        .with_context(|| format!("analysing {}", path.display()))?;
     println!("{}", serde_json::to_string_pretty(&analysis)?);
     Ok(())
 }

@@ -4,9 +4,9 @@
 //! The worker calls [`build`] once the dance exists and [`write`] to store `report.json`; the
 //! schema is [`Report`], documented in the OpenAPI spec through `utoipa::ToSchema`.
 use crate::audio::Analysis;
+use crate::metrics::kinematics::Freezing;
 use crate::metrics::reference::ReferenceStats;
 use crate::metrics::score::{fid_k_curve, score_dance, CurvePoint, DanceScores, KinematicBeats};
-use crate::metrics::kinematics::Freezing;
 use crate::metrics::MetricsError;
 use crate::motion::{KeyPose, Motion};
 
@@ -67,7 +67,12 @@ pub struct BeatAlignReport {
 
 /// Builds the report of `motion` danced to the song `analysis` describes (motion frame 0 at song
 /// time 0), with the key poses the user fixed (may be empty).
-pub fn build(motion: &Motion, analysis: &Analysis, key_poses: &[KeyPose], reference: &ReferenceStats) -> Result<Report, MetricsError> {
+pub fn build(
+    motion: &Motion,
+    analysis: &Analysis,
+    key_poses: &[KeyPose],
+    reference: &ReferenceStats,
+) -> Result<Report, MetricsError> {
     let scored = score_dance(motion, &analysis.beat_times, key_poses, reference)?;
     Ok(Report {
         version: REPORT_VERSION,
@@ -89,5 +94,8 @@ pub fn build(motion: &Motion, analysis: &Analysis, key_poses: &[KeyPose], refere
 /// Writes the report as pretty JSON to `path`.
 pub fn write(report: &Report, path: &std::path::Path) -> Result<(), MetricsError> {
     let text = serde_json::to_string_pretty(report)?;
-    std::fs::write(path, text).map_err(|source| MetricsError::Io { path: path.display().to_string(), source })
+    std::fs::write(path, text).map_err(|source| MetricsError::Io {
+        path: path.display().to_string(),
+        source,
+    })
 }

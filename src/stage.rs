@@ -102,7 +102,10 @@ impl FromStr for Stage {
     type Err = UnknownStage;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Stage::ALL.into_iter().find(|stage| stage.as_str() == s).ok_or_else(|| UnknownStage(s.to_string()))
+        Stage::ALL
+            .into_iter()
+            .find(|stage| stage.as_str() == s)
+            .ok_or_else(|| UnknownStage(s.to_string()))
     }
 }
 
@@ -114,8 +117,15 @@ mod tests {
     fn every_name_round_trips_through_str_serde_and_display() {
         for stage in Stage::ALL {
             assert_eq!(stage.as_str().parse::<Stage>(), Ok(stage));
-            assert_eq!(serde_json::to_value(stage).expect("serialises"), serde_json::json!(stage.as_str()));
-            assert_eq!(serde_json::from_value::<Stage>(serde_json::json!(stage.as_str())).expect("deserialises"), stage);
+            assert_eq!(
+                serde_json::to_value(stage).expect("serialises"),
+                serde_json::json!(stage.as_str())
+            );
+            assert_eq!(
+                serde_json::from_value::<Stage>(serde_json::json!(stage.as_str()))
+                    .expect("deserialises"),
+                stage
+            );
             assert_eq!(format!("{stage:<14}|"), format!("{:<14}|", stage.as_str()));
         }
     }

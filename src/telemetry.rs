@@ -35,7 +35,9 @@ pub const WORKER_RESTARTS: &str = "choreo_worker_restarts_total";
 pub const CLAIM_ERRORS: &str = "choreo_claim_errors_total";
 
 /// Buckets for job and stage durations: from 10 ms to 10 minutes.
-const DURATION_BUCKETS: &[f64] = &[0.01, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0];
+const DURATION_BUCKETS: &[f64] = &[
+    0.01, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0, 60.0, 120.0, 300.0, 600.0,
+];
 
 static PROMETHEUS: OnceLock<PrometheusHandle> = OnceLock::new();
 
@@ -64,14 +66,31 @@ fn describe() {
     metrics::describe_gauge!(QUEUE_DEPTH, "Jobs waiting to be claimed");
     metrics::describe_gauge!(BUSY_WORKERS, "Workers running a job");
     metrics::describe_counter!(JOBS_FINISHED, "Jobs that reached a terminal state");
-    metrics::describe_histogram!(JOB_DURATION, metrics::Unit::Seconds, "Wall time of one job attempt");
-    metrics::describe_histogram!(STAGE_DURATION, metrics::Unit::Seconds, "Wall time of one job stage");
+    metrics::describe_histogram!(
+        JOB_DURATION,
+        metrics::Unit::Seconds,
+        "Wall time of one job attempt"
+    );
+    metrics::describe_histogram!(
+        STAGE_DURATION,
+        metrics::Unit::Seconds,
+        "Wall time of one job stage"
+    );
     metrics::describe_counter!(HTTP_RESPONSES, "HTTP responses by status class");
-    metrics::describe_counter!(CONNECTIONS_REFUSED, "Connections refused at the max_connections cap");
+    metrics::describe_counter!(
+        CONNECTIONS_REFUSED,
+        "Connections refused at the max_connections cap"
+    );
     metrics::describe_counter!(ACCEPT_ERRORS, "Failed accepts of HTTP connections");
-    metrics::describe_counter!(LOG_WRITE_ERRORS, "Log lines dropped because the log sink failed");
+    metrics::describe_counter!(
+        LOG_WRITE_ERRORS,
+        "Log lines dropped because the log sink failed"
+    );
     metrics::describe_counter!(WORKER_RESTARTS, "Workers restarted after dying");
-    metrics::describe_counter!(CLAIM_ERRORS, "Failed claims (store unreachable or unwritable)");
+    metrics::describe_counter!(
+        CLAIM_ERRORS,
+        "Failed claims (store unreachable or unwritable)"
+    );
 }
 
 /// Log output that cannot fail: a line that stderr does not take (a closed pipe, a full disk
@@ -104,10 +123,14 @@ impl tracing_subscriber::fmt::MakeWriter<'_> for Stderr {
 
 /// Starts the global tracing subscriber; a second call (tests) is a no-op.
 pub fn init_tracing(format: LogFormat, default_level: &str) {
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_level));
+    let filter =
+        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_level));
     // log_internal_errors(false): tracing-subscriber would otherwise report a failed write with
     // eprintln!, which panics when stderr is closed.
-    let builder = tracing_subscriber::fmt().with_env_filter(filter).with_writer(Stderr).log_internal_errors(false);
+    let builder = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(Stderr)
+        .log_internal_errors(false);
     let _ = match format {
         LogFormat::Pretty => builder.try_init(),
         LogFormat::Json => builder.json().flatten_event(true).try_init(),
@@ -124,7 +147,11 @@ pub struct StageTimer {
 impl StageTimer {
     /// Starts timing `stage` of a job of `kind`.
     pub fn start(kind: &'static str, stage: Stage) -> Self {
-        Self { kind, stage, start: Instant::now() }
+        Self {
+            kind,
+            stage,
+            start: Instant::now(),
+        }
     }
 }
 
@@ -140,12 +167,17 @@ const LIBTORCH_AT_BUILD: Option<&str> = option_env!("LIBTORCH");
 
 /// The torch version of the wheel libtorch came from, read from its `version.py`.
 fn torch_version() -> String {
-    let Some(dir) = LIBTORCH_AT_BUILD else { return "unknown (LIBTORCH was not set at build time)".into() };
+    let Some(dir) = LIBTORCH_AT_BUILD else {
+        return "unknown (LIBTORCH was not set at build time)".into();
+    };
     let file = std::path::Path::new(dir).join("version.py");
     match std::fs::read_to_string(&file) {
         Ok(text) => text
             .lines()
-            .find_map(|l| l.strip_prefix("__version__ = ").map(|v| v.trim_matches(['\'', '"']).to_string()))
+            .find_map(|l| {
+                l.strip_prefix("__version__ = ")
+                    .map(|v| v.trim_matches(['\'', '"']).to_string())
+            })
             .unwrap_or_else(|| format!("unknown (no __version__ in {})", file.display())),
         Err(e) => format!("unknown ({}: {e})", file.display()),
     }
@@ -155,18 +187,29 @@ fn torch_version() -> String {
 fn loaded_libtorch() -> String {
     std::fs::read_to_string("/proc/self/maps")
         .ok()
-        .and_then(|maps| maps.lines().find(|l| l.contains("libtorch_cpu.so")).and_then(|l| l.split_whitespace().last()).map(str::to_string))
+        .and_then(|maps| {
+            maps.lines()
+                .find(|l| l.contains("libtorch_cpu.so"))
+                .and_then(|l| l.split_whitespace().last())
+                .map(str::to_string)
+        })
         .unwrap_or_else(|| "not mapped (or /proc unavailable)".into())
 }
 
 /// What `choreo doctor` prints: libtorch, threads, data dir, models. Runs a tensor op to prove
 /// libtorch loads.
 pub fn doctor(config: &crate::config::Config) -> Vec<(&'static str, String)> {
-    let sum = tch::Tensor::from_slice(&[1.0f32, 2.0, 3.0]).sum(tch::Kind::Float).double_value(&[]);
+    let sum = tch::Tensor::from_slice(&[1.0f32, 2.0, 3.0])
+        .sum(tch::Kind::Float)
+        .double_value(&[]);
     let models = match crate::models::Registry::load(&config.models_dir) {
         Ok(registry) => {
             let ids: Vec<String> = registry.list().into_iter().map(|m| m.id.0).collect();
-            if ids.is_empty() { "none (train one first)".to_string() } else { ids.join(", ") }
+            if ids.is_empty() {
+                "none (train one first)".to_string()
+            } else {
+                ids.join(", ")
+            }
         }
         Err(e) => format!("error: {e}"),
     };
@@ -179,19 +222,52 @@ pub fn doctor(config: &crate::config::Config) -> Vec<(&'static str, String)> {
     vec![
         ("choreo", env!("CARGO_PKG_VERSION").to_string()),
         ("torch", torch_version()),
-        ("libtorch built against", LIBTORCH_AT_BUILD.unwrap_or("unknown").to_string()),
+        (
+            "libtorch built against",
+            LIBTORCH_AT_BUILD.unwrap_or("unknown").to_string(),
+        ),
         ("libtorch loaded", loaded_libtorch()),
         ("libtorch works", format!("sum([1, 2, 3]) = {sum}")),
-        ("openmp / mkl / mkldnn", format!("{} / {} / {}", tch::utils::has_openmp(), tch::utils::has_mkl(), tch::utils::has_mkldnn())),
-        ("intra-op threads (main thread)", tch::get_num_threads().to_string()),
-        ("intra-op threads per worker", "1 (set on each worker thread)".to_string()),
-        ("OMP_NUM_THREADS / OMP_WAIT_POLICY", format!("{} / {}", env("OMP_NUM_THREADS"), env("OMP_WAIT_POLICY"))),
-        ("cores", std::thread::available_parallelism().map_or(0, |n| n.get()).to_string()),
+        (
+            "openmp / mkl / mkldnn",
+            format!(
+                "{} / {} / {}",
+                tch::utils::has_openmp(),
+                tch::utils::has_mkl(),
+                tch::utils::has_mkldnn()
+            ),
+        ),
+        (
+            "intra-op threads (main thread)",
+            tch::get_num_threads().to_string(),
+        ),
+        (
+            "intra-op threads per worker",
+            "1 (set on each worker thread)".to_string(),
+        ),
+        (
+            "OMP_NUM_THREADS / OMP_WAIT_POLICY",
+            format!("{} / {}", env("OMP_NUM_THREADS"), env("OMP_WAIT_POLICY")),
+        ),
+        (
+            "cores",
+            std::thread::available_parallelism()
+                .map_or(0, |n| n.get())
+                .to_string(),
+        ),
         ("workers", config.worker_count().to_string()),
         ("bind", config.bind.clone()),
         ("data dir", data_dir),
         ("models dir", config.models_dir.display().to_string()),
         ("models found", models),
-        ("auth", if config.auth_token.is_some() { "bearer token required on /v1" } else { "off" }.to_string()),
+        (
+            "auth",
+            if config.auth_token.is_some() {
+                "bearer token required on /v1"
+            } else {
+                "off"
+            }
+            .to_string(),
+        ),
     ]
 }

@@ -29,14 +29,21 @@ fn song_path(song: &str) -> Option<PathBuf> {
         return Some(p);
     }
     if std::env::var("CI").as_deref() == Ok("true") {
-        panic!("{} is missing: the audio parity tests need ../shared (CI=true)", p.display());
+        panic!(
+            "{} is missing: the audio parity tests need ../shared (CI=true)",
+            p.display()
+        );
     }
-    eprintln!("NOTICE: skipping {song}: {} not found (set up ../shared to run parity tests)", p.display());
+    eprintln!(
+        "NOTICE: skipping {song}: {} not found (set up ../shared to run parity tests)",
+        p.display()
+    );
     None
 }
 
 fn ref_json(song: &str) -> serde_json::Value {
-    let text = std::fs::read_to_string(fixture_dir(song).join("ref.json")).expect("fixture ref.json");
+    let text =
+        std::fs::read_to_string(fixture_dir(song).join("ref.json")).expect("fixture ref.json");
     serde_json::from_str(&text).expect("valid ref.json")
 }
 
@@ -50,7 +57,13 @@ fn npy1(song: &str, name: &str) -> Array1<f32> {
     Array1::<f32>::read_npy(f).expect("1-d f32 npy")
 }
 
-const SHARED_SONGS: [&str; 5] = ["hungarian_dance_5", "lets_go_fishin", "sugar_plum_fairy", "trumpet_loop_90bpm", "vibe_ace"];
+const SHARED_SONGS: [&str; 5] = [
+    "hungarian_dance_5",
+    "lets_go_fishin",
+    "sugar_plum_fairy",
+    "trumpet_loop_90bpm",
+    "vibe_ace",
+];
 const DANCE_SONGS: [&str; 3] = ["DANCE_C_8", "DANCE_R_9", "DANCE_W_3"];
 
 fn all_songs() -> impl Iterator<Item = &'static str> {
@@ -102,7 +115,11 @@ fn f_measure(reference: &[f64], estimated: &[f64], window: f64) -> f64 {
     }
     let p = hits as f64 / estimated.len() as f64;
     let r = hits as f64 / reference.len() as f64;
-    if p + r == 0.0 { 0.0 } else { 2.0 * p * r / (p + r) }
+    if p + r == 0.0 {
+        0.0
+    } else {
+        2.0 * p * r / (p + r)
+    }
 }
 
 /// Rows `0, step, 2·step, …` of a time-major matrix, as many as the fixture has.
@@ -130,23 +147,38 @@ fn decode_native(song: &str) -> Option<DecodedAudio> {
 fn decoded_length_matches_librosa() {
     let mut fails: Vec<String> = Vec::new();
     for song in all_songs() {
-        let Some(a) = decode_native(song) else { continue };
+        let Some(a) = decode_native(song) else {
+            continue;
+        };
         let meta = ref_json(song);
         let n_ref = meta["n_native"].as_u64().expect("n_native") as i64;
         let diff = a.samples.len() as i64 - n_ref;
-        eprintln!("{song}: decoded {} samples, librosa {n_ref} ({diff:+})", a.samples.len());
+        eprintln!(
+            "{song}: decoded {} samples, librosa {n_ref} ({diff:+})",
+            a.samples.len()
+        );
         // Tolerance: Vorbis is sample exact; MP3 decoders may differ by a frame at the end.
         let tol = if song.starts_with("DANCE") { 1152 } else { 0 };
-        check(&mut fails, diff.abs() <= tol, format!("{song}: length differs by {diff} samples"));
+        check(
+            &mut fails,
+            diff.abs() <= tol,
+            format!("{song}: length differs by {diff} samples"),
+        );
     }
-    assert!(fails.is_empty(), "{} check(s) failed: {fails:#?}", fails.len());
+    assert!(
+        fails.is_empty(),
+        "{} check(s) failed: {fails:#?}",
+        fails.len()
+    );
 }
 
 #[test]
 fn mel_mfcc_onset_match_librosa_at_native_rate() {
     let mut fails: Vec<String> = Vec::new();
     for song in SHARED_SONGS {
-        let Some(a) = decode_native(song) else { continue };
+        let Some(a) = decode_native(song) else {
+            continue;
+        };
         let meta = ref_json(song);
         let step = meta["step_native"].as_u64().expect("step") as usize;
         let mel = dsp::melspectrogram(&a.samples, a.sample_rate, 2048, 512, 128);
@@ -158,16 +190,35 @@ fn mel_mfcc_onset_match_librosa_at_native_rate() {
         let ref_mfcc = npy2(song, "mfcc_native.npy");
         // Tolerance: MFCC relative error < 1e-3.
         let e_mfcc = rel_err(&take_rows(&mfcc, step, ref_mfcc.nrows()), &ref_mfcc);
-        let env = onset::onset_strength(&a.samples, a.sample_rate, 2048, 512, onset::Aggregate::Mean);
+        let env =
+            onset::onset_strength(&a.samples, a.sample_rate, 2048, 512, onset::Aggregate::Mean);
         let ref_env = npy1(song, "onset_native.npy");
         // Tolerance: onset envelope correlation > 0.999.
         let c_onset = corr(&env, &ref_env);
-        eprintln!("{song}: mel rel err {e_mel:.2e}, mfcc rel err {e_mfcc:.2e}, onset corr {c_onset:.6}");
-        check(&mut fails, e_mel < 1e-3, format!("{song}: mel rel err {e_mel}"));
-        check(&mut fails, e_mfcc < 1e-3, format!("{song}: mfcc rel err {e_mfcc}"));
-        check(&mut fails, c_onset > 0.999, format!("{song}: onset corr {c_onset}"));
+        eprintln!(
+            "{song}: mel rel err {e_mel:.2e}, mfcc rel err {e_mfcc:.2e}, onset corr {c_onset:.6}"
+        );
+        check(
+            &mut fails,
+            e_mel < 1e-3,
+            format!("{song}: mel rel err {e_mel}"),
+        );
+        check(
+            &mut fails,
+            e_mfcc < 1e-3,
+            format!("{song}: mfcc rel err {e_mfcc}"),
+        );
+        check(
+            &mut fails,
+            c_onset > 0.999,
+            format!("{song}: onset corr {c_onset}"),
+        );
     }
-    assert!(fails.is_empty(), "{} check(s) failed: {fails:#?}", fails.len());
+    assert!(
+        fails.is_empty(),
+        "{} check(s) failed: {fails:#?}",
+        fails.len()
+    );
 }
 
 #[test]
@@ -175,7 +226,9 @@ fn chroma_stft_and_cqt_match_librosa_at_native_rate() {
     let mut fails: Vec<String> = Vec::new();
     let mut cqt_corrs = Vec::new();
     for song in SHARED_SONGS {
-        let Some(a) = decode_native(song) else { continue };
+        let Some(a) = decode_native(song) else {
+            continue;
+        };
         let meta = ref_json(song);
         let step = meta["step_native"].as_u64().expect("step") as usize;
         let tuning = chroma::estimate_tuning(&a.samples, a.sample_rate, 36);
@@ -194,15 +247,35 @@ fn chroma_stft_and_cqt_match_librosa_at_native_rate() {
         cqt_corrs.push(c_cqt);
         eprintln!("{song}: tuning {tuning:+.2} (librosa {ref_tuning:+.2}), chroma_stft corr {c_stft:.5}, chroma_cqt corr {c_cqt:.5}");
         // Tolerance: tuning within one histogram bin (0.01 of a bin).
-        check(&mut fails, (tuning - ref_tuning).abs() <= 0.0101, format!("{song}: tuning {tuning} vs {ref_tuning}"));
-        check(&mut fails, c_stft > 0.999, format!("{song}: chroma_stft corr {c_stft}"));
-        check(&mut fails, c_cqt > 0.975, format!("{song}: chroma_cqt corr {c_cqt}"));
+        check(
+            &mut fails,
+            (tuning - ref_tuning).abs() <= 0.0101,
+            format!("{song}: tuning {tuning} vs {ref_tuning}"),
+        );
+        check(
+            &mut fails,
+            c_stft > 0.999,
+            format!("{song}: chroma_stft corr {c_stft}"),
+        );
+        check(
+            &mut fails,
+            c_cqt > 0.975,
+            format!("{song}: chroma_cqt corr {c_cqt}"),
+        );
     }
     if !cqt_corrs.is_empty() {
         let mean = cqt_corrs.iter().sum::<f64>() / cqt_corrs.len() as f64;
-        check(&mut fails, mean > 0.99, format!("mean chroma_cqt corr {mean}"));
+        check(
+            &mut fails,
+            mean > 0.99,
+            format!("mean chroma_cqt corr {mean}"),
+        );
     }
-    assert!(fails.is_empty(), "{} check(s) failed: {fails:#?}", fails.len());
+    assert!(
+        fails.is_empty(),
+        "{} check(s) failed: {fails:#?}",
+        fails.len()
+    );
 }
 
 // ---- parity: what `choreo analyze` reports (22 050 Hz, resampled by rubato vs soxr) ----
@@ -211,7 +284,9 @@ fn chroma_stft_and_cqt_match_librosa_at_native_rate() {
 fn beats_and_tempo_match_librosa() {
     let mut fails: Vec<String> = Vec::new();
     for song in all_songs() {
-        let Some(a) = decode_native(song) else { continue };
+        let Some(a) = decode_native(song) else {
+            continue;
+        };
         let meta = ref_json(song);
         let an = audio::analyze(&a).expect("analyze");
         let ref_tempo = meta["tempo22"].as_f64().expect("tempo");
@@ -222,13 +297,29 @@ fn beats_and_tempo_match_librosa() {
             .map(|b| b.as_f64().unwrap_or(0.0) * 512.0 / 22050.0)
             .collect();
         let f = f_measure(&ref_beats, &an.beat_times, 0.07);
-        eprintln!("{song}: tempo {:.2} (librosa {ref_tempo:.2}), {} beats (librosa {}), F {f:.4}", an.tempo_bpm, an.beat_times.len(), ref_beats.len());
+        eprintln!(
+            "{song}: tempo {:.2} (librosa {ref_tempo:.2}), {} beats (librosa {}), F {f:.4}",
+            an.tempo_bpm,
+            an.beat_times.len(),
+            ref_beats.len()
+        );
         // Tolerance: tempo within 1 BPM, beat F-measure ≥ 0.99 at 70 ms.
-        check(&mut fails, (an.tempo_bpm - ref_tempo).abs() < 1.0, format!("{song}: tempo {} vs {ref_tempo}", an.tempo_bpm));
+        check(
+            &mut fails,
+            (an.tempo_bpm - ref_tempo).abs() < 1.0,
+            format!("{song}: tempo {} vs {ref_tempo}", an.tempo_bpm),
+        );
         check(&mut fails, f >= 0.99, format!("{song}: beat F {f}"));
-        assert!(an.downbeat_times.iter().all(|d| an.beat_times.contains(d)), "downbeats are beats");
+        assert!(
+            an.downbeat_times.iter().all(|d| an.beat_times.contains(d)),
+            "downbeats are beats"
+        );
     }
-    assert!(fails.is_empty(), "{} check(s) failed: {fails:#?}", fails.len());
+    assert!(
+        fails.is_empty(),
+        "{} check(s) failed: {fails:#?}",
+        fails.len()
+    );
 }
 
 #[test]
@@ -241,19 +332,39 @@ fn beat_tracker_is_exact_on_librosas_onset_envelope() {
         let bpm = rhythm::tempo(&env, 22050, 512);
         let ref_bpm = meta["tempo22_from_onset"].as_f64().expect("tempo");
         // Tolerance: the tempo is picked from a discrete lag grid, so equal to float precision.
-        check(&mut fails, (bpm - ref_bpm).abs() < 1e-6, format!("{song}: tempo {bpm} vs {ref_bpm}"));
+        check(
+            &mut fails,
+            (bpm - ref_bpm).abs() < 1e-6,
+            format!("{song}: tempo {bpm} vs {ref_bpm}"),
+        );
         let beats = rhythm::beat_track_frames(&env, bpm, 22050.0 / 512.0, 100.0);
-        let ref_beats: Vec<usize> = meta["beats22"].as_array().expect("beats").iter().map(|b| b.as_u64().unwrap_or(0) as usize).collect();
+        let ref_beats: Vec<usize> = meta["beats22"]
+            .as_array()
+            .expect("beats")
+            .iter()
+            .map(|b| b.as_u64().unwrap_or(0) as usize)
+            .collect();
         assert_eq!(beats, ref_beats, "{song}: beat frames differ");
         let tg = rhythm::tempogram(&env, 384);
         let ref_tg = npy2(song, "tempogram22.npy");
         let step = meta["step_native"].as_u64().expect("step") as usize;
         let n = ref_tg.nrows().min(tg.nrows().div_ceil(step));
         // Tolerance: tempogram relative error < 1e-4 (same input, float32 FFTs).
-        let e = rel_err(&take_rows(&tg, step, n), &ref_tg.slice(ndarray::s![..n, ..]).to_owned());
-        check(&mut fails, e < 1e-4, format!("{song}: tempogram rel err {e}"));
+        let e = rel_err(
+            &take_rows(&tg, step, n),
+            &ref_tg.slice(ndarray::s![..n, ..]).to_owned(),
+        );
+        check(
+            &mut fails,
+            e < 1e-4,
+            format!("{song}: tempogram rel err {e}"),
+        );
     }
-    assert!(fails.is_empty(), "{} check(s) failed: {fails:#?}", fails.len());
+    assert!(
+        fails.is_empty(),
+        "{} check(s) failed: {fails:#?}",
+        fails.len()
+    );
 }
 
 #[test]
@@ -265,11 +376,23 @@ fn trumpet_loop_tempo_is_a_metrical_level_of_90_bpm() {
     // librosa (and we) report 184.6 BPM, the double of the stated 90 BPM; the nearest lags of
     // the 43 Hz onset grid are 92.3 and 89.1 BPM. Tolerance: half the tempo within 3 BPM of 90.
     eprintln!("trumpet: tempo {:.2} BPM (author: 90)", an.tempo_bpm);
-    check(&mut fails, (an.tempo_bpm / 2.0 - 90.0).abs() < 3.0, format!("tempo {}", an.tempo_bpm));
+    check(
+        &mut fails,
+        (an.tempo_bpm / 2.0 - 90.0).abs() < 3.0,
+        format!("tempo {}", an.tempo_bpm),
+    );
     let ibi: Vec<f64> = an.beat_times.windows(2).map(|w| w[1] - w[0]).collect();
     let mean_ibi = ibi.iter().sum::<f64>() / ibi.len().max(1) as f64;
-    check(&mut fails, (60.0 / mean_ibi / 2.0 - 90.0).abs() < 8.0, format!("beat period {mean_ibi}"));
-    assert!(fails.is_empty(), "{} check(s) failed: {fails:#?}", fails.len());
+    check(
+        &mut fails,
+        (60.0 / mean_ibi / 2.0 - 90.0).abs() < 8.0,
+        format!("beat period {mean_ibi}"),
+    );
+    assert!(
+        fails.is_empty(),
+        "{} check(s) failed: {fails:#?}",
+        fails.len()
+    );
 }
 
 // ---- parity: the DanceRevolution set end to end at 25 fps ----
@@ -300,20 +423,52 @@ fn dance_revolution_set_matches_librosa_recipe() {
         let (_, c_tg) = block(c::TEMPOGRAM);
         let ref_onset = npy1(song, "onset25_percussive.npy");
         let c_onset = corr(x.column(c::ONSET).iter(), ref_onset.iter());
-        let ref_beats: Vec<f64> = meta["beats25"].as_array().expect("beats").iter().map(|b| b.as_f64().unwrap_or(0.0) / 25.0).collect();
-        let beats: Vec<f64> = (0..frames).filter(|&i| x[[i, c::BEAT]] > 0.5).map(|i| i as f64 / 25.0).collect();
+        let ref_beats: Vec<f64> = meta["beats25"]
+            .as_array()
+            .expect("beats")
+            .iter()
+            .map(|b| b.as_f64().unwrap_or(0.0) / 25.0)
+            .collect();
+        let beats: Vec<f64> = (0..frames)
+            .filter(|&i| x[[i, c::BEAT]] > 0.5)
+            .map(|i| i as f64 / 25.0)
+            .collect();
         let f = f_measure(&ref_beats, &beats, 0.07);
         eprintln!("{song}: DR25 mfcc rel {e_mfcc:.2e} dmfcc corr {c_dmfcc:.4} chroma corr {c_chroma:.4} tempogram corr {c_tg:.4} onset corr {c_onset:.4} beats F {f:.3}");
         // Tolerances (end to end: our resampler vs soxr_hq, our CQT octave FIR vs soxr). Measured:
         // MFCC rel err 1.5e-4..9.3e-4, every correlation ≥ 0.999, beats F = 1.
-        check(&mut fails, e_mfcc < 1e-3, format!("{song}: mfcc rel err {e_mfcc}"));
-        check(&mut fails, c_dmfcc > 0.99, format!("{song}: dmfcc corr {c_dmfcc}"));
-        check(&mut fails, c_chroma > 0.99, format!("{song}: chroma corr {c_chroma}"));
-        check(&mut fails, c_tg > 0.99, format!("{song}: tempogram corr {c_tg}"));
-        check(&mut fails, c_onset > 0.99, format!("{song}: onset corr {c_onset}"));
+        check(
+            &mut fails,
+            e_mfcc < 1e-3,
+            format!("{song}: mfcc rel err {e_mfcc}"),
+        );
+        check(
+            &mut fails,
+            c_dmfcc > 0.99,
+            format!("{song}: dmfcc corr {c_dmfcc}"),
+        );
+        check(
+            &mut fails,
+            c_chroma > 0.99,
+            format!("{song}: chroma corr {c_chroma}"),
+        );
+        check(
+            &mut fails,
+            c_tg > 0.99,
+            format!("{song}: tempogram corr {c_tg}"),
+        );
+        check(
+            &mut fails,
+            c_onset > 0.99,
+            format!("{song}: onset corr {c_onset}"),
+        );
         check(&mut fails, f >= 0.95, format!("{song}: beats F {f}"));
     }
-    assert!(fails.is_empty(), "{} check(s) failed: {fails:#?}", fails.len());
+    assert!(
+        fails.is_empty(),
+        "{} check(s) failed: {fails:#?}",
+        fails.len()
+    );
 }
 
 // ---- hard audio: synthesised WAV files, no ../shared needed ----
@@ -353,13 +508,17 @@ fn write_wav(path: &std::path::Path, sr: u32, channels: u16, interleaved: &[f32]
         b.extend_from_slice(&mask.to_le_bytes());
         // KSDATAFORMAT_SUBTYPE_PCM / _IEEE_FLOAT GUID: tag, then the fixed suffix.
         b.extend_from_slice(&(tag as u32).to_le_bytes());
-        b.extend_from_slice(&[0x00, 0x00, 0x10, 0x00, 0x80, 0x00, 0x00, 0xAA, 0x00, 0x38, 0x9B, 0x71]);
+        b.extend_from_slice(&[
+            0x00, 0x00, 0x10, 0x00, 0x80, 0x00, 0x00, 0xAA, 0x00, 0x38, 0x9B, 0x71,
+        ]);
     }
     b.extend_from_slice(b"data");
     b.extend_from_slice(&data_len.to_le_bytes());
     for &v in interleaved {
         match kind {
-            WavKind::Pcm16 => b.extend_from_slice(&((v.clamp(-1.0, 1.0) * 32767.0).round() as i16).to_le_bytes()),
+            WavKind::Pcm16 => {
+                b.extend_from_slice(&((v.clamp(-1.0, 1.0) * 32767.0).round() as i16).to_le_bytes())
+            }
             WavKind::Float32 => b.extend_from_slice(&v.to_le_bytes()),
         }
     }
@@ -370,7 +529,10 @@ fn write_wav(path: &std::path::Path, sr: u32, channels: u16, interleaved: &[f32]
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f32 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((self.0 >> 40) as f32 / (1u64 << 24) as f32) * 2.0 - 1.0
     }
 }
@@ -378,7 +540,13 @@ impl Lcg {
 /// A click track: a decaying noise burst plus a 60 Hz kick at `bpm` from `t0`; accents every
 /// `meter` beats carry a louder kick and a new chord (for downbeat tests). Returns the signal
 /// and the true beat and downbeat times.
-fn click_track(sr: u32, seconds: f64, bpm: f64, meter: usize, t0: f64) -> (Vec<f32>, Vec<f64>, Vec<f64>) {
+fn click_track(
+    sr: u32,
+    seconds: f64,
+    bpm: f64,
+    meter: usize,
+    t0: f64,
+) -> (Vec<f32>, Vec<f64>, Vec<f64>) {
     let n = (seconds * sr as f64) as usize;
     let mut y = vec![0.0f32; n];
     let mut rng = Lcg(7);
@@ -387,7 +555,12 @@ fn click_track(sr: u32, seconds: f64, bpm: f64, meter: usize, t0: f64) -> (Vec<f
     }
     let period = 60.0 / bpm;
     let (mut beats, mut downs) = (Vec::new(), Vec::new());
-    let chords = [[261.6, 329.6, 392.0], [349.2, 440.0, 523.3], [392.0, 493.9, 587.3], [220.0, 261.6, 329.6]];
+    let chords = [
+        [261.6, 329.6, 392.0],
+        [349.2, 440.0, 523.3],
+        [392.0, 493.9, 587.3],
+        [220.0, 261.6, 329.6],
+    ];
     let mut k = 0usize;
     loop {
         let t = t0 + k as f64 * period;
@@ -404,9 +577,17 @@ fn click_track(sr: u32, seconds: f64, bpm: f64, meter: usize, t0: f64) -> (Vec<f
         let kick = if accent { 0.8 } else { 0.3 };
         for i in 0..((period * sr as f64) as usize).min(n - start) {
             let s = i as f64 / sr as f64;
-            let burst = if s < 0.03 { 0.5 * rng.next() * (-s / 0.005).exp() as f32 } else { 0.0 };
-            let bass = (kick * (2.0 * std::f64::consts::PI * 60.0 * s).sin() * (-s / 0.08).exp()) as f32;
-            let pad: f32 = chord.iter().map(|f| (0.05 * (2.0 * std::f64::consts::PI * f * s).sin()) as f32).sum();
+            let burst = if s < 0.03 {
+                0.5 * rng.next() * (-s / 0.005).exp() as f32
+            } else {
+                0.0
+            };
+            let bass =
+                (kick * (2.0 * std::f64::consts::PI * 60.0 * s).sin() * (-s / 0.08).exp()) as f32;
+            let pad: f32 = chord
+                .iter()
+                .map(|f| (0.05 * (2.0 * std::f64::consts::PI * f * s).sin()) as f32)
+                .sum();
             y[start + i] += burst + bass + pad;
         }
         k += 1;
@@ -415,14 +596,19 @@ fn click_track(sr: u32, seconds: f64, bpm: f64, meter: usize, t0: f64) -> (Vec<f
 }
 
 fn interleave(mono: &[f32], channels: u16) -> Vec<f32> {
-    mono.iter().flat_map(|&v| std::iter::repeat_n(v, channels as usize)).collect()
+    mono.iter()
+        .flat_map(|&v| std::iter::repeat_n(v, channels as usize))
+        .collect()
 }
 
 fn assert_finite_features(a: &DecodedAudio, what: &str) {
     let n = (a.duration_s * 25.0).ceil() as usize + 1;
     let dr = features::dance_revolution(a, 25.0, n).unwrap_or_else(|e| panic!("{what}: {e}"));
     assert_eq!(dr.dim(), (n, 438), "{what}");
-    assert!(dr.iter().all(|v| v.is_finite()), "{what}: NaN/inf in DanceRevolution features");
+    assert!(
+        dr.iter().all(|v| v.is_finite()),
+        "{what}: NaN/inf in DanceRevolution features"
+    );
     for (name, x) in [
         ("dancenet", features::dancenet(a, 25.0, 0.0, n)),
         ("keypose", features::keypose(a, 25.0, 0.0, n)),
@@ -452,14 +638,22 @@ fn dc_offset_and_clipping_keep_the_beat() {
     let (y, truth, _) = click_track(44_100, 12.0, 120.0, 4, 0.25);
     for (name, signal) in [
         ("dc", y.iter().map(|v| v * 0.5 + 0.4).collect::<Vec<f32>>()),
-        ("clipped", y.iter().map(|v| (v * 20.0).clamp(-1.0, 1.0)).collect::<Vec<f32>>()),
+        (
+            "clipped",
+            y.iter()
+                .map(|v| (v * 20.0).clamp(-1.0, 1.0))
+                .collect::<Vec<f32>>(),
+        ),
         ("dc-only", vec![0.5f32; 44_100 * 3]),
     ] {
         let p = dir.path().join(format!("{name}.wav"));
         write_wav(&p, 44_100, 1, &signal, WavKind::Pcm16);
         let a = audio::decode_path(&p).expect("decodes");
         let an = audio::analyze(&a).expect("analyze");
-        assert!(an.tempo_bpm.is_finite() && an.beat_times.iter().all(|t| t.is_finite()), "{name}");
+        assert!(
+            an.tempo_bpm.is_finite() && an.beat_times.iter().all(|t| t.is_finite()),
+            "{name}"
+        );
         if name != "dc-only" {
             let f = f_measure(&truth, &an.beat_times, 0.07);
             eprintln!("{name}: tempo {:.1}, beat F vs truth {f:.3}", an.tempo_bpm);
@@ -476,14 +670,24 @@ fn mono_stereo_and_5_1_downmix_to_the_same_signal() {
     let mut reference: Option<Vec<f32>> = None;
     for channels in [1u16, 2, 6] {
         let p = dir.path().join(format!("c{channels}.wav"));
-        write_wav(&p, 48_000, channels, &interleave(&y, channels), WavKind::Float32);
+        write_wav(
+            &p,
+            48_000,
+            channels,
+            &interleave(&y, channels),
+            WavKind::Float32,
+        );
         let a = audio::decode_path(&p).expect("decodes");
         assert_eq!(a.channels, channels);
         assert_eq!(a.samples.len(), y.len());
         match &reference {
             None => reference = Some(a.samples.clone()),
             Some(r) => {
-                let d = r.iter().zip(&a.samples).map(|(x, z)| (x - z).abs()).fold(0.0f32, f32::max);
+                let d = r
+                    .iter()
+                    .zip(&a.samples)
+                    .map(|(x, z)| (x - z).abs())
+                    .fold(0.0f32, f32::max);
                 assert!(d < 1e-6, "{channels} channels differ by {d}");
             }
         }
@@ -491,7 +695,9 @@ fn mono_stereo_and_5_1_downmix_to_the_same_signal() {
     }
     // A 5.1 file whose channels differ downmixes to their mean (librosa `to_mono`).
     let p = dir.path().join("mixed.wav");
-    let inter: Vec<f32> = (0..1000).flat_map(|i| (0..6).map(move |c| (c as f32 - 2.5) * 0.1 + (i as f32 * 0.01).sin() * 0.1)).collect();
+    let inter: Vec<f32> = (0..1000)
+        .flat_map(|i| (0..6).map(move |c| (c as f32 - 2.5) * 0.1 + (i as f32 * 0.01).sin() * 0.1))
+        .collect();
     write_wav(&p, 48_000, 6, &inter, WavKind::Float32);
     let a = audio::decode_path(&p).expect("decodes");
     for (i, v) in a.samples.iter().enumerate() {
@@ -503,7 +709,9 @@ fn mono_stereo_and_5_1_downmix_to_the_same_signal() {
 #[test]
 fn sample_rates_from_8_to_96_khz() {
     let dir = tempfile::tempdir().expect("tempdir");
-    for sr in [8_000u32, 11_025, 16_000, 22_050, 32_000, 44_100, 48_000, 88_200, 96_000] {
+    for sr in [
+        8_000u32, 11_025, 16_000, 22_050, 32_000, 44_100, 48_000, 88_200, 96_000,
+    ] {
         let (y, truth, _) = click_track(sr, 10.0, 120.0, 4, 0.25);
         let p = dir.path().join(format!("sr{sr}.wav"));
         write_wav(&p, sr, 2, &interleave(&y, 2), WavKind::Pcm16);
@@ -517,7 +725,10 @@ fn sample_rates_from_8_to_96_khz() {
         // Resampled while decoding: same length as resampling afterwards.
         let b = audio::decode_path_at(&p, Some(12_800)).expect("decodes at 12.8 kHz");
         assert_eq!(b.sample_rate, 12_800);
-        assert_eq!(b.samples.len(), (y.len() as u64 * 12_800).div_ceil(sr as u64) as usize);
+        assert_eq!(
+            b.samples.len(),
+            (y.len() as u64 * 12_800).div_ceil(sr as u64) as usize
+        );
         assert_finite_features(&b, &format!("{sr} Hz"));
     }
 }
@@ -548,22 +759,55 @@ fn bad_input_gives_clear_errors() {
     let dir = tempfile::tempdir().expect("tempdir");
     let p = dir.path().join("garbage.mp3");
     std::fs::write(&p, b"this is not audio at all, just some text pretending").expect("write");
-    assert!(matches!(audio::decode_path(&p), Err(audio::AudioError::Undecodable(_))));
+    assert!(matches!(
+        audio::decode_path(&p),
+        Err(audio::AudioError::Undecodable(_))
+    ));
     let p = dir.path().join("empty.wav");
     write_wav(&p, 44_100, 2, &[], WavKind::Pcm16);
     let e = audio::decode_path(&p);
-    assert!(matches!(e, Err(audio::AudioError::Empty) | Err(audio::AudioError::Undecodable(_))), "{e:?}");
+    assert!(
+        matches!(
+            e,
+            Err(audio::AudioError::Empty) | Err(audio::AudioError::Undecodable(_))
+        ),
+        "{e:?}"
+    );
     let p = dir.path().join("nan.wav");
     write_wav(&p, 44_100, 1, &[0.0, f32::NAN, 0.1, 0.2], WavKind::Float32);
-    assert!(matches!(audio::decode_path(&p), Err(audio::AudioError::NonFinite)));
-    assert!(matches!(audio::decode_path(&dir.path().join("missing.wav")), Err(audio::AudioError::Io(_))));
+    assert!(matches!(
+        audio::decode_path(&p),
+        Err(audio::AudioError::NonFinite)
+    ));
+    assert!(matches!(
+        audio::decode_path(&dir.path().join("missing.wav")),
+        Err(audio::AudioError::Io(_))
+    ));
     let p = dir.path().join("long.wav");
     write_wav(&p, 4_000, 1, &vec![0.0; 4_000 * 60 * 31], WavKind::Pcm16);
-    assert!(matches!(audio::decode_path(&p), Err(audio::AudioError::TooLong { .. })));
-    let a = DecodedAudio { format: audio::AudioFormat::Wav, sample_rate: 44_100, channels: 1, duration_s: 1.0, samples: vec![0.0; 44_100] };
-    assert!(matches!(features::dance_revolution(&a, 25.3, 10), Err(audio::AudioError::InvalidParameter(_))));
-    assert!(matches!(features::dancenet(&a, 25.0, -1.0, 10), Err(audio::AudioError::InvalidParameter(_))));
-    assert!(matches!(features::tsmt(&a, 25.0, 0.0, 0), Err(audio::AudioError::InvalidParameter(_))));
+    assert!(matches!(
+        audio::decode_path(&p),
+        Err(audio::AudioError::TooLong { .. })
+    ));
+    let a = DecodedAudio {
+        format: audio::AudioFormat::Wav,
+        sample_rate: 44_100,
+        channels: 1,
+        duration_s: 1.0,
+        samples: vec![0.0; 44_100],
+    };
+    assert!(matches!(
+        features::dance_revolution(&a, 25.3, 10),
+        Err(audio::AudioError::InvalidParameter(_))
+    ));
+    assert!(matches!(
+        features::dancenet(&a, 25.0, -1.0, 10),
+        Err(audio::AudioError::InvalidParameter(_))
+    ));
+    assert!(matches!(
+        features::tsmt(&a, 25.0, 0.0, 0),
+        Err(audio::AudioError::InvalidParameter(_))
+    ));
 }
 
 #[test]
@@ -580,7 +824,10 @@ fn fifteen_minute_song_streams_and_stays_finite() {
     let x = features::dance_revolution(&a, 25.0, n).expect("features");
     assert_eq!(x.dim(), (n, 438));
     assert!(x.iter().all(|v| v.is_finite()));
-    let beats: Vec<f64> = (0..n).filter(|&i| x[[i, 437]] > 0.5).map(|i| i as f64 / 25.0).collect();
+    let beats: Vec<f64> = (0..n)
+        .filter(|&i| x[[i, 437]] > 0.5)
+        .map(|i| i as f64 / 25.0)
+        .collect();
     let f = f_measure(&truth, &beats, 0.07);
     eprintln!("15 min: {} beats, F vs truth {f:.3}", beats.len());
     assert!(f > 0.9, "beat F {f}");
@@ -601,15 +848,28 @@ fn feature_frame_i_is_time_i_over_fps() {
         for i in 0..(sr as usize / 50) {
             y[at + i] = rng.next() * (-(i as f32) / (sr as f32 * 0.003)).exp();
         }
-        let a = DecodedAudio { format: audio::AudioFormat::Wav, sample_rate: sr, channels: 1, duration_s: 4.0, samples: y };
+        let a = DecodedAudio {
+            format: audio::AudioFormat::Wav,
+            sample_rate: sr,
+            channels: 1,
+            duration_s: 4.0,
+            samples: y,
+        };
         let n = (4.0 * fps) as usize;
         let x = features::dancenet(&a, fps, 0.0, n).expect("features");
-        let peak = (0..n).max_by(|&i, &j| x[[i, 0]].total_cmp(&x[[j, 0]])).unwrap_or(0);
+        let peak = (0..n)
+            .max_by(|&i, &j| x[[i, 0]].total_cmp(&x[[j, 0]]))
+            .unwrap_or(0);
         let want = (2.0 * fps) as usize;
-        eprintln!("{fps} fps (hop {}, {} Hz): onset peak at row {peak}, click at row {want}", grid.hop, sr);
+        eprintln!(
+            "{fps} fps (hop {}, {} Hz): onset peak at row {peak}, click at row {want}",
+            grid.hop, sr
+        );
         assert!(peak.abs_diff(want) <= 1, "{fps} fps: peak {peak} vs {want}");
         let shifted = features::dancenet(&a, fps, 1.0, n).expect("features");
-        let peak2 = (0..n).max_by(|&i, &j| shifted[[i, 0]].total_cmp(&shifted[[j, 0]])).unwrap_or(0);
+        let peak2 = (0..n)
+            .max_by(|&i, &j| shifted[[i, 0]].total_cmp(&shifted[[j, 0]]))
+            .unwrap_or(0);
         assert_eq!(peak2 + fps as usize, peak, "{fps} fps: start offset");
     }
 }
@@ -619,11 +879,20 @@ fn downbeats_on_synthetic_bars() {
     // Accented first beats (louder kick, chord change) in 4/4 and 3/4: the method must find
     // the meter and phase. This is the only ground truth we have; see the report for limits.
     let mut scores = Vec::new();
-    for (meter, bpm, t0) in [(4usize, 120.0, 0.5), (3, 90.0, 0.4), (4, 100.0, 1.1), (3, 150.0, 0.2)] {
+    for (meter, bpm, t0) in [
+        (4usize, 120.0, 0.5),
+        (3, 90.0, 0.4),
+        (4, 100.0, 1.1),
+        (3, 150.0, 0.2),
+    ] {
         let (y, _, downs) = click_track(22_050, 30.0, bpm, meter, t0);
         let an = choreo::audio::rhythm::analyze_mono(&y, 22_050, 512).expect("analyze");
         let f = f_measure(&downs, &an.downbeat_times, 0.07);
-        eprintln!("{meter}/4 at {bpm} BPM: downbeat F {f:.3} ({} found, {} true)", an.downbeat_times.len(), downs.len());
+        eprintln!(
+            "{meter}/4 at {bpm} BPM: downbeat F {f:.3} ({} found, {} true)",
+            an.downbeat_times.len(),
+            downs.len()
+        );
         scores.push(f);
     }
     let mean = scores.iter().sum::<f64>() / scores.len() as f64;
@@ -638,7 +907,10 @@ fn downbeat_meter_matches_the_dance_style_on_real_songs() {
     let data = root().join("../shared/data/dance-with-melody");
     if !data.is_dir() {
         if std::env::var("CI").as_deref() == Ok("true") {
-            panic!("{} is missing: the downbeat meter test needs ../shared (CI=true)", data.display());
+            panic!(
+                "{} is missing: the downbeat meter test needs ../shared (CI=true)",
+                data.display()
+            );
         }
         eprintln!("NOTICE: skipping: {} not found", data.display());
         return;
@@ -649,26 +921,49 @@ fn downbeat_meter_matches_the_dance_style_on_real_songs() {
         .filter(|p| p.join("audio.mp3").is_file())
         .collect();
     dirs.sort();
-    assert!(dirs.len() >= 40, "expected the 43 songs of dance-with-melody, found {}", dirs.len());
+    assert!(
+        dirs.len() >= 40,
+        "expected the 43 songs of dance-with-melody, found {}",
+        dirs.len()
+    );
     // (right, total) for 3/4 and 4/4 songs.
     let mut tally = [(0usize, 0usize); 2];
     for dir in &dirs {
-        let name = dir.file_name().and_then(|n| n.to_str()).unwrap_or_default().to_string();
+        let name = dir
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default()
+            .to_string();
         let want = if name.contains("_W_") { 3 } else { 4 };
         let audio = audio::decode_path(&dir.join("audio.mp3")).expect("decode");
         let an = audio::analyze(&audio).expect("analyze");
         // Beats per bar: the median count of beats between consecutive downbeats.
-        let index = |t: f64| an.beat_times.iter().position(|&b| (b - t).abs() < 1e-6).expect("downbeats are beats");
-        let mut gaps: Vec<usize> = an.downbeat_times.windows(2).map(|w| index(w[1]) - index(w[0])).collect();
+        let index = |t: f64| {
+            an.beat_times
+                .iter()
+                .position(|&b| (b - t).abs() < 1e-6)
+                .expect("downbeats are beats")
+        };
+        let mut gaps: Vec<usize> = an
+            .downbeat_times
+            .windows(2)
+            .map(|w| index(w[1]) - index(w[0]))
+            .collect();
         gaps.sort_unstable();
         let meter = gaps.get(gaps.len() / 2).copied().unwrap_or(0);
         let slot = &mut tally[usize::from(want == 4)];
         slot.1 += 1;
         slot.0 += usize::from(meter == want);
-        eprintln!("{name}: {:.1} BPM, {meter} beats per bar (style says {want})", an.tempo_bpm);
+        eprintln!(
+            "{name}: {:.1} BPM, {meter} beats per bar (style says {want})",
+            an.tempo_bpm
+        );
     }
     let share = |(right, total): (usize, usize)| right as f64 / total.max(1) as f64;
-    eprintln!("meter right: 3/4 {}/{}, 4/4 {}/{}", tally[0].0, tally[0].1, tally[1].0, tally[1].1);
+    eprintln!(
+        "meter right: 3/4 {}/{}, 4/4 {}/{}",
+        tally[0].0, tally[0].1, tally[1].0, tally[1].1
+    );
     // Always answering 3 would score 30/43 overall, so each meter is held to its own bar.
     assert!(share(tally[0]) >= 0.85, "3/4 songs: {:?}", tally[0]);
     assert!(share(tally[1]) >= 0.85, "4/4 songs: {:?}", tally[1]);

@@ -6,7 +6,9 @@
 mod common_models;
 
 use choreo::audio::{self, DecodedAudio};
-use choreo::models::{Cancelled, DanceModel, DanceStyle, GenerateRequest, ModelError, ModelId, Progress, Registry};
+use choreo::models::{
+    Cancelled, DanceModel, DanceStyle, GenerateRequest, ModelError, ModelId, Progress, Registry,
+};
 use choreo::motion::validate::song_frames;
 use choreo::motion::{KeyPose, Motion, MOTION_FPS, NUM_JOINTS};
 use choreo::stage::Stage;
@@ -31,26 +33,43 @@ fn registry() -> &'static Registry {
 fn song() -> &'static DecodedAudio {
     static SONG: OnceLock<DecodedAudio> = OnceLock::new();
     SONG.get_or_init(|| {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/audio/trumpet_loop_90bpm.ogg");
-        assert!(path.is_file(), "{} is missing: the model contract dances a real song (CI={})", path.display(), std::env::var("CI").unwrap_or_default());
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../shared/audio/trumpet_loop_90bpm.ogg");
+        assert!(
+            path.is_file(),
+            "{} is missing: the model contract dances a real song (CI={})",
+            path.display(),
+            std::env::var("CI").unwrap_or_default()
+        );
         audio::decode_path(&path).expect("the song decodes")
     })
 }
 
 fn model(id: &str) -> Arc<dyn DanceModel> {
-    registry().get(&ModelId(id.into())).unwrap_or_else(|| panic!("{id} is not served"))
+    registry()
+        .get(&ModelId(id.into()))
+        .unwrap_or_else(|| panic!("{id} is not served"))
 }
 
 fn dance(m: &dyn DanceModel, req: &GenerateRequest<'_>) -> Motion {
-    m.generate(req, &mut Quiet).unwrap_or_else(|e| panic!("{}: {e}", m.info().id.0)).motion
+    m.generate(req, &mut Quiet)
+        .unwrap_or_else(|e| panic!("{}: {e}", m.info().id.0))
+        .motion
 }
 
 fn dances_every_frame_of_the_song(id: &str) {
     let m = model(id);
     let motion = dance(m.as_ref(), &GenerateRequest::plain(song(), 1));
     assert_eq!(motion.fps, MOTION_FPS, "{id}");
-    assert_eq!(motion.positions.dim(), (song_frames(song().duration_s, MOTION_FPS), NUM_JOINTS, 3), "{id}");
-    assert!(motion.positions.iter().all(|v| v.is_finite()), "{id}: non-finite positions");
+    assert_eq!(
+        motion.positions.dim(),
+        (song_frames(song().duration_s, MOTION_FPS), NUM_JOINTS, 3),
+        "{id}"
+    );
+    assert!(
+        motion.positions.iter().all(|v| v.is_finite()),
+        "{id}: non-finite positions"
+    );
 }
 
 fn same_seed_same_dance_other_seed_another(id: &str) {
@@ -60,21 +79,65 @@ fn same_seed_same_dance_other_seed_another(id: &str) {
     let other = dance(m.as_ref(), &GenerateRequest::plain(song(), 8));
     assert_eq!(a.positions, again.positions, "{id}: seed 7 twice");
     let apart = choreo::metrics::physical::seed_distance_m(&a, &other);
-    assert!(apart > 0.05, "{id}: seeds 7 and 8 dance {apart:.3} m apart (root-relative)");
+    assert!(
+        apart > 0.05,
+        "{id}: seeds 7 and 8 dance {apart:.3} m apart (root-relative)"
+    );
 }
 
 fn refuses_what_it_does_not_take(id: &str) {
     let m = model(id);
     let c = m.info().capabilities;
-    let keys = [KeyPose { time_s: 1.0, joints: vec![[0.0; 3]; NUM_JOINTS] }];
-    let seed_motion = Motion { fps: MOTION_FPS, positions: ndarray::Array3::zeros((10, NUM_JOINTS, 3)) };
+    let keys = [KeyPose {
+        time_s: 1.0,
+        joints: vec![[0.0; 3]; NUM_JOINTS],
+    }];
+    let seed_motion = Motion {
+        fps: MOTION_FPS,
+        positions: ndarray::Array3::zeros((10, NUM_JOINTS, 3)),
+    };
     let plain = GenerateRequest::plain(song(), 1);
     let cases: [(bool, &str, GenerateRequest<'_>); 5] = [
-        (c.key_poses, "key poses", GenerateRequest { key_poses: &keys, ..plain }),
-        (c.seed_motion, "a seed motion", GenerateRequest { seed_motion: Some(&seed_motion), ..plain }),
-        (c.style, "a style", GenerateRequest { style: Some(DanceStyle::Waltz), ..plain }),
-        (c.temperature, "a temperature", GenerateRequest { temperature: Some(1.0), ..plain }),
-        (c.top_k, "top_k", GenerateRequest { top_k: Some(5), ..plain }),
+        (
+            c.key_poses,
+            "key poses",
+            GenerateRequest {
+                key_poses: &keys,
+                ..plain
+            },
+        ),
+        (
+            c.seed_motion,
+            "a seed motion",
+            GenerateRequest {
+                seed_motion: Some(&seed_motion),
+                ..plain
+            },
+        ),
+        (
+            c.style,
+            "a style",
+            GenerateRequest {
+                style: Some(DanceStyle::Waltz),
+                ..plain
+            },
+        ),
+        (
+            c.temperature,
+            "a temperature",
+            GenerateRequest {
+                temperature: Some(1.0),
+                ..plain
+            },
+        ),
+        (
+            c.top_k,
+            "top_k",
+            GenerateRequest {
+                top_k: Some(5),
+                ..plain
+            },
+        ),
     ];
     let mut refused = 0;
     for (takes, what, req) in cases {
@@ -125,7 +188,13 @@ contract! {
 fn the_contract_covers_every_served_model() {
     let mut served: Vec<String> = registry().list().into_iter().map(|i| i.id.0).collect();
     served.sort();
-    let mut covered: Vec<String> = common_models::SERVED.iter().map(|s| s.to_string()).collect();
+    let mut covered: Vec<String> = common_models::SERVED
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
     covered.sort();
-    assert_eq!(served, covered, "a new model needs a row in contract! and common/models.rs");
+    assert_eq!(
+        served, covered,
+        "a new model needs a row in contract! and common/models.rs"
+    );
 }

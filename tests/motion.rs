@@ -41,7 +41,8 @@ fn rigid_fit_error_over_every_dance() {
     for id in &ids {
         let dance = ds.load(id).expect("load");
         // As `choreo export ID --format bvh` fits it.
-        let m = choreo::motion::export::prepare_with_root(&dance.motion, dance.center.view()).expect("ik");
+        let m = choreo::motion::export::prepare_with_root(&dance.motion, dance.center.view())
+            .expect("ik");
         let f = RotationFlips::of(&m);
         eprintln!(
             "{id}: rotation flips > 60° on {:.2} % of steps, > 90° on {:.2} %, max {:.0}°, worst {:?} {:?}",
@@ -53,12 +54,23 @@ fn rigid_fit_error_over_every_dance() {
         );
         // Steps on which some joint turns as far as the rig lets it (55° at 25 fps): where the
         // data's own bones jump and the positions leave it.
-        at_limit += m.rotations.windows(2).filter(|w| w[0].iter().zip(&w[1]).any(|(a, b)| a.angle_to(b).to_degrees() > 54.9)).count();
+        at_limit += m
+            .rotations
+            .windows(2)
+            .filter(|w| {
+                w[0].iter()
+                    .zip(&w[1])
+                    .any(|(a, b)| a.angle_to(b).to_degrees() > 54.9)
+            })
+            .count();
         flips.push(f);
         // The root trajectory is carried exactly.
         for (t, r) in m.root_translation.iter().enumerate() {
             for c in 0..3 {
-                assert!((r[c] as f32 - dance.center[[t, c]]).abs() < 1e-6, "root moved");
+                assert!(
+                    (r[c] as f32 - dance.center[[t, c]]).abs() < 1e-6,
+                    "root moved"
+                );
             }
         }
         let fitted = m.joint_positions();
@@ -88,8 +100,12 @@ fn rigid_fit_error_over_every_dance() {
     }
     let mut means: Vec<f32> = per_dance_mean.iter().map(|(_, m)| *m).collect();
     let p95_dance = percentile(&mut means, 95.0);
-    eprintln!("per-dance mean error: p50 {:.2} cm, p95 {:.2} cm, max {:.2} cm",
-        percentile(&mut means, 50.0) * 100.0, p95_dance * 100.0, percentile(&mut means, 100.0) * 100.0);
+    eprintln!(
+        "per-dance mean error: p50 {:.2} cm, p95 {:.2} cm, max {:.2} cm",
+        percentile(&mut means, 50.0) * 100.0,
+        p95_dance * 100.0,
+        percentile(&mut means, 100.0) * 100.0
+    );
     let pooled = RotationFlips::pooled(flips.iter());
     let worst = flips.iter().map(|f| f.share_over_60).fold(0.0, f64::max);
     eprintln!(
@@ -103,9 +119,16 @@ fn rigid_fit_error_over_every_dance() {
     );
     // Issue 26: no joint of an export turns past 60° between two frames on more than 0.1 % of
     // the steps of any dance (1.66 % pooled, 7.17 % on DANCE_C_8, before the twist was carried).
-    assert!(worst <= 0.001, "a dance's rotations flip on {:.3} % of its steps", 100.0 * worst);
+    assert!(
+        worst <= 0.001,
+        "a dance's rotations flip on {:.3} % of its steps",
+        100.0 * worst
+    );
     // The mean per-joint error of a dance, 95th percentile over the 43 dances.
-    assert!(p95_dance < 0.03, "per-dance mean rigid-fit error p95 {p95_dance} m");
+    assert!(
+        p95_dance < 0.03,
+        "per-dance mean rigid-fit error p95 {p95_dance} m"
+    );
     // Half of all joint-frames within 2 cm: the fit follows the data, not just on average.
     assert!(p50 < 0.02, "median rigid-fit error {p50} m");
 }
@@ -123,7 +146,10 @@ fn glb_world_positions(bytes: &[u8]) -> (Vec<String>, Vec<Vec<[f64; 3]>>) {
         let view = &root.buffer_views[acc.buffer_view.expect("view").value()];
         let off = view.byte_offset.map_or(0, |o| o.0 as usize);
         let len = view.byte_length.0 as usize;
-        bin[off..off + len].chunks(4).map(|c| f32::from_le_bytes(c.try_into().unwrap())).collect()
+        bin[off..off + len]
+            .chunks(4)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()))
+            .collect()
     };
     let n = root.nodes.len();
     let mut parent = vec![None; n];
@@ -142,8 +168,12 @@ fn glb_world_positions(bytes: &[u8]) -> (Vec<String>, Vec<Vec<[f64; 3]>>) {
         t_len = root.accessors[s.input.value()].count.0 as usize;
         let node = ch.target.node.value();
         match ch.target.path {
-            gltf_json::validation::Checked::Valid(gltf_json::animation::Property::Rotation) => rot_tracks[node] = Some(out),
-            gltf_json::validation::Checked::Valid(gltf_json::animation::Property::Translation) => trans_tracks[node] = Some(out),
+            gltf_json::validation::Checked::Valid(gltf_json::animation::Property::Rotation) => {
+                rot_tracks[node] = Some(out)
+            }
+            gltf_json::validation::Checked::Valid(gltf_json::animation::Property::Translation) => {
+                trans_tracks[node] = Some(out)
+            }
             _ => panic!("unexpected channel"),
         }
     }
@@ -172,7 +202,10 @@ fn glb_world_positions(bytes: &[u8]) -> (Vec<String>, Vec<Vec<[f64; 3]>>) {
                 None => node.rotation.map_or([0.0, 0.0, 0.0, 1.0], |r| r.0),
             };
             let q = UnitQuaternion::from_quaternion(Quaternion::new(
-                f64::from(q[3]), f64::from(q[0]), f64::from(q[1]), f64::from(q[2]),
+                f64::from(q[3]),
+                f64::from(q[0]),
+                f64::from(q[1]),
+                f64::from(q[2]),
             ));
             match parent[j] {
                 None => {
@@ -187,7 +220,11 @@ fn glb_world_positions(bytes: &[u8]) -> (Vec<String>, Vec<Vec<[f64; 3]>>) {
         }
         frames.push(pos.iter().map(|p| [p.x, p.y, p.z]).collect());
     }
-    let names = root.nodes.iter().map(|n| n.name.clone().unwrap_or_default()).collect();
+    let names = root
+        .nodes
+        .iter()
+        .map(|n| n.name.clone().unwrap_or_default())
+        .collect();
     (names, frames)
 }
 
@@ -196,7 +233,8 @@ fn glb_world_positions(bytes: &[u8]) -> (Vec<String>, Vec<Vec<[f64; 3]>>) {
 fn formats_disagree_m(m: &rig::RigMotion) -> (f64, f64) {
     use choreo::motion::bvh::Bvh;
     use choreo::motion::export::{self, MotionJson};
-    let json: MotionJson = serde_json::from_str(&export::json_string(m).expect("json")).expect("parse json");
+    let json: MotionJson =
+        serde_json::from_str(&export::json_string(m).expect("json")).expect("parse json");
     let t_len = m.num_frames();
     assert_eq!(json.num_frames, t_len);
     assert_eq!(json.positions.len(), t_len);
@@ -210,9 +248,14 @@ fn formats_disagree_m(m: &rig::RigMotion) -> (f64, f64) {
     let mut worst_bvh = 0.0f64;
     for t in 0..t_len {
         for (j, name) in json.joint_names.iter().enumerate() {
-            let k = bvh.names.iter().position(|n| n == name).expect("joint in BVH");
+            let k = bvh
+                .names
+                .iter()
+                .position(|n| n == name)
+                .expect("joint in BVH");
             for c in 0..3 {
-                worst_bvh = worst_bvh.max((bw[[t, k, c]] - f64::from(json.positions[t][j][c])).abs());
+                worst_bvh =
+                    worst_bvh.max((bw[[t, k, c]] - f64::from(json.positions[t][j][c])).abs());
             }
         }
     }
@@ -241,12 +284,23 @@ fn bvh_json_and_glb_agree_within_a_millimetre() {
     let m = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
     // As a dataset dance is exported, and as a generated one with key poses is (least-squares IK
     // around the joints' weighted centroid, rig fitted to the key frames).
-    let anchored = export::prepare_anchored(&dance.motion, &[100, 458, 817, 1175, 1534]).expect("prepare anchored");
+    let anchored = export::prepare_anchored(&dance.motion, &[100, 458, 817, 1175, 1534])
+        .expect("prepare anchored");
     for (what, m) in [("dataset export", &m), ("anchored export", &anchored)] {
         let (worst_bvh, worst_glb) = formats_disagree_m(m);
-        eprintln!("{what}: max coordinate difference vs JSON: BVH {:.4} mm, glb {:.4} mm", worst_bvh * 1e3, worst_glb * 1e3);
-        assert!(worst_bvh < 1e-3, "{what}: BVH differs from JSON by {worst_bvh} m");
-        assert!(worst_glb < 1e-3, "{what}: glb differs from JSON by {worst_glb} m");
+        eprintln!(
+            "{what}: max coordinate difference vs JSON: BVH {:.4} mm, glb {:.4} mm",
+            worst_bvh * 1e3,
+            worst_glb * 1e3
+        );
+        assert!(
+            worst_bvh < 1e-3,
+            "{what}: BVH differs from JSON by {worst_bvh} m"
+        );
+        assert!(
+            worst_glb < 1e-3,
+            "{what}: glb differs from JSON by {worst_glb} m"
+        );
     }
 
     // The BVH maps back onto the 23 joints, and its root is the body centre exactly.
@@ -254,7 +308,10 @@ fn bvh_json_and_glb_agree_within_a_millimetre() {
     let back = bvh.to_motion().expect("to motion");
     let e = joint_errors(back.positions.view(), dance.motion.positions.view());
     let mean = e.mean().unwrap_or(f32::NAN);
-    assert!(mean < 0.03, "BVH read back is {mean} m from the data on average");
+    assert!(
+        mean < 0.03,
+        "BVH read back is {mean} m from the data on average"
+    );
     let rm = bvh.to_rig_motion().expect("rig motion");
     for t in 0..t_len {
         for c in 0..3 {
@@ -265,18 +322,29 @@ fn bvh_json_and_glb_agree_within_a_millimetre() {
 
 /// Makes sure Debian's `blender` is installed (installing it and python3-numpy if missing).
 fn ensure_blender() {
-    let ok = |cmd: &mut std::process::Command| cmd.output().map(|o| o.status.success()).unwrap_or(false);
+    let ok =
+        |cmd: &mut std::process::Command| cmd.output().map(|o| o.status.success()).unwrap_or(false);
     if ok(std::process::Command::new("blender").arg("--version")) {
         return;
     }
     eprintln!("blender missing: apt-get install -y blender python3-numpy (large, takes minutes)");
     let _ = std::process::Command::new("apt-get").arg("update").status();
     let status = std::process::Command::new("apt-get")
-        .args(["install", "-y", "-o", "DPkg::Lock::Timeout=1200", "blender", "python3-numpy"])
+        .args([
+            "install",
+            "-y",
+            "-o",
+            "DPkg::Lock::Timeout=1200",
+            "blender",
+            "python3-numpy",
+        ])
         .status()
         .expect("run apt-get");
     assert!(status.success(), "apt-get install blender failed");
-    assert!(ok(std::process::Command::new("blender").arg("--version")), "blender still missing");
+    assert!(
+        ok(std::process::Command::new("blender").arg("--version")),
+        "blender still missing"
+    );
 }
 
 #[test]
@@ -288,35 +356,71 @@ fn blender_imports_bvh_and_glb_of_a_dataset_dance() {
     // As a dataset dance is exported, and as a generated dance with key poses is (least-squares
     // IK, rig fitted to the key frames).
     let plain = export::prepare_with_root(&dance.motion, dance.center.view()).expect("prepare");
-    let anchored = export::prepare_anchored(&dance.motion, &[100, 458, 817, 1175, 1534]).expect("prepare anchored");
+    let anchored = export::prepare_anchored(&dance.motion, &[100, 458, 817, 1175, 1534])
+        .expect("prepare anchored");
     for (what, m) in [("dataset export", &plain), ("anchored export", &anchored)] {
         let dir = tempfile::tempdir().expect("tempdir");
         let paths = export::write_all_rig(m, dir.path()).expect("export");
         let result = dir.path().join("result.json");
         let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/blender/check_import.py");
         let out = std::process::Command::new("blender")
-            .args(["-b", "--factory-startup", "--python-exit-code", "1", "--python"])
+            .args([
+                "-b",
+                "--factory-startup",
+                "--python-exit-code",
+                "1",
+                "--python",
+            ])
             .arg(&script)
             .arg("--")
             .args([&paths.bvh, &paths.glb, &paths.json, &result])
             .output()
             .expect("run blender");
-        let log = String::from_utf8_lossy(&out.stdout).to_string() + &String::from_utf8_lossy(&out.stderr);
+        let log = String::from_utf8_lossy(&out.stdout).to_string()
+            + &String::from_utf8_lossy(&out.stderr);
         assert!(out.status.success(), "{what}: blender failed:\n{log}");
-        let r: serde_json::Value = serde_json::from_slice(&std::fs::read(&result).expect("result")).expect("result json");
-        eprintln!("{what}: {}", serde_json::to_string_pretty(&r).unwrap_or_default());
+        let r: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(&result).expect("result")).expect("result json");
+        eprintln!(
+            "{what}: {}",
+            serde_json::to_string_pretty(&r).unwrap_or_default()
+        );
         let t_len = dance.motion.num_frames() as u64;
         for kind in ["bvh", "glb"] {
             let k = &r[kind];
-            assert!(k.get("error").is_none(), "{what}: {kind} import raised: {}", k["error"]);
-            assert_eq!(k["status"], serde_json::json!(["FINISHED"]), "{what}: {kind} import status");
-            assert_eq!(k["frames"].as_u64(), Some(t_len), "{what}: {kind} frame count");
-            assert_eq!(k["joints"].as_u64(), Some(rig::RIG_JOINTS as u64), "{what}: {kind} joint count");
+            assert!(
+                k.get("error").is_none(),
+                "{what}: {kind} import raised: {}",
+                k["error"]
+            );
+            assert_eq!(
+                k["status"],
+                serde_json::json!(["FINISHED"]),
+                "{what}: {kind} import status"
+            );
+            assert_eq!(
+                k["frames"].as_u64(),
+                Some(t_len),
+                "{what}: {kind} frame count"
+            );
+            assert_eq!(
+                k["joints"].as_u64(),
+                Some(rig::RIG_JOINTS as u64),
+                "{what}: {kind} joint count"
+            );
             for t in [0, t_len / 2, t_len - 1] {
                 let c = &k["checks"][t.to_string()];
-                assert_eq!(c["missing"], serde_json::json!([]), "{what}: {kind} frame {t}: joints missing");
+                assert_eq!(
+                    c["missing"],
+                    serde_json::json!([]),
+                    "{what}: {kind} frame {t}: joints missing"
+                );
                 let e = c["max_error_m"].as_f64().expect("error");
-                assert!(e < 0.01, "{what}: {kind} frame {t}: joint {} is {e} m from our JSON", c["worst_joint"]);
+                assert!(
+                    e < 0.01,
+                    "{what}: {kind} frame {t}: joint {} is {e} m from our JSON",
+                    c["worst_joint"]
+                );
             }
         }
     }
@@ -341,16 +445,28 @@ fn every_dataset_frame_passes_validation_and_bvh_inputs_load() {
     // Relative to the body centre: the data's own root-relative frame, up to the rigid fit.
     let rel = dance.root_relative();
     let err: f64 = (0..NUM_JOINTS)
-        .map(|j| (0..3).map(|c| (kp.joints[j][c] - f64::from(rel[[100, j, c]])).powi(2)).sum::<f64>().sqrt())
+        .map(|j| {
+            (0..3)
+                .map(|c| (kp.joints[j][c] - f64::from(rel[[100, j, c]])).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
         .sum::<f64>()
         / NUM_JOINTS as f64;
-    assert!(err < 0.05, "key pose from BVH is {err} m from the data on average");
+    assert!(
+        err < 0.05,
+        "key pose from BVH is {err} m from the data on average"
+    );
     // Centimetres are refused with a clear message.
     let scaled: String = text
         .lines()
         .map(|l| {
             if l.trim_start().starts_with("OFFSET") {
-                let v: Vec<String> = l.split_whitespace().skip(1).map(|x| format!("{}", x.parse::<f64>().unwrap() * 100.0)).collect();
+                let v: Vec<String> = l
+                    .split_whitespace()
+                    .skip(1)
+                    .map(|x| format!("{}", x.parse::<f64>().unwrap() * 100.0))
+                    .collect();
                 format!("OFFSET {}", v.join(" "))
             } else {
                 l.to_string()
@@ -369,12 +485,17 @@ fn every_dataset_frame_passes_validation_and_bvh_inputs_load() {
 fn anchored_fit_returns_the_key_frame_as_posed() {
     let Some(ds) = dataset() else { return };
     let dance = ds.load("DANCE_W_22").expect("load");
-    let mut positions = dance.motion.positions.slice(ndarray::s![..400, .., ..]).to_owned();
+    let mut positions = dance
+        .motion
+        .positions
+        .slice(ndarray::s![..400, .., ..])
+        .to_owned();
     let centre = dance.center.slice(ndarray::s![..400, ..]).to_owned();
     for t in 200..400 {
         for j in 0..NUM_JOINTS {
             for c in 0..3 {
-                positions[[t, j, c]] = centre[[t, c]] + 1.12 * (positions[[t, j, c]] - centre[[t, c]]);
+                positions[[t, j, c]] =
+                    centre[[t, c]] + 1.12 * (positions[[t, j, c]] - centre[[t, c]]);
             }
         }
     }
@@ -386,8 +507,14 @@ fn anchored_fit_returns_the_key_frame_as_posed() {
     };
     let (anchored, whole) = (error_at_key(&[key]), error_at_key(&[]));
     eprintln!("key frame error: anchored {anchored:.2} cm, fitted to every frame {whole:.2} cm");
-    assert!(anchored < 1.0, "anchored fit misses its key frame by {anchored:.2} cm");
-    assert!(whole > 2.0 * anchored, "the test does not tell the fits apart: {whole:.2} vs {anchored:.2} cm");
+    assert!(
+        anchored < 1.0,
+        "anchored fit misses its key frame by {anchored:.2} cm"
+    );
+    assert!(
+        whole > 2.0 * anchored,
+        "the test does not tell the fits apart: {whole:.2} vs {anchored:.2} cm"
+    );
 }
 
 /// Captured key poses come back within issue 10's 3 cm through the export, with no pop: the five
@@ -417,26 +544,47 @@ fn captured_key_poses_come_back_within_3_cm() {
             .iter()
             .map(|&f| KeyPose {
                 time_s: f as f64 / fps,
-                joints: (0..NUM_JOINTS).map(|j| [0, 1, 2].map(|c| f64::from(dance.motion.positions[[f, j, c]]))).collect(),
+                joints: (0..NUM_JOINTS)
+                    .map(|j| [0, 1, 2].map(|c| f64::from(dance.motion.positions[[f, j, c]])))
+                    .collect(),
             })
             .collect();
         let rig_motion = prepare_anchored(&dance.motion, frames).expect("export");
         let flips = choreo::metrics::rotation_flips::RotationFlips::of(&rig_motion);
-        eprintln!("{id}: rotation flips > 60° on {:.3} % of steps ({:?})", 100.0 * flips.share_over_60, flips.joints_over_60);
-        assert!(flips.share_over_60 <= 0.001, "{id}: the least-squares export flips on {:.3} % of steps", 100.0 * flips.share_over_60);
+        eprintln!(
+            "{id}: rotation flips > 60° on {:.3} % of steps ({:?})",
+            100.0 * flips.share_over_60,
+            flips.joints_over_60
+        );
+        assert!(
+            flips.share_over_60 <= 0.001,
+            "{id}: the least-squares export flips on {:.3} % of steps",
+            100.0 * flips.share_over_60
+        );
         let served = served_motion(&rig_motion);
         let errors = key_pose_errors_cm(served.positions.view(), fps, &keys);
         let acc = joint_acceleration(served.positions.view(), fps);
         let pops = key_pose_pops(&acc, fps, served.num_frames(), &keys);
-        let data_pops = key_pose_pops(&joint_acceleration(dance.motion.positions.view(), fps), fps, served.num_frames(), &keys);
+        let data_pops = key_pose_pops(
+            &joint_acceleration(dance.motion.positions.view(), fps),
+            fps,
+            served.num_frames(),
+            &keys,
+        );
         let worst_pop = pops.iter().copied().fold(0.0, f64::max);
         let data_pop = data_pops.iter().copied().fold(0.0, f64::max);
         eprintln!("{id}: key errors {errors:.2?} cm; largest acceleration within ±0.5 s of a key {worst_pop:.1} m/s² (the data's {data_pop:.1})");
         assert_eq!(errors.len(), frames.len());
         for e in &errors {
-            assert!(*e < 3.0, "{id}: a key pose comes back {e:.2} cm off: {errors:.2?}");
+            assert!(
+                *e < 3.0,
+                "{id}: a key pose comes back {e:.2} cm off: {errors:.2?}"
+            );
         }
-        assert!(worst_pop <= 1.1 * data_pop + 1.0, "{id}: {worst_pop:.1} m/s² near a key, the data has {data_pop:.1}");
+        assert!(
+            worst_pop <= 1.1 * data_pop + 1.0,
+            "{id}: {worst_pop:.1} m/s² near a key, the data has {data_pop:.1}"
+        );
     }
 }
 
@@ -465,25 +613,53 @@ fn captured_key_sets_of_every_dance() {
             let positions = dance.motion.positions.select(ndarray::Axis(0), &frames);
             let root = body_centre_track(positions.view());
             let keys: Vec<KeyPose> = (0..frames.len())
-                .map(|k| KeyPose { time_s: k as f64 / 25.0, joints: (0..NUM_JOINTS).map(|j| [0, 1, 2].map(|c| f64::from(positions[[k, j, c]]))).collect() })
+                .map(|k| KeyPose {
+                    time_s: k as f64 / 25.0,
+                    joints: (0..NUM_JOINTS)
+                        .map(|j| [0, 1, 2].map(|c| f64::from(positions[[k, j, c]])))
+                        .collect(),
+                })
                 .collect();
             let anchors: Vec<usize> = (0..frames.len()).collect();
-            let worst = |m: &rig::RigMotion| key_pose_errors_cm(served_motion(m).positions.view(), 25.0, &keys).into_iter().fold(0.0, f64::max);
+            let worst = |m: &rig::RigMotion| {
+                key_pose_errors_cm(served_motion(m).positions.view(), 25.0, &keys)
+                    .into_iter()
+                    .fold(0.0, f64::max)
+            };
             // Poses, not a motion (no frame rate): each frame solved on its own, no turn carried.
-            fitted.push(worst(&rig::fit_and_solve(positions.view(), root.view(), f64::NAN, &anchors).expect("export")));
+            fitted.push(worst(
+                &rig::fit_and_solve(positions.view(), root.view(), f64::NAN, &anchors)
+                    .expect("export"),
+            ));
             let median_rig = rig::Rig::fit(positions.view(), root.view()).expect("fit");
-            chain.push(worst(&rig::solve(&median_rig, positions.view(), root.view(), f64::NAN).expect("solve")));
+            chain.push(worst(
+                &rig::solve(&median_rig, positions.view(), root.view(), f64::NAN).expect("solve"),
+            ));
         }
     }
     let summary = |v: &mut Vec<f64>| {
         v.sort_by(f64::total_cmp);
         let n = v.len();
-        (v[n / 2], v[n * 9 / 10], v[n - 1], v.iter().filter(|&&e| e > 3.0).count())
+        (
+            v[n / 2],
+            v[n * 9 / 10],
+            v[n - 1],
+            v.iter().filter(|&&e| e > 3.0).count(),
+        )
     };
     let (f, c) = (summary(&mut fitted), summary(&mut chain));
-    eprintln!("worst key per set of {} (cm), median / p90 / max, sets over 3 cm:", fitted.len());
-    eprintln!("  least squares        {:.2} / {:.2} / {:.2}, {}", f.0, f.1, f.2, f.3);
-    eprintln!("  chain, median bones  {:.2} / {:.2} / {:.2}, {}", c.0, c.1, c.2, c.3);
+    eprintln!(
+        "worst key per set of {} (cm), median / p90 / max, sets over 3 cm:",
+        fitted.len()
+    );
+    eprintln!(
+        "  least squares        {:.2} / {:.2} / {:.2}, {}",
+        f.0, f.1, f.2, f.3
+    );
+    eprintln!(
+        "  chain, median bones  {:.2} / {:.2} / {:.2}, {}",
+        c.0, c.1, c.2, c.3
+    );
     assert_eq!(fitted.len(), 258);
     // As measured on 2026-11-25 (1.67 / 2.59 / 3.74, 5 sets over 3 cm): a regression guard.
     assert!(f.2 < 4.0 && f.3 <= 5, "least-squares export: {f:?}");

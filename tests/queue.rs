@@ -4,13 +4,13 @@
 #[path = "common/postgres.rs"]
 mod postgres;
 
-use chrono::Utc;
 use choreo::audio::AudioFormat;
-use choreo::stage::Stage;
 use choreo::queue::{
-    Beat, Idempotency, JobFiles, JobFilter, JobId, JobKind, LeasePolicy, NewJob, Outcome, PgStore, QueueError, Registered,
-    Song, SongId, SqliteStore, Status, Store,
+    Beat, Idempotency, JobFiles, JobFilter, JobId, JobKind, LeasePolicy, NewJob, Outcome, PgStore,
+    QueueError, Registered, Scope, Song, SongId, SqliteStore, Status, Store, TenantId,
 };
+use choreo::stage::Stage;
+use chrono::Utc;
 use sqlx::Row;
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -35,48 +35,72 @@ enum Events {
 impl TestDb {
     async fn sqlite() -> Self {
         let dir = tempfile::tempdir().expect("tempdir");
-        let store = SqliteStore::open(&dir.path().join("q.sqlite")).await.expect("open sqlite");
-        Self { store: Arc::new(store.clone()), events: Events::Sqlite(store), _dir: Some(dir), _server: None }
+        let store = SqliteStore::open(&dir.path().join("q.sqlite"))
+            .await
+            .expect("open sqlite");
+        Self {
+            store: Arc::new(store.clone()),
+            events: Events::Sqlite(store),
+            _dir: Some(dir),
+            _server: None,
+        }
     }
 
     async fn postgres() -> Self {
-        let server = tokio::task::spawn_blocking(postgres::Postgres::start).await.expect("start postgres");
+        let server = tokio::task::spawn_blocking(postgres::Postgres::start)
+            .await
+            .expect("start postgres");
         let url = choreo::config::Secret::new(server.url());
-        let store = PgStore::connect(&url, std::time::Duration::from_secs(3)).await.expect("connect postgres");
-        Self { store: Arc::new(store.clone()), events: Events::Postgres(store), _dir: None, _server: Some(server) }
+        let store = PgStore::connect(&url, std::time::Duration::from_secs(3))
+            .await
+            .expect("connect postgres");
+        Self {
+            store: Arc::new(store.clone()),
+            events: Events::Postgres(store),
+            _dir: None,
+            _server: Some(server),
+        }
     }
 
     /// `(from_status, to_status)` of a job's events, oldest first.
     async fn events(&self, id: JobId) -> Vec<(Option<String>, String)> {
         let rows = match &self.events {
-            Events::Sqlite(s) => sqlx::query("SELECT from_status, to_status FROM job_events WHERE job_id = ? ORDER BY seq")
-                .bind(id.to_string())
-                .fetch_all(s.pool())
-                .await
-                .expect("sqlite events")
-                .iter()
-                .map(|r| (r.get::<Option<String>, _>(0), r.get::<String, _>(1)))
-                .collect(),
-            Events::Postgres(s) => sqlx::query("SELECT from_status, to_status FROM job_events WHERE job_id = $1 ORDER BY seq")
-                .bind(id.0)
-                .fetch_all(s.pool())
-                .await
-                .expect("postgres events")
-                .iter()
-                .map(|r| (r.get::<Option<String>, _>(0), r.get::<String, _>(1)))
-                .collect(),
+            Events::Sqlite(s) => sqlx::query(
+                "SELECT from_status, to_status FROM job_events WHERE job_id = ? ORDER BY seq",
+            )
+            .bind(id.to_string())
+            .fetch_all(s.pool())
+            .await
+            .expect("sqlite events")
+            .iter()
+            .map(|r| (r.get::<Option<String>, _>(0), r.get::<String, _>(1)))
+            .collect(),
+            Events::Postgres(s) => sqlx::query(
+                "SELECT from_status, to_status FROM job_events WHERE job_id = $1 ORDER BY seq",
+            )
+            .bind(id.0)
+            .fetch_all(s.pool())
+            .await
+            .expect("postgres events")
+            .iter()
+            .map(|r| (r.get::<Option<String>, _>(0), r.get::<String, _>(1)))
+            .collect(),
         };
         rows
     }
 }
 
 fn policy(lease_ms: u64, backoff_ms: u64) -> LeasePolicy {
-    LeasePolicy { lease: Duration::from_millis(lease_ms), backoff: Duration::from_millis(backoff_ms) }
+    LeasePolicy {
+        lease: Duration::from_millis(lease_ms),
+        backoff: Duration::from_millis(backoff_ms),
+    }
 }
 
 fn song(sha: &str) -> Song {
     Song {
         id: SongId::new(),
+        tenant: TenantId::OPEN,
         filename: "a.ogg".into(),
         format: AudioFormat::Ogg,
         duration_s: 1.0,
@@ -90,7 +114,13 @@ fn song(sha: &str) -> Song {
 }
 
 fn analyze(song: SongId, max_attempts: u32) -> NewJob {
-    NewJob { kind: JobKind::Analyze { song_id: song }, priority: 0, max_attempts, idempotency: None }
+    NewJob {
+        tenant: TenantId::OPEN,
+        kind: JobKind::Analyze { song_id: song },
+        priority: 0,
+        max_attempts,
+        idempotency: None,
+    }
 }
 
 /// A song with its analyze job (`max_attempts` 2), which is queued.
@@ -108,61 +138,147 @@ async fn claim_is_exclusive_and_expired_leases_retry_then_fail(db: TestDb) {
     let p = policy(50, 0);
     let first = store.claim("w1", p).await.expect("claim").expect("a job");
     assert_eq!((first.status, first.attempts), (Status::Running, 1));
-    assert!(store.claim("w2", p).await.expect("claim").is_none(), "one job, claimed once");
+    assert!(
+        store.claim("w2", p).await.expect("claim").is_none(),
+        "one job, claimed once"
+    );
     tokio::time::sleep(Duration::from_millis(80)).await;
-    assert_eq!(store.requeue_expired(p).await.expect("requeue").requeued, vec![first.id]);
+    assert_eq!(
+        store.requeue_expired(p).await.expect("requeue").requeued,
+        vec![first.id]
+    );
     // The dead worker can no longer heartbeat or finish it.
-    assert_eq!(store.heartbeat(first.id, "w1", "x", 0.5, p).await.expect("beat"), Beat::Lost);
-    assert!(!store.complete(first.id, "w1", Outcome::Files(JobFiles::default())).await.expect("complete"));
-    let second = store.claim("w2", p).await.expect("claim").expect("requeued job");
+    assert_eq!(
+        store
+            .heartbeat(first.id, "w1", "x", 0.5, p)
+            .await
+            .expect("beat"),
+        Beat::Lost
+    );
+    assert!(!store
+        .complete(first.id, "w1", Outcome::Files(JobFiles::default()))
+        .await
+        .expect("complete"));
+    let second = store
+        .claim("w2", p)
+        .await
+        .expect("claim")
+        .expect("requeued job");
     assert_eq!((second.id, second.attempts), (first.id, 2));
     tokio::time::sleep(Duration::from_millis(80)).await;
-    assert_eq!(store.requeue_expired(p).await.expect("requeue").failed, vec![first.id], "max_attempts = 2 reached");
-    let job = store.job(first.id).await.expect("job");
+    assert_eq!(
+        store.requeue_expired(p).await.expect("requeue").failed,
+        vec![first.id],
+        "max_attempts = 2 reached"
+    );
+    let job = store.job(Scope::All, first.id).await.expect("job");
     assert_eq!(job.status, Status::Failed);
     assert!(job.finished_at.is_some());
-    assert!(job.error.as_deref().is_some_and(|e| e.contains("lease expired on attempt 2 of 2")), "{:?}", job.error);
+    assert!(
+        job.error
+            .as_deref()
+            .is_some_and(|e| e.contains("lease expired on attempt 2 of 2")),
+        "{:?}",
+        job.error
+    );
     let events = db.events(first.id).await;
-    let events: Vec<(Option<&str>, &str)> = events.iter().map(|(f, t)| (f.as_deref(), t.as_str())).collect();
+    let events: Vec<(Option<&str>, &str)> = events
+        .iter()
+        .map(|(f, t)| (f.as_deref(), t.as_str()))
+        .collect();
     assert_eq!(
         events,
-        [(None, "queued"), (Some("queued"), "running"), (Some("running"), "queued"), (Some("queued"), "running"), (Some("running"), "failed")]
+        [
+            (None, "queued"),
+            (Some("queued"), "running"),
+            (Some("running"), "queued"),
+            (Some("queued"), "running"),
+            (Some("running"), "failed")
+        ]
     );
 }
 
 async fn cancel_queued_is_immediate_and_running_is_requested(db: TestDb) {
     let store = db.store.as_ref();
     let song = with_song(store).await;
-    let running = store.claim("w", policy(5_000, 0)).await.expect("claim").expect("job");
-    let queued = store.register(analyze(song, 1)).await.expect("register").job().clone();
-    let cancelled = store.cancel(queued.id).await.expect("cancel");
-    assert_eq!((cancelled.status, cancelled.finished_at.is_some()), (Status::Cancelled, true));
-    let after = store.cancel(running.id).await.expect("cancel");
-    assert_eq!((after.status, after.cancel_requested), (Status::Running, true));
-    let beat = store.heartbeat(running.id, "w", "x", 0.5, policy(5_000, 0)).await;
-    assert_eq!(beat.expect("beat"), Beat::Held { cancel_requested: true });
-    assert!(!store.finish_cancelled(running.id, "someone-else").await.expect("finish"), "only the owner finishes");
-    assert!(store.finish_cancelled(running.id, "w").await.expect("finish"));
-    assert_eq!(store.job(running.id).await.expect("job").status, Status::Cancelled);
+    let running = store
+        .claim("w", policy(5_000, 0))
+        .await
+        .expect("claim")
+        .expect("job");
+    let queued = store
+        .register(analyze(song, 1))
+        .await
+        .expect("register")
+        .job()
+        .clone();
+    let cancelled = store.cancel(Scope::All, queued.id).await.expect("cancel");
+    assert_eq!(
+        (cancelled.status, cancelled.finished_at.is_some()),
+        (Status::Cancelled, true)
+    );
+    let after = store.cancel(Scope::All, running.id).await.expect("cancel");
+    assert_eq!(
+        (after.status, after.cancel_requested),
+        (Status::Running, true)
+    );
+    let beat = store
+        .heartbeat(running.id, "w", "x", 0.5, policy(5_000, 0))
+        .await;
+    assert_eq!(
+        beat.expect("beat"),
+        Beat::Held {
+            cancel_requested: true
+        }
+    );
+    assert!(
+        !store
+            .finish_cancelled(running.id, "someone-else")
+            .await
+            .expect("finish"),
+        "only the owner finishes"
+    );
+    assert!(store
+        .finish_cancelled(running.id, "w")
+        .await
+        .expect("finish"));
+    assert_eq!(
+        store.job(Scope::All, running.id).await.expect("job").status,
+        Status::Cancelled
+    );
     // Cancelling a finished job changes nothing.
-    let again = store.cancel(running.id).await.expect("cancel again");
+    let again = store
+        .cancel(Scope::All, running.id)
+        .await
+        .expect("cancel again");
     assert_eq!(again.status, Status::Cancelled);
-    assert!(matches!(store.cancel(JobId::new()).await, Err(QueueError::JobNotFound(_))));
+    assert!(matches!(
+        store.cancel(Scope::All, JobId::new()).await,
+        Err(QueueError::JobNotFound(_))
+    ));
 }
 
 async fn idempotency_key_returns_the_same_job_or_conflicts(db: TestDb) {
     let store = db.store.as_ref();
     let song = with_song(store).await;
     let job = |hash: &str| NewJob {
-        idempotency: Some(Idempotency { key: "k".into(), request_hash: hash.into() }),
+        idempotency: Some(Idempotency {
+            key: "k".into(),
+            request_hash: hash.into(),
+        }),
         ..analyze(song, 1)
     };
     let a = store.register(job("h1")).await.expect("register");
     let b = store.register(job("h1")).await.expect("register again");
     assert!(matches!(a, Registered::Created(_)) && matches!(b, Registered::Existing(_)));
     assert_eq!(a.job().id, b.job().id);
-    assert!(matches!(store.register(job("h2")).await, Err(QueueError::IdempotencyConflict(id)) if id == a.job().id));
-    assert!(matches!(store.register(analyze(SongId::new(), 1)).await, Err(QueueError::SongNotFound(_))));
+    assert!(
+        matches!(store.register(job("h2")).await, Err(QueueError::IdempotencyConflict(id)) if id == a.job().id)
+    );
+    assert!(matches!(
+        store.register(analyze(SongId::new(), 1)).await,
+        Err(QueueError::SongNotFound(_))
+    ));
 }
 
 async fn failures_retry_with_backoff_until_attempts_run_out(db: TestDb) {
@@ -170,24 +286,56 @@ async fn failures_retry_with_backoff_until_attempts_run_out(db: TestDb) {
     with_song(store).await;
     let p = policy(5_000, 300);
     let job = store.claim("w", p).await.expect("claim").expect("job");
-    assert!(!store.fail(job.id, "other", "boom", true, p).await.expect("fail"), "only the owner fails it");
-    assert!(store.fail(job.id, "w", "boom", true, p).await.expect("fail"));
-    let queued = store.job(job.id).await.expect("job");
-    assert_eq!((queued.status, queued.error.as_deref()), (Status::Queued, Some("boom")));
-    assert!(store.claim("w", p).await.expect("claim").is_none(), "not before its backoff");
+    assert!(
+        !store
+            .fail(job.id, "other", "boom", true, p)
+            .await
+            .expect("fail"),
+        "only the owner fails it"
+    );
+    assert!(store
+        .fail(job.id, "w", "boom", true, p)
+        .await
+        .expect("fail"));
+    let queued = store.job(Scope::All, job.id).await.expect("job");
+    assert_eq!(
+        (queued.status, queued.error.as_deref()),
+        (Status::Queued, Some("boom"))
+    );
+    assert!(
+        store.claim("w", p).await.expect("claim").is_none(),
+        "not before its backoff"
+    );
     tokio::time::sleep(Duration::from_millis(400)).await;
-    let again = store.claim("w", p).await.expect("claim").expect("claimable after the backoff");
+    let again = store
+        .claim("w", p)
+        .await
+        .expect("claim")
+        .expect("claimable after the backoff");
     assert_eq!((again.id, again.attempts), (job.id, 2));
-    assert!(store.fail(job.id, "w", "boom again", true, p).await.expect("fail"));
-    let failed = store.job(job.id).await.expect("job");
-    assert_eq!((failed.status, failed.error.as_deref()), (Status::Failed, Some("boom again")), "2 of 2 attempts used");
+    assert!(store
+        .fail(job.id, "w", "boom again", true, p)
+        .await
+        .expect("fail"));
+    let failed = store.job(Scope::All, job.id).await.expect("job");
+    assert_eq!(
+        (failed.status, failed.error.as_deref()),
+        (Status::Failed, Some("boom again")),
+        "2 of 2 attempts used"
+    );
 
     // A failure that is not retryable fails at once.
     let song = with_song(store).await;
     let other = store.claim("w", p).await.expect("claim").expect("job");
     assert_eq!(other.kind.song_id(), song);
-    assert!(store.fail(other.id, "w", "bad input", false, p).await.expect("fail"));
-    assert_eq!(store.job(other.id).await.expect("job").status, Status::Failed);
+    assert!(store
+        .fail(other.id, "w", "bad input", false, p)
+        .await
+        .expect("fail"));
+    assert_eq!(
+        store.job(Scope::All, other.id).await.expect("job").status,
+        Status::Failed
+    );
 }
 
 async fn complete_stores_the_outcome_once(db: TestDb) {
@@ -195,57 +343,185 @@ async fn complete_stores_the_outcome_once(db: TestDb) {
     let song = with_song(store).await;
     let p = policy(5_000, 0);
     let analysis = store.claim("w", p).await.expect("claim").expect("job");
-    let outcome = choreo::audio::Analysis { tempo_bpm: 120.0, beat_times: vec![0.5, 1.0], downbeat_times: vec![0.5] };
-    assert!(store.complete(analysis.id, "w", Outcome::Analysis(outcome)).await.expect("complete"));
-    assert!(!store.complete(analysis.id, "w", Outcome::Files(JobFiles::default())).await.expect("twice"), "a finished job stays finished");
-    let done = store.job(analysis.id).await.expect("job");
-    assert_eq!((done.status, done.progress, done.stage), (Status::Succeeded, 1.0, Some(Stage::Done)));
-    assert_eq!(store.song(song).await.expect("song").analysis.map(|a| a.beat_times), Some(vec![0.5, 1.0]));
+    let outcome = choreo::audio::Analysis {
+        tempo_bpm: 120.0,
+        beat_times: vec![0.5, 1.0],
+        downbeat_times: vec![0.5],
+    };
+    assert!(store
+        .complete(analysis.id, "w", Outcome::Analysis(outcome))
+        .await
+        .expect("complete"));
+    assert!(
+        !store
+            .complete(analysis.id, "w", Outcome::Files(JobFiles::default()))
+            .await
+            .expect("twice"),
+        "a finished job stays finished"
+    );
+    let done = store.job(Scope::All, analysis.id).await.expect("job");
+    assert_eq!(
+        (done.status, done.progress, done.stage),
+        (Status::Succeeded, 1.0, Some(Stage::Done))
+    );
+    assert_eq!(
+        store
+            .song(Scope::All, song)
+            .await
+            .expect("song")
+            .analysis
+            .map(|a| a.beat_times),
+        Some(vec![0.5, 1.0])
+    );
 
     store.register(analyze(song, 1)).await.expect("register");
     let files = store.claim("w", p).await.expect("claim").expect("job");
-    let beat = store.heartbeat(files.id, "w", Stage::Generate.as_str(), 0.4, p).await.expect("beat");
-    assert_eq!(beat, Beat::Held { cancel_requested: false });
-    let running = store.job(files.id).await.expect("job");
-    assert_eq!((running.stage, running.progress), (Some(Stage::Generate), 0.4));
+    let beat = store
+        .heartbeat(files.id, "w", Stage::Generate.as_str(), 0.4, p)
+        .await
+        .expect("beat");
+    assert_eq!(
+        beat,
+        Beat::Held {
+            cancel_requested: false
+        }
+    );
+    let running = store.job(Scope::All, files.id).await.expect("job");
+    assert_eq!(
+        (running.stage, running.progress),
+        (Some(Stage::Generate), 0.4)
+    );
     // The style a model chose on the user's behalf is stored with the files.
-    let style = choreo::models::StyleChoice { style: choreo::models::DanceStyle::Rumba, predicted: true, probabilities: vec![0.1, 0.7, 0.05, 0.15] };
-    let written = JobFiles { files: vec!["motion.bvh".into(), "report.json".into()], style: Some(style) };
-    assert!(store.complete(files.id, "w", Outcome::Files(written.clone())).await.expect("complete"));
-    assert_eq!(store.job(files.id).await.expect("job").files, written);
+    let style = choreo::models::StyleChoice {
+        style: choreo::models::DanceStyle::Rumba,
+        predicted: true,
+        probabilities: vec![0.1, 0.7, 0.05, 0.15],
+    };
+    let written = JobFiles {
+        files: vec!["motion.bvh".into(), "report.json".into()],
+        style: Some(style),
+    };
+    assert!(store
+        .complete(files.id, "w", Outcome::Files(written.clone()))
+        .await
+        .expect("complete"));
+    assert_eq!(
+        store.job(Scope::All, files.id).await.expect("job").files,
+        written
+    );
 }
 
 async fn songs_are_one_per_content_and_jobs_page_newest_first(db: TestDb) {
     let store = db.store.as_ref();
     let first = song("same-bytes");
     let first_id = first.id;
-    let (stored, created) = store.add_song(first, analyze(first_id, 1)).await.expect("add");
+    let (stored, created) = store
+        .add_song(first, analyze(first_id, 1))
+        .await
+        .expect("add");
     assert!(created);
     let twin = song("same-bytes");
     let twin_id = twin.id;
-    let (existing, created) = store.add_song(twin, analyze(twin_id, 1)).await.expect("add twin");
+    let (existing, created) = store
+        .add_song(twin, analyze(twin_id, 1))
+        .await
+        .expect("add twin");
     assert!(!created);
     assert_eq!(existing.id, stored.id);
-    assert_eq!(store.song_by_sha256("same-bytes").await.expect("by sha").map(|s| s.id), Some(stored.id));
-    assert!(matches!(store.song(twin_id).await, Err(QueueError::SongNotFound(_))));
-    let analyze_job = store.analyze_job(stored.id).await.expect("query").expect("its analyze job");
+    assert_eq!(
+        store
+            .song_by_sha256(TenantId::OPEN, "same-bytes")
+            .await
+            .expect("by sha")
+            .map(|s| s.id),
+        Some(stored.id)
+    );
+    assert!(matches!(
+        store.song(Scope::All, twin_id).await,
+        Err(QueueError::SongNotFound(_))
+    ));
+    let analyze_job = store
+        .analyze_job(stored.id)
+        .await
+        .expect("query")
+        .expect("its analyze job");
 
     let mut ids = vec![analyze_job.id];
     for _ in 0..4 {
-        ids.push(store.register(analyze(stored.id, 1)).await.expect("register").job().id);
+        ids.push(
+            store
+                .register(analyze(stored.id, 1))
+                .await
+                .expect("register")
+                .job()
+                .id,
+        );
     }
     ids.reverse();
-    let page = store.jobs(JobFilter { limit: 3, ..JobFilter::default() }).await.expect("page");
+    let page = store
+        .jobs(
+            Scope::All,
+            JobFilter {
+                limit: 3,
+                ..JobFilter::default()
+            },
+        )
+        .await
+        .expect("page");
     assert_eq!(page.iter().map(|j| j.id).collect::<Vec<_>>(), ids[..3]);
-    let next = store.jobs(JobFilter { limit: 3, before: Some(ids[2]), ..JobFilter::default() }).await.expect("next page");
+    let next = store
+        .jobs(
+            Scope::All,
+            JobFilter {
+                limit: 3,
+                before: Some(ids[2]),
+                ..JobFilter::default()
+            },
+        )
+        .await
+        .expect("next page");
     assert_eq!(next.iter().map(|j| j.id).collect::<Vec<_>>(), ids[3..]);
-    store.cancel(ids[0]).await.expect("cancel");
-    let cancelled = store.jobs(JobFilter { status: Some(Status::Cancelled), limit: 10, ..JobFilter::default() }).await.expect("filter");
-    assert_eq!(cancelled.iter().map(|j| j.id).collect::<Vec<_>>(), vec![ids[0]]);
-    let by_model = store.jobs(JobFilter { model: Some("dance-revolution".into()), limit: 10, ..JobFilter::default() }).await;
-    assert!(by_model.expect("filter").is_empty(), "analyze jobs have no model");
+    store.cancel(Scope::All, ids[0]).await.expect("cancel");
+    let cancelled = store
+        .jobs(
+            Scope::All,
+            JobFilter {
+                status: Some(Status::Cancelled),
+                limit: 10,
+                ..JobFilter::default()
+            },
+        )
+        .await
+        .expect("filter");
+    assert_eq!(
+        cancelled.iter().map(|j| j.id).collect::<Vec<_>>(),
+        vec![ids[0]]
+    );
+    let by_model = store
+        .jobs(
+            Scope::All,
+            JobFilter {
+                model: Some("dance-revolution".into()),
+                limit: 10,
+                ..JobFilter::default()
+            },
+        )
+        .await;
+    assert!(
+        by_model.expect("filter").is_empty(),
+        "analyze jobs have no model"
+    );
     let counts = store.counts().await.expect("counts");
-    assert_eq!(counts, vec![(Status::Queued, 4), (Status::Running, 0), (Status::Succeeded, 0), (Status::Failed, 0), (Status::Cancelled, 1)]);
+    assert_eq!(
+        counts,
+        vec![
+            (Status::Queued, 4),
+            (Status::Running, 0),
+            (Status::Succeeded, 0),
+            (Status::Failed, 0),
+            (Status::Cancelled, 1)
+        ]
+    );
     store.ping().await.expect("ping");
 }
 
@@ -253,8 +529,19 @@ async fn higher_priority_runs_first(db: TestDb) {
     let store = db.store.as_ref();
     let song = with_song(store).await;
     let p = policy(5_000, 0);
-    let urgent = store.register(NewJob { priority: 5, ..analyze(song, 1) }).await.expect("register").job().id;
-    assert_eq!(store.claim("w", p).await.expect("claim").map(|j| j.id), Some(urgent));
+    let urgent = store
+        .register(NewJob {
+            priority: 5,
+            ..analyze(song, 1)
+        })
+        .await
+        .expect("register")
+        .job()
+        .id;
+    assert_eq!(
+        store.claim("w", p).await.expect("claim").map(|j| j.id),
+        Some(urgent)
+    );
 }
 
 async fn concurrent_claims_take_each_job_once(db: TestDb) {
@@ -271,7 +558,10 @@ async fn concurrent_claims_take_each_job_once(db: TestDb) {
                 let owner = format!("w{n}");
                 let mut mine = Vec::new();
                 while let Some(job) = store.claim(&owner, p).await.expect("claim") {
-                    assert!(store.complete(job.id, &owner, Outcome::Files(JobFiles::default())).await.expect("complete"));
+                    assert!(store
+                        .complete(job.id, &owner, Outcome::Files(JobFiles::default()))
+                        .await
+                        .expect("complete"));
                     mine.push(job.id);
                 }
                 mine
@@ -283,9 +573,18 @@ async fn concurrent_claims_take_each_job_once(db: TestDb) {
         all.extend(claimer.await.expect("claimer"));
     }
     assert_eq!(all.len(), JOBS, "every job claimed");
-    assert_eq!(all.iter().collect::<HashSet<_>>().len(), JOBS, "no job claimed twice");
+    assert_eq!(
+        all.iter().collect::<HashSet<_>>().len(),
+        JOBS,
+        "no job claimed twice"
+    );
     for id in all {
-        let succeeded = db.events(id).await.iter().filter(|(_, to)| to == "succeeded").count();
+        let succeeded = db
+            .events(id)
+            .await
+            .iter()
+            .filter(|(_, to)| to == "succeeded")
+            .count();
         assert_eq!(succeeded, 1, "job {id} succeeded once");
     }
 }
@@ -300,12 +599,17 @@ async fn rigs_keep_their_skeleton_and_mapping(db: TestDb) {
         rig: Rig {
             names: vec!["Hips".into(), "Spine".into(), "Bone.001".into()],
             parents: vec![None, Some(0), Some(1)],
-            offsets: vec![nalgebra::Vector3::new(0.0, 0.95, 0.0), nalgebra::Vector3::new(0.0, 0.1, 0.0), nalgebra::Vector3::new(0.0, 0.125, 0.0)],
+            offsets: vec![
+                nalgebra::Vector3::new(0.0, 0.95, 0.0),
+                nalgebra::Vector3::new(0.0, 0.1, 0.0),
+                nalgebra::Vector3::new(0.0, 0.125, 0.0),
+            ],
         },
         humanoid: vec![Some(HumanBone::Hips), Some(HumanBone::Spine), None],
     };
     let rig = UploadedRig {
         id: RigId::new(),
+        tenant: TenantId::OPEN,
         filename: "mine.bvh".into(),
         format: RigFormat::Bvh,
         units: Units::Cm,
@@ -315,12 +619,143 @@ async fn rigs_keep_their_skeleton_and_mapping(db: TestDb) {
         created_at: Utc::now(),
     };
     let stored = store.add_rig(rig.clone()).await.expect("add rig");
-    let read = store.rig(rig.id).await.expect("read rig");
+    let read = store.rig(Scope::All, rig.id).await.expect("read rig");
     for got in [&stored, &read] {
-        assert_eq!((got.id, got.filename.as_str(), got.format, got.units, got.size_bytes), (rig.id, "mine.bvh", RigFormat::Bvh, Units::Cm, 123));
+        assert_eq!(
+            (
+                got.id,
+                got.filename.as_str(),
+                got.format,
+                got.units,
+                got.size_bytes
+            ),
+            (rig.id, "mine.bvh", RigFormat::Bvh, Units::Cm, 123)
+        );
         assert_eq!(got.skeleton, skeleton);
     }
-    assert!(matches!(store.rig(RigId::new()).await, Err(QueueError::RigNotFound(_))));
+    assert!(matches!(
+        store.rig(Scope::All, RigId::new()).await,
+        Err(QueueError::RigNotFound(_))
+    ));
+}
+
+/// Two tenants share nothing they can see: the same bytes are two songs, an idempotency key is
+/// each one's own, and every scoped read, listing and cancel of the other's id is "not found".
+async fn tenants_see_only_their_own_rows(db: TestDb) {
+    let store = db.store.as_ref();
+    let (a, b) = (TenantId::new(), TenantId::new());
+    let song_of = |tenant| Song {
+        tenant,
+        ..song("shared-bytes")
+    };
+    let job_of = |tenant, song| NewJob {
+        tenant,
+        ..analyze(song, 1)
+    };
+    let first = song_of(a);
+    let (song_a, created_a) = store
+        .add_song(first.clone(), job_of(a, first.id))
+        .await
+        .expect("a's song");
+    let second = song_of(b);
+    let (song_b, created_b) = store
+        .add_song(second.clone(), job_of(b, second.id))
+        .await
+        .expect("b's song");
+    assert!(
+        created_a && created_b,
+        "the same bytes from two tenants are two songs"
+    );
+    assert_ne!(song_a.id, song_b.id);
+    assert_eq!((song_a.tenant, song_b.tenant), (a, b));
+    assert_eq!(
+        store
+            .song_by_sha256(a, "shared-bytes")
+            .await
+            .expect("by sha")
+            .map(|s| s.id),
+        Some(song_a.id)
+    );
+    assert_eq!(
+        store
+            .song_by_sha256(TenantId::OPEN, "shared-bytes")
+            .await
+            .expect("by sha")
+            .map(|s| s.id),
+        None
+    );
+    assert!(matches!(
+        store.song(Scope::Tenant(b), song_a.id).await,
+        Err(QueueError::SongNotFound(_))
+    ));
+    assert_eq!(
+        store
+            .song(Scope::Tenant(a), song_a.id)
+            .await
+            .expect("own song")
+            .id,
+        song_a.id
+    );
+
+    // A job on another tenant's song is refused as if the song did not exist.
+    assert!(matches!(
+        store.register(job_of(b, song_a.id)).await,
+        Err(QueueError::SongNotFound(_))
+    ));
+    let keyed = |tenant, song| NewJob {
+        idempotency: Some(Idempotency {
+            key: "same-key".into(),
+            request_hash: "h".into(),
+        }),
+        ..job_of(tenant, song)
+    };
+    let job_a = store.register(keyed(a, song_a.id)).await.expect("a's job");
+    let job_b = store.register(keyed(b, song_b.id)).await.expect("b's job");
+    assert!(
+        matches!(job_b, Registered::Created(_)),
+        "an idempotency key is one tenant's"
+    );
+    let (job_a, job_b) = (job_a.job().clone(), job_b.job().clone());
+    assert_eq!((job_a.tenant, job_b.tenant), (a, b));
+
+    assert!(matches!(
+        store.job(Scope::Tenant(b), job_a.id).await,
+        Err(QueueError::JobNotFound(_))
+    ));
+    assert!(matches!(
+        store.cancel(Scope::Tenant(b), job_a.id).await,
+        Err(QueueError::JobNotFound(_))
+    ));
+    assert_eq!(
+        store
+            .job(Scope::Tenant(a), job_a.id)
+            .await
+            .expect("own job")
+            .status,
+        Status::Queued
+    );
+    let listed = |scope| async move {
+        let jobs = store
+            .jobs(
+                scope,
+                JobFilter {
+                    limit: 100,
+                    ..JobFilter::default()
+                },
+            )
+            .await
+            .expect("list");
+        jobs.iter().map(|j| j.id).collect::<HashSet<_>>()
+    };
+    let (of_a, of_b, all) = (
+        listed(Scope::Tenant(a)).await,
+        listed(Scope::Tenant(b)).await,
+        listed(Scope::All).await,
+    );
+    assert!(of_a.contains(&job_a.id) && !of_a.contains(&job_b.id));
+    assert!(of_b.contains(&job_b.id) && !of_b.contains(&job_a.id));
+    assert!(all.contains(&job_a.id) && all.contains(&job_b.id));
+    assert!(of_a.iter().chain(&of_b).all(|id| all.contains(id)) && of_a.is_disjoint(&of_b));
 }
 
 macro_rules! contract {
@@ -345,6 +780,7 @@ macro_rules! contract {
 }
 
 contract!(
+    tenants_see_only_their_own_rows,
     claim_is_exclusive_and_expired_leases_retry_then_fail,
     cancel_queued_is_immediate_and_running_is_requested,
     idempotency_key_returns_the_same_job_or_conflicts,
@@ -360,9 +796,21 @@ contract!(
 /// at once, and a socket URL works as well as TCP.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn postgres_notifies_watchers_of_new_jobs() {
-    let server = tokio::task::spawn_blocking(postgres::Postgres::start).await.expect("start postgres");
-    let api = PgStore::connect(&choreo::config::Secret::new(server.socket_url()), std::time::Duration::from_secs(3)).await.expect("connect over the socket");
-    let worker = PgStore::connect(&choreo::config::Secret::new(server.url()), std::time::Duration::from_secs(3)).await.expect("connect over TCP");
+    let server = tokio::task::spawn_blocking(postgres::Postgres::start)
+        .await
+        .expect("start postgres");
+    let api = PgStore::connect(
+        &choreo::config::Secret::new(server.socket_url()),
+        std::time::Duration::from_secs(3),
+    )
+    .await
+    .expect("connect over the socket");
+    let worker = PgStore::connect(
+        &choreo::config::Secret::new(server.url()),
+        std::time::Duration::from_secs(3),
+    )
+    .await
+    .expect("connect over TCP");
     let wake = Arc::new(Notify::new());
     let shutdown = CancellationToken::new();
     // Created before the watcher starts, so its wake-up on listening cannot be missed.
@@ -372,12 +820,22 @@ async fn postgres_notifies_watchers_of_new_jobs() {
         async move { choreo::queue::JobStore::watch(&worker, wake, shutdown).await }
     });
     // The watcher wakes once when it starts listening; wait for that, then queue a job.
-    tokio::time::timeout(Duration::from_secs(10), listening).await.expect("watcher listening");
+    tokio::time::timeout(Duration::from_secs(10), listening)
+        .await
+        .expect("watcher listening");
     let woken = wake.notified();
     let song = with_song(&api).await;
-    tokio::time::timeout(Duration::from_secs(5), woken).await.expect("a new job wakes the watcher");
-    let job = choreo::queue::JobStore::claim(&worker, "w", policy(5_000, 0)).await.expect("claim").expect("the job");
+    tokio::time::timeout(Duration::from_secs(5), woken)
+        .await
+        .expect("a new job wakes the watcher");
+    let job = choreo::queue::JobStore::claim(&worker, "w", policy(5_000, 0))
+        .await
+        .expect("claim")
+        .expect("the job");
     assert_eq!(job.kind.song_id(), song);
     shutdown.cancel();
-    watcher.await.expect("watcher task").expect("watch ends cleanly");
+    watcher
+        .await
+        .expect("watcher task")
+        .expect("watch ends cleanly");
 }

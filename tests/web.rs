@@ -8,13 +8,14 @@
 //! and its sources, and with Node against a real server; and the `<choreo-player>` element on a
 //! sample page of another origin.
 //!
-//! Needs node, chromium, `npm ci` in `tests/web`, `web` and `clients/typescript` (all from `scripts/setup.sh --test`)
-//! and `../shared/audio`; without them the tests fail under `CI=true` and print a notice otherwise.
+//! Needs node, chromium, `npm ci` in `tests/web`, `web` and `clients/typescript` (all from
+//! `scripts/setup.sh --test`) and `../shared/audio`; without them the tests fail under
+//! `CI=true` and print a notice otherwise.
+#[path = "common/models.rs"]
+mod common_models;
 #[allow(dead_code)]
 #[path = "api/helpers.rs"]
 mod helpers;
-#[path = "common/models.rs"]
-mod common_models;
 use common_models::models_dir;
 
 use helpers::{spawn_app, spawn_app_with, TestApp};
@@ -54,9 +55,15 @@ fn missing_prerequisites(needs: &Needs) -> Vec<String> {
     }
     if needs.browser_and_songs {
         if !chromium().is_file() {
-            missing.push(format!("{} (Debian's chromium package)", chromium().display()));
+            missing.push(format!(
+                "{} (Debian's chromium package)",
+                chromium().display()
+            ));
         }
-        if !root().join("../shared/audio/trumpet_loop_90bpm.ogg").is_file() {
+        if !root()
+            .join("../shared/audio/trumpet_loop_90bpm.ogg")
+            .is_file()
+        {
             missing.push("../shared/audio".to_string());
         }
     }
@@ -69,16 +76,27 @@ fn ready(test: &str, needs: &Needs) -> bool {
     if missing.is_empty() {
         return true;
     }
-    let message = format!("{test} needs {}: run `scripts/setup.sh --test` (or `make test`)", missing.join(", "));
-    assert!(std::env::var("CI").as_deref() != Ok("true"), "{message} (CI=true)");
+    let message = format!(
+        "{test} needs {}: run `scripts/setup.sh --test` (or `make test`)",
+        missing.join(", ")
+    );
+    assert!(
+        std::env::var("CI").as_deref() != Ok("true"),
+        "{message} (CI=true)"
+    );
     eprintln!("NOTICE: skipping: {message}");
     false
 }
 
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
-    if !ready("the browser flow test", &Needs { node_modules: &["tests/web/node_modules/playwright-core"], browser_and_songs: true }) {
+    if !ready(
+        "the browser flow test",
+        &Needs {
+            node_modules: &["tests/web/node_modules/playwright-core"],
+            browser_and_songs: true,
+        },
+    ) {
         return;
     }
     // The page from one server; the API, with models, a token and CORS for the page, from another.
@@ -108,11 +126,20 @@ async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
         .output();
     let output = tokio::time::timeout(FLOW_LIMIT, run)
         .await
-        .unwrap_or_else(|_| panic!("the browser flow ran past {FLOW_LIMIT:?}; screenshots in {}", out.display()))
+        .unwrap_or_else(|_| {
+            panic!(
+                "the browser flow ran past {FLOW_LIMIT:?}; screenshots in {}",
+                out.display()
+            )
+        })
         .expect("run node tests/web/flow.mjs");
     let stdout = String::from_utf8_lossy(&output.stdout);
     eprintln!("{stdout}{}", String::from_utf8_lossy(&output.stderr));
-    assert!(output.status.success(), "the browser flow failed (above); screenshots in {}", out.display());
+    assert!(
+        output.status.success(),
+        "the browser flow failed (above); screenshots in {}",
+        out.display()
+    );
 
     // The script's own summary, checked again here: the numbers the issue asks for.
     let summary: serde_json::Value = stdout
@@ -123,20 +150,41 @@ async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
     for (phase, sync) in summary["sync"].as_object().expect("sync phases") {
         let worst = sync["worst_diff_s"].as_f64().expect("worst_diff_s");
         // Over the frames drawn in time; flow.mjs bounds the CPU-starved ones (see checkSync).
-        assert!(worst <= 1.0 / 25.0, "{phase}: |audioTime − animationTime| reached {worst} s");
-        assert!(sync["audio_advanced_s"].as_f64().expect("advanced") > 1.0, "{phase}: the song did not play: {sync}");
+        assert!(
+            worst <= 1.0 / 25.0,
+            "{phase}: |audioTime − animationTime| reached {worst} s"
+        );
+        assert!(
+            sync["audio_advanced_s"].as_f64().expect("advanced") > 1.0,
+            "{phase}: the song did not play: {sync}"
+        );
     }
-    assert!(summary["sync"].as_object().is_some_and(|s| s.len() >= 3), "playing, looping and deep link were measured: {summary}");
+    assert!(
+        summary["sync"].as_object().is_some_and(|s| s.len() >= 3),
+        "playing, looping and deep link were measured: {summary}"
+    );
     // The mannequin drawn and moving with the song, its skin on its joints; a rig upload mapped.
     let mannequin = &summary["mannequin"];
-    assert!(mannequin["triangles"].as_u64().is_some_and(|n| n > 1000), "{summary}");
-    assert!(mannequin["travel_m"].as_f64().is_some_and(|m| m > 0.05), "{summary}");
-    assert!(summary["rig"]["mapped"].as_u64().is_some_and(|n| n >= 13), "{summary}");
+    assert!(
+        mannequin["triangles"].as_u64().is_some_and(|n| n > 1000),
+        "{summary}"
+    );
+    assert!(
+        mannequin["travel_m"].as_f64().is_some_and(|m| m > 0.05),
+        "{summary}"
+    );
+    assert!(
+        summary["rig"]["mapped"].as_u64().is_some_and(|n| n >= 13),
+        "{summary}"
+    );
     let shots = summary["screenshots"].as_array().expect("screenshots");
     assert!(shots.len() >= 6, "{summary}");
     for shot in shots {
         let bytes = std::fs::read(shot.as_str().expect("path")).expect("screenshot file");
-        assert!(bytes.starts_with(b"\x89PNG") && bytes.len() > 10_000, "{shot} is a real PNG");
+        assert!(
+            bytes.starts_with(b"\x89PNG") && bytes.len() > 10_000,
+            "{shot} is a real PNG"
+        );
     }
     eprintln!("screenshots: {}", out.display());
     api.stop().await;
@@ -148,24 +196,68 @@ async fn the_page_and_its_assets_are_served_from_the_binary() {
     let app = spawn_app().await;
     let page = app.get("/").await;
     assert_eq!(page.status(), StatusCode::OK);
-    let csp = page.headers().get("content-security-policy").and_then(|v| v.to_str().ok()).unwrap_or("").to_string();
-    assert!(csp.contains("script-src 'self'") && csp.contains("default-src 'none'"), "{csp}");
-    assert!(page.headers()["content-type"].to_str().is_ok_and(|t| t.starts_with("text/html")));
+    let csp = page
+        .headers()
+        .get("content-security-policy")
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_string();
+    assert!(
+        csp.contains("script-src 'self'") && csp.contains("default-src 'none'"),
+        "{csp}"
+    );
+    assert!(page.headers()["content-type"]
+        .to_str()
+        .is_ok_and(|t| t.starts_with("text/html")));
     let html = page.text().await.expect("html");
-    assert!(html.contains(r#"src="/assets/app.js""#) && html.contains(r#"href="/assets/app.css""#), "{html}");
+    assert!(
+        html.contains(r#"src="/assets/app.js""#) && html.contains(r#"href="/assets/app.css""#),
+        "{html}"
+    );
     // Nothing is fetched from elsewhere: no absolute URL in the page's src or href attributes.
-    assert!(!html.contains("src=\"http") && !html.contains("href=\"http"), "{html}");
+    assert!(
+        !html.contains("src=\"http") && !html.contains("href=\"http"),
+        "{html}"
+    );
 
-    for (path, kind) in [("/assets/app.js", "text/javascript"), ("/assets/app.css", "text/css"), ("/assets/choreo-player.js", "text/javascript")] {
+    for (path, kind) in [
+        ("/assets/app.js", "text/javascript"),
+        ("/assets/app.css", "text/css"),
+        ("/assets/choreo-player.js", "text/javascript"),
+    ] {
         let first = app.get(path).await;
         assert_eq!(first.status(), StatusCode::OK, "{path}");
-        assert!(first.headers()["content-type"].to_str().is_ok_and(|t| t.starts_with(kind)), "{path}");
+        assert!(
+            first.headers()["content-type"]
+                .to_str()
+                .is_ok_and(|t| t.starts_with(kind)),
+            "{path}"
+        );
         let etag = first.headers()["etag"].clone();
         let body = first.bytes().await.expect("body");
-        let on_disk = std::fs::read(root().join("web/dist").join(path.trim_start_matches("/assets/"))).expect("web/dist file");
-        assert_eq!(body.as_ref(), on_disk.as_slice(), "{path} is web/dist's file");
-        let again = app.client.get(app.url(path)).header("if-none-match", etag).send().await.expect("GET");
-        assert_eq!(again.status(), StatusCode::NOT_MODIFIED, "{path} with its ETag");
+        let on_disk = std::fs::read(
+            root()
+                .join("web/dist")
+                .join(path.trim_start_matches("/assets/")),
+        )
+        .expect("web/dist file");
+        assert_eq!(
+            body.as_ref(),
+            on_disk.as_slice(),
+            "{path} is web/dist's file"
+        );
+        let again = app
+            .client
+            .get(app.url(path))
+            .header("if-none-match", etag)
+            .send()
+            .await
+            .expect("GET");
+        assert_eq!(
+            again.status(),
+            StatusCode::NOT_MODIFIED,
+            "{path} with its ETag"
+        );
     }
     app.stop().await;
 }
@@ -174,7 +266,11 @@ async fn the_page_and_its_assets_are_served_from_the_binary() {
 fn web_dist_is_what_web_src_builds_to() {
     // The page bundles the TypeScript client, so its dependencies are needed too.
     let needs = Needs {
-        node_modules: &["web/node_modules/esbuild", "web/node_modules/three", "clients/typescript/node_modules/openapi-fetch"],
+        node_modules: &[
+            "web/node_modules/esbuild",
+            "web/node_modules/three",
+            "clients/typescript/node_modules/openapi-fetch",
+        ],
         browser_and_songs: false,
     };
     if !ready("the web build check", &needs) {
@@ -191,7 +287,10 @@ fn web_dist_is_what_web_src_builds_to() {
     for file in ["index.html", "app.js", "app.css", "choreo-player.js"] {
         let built = std::fs::read(out.path().join(file)).expect("built file");
         let committed = std::fs::read(root().join("web/dist").join(file)).expect("committed file");
-        assert!(built == committed, "web/dist/{file} differs from what web/src builds to: run `npm run build` in web/ and commit web/dist");
+        assert!(
+            built == committed,
+            "web/dist/{file} differs from what web/src builds to: run `npm run build` in web/ and commit web/dist"
+        );
     }
 }
 
@@ -202,31 +301,56 @@ fn web_dist_is_what_web_src_builds_to() {
 #[test]
 fn the_typescript_client_is_what_the_spec_and_its_sources_make() {
     let needs = Needs {
-        node_modules: &["clients/typescript/node_modules/openapi-typescript", "clients/typescript/node_modules/typescript", "clients/typescript/node_modules/esbuild", "clients/typescript/node_modules/standardwebhooks"],
+        node_modules: &[
+            "clients/typescript/node_modules/openapi-typescript",
+            "clients/typescript/node_modules/typescript",
+            "clients/typescript/node_modules/esbuild",
+            "clients/typescript/node_modules/standardwebhooks",
+        ],
         browser_and_songs: false,
     };
     if !ready("the TypeScript client's checks", &needs) {
         return;
     }
     let output = std::process::Command::new("node")
-        .args(["--test", "test/drift.test.mjs", "test/events.test.mjs", "test/webhook.test.mjs"])
+        .args([
+            "--test",
+            "test/drift.test.mjs",
+            "test/events.test.mjs",
+            "test/webhook.test.mjs",
+        ])
         .current_dir(root().join("clients/typescript"))
         .output()
         .expect("run node --test in clients/typescript");
     let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(output.status.success(), "the TypeScript client's tests failed:\n{stdout}{}", String::from_utf8_lossy(&output.stderr));
-    assert!(stdout.contains("# fail 0") && !stdout.contains("# pass 0"), "{stdout}");
+    assert!(
+        output.status.success(),
+        "the TypeScript client's tests failed:\n{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(
+        stdout.contains("# fail 0") && !stdout.contains("# pass 0"),
+        "{stdout}"
+    );
 }
 
 /// Whether the checked-in spec has the job events route (then the client must follow a job by
 /// its events, not by polling).
 fn spec_has_events() -> bool {
-    let spec: serde_json::Value = serde_json::from_slice(&std::fs::read(root().join("openapi/openapi.json")).expect("openapi.json")).expect("spec json");
+    let spec: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(root().join("openapi/openapi.json")).expect("openapi.json"),
+    )
+    .expect("spec json");
     spec["paths"].get("/v1/jobs/{id}/events").is_some()
 }
 
 /// Runs `node script` in `dir` with `env`, within `limit`; returns its stdout's summary line as JSON.
-async fn run_node(script: &Path, dir: &Path, env: &[(&str, String)], limit: Duration) -> serde_json::Value {
+async fn run_node(
+    script: &Path,
+    dir: &Path,
+    env: &[(&str, String)],
+    limit: Duration,
+) -> serde_json::Value {
     let mut command = tokio::process::Command::new("node");
     command.arg(script).current_dir(dir).kill_on_drop(true);
     for (name, value) in env {
@@ -238,7 +362,11 @@ async fn run_node(script: &Path, dir: &Path, env: &[(&str, String)], limit: Dura
         .unwrap_or_else(|e| panic!("run node {}: {e}", script.display()));
     let stdout = String::from_utf8_lossy(&output.stdout);
     eprintln!("{stdout}{}", String::from_utf8_lossy(&output.stderr));
-    assert!(output.status.success(), "{} failed (above)", script.display());
+    assert!(
+        output.status.success(),
+        "{} failed (above)",
+        script.display()
+    );
     stdout
         .lines()
         .find_map(|l| l.strip_prefix("summary: "))
@@ -251,7 +379,13 @@ async fn run_node(script: &Path, dir: &Path, env: &[(&str, String)], limit: Dura
 /// motion.json (`clients/typescript/test/e2e.mjs`; it needs only the committed dist/).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_typescript_client_uploads_waits_and_downloads_from_a_real_server() {
-    if !ready("the TypeScript client's end-to-end test", &Needs { node_modules: &[], browser_and_songs: true }) {
+    if !ready(
+        "the TypeScript client's end-to-end test",
+        &Needs {
+            node_modules: &[],
+            browser_and_songs: true,
+        },
+    ) {
         return;
     }
     let app = spawn_app_with(|c| {
@@ -268,11 +402,24 @@ async fn the_typescript_client_uploads_waits_and_downloads_from_a_real_server() 
         ("EXPECT_EVENTS", if events { "1" } else { "0" }.to_string()),
     ];
     let dir = root().join("clients/typescript");
-    let summary = run_node(&dir.join("test/e2e.mjs"), &dir, &env, Duration::from_secs(240)).await;
+    let summary = run_node(
+        &dir.join("test/e2e.mjs"),
+        &dir,
+        &env,
+        Duration::from_secs(240),
+    )
+    .await;
     let job = app.job(summary["job_id"].as_str().expect("job_id")).await;
     assert_eq!(job["status"], "succeeded", "{job}");
-    assert!(summary["frames"].as_u64().is_some_and(|n| n > 25), "{summary}");
-    assert_eq!(summary["transport"], if events { "events" } else { "poll" }, "{summary}");
+    assert!(
+        summary["frames"].as_u64().is_some_and(|n| n > 25),
+        "{summary}"
+    );
+    assert_eq!(
+        summary["transport"],
+        if events { "events" } else { "poll" },
+        "{summary}"
+    );
     app.stop().await;
 }
 
@@ -282,12 +429,21 @@ async fn the_typescript_client_uploads_waits_and_downloads_from_a_real_server() 
 /// one motion frame of the song.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() {
-    if !ready("the player element test", &Needs { node_modules: &["tests/web/node_modules/playwright-core"], browser_and_songs: true }) {
+    if !ready(
+        "the player element test",
+        &Needs {
+            node_modules: &["tests/web/node_modules/playwright-core"],
+            browser_and_songs: true,
+        },
+    ) {
         return;
     }
     // The sample page's own origin: a free port for player.mjs's page server, listed for CORS.
     // (A made-up host would not do: Chromium keeps pages on public origins from loopback servers.)
-    let page_port = std::net::TcpListener::bind("127.0.0.1:0").and_then(|l| l.local_addr()).expect("a free port").port();
+    let page_port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port();
     let app = spawn_app_with(|c| {
         c.models_dir = models_dir();
         c.auth_token = Some(choreo::config::Secret::new(TOKEN));
@@ -296,7 +452,9 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
     .await;
     let song = app.upload_ok(&helpers::short_song()).await;
     let song_id = song["id"].as_str().expect("song id").to_string();
-    let job_id = app.dance(&serde_json::json!({"song_id": song_id, "model": "dance-revolution", "seed": 2})).await;
+    let job_id = app
+        .dance(&serde_json::json!({"song_id": song_id, "model": "dance-revolution", "seed": 2}))
+        .await;
     let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-player");
     let env = [
         ("API_URL", format!("http://{}", app.addr)),
@@ -307,11 +465,31 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
         ("OUT_DIR", out.display().to_string()),
         ("CHROMIUM", chromium().display().to_string()),
     ];
-    let summary = run_node(&root().join("tests/web/player.mjs"), &root().join("tests/web"), &env, Duration::from_secs(180)).await;
-    let worst = summary["sync"]["worst_diff_s"].as_f64().expect("worst_diff_s");
-    assert!(worst <= 1.0 / 25.0, "|audioTime − animationTime| reached {worst} s: {summary}");
-    assert!(summary["sync"]["audio_advanced_s"].as_f64().is_some_and(|s| s > 1.0), "{summary}");
-    let shot = std::fs::read(summary["screenshot"].as_str().expect("screenshot")).expect("screenshot file");
-    assert!(shot.starts_with(b"\x89PNG") && shot.len() > 10_000, "a real screenshot");
+    let summary = run_node(
+        &root().join("tests/web/player.mjs"),
+        &root().join("tests/web"),
+        &env,
+        Duration::from_secs(180),
+    )
+    .await;
+    let worst = summary["sync"]["worst_diff_s"]
+        .as_f64()
+        .expect("worst_diff_s");
+    assert!(
+        worst <= 1.0 / 25.0,
+        "|audioTime − animationTime| reached {worst} s: {summary}"
+    );
+    assert!(
+        summary["sync"]["audio_advanced_s"]
+            .as_f64()
+            .is_some_and(|s| s > 1.0),
+        "{summary}"
+    );
+    let shot = std::fs::read(summary["screenshot"].as_str().expect("screenshot"))
+        .expect("screenshot file");
+    assert!(
+        shot.starts_with(b"\x89PNG") && shot.len() > 10_000,
+        "a real screenshot"
+    );
     app.stop().await;
 }

@@ -81,7 +81,10 @@ impl Conn {
     async fn open(addr: std::net::SocketAddr) -> Result<Self, BenchError> {
         let stream = TcpStream::connect(addr).await?;
         stream.set_nodelay(true)?;
-        Ok(Self { stream, buf: Vec::with_capacity(16 * 1024) })
+        Ok(Self {
+            stream,
+            buf: Vec::with_capacity(16 * 1024),
+        })
     }
 
     /// Sends one request and reads the whole response; returns its status and body.
@@ -94,7 +97,8 @@ impl Conn {
             }
             self.fill().await?;
         };
-        let head = std::str::from_utf8(&self.buf[..header_end]).map_err(|e| BenchError::Protocol(e.to_string()))?;
+        let head = std::str::from_utf8(&self.buf[..header_end])
+            .map_err(|e| BenchError::Protocol(e.to_string()))?;
         let status = head
             .split(' ')
             .nth(1)
@@ -104,7 +108,8 @@ impl Conn {
             .lines()
             .find_map(|l| {
                 let (name, value) = l.split_once(':')?;
-                name.eq_ignore_ascii_case("content-length").then(|| value.trim().parse::<usize>().ok())?
+                name.eq_ignore_ascii_case("content-length")
+                    .then(|| value.trim().parse::<usize>().ok())?
             })
             .ok_or_else(|| BenchError::Protocol("no content-length".into()))?;
         while self.buf.len() < header_end + length {
@@ -136,7 +141,10 @@ fn percentile(sorted: &[Duration], q: f64) -> f64 {
 
 async fn running(server: &Server) -> Result<u64, BenchError> {
     let counts = server.state().store.counts().await?;
-    Ok(counts.iter().find(|(s, _)| *s == Status::Running).map_or(0, |(_, n)| *n))
+    Ok(counts
+        .iter()
+        .find(|(s, _)| *s == Status::Running)
+        .map_or(0, |(_, n)| *n))
 }
 
 /// Runs the bench and returns its figures.
@@ -167,9 +175,13 @@ pub async fn run(bench: HttpBench) -> Result<HttpReport, BenchError> {
     let mut conn = Conn::open(addr).await?;
     let (status, response) = conn.request(head.as_bytes(), &body).await?;
     if status != 201 {
-        return Err(BenchError::Protocol(format!("upload answered {status}: {}", String::from_utf8_lossy(&response))));
+        return Err(BenchError::Protocol(format!(
+            "upload answered {status}: {}",
+            String::from_utf8_lossy(&response)
+        )));
     }
-    let song: serde_json::Value = serde_json::from_slice(&response).map_err(|e| BenchError::Protocol(e.to_string()))?;
+    let song: serde_json::Value =
+        serde_json::from_slice(&response).map_err(|e| BenchError::Protocol(e.to_string()))?;
     let song_id: SongId = song["id"]
         .as_str()
         .and_then(|s| s.parse().ok())
@@ -178,7 +190,13 @@ pub async fn run(bench: HttpBench) -> Result<HttpReport, BenchError> {
     // Keep every worker busy: the analyze jobs queued here are real work on the real song.
     let mut target: Option<JobId> = None;
     for _ in 0..bench.busy_jobs.max(workers) {
-        let job = NewJob { kind: JobKind::Analyze { song_id }, priority: 0, max_attempts: 1, idempotency: None };
+        let job = NewJob {
+            tenant: crate::queue::TenantId::OPEN,
+            kind: JobKind::Analyze { song_id },
+            priority: 0,
+            max_attempts: 1,
+            idempotency: None,
+        };
         target = Some(server.state().store.register(job).await?.job().id);
     }
     server.state().wake.notify_waiters();
@@ -217,7 +235,9 @@ pub async fn run(bench: HttpBench) -> Result<HttpReport, BenchError> {
     let mut latencies = Vec::new();
     let mut errors = 0;
     for task in tasks {
-        let (l, e) = task.await.map_err(|e| BenchError::Protocol(format!("client task: {e}")))??;
+        let (l, e) = task
+            .await
+            .map_err(|e| BenchError::Protocol(format!("client task: {e}")))??;
         latencies.extend(l);
         errors += e;
     }

@@ -3,13 +3,14 @@
 //! ([`crate::motion::retarget`]). `rig=choreo`, the default, serves the stored files unchanged.
 //!
 //! Which skeleton a `rig` names is decided in one place, [`resolve_rig`].
+use super::auth::Caller;
 use super::extract::ApiQuery;
 use super::problem::{ApiError, Problem};
 use super::AppState;
 use crate::artifacts::Artifact;
 use crate::motion::export::{MotionJson, JSON_FILE};
 use crate::motion::retarget::{self, Format, RetargetError, TargetSkeleton};
-use crate::queue::{Job, JobKind, Status};
+use crate::queue::{Job, JobKind, Scope, Status};
 use axum::extract::{Path, State};
 use axum::http::{header, HeaderValue};
 use axum::response::{IntoResponse, Response};
@@ -30,53 +31,84 @@ pub struct RigQuery {
 
 /// The target a `rig` names: `None` for choreo's own rig (nothing to retarget), a built-in by
 /// name, else an uploaded rig by id (`POST /v1/rigs`); anything else is 404 `rig-not-found`.
-pub async fn resolve_rig(state: &AppState, _job: &Job, rig: &str) -> Result<Option<TargetSkeleton>, ApiError> {
+pub async fn resolve_rig(
+    state: &AppState,
+    job: &Job,
+    rig: &str,
+) -> Result<Option<TargetSkeleton>, ApiError> {
     if rig == "choreo" {
         return Ok(None);
     }
     if let Some(target) = retarget::builtin(rig) {
         return Ok(Some(target));
     }
-    super::rigs::target_skeleton(state, rig).await.map(Some).map_err(|e| match e {
-        ApiError::RigNotFound(_) => ApiError::RigNotFound(format!(
-            "{rig:?} (rigs are choreo, {}, or the id of an uploaded rig)",
-            retarget::BUILTINS.join(", ")
-        )),
-        other => other,
-    })
+    super::rigs::target_skeleton(state, Scope::Tenant(job.tenant), rig)
+        .await
+        .map(Some)
+        .map_err(|e| match e {
+            ApiError::RigNotFound(_) => ApiError::RigNotFound(format!(
+                "{rig:?} (rigs are choreo, {}, or the id of an uploaded rig)",
+                retarget::BUILTINS.join(", ")
+            )),
+            other => other,
+        })
 }
 
 /// A succeeded generate job, or the answer the result routes give when there is none.
-async fn finished_job(state: &AppState, id: &str) -> Result<Job, ApiError> {
-    let job = state.store.job(super::jobs::parse_job_id(id)?).await?;
+async fn finished_job(state: &AppState, caller: Caller, id: &str) -> Result<Job, ApiError> {
+    let job = state
+        .store
+        .job(caller.scope(), super::jobs::parse_job_id(id)?)
+        .await?;
     if let JobKind::Analyze { song_id } = job.kind {
-        return Err(ApiError::ResultNotFound(format!("analyze jobs write no files; the analysis is on /v1/songs/{song_id}")));
+        return Err(ApiError::ResultNotFound(format!(
+            "analyze jobs write no files; the analysis is on /v1/songs/{song_id}"
+        )));
     }
     Ok(job)
 }
 
 /// Reads the job's motion.json and renders it on `target` as `format`, off the async threads.
-async fn render(state: &AppState, job: &Job, target: TargetSkeleton, format: Format) -> Result<Vec<u8>, ApiError> {
+async fn render(
+    state: &AppState,
+    job: &Job,
+    target: TargetSkeleton,
+    format: Format,
+) -> Result<Vec<u8>, ApiError> {
     if job.status != Status::Succeeded {
-        return Err(ApiError::JobNotFinished { id: job.id, status: job.status });
+        return Err(ApiError::JobNotFinished {
+            id: job.id,
+            status: job.status,
+        });
     }
     if !job.files.files.iter().any(|f| f == JSON_FILE) {
-        return Err(ApiError::ResultNotFound(format!("job {} did not write {JSON_FILE}", job.id)));
+        return Err(ApiError::ResultNotFound(format!(
+            "job {} did not write {JSON_FILE}",
+            job.id
+        )));
     }
     let doing = format!("reading {JSON_FILE} of job {}", job.id);
-    let file = state.artifacts.stream(Artifact::Result(job.id, JSON_FILE)).await.map_err(|e| ApiError::artifact(&doing, &e))?;
+    let file = state
+        .artifacts
+        .stream(Artifact::Result(job.id, JSON_FILE))
+        .await
+        .map_err(|e| ApiError::artifact(&doing, &e))?;
     let bytes: Vec<u8> = file
         .body
-        .try_fold(Vec::with_capacity(file.len as usize), |mut acc, chunk| async move {
-            acc.extend_from_slice(&chunk);
-            Ok(acc)
-        })
+        .try_fold(
+            Vec::with_capacity(file.len as usize),
+            |mut acc, chunk| async move {
+                acc.extend_from_slice(&chunk);
+                Ok(acc)
+            },
+        )
         .await
         .map_err(|e| ApiError::storage(&doing, &e))?;
     let id = job.id;
     tokio::task::spawn_blocking(move || {
-        let json: MotionJson =
-            serde_json::from_slice(&bytes).map_err(|e| ApiError::Internal(format!("job {id}'s {JSON_FILE} does not parse: {e}")))?;
+        let json: MotionJson = serde_json::from_slice(&bytes).map_err(|e| {
+            ApiError::Internal(format!("job {id}'s {JSON_FILE} does not parse: {e}"))
+        })?;
         let src = retarget::from_motion_json(&json).map_err(|e| retarget_error(id, e))?;
         retarget::render(&src, &target, format).map_err(|e| retarget_error(id, e))
     })
@@ -87,10 +119,15 @@ async fn render(state: &AppState, job: &Job, target: TargetSkeleton, format: For
 /// A retarget failure as the API answers it: the rig's fault is 422 on `rig`, the rest ours.
 fn retarget_error(id: crate::queue::JobId, e: RetargetError) -> ApiError {
     match e {
-        RetargetError::InvalidTarget(_) | RetargetError::MissingBone(_) | RetargetError::DuplicateBone(_) => {
-            ApiError::InvalidField { field: "rig".into(), message: e.to_string() }
-        }
-        RetargetError::NotChoreoMotion(_) | RetargetError::EmptyMotion | RetargetError::Write { .. } => {
+        RetargetError::InvalidTarget(_)
+        | RetargetError::MissingBone(_)
+        | RetargetError::DuplicateBone(_) => ApiError::InvalidField {
+            field: "rig".into(),
+            message: e.to_string(),
+        },
+        RetargetError::NotChoreoMotion(_)
+        | RetargetError::EmptyMotion
+        | RetargetError::Write { .. } => {
             ApiError::Internal(format!("retargeting job {id}: {e} ({})", e.code()))
         }
     }
@@ -100,20 +137,32 @@ fn retarget_error(id: crate::queue::JobId, e: RetargetError) -> ApiError {
 fn respond(bytes: Vec<u8>, content_type: &'static str, filename: &str) -> Response {
     let disposition = HeaderValue::from_str(&format!("attachment; filename=\"{filename}\""))
         .unwrap_or_else(|_| HeaderValue::from_static("attachment"));
-    ([(header::CONTENT_TYPE, HeaderValue::from_static(content_type)), (header::CONTENT_DISPOSITION, disposition)], bytes)
+    (
+        [
+            (header::CONTENT_TYPE, HeaderValue::from_static(content_type)),
+            (header::CONTENT_DISPOSITION, disposition),
+        ],
+        bytes,
+    )
         .into_response()
 }
 
 /// `motion.bvh` or `motion.glb` on the rig asked for.
-async fn on_rig(state: State<AppState>, id: String, rig: Option<String>, format: Format) -> Result<Response, ApiError> {
+async fn on_rig(
+    state: State<AppState>,
+    caller: Caller,
+    id: String,
+    rig: Option<String>,
+    format: Format,
+) -> Result<Response, ApiError> {
     let (file, content_type, ext) = match format {
         Format::Glb => ("motion.glb", "model/gltf-binary", "glb"),
         _ => ("motion.bvh", "text/plain; charset=utf-8", "bvh"),
     };
     let rig = rig.unwrap_or_else(|| "choreo".into());
-    let job = finished_job(&state, &id).await?;
+    let job = finished_job(&state, caller, &id).await?;
     let Some(target) = resolve_rig(&state, &job, &rig).await? else {
-        return super::jobs::result(state, Path((id, file.to_string()))).await;
+        return super::jobs::result(state, caller, Path((id, file.to_string()))).await;
     };
     let bytes = render(&state, &job, target, format).await?;
     // The rig is a built-in name or an id here: safe in a header.
@@ -140,8 +189,13 @@ async fn on_rig(state: State<AppState>, id: String, rig: Option<String>, format:
     ),
     security(("bearer" = []))
 )]
-pub async fn motion_bvh(state: State<AppState>, Path(id): Path<String>, ApiQuery(q): ApiQuery<RigQuery>) -> Result<Response, ApiError> {
-    on_rig(state, id, q.rig, Format::Bvh).await
+pub async fn motion_bvh(
+    state: State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    ApiQuery(q): ApiQuery<RigQuery>,
+) -> Result<Response, ApiError> {
+    on_rig(state, caller, id, q.rig, Format::Bvh).await
 }
 
 /// A succeeded generate job's dance as glTF binary, on choreo's rig or another.
@@ -162,8 +216,13 @@ pub async fn motion_bvh(state: State<AppState>, Path(id): Path<String>, ApiQuery
     ),
     security(("bearer" = []))
 )]
-pub async fn motion_glb(state: State<AppState>, Path(id): Path<String>, ApiQuery(q): ApiQuery<RigQuery>) -> Result<Response, ApiError> {
-    on_rig(state, id, q.rig, Format::Glb).await
+pub async fn motion_glb(
+    state: State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+    ApiQuery(q): ApiQuery<RigQuery>,
+) -> Result<Response, ApiError> {
+    on_rig(state, caller, id, q.rig, Format::Glb).await
 }
 
 /// A succeeded generate job's dance as a VRM Animation (`.vrma`) for any VRM 1.0 avatar.
@@ -184,8 +243,12 @@ pub async fn motion_glb(state: State<AppState>, Path(id): Path<String>, ApiQuery
     ),
     security(("bearer" = []))
 )]
-pub async fn motion_vrma(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
-    let job = finished_job(&state, &id).await?;
+pub async fn motion_vrma(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let job = finished_job(&state, caller, &id).await?;
     let bytes = render(&state, &job, retarget::vrm(), Format::Vrma).await?;
     Ok(respond(bytes, "model/gltf-binary", "motion.vrma"))
 }
@@ -208,8 +271,16 @@ pub async fn motion_vrma(State(state): State<AppState>, Path(id): Path<String>) 
     ),
     security(("bearer" = []))
 )]
-pub async fn motion_smpl(State(state): State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
-    let job = finished_job(&state, &id).await?;
+pub async fn motion_smpl(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    let job = finished_job(&state, caller, &id).await?;
     let bytes = render(&state, &job, retarget::smpl(), Format::SmplNpz).await?;
-    Ok(respond(bytes, "application/octet-stream", "motion.smpl.npz"))
+    Ok(respond(
+        bytes,
+        "application/octet-stream",
+        "motion.smpl.npz",
+    ))
 }

@@ -13,23 +13,42 @@ pub struct ApiJson<T>(pub T);
 pub fn json_error(path: String, error: serde_json::Error) -> ApiError {
     use serde_json::error::Category;
     match error.classify() {
-        Category::Syntax | Category::Eof | Category::Io => ApiError::MalformedJson(error.to_string()),
+        Category::Syntax | Category::Eof | Category::Io => {
+            ApiError::MalformedJson(error.to_string())
+        }
         Category::Data => {
             let message = error.to_string();
             // serde names the offending key in backticks: "unknown field `x`, expected ...".
             let quoted = message.split('`').nth(1).map(str::to_string);
-            let prefix = if path == "." { String::new() } else { format!("{path}.") };
+            let prefix = if path == "." {
+                String::new()
+            } else {
+                format!("{path}.")
+            };
             if message.starts_with("unknown field") {
                 // The path already ends at the unknown key, unless it is at the top level.
                 let name = quoted.unwrap_or_default();
-                let field = if path == "." { name } else if path.ends_with(&name) { path } else { format!("{prefix}{name}") };
+                let field = if path == "." {
+                    name
+                } else if path.ends_with(&name) {
+                    path
+                } else {
+                    format!("{prefix}{name}")
+                };
                 ApiError::UnknownField(field)
             } else if message.starts_with("missing field") {
                 ApiError::MissingField(format!("{prefix}{}", quoted.unwrap_or_default()))
             } else {
                 // Drop serde_json's " at line 1 column 9" position suffix; the field is named.
-                let message = message.split(" at line ").next().unwrap_or(&message).to_string();
-                ApiError::InvalidField { field: path, message }
+                let message = message
+                    .split(" at line ")
+                    .next()
+                    .unwrap_or(&message)
+                    .to_string();
+                ApiError::InvalidField {
+                    field: path,
+                    message,
+                }
             }
         }
     }
@@ -42,7 +61,8 @@ pub fn parse_json<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
         let path = e.path().to_string();
         json_error(path, e.into_inner())
     })?;
-    de.end().map_err(|e| ApiError::MalformedJson(e.to_string()))?;
+    de.end()
+        .map_err(|e| ApiError::MalformedJson(e.to_string()))?;
     Ok(value)
 }
 
@@ -60,7 +80,8 @@ where
             .and_then(|v| v.split(';').next())
             .is_some_and(|mime| {
                 let mime = mime.trim().to_ascii_lowercase();
-                mime == "application/json" || (mime.starts_with("application/") && mime.ends_with("+json"))
+                mime == "application/json"
+                    || (mime.starts_with("application/") && mime.ends_with("+json"))
             });
         if !is_json {
             return Err(ApiError::NotJson);
@@ -68,9 +89,13 @@ where
         // The route's `DefaultBodyLimit` is `max_job_body_bytes`; past it nothing more is read.
         let bytes = Bytes::from_request(req, state).await.map_err(|e| {
             if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
-                ApiError::BodyTooLarge { limit: state.config.max_job_body_bytes }
+                ApiError::BodyTooLarge {
+                    limit: state.config.max_job_body_bytes,
+                }
             } else if super::multipart::caused_by::<tower_http::timeout::TimeoutError>(&e) {
-                ApiError::BodyTimeout { seconds: state.config.body_timeout_s }
+                ApiError::BodyTimeout {
+                    seconds: state.config.body_timeout_s,
+                }
             } else {
                 ApiError::MalformedJson(e.body_text())
             }
@@ -89,15 +114,23 @@ where
 {
     use serde::de::Error;
     use serde::Deserialize;
-    let Some(n) = Option::<serde_json::Number>::deserialize(deserializer)? else { return Ok(None) };
+    let Some(n) = Option::<serde_json::Number>::deserialize(deserializer)? else {
+        return Ok(None);
+    };
     let value = match (n.as_i64(), n.as_u64(), n.as_f64()) {
         (Some(i), _, _) => i128::from(i),
         (_, Some(u), _) => i128::from(u),
         // 2^64 bounds every integer field; past it (or with a fraction) it is no integer we take.
         (_, _, Some(f)) if f.fract() == 0.0 && f.abs() <= 18_446_744_073_709_551_615.0 => f as i128,
-        _ => return Err(D::Error::custom(format!("invalid value {n}, expected an integer"))),
+        _ => {
+            return Err(D::Error::custom(format!(
+                "invalid value {n}, expected an integer"
+            )))
+        }
     };
-    T::try_from(value).map(Some).map_err(|_| D::Error::custom(format!("{n} is out of range")))
+    T::try_from(value)
+        .map(Some)
+        .map_err(|_| D::Error::custom(format!("{n} is out of range")))
 }
 
 /// A query string; an unknown or malformed parameter is a 400 that says which.

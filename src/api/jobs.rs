@@ -1,4 +1,5 @@
 //! `/v1/jobs`: submit, read, list, cancel, and the result files.
+use super::auth::Caller;
 use super::extract::{optional_integer, ApiJson, ApiQuery};
 use super::problem::{ApiError, Problem};
 use super::AppState;
@@ -7,7 +8,8 @@ use crate::motion::input::{KeyPoseInput, SeedMotionInput};
 use crate::motion::{validate, KeyPose, MOTION_FPS};
 use crate::queue::files::RESULT_FILES;
 use crate::queue::{
-    GenerateOptions, Idempotency, Job, JobFilter, JobId, JobKind, NewJob, QueueError, Registered, SeedMotion, SongId, Status,
+    GenerateOptions, Idempotency, Job, JobFilter, JobId, JobKind, NewJob, QueueError, Registered,
+    SeedMotion, SongId, Status,
 };
 use axum::body::Body;
 use axum::extract::{Path, State};
@@ -135,7 +137,8 @@ pub struct JobView {
 impl From<Job> for JobView {
     fn from(job: Job) -> Self {
         let base = format!("/v1/jobs/{}", job.id);
-        let file = |name: &str| matches!(job.kind, JobKind::Generate(_)).then(|| format!("{base}/{name}"));
+        let file =
+            |name: &str| matches!(job.kind, JobKind::Generate(_)).then(|| format!("{base}/{name}"));
         let links = Links {
             song: format!("/v1/songs/{}", job.kind.song_id()),
             motion_bvh: file("motion.bvh"),
@@ -199,7 +202,10 @@ pub struct ListQuery {
 }
 
 fn invalid(field: &str, message: impl Into<String>) -> ApiError {
-    ApiError::InvalidField { field: field.into(), message: message.into() }
+    ApiError::InvalidField {
+        field: field.into(),
+        message: message.into(),
+    }
 }
 
 /// The request's key poses and seed motion made canonical and validated by the motion module
@@ -215,14 +221,23 @@ async fn motion_inputs(
     }
     tokio::task::spawn_blocking(move || {
         let frames = validate::song_frames(duration_s, MOTION_FPS);
-        let keys = crate::motion::input::key_poses(&key_poses, frames, MOTION_FPS).map_err(|e| invalid("key_poses", e.to_string()))?;
+        let keys = crate::motion::input::key_poses(&key_poses, frames, MOTION_FPS)
+            .map_err(|e| invalid("key_poses", e.to_string()))?;
         let seed = seed_motion
             .map(|s| crate::motion::input::seed_motion(&s))
             .transpose()
             .map_err(|e| invalid("seed_motion", e.to_string()))?
             .map(|m| SeedMotion {
                 fps: m.fps,
-                positions: m.positions.outer_iter().map(|f| f.outer_iter().map(|p| [0, 1, 2].map(|c| f64::from(p[c]))).collect()).collect(),
+                positions: m
+                    .positions
+                    .outer_iter()
+                    .map(|f| {
+                        f.outer_iter()
+                            .map(|p| [0, 1, 2].map(|c| f64::from(p[c])))
+                            .collect()
+                    })
+                    .collect(),
             });
         Ok((keys, seed))
     })
@@ -233,24 +248,44 @@ async fn motion_inputs(
 /// Refuses inputs whose size alone would cost memory or time, before anything else reads them.
 fn check_sizes(request: &CreateJob) -> Result<(), ApiError> {
     if request.key_poses.len() > MAX_KEY_POSES {
-        return Err(invalid("key_poses", format!("at most {MAX_KEY_POSES} key poses, got {}", request.key_poses.len())));
+        return Err(invalid(
+            "key_poses",
+            format!(
+                "at most {MAX_KEY_POSES} key poses, got {}",
+                request.key_poses.len()
+            ),
+        ));
     }
-    if let Some(positions) = request.seed_motion.as_ref().and_then(|s| s.positions.as_ref()) {
+    if let Some(positions) = request
+        .seed_motion
+        .as_ref()
+        .and_then(|s| s.positions.as_ref())
+    {
         if positions.len() > MAX_SEED_FRAMES {
-            return Err(invalid("seed_motion.positions", format!("at most {MAX_SEED_FRAMES} frames, got {}", positions.len())));
+            return Err(invalid(
+                "seed_motion.positions",
+                format!("at most {MAX_SEED_FRAMES} frames, got {}", positions.len()),
+            ));
         }
     }
     Ok(())
 }
 
 fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempotency>, ApiError> {
-    let Some(value) = headers.get(&IDEMPOTENCY_KEY) else { return Ok(None) };
-    let key = value.to_str().map_err(|_| ApiError::InvalidIdempotencyKey)?;
+    let Some(value) = headers.get(&IDEMPOTENCY_KEY) else {
+        return Ok(None);
+    };
+    let key = value
+        .to_str()
+        .map_err(|_| ApiError::InvalidIdempotencyKey)?;
     if key.is_empty() || key.len() > 255 || !key.bytes().all(|b| b.is_ascii_graphic()) {
         return Err(ApiError::InvalidIdempotencyKey);
     }
     let canonical = serde_json::to_vec(request).map_err(|e| ApiError::Internal(e.to_string()))?;
-    Ok(Some(Idempotency { key: key.to_string(), request_hash: hex::encode(Sha256::digest(&canonical)) }))
+    Ok(Some(Idempotency {
+        key: key.to_string(),
+        request_hash: hex::encode(Sha256::digest(&canonical)),
+    }))
 }
 
 /// Submit a dance.
@@ -283,12 +318,13 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
 )]
 pub async fn create(
     State(state): State<AppState>,
+    caller: Caller,
     headers: HeaderMap,
     ApiJson(mut request): ApiJson<CreateJob>,
 ) -> Result<Response, ApiError> {
     check_sizes(&request)?;
     let idempotency = idempotency(&headers, &request)?;
-    let song = match state.store.song(request.song_id).await {
+    let song = match state.store.song(caller.scope(), request.song_id).await {
         Ok(song) => song,
         // 404, as for any id that names nothing: the request itself is well formed.
         Err(QueueError::SongNotFound(id)) => return Err(ApiError::SongNotFound(id.to_string())),
@@ -297,21 +333,39 @@ pub async fn create(
     let model_id = ModelId(request.model.clone());
     let Some(model) = state.registry.get(&model_id) else {
         let available = state.registry.list().into_iter().map(|m| m.id.0).collect();
-        return Err(ApiError::UnknownModel { model: request.model, available });
+        return Err(ApiError::UnknownModel {
+            model: request.model,
+            available,
+        });
     };
     let capabilities = model.info().capabilities;
     if !request.key_poses.is_empty() && !capabilities.key_poses {
-        return Err(invalid("key_poses", format!("model `{}` does not take key poses", request.model)));
+        return Err(invalid(
+            "key_poses",
+            format!("model `{}` does not take key poses", request.model),
+        ));
     }
     if request.seed_motion.is_some() && !capabilities.seed_motion {
-        return Err(invalid("seed_motion", format!("model `{}` does not take a seed motion", request.model)));
+        return Err(invalid(
+            "seed_motion",
+            format!("model `{}` does not take a seed motion", request.model),
+        ));
     }
     if request.style.is_some() && !capabilities.style {
-        return Err(invalid("style", format!("model `{}` does not take a style", request.model)));
+        return Err(invalid(
+            "style",
+            format!("model `{}` does not take a style", request.model),
+        ));
     }
     if let Some(t) = request.temperature {
         if !capabilities.temperature {
-            return Err(invalid("temperature", format!("model `{}` does not sample with a temperature", request.model)));
+            return Err(invalid(
+                "temperature",
+                format!(
+                    "model `{}` does not sample with a temperature",
+                    request.model
+                ),
+            ));
         }
         if !TEMPERATURE_RANGE.contains(&t) {
             return Err(invalid("temperature", "must be within 0.05..=5"));
@@ -319,7 +373,10 @@ pub async fn create(
     }
     if let Some(k) = request.top_k {
         if !capabilities.top_k {
-            return Err(invalid("top_k", format!("model `{}` does not take top_k", request.model)));
+            return Err(invalid(
+                "top_k",
+                format!("model `{}` does not take top_k", request.model),
+            ));
         }
         if !(1..=300).contains(&k) {
             return Err(invalid("top_k", "must be within 1..=300"));
@@ -329,9 +386,15 @@ pub async fn create(
     if !PRIORITY_RANGE.contains(&priority) {
         return Err(invalid("priority", "must be within -100..=100"));
     }
-    let (key_poses, seed_motion) = motion_inputs(std::mem::take(&mut request.key_poses), request.seed_motion.take(), song.duration_s).await?;
+    let (key_poses, seed_motion) = motion_inputs(
+        std::mem::take(&mut request.key_poses),
+        request.seed_motion.take(),
+        song.duration_s,
+    )
+    .await?;
     let seed = request.seed.unwrap_or_else(rand::random);
     let job = NewJob {
+        tenant: caller.tenant,
         kind: JobKind::Generate(GenerateOptions {
             song_id: request.song_id,
             model: model_id,
@@ -357,7 +420,9 @@ pub async fn create(
     };
     let mut response = (StatusCode::ACCEPTED, Json(JobView::from(job))).into_response();
     if replayed {
-        response.headers_mut().insert(IDEMPOTENT_REPLAYED, HeaderValue::from_static("true"));
+        response
+            .headers_mut()
+            .insert(IDEMPOTENT_REPLAYED, HeaderValue::from_static("true"));
     }
     Ok(response)
 }
@@ -379,8 +444,12 @@ pub(super) fn parse_job_id(id: &str) -> Result<JobId, ApiError> {
     ),
     security(("bearer" = []))
 )]
-pub async fn get(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<JobView>, ApiError> {
-    let job = state.store.job(parse_job_id(&id)?).await?;
+pub async fn get(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<Json<JobView>, ApiError> {
+    let job = state.store.job(caller.scope(), parse_job_id(&id)?).await?;
     Ok(Json(job.into()))
 }
 
@@ -398,8 +467,17 @@ pub async fn get(State(state): State<AppState>, Path(id): Path<String>) -> Resul
     ),
     security(("bearer" = []))
 )]
-pub async fn list(State(state): State<AppState>, ApiQuery(query): ApiQuery<ListQuery>) -> Result<Json<JobPage>, ApiError> {
-    let status = query.status.as_deref().map(Status::from_str).transpose().map_err(|e| invalid("status", e.to_string()))?;
+pub async fn list(
+    State(state): State<AppState>,
+    caller: Caller,
+    ApiQuery(query): ApiQuery<ListQuery>,
+) -> Result<Json<JobPage>, ApiError> {
+    let status = query
+        .status
+        .as_deref()
+        .map(Status::from_str)
+        .transpose()
+        .map_err(|e| invalid("status", e.to_string()))?;
     let limit = query.limit.unwrap_or(DEFAULT_LIMIT);
     if !(1..=MAX_LIMIT).contains(&limit) {
         return Err(invalid("limit", format!("must be within 1..={MAX_LIMIT}")));
@@ -411,11 +489,29 @@ pub async fn list(State(state): State<AppState>, ApiQuery(query): ApiQuery<ListQ
         .transpose()
         .map_err(|_| invalid("cursor", "must be the next_cursor of a previous page"))?;
     // One extra row tells whether another page exists.
-    let mut jobs = state.store.jobs(JobFilter { status, model: query.model, before, limit: limit + 1 }).await?;
+    let mut jobs = state
+        .store
+        .jobs(
+            caller.scope(),
+            JobFilter {
+                status,
+                model: query.model,
+                before,
+                limit: limit + 1,
+            },
+        )
+        .await?;
     let more = jobs.len() > limit as usize;
     jobs.truncate(limit as usize);
-    let next_cursor = if more { jobs.last().map(|j| j.id.to_string()) } else { None };
-    Ok(Json(JobPage { items: jobs.into_iter().map(JobView::from).collect(), next_cursor }))
+    let next_cursor = if more {
+        jobs.last().map(|j| j.id.to_string())
+    } else {
+        None
+    };
+    Ok(Json(JobPage {
+        items: jobs.into_iter().map(JobView::from).collect(),
+        next_cursor,
+    }))
 }
 
 /// Cancel a job: a queued one at once, a running one at its next progress checkpoint.
@@ -432,11 +528,23 @@ pub async fn list(State(state): State<AppState>, ApiQuery(query): ApiQuery<ListQ
     ),
     security(("bearer" = []))
 )]
-pub async fn cancel(State(state): State<AppState>, Path(id): Path<String>) -> Result<(StatusCode, Json<JobView>), ApiError> {
-    let job = state.store.cancel(parse_job_id(&id)?).await?;
+pub async fn cancel(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<(StatusCode, Json<JobView>), ApiError> {
+    let job = state
+        .store
+        .cancel(caller.scope(), parse_job_id(&id)?)
+        .await?;
     match job.status {
-        Status::Succeeded | Status::Failed => Err(ApiError::AlreadyFinished { id: job.id, status: job.status }),
-        Status::Queued | Status::Running | Status::Cancelled => Ok((StatusCode::ACCEPTED, Json(job.into()))),
+        Status::Succeeded | Status::Failed => Err(ApiError::AlreadyFinished {
+            id: job.id,
+            status: job.status,
+        }),
+        Status::Queued | Status::Running | Status::Cancelled => {
+            Ok((StatusCode::ACCEPTED, Json(job.into())))
+        }
     }
 }
 
@@ -466,19 +574,34 @@ fn content_type(file: &str) -> &'static str {
     ),
     security(("bearer" = []))
 )]
-pub async fn result(State(state): State<AppState>, Path((id, file)): Path<(String, String)>) -> Result<Response, ApiError> {
+pub async fn result(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path((id, file)): Path<(String, String)>,
+) -> Result<Response, ApiError> {
     let Some(name) = RESULT_FILES.iter().find(|f| **f == file) else {
-        return Err(ApiError::ResultNotFound(format!("no result named {file:?}; jobs have {}", RESULT_FILES.join(", "))));
+        return Err(ApiError::ResultNotFound(format!(
+            "no result named {file:?}; jobs have {}",
+            RESULT_FILES.join(", ")
+        )));
     };
-    let job = state.store.job(parse_job_id(&id)?).await?;
+    let job = state.store.job(caller.scope(), parse_job_id(&id)?).await?;
     if let JobKind::Analyze { song_id } = job.kind {
-        return Err(ApiError::ResultNotFound(format!("analyze jobs write no files; the analysis is on /v1/songs/{song_id}")));
+        return Err(ApiError::ResultNotFound(format!(
+            "analyze jobs write no files; the analysis is on /v1/songs/{song_id}"
+        )));
     }
     if job.status != Status::Succeeded {
-        return Err(ApiError::JobNotFinished { id: job.id, status: job.status });
+        return Err(ApiError::JobNotFinished {
+            id: job.id,
+            status: job.status,
+        });
     }
     if !job.files.files.iter().any(|f| f == name) {
-        return Err(ApiError::ResultNotFound(format!("job {} did not write {name}", job.id)));
+        return Err(ApiError::ResultNotFound(format!(
+            "job {} did not write {name}",
+            job.id
+        )));
     }
     let file = state
         .artifacts
@@ -486,8 +609,13 @@ pub async fn result(State(state): State<AppState>, Path((id, file)): Path<(Strin
         .await
         .map_err(|e| ApiError::artifact(&format!("reading {name} of job {}", job.id), &e))?;
     // Streamed with backpressure: a client that stops reading holds one chunk, not the file.
-    let headers =
-        [(header::CONTENT_TYPE, HeaderValue::from_static(content_type(name))), (header::CONTENT_LENGTH, HeaderValue::from(file.len))];
+    let headers = [
+        (
+            header::CONTENT_TYPE,
+            HeaderValue::from_static(content_type(name)),
+        ),
+        (header::CONTENT_LENGTH, HeaderValue::from(file.len)),
+    ];
     Ok((headers, Body::from_stream(file.body)).into_response())
 }
 
@@ -516,6 +644,15 @@ pub struct Png(pub Vec<u8>);
     ),
     security(("bearer" = []))
 )]
-pub async fn preview(state: State<AppState>, Path(id): Path<String>) -> Result<Response, ApiError> {
-    result(state, Path((id, crate::report::preview::PREVIEW_FILE.to_string()))).await
+pub async fn preview(
+    state: State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<Response, ApiError> {
+    result(
+        state,
+        caller,
+        Path((id, crate::report::preview::PREVIEW_FILE.to_string())),
+    )
+    .await
 }

@@ -50,7 +50,11 @@ impl Limits {
     /// The limits of `config`, with the connection cap fitted to the open-file limit.
     pub fn new(config: &crate::config::Config) -> Self {
         Self {
-            max_connections: connection_cap(config.max_connections, config.fd_reserve, open_file_limit()),
+            max_connections: connection_cap(
+                config.max_connections,
+                config.fd_reserve,
+                open_file_limit(),
+            ),
             header_timeout: Duration::from_secs_f64(config.header_timeout_s),
             write_timeout: Duration::from_secs_f64(config.write_timeout_s),
         }
@@ -60,13 +64,19 @@ impl Limits {
 /// The open-file limit, raised first to the hard limit (as Go's runtime does): the default soft
 /// limit of 1,024 is a relic that the hard limit usually far exceeds.
 pub fn open_file_limit() -> u64 {
-    let mut limit = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
+    let mut limit = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
     // SAFETY: getrlimit writes into the struct we own.
     if unsafe { libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit) } != 0 {
         return u64::MAX;
     }
     if limit.rlim_cur < limit.rlim_max {
-        let raised = libc::rlimit { rlim_cur: limit.rlim_max, rlim_max: limit.rlim_max };
+        let raised = libc::rlimit {
+            rlim_cur: limit.rlim_max,
+            rlim_max: limit.rlim_max,
+        };
         // SAFETY: setrlimit only reads the struct.
         if unsafe { libc::setrlimit(libc::RLIMIT_NOFILE, &raised) } == 0 {
             limit = raised;
@@ -81,18 +91,29 @@ pub fn open_file_limit() -> u64 {
 
 /// `max_connections`, lowered so that `reserve` file handles of `open_files` stay free.
 pub fn connection_cap(max_connections: usize, reserve: u64, open_files: u64) -> usize {
-    let room = open_files.saturating_sub(reserve).saturating_sub(REFUSALS as u64).max(1);
+    let room = open_files
+        .saturating_sub(reserve)
+        .saturating_sub(REFUSALS as u64)
+        .max(1);
     max_connections.min(usize::try_from(room).unwrap_or(usize::MAX))
 }
 
 /// Serves `app` on `listener` until `shutdown`, then lets in-flight requests finish (bounded).
-pub async fn serve(listener: TcpListener, app: Router, limits: Limits, shutdown: CancellationToken) -> std::io::Result<()> {
+pub async fn serve(
+    listener: TcpListener,
+    app: Router,
+    limits: Limits,
+    shutdown: CancellationToken,
+) -> std::io::Result<()> {
     let open = Arc::new(Semaphore::new(limits.max_connections));
     let refusals = Arc::new(Semaphore::new(REFUSALS));
     let refusal = refusal_bytes(limits.max_connections);
     let graceful = GracefulShutdown::new();
     let mut builder = http1::Builder::new();
-    builder.timer(TokioTimer::new()).header_read_timeout(limits.header_timeout).max_buf_size(MAX_HEAD_BYTES);
+    builder
+        .timer(TokioTimer::new())
+        .header_read_timeout(limits.header_timeout)
+        .max_buf_size(MAX_HEAD_BYTES);
     let mut last_accept_error: Option<Instant> = None;
     loop {
         let stream = tokio::select! {
@@ -124,7 +145,10 @@ pub async fn serve(listener: TcpListener, app: Router, limits: Limits, shutdown:
         };
         let mut io = TimeoutStream::new(stream);
         io.set_write_timeout(Some(limits.write_timeout));
-        let connection = builder.serve_connection(TokioIo::new(Box::pin(io)), TowerToHyperService::new(app.clone()));
+        let connection = builder.serve_connection(
+            TokioIo::new(Box::pin(io)),
+            TowerToHyperService::new(app.clone()),
+        );
         let connection = graceful.watch(connection);
         tokio::spawn(async move {
             if let Err(e) = connection.await {

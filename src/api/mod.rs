@@ -8,10 +8,10 @@ use crate::config::Config;
 use crate::models::Registry;
 use crate::queue::{DataDir, Store};
 use crate::telemetry;
-use axum::extract::{Request, State};
+use axum::extract::Request;
 use axum::http::{header, HeaderName, Method};
 use axum::middleware::{self, Next};
-use axum::response::{IntoResponse, Response};
+use axum::response::Response;
 use axum::routing::get;
 use axum::Router;
 use metrics_exporter_prometheus::PrometheusHandle;
@@ -28,6 +28,7 @@ use tower_http::timeout::RequestBodyTimeoutLayer;
 use tower_http::trace::TraceLayer;
 use utoipa_swagger_ui::SwaggerUi;
 
+pub mod auth;
 pub mod bench;
 pub mod downloads;
 pub mod extract;
@@ -77,9 +78,15 @@ pub struct AppState {
 #[derive(Debug, thiserror::Error)]
 pub enum StartError {
     #[error("data dir {path}: {source}")]
-    DataDir { path: String, source: std::io::Error },
+    DataDir {
+        path: String,
+        source: std::io::Error,
+    },
     #[error("binding {bind}: {source}")]
-    Bind { bind: String, source: std::io::Error },
+    Bind {
+        bind: String,
+        source: std::io::Error,
+    },
     #[error(transparent)]
     Config(#[from] crate::config::ConfigError),
     #[error(transparent)]
@@ -114,9 +121,11 @@ pub fn router(state: AppState) -> Router {
         .route("/rigs/{id}", get(rigs::get))
         .route(
             "/jobs",
-            get(jobs::list).post(jobs::create).layer(axum::extract::DefaultBodyLimit::max(
-                usize::try_from(state.config.max_job_body_bytes).unwrap_or(usize::MAX),
-            )),
+            get(jobs::list)
+                .post(jobs::create)
+                .layer(axum::extract::DefaultBodyLimit::max(
+                    usize::try_from(state.config.max_job_body_bytes).unwrap_or(usize::MAX),
+                )),
         )
         .route("/jobs/{id}", get(jobs::get).delete(jobs::cancel))
         .route("/jobs/{id}/preview.png", get(jobs::preview))
@@ -128,12 +137,22 @@ pub fn router(state: AppState) -> Router {
         .route("/models", get(system::models))
         .layer(axum::extract::DefaultBodyLimit::max(
             // Room to read and drop the rest of a refused upload (songs::read_form).
-            usize::try_from(state.config.max_upload_bytes + MULTIPART_OVERHEAD + songs::DRAIN_LIMIT_BYTES).unwrap_or(usize::MAX),
+            usize::try_from(
+                state.config.max_upload_bytes + MULTIPART_OVERHEAD + songs::DRAIN_LIMIT_BYTES,
+            )
+            .unwrap_or(usize::MAX),
         ))
-        .route_layer(middleware::from_fn_with_state(state.clone(), require_bearer));
+        .route_layer(middleware::from_fn_with_state(
+            state.clone(),
+            auth::authenticate,
+        ));
 
     let request_span = |req: &Request| {
-        let id = req.headers().get(REQUEST_ID).and_then(|v| v.to_str().ok()).unwrap_or("-");
+        let id = req
+            .headers()
+            .get(REQUEST_ID)
+            .and_then(|v| v.to_str().ok())
+            .unwrap_or("-");
         tracing::info_span!("request", method = %req.method(), path = %req.uri().path(), request_id = %id)
     };
     Router::new()
@@ -142,7 +161,10 @@ pub fn router(state: AppState) -> Router {
         .route("/healthz", get(system::healthz))
         .route("/readyz", get(system::readyz))
         .route("/metrics", get(system::metrics))
-        .merge(SwaggerUi::new("/docs").external_url_unchecked("/openapi.json", openapi::spec().unwrap_or_default()))
+        .merge(
+            SwaggerUi::new("/docs")
+                .external_url_unchecked("/openapi.json", openapi::spec().unwrap_or_default()),
+        )
         .fallback(|| async { ApiError::NoRoute })
         .method_not_allowed_fallback(|| async { ApiError::MethodNotAllowed })
         .layer(middleware::from_fn(count_responses))
@@ -152,7 +174,9 @@ pub fn router(state: AppState) -> Router {
         .layer(SetRequestIdLayer::new(REQUEST_ID, MakeRequestUuid))
         .layer(middleware::from_fn(cap_request_id))
         // The longest pause between two pieces of any request body.
-        .layer(RequestBodyTimeoutLayer::new(Duration::from_secs_f64(state.config.body_timeout_s)))
+        .layer(RequestBodyTimeoutLayer::new(Duration::from_secs_f64(
+            state.config.body_timeout_s,
+        )))
         .with_state(state)
 }
 
@@ -165,7 +189,11 @@ fn cors(config: &Config) -> CorsLayer {
     CorsLayer::new()
         .allow_origin(origins)
         .allow_methods([Method::GET, Method::POST, Method::DELETE])
-        .allow_headers([header::AUTHORIZATION, header::CONTENT_TYPE, jobs::IDEMPOTENCY_KEY])
+        .allow_headers([
+            header::AUTHORIZATION,
+            header::CONTENT_TYPE,
+            jobs::IDEMPOTENCY_KEY,
+        ])
         .expose_headers([REQUEST_ID, header::LOCATION, jobs::IDEMPOTENT_REPLAYED])
         .max_age(Duration::from_secs(3600))
 }
@@ -174,58 +202,20 @@ fn cors(config: &Config) -> CorsLayer {
 async fn cap_request_id(mut req: Request, next: Next) -> Response {
     let acceptable = |v: &axum::http::HeaderValue| {
         let bytes = v.as_bytes();
-        !bytes.is_empty() && bytes.len() <= MAX_REQUEST_ID_CHARS && bytes.iter().all(|b| b.is_ascii_graphic())
+        !bytes.is_empty()
+            && bytes.len() <= MAX_REQUEST_ID_CHARS
+            && bytes.iter().all(|b| b.is_ascii_graphic())
     };
-    if req.headers().get_all(REQUEST_ID).iter().any(|v| !acceptable(v)) || req.headers().get_all(REQUEST_ID).iter().count() > 1 {
+    if req
+        .headers()
+        .get_all(REQUEST_ID)
+        .iter()
+        .any(|v| !acceptable(v))
+        || req.headers().get_all(REQUEST_ID).iter().count() > 1
+    {
         req.headers_mut().remove(REQUEST_ID);
     }
     next.run(req).await
-}
-
-/// The token of an `Authorization` header's `Bearer` credentials (the scheme is
-/// case-insensitive, RFC 9110 §11.1).
-fn bearer_token(value: &str) -> Option<&str> {
-    let (scheme, token) = value.trim().split_once(' ')?;
-    scheme.eq_ignore_ascii_case("bearer").then(|| token.trim_start_matches(' '))
-}
-
-/// Demands `Authorization: Bearer <token>` when a token is configured.
-async fn require_bearer(State(state): State<AppState>, req: Request, next: Next) -> Response {
-    let Some(token) = &state.config.auth_token else {
-        return next.run(req).await;
-    };
-    let given = req.headers().get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()).and_then(bearer_token).unwrap_or("");
-    if constant_time_eq(given.as_bytes(), token.expose().as_bytes()) {
-        next.run(req).await
-    } else {
-        let mut response = ApiError::Unauthorized.into_response();
-        // An unauthenticated body is not read. hyper drops a connection with unread bytes after
-        // the answer, so say so, or a keep-alive client sends its next request into it.
-        if has_body(&req) {
-            response.headers_mut().insert(header::CONNECTION, axum::http::HeaderValue::from_static("close"));
-        }
-        response
-    }
-}
-
-/// Whether a request announces a body (a non-zero `Content-Length`, or chunked).
-fn has_body(req: &Request) -> bool {
-    let headers = req.headers();
-    headers.contains_key(header::TRANSFER_ENCODING)
-        || headers
-            .get(header::CONTENT_LENGTH)
-            .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.parse::<u64>().ok())
-            .is_some_and(|n| n > 0)
-}
-
-/// Compares without an early exit, so timing does not reveal how much of a token matched.
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    let mut diff = u8::from(a.len() != b.len());
-    for (i, x) in a.iter().enumerate() {
-        diff |= x ^ b.get(i % b.len().max(1)).copied().unwrap_or(0);
-    }
-    diff == 0
 }
 
 async fn count_responses(req: Request, next: Next) -> Response {
@@ -263,15 +253,29 @@ impl Server {
     }
 
     async fn launch(config: Config, run_workers: bool) -> Result<Self, StartError> {
-        let data_err = |source| StartError::DataDir { path: config.data_dir.display().to_string(), source };
+        let data_err = |source| StartError::DataDir {
+            path: config.data_dir.display().to_string(),
+            source,
+        };
         let data = DataDir::create(&config.data_dir).map_err(data_err)?;
         let stale = data.clean_tmp().map_err(data_err)?;
         if stale > 0 {
-            tracing::info!(files = stale, "removed uploads cut off by a previous process");
+            tracing::info!(
+                files = stale,
+                "removed uploads cut off by a previous process"
+            );
         }
-        let store: Arc<dyn Store> = crate::queue::open(&config.database()?, Duration::from_secs_f64(config.db_timeout_s)).await?;
+        let store: Arc<dyn Store> = crate::queue::open(
+            &config.database()?,
+            Duration::from_secs_f64(config.db_timeout_s),
+        )
+        .await?;
         let artifacts = crate::artifacts::open(&config, data.clone())?;
-        crate::artifacts::sweep::spawn(store.clone(), data.clone(), Duration::from_secs_f64(config.sweep_grace_s));
+        crate::artifacts::sweep::spawn(
+            store.clone(),
+            data.clone(),
+            Duration::from_secs_f64(config.sweep_grace_s),
+        );
         let registry = Arc::new(Registry::load(&config.models_dir)?);
         let workers = config.worker_count();
         tracing::info!(
@@ -281,11 +285,20 @@ impl Server {
             "starting"
         );
 
-        let ctx = crate::worker::context(store.clone(), artifacts.clone(), registry.clone(), data.clone(), &config);
+        let ctx = crate::worker::context(
+            store.clone(),
+            artifacts.clone(),
+            registry.clone(),
+            data.clone(),
+            &config,
+        );
         if run_workers {
             let recovered = crate::worker::recover(store.as_ref(), ctx.policy).await?;
             if recovered != crate::queue::Requeued::default() {
-                tracing::warn!(?recovered, "recovered jobs of a previous process whose leases had expired");
+                tracing::warn!(
+                    ?recovered,
+                    "recovered jobs of a previous process whose leases had expired"
+                );
             }
         }
         let metrics = telemetry::prometheus();
@@ -298,7 +311,9 @@ impl Server {
             config: Arc::new(config.clone()),
             wake: ctx.wake.clone(),
             metrics: metrics.clone(),
-            decode_permits: Arc::new(Semaphore::new(std::thread::available_parallelism().map_or(1, |n| n.get()))),
+            decode_permits: Arc::new(Semaphore::new(
+                std::thread::available_parallelism().map_or(1, |n| n.get()),
+            )),
             workers_alive: ctx.alive.clone(),
             runs_workers: run_workers,
             shutdown: shutdown.clone(),
@@ -306,10 +321,20 @@ impl Server {
 
         let listener = tokio::net::TcpListener::bind(&config.bind)
             .await
-            .map_err(|source| StartError::Bind { bind: config.bind.clone(), source })?;
-        let addr = listener.local_addr().map_err(|source| StartError::Bind { bind: config.bind.clone(), source })?;
+            .map_err(|source| StartError::Bind {
+                bind: config.bind.clone(),
+                source,
+            })?;
+        let addr = listener.local_addr().map_err(|source| StartError::Bind {
+            bind: config.bind.clone(),
+            source,
+        })?;
 
-        let worker_handles = if run_workers { crate::worker::start(ctx, workers, shutdown.clone()) } else { Vec::new() };
+        let worker_handles = if run_workers {
+            crate::worker::start(ctx, workers, shutdown.clone())
+        } else {
+            Vec::new()
+        };
         let upkeep = tokio::spawn({
             let shutdown = shutdown.clone();
             async move {
@@ -326,7 +351,14 @@ impl Server {
         let limits = listen::Limits::new(&config);
         let http = tokio::spawn(listen::serve(listener, app, limits, shutdown.clone()));
         tracing::info!(%addr, max_connections = limits.max_connections, "listening");
-        Ok(Self { addr, state, shutdown, http, workers: worker_handles, upkeep })
+        Ok(Self {
+            addr,
+            state,
+            shutdown,
+            http,
+            workers: worker_handles,
+            upkeep,
+        })
     }
 
     /// The address actually bound (resolves port 0).
@@ -355,28 +387,5 @@ impl Server {
         if let Err(e) = self.upkeep.await {
             tracing::error!(error = %e, "metrics upkeep task failed");
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::{bearer_token, constant_time_eq};
-
-    #[test]
-    fn the_bearer_scheme_is_case_insensitive() {
-        assert_eq!(bearer_token("Bearer abc"), Some("abc"));
-        assert_eq!(bearer_token("bearer abc"), Some("abc"));
-        assert_eq!(bearer_token("BEARER  abc"), Some("abc"));
-        assert_eq!(bearer_token("Basic abc"), None);
-        assert_eq!(bearer_token("Bearerabc"), None);
-    }
-
-    #[test]
-    fn token_comparison_is_exact() {
-        assert!(constant_time_eq(b"abc", b"abc"));
-        assert!(!constant_time_eq(b"abc", b"abd"));
-        assert!(!constant_time_eq(b"ab", b"abc"));
-        assert!(!constant_time_eq(b"abcd", b"abc"));
-        assert!(!constant_time_eq(b"", b"abc"));
     }
 }

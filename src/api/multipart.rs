@@ -115,7 +115,12 @@ impl Scanner {
                     None => return self.count_preamble(chunk.len() - i),
                 }
             }
-            self.matched = advance(&self.delimiter, &self.delimiter_table, self.matched, chunk[i]);
+            self.matched = advance(
+                &self.delimiter,
+                &self.delimiter_table,
+                self.matched,
+                chunk[i],
+            );
             if !self.count_preamble(1) {
                 return false;
             }
@@ -164,7 +169,9 @@ where
                     Poll::Ready(Some(Ok(chunk)))
                 } else {
                     self.failed = true;
-                    Poll::Ready(Some(Err(Box::new(PartHeaderTooLarge { limit: self.scanner.limit }))))
+                    Poll::Ready(Some(Err(Box::new(PartHeaderTooLarge {
+                        limit: self.scanner.limit,
+                    }))))
                 }
             }
             Poll::Ready(Some(Err(e))) => Poll::Ready(Some(Err(e.into()))),
@@ -180,17 +187,29 @@ pub type Form = multer::Multipart<'static>;
 /// Opens `body` (already limited in size) as a multipart form whose part headers are capped at
 /// `limit` bytes.
 pub fn form(headers: &HeaderMap, body: Body, limit: usize) -> Result<Form, ApiError> {
-    let content_type = headers.get(header::CONTENT_TYPE).and_then(|v| v.to_str().ok()).unwrap_or("");
-    let boundary = multer::parse_boundary(content_type).map_err(|e| ApiError::InvalidMultipart(e.to_string()))?;
+    let content_type = headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("");
+    let boundary = multer::parse_boundary(content_type)
+        .map_err(|e| ApiError::InvalidMultipart(e.to_string()))?;
     if boundary.is_empty() || boundary.len() > MAX_BOUNDARY_BYTES {
-        return Err(ApiError::InvalidMultipart(format!("the boundary must be 1 to {MAX_BOUNDARY_BYTES} characters")));
+        return Err(ApiError::InvalidMultipart(format!(
+            "the boundary must be 1 to {MAX_BOUNDARY_BYTES} characters"
+        )));
     }
-    let guard = PartHeaderGuard { inner: body.into_data_stream(), scanner: Scanner::new(&boundary, limit), failed: false };
+    let guard = PartHeaderGuard {
+        inner: body.into_data_stream(),
+        scanner: Scanner::new(&boundary, limit),
+        failed: false,
+    };
     Ok(multer::Multipart::new(guard, boundary))
 }
 
 /// Whether `T` is `error` or anywhere in its chain of sources.
-pub fn caused_by<T: std::error::Error + 'static>(error: &(dyn std::error::Error + 'static)) -> bool {
+pub fn caused_by<T: std::error::Error + 'static>(
+    error: &(dyn std::error::Error + 'static),
+) -> bool {
     let mut current = Some(error);
     while let Some(e) = current {
         if e.is::<T>() {
@@ -206,13 +225,19 @@ pub fn error(e: &multer::Error, config: &crate::config::Config) -> ApiError {
     if let multer::Error::StreamReadFailed(source) = e {
         let source: &(dyn std::error::Error + 'static) = source.as_ref();
         if caused_by::<PartHeaderTooLarge>(source) {
-            return ApiError::PartHeaderTooLarge { limit: config.max_part_header_bytes };
+            return ApiError::PartHeaderTooLarge {
+                limit: config.max_part_header_bytes,
+            };
         }
         if caused_by::<http_body_util::LengthLimitError>(source) {
-            return ApiError::FileTooLarge { limit: config.max_upload_bytes };
+            return ApiError::FileTooLarge {
+                limit: config.max_upload_bytes,
+            };
         }
         if caused_by::<tower_http::timeout::TimeoutError>(source) {
-            return ApiError::BodyTimeout { seconds: config.body_timeout_s };
+            return ApiError::BodyTimeout {
+                seconds: config.body_timeout_s,
+            };
         }
     }
     ApiError::InvalidMultipart(e.to_string())
@@ -230,13 +255,19 @@ mod tests {
     #[test]
     fn part_headers_past_the_limit_are_caught_across_chunk_edges() {
         let data = vec![b'\r'; 5000];
-        let mut ok = b"--XyZ\r\nContent-Disposition: form-data; name=\"file\"; filename=\"a.ogg\"\r\n\r\n".to_vec();
+        let mut ok =
+            b"--XyZ\r\nContent-Disposition: form-data; name=\"file\"; filename=\"a.ogg\"\r\n\r\n"
+                .to_vec();
         ok.extend_from_slice(&data);
         ok.extend_from_slice(b"\r\n--XyZ--\r\n");
         let long_name = "n".repeat(300);
-        let bad = format!("--XyZ\r\nContent-Disposition: form-data; name=\"{long_name}\"\r\n\r\nx\r\n--XyZ--\r\n");
+        let bad = format!(
+            "--XyZ\r\nContent-Disposition: form-data; name=\"{long_name}\"\r\n\r\nx\r\n--XyZ--\r\n"
+        );
         let mut second_bad = ok[..ok.len() - 4].to_vec();
-        second_bad.extend_from_slice(format!("\r\nX-Pad: {long_name}\r\n\r\nx\r\n--XyZ--\r\n").as_bytes());
+        second_bad.extend_from_slice(
+            format!("\r\nX-Pad: {long_name}\r\n\r\nx\r\n--XyZ--\r\n").as_bytes(),
+        );
         for piece in [1, 2, 3, 7, 64, 100_000] {
             assert!(scan_in_pieces(&ok, 256, piece), "piece {piece}");
             assert!(!scan_in_pieces(bad.as_bytes(), 256, piece), "piece {piece}");

@@ -50,7 +50,15 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
 pub struct ApiDoc;
 
 fn operations(item: &mut PathItem) -> impl Iterator<Item = &mut Operation> {
-    [&mut item.get, &mut item.post, &mut item.put, &mut item.delete, &mut item.patch].into_iter().flatten()
+    [
+        &mut item.get,
+        &mut item.post,
+        &mut item.put,
+        &mut item.delete,
+        &mut item.patch,
+    ]
+    .into_iter()
+    .flatten()
 }
 
 /// Declares the bearer token that guards `/v1` when the server has one: every `/v1` operation
@@ -60,7 +68,10 @@ struct BearerAuth;
 impl Modify for BearerAuth {
     fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
         let components = openapi.components.get_or_insert_with(Default::default);
-        components.add_security_scheme("bearer", SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()));
+        components.add_security_scheme(
+            "bearer",
+            SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
+        );
         let unauthorized = ResponseBuilder::new()
             .description("The server has an auth_token and the request did not send it as `Authorization: Bearer <token>`")
             .content(super::problem::PROBLEM_JSON, ContentBuilder::new().schema(Some(Ref::from_schema_name("Problem"))).build())
@@ -70,8 +81,14 @@ impl Modify for BearerAuth {
                 continue;
             }
             for op in operations(item) {
-                op.security = Some(vec![SecurityRequirement::default(), SecurityRequirement::new("bearer", Vec::<String>::new())]);
-                op.responses.responses.entry("401".into()).or_insert_with(|| RefOr::T(unauthorized.clone()));
+                op.security = Some(vec![
+                    SecurityRequirement::default(),
+                    SecurityRequirement::new("bearer", Vec::<String>::new()),
+                ]);
+                op.responses
+                    .responses
+                    .entry("401".into())
+                    .or_insert_with(|| RefOr::T(unauthorized.clone()));
             }
         }
     }
@@ -99,8 +116,16 @@ fn add_links(spec: &mut Value) {
     let rig = json!({
         "GetRig": { "operationId": "getRig", "parameters": { "id": "$response.body#/id" } },
     });
-    for (path, status, links) in [("/v1/songs", "201", &song), ("/v1/songs", "200", &song), ("/v1/jobs", "202", &job), ("/v1/rigs", "201", &rig)] {
-        if let Some(response) = spec.pointer_mut(&format!("/paths/{}/post/responses/{status}", path.replace('/', "~1"))) {
+    for (path, status, links) in [
+        ("/v1/songs", "201", &song),
+        ("/v1/songs", "200", &song),
+        ("/v1/jobs", "202", &job),
+        ("/v1/rigs", "201", &rig),
+    ] {
+        if let Some(response) = spec.pointer_mut(&format!(
+            "/paths/{}/post/responses/{status}",
+            path.replace('/', "~1")
+        )) {
             response["links"] = links.clone();
         }
     }
@@ -108,7 +133,10 @@ fn add_links(spec: &mut Value) {
 
 /// The result file names, from the one list the handler serves.
 fn result_file_names(spec: &mut Value) {
-    let Some(params) = spec.pointer_mut("/paths/~1v1~1jobs~1{id}~1{file}/get/parameters").and_then(Value::as_array_mut) else {
+    let Some(params) = spec
+        .pointer_mut("/paths/~1v1~1jobs~1{id}~1{file}/get/parameters")
+        .and_then(Value::as_array_mut)
+    else {
         return;
     };
     for param in params.iter_mut().filter(|p| p["name"] == "file") {
@@ -121,7 +149,10 @@ fn result_file_names(spec: &mut Value) {
 fn fixed_lengths(spec: &mut Value) {
     // A point is exactly [x, y, z] (serde refuses any other length before anything else runs);
     // the joint count (23 or 26) is checked after the song is found, and said in the description.
-    for pointer in ["/components/schemas/SeedMotionInput/properties/positions/items/items", "/components/schemas/KeyPoseInput/properties/joints/items"] {
+    for pointer in [
+        "/components/schemas/SeedMotionInput/properties/positions/items/items",
+        "/components/schemas/KeyPoseInput/properties/joints/items",
+    ] {
         if let Some(Value::Object(schema)) = spec.pointer_mut(pointer) {
             schema.insert("minItems".into(), 3.into());
             schema.insert("maxItems".into(), 3.into());

@@ -80,14 +80,19 @@ pub enum ApiError {
     #[error("{0}")]
     Rig(RigFileError),
     #[error("model `{model}` is not available; use one of the available models")]
-    UnknownModel { model: String, available: Vec<String> },
+    UnknownModel {
+        model: String,
+        available: Vec<String>,
+    },
     #[error("job {id} is {status}; results exist once it has succeeded")]
     JobNotFinished { id: JobId, status: Status },
     #[error("{0}")]
     ResultNotFound(String),
     #[error("job {id} already {status}; it can no longer be cancelled")]
     AlreadyFinished { id: JobId, status: Status },
-    #[error("the Idempotency-Key was already used for a different request (job {0}); use a new key")]
+    #[error(
+        "the Idempotency-Key was already used for a different request (job {0}); use a new key"
+    )]
     IdempotencyConflict(JobId),
     #[error("the Idempotency-Key header must be 1 to 255 visible ASCII characters")]
     InvalidIdempotencyKey,
@@ -217,10 +222,15 @@ impl ApiError {
             available_models: None,
         };
         match self {
-            ApiError::InvalidField { field, .. } | ApiError::UnknownField(field) | ApiError::MissingField(field) => {
+            ApiError::InvalidField { field, .. }
+            | ApiError::UnknownField(field)
+            | ApiError::MissingField(field) => {
                 problem.field = Some(field.clone());
             }
-            ApiError::MissingFile | ApiError::EmptyFile | ApiError::InvalidFilename(_) | ApiError::Truncated { .. } => {
+            ApiError::MissingFile
+            | ApiError::EmptyFile
+            | ApiError::InvalidFilename(_)
+            | ApiError::Truncated { .. } => {
                 problem.field = Some("file".into());
             }
             ApiError::UnknownModel { available, .. } => {
@@ -229,7 +239,11 @@ impl ApiError {
                 problem.detail = format!(
                     "{self}: [{}]{}",
                     available.join(", "),
-                    if available.is_empty() { " (no model is trained on this server yet)" } else { "" }
+                    if available.is_empty() {
+                        " (no model is trained on this server yet)"
+                    } else {
+                        ""
+                    }
                 );
             }
             ApiError::Rig(e) => {
@@ -246,8 +260,14 @@ impl ApiError {
 
 /// Whether an I/O error means the disk (or the quota, or the file size limit) is full.
 pub fn is_out_of_space(e: &std::io::Error) -> bool {
-    matches!(e.kind(), std::io::ErrorKind::StorageFull | std::io::ErrorKind::QuotaExceeded | std::io::ErrorKind::FileTooLarge)
-        || e.raw_os_error().is_some_and(|n| n == libc::ENOSPC || n == libc::EDQUOT || n == libc::EFBIG)
+    matches!(
+        e.kind(),
+        std::io::ErrorKind::StorageFull
+            | std::io::ErrorKind::QuotaExceeded
+            | std::io::ErrorKind::FileTooLarge
+    ) || e
+        .raw_os_error()
+        .is_some_and(|n| n == libc::ENOSPC || n == libc::EDQUOT || n == libc::EFBIG)
 }
 
 impl ApiError {
@@ -266,7 +286,9 @@ impl ApiError {
     pub fn artifact(doing: &str, e: &crate::artifacts::ArtifactError) -> Self {
         use crate::artifacts::ArtifactError;
         match e {
-            ArtifactError::NotFound(key) => ApiError::Internal(format!("{doing}: {key} is missing from the artifact store")),
+            ArtifactError::NotFound(key) => {
+                ApiError::Internal(format!("{doing}: {key} is missing from the artifact store"))
+            }
             ArtifactError::Io { source, .. } => ApiError::storage(doing, source),
             ArtifactError::Bucket { .. } => ApiError::ServiceUnavailable(format!("{doing}: {e}")),
             ArtifactError::Config(_) => ApiError::Internal(format!("{doing}: {e}")),
@@ -276,20 +298,28 @@ impl ApiError {
     /// The API error for a database failure: unreachable is `503`, full is `507`.
     fn database(e: &sqlx::Error) -> Option<Self> {
         match e {
-            sqlx::Error::PoolTimedOut | sqlx::Error::PoolClosed | sqlx::Error::WorkerCrashed | sqlx::Error::Tls(_) => {
-                Some(ApiError::ServiceUnavailable(format!("database: {e}")))
-            }
-            sqlx::Error::Io(io) if is_out_of_space(io) => Some(ApiError::InsufficientStorage("database: no space left".into())),
+            sqlx::Error::PoolTimedOut
+            | sqlx::Error::PoolClosed
+            | sqlx::Error::WorkerCrashed
+            | sqlx::Error::Tls(_) => Some(ApiError::ServiceUnavailable(format!("database: {e}"))),
+            sqlx::Error::Io(io) if is_out_of_space(io) => Some(ApiError::InsufficientStorage(
+                "database: no space left".into(),
+            )),
             sqlx::Error::Io(_) => Some(ApiError::ServiceUnavailable(format!("database: {e}"))),
             sqlx::Error::Database(db) => {
                 let code = db.code();
                 // SQLite's SQLITE_FULL (13), PostgreSQL's disk_full (53100).
-                let full = matches!(code.as_deref(), Some("13") | Some("53100")) || db.message().contains("disk is full");
+                let full = matches!(code.as_deref(), Some("13") | Some("53100"))
+                    || db.message().contains("disk is full");
                 // PostgreSQL's connection exceptions (class 08) and a server shutting down or
                 // starting (57P01-57P03): the database is unreachable for now, not broken.
-                let gone = code.as_deref().is_some_and(|c| c.starts_with("08") || matches!(c, "57P01" | "57P02" | "57P03"));
+                let gone = code.as_deref().is_some_and(|c| {
+                    c.starts_with("08") || matches!(c, "57P01" | "57P02" | "57P03")
+                });
                 if full {
-                    Some(ApiError::InsufficientStorage("database: no space left".into()))
+                    Some(ApiError::InsufficientStorage(
+                        "database: no space left".into(),
+                    ))
                 } else if gone {
                     Some(ApiError::ServiceUnavailable(format!("database: {e}")))
                 } else {
@@ -305,11 +335,16 @@ impl From<QueueError> for ApiError {
     fn from(e: QueueError) -> Self {
         match e {
             QueueError::SongNotFound(id) => ApiError::SongNotFound(id.to_string()),
-            QueueError::JobNotFound(id) => ApiError::JobNotFound(format!("job {id} does not exist")),
+            QueueError::JobNotFound(id) => {
+                ApiError::JobNotFound(format!("job {id} does not exist"))
+            }
             QueueError::RigNotFound(id) => ApiError::RigNotFound(id.to_string()),
             QueueError::IdempotencyConflict(id) => ApiError::IdempotencyConflict(id),
-            QueueError::Database(db) => ApiError::database(&db).unwrap_or_else(|| ApiError::Internal(format!("database: {db}"))),
-            other @ (QueueError::Migrate(_) | QueueError::Corrupt(_)) => ApiError::Internal(other.to_string()),
+            QueueError::Database(db) => ApiError::database(&db)
+                .unwrap_or_else(|| ApiError::Internal(format!("database: {db}"))),
+            other @ (QueueError::Migrate(_) | QueueError::Corrupt(_)) => {
+                ApiError::Internal(other.to_string())
+            }
         }
     }
 }
@@ -321,17 +356,30 @@ impl IntoResponse for ApiError {
             tracing::error!(code = self.code(), error = %self, "request failed");
         }
         let mut response = (status, axum::Json(self.problem())).into_response();
-        response.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
-        if matches!(self, ApiError::BodyTooLarge { .. } | ApiError::BodyTimeout { .. } | ApiError::PartHeaderTooLarge { .. }) {
+        response
+            .headers_mut()
+            .insert(header::CONTENT_TYPE, HeaderValue::from_static(PROBLEM_JSON));
+        if matches!(
+            self,
+            ApiError::BodyTooLarge { .. }
+                | ApiError::BodyTimeout { .. }
+                | ApiError::PartHeaderTooLarge { .. }
+        ) {
             // The rest of the body is never read; hyper drops the connection after the answer,
             // so a keep-alive client must not send its next request into it.
-            response.headers_mut().insert(header::CONNECTION, HeaderValue::from_static("close"));
+            response
+                .headers_mut()
+                .insert(header::CONNECTION, HeaderValue::from_static("close"));
         }
         if status == StatusCode::SERVICE_UNAVAILABLE || status == StatusCode::INSUFFICIENT_STORAGE {
-            response.headers_mut().insert(header::RETRY_AFTER, HeaderValue::from_static(RETRY_AFTER_S));
+            response
+                .headers_mut()
+                .insert(header::RETRY_AFTER, HeaderValue::from_static(RETRY_AFTER_S));
         }
         if matches!(self, ApiError::Unauthorized) {
-            response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
+            response
+                .headers_mut()
+                .insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
         }
         response
     }

@@ -6,6 +6,7 @@
 //! a [`TargetSkeleton`] ([`crate::motion::retarget::uploaded`]), renamed into `rigs/<id>.<ext>`,
 //! published to the artifact store and recorded with its skeleton. Dance downloads name the rig by
 //! its id (`?rig=<id>`); [`target_skeleton`] is the lookup they use.
+use super::auth::Caller;
 use super::multipart::{self, Form};
 use super::problem::{ApiError, Problem};
 use super::songs::{drain, receive, Received, UploadError};
@@ -13,7 +14,7 @@ use super::AppState;
 use crate::artifacts::Artifact;
 use crate::motion::retarget::uploaded::{self, RigFormat, Units};
 use crate::motion::retarget::{HumanBone, TargetSkeleton};
-use crate::queue::{RigId, UploadedRig};
+use crate::queue::{RigId, Scope, UploadedRig};
 use axum::extract::{Path, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::{Json, RequestExt};
@@ -197,6 +198,7 @@ fn parse_mapping(text: Option<&str>) -> Result<BTreeMap<String, Option<HumanBone
 )]
 pub async fn upload(
     State(state): State<AppState>,
+    caller: Caller,
     request: Request,
 ) -> Result<(StatusCode, HeaderMap, Json<RigView>), UploadError> {
     let form = read_form(&state, request).await?;
@@ -225,6 +227,7 @@ pub async fn upload(
     }
     let rig = UploadedRig {
         id,
+        tenant: caller.tenant,
         filename: received.filename,
         format: read.format,
         units: read.units,
@@ -270,20 +273,25 @@ async fn forget(state: &AppState, artifact: Artifact<'_>) {
 )]
 pub async fn get(
     State(state): State<AppState>,
+    caller: Caller,
     Path(id): Path<String>,
 ) -> Result<Json<RigView>, ApiError> {
     let id = RigId::from_str(&id)
         .map_err(|_| ApiError::RigNotFound(format!("{id:?} (not a rig id)")))?;
-    let rig = state.store.rig(id).await?;
+    let rig = state.store.rig(caller.scope(), id).await?;
     Ok(Json(RigView::from(&rig)))
 }
 
 /// The skeleton of uploaded rig `id` (a `?rig=` value that is not a built-in's name), for the
-/// downloads that retarget onto it.
-pub async fn target_skeleton(state: &AppState, id: &str) -> Result<TargetSkeleton, ApiError> {
+/// downloads that retarget onto it; only `scope`'s rigs are found.
+pub async fn target_skeleton(
+    state: &AppState,
+    scope: Scope,
+    id: &str,
+) -> Result<TargetSkeleton, ApiError> {
     let id = RigId::from_str(id)
         .map_err(|_| ApiError::RigNotFound(format!("{id:?} (not a rig id nor a built-in rig)")))?;
-    Ok(state.store.rig(id).await?.skeleton)
+    Ok(state.store.rig(scope, id).await?.skeleton)
 }
 
 #[cfg(test)]

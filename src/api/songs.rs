@@ -4,6 +4,7 @@
 //! sha256 computed; it is decoded with symphonia (the format comes from decoding, never the
 //! name), renamed into place under its id, and an analyze job is queued in the same transaction
 //! that records the song.
+use super::auth::Caller;
 use super::multipart::{self, Form};
 use super::problem::{ApiError, Problem};
 use super::AppState;
@@ -80,7 +81,9 @@ async fn view(state: &AppState, song: Song) -> Result<SongView, ApiError> {
 
 /// Accepts a plain file name; anything that could name a path is refused.
 fn check_filename(name: Option<&str>) -> Result<String, ApiError> {
-    let Some(name) = name else { return Ok("upload".into()) };
+    let Some(name) = name else {
+        return Ok("upload".into());
+    };
     let bad = name.is_empty()
         || name.len() > MAX_FILENAME_BYTES
         || name == "."
@@ -103,11 +106,20 @@ pub(super) struct Received {
     pub(super) sha256: String,
 }
 
-pub(super) async fn receive(state: &AppState, mut field: multer::Field<'static>) -> Result<Received, ApiError> {
+pub(super) async fn receive(
+    state: &AppState,
+    mut field: multer::Field<'static>,
+) -> Result<Received, ApiError> {
     let filename = check_filename(field.file_name())?;
     let limit = state.config.max_upload_bytes;
-    let tmp = state.data.temp_file().map_err(|e| ApiError::storage("creating the upload's temp file", &e))?;
-    let std_file = tmp.as_file().try_clone().map_err(|e| ApiError::storage("opening the upload's temp file", &e))?;
+    let tmp = state
+        .data
+        .temp_file()
+        .map_err(|e| ApiError::storage("creating the upload's temp file", &e))?;
+    let std_file = tmp
+        .as_file()
+        .try_clone()
+        .map_err(|e| ApiError::storage("opening the upload's temp file", &e))?;
     let mut out = tokio::fs::File::from_std(std_file);
     let mut hasher = Sha256::new();
     let mut size: u64 = 0;
@@ -122,14 +134,25 @@ pub(super) async fn receive(state: &AppState, mut field: multer::Field<'static>)
             return Err(ApiError::FileTooLarge { limit });
         }
         hasher.update(&chunk);
-        out.write_all(&chunk).await.map_err(|e| ApiError::storage("writing the upload", &e))?;
+        out.write_all(&chunk)
+            .await
+            .map_err(|e| ApiError::storage("writing the upload", &e))?;
     }
-    out.flush().await.map_err(|e| ApiError::storage("writing the upload", &e))?;
-    out.sync_all().await.map_err(|e| ApiError::storage("writing the upload", &e))?;
+    out.flush()
+        .await
+        .map_err(|e| ApiError::storage("writing the upload", &e))?;
+    out.sync_all()
+        .await
+        .map_err(|e| ApiError::storage("writing the upload", &e))?;
     if size == 0 {
         return Err(ApiError::EmptyFile);
     }
-    Ok(Received { file: tmp, filename, size, sha256: hex::encode(hasher.finalize()) })
+    Ok(Received {
+        file: tmp,
+        filename,
+        size,
+        sha256: hex::encode(hasher.finalize()),
+    })
 }
 
 /// Reads the form to its end: the one `file` field streamed to disk, or `None` if there was none.
@@ -140,12 +163,16 @@ pub(super) async fn receive(state: &AppState, mut field: multer::Field<'static>)
 /// and closes would otherwise see a broken pipe instead of the answer.
 async fn read_form(state: &AppState, request: Request) -> Result<Option<Received>, UploadError> {
     let (parts, body) = request.with_limited_body().into_parts();
-    let mut multipart = multipart::form(&parts.headers, body, state.config.max_part_header_bytes).map_err(UploadError::before_body_end)?;
+    let mut multipart = multipart::form(&parts.headers, body, state.config.max_part_header_bytes)
+        .map_err(UploadError::before_body_end)?;
     match read_fields(state, &mut multipart).await {
         Ok(received) => Ok(received),
         Err(error) => {
             let drained = drain(&mut multipart).await;
-            Err(UploadError { error, body_unread: !drained })
+            Err(UploadError {
+                error,
+                body_unread: !drained,
+            })
         }
     }
 }
@@ -186,14 +213,18 @@ pub(super) async fn drain(multipart: &mut Form) -> bool {
             };
             loop {
                 match field.chunk().await {
-                    Ok(Some(chunk)) if (chunk.len() as u64) <= budget => budget -= chunk.len() as u64,
+                    Ok(Some(chunk)) if (chunk.len() as u64) <= budget => {
+                        budget -= chunk.len() as u64
+                    }
                     Ok(Some(_)) | Err(_) => return false,
                     Ok(None) => break,
                 }
             }
         }
     };
-    tokio::time::timeout(DRAIN_TIMEOUT, work).await.unwrap_or(false)
+    tokio::time::timeout(DRAIN_TIMEOUT, work)
+        .await
+        .unwrap_or(false)
 }
 
 /// An upload's error response.
@@ -208,13 +239,19 @@ pub struct UploadError {
 
 impl UploadError {
     pub(super) fn before_body_end(error: ApiError) -> Self {
-        Self { error, body_unread: true }
+        Self {
+            error,
+            body_unread: true,
+        }
     }
 }
 
 impl From<ApiError> for UploadError {
     fn from(error: ApiError) -> Self {
-        Self { error, body_unread: false }
+        Self {
+            error,
+            body_unread: false,
+        }
     }
 }
 
@@ -222,7 +259,9 @@ impl axum::response::IntoResponse for UploadError {
     fn into_response(self) -> axum::response::Response {
         let mut response = self.error.into_response();
         if self.body_unread {
-            response.headers_mut().insert(header::CONNECTION, HeaderValue::from_static("close"));
+            response
+                .headers_mut()
+                .insert(header::CONNECTION, HeaderValue::from_static("close"));
         }
         response
     }
@@ -252,26 +291,53 @@ impl axum::response::IntoResponse for UploadError {
     ),
     security(("bearer" = []))
 )]
-pub async fn upload(State(state): State<AppState>, request: Request) -> Result<(StatusCode, HeaderMap, Json<SongView>), UploadError> {
+pub async fn upload(
+    State(state): State<AppState>,
+    caller: Caller,
+    request: Request,
+) -> Result<(StatusCode, HeaderMap, Json<SongView>), UploadError> {
     let received = read_form(&state, request).await?;
     let received = received.ok_or(ApiError::MissingFile)?;
 
-    if let Some(existing) = state.store.song_by_sha256(&received.sha256).await.map_err(ApiError::from)? {
-        return Ok((StatusCode::OK, location(existing.id), Json(view(&state, existing).await?)));
+    if let Some(existing) = state
+        .store
+        .song_by_sha256(caller.tenant, &received.sha256)
+        .await
+        .map_err(ApiError::from)?
+    {
+        return Ok((
+            StatusCode::OK,
+            location(existing.id),
+            Json(view(&state, existing).await?),
+        ));
     }
 
     // Decode fully: that is the only proof the bytes are audio we can use. No samples are kept,
     // the header's length and rate are checked before decoding, and the decode stops at the
     // duration limit, the time budget or a server shutdown. Bounded in parallel as well.
     let decoded = {
-        let _permit = state.decode_permits.acquire().await.map_err(|e| ApiError::Internal(e.to_string()))?;
+        let _permit = state
+            .decode_permits
+            .acquire()
+            .await
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
         let path = received.file.path().to_path_buf();
-        let (max_duration_s, timeout) = (state.config.max_duration_s, Duration::from_secs_f64(state.config.audio_timeout_s));
+        let (max_duration_s, timeout) = (
+            state.config.max_duration_s,
+            Duration::from_secs_f64(state.config.audio_timeout_s),
+        );
         let shutdown = state.shutdown.clone();
         tokio::task::spawn_blocking(move || {
             let stop = || shutdown.is_cancelled();
             let budget = Budget::new(Some(timeout), Some(&stop));
-            audio::decode_file(&path, &DecodeOptions { keep: Keep::Nothing, max_duration_s, budget: &budget })
+            audio::decode_file(
+                &path,
+                &DecodeOptions {
+                    keep: Keep::Nothing,
+                    max_duration_s,
+                    budget: &budget,
+                },
+            )
         })
         .await
         .map_err(|e| ApiError::Internal(format!("decoder thread: {e}")))?
@@ -283,14 +349,21 @@ pub async fn upload(State(state): State<AppState>, request: Request) -> Result<(
     };
     if let Some(declared_s) = decoded.declared_s {
         if decoded.audio.duration_s + TRUNCATION_TOLERANCE_S < declared_s {
-            return Err(ApiError::Truncated { declared_s, decoded_s: decoded.audio.duration_s }.into());
+            return Err(ApiError::Truncated {
+                declared_s,
+                decoded_s: decoded.audio.duration_s,
+            }
+            .into());
         }
     }
     let decoded = decoded.audio;
 
     let id = SongId::new();
     let path = state.data.song_path(id, decoded.format);
-    received.file.persist(&path).map_err(|e| ApiError::storage("storing the song", &e.error))?;
+    received
+        .file
+        .persist(&path)
+        .map_err(|e| ApiError::storage("storing the song", &e.error))?;
     // Published before its analyze job exists, so any worker that claims the job finds it.
     let artifact = Artifact::Song(id, decoded.format);
     if let Err(e) = state.artifacts.publish(artifact).await {
@@ -299,6 +372,7 @@ pub async fn upload(State(state): State<AppState>, request: Request) -> Result<(
     }
     let song = Song {
         id,
+        tenant: caller.tenant,
         filename: received.filename,
         format: decoded.format,
         duration_s: decoded.duration_s,
@@ -310,6 +384,7 @@ pub async fn upload(State(state): State<AppState>, request: Request) -> Result<(
         created_at: Utc::now(),
     };
     let analyze = NewJob {
+        tenant: caller.tenant,
         kind: JobKind::Analyze { song_id: id },
         priority: ANALYZE_PRIORITY,
         max_attempts: state.config.max_attempts,
@@ -328,11 +403,19 @@ pub async fn upload(State(state): State<AppState>, request: Request) -> Result<(
         if let Err(e) = state.artifacts.remove(artifact).await {
             tracing::warn!(error = %e, "could not remove a duplicate upload");
         }
-        return Ok((StatusCode::OK, location(stored.id), Json(view(&state, stored).await?)));
+        return Ok((
+            StatusCode::OK,
+            location(stored.id),
+            Json(view(&state, stored).await?),
+        ));
     }
     state.wake.notify_waiters();
     tracing::info!(song_id = %stored.id, format = ?stored.format, duration_s = stored.duration_s, "song stored");
-    Ok((StatusCode::CREATED, location(stored.id), Json(view(&state, stored).await?)))
+    Ok((
+        StatusCode::CREATED,
+        location(stored.id),
+        Json(view(&state, stored).await?),
+    ))
 }
 
 /// Removes a stored song whose row was never written.
@@ -366,9 +449,14 @@ fn location(id: SongId) -> HeaderMap {
     ),
     security(("bearer" = []))
 )]
-pub async fn get(State(state): State<AppState>, Path(id): Path<String>) -> Result<Json<SongView>, ApiError> {
-    let id = SongId::from_str(&id).map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
-    let song = state.store.song(id).await?;
+pub async fn get(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<Json<SongView>, ApiError> {
+    let id = SongId::from_str(&id)
+        .map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
+    let song = state.store.song(caller.scope(), id).await?;
     Ok(Json(view(&state, song).await?))
 }
 
@@ -411,10 +499,15 @@ pub struct AudioBytes(pub Vec<u8>);
     ),
     security(("bearer" = []))
 )]
-pub async fn audio(State(state): State<AppState>, Path(id): Path<String>) -> Result<axum::response::Response, ApiError> {
+pub async fn audio(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<axum::response::Response, ApiError> {
     use axum::response::IntoResponse;
-    let id = SongId::from_str(&id).map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
-    let song = state.store.song(id).await?;
+    let id = SongId::from_str(&id)
+        .map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
+    let song = state.store.song(caller.scope(), id).await?;
     // Through the artifact store: with a bucket, another API host may have taken the upload; it
     // is cached in this host's data dir, then streamed from there.
     let path = state
@@ -422,11 +515,26 @@ pub async fn audio(State(state): State<AppState>, Path(id): Path<String>) -> Res
         .fetch(Artifact::Song(song.id, song.format))
         .await
         .map_err(|e| ApiError::artifact(&format!("fetching song {}", song.id), &e))?;
-    let file = tokio::fs::File::open(&path).await.map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?;
-    let len = file.metadata().await.map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?.len();
+    let file = tokio::fs::File::open(&path)
+        .await
+        .map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?;
+    let len = file
+        .metadata()
+        .await
+        .map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?
+        .len();
     // Streamed with backpressure: a song may be up to max_upload_bytes.
-    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::with_capacity(file, crate::artifacts::STREAM_CHUNK_BYTES));
-    let headers = [(header::CONTENT_TYPE, HeaderValue::from_static(audio_mime(song.format))), (header::CONTENT_LENGTH, HeaderValue::from(len))];
+    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::with_capacity(
+        file,
+        crate::artifacts::STREAM_CHUNK_BYTES,
+    ));
+    let headers = [
+        (
+            header::CONTENT_TYPE,
+            HeaderValue::from_static(audio_mime(song.format)),
+        ),
+        (header::CONTENT_LENGTH, HeaderValue::from(len)),
+    ];
     Ok((headers, body).into_response())
 }
 
@@ -436,10 +544,21 @@ mod tests {
 
     #[test]
     fn file_names_that_could_name_a_path_are_refused() {
-        for bad in ["../x.mp3", "..", "a/b.mp3", "a\\b.mp3", "x\0.mp3", "..\\..\\evil.wav", ""] {
+        for bad in [
+            "../x.mp3",
+            "..",
+            "a/b.mp3",
+            "a\\b.mp3",
+            "x\0.mp3",
+            "..\\..\\evil.wav",
+            "",
+        ] {
             assert!(check_filename(Some(bad)).is_err(), "{bad:?}");
         }
-        assert_eq!(check_filename(Some("My Song (live).mp3")).ok().as_deref(), Some("My Song (live).mp3"));
+        assert_eq!(
+            check_filename(Some("My Song (live).mp3")).ok().as_deref(),
+            Some("My Song (live).mp3")
+        );
         assert_eq!(check_filename(None).ok().as_deref(), Some("upload"));
     }
 }

@@ -21,7 +21,9 @@ pub struct Health {
 /// The process is up.
 #[utoipa::path(get, path = "/healthz", operation_id = "healthz", tag = "system", responses((status = 200, body = Health)))]
 pub async fn healthz() -> Json<Health> {
-    Json(Health { status: "ok".into() })
+    Json(Health {
+        status: "ok".into(),
+    })
 }
 
 /// The database answers (within `db_timeout_s`) and at least one worker runs.
@@ -42,9 +44,14 @@ pub async fn readyz(State(state): State<AppState>) -> Result<Json<Health>, ApiEr
     }
     let limit = std::time::Duration::from_secs_f64(state.config.db_timeout_s);
     match tokio::time::timeout(limit, state.store.ping()).await {
-        Ok(Ok(())) => Ok(Json(Health { status: "ready".into() })),
+        Ok(Ok(())) => Ok(Json(Health {
+            status: "ready".into(),
+        })),
         Ok(Err(e)) => Err(ApiError::NotReady(format!("database: {e}"))),
-        Err(_) => Err(ApiError::NotReady(format!("the database did not answer within {} s", state.config.db_timeout_s))),
+        Err(_) => Err(ApiError::NotReady(format!(
+            "the database did not answer within {} s",
+            state.config.db_timeout_s
+        ))),
     }
 }
 
@@ -59,7 +66,13 @@ pub async fn metrics(State(state): State<AppState>) -> Result<impl IntoResponse,
             metrics::gauge!(telemetry::QUEUE_DEPTH).set(*n as f64);
         }
     }
-    Ok(([(header::CONTENT_TYPE, "text/plain; version=0.0.4; charset=utf-8")], state.metrics.render()))
+    Ok((
+        [(
+            header::CONTENT_TYPE,
+            "text/plain; version=0.0.4; charset=utf-8",
+        )],
+        state.metrics.render(),
+    ))
 }
 
 /// The models this server can dance with.

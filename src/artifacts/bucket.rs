@@ -24,8 +24,16 @@ pub struct BucketArtifacts {
 
 impl BucketArtifacts {
     /// A store over `bucket` (keys under `prefix`), at `endpoint` when not AWS itself.
-    pub fn connect(bucket: &str, prefix: &str, endpoint: Option<&str>, region: &str, cache: DataDir) -> Result<Self, ArtifactError> {
-        let mut builder = AmazonS3Builder::from_env().with_bucket_name(bucket).with_region(region);
+    pub fn connect(
+        bucket: &str,
+        prefix: &str,
+        endpoint: Option<&str>,
+        region: &str,
+        cache: DataDir,
+    ) -> Result<Self, ArtifactError> {
+        let mut builder = AmazonS3Builder::from_env()
+            .with_bucket_name(bucket)
+            .with_region(region);
         if let Some(endpoint) = endpoint {
             // Self-hosted servers are addressed by path (`endpoint/bucket/key`), and may be plain
             // HTTP inside a private network.
@@ -34,8 +42,14 @@ impl BucketArtifacts {
                 .with_virtual_hosted_style_request(false)
                 .with_allow_http(endpoint.starts_with("http://"));
         }
-        let bucket = builder.build().map_err(|e| ArtifactError::Config(e.to_string()))?;
-        Ok(Self { bucket: Arc::new(bucket), prefix: prefix.to_string(), cache })
+        let bucket = builder
+            .build()
+            .map_err(|e| ArtifactError::Config(e.to_string()))?;
+        Ok(Self {
+            bucket: Arc::new(bucket),
+            prefix: prefix.to_string(),
+            cache,
+        })
     }
 
     fn location(&self, artifact: &Artifact<'_>) -> ObjectPath {
@@ -49,18 +63,30 @@ impl BucketArtifacts {
     fn bucket_error(artifact: &Artifact<'_>, source: object_store::Error) -> ArtifactError {
         match source {
             object_store::Error::NotFound { .. } => ArtifactError::NotFound(artifact.key()),
-            source => ArtifactError::Bucket { key: artifact.key(), source },
+            source => ArtifactError::Bucket {
+                key: artifact.key(),
+                source,
+            },
         }
     }
 
     async fn get(&self, artifact: &Artifact<'_>) -> Result<Bytes, ArtifactError> {
-        let got = self.bucket.get(&self.location(artifact)).await.map_err(|e| Self::bucket_error(artifact, e))?;
-        got.bytes().await.map_err(|e| Self::bucket_error(artifact, e))
+        let got = self
+            .bucket
+            .get(&self.location(artifact))
+            .await
+            .map_err(|e| Self::bucket_error(artifact, e))?;
+        got.bytes()
+            .await
+            .map_err(|e| Self::bucket_error(artifact, e))
     }
 }
 
 fn io(artifact: &Artifact<'_>, source: std::io::Error) -> ArtifactError {
-    ArtifactError::Io { key: artifact.key(), source }
+    ArtifactError::Io {
+        key: artifact.key(),
+        source,
+    }
 }
 
 impl ArtifactStore for BucketArtifacts {
@@ -68,7 +94,9 @@ impl ArtifactStore for BucketArtifacts {
         Box::pin(async move {
             // Songs are at most `max_upload_bytes` and results a few MB: one PUT each, which S3
             // makes visible whole or not at all.
-            let bytes = tokio::fs::read(artifact.local_path(&self.cache)).await.map_err(|e| io(&artifact, e))?;
+            let bytes = tokio::fs::read(artifact.local_path(&self.cache))
+                .await
+                .map_err(|e| io(&artifact, e))?;
             self.bucket
                 .put(&self.location(&artifact), PutPayload::from(bytes))
                 .await
@@ -96,7 +124,11 @@ impl ArtifactStore for BucketArtifacts {
     fn stream<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ArtifactStream> {
         Box::pin(async move {
             // The object's body streams from the bucket as the client reads it.
-            let got = self.bucket.get(&self.location(&artifact)).await.map_err(|e| Self::bucket_error(&artifact, e))?;
+            let got = self
+                .bucket
+                .get(&self.location(&artifact))
+                .await
+                .map_err(|e| Self::bucket_error(&artifact, e))?;
             let len = got.meta.size;
             let body = got.into_stream().map_err(std::io::Error::other).boxed();
             Ok(ArtifactStream { len, body })

@@ -1,5 +1,7 @@
 //! The data dir as the artifact store: every artifact is already in place when published.
-use super::{Artifact, ArtifactError, ArtifactFuture, ArtifactStore, ArtifactStream, STREAM_CHUNK_BYTES};
+use super::{
+    Artifact, ArtifactError, ArtifactFuture, ArtifactStore, ArtifactStream, STREAM_CHUNK_BYTES,
+};
 use crate::queue::DataDir;
 use futures::StreamExt;
 use std::path::PathBuf;
@@ -21,7 +23,10 @@ fn io(artifact: &Artifact<'_>, source: std::io::Error) -> ArtifactError {
     if source.kind() == std::io::ErrorKind::NotFound {
         ArtifactError::NotFound(artifact.key())
     } else {
-        ArtifactError::Io { key: artifact.key(), source }
+        ArtifactError::Io {
+            key: artifact.key(),
+            source,
+        }
     }
 }
 
@@ -29,7 +34,9 @@ impl ArtifactStore for LocalArtifacts {
     fn publish<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ()> {
         Box::pin(async move {
             // The atomic write that put it there is the publication.
-            tokio::fs::metadata(artifact.local_path(&self.data)).await.map_err(|e| io(&artifact, e))?;
+            tokio::fs::metadata(artifact.local_path(&self.data))
+                .await
+                .map_err(|e| io(&artifact, e))?;
             Ok(())
         })
     }
@@ -37,16 +44,21 @@ impl ArtifactStore for LocalArtifacts {
     fn fetch<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, PathBuf> {
         Box::pin(async move {
             let path = artifact.local_path(&self.data);
-            tokio::fs::metadata(&path).await.map_err(|e| io(&artifact, e))?;
+            tokio::fs::metadata(&path)
+                .await
+                .map_err(|e| io(&artifact, e))?;
             Ok(path)
         })
     }
 
     fn stream<'a>(&'a self, artifact: Artifact<'a>) -> ArtifactFuture<'a, ArtifactStream> {
         Box::pin(async move {
-            let file = tokio::fs::File::open(artifact.local_path(&self.data)).await.map_err(|e| io(&artifact, e))?;
+            let file = tokio::fs::File::open(artifact.local_path(&self.data))
+                .await
+                .map_err(|e| io(&artifact, e))?;
             let len = file.metadata().await.map_err(|e| io(&artifact, e))?.len();
-            let body = tokio_util::io::ReaderStream::with_capacity(file, STREAM_CHUNK_BYTES).boxed();
+            let body =
+                tokio_util::io::ReaderStream::with_capacity(file, STREAM_CHUNK_BYTES).boxed();
             Ok(ArtifactStream { len, body })
         })
     }

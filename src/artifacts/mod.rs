@@ -36,7 +36,10 @@ pub enum ArtifactError {
     #[error("artifact {key}: {source}")]
     Io { key: String, source: std::io::Error },
     #[error("artifact {key}: object store: {source}")]
-    Bucket { key: String, source: object_store::Error },
+    Bucket {
+        key: String,
+        source: object_store::Error,
+    },
     #[error("artifact store configuration: {0}")]
     Config(String),
 }
@@ -80,7 +83,9 @@ impl Artifact<'_> {
     /// `jobs/<id>/<file>`.
     pub fn key(&self) -> String {
         match self {
-            Artifact::Song(id, format) => format!("songs/{id}.{}", crate::queue::files::extension(*format)),
+            Artifact::Song(id, format) => {
+                format!("songs/{id}.{}", crate::queue::files::extension(*format))
+            }
             Artifact::Rig(id, format) => format!("rigs/{id}.{}", format.extension()),
             Artifact::Result(id, file) => format!("jobs/{id}/{file}"),
         }
@@ -138,20 +143,30 @@ impl Location {
             None | Some("local") => Ok(Location::Local),
             Some(url) => {
                 let Some(rest) = url.strip_prefix("s3://") else {
-                    return Err(ArtifactError::Config(format!("artifacts_url {url:?}: use \"local\" or s3://bucket[/prefix]")));
+                    return Err(ArtifactError::Config(format!(
+                        "artifacts_url {url:?}: use \"local\" or s3://bucket[/prefix]"
+                    )));
                 };
                 let (bucket, prefix) = rest.split_once('/').unwrap_or((rest, ""));
                 if bucket.is_empty() {
-                    return Err(ArtifactError::Config(format!("artifacts_url {url:?} names no bucket")));
+                    return Err(ArtifactError::Config(format!(
+                        "artifacts_url {url:?} names no bucket"
+                    )));
                 }
-                Ok(Location::Bucket { bucket: bucket.to_string(), prefix: prefix.trim_matches('/').to_string() })
+                Ok(Location::Bucket {
+                    bucket: bucket.to_string(),
+                    prefix: prefix.trim_matches('/').to_string(),
+                })
             }
         }
     }
 }
 
 /// Opens the artifact store the configuration names; `data` is the store or its cache.
-pub fn open(config: &crate::config::Config, data: DataDir) -> Result<Arc<dyn ArtifactStore>, ArtifactError> {
+pub fn open(
+    config: &crate::config::Config,
+    data: DataDir,
+) -> Result<Arc<dyn ArtifactStore>, ArtifactError> {
     Ok(match Location::parse(config.artifacts_url.as_deref())? {
         Location::Local => Arc::new(LocalArtifacts::new(data)),
         Location::Bucket { bucket, prefix } => Arc::new(BucketArtifacts::connect(
@@ -171,13 +186,22 @@ mod tests {
     #[test]
     fn keys_come_from_ids_and_urls_parse() {
         let song = SongId::new();
-        assert_eq!(Artifact::Song(song, AudioFormat::Flac).key(), format!("songs/{song}.flac"));
+        assert_eq!(
+            Artifact::Song(song, AudioFormat::Flac).key(),
+            format!("songs/{song}.flac")
+        );
         let job = JobId::new();
-        assert_eq!(Artifact::Result(job, "motion.bvh").key(), format!("jobs/{job}/motion.bvh"));
+        assert_eq!(
+            Artifact::Result(job, "motion.bvh").key(),
+            format!("jobs/{job}/motion.bvh")
+        );
         assert_eq!(Location::parse(None).expect("default"), Location::Local);
         assert_eq!(
             Location::parse(Some("s3://b/choreo/prod/")).expect("bucket"),
-            Location::Bucket { bucket: "b".into(), prefix: "choreo/prod".into() }
+            Location::Bucket {
+                bucket: "b".into(),
+                prefix: "choreo/prod".into()
+            }
         );
         assert!(Location::parse(Some("s3:///x")).is_err());
         assert!(Location::parse(Some("gs://b")).is_err());

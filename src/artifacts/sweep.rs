@@ -5,7 +5,7 @@
 //! does not exist. Nothing reads them, but they fill the disk. The sweep removes those older
 //! than the grace period (`sweep_grace_s`), so it never races a write in progress in another
 //! process sharing the data dir. It runs once, in the background, after the store opens.
-use crate::queue::{DataDir, JobId, QueueError, SongId, Store};
+use crate::queue::{DataDir, JobId, QueueError, Scope, SongId, Store};
 use std::path::Path;
 use std::str::FromStr;
 use std::sync::Arc;
@@ -33,22 +33,38 @@ pub fn spawn(store: Arc<dyn Store>, data: DataDir, grace: Duration) {
 }
 
 fn older_than(path: &Path, grace: Duration) -> bool {
-    let modified = std::fs::symlink_metadata(path).and_then(|m| m.modified()).unwrap_or_else(|_| SystemTime::now());
-    SystemTime::now().duration_since(modified).is_ok_and(|age| age >= grace)
+    let modified = std::fs::symlink_metadata(path)
+        .and_then(|m| m.modified())
+        .unwrap_or_else(|_| SystemTime::now());
+    SystemTime::now()
+        .duration_since(modified)
+        .is_ok_and(|age| age >= grace)
 }
 
 /// Removes leftovers older than `grace`; a database error stops it (nothing is removed on doubt).
-pub async fn sweep(store: &dyn Store, data: &DataDir, grace: Duration) -> Result<Swept, QueueError> {
+pub async fn sweep(
+    store: &dyn Store,
+    data: &DataDir,
+    grace: Duration,
+) -> Result<Swept, QueueError> {
     let mut swept = Swept::default();
-    for entry in std::fs::read_dir(data.root().join("songs")).into_iter().flatten().flatten() {
+    for entry in std::fs::read_dir(data.root().join("songs"))
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
         let path = entry.path();
-        let Some(id) = path.file_stem().and_then(|s| s.to_str()).and_then(|s| SongId::from_str(s).ok()) else {
+        let Some(id) = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .and_then(|s| SongId::from_str(s).ok())
+        else {
             continue;
         };
         if !older_than(&path, grace) {
             continue;
         }
-        match store.song(id).await {
+        match store.song(Scope::All, id).await {
             Err(QueueError::SongNotFound(_)) => {
                 if std::fs::remove_file(&path).is_ok() {
                     swept.songs += 1;
@@ -58,21 +74,35 @@ pub async fn sweep(store: &dyn Store, data: &DataDir, grace: Duration) -> Result
             Ok(_) => {}
         }
     }
-    for entry in std::fs::read_dir(data.root().join("jobs")).into_iter().flatten().flatten() {
+    for entry in std::fs::read_dir(data.root().join("jobs"))
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
         let dir = entry.path();
-        let Some(id) = dir.file_name().and_then(|s| s.to_str()).and_then(|s| JobId::from_str(s).ok()) else {
+        let Some(id) = dir
+            .file_name()
+            .and_then(|s| s.to_str())
+            .and_then(|s| JobId::from_str(s).ok())
+        else {
             continue;
         };
         for file in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
-            let is_temp = file.file_name().to_str().is_some_and(|n| n.starts_with(".partial-") || n.starts_with(".tmp"));
-            if is_temp && older_than(&file.path(), grace) && std::fs::remove_file(file.path()).is_ok() {
+            let is_temp = file
+                .file_name()
+                .to_str()
+                .is_some_and(|n| n.starts_with(".partial-") || n.starts_with(".tmp"));
+            if is_temp
+                && older_than(&file.path(), grace)
+                && std::fs::remove_file(file.path()).is_ok()
+            {
                 swept.temp_files += 1;
             }
         }
         if !older_than(&dir, grace) {
             continue;
         }
-        match store.job(id).await {
+        match store.job(Scope::All, id).await {
             Err(QueueError::JobNotFound(_)) => {
                 if std::fs::remove_dir_all(&dir).is_ok() {
                     swept.job_dirs += 1;

@@ -72,7 +72,10 @@ fn reset_peak() -> Option<f64> {
 
 fn is_song(p: &Path) -> bool {
     matches!(
-        p.extension().and_then(|e| e.to_str()).map(|e| e.to_ascii_lowercase()).as_deref(),
+        p.extension()
+            .and_then(|e| e.to_str())
+            .map(|e| e.to_ascii_lowercase())
+            .as_deref(),
         Some("mp3" | "wav" | "flac" | "ogg" | "m4a")
     )
 }
@@ -108,7 +111,11 @@ fn make_long_song(songs: &[PathBuf], seconds: f64, out: &Path) -> Result<(), Aud
     let mut parts = Vec::new();
     for s in songs {
         let a = decode_path(s)?;
-        parts.push(if a.sample_rate == sr { a.samples } else { super::resample(&a.samples, a.sample_rate, sr)? });
+        parts.push(if a.sample_rate == sr {
+            a.samples
+        } else {
+            super::resample(&a.samples, a.sample_rate, sr)?
+        });
     }
     if parts.iter().all(|p| p.is_empty()) {
         return Err(AudioError::Empty);
@@ -135,7 +142,10 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<BenchRow>, AudioError> {
         .collect();
     songs.sort();
     if songs.is_empty() {
-        return Err(AudioError::InvalidParameter(format!("no songs in {}", opts.songs_dir.display())));
+        return Err(AudioError::InvalidParameter(format!(
+            "no songs in {}",
+            opts.songs_dir.display()
+        )));
     }
     let tmp = tempfile::tempdir()?;
     let mut all = songs.clone();
@@ -143,7 +153,9 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<BenchRow>, AudioError> {
     make_long_song(&songs, 180.0, &three)?;
     all.push(three);
     if opts.long_minutes > 0.0 {
-        let long = tmp.path().join(format!("concat_{}min.wav", opts.long_minutes));
+        let long = tmp
+            .path()
+            .join(format!("concat_{}min.wav", opts.long_minutes));
         make_long_song(&songs, opts.long_minutes * 60.0, &long)?;
         all.push(long);
     }
@@ -162,7 +174,10 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<BenchRow>, AudioError> {
             _ => None,
         };
         drop(x);
-        let name = song.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        let name = song
+            .file_name()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_default();
         rows.push(BenchRow {
             song: name,
             duration_s: audio.duration_s,
@@ -178,17 +193,35 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<BenchRow>, AudioError> {
     if let Some(py) = &opts.python {
         let script = opts.repo_root.join("tools/librosa_reference.py");
         let mut cmd = Command::new(py);
-        cmd.arg(&script).arg("bench").arg("--fps").arg(opts.fps.to_string()).args(&all);
-        for var in ["OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"] {
+        cmd.arg(&script)
+            .arg("bench")
+            .arg("--fps")
+            .arg(opts.fps.to_string())
+            .args(&all);
+        for var in [
+            "OMP_NUM_THREADS",
+            "OPENBLAS_NUM_THREADS",
+            "MKL_NUM_THREADS",
+            "NUMBA_NUM_THREADS",
+        ] {
             cmd.env(var, "1");
         }
         let out = cmd.output()?;
         if !out.status.success() {
-            return Err(AudioError::Reference(String::from_utf8_lossy(&out.stderr).chars().take(2000).collect()));
+            return Err(AudioError::Reference(
+                String::from_utf8_lossy(&out.stderr)
+                    .chars()
+                    .take(2000)
+                    .collect(),
+            ));
         }
         let text = String::from_utf8_lossy(&out.stdout);
-        for (row, line) in rows.iter_mut().zip(text.lines().filter(|l| l.starts_with('{'))) {
-            let v: serde_json::Value = serde_json::from_str(line).map_err(|e| AudioError::Reference(e.to_string()))?;
+        for (row, line) in rows
+            .iter_mut()
+            .zip(text.lines().filter(|l| l.starts_with('{')))
+        {
+            let v: serde_json::Value =
+                serde_json::from_str(line).map_err(|e| AudioError::Reference(e.to_string()))?;
             if let Some(t) = v["total_s"].as_f64() {
                 row.librosa_total_s = Some(t);
                 row.speedup = Some(t / row.rust_total_s.max(1e-9));

@@ -18,12 +18,20 @@ pub struct Budget<'a> {
 impl<'a> Budget<'a> {
     /// No time limit and no stop signal (the CLI, tests, offline evaluation).
     pub fn unlimited() -> Self {
-        Self { start: Instant::now(), limit: None, stop: None }
+        Self {
+            start: Instant::now(),
+            limit: None,
+            stop: None,
+        }
     }
 
     /// A budget of `limit` from now; `stop` returning true ends the work at its next checkpoint.
     pub fn new(limit: Option<Duration>, stop: Option<&'a dyn Fn() -> bool>) -> Self {
-        Self { start: Instant::now(), limit, stop }
+        Self {
+            start: Instant::now(),
+            limit,
+            stop,
+        }
     }
 
     /// `Err` when the work must end now: stopped, or past its budget while in `stage`.
@@ -32,7 +40,10 @@ impl<'a> Budget<'a> {
             return Err(AudioError::Cancelled);
         }
         match self.limit {
-            Some(limit) if self.start.elapsed() > limit => Err(AudioError::TimedOut { stage, limit_s: limit.as_secs_f64() }),
+            Some(limit) if self.start.elapsed() > limit => Err(AudioError::TimedOut {
+                stage,
+                limit_s: limit.as_secs_f64(),
+            }),
             _ => Ok(()),
         }
     }
@@ -52,18 +63,37 @@ mod tests {
         let budget = Budget::new(Some(Duration::from_secs(60)), Some(&stop));
         assert!(budget.check(Stage::DecodeAudio).is_ok());
         flag.set(true);
-        assert!(matches!(budget.check(Stage::DecodeAudio), Err(AudioError::Cancelled)));
+        assert!(matches!(
+            budget.check(Stage::DecodeAudio),
+            Err(AudioError::Cancelled)
+        ));
         let over = Budget::new(Some(Duration::ZERO), None);
         std::thread::sleep(Duration::from_millis(2));
-        assert!(matches!(over.check(Stage::Analyze), Err(AudioError::TimedOut { stage: Stage::Analyze, .. })));
+        assert!(matches!(
+            over.check(Stage::Analyze),
+            Err(AudioError::TimedOut {
+                stage: Stage::Analyze,
+                ..
+            })
+        ));
     }
 
     #[test]
     fn an_analysis_stops_between_its_stages() {
         let sr = ANALYSIS_SR;
-        let samples: Vec<f32> = (0..sr * 10).map(|i| if i % (sr / 2) < 200 { 0.8 } else { 0.0 }).collect();
-        let audio = DecodedAudio { format: AudioFormat::Wav, sample_rate: sr, channels: 1, duration_s: 10.0, samples };
-        assert!(analyze_within(&audio, &Budget::unlimited()).is_ok_and(|a| !a.beat_times.is_empty()));
+        let samples: Vec<f32> = (0..sr * 10)
+            .map(|i| if i % (sr / 2) < 200 { 0.8 } else { 0.0 })
+            .collect();
+        let audio = DecodedAudio {
+            format: AudioFormat::Wav,
+            sample_rate: sr,
+            channels: 1,
+            duration_s: 10.0,
+            samples,
+        };
+        assert!(
+            analyze_within(&audio, &Budget::unlimited()).is_ok_and(|a| !a.beat_times.is_empty())
+        );
         // The fourth checkpoint comes after the mel spectrogram: the analysis stops there.
         let calls = Cell::new(0);
         let stop = || {
@@ -71,7 +101,10 @@ mod tests {
             calls.get() >= 4
         };
         let budget = Budget::new(None, Some(&stop));
-        assert!(matches!(analyze_within(&audio, &budget), Err(AudioError::Cancelled)));
+        assert!(matches!(
+            analyze_within(&audio, &budget),
+            Err(AudioError::Cancelled)
+        ));
         assert_eq!(calls.get(), 4);
     }
 }

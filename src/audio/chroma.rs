@@ -37,7 +37,11 @@ fn piptrack_frame(s: &[f32], sr: u32, n_fft: usize, out: &mut Vec<Peak>) {
             continue;
         }
         let x = th(i);
-        let is_max = if i == n - 1 { x > th(i - 1) } else { x > th(i - 1) && x >= th(i + 1) };
+        let is_max = if i == n - 1 {
+            x > th(i - 1)
+        } else {
+            x > th(i - 1) && x >= th(i + 1)
+        };
         if !is_max {
             continue;
         }
@@ -78,12 +82,21 @@ fn pitch_tuning(freqs: impl Iterator<Item = f32>, bins_per_octave: usize) -> f64
     if !any {
         return 0.0;
     }
-    let best = counts.iter().enumerate().max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(&a.0))).map_or(0, |(i, _)| i);
+    let best = counts
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.cmp(b.1).then(b.0.cmp(&a.0)))
+        .map_or(0, |(i, _)| i);
     -0.5 + best as f64 * 0.01
 }
 
 /// librosa `estimate_tuning` over spectrogram frames `[frames, bins]` (magnitude or power).
-pub fn estimate_tuning_from_spec(spec: &Array2<f32>, sr: u32, n_fft: usize, bins_per_octave: usize) -> f64 {
+pub fn estimate_tuning_from_spec(
+    spec: &Array2<f32>,
+    sr: u32,
+    n_fft: usize,
+    bins_per_octave: usize,
+) -> f64 {
     let mut peaks: Vec<Peak> = Vec::new();
     for row in spec.axis_iter(Axis(0)) {
         let r = row.to_vec();
@@ -94,8 +107,18 @@ pub fn estimate_tuning_from_spec(spec: &Array2<f32>, sr: u32, n_fft: usize, bins
 
 fn tuning_from_peaks(peaks: Vec<Peak>, bins_per_octave: usize) -> f64 {
     let mut mags: Vec<f32> = peaks.iter().filter(|p| p.0 > 0.0).map(|p| p.1).collect();
-    let threshold = if mags.is_empty() { 0.0 } else { dsp::median(&mut mags) };
-    pitch_tuning(peaks.iter().filter(|p| p.0 > 0.0 && p.1 >= threshold).map(|p| p.0), bins_per_octave)
+    let threshold = if mags.is_empty() {
+        0.0
+    } else {
+        dsp::median(&mut mags)
+    };
+    pitch_tuning(
+        peaks
+            .iter()
+            .filter(|p| p.0 > 0.0 && p.1 >= threshold)
+            .map(|p| p.0),
+        bins_per_octave,
+    )
 }
 
 /// librosa `estimate_tuning(y=y)`: piptrack on the magnitude STFT (n_fft 2048, hop 512).
@@ -137,10 +160,17 @@ pub fn chroma_filterbank(sr: u32, n_fft: usize, tuning: f64) -> Array2<f32> {
         }
     }
     for k in 0..n_fft {
-        let norm = (0..n_chroma).map(|c| wts[[c, k]].powi(2)).sum::<f64>().sqrt();
+        let norm = (0..n_chroma)
+            .map(|c| wts[[c, k]].powi(2))
+            .sum::<f64>()
+            .sqrt();
         let oct = (-0.5 * ((frqbins[k] / nc - 5.0) / 2.0).powi(2)).exp();
         for c in 0..n_chroma {
-            let v = if norm > f64::MIN_POSITIVE { wts[[c, k]] / norm } else { wts[[c, k]] };
+            let v = if norm > f64::MIN_POSITIVE {
+                wts[[c, k]] / norm
+            } else {
+                wts[[c, k]]
+            };
             wts[[c, k]] = v * oct;
         }
     }
@@ -202,14 +232,23 @@ impl Halver {
         let mut taps: Vec<f64> = (-m..=m)
             .map(|n| {
                 let x = n as f64;
-                let sinc = if n == 0 { 2.0 * fc } else { (2.0 * std::f64::consts::PI * fc * x).sin() / (std::f64::consts::PI * x) };
+                let sinc = if n == 0 {
+                    2.0 * fc
+                } else {
+                    (2.0 * std::f64::consts::PI * fc * x).sin() / (std::f64::consts::PI * x)
+                };
                 let r = x / m as f64;
                 sinc * i0(beta * (1.0 - r * r).max(0.0).sqrt()) / i0(beta)
             })
             .collect();
         let s: f64 = taps.iter().sum();
         taps.iter_mut().for_each(|t| *t /= s);
-        Self { taps: taps.into_iter().map(|t| (t * std::f64::consts::SQRT_2) as f32).collect() }
+        Self {
+            taps: taps
+                .into_iter()
+                .map(|t| (t * std::f64::consts::SQRT_2) as f32)
+                .collect(),
+        }
     }
 
     /// Halves the rate; output length `ceil(n / 2)`.
@@ -223,7 +262,11 @@ impl Halver {
             let lo = c.saturating_sub(m);
             let hi = (c + m + 1).min(n);
             let t0 = lo + m - c;
-            *y = self.taps[t0..t0 + (hi - lo)].iter().zip(&x[lo..hi]).map(|(a, b)| a * b).sum();
+            *y = self.taps[t0..t0 + (hi - lo)]
+                .iter()
+                .zip(&x[lo..hi])
+                .map(|(a, b)| a * b)
+                .sum();
         }
         out
     }
@@ -236,7 +279,11 @@ struct OctaveBasis {
 }
 
 fn octave_basis(freqs: &[f64], alpha: &[f64], sr: f64, scale: f64) -> OctaveBasis {
-    let lengths: Vec<f64> = freqs.iter().zip(alpha).map(|(f, a)| (1.0 / a) * sr / f).collect();
+    let lengths: Vec<f64> = freqs
+        .iter()
+        .zip(alpha)
+        .map(|(f, a)| (1.0 / a) * sr / f)
+        .collect();
     let max_len = lengths.iter().cloned().fold(0.0, f64::max);
     let n_fft = 2f64.powf(max_len.log2().ceil()) as usize;
     let mut planner = FftPlanner::<f64>::new();
@@ -281,10 +328,17 @@ fn octave_basis(freqs: &[f64], alpha: &[f64], sr: f64, scale: f64) -> OctaveBasi
             }
         }
         let first = mags.iter().position(|&m| m >= thr).unwrap_or(0);
-        let last = mags.iter().rposition(|&m| m >= thr).map_or(first, |l| l + 1);
+        let last = mags
+            .iter()
+            .rposition(|&m| m >= thr)
+            .map_or(first, |l| l + 1);
         let w: Vec<Complex32> = (first..last)
             .map(|k| {
-                let c = if mags[k] >= thr { half[k] * scale } else { rustfft::num_complex::Complex::new(0.0, 0.0) };
+                let c = if mags[k] >= thr {
+                    half[k] * scale
+                } else {
+                    rustfft::num_complex::Complex::new(0.0, 0.0)
+                };
                 Complex32::new(c.re as f32, c.im as f32)
             })
             .collect();
@@ -305,7 +359,9 @@ pub fn cqt_magnitude(
 ) -> Result<Array2<f32>, AudioError> {
     let n_octaves = n_bins.div_ceil(bins_per_octave);
     let fmin = fmin * 2f64.powf(tuning / bins_per_octave as f64);
-    let freqs: Vec<f64> = (0..n_bins).map(|k| fmin * 2f64.powf(k as f64 / bins_per_octave as f64)).collect();
+    let freqs: Vec<f64> = (0..n_bins)
+        .map(|k| fmin * 2f64.powf(k as f64 / bins_per_octave as f64))
+        .collect();
     let logf: Vec<f64> = freqs.iter().map(|f| f.log2()).collect();
     let alpha: Vec<f64> = (0..n_bins)
         .map(|k| {
@@ -322,7 +378,11 @@ pub fn cqt_magnitude(
             (r - 1.0) / (r + 1.0)
         })
         .collect();
-    let cutoff = freqs.iter().zip(&alpha).map(|(f, a)| f * (1.0 + 0.5 * HANN_BANDWIDTH * a)).fold(0.0, f64::max);
+    let cutoff = freqs
+        .iter()
+        .zip(&alpha)
+        .map(|(f, a)| f * (1.0 + 0.5 * HANN_BANDWIDTH * a))
+        .fold(0.0, f64::max);
     let nyquist = sr as f64 / 2.0;
     if cutoff > nyquist {
         return Err(AudioError::InvalidParameter(format!(
@@ -349,7 +409,12 @@ pub fn cqt_magnitude(
     for i in 0..n_octaves {
         let hi = n_bins - bins_per_octave * i;
         let lo = hi.saturating_sub(bins_per_octave);
-        let basis = octave_basis(&freqs[lo..hi], &alpha[lo..hi], my_sr, (base_sr / my_sr).sqrt());
+        let basis = octave_basis(
+            &freqs[lo..hi],
+            &alpha[lo..hi],
+            my_sr,
+            (base_sr / my_sr).sqrt(),
+        );
         let fft = rplanner.plan_fft_forward(basis.n_fft);
         let mut frame = fft.make_input_vec();
         let mut spec = fft.make_output_vec();
@@ -361,7 +426,11 @@ pub fn cqt_magnitude(
             let start = (t * my_hop) as isize - half as isize;
             for (j, v) in frame.iter_mut().enumerate() {
                 let idx = start + j as isize;
-                *v = if idx >= 0 && (idx as usize) < my_y.len() { my_y[idx as usize] } else { 0.0 };
+                *v = if idx >= 0 && (idx as usize) < my_y.len() {
+                    my_y[idx as usize]
+                } else {
+                    0.0
+                };
             }
             let _ = fft.process_with_scratch(&mut frame, &mut spec, &mut scratch);
             for (b, (first, w)) in basis.rows.iter().enumerate() {
@@ -385,7 +454,8 @@ pub fn cqt_magnitude(
         let hi = n_bins - bins_per_octave * i;
         let lo = hi.saturating_sub(bins_per_octave);
         let width = hi - lo;
-        out.slice_mut(ndarray::s![.., lo..hi]).assign(&r.slice(ndarray::s![..t_min, r.ncols() - width..]));
+        out.slice_mut(ndarray::s![.., lo..hi])
+            .assign(&r.slice(ndarray::s![..t_min, r.ncols() - width..]));
     }
     // scale=True: divide by √(filter length) at the (early-downsampled) base rate.
     for k in 0..n_bins {

@@ -45,7 +45,12 @@ fn phase(marks: &[usize], t: usize) -> Option<(f64, f64)> {
 /// `[len, 5]` clock on a frame grid at `frame_rate` from beat and downbeat frames (ascending):
 /// [`cols`]. Without two beats the clock is all zeros (no phase to give). Without two downbeats
 /// the bar is every [`DEFAULT_BEATS_PER_BAR`] beats from the first downbeat (or the first beat).
-pub fn beat_clock(beats: &[usize], downbeats: &[usize], len: usize, frame_rate: f64) -> Array2<f32> {
+pub fn beat_clock(
+    beats: &[usize],
+    downbeats: &[usize],
+    len: usize,
+    frame_rate: f64,
+) -> Array2<f32> {
     let mut out = Array2::<f32>::zeros((len, cols::DIM));
     if beats.len() < 2 {
         return out;
@@ -55,7 +60,11 @@ pub fn beat_clock(beats: &[usize], downbeats: &[usize], len: usize, frame_rate: 
     } else {
         let first = downbeats.first().copied().unwrap_or(beats[0]);
         let from = beats.partition_point(|&b| b < first);
-        beats[from..].iter().step_by(DEFAULT_BEATS_PER_BAR).copied().collect()
+        beats[from..]
+            .iter()
+            .step_by(DEFAULT_BEATS_PER_BAR)
+            .copied()
+            .collect()
     };
     let tau = std::f64::consts::TAU;
     for t in 0..len {

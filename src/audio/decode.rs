@@ -20,7 +20,9 @@ use symphonia::core::probe::Hint;
 
 use super::mp4::{mp4_edit, Mp4Edit};
 use super::resample::StreamResampler;
-use super::{AudioError, AudioFormat, Budget, DecodedAudio, MAX_DURATION_S, MAX_SAMPLE_RATE, MIN_SAMPLE_RATE};
+use super::{
+    AudioError, AudioFormat, Budget, DecodedAudio, MAX_DURATION_S, MAX_SAMPLE_RATE, MIN_SAMPLE_RATE,
+};
 use crate::stage::Stage;
 
 /// Slack on a header's declared duration before it alone refuses a song: declared lengths
@@ -66,7 +68,15 @@ pub struct Decoded {
 pub fn decode_path_at(path: &Path, target_sr: Option<u32>) -> Result<DecodedAudio, AudioError> {
     let keep = target_sr.map_or(Keep::Native, Keep::At);
     let budget = Budget::unlimited();
-    Ok(decode_file(path, &DecodeOptions { keep, max_duration_s: MAX_DURATION_S, budget: &budget })?.audio)
+    Ok(decode_file(
+        path,
+        &DecodeOptions {
+            keep,
+            max_duration_s: MAX_DURATION_S,
+            budget: &budget,
+        },
+    )?
+    .audio)
 }
 
 /// Decodes a file within `options`.
@@ -100,7 +110,9 @@ fn guarded(decode: impl FnOnce() -> Result<Decoded, AudioError>) -> Result<Decod
             .map(|s| s.to_string())
             .or_else(|| panic.downcast_ref::<String>().cloned())
             .unwrap_or_else(|| "a panic without a message".into());
-        Err(AudioError::Undecodable(format!("the decoder failed on a malformed header: {message}")))
+        Err(AudioError::Undecodable(format!(
+            "the decoder failed on a malformed header: {message}"
+        )))
     })
 }
 
@@ -117,11 +129,17 @@ fn format_of(codec: codecs::CodecType) -> Result<AudioFormat, AudioError> {
         CODEC_TYPE_AAC => AudioFormat::M4a,
         c if symphonia::default::get_codecs()
             .get_codec(c)
-            .is_some_and(|d| d.short_name.starts_with("pcm") || d.short_name.starts_with("adpcm")) =>
+            .is_some_and(|d| {
+                d.short_name.starts_with("pcm") || d.short_name.starts_with("adpcm")
+            }) =>
         {
             AudioFormat::Wav
         }
-        other => return Err(AudioError::Undecodable(format!("unsupported codec {other}"))),
+        other => {
+            return Err(AudioError::Undecodable(format!(
+                "unsupported codec {other}"
+            )))
+        }
     })
 }
 
@@ -156,7 +174,10 @@ fn decode_source(
     let budget = options.budget;
     let max_s = options.max_duration_s;
     let mss = MediaSourceStream::new(source, Default::default());
-    let fmt_opts = FormatOptions { enable_gapless: true, ..Default::default() };
+    let fmt_opts = FormatOptions {
+        enable_gapless: true,
+        ..Default::default()
+    };
     let probed = symphonia::default::get_probe()
         .format(&hint, mss, &fmt_opts, &MetadataOptions::default())
         .map_err(undecodable)?;
@@ -176,7 +197,10 @@ fn decode_source(
     }
     if let Some(seconds) = declared_s {
         if seconds > max_s + DECLARED_SLACK_S {
-            return Err(AudioError::TooLong { seconds, limit: max_s });
+            return Err(AudioError::TooLong {
+                seconds,
+                limit: max_s,
+            });
         }
     }
     let mut decoder = symphonia::default::get_codecs()
@@ -205,7 +229,9 @@ fn decode_source(
             Err(SymError::ResetRequired) => break,
             Err(e) => {
                 // A stream cut short after good audio is still a song; fail only if nothing came out.
-                if native_len > 0 { break; }
+                if native_len > 0 {
+                    break;
+                }
                 return Err(undecodable(e));
             }
         };
@@ -220,15 +246,20 @@ fn decode_source(
             Err(e) => return Err(undecodable(e)),
         };
         let spec = *decoded.spec();
-        if native_sr == 0 { native_sr = spec.rate; }
-        if channels == 0 { channels = spec.channels.count() as u16; }
+        if native_sr == 0 {
+            native_sr = spec.rate;
+        }
+        if channels == 0 {
+            channels = spec.channels.count() as u16;
+        }
         if sink.is_none() {
             check_rate(native_sr)?;
             max_len = (max_s * f64::from(native_sr)).floor() as u64;
             sink = Some(MonoSink::new(native_sr, options.keep)?);
         }
         let n_ch = spec.channels.count().max(1);
-        let buf = sample_buf.get_or_insert_with(|| SampleBuffer::new(decoded.capacity() as u64, spec));
+        let buf =
+            sample_buf.get_or_insert_with(|| SampleBuffer::new(decoded.capacity() as u64, spec));
         if buf.capacity() < decoded.capacity() * n_ch {
             *buf = SampleBuffer::new(decoded.capacity() as u64, spec);
         }
@@ -251,20 +282,31 @@ fn decode_source(
         }
         native_len += slice.len() as u64;
         if native_len > max_len {
-            return Err(AudioError::TooLong { seconds: native_len as f64 / f64::from(native_sr), limit: max_s });
+            return Err(AudioError::TooLong {
+                seconds: native_len as f64 / f64::from(native_sr),
+                limit: max_s,
+            });
         }
         // Checked here, where the native samples pass, so a decode that keeps none checks too.
         if slice.iter().any(|x| !x.is_finite()) {
             return Err(AudioError::NonFinite);
         }
-        if let Some(s) = sink.as_mut() { s.push(slice)?; }
+        if let Some(s) = sink.as_mut() {
+            s.push(slice)?;
+        }
     }
     let sink = sink.ok_or(AudioError::Empty)?;
     if native_len == 0 {
         return Err(AudioError::Empty);
     }
     let (samples, sample_rate) = sink.finish()?;
-    let audio = DecodedAudio { format, sample_rate, channels, duration_s: native_len as f64 / f64::from(native_sr), samples };
+    let audio = DecodedAudio {
+        format,
+        sample_rate,
+        channels,
+        duration_s: native_len as f64 / f64::from(native_sr),
+        samples,
+    };
     Ok(Decoded { audio, declared_s })
 }
 
@@ -287,8 +329,17 @@ impl MonoSink {
         if sr_out == 0 {
             return Err(AudioError::UnsupportedSampleRate(0));
         }
-        let stream = if sr_in == sr_out || !store { None } else { Some(StreamResampler::new(sr_in, sr_out)?) };
-        Ok(Self { out: Vec::new(), stream, sr_out, store })
+        let stream = if sr_in == sr_out || !store {
+            None
+        } else {
+            Some(StreamResampler::new(sr_in, sr_out)?)
+        };
+        Ok(Self {
+            out: Vec::new(),
+            stream,
+            sr_out,
+            store,
+        })
     }
 
     fn push(&mut self, x: &[f32]) -> Result<(), AudioError> {
@@ -296,7 +347,10 @@ impl MonoSink {
             return Ok(());
         }
         match self.stream.as_mut() {
-            None => { self.out.extend_from_slice(x); Ok(()) }
+            None => {
+                self.out.extend_from_slice(x);
+                Ok(())
+            }
             Some(s) => s.push(x, &mut self.out),
         }
     }

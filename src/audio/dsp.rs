@@ -48,7 +48,15 @@ impl Stft {
         let fft = RealFftPlanner::<f32>::new().plan_fft_forward(n_fft);
         let spectrum = fft.make_output_vec();
         let scratch = fft.make_scratch_vec();
-        Self { n_fft, hop, window, fft, frame: vec![0.0; n_fft], spectrum, scratch }
+        Self {
+            n_fft,
+            hop,
+            window,
+            fft,
+            frame: vec![0.0; n_fft],
+            spectrum,
+            scratch,
+        }
     }
 
     /// Number of bins, `1 + n_fft / 2`.
@@ -62,10 +70,16 @@ impl Stft {
         let start = (t * self.hop) as isize - half as isize;
         for (i, (f, w)) in self.frame.iter_mut().zip(&self.window).enumerate() {
             let idx = start + i as isize;
-            *f = if idx >= 0 && (idx as usize) < y.len() { y[idx as usize] * w } else { 0.0 };
+            *f = if idx >= 0 && (idx as usize) < y.len() {
+                y[idx as usize] * w
+            } else {
+                0.0
+            };
         }
         // realfft only errors on wrong buffer lengths, which are fixed at construction.
-        let _ = self.fft.process_with_scratch(&mut self.frame, &mut self.spectrum, &mut self.scratch);
+        let _ =
+            self.fft
+                .process_with_scratch(&mut self.frame, &mut self.spectrum, &mut self.scratch);
         &self.spectrum
     }
 
@@ -84,7 +98,11 @@ pub fn hz_to_mel(f: f64) -> f64 {
     let min_log_hz = 1000.0;
     let min_log_mel = min_log_hz / f_sp;
     let logstep = (6.4f64).ln() / 27.0;
-    if f >= min_log_hz { min_log_mel + (f / min_log_hz).ln() / logstep } else { f / f_sp }
+    if f >= min_log_hz {
+        min_log_mel + (f / min_log_hz).ln() / logstep
+    } else {
+        f / f_sp
+    }
 }
 
 /// Mel → Hz, Slaney scale.
@@ -93,7 +111,11 @@ pub fn mel_to_hz(m: f64) -> f64 {
     let min_log_hz = 1000.0;
     let min_log_mel = min_log_hz / f_sp;
     let logstep = (6.4f64).ln() / 27.0;
-    if m >= min_log_mel { min_log_hz * (logstep * (m - min_log_mel)).exp() } else { f_sp * m }
+    if m >= min_log_mel {
+        min_log_hz * (logstep * (m - min_log_mel)).exp()
+    } else {
+        f_sp * m
+    }
 }
 
 /// A sparse filterbank: for each output band, the first bin and its weights.
@@ -112,7 +134,13 @@ impl SparseBank {
             .map(|r| {
                 let first = r.iter().position(|&w| w != 0.0).unwrap_or(0);
                 let last = r.iter().rposition(|&w| w != 0.0).map_or(first, |l| l + 1);
-                (first, r[first..last.max(first)].iter().map(|&w| w as f32).collect())
+                (
+                    first,
+                    r[first..last.max(first)]
+                        .iter()
+                        .map(|&w| w as f32)
+                        .collect(),
+                )
             })
             .collect();
         Self { rows, n_bins }
@@ -126,7 +154,11 @@ impl SparseBank {
     /// `out[b] = Σ_k W[b,k] x[k]`.
     pub fn apply(&self, x: &[f32], out: &mut [f32]) {
         for ((first, w), o) in self.rows.iter().zip(out.iter_mut()) {
-            *o = w.iter().zip(&x[*first..*first + w.len()]).map(|(a, b)| a * b).sum();
+            *o = w
+                .iter()
+                .zip(&x[*first..*first + w.len()])
+                .map(|(a, b)| a * b)
+                .sum();
         }
     }
 }
@@ -134,7 +166,9 @@ impl SparseBank {
 /// Slaney-normalised mel filterbank (librosa `filters.mel`, `htk=False`, `norm='slaney'`).
 pub fn mel_filterbank(sr: u32, n_fft: usize, n_mels: usize, fmin: f64, fmax: f64) -> SparseBank {
     let n_bins = n_fft / 2 + 1;
-    let fftfreqs: Vec<f64> = (0..n_bins).map(|k| k as f64 * sr as f64 / n_fft as f64).collect();
+    let fftfreqs: Vec<f64> = (0..n_bins)
+        .map(|k| k as f64 * sr as f64 / n_fft as f64)
+        .collect();
     let (mmin, mmax) = (hz_to_mel(fmin), hz_to_mel(fmax));
     let mel_f: Vec<f64> = (0..n_mels + 2)
         .map(|i| mel_to_hz(mmin + (mmax - mmin) * i as f64 / (n_mels + 1) as f64))
@@ -195,9 +229,14 @@ pub fn power_to_db_ref_max_inplace(s: &mut Array2<f32>) {
 pub fn dct_matrix(n_out: usize, n_in: usize) -> Array2<f32> {
     let mut m = Array2::<f32>::zeros((n_out, n_in));
     for k in 0..n_out {
-        let scale = if k == 0 { (1.0 / n_in as f64).sqrt() } else { (2.0 / n_in as f64).sqrt() };
+        let scale = if k == 0 {
+            (1.0 / n_in as f64).sqrt()
+        } else {
+            (2.0 / n_in as f64).sqrt()
+        };
         for n in 0..n_in {
-            let v = scale * (std::f64::consts::PI * k as f64 * (2 * n + 1) as f64 / (2 * n_in) as f64).cos();
+            let v = scale
+                * (std::f64::consts::PI * k as f64 * (2 * n + 1) as f64 / (2 * n_in) as f64).cos();
             m[[k, n]] = v as f32;
         }
     }
@@ -234,7 +273,9 @@ pub fn delta(x: &Array2<f32>, width: usize) -> Array2<f32> {
         let mean_t = (t_n - 1) as f64 / 2.0;
         let denom: f64 = (0..t_n).map(|t| (t as f64 - mean_t).powi(2)).sum();
         for c in 0..x.ncols() {
-            let num: f64 = (0..t_n).map(|t| (t as f64 - mean_t) * x[[t, c]] as f64).sum();
+            let num: f64 = (0..t_n)
+                .map(|t| (t as f64 - mean_t) * x[[t, c]] as f64)
+                .sum();
             let s = (num / denom) as f32;
             for t in 0..t_n {
                 out[[t, c]] = s;
@@ -277,5 +318,9 @@ pub fn median(v: &mut [f32]) -> f32 {
         return 0.0;
     }
     v.sort_unstable_by(|a, b| a.total_cmp(b));
-    if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) }
+    if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    }
 }

@@ -72,7 +72,9 @@ impl FrameGrid {
     /// The grid for a motion frame rate (see the module doc).
     pub fn for_fps(fps: f64) -> Result<Self, AudioError> {
         if !(fps.is_finite() && (1.0..=240.0).contains(&fps)) {
-            return Err(AudioError::InvalidParameter(format!("fps {fps} is outside 1..=240")));
+            return Err(AudioError::InvalidParameter(format!(
+                "fps {fps} is outside 1..=240"
+            )));
         }
         let mut hop = super::HOP_LENGTH;
         while fps * (hop as f64) < MIN_FEATURE_SR {
@@ -84,7 +86,11 @@ impl FrameGrid {
                 "fps {fps} × hop {hop} = {sr} Hz is not a whole sample rate"
             )));
         }
-        Ok(Self { fps, hop, sr: sr.round() as u32 })
+        Ok(Self {
+            fps,
+            hop,
+            sr: sr.round() as u32,
+        })
     }
 }
 
@@ -95,10 +101,17 @@ struct Prepared<'a> {
     rows: Range<usize>,
 }
 
-fn prepare(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Result<Prepared<'_>, AudioError> {
+fn prepare(
+    audio: &DecodedAudio,
+    fps: f64,
+    start_s: f64,
+    n_frames: usize,
+) -> Result<Prepared<'_>, AudioError> {
     let grid = FrameGrid::for_fps(fps)?;
     if !(start_s.is_finite() && start_s >= 0.0) {
-        return Err(AudioError::InvalidParameter(format!("start_s {start_s} must be ≥ 0")));
+        return Err(AudioError::InvalidParameter(format!(
+            "start_s {start_s} must be ≥ 0"
+        )));
     }
     if n_frames == 0 {
         return Err(AudioError::InvalidParameter("n_frames must be ≥ 1".into()));
@@ -137,7 +150,8 @@ fn prepare(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Res
 fn put(dst: &mut Array2<f32>, cols: Range<usize>, src: &Array2<f32>, rows: &Range<usize>) {
     let avail = src.nrows().min(rows.end).saturating_sub(rows.start);
     if avail > 0 {
-        dst.slice_mut(s![..avail, cols.clone()]).assign(&src.slice(s![rows.start..rows.start + avail, ..]));
+        dst.slice_mut(s![..avail, cols.clone()])
+            .assign(&src.slice(s![rows.start..rows.start + avail, ..]));
     }
 }
 
@@ -182,22 +196,42 @@ fn beats_from_onset(env: &[f32], grid: &FrameGrid) -> Vec<usize> {
 /// MFCC 20 of the mel dB (ref = max), ΔMFCC 20 (width 3), CQT chroma 12 of the harmonic
 /// part (`effects.hpss`), tempogram 384 and onset 1 of the percussive part (median), beat
 /// one-hot 1 (`beat_track` on that onset envelope). Frame i = time `i / fps`.
-pub fn dance_revolution(audio: &DecodedAudio, fps: f64, n_frames: usize) -> Result<Array2<f32>, AudioError> {
+pub fn dance_revolution(
+    audio: &DecodedAudio,
+    fps: f64,
+    n_frames: usize,
+) -> Result<Array2<f32>, AudioError> {
     dance_revolution_at(audio, fps, 0.0, n_frames)
 }
 
 /// [`dance_revolution`] with row i at time `start_s + i / fps`.
-pub fn dance_revolution_at(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Result<Array2<f32>, AudioError> {
+pub fn dance_revolution_at(
+    audio: &DecodedAudio,
+    fps: f64,
+    start_s: f64,
+    n_frames: usize,
+) -> Result<Array2<f32>, AudioError> {
     dance_revolution_set(audio, fps, start_s, n_frames, false)
 }
 
 /// [`dance_revolution_at`] with the beat clock of its own beats appended (`[n_frames, 443]`,
 /// [`dance_revolution_cols::CLOCK`]): bars from [`downbeats`] of the same mel spectrogram.
-pub fn dance_revolution_clock_at(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Result<Array2<f32>, AudioError> {
+pub fn dance_revolution_clock_at(
+    audio: &DecodedAudio,
+    fps: f64,
+    start_s: f64,
+    n_frames: usize,
+) -> Result<Array2<f32>, AudioError> {
     dance_revolution_set(audio, fps, start_s, n_frames, true)
 }
 
-fn dance_revolution_set(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize, clock: bool) -> Result<Array2<f32>, AudioError> {
+fn dance_revolution_set(
+    audio: &DecodedAudio,
+    fps: f64,
+    start_s: f64,
+    n_frames: usize,
+    clock: bool,
+) -> Result<Array2<f32>, AudioError> {
     use dance_revolution_cols as c;
     let p = prepare(audio, fps, start_s, n_frames)?;
     let (g, rows) = (p.grid, p.rows.clone());
@@ -223,7 +257,11 @@ fn dance_revolution_set(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: 
     drop(tg);
     put_col(out.column_mut(c::ONSET), &onset, &rows);
     let beats = beats_from_onset(&onset, &g);
-    put_col(out.column_mut(c::BEAT), &one_hot(&beats, onset.len()), &rows);
+    put_col(
+        out.column_mut(c::BEAT),
+        &one_hot(&beats, onset.len()),
+        &rows,
+    );
     if let Some(mel) = mel_for_bars {
         let bars = downbeats(&beats, &mel, g.sr);
         let clock = super::clock::beat_clock(&beats, &bars, onset.len(), g.fps);
@@ -234,7 +272,12 @@ fn dance_revolution_set(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: 
 
 /// DanceNet (Zhuang et al. 2022), `[n_frames, 15]`: onset strength 1 (librosa default, mean
 /// over mel bands) | beat one-hot 1, downbeat one-hot 1 | chroma_stft 12 (C first).
-pub fn dancenet(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Result<Array2<f32>, AudioError> {
+pub fn dancenet(
+    audio: &DecodedAudio,
+    fps: f64,
+    start_s: f64,
+    n_frames: usize,
+) -> Result<Array2<f32>, AudioError> {
     let (chroma, onset, beats, down, rows) = rhythm_and_chroma(audio, fps, start_s, n_frames)?;
     let mut out = Array2::<f32>::zeros((n_frames, DANCENET_DIM));
     put_col(out.column_mut(0), &onset, &rows);
@@ -246,7 +289,12 @@ pub fn dancenet(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -
 
 /// Key-pose transformer, `[n_frames, 15]`: chroma_stft 12 | beat one-hot 1, downbeat
 /// one-hot 1 (the "downbeat 2" of the paper: beat and bar positions) | onset strength 1.
-pub fn keypose(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Result<Array2<f32>, AudioError> {
+pub fn keypose(
+    audio: &DecodedAudio,
+    fps: f64,
+    start_s: f64,
+    n_frames: usize,
+) -> Result<Array2<f32>, AudioError> {
     let (chroma, onset, beats, down, rows) = rhythm_and_chroma(audio, fps, start_s, n_frames)?;
     let mut out = Array2::<f32>::zeros((n_frames, KEYPOSE_DIM));
     put(&mut out, 0..12, &chroma, &rows);
@@ -258,7 +306,12 @@ pub fn keypose(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) ->
 
 type RhythmChroma = (Array2<f32>, Vec<f32>, Vec<f32>, Vec<f32>, Range<usize>);
 
-fn rhythm_and_chroma(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Result<RhythmChroma, AudioError> {
+fn rhythm_and_chroma(
+    audio: &DecodedAudio,
+    fps: f64,
+    start_s: f64,
+    n_frames: usize,
+) -> Result<RhythmChroma, AudioError> {
     let p = prepare(audio, fps, start_s, n_frames)?;
     let g = p.grid;
     let mut mel = mel_power(&p.y, &g);
@@ -268,11 +321,22 @@ fn rhythm_and_chroma(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usi
     let down = downbeats(&beats, &mel, g.sr);
     let chroma = chroma_stft(&p.y, g.sr, N_FFT, g.hop);
     let t_n = onset.len();
-    Ok((chroma, onset, one_hot(&beats, t_n), one_hot(&down, t_n), p.rows))
+    Ok((
+        chroma,
+        onset,
+        one_hot(&beats, t_n),
+        one_hot(&down, t_n),
+        p.rows,
+    ))
 }
 
 /// TSMT, `[n_frames, 27]`: MFCC 13 (librosa defaults) | ΔMFCC 13 (width 9) | beat one-hot 1.
-pub fn tsmt(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Result<Array2<f32>, AudioError> {
+pub fn tsmt(
+    audio: &DecodedAudio,
+    fps: f64,
+    start_s: f64,
+    n_frames: usize,
+) -> Result<Array2<f32>, AudioError> {
     let p = prepare(audio, fps, start_s, n_frames)?;
     let g = p.grid;
     let mut mel = mel_power(&p.y, &g);
@@ -289,7 +353,12 @@ pub fn tsmt(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Re
 /// Percussive onset envelope for the beat-alignment metric, `n_frames` values at `fps`:
 /// librosa `onset_strength(y=effects.percussive(y), aggregate=np.median)` on the grid, the
 /// same envelope as the DanceRevolution onset column.
-pub fn percussive_onset(audio: &DecodedAudio, fps: f64, start_s: f64, n_frames: usize) -> Result<Vec<f32>, AudioError> {
+pub fn percussive_onset(
+    audio: &DecodedAudio,
+    fps: f64,
+    start_s: f64,
+    n_frames: usize,
+) -> Result<Vec<f32>, AudioError> {
     let p = prepare(audio, fps, start_s, n_frames)?;
     let g = p.grid;
     let (_, percussive) = hpss_signal(&p.y, N_FFT, g.hop);

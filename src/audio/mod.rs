@@ -24,7 +24,9 @@ mod resample;
 pub mod rhythm;
 
 pub use budget::Budget;
-pub use decode::{decode_bytes, decode_file, decode_path_at, resample, DecodeOptions, Decoded, Keep};
+pub use decode::{
+    decode_bytes, decode_file, decode_path_at, resample, DecodeOptions, Decoded, Keep,
+};
 
 /// Sample rate of `analyze` (librosa's default `sr`).
 pub const ANALYSIS_SR: u32 = 22_050;
@@ -44,7 +46,13 @@ pub const MAX_SAMPLE_RATE: u32 = 384_000;
 /// The container/codec a song was decoded as, found by decoding, never by extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, utoipa::ToSchema)]
 #[serde(rename_all = "lowercase")]
-pub enum AudioFormat { Mp3, Wav, Flac, Ogg, M4a }
+pub enum AudioFormat {
+    Mp3,
+    Wav,
+    Flac,
+    Ogg,
+    M4a,
+}
 
 /// A decoded song, downmixed to mono at `sample_rate` (native unless resampled while decoding).
 #[derive(Clone, Debug)]
@@ -75,7 +83,9 @@ pub enum AudioError {
     Empty,
     #[error("the song is longer than the {limit:.0} s limit ({seconds:.1} s declared or decoded)")]
     TooLong { seconds: f64, limit: f64 },
-    #[error("sample rate {0} Hz is outside the supported {MIN_SAMPLE_RATE}..={MAX_SAMPLE_RATE} Hz")]
+    #[error(
+        "sample rate {0} Hz is outside the supported {MIN_SAMPLE_RATE}..={MAX_SAMPLE_RATE} Hz"
+    )]
     UnsupportedSampleRate(u32),
     #[error("audio contains non-finite samples")]
     NonFinite,

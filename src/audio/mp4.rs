@@ -20,9 +20,16 @@ pub struct Mp4Edit {
 impl Mp4Edit {
     pub(super) fn to_samples(self, sr: u32) -> (u64, Option<u64>) {
         // u128 cannot overflow here (u64 × u32); a result past u64 saturates.
-        let scale = |v: u64, ts: u32| u64::try_from(u128::from(v) * u128::from(sr) / u128::from(ts)).unwrap_or(u64::MAX);
-        let skip = if self.media_timescale > 0 { scale(self.media_time, self.media_timescale) } else { 0 };
-        let keep = (self.segment_duration > 0 && self.movie_timescale > 0).then(|| scale(self.segment_duration, self.movie_timescale));
+        let scale = |v: u64, ts: u32| {
+            u64::try_from(u128::from(v) * u128::from(sr) / u128::from(ts)).unwrap_or(u64::MAX)
+        };
+        let skip = if self.media_timescale > 0 {
+            scale(self.media_time, self.media_timescale)
+        } else {
+            0
+        };
+        let keep = (self.segment_duration > 0 && self.movie_timescale > 0)
+            .then(|| scale(self.segment_duration, self.movie_timescale));
         (skip, keep)
     }
 }
@@ -113,7 +120,8 @@ fn children(body: &[u8]) -> Vec<([u8; 4], &[u8])> {
 }
 
 fn be_u32(b: &[u8], at: usize) -> Option<u32> {
-    b.get(at..at.checked_add(4)?).map(|s| u32::from_be_bytes([s[0], s[1], s[2], s[3]]))
+    b.get(at..at.checked_add(4)?)
+        .map(|s| u32::from_be_bytes([s[0], s[1], s[2], s[3]]))
 }
 
 fn be_u64(b: &[u8], at: usize) -> Option<u64> {
@@ -134,14 +142,30 @@ fn header_timescale(b: &[u8]) -> Option<u32> {
 
 fn parse_moov(moov: &[u8]) -> Option<Mp4Edit> {
     let kids = children(moov);
-    let movie_timescale = kids.iter().find(|(k, _)| k == b"mvhd").and_then(|(_, b)| header_timescale(b))?;
+    let movie_timescale = kids
+        .iter()
+        .find(|(k, _)| k == b"mvhd")
+        .and_then(|(_, b)| header_timescale(b))?;
     for (_, trak) in kids.iter().filter(|(k, _)| k == b"trak") {
         let tk = children(trak);
-        let mdia = tk.iter().find(|(k, _)| k == b"mdia").map(|(_, b)| children(b))?;
-        let is_sound = mdia.iter().any(|(k, b)| k == b"hdlr" && b.get(8..12) == Some(b"soun"));
-        if !is_sound { continue; }
-        let media_timescale = mdia.iter().find(|(k, _)| k == b"mdhd").and_then(|(_, b)| header_timescale(b))?;
-        let edts = tk.iter().find(|(k, _)| k == b"edts").map(|(_, b)| children(b))?;
+        let mdia = tk
+            .iter()
+            .find(|(k, _)| k == b"mdia")
+            .map(|(_, b)| children(b))?;
+        let is_sound = mdia
+            .iter()
+            .any(|(k, b)| k == b"hdlr" && b.get(8..12) == Some(b"soun"));
+        if !is_sound {
+            continue;
+        }
+        let media_timescale = mdia
+            .iter()
+            .find(|(k, _)| k == b"mdhd")
+            .and_then(|(_, b)| header_timescale(b))?;
+        let edts = tk
+            .iter()
+            .find(|(k, _)| k == b"edts")
+            .map(|(_, b)| children(b))?;
         let elst = edts.iter().find(|(k, _)| k == b"elst").map(|(_, b)| *b)?;
         let version = *elst.first()?;
         let entry = if version == 1 { 20 } else { 12 };
@@ -152,11 +176,19 @@ fn parse_moov(moov: &[u8]) -> Option<Mp4Edit> {
             let (dur, mt) = if version == 1 {
                 (be_u64(elst, at)?, be_u64(elst, at + 8)? as i64)
             } else {
-                (u64::from(be_u32(elst, at)?), i64::from(be_u32(elst, at + 4)? as i32))
+                (
+                    u64::from(be_u32(elst, at)?),
+                    i64::from(be_u32(elst, at + 4)? as i32),
+                )
             };
             // media_time -1 is an empty edit (a gap); the first real edit says where audio starts.
             if mt >= 0 {
-                return Some(Mp4Edit { media_time: mt as u64, media_timescale, segment_duration: dur, movie_timescale });
+                return Some(Mp4Edit {
+                    media_time: mt as u64,
+                    media_timescale,
+                    segment_duration: dur,
+                    movie_timescale,
+                });
             }
         }
         return None;
@@ -194,8 +226,15 @@ mod tests {
         elst.extend_from_slice(&media_time.to_be_bytes());
         elst.extend_from_slice(&0x0001_0000u32.to_be_bytes());
         let mdia = [mp4_box(b"hdlr", &hdlr), mp4_box(b"mdhd", &mdhd)].concat();
-        let trak = [mp4_box(b"edts", &mp4_box(b"elst", &elst)), mp4_box(b"mdia", &mdia)].concat();
-        mp4_box(b"moov", &[mp4_box(b"mvhd", &mvhd), mp4_box(b"trak", &trak)].concat())
+        let trak = [
+            mp4_box(b"edts", &mp4_box(b"elst", &elst)),
+            mp4_box(b"mdia", &mdia),
+        ]
+        .concat();
+        mp4_box(
+            b"moov",
+            &[mp4_box(b"mvhd", &mvhd), mp4_box(b"trak", &trak)].concat(),
+        )
     }
 
     /// The hostile file of issue 11, byte for byte.
@@ -216,10 +255,21 @@ mod tests {
     fn reads_the_edit_list() {
         let file = [ftyp(), moov(2112, 1)].concat();
         let e = edit(&file).expect("an edit");
-        assert_eq!((e.media_time, e.media_timescale, e.segment_duration, e.movie_timescale), (2112, 44_100, 5000, 1000));
+        assert_eq!(
+            (
+                e.media_time,
+                e.media_timescale,
+                e.segment_duration,
+                e.movie_timescale
+            ),
+            (2112, 44_100, 5000, 1000)
+        );
         assert_eq!(e.to_samples(44_100), (2112, Some(220_500)));
         // A count larger than the box holds reads the entries that are there.
-        assert_eq!(edit(&[ftyp(), moov(2112, u32::MAX)].concat()).map(|e| e.media_time), Some(2112));
+        assert_eq!(
+            edit(&[ftyp(), moov(2112, u32::MAX)].concat()).map(|e| e.media_time),
+            Some(2112)
+        );
     }
 
     #[test]

@@ -16,7 +16,12 @@ pub enum Aggregate {
 /// Onset strength from a mel spectrogram in dB `[frames, bands]`, lag 1, max_size 1, centred:
 /// `env[t] = agg_f max(0, S[t-2, f] - S[t-3, f])` (the shift `1 + n_fft / (2 hop)` counters
 /// framing), zero for the first frames, same length as `S`.
-pub fn onset_strength_from_db(s_db: &Array2<f32>, n_fft: usize, hop: usize, agg: Aggregate) -> Vec<f32> {
+pub fn onset_strength_from_db(
+    s_db: &Array2<f32>,
+    n_fft: usize,
+    hop: usize,
+    agg: Aggregate,
+) -> Vec<f32> {
     let t_n = s_db.nrows();
     let pad = 1 + n_fft / (2 * hop);
     let mut env = vec![0.0f32; t_n];
@@ -31,7 +36,9 @@ pub fn onset_strength_from_db(s_db: &Array2<f32>, n_fft: usize, hop: usize, agg:
             *f = (a - b).max(0.0);
         }
         env[t] = match agg {
-            Aggregate::Mean => flux.iter().map(|&v| v as f64).sum::<f64>() as f32 / flux.len().max(1) as f32,
+            Aggregate::Mean => {
+                flux.iter().map(|&v| v as f64).sum::<f64>() as f32 / flux.len().max(1) as f32
+            }
             Aggregate::Median => median(&mut flux),
         };
     }
@@ -59,7 +66,9 @@ impl SortedWindow {
     /// Swaps one occurrence of `old` for `new`, shifting only the elements between them.
     fn replace(&mut self, old: f32, new: f32) {
         let v = &mut self.v;
-        let i = v.partition_point(|x| x.total_cmp(&old).is_lt()).min(v.len() - 1);
+        let i = v
+            .partition_point(|x| x.total_cmp(&old).is_lt())
+            .min(v.len() - 1);
         if new.total_cmp(&old).is_ge() {
             // Move left the elements in (i, j) that are smaller than `new`.
             let mut j = i;
@@ -124,9 +133,15 @@ pub fn hpss_signal(y: &[f32], n_fft: usize, hop: usize) -> (Vec<f32>, Vec<f32>) 
     let mut stft = Stft::new(n_fft, hop);
     let nb = stft.n_bins();
     // Cache of (spectrum, magnitude) for the frames a window needs.
-    let mut cache: std::collections::BTreeMap<usize, (Vec<rustfft::num_complex::Complex32>, Vec<f32>)> =
-        std::collections::BTreeMap::new();
-    let mut get = |t: usize, cache: &mut std::collections::BTreeMap<usize, (Vec<rustfft::num_complex::Complex32>, Vec<f32>)>| {
+    let mut cache: std::collections::BTreeMap<
+        usize,
+        (Vec<rustfft::num_complex::Complex32>, Vec<f32>),
+    > = std::collections::BTreeMap::new();
+    let mut get = |t: usize,
+                   cache: &mut std::collections::BTreeMap<
+        usize,
+        (Vec<rustfft::num_complex::Complex32>, Vec<f32>),
+    >| {
         if !cache.contains_key(&t) {
             let spec = stft.frame(y, t).to_vec();
             let mag = spec.iter().map(|c| dsp::magnitude(*c)).collect();
@@ -138,7 +153,13 @@ pub fn hpss_signal(y: &[f32], n_fft: usize, hop: usize) -> (Vec<f32>, Vec<f32>) 
         get(ext(j), &mut cache);
     }
     let mut windows: Vec<SortedWindow> = (0..nb)
-        .map(|k| SortedWindow::new((-(half as isize)..=half as isize).map(|j| cache[&ext(j)].1[k]).collect()))
+        .map(|k| {
+            SortedWindow::new(
+                (-(half as isize)..=half as isize)
+                    .map(|j| cache[&ext(j)].1[k])
+                    .collect(),
+            )
+        })
         .collect();
     let window = dsp::hann_periodic(n_fft);
     let inv = realfft::RealFftPlanner::<f32>::new().plan_fft_inverse(n_fft);
@@ -151,7 +172,10 @@ pub fn hpss_signal(y: &[f32], n_fft: usize, hop: usize) -> (Vec<f32>, Vec<f32>) 
     let mut mask_p = vec![0.0f32; nb];
     for t in 0..t_n {
         if t > 0 {
-            let (old, new) = (ext(t as isize - half as isize - 1), ext((t + half) as isize));
+            let (old, new) = (
+                ext(t as isize - half as isize - 1),
+                ext((t + half) as isize),
+            );
             get(new, &mut cache);
             let (old_mag, new_mag) = (&cache[&old].1, &cache[&new].1);
             for ((w, &o), &n) in windows.iter_mut().zip(old_mag).zip(new_mag) {
@@ -160,7 +184,11 @@ pub fn hpss_signal(y: &[f32], n_fft: usize, hop: usize) -> (Vec<f32>, Vec<f32>) 
             // Frames older than the window (and not needed for end reflection) can go.
             let keep_from = t.saturating_sub(half + 1);
             while let Some((&first, _)) = cache.iter().next() {
-                if first < keep_from && first + 2 * half + 2 < t_n { cache.remove(&first); } else { break; }
+                if first < keep_from && first + 2 * half + 2 < t_n {
+                    cache.remove(&first);
+                } else {
+                    break;
+                }
             }
         }
         let (spec, mag) = &cache[&t];

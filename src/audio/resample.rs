@@ -101,13 +101,26 @@ impl PolyResampler {
                 if x.abs() > half_len {
                     continue;
                 }
-                let sinc = if x == 0.0 { 2.0 * fc } else { (2.0 * std::f64::consts::PI * fc * x).sin() / (std::f64::consts::PI * x) };
+                let sinc = if x == 0.0 {
+                    2.0 * fc
+                } else {
+                    (2.0 * std::f64::consts::PI * fc * x).sin() / (std::f64::consts::PI * x)
+                };
                 let w = bessel_i0(beta * (1.0 - (x / half_len).powi(2)).max(0.0).sqrt()) / i0b;
                 // Stored reversed so the dot product runs forward over the input.
                 branches[p * taps + (taps - 1 - i)] = (sinc * w * l as f64) as f32;
             }
         }
-        Some(Self { l, m, r, branches, buf: Vec::new(), buf_start: 0, next_out: 0, total_in: 0 })
+        Some(Self {
+            l,
+            m,
+            r,
+            branches,
+            buf: Vec::new(),
+            buf_start: 0,
+            next_out: 0,
+            total_in: 0,
+        })
     }
 
     fn taps(&self) -> usize {
@@ -220,7 +233,15 @@ impl RubatoResampler {
         let inner = FftFixedIn::<f32>::new(sr_in as usize, sr_out as usize, RESAMPLE_CHUNK, 2, 1)
             .map_err(|e| AudioError::Resample(e.to_string()))?;
         let delay_left = inner.output_delay();
-        Ok(Self { inner, pending: Vec::new(), delay_left, total_in: 0, total_out: 0, sr_in, sr_out })
+        Ok(Self {
+            inner,
+            pending: Vec::new(),
+            delay_left,
+            total_in: 0,
+            total_out: 0,
+            sr_in,
+            sr_out,
+        })
     }
 
     fn emit(&mut self, chunk: &[f32], out: &mut Vec<f32>) {
@@ -236,7 +257,9 @@ impl RubatoResampler {
         let mut start = 0;
         loop {
             let need = self.inner.input_frames_next();
-            if self.pending.len() - start < need { break; }
+            if self.pending.len() - start < need {
+                break;
+            }
             let res = self
                 .inner
                 .process(&[&self.pending[start..start + need]], None)
@@ -250,13 +273,18 @@ impl RubatoResampler {
     }
 
     fn finish(mut self, out: &mut Vec<f32>) -> Result<(), AudioError> {
-        let expected = (self.total_in as u128 * self.sr_out as u128).div_ceil(self.sr_in as u128) as u64;
+        let expected =
+            (self.total_in as u128 * self.sr_out as u128).div_ceil(self.sr_in as u128) as u64;
         let mut first = true;
         // Flush with zeros until the delayed tail is out; bounded by delay + one chunk.
         let mut guard = 0;
         while self.total_out < expected && guard < 64 {
             let pending = std::mem::take(&mut self.pending);
-            let input: Option<&[&[f32]]> = if first && !pending.is_empty() { Some(&[&pending[..]]) } else { None };
+            let input: Option<&[&[f32]]> = if first && !pending.is_empty() {
+                Some(&[&pending[..]])
+            } else {
+                None
+            };
             let res = self
                 .inner
                 .process_partial(input, None)

@@ -61,7 +61,11 @@ pub fn tempogram(onset: &[f32], win_length: usize) -> Array2<f32> {
             buf.iter_mut().for_each(|b| *b = 0.0);
         }
         for i in 0..n_pad {
-            buf[i] = if i < win_length { padded.get(t + i).copied().unwrap_or(0.0) * window[i] } else { 0.0 };
+            buf[i] = if i < win_length {
+                padded.get(t + i).copied().unwrap_or(0.0) * window[i]
+            } else {
+                0.0
+            };
         }
         let _ = fwd.process_with_scratch(&mut buf, &mut spec, &mut s1);
         for c in spec.iter_mut() {
@@ -86,7 +90,13 @@ pub fn tempogram(onset: &[f32], win_length: usize) -> Array2<f32> {
 /// BPM of each tempogram lag (`tempo_frequencies`); lag 0 is infinite.
 pub fn tempo_frequencies(n_bins: usize, hop: usize, sr: u32) -> Vec<f64> {
     (0..n_bins)
-        .map(|i| if i == 0 { f64::INFINITY } else { 60.0 * sr as f64 / (hop as f64 * i as f64) })
+        .map(|i| {
+            if i == 0 {
+                f64::INFINITY
+            } else {
+                60.0 * sr as f64 / (hop as f64 * i as f64)
+            }
+        })
         .collect()
 }
 
@@ -96,7 +106,9 @@ pub fn tempo(onset: &[f32], sr: u32, hop: usize) -> f64 {
     let win = win.max(2);
     let tg = tempogram(onset, win);
     let n = tg.nrows().max(1) as f64;
-    let mean: Vec<f64> = (0..win).map(|l| tg.column(l).iter().map(|&v| v as f64).sum::<f64>() / n).collect();
+    let mean: Vec<f64> = (0..win)
+        .map(|l| tg.column(l).iter().map(|&v| v as f64).sum::<f64>() / n)
+        .collect();
     let bpms = tempo_frequencies(win, hop, sr);
     let max_idx = bpms.iter().position(|&b| b < 320.0).unwrap_or(0);
     let mut best = (f64::NEG_INFINITY, 0usize);
@@ -114,7 +126,11 @@ pub fn tempo(onset: &[f32], sr: u32, hop: usize) -> f64 {
 /// numpy's round-half-to-even.
 fn round_even(x: f64) -> f64 {
     let r = x.round();
-    if (x - x.trunc()).abs() == 0.5 { 2.0 * (x / 2.0).round() } else { r }
+    if (x - x.trunc()).abs() == 0.5 {
+        2.0 * (x / 2.0).round()
+    } else {
+        r
+    }
 }
 
 /// Beat frames from an onset envelope and a tempo (librosa `__beat_tracker`, trim=True).
@@ -126,7 +142,15 @@ pub fn beat_track_frames(onset: &[f32], bpm: f64, frame_rate: f64, tightness: f6
     let fpb = round_even(frame_rate * 60.0 / bpm).max(1.0);
     // Normalise by the standard deviation (ddof=1).
     let mean = onset.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
-    let var = if n > 1 { onset.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / (n - 1) as f64 } else { 0.0 };
+    let var = if n > 1 {
+        onset
+            .iter()
+            .map(|&v| (v as f64 - mean).powi(2))
+            .sum::<f64>()
+            / (n - 1) as f64
+    } else {
+        0.0
+    };
     let norm = var.sqrt() + f32::MIN_POSITIVE as f64;
     let env: Vec<f64> = onset.iter().map(|&v| v as f64 / norm).collect();
 
@@ -161,7 +185,9 @@ pub fn beat_track_frames(onset: &[f32], bpm: f64, frame_rate: f64, tightness: f6
         let mut loc_best = -1i64;
         let mut loc = i as i64 - near;
         while loc >= i as i64 - far {
-            if loc < 0 { break; }
+            if loc < 0 {
+                break;
+            }
             let d = ((i as i64 - loc) as f64).ln() - log_fpb;
             let score = cum[loc as usize] - tightness * d * d;
             if score > best {
@@ -170,7 +196,11 @@ pub fn beat_track_frames(onset: &[f32], bpm: f64, frame_rate: f64, tightness: f6
             }
             loc -= 1;
         }
-        cum[i] = if loc_best >= 0 { local[i] + best } else { local[i] };
+        cum[i] = if loc_best >= 0 {
+            local[i] + best
+        } else {
+            local[i]
+        };
         if first_beat && local[i] < score_thresh {
             backlink[i] = -1;
         } else {
@@ -182,11 +212,22 @@ pub fn beat_track_frames(onset: &[f32], bpm: f64, frame_rate: f64, tightness: f6
     // Last beat: the last local maximum of cum whose score ≥ half the median of local maxima.
     let is_max: Vec<bool> = (0..n)
         .map(|i| {
-            if n < 2 { return false; }
-            if i == 0 { false } else if i == n - 1 { cum[i] > cum[i - 1] } else { cum[i] > cum[i - 1] && cum[i] >= cum[i + 1] }
+            if n < 2 {
+                return false;
+            }
+            if i == 0 {
+                false
+            } else if i == n - 1 {
+                cum[i] > cum[i - 1]
+            } else {
+                cum[i] > cum[i - 1] && cum[i] >= cum[i + 1]
+            }
         })
         .collect();
-    let mut maxima: Vec<f32> = (0..n).filter(|&i| is_max[i]).map(|i| cum[i] as f32).collect();
+    let mut maxima: Vec<f32> = (0..n)
+        .filter(|&i| is_max[i])
+        .map(|i| cum[i] as f32)
+        .collect();
     let threshold = 0.5 * dsp::median(&mut maxima) as f64;
     let mut tail = n as i64 - 1;
     for i in (0..n).rev() {
@@ -207,10 +248,19 @@ pub fn beat_track_frames(onset: &[f32], bpm: f64, frame_rate: f64, tightness: f6
     let w = [0.0, 0.5, 1.0, 0.5, 0.0];
     let full_len = beat_scores.len() + w.len() - 1;
     let full: Vec<f64> = (0..full_len)
-        .map(|j| (0..w.len()).filter(|&k| j >= k && j - k < beat_scores.len()).map(|k| w[k] * beat_scores[j - k]).sum())
+        .map(|j| {
+            (0..w.len())
+                .filter(|&k| j >= k && j - k < beat_scores.len())
+                .map(|k| w[k] * beat_scores[j - k])
+                .sum()
+        })
         .collect();
     let smooth: Vec<f64> = full.iter().skip(w.len() / 2).take(n).cloned().collect();
-    let threshold = if smooth.is_empty() { 0.0 } else { 0.5 * (smooth.iter().map(|v| v * v).sum::<f64>() / smooth.len() as f64).sqrt() };
+    let threshold = if smooth.is_empty() {
+        0.0
+    } else {
+        0.5 * (smooth.iter().map(|v| v * v).sum::<f64>() / smooth.len() as f64).sqrt()
+    };
     let mut i = 0;
     while i < n && local[i] <= threshold {
         beats[i] = false;
@@ -245,7 +295,12 @@ pub fn analyze_mono(y: &[f32], sr: u32, hop: usize) -> Result<Analysis, AudioErr
 
 /// [`analyze_mono`], checking `budget` between its stages ([`beat_track`]'s steps, then the
 /// downbeats), so an analysis past its budget stops within one stage.
-pub fn analyze_mono_within(y: &[f32], sr: u32, hop: usize, budget: &Budget) -> Result<Analysis, AudioError> {
+pub fn analyze_mono_within(
+    y: &[f32],
+    sr: u32,
+    hop: usize,
+    budget: &Budget,
+) -> Result<Analysis, AudioError> {
     if y.is_empty() {
         return Err(AudioError::Empty);
     }
@@ -262,7 +317,10 @@ pub fn analyze_mono_within(y: &[f32], sr: u32, hop: usize, budget: &Budget) -> R
     let (bpm, beats) = if onset.iter().any(|&v| v != 0.0) {
         let bpm = tempo(&onset, sr, hop);
         budget.check(stage)?;
-        (bpm, beat_track_frames(&onset, bpm, sr as f64 / hop as f64, 100.0))
+        (
+            bpm,
+            beat_track_frames(&onset, bpm, sr as f64 / hop as f64, 100.0),
+        )
     } else {
         (0.0, Vec::new())
     };
@@ -304,14 +362,20 @@ pub fn downbeats(beats: &[usize], mel_db: &Array2<f32>, sr: u32) -> Vec<usize> {
         .max(1);
     let bass_flux: Vec<f64> = (0..t_n)
         .map(|t| {
-            if t == 0 { return 0.0; }
-            (0..bass_bands).map(|b| (mel_db[[t, b]] - mel_db[[t - 1, b]]).max(0.0) as f64).sum()
+            if t == 0 {
+                return 0.0;
+            }
+            (0..bass_bands)
+                .map(|b| (mel_db[[t, b]] - mel_db[[t - 1, b]]).max(0.0) as f64)
+                .sum()
         })
         .collect();
     let mean_spec = |a: usize, b: usize| -> Vec<f64> {
         let (a, b) = (a.min(t_n), b.min(t_n).max(a.min(t_n) + 1).min(t_n));
         let mut m = vec![0.0f64; n_mels];
-        if a >= b { return m; }
+        if a >= b {
+            return m;
+        }
         for t in a..b {
             for (k, v) in m.iter_mut().enumerate() {
                 *v += mel_db[[t, k]] as f64;
@@ -324,9 +388,19 @@ pub fn downbeats(beats: &[usize], mel_db: &Array2<f32>, sr: u32) -> Vec<usize> {
     let mut bass = vec![0.0f64; nb];
     let mut change = vec![0.0f64; nb];
     for (i, &b) in beats.iter().enumerate() {
-        bass[i] = (b.saturating_sub(1)..(b + 2).min(t_n)).map(|t| bass_flux[t]).sum();
-        let prev = if i > 0 { beats[i - 1] } else { b.saturating_sub(beats[1] - beats[0]) };
-        let next = if i + 1 < nb { beats[i + 1] } else { b + (beats[nb - 1] - beats[nb - 2]) };
+        bass[i] = (b.saturating_sub(1)..(b + 2).min(t_n))
+            .map(|t| bass_flux[t])
+            .sum();
+        let prev = if i > 0 {
+            beats[i - 1]
+        } else {
+            b.saturating_sub(beats[1] - beats[0])
+        };
+        let next = if i + 1 < nb {
+            beats[i + 1]
+        } else {
+            b + (beats[nb - 1] - beats[nb - 2])
+        };
         let (x, y) = (mean_spec(prev, b), mean_spec(b, next));
         let mx = x.iter().sum::<f64>() / n_mels as f64;
         let my = y.iter().sum::<f64>() / n_mels as f64;
@@ -337,7 +411,11 @@ pub fn downbeats(beats: &[usize], mel_db: &Array2<f32>, sr: u32) -> Vec<usize> {
             nx += a * a;
             ny += c * c;
         }
-        change[i] = if nx > 0.0 && ny > 0.0 { 1.0 - dot / (nx * ny).sqrt() } else { 0.0 };
+        change[i] = if nx > 0.0 && ny > 0.0 {
+            1.0 - dot / (nx * ny).sqrt()
+        } else {
+            0.0
+        };
     }
     zscore(&mut bass);
     zscore(&mut change);
@@ -347,9 +425,17 @@ pub fn downbeats(beats: &[usize], mel_db: &Array2<f32>, sr: u32) -> Vec<usize> {
         for p in 0..m {
             let (mut on, mut non, mut off, mut noff) = (0.0, 0usize, 0.0, 0usize);
             for (k, s) in score.iter().enumerate() {
-                if k % m == p { on += s; non += 1; } else { off += s; noff += 1; }
+                if k % m == p {
+                    on += s;
+                    non += 1;
+                } else {
+                    off += s;
+                    noff += 1;
+                }
             }
-            if non == 0 || noff == 0 { continue; }
+            if non == 0 || noff == 0 {
+                continue;
+            }
             let contrast = on / non as f64 - off / noff as f64;
             if contrast > best.0 + 1e-9 {
                 best = (contrast, m, p);
@@ -357,5 +443,10 @@ pub fn downbeats(beats: &[usize], mel_db: &Array2<f32>, sr: u32) -> Vec<usize> {
         }
     }
     let (_, m, p) = best;
-    beats.iter().enumerate().filter(|(k, _)| k % m == p).map(|(_, &b)| b).collect()
+    beats
+        .iter()
+        .enumerate()
+        .filter(|(k, _)| k % m == p)
+        .map(|(_, &b)| b)
+        .collect()
 }

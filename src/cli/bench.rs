@@ -74,7 +74,10 @@ pub struct HttpBenchArgs {
 /// `choreo bench http`: prints the report as JSON.
 pub fn http(args: &HttpBenchArgs, config: Config) -> anyhow::Result<()> {
     choreo::telemetry::init_tracing(config.log_format, "warn");
-    anyhow::ensure!(args.seconds > 0.0 && args.seconds <= 600.0, "--seconds must be within (0, 600]");
+    anyhow::ensure!(
+        args.seconds > 0.0 && args.seconds <= 600.0,
+        "--seconds must be within (0, 600]"
+    );
     let bench = choreo::api::bench::HttpBench {
         song: args.song.clone(),
         duration: std::time::Duration::from_secs_f64(args.seconds),
@@ -82,7 +85,9 @@ pub fn http(args: &HttpBenchArgs, config: Config) -> anyhow::Result<()> {
         busy_jobs: args.busy_jobs,
         config,
     };
-    let report = super::runtime()?.block_on(choreo::api::bench::run(bench)).context("running the HTTP bench")?;
+    let report = super::runtime()?
+        .block_on(choreo::api::bench::run(bench))
+        .context("running the HTTP bench")?;
     println!("{}", serde_json::to_string_pretty(&report)?);
     Ok(())
 }
@@ -96,7 +101,10 @@ fn print_table(rows: &[BenchRow], fps: f64) {
         "| {:<28} | {:>7} | {:>9} | {:>10} | {:>9} | {:>10} | {:>7} | {:>10} |",
         "song", "len s", "decode s", "features s", "choreo s", "librosa s", "speedup", "peak MB"
     );
-    println!("|{:-<30}|{:-<9}|{:-<11}|{:-<12}|{:-<11}|{:-<12}|{:-<9}|{:-<12}|", "", "", "", "", "", "", "", "");
+    println!(
+        "|{:-<30}|{:-<9}|{:-<11}|{:-<12}|{:-<11}|{:-<12}|{:-<9}|{:-<12}|",
+        "", "", "", "", "", "", "", ""
+    );
     for r in rows {
         println!(
             "| {:<28} | {:>7.1} | {:>9.3} | {:>10.3} | {:>9.3} | {:>10} | {:>7} | {:>10} |",
@@ -116,6 +124,9 @@ fn print_table(rows: &[BenchRow], fps: f64) {
         .map(|r| (r.rust_total_s, r.librosa_total_s.unwrap_or(0.0)))
         .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
     if ls > 0.0 {
-        println!("total: choreo {rs:.2} s, librosa {ls:.2} s, speedup {:.1}x", ls / rs);
+        println!(
+            "total: choreo {rs:.2} s, librosa {ls:.2} s, speedup {:.1}x",
+            ls / rs
+        );
     }
 }

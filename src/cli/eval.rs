@@ -87,7 +87,11 @@ impl EvalArgs {
             key_poses: self.key_poses,
             previews: self.previews.clone(),
             mismatch_per_song: self.mismatch_per_song,
-            tempi: if self.no_tempo { Vec::new() } else { self.tempi.clone() },
+            tempi: if self.no_tempo {
+                Vec::new()
+            } else {
+                self.tempi.clone()
+            },
         }
     }
 }
@@ -122,13 +126,17 @@ pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     }
     let options = args.options();
     if options.shared_songs_missing() {
-        eprintln!("note: {} not found; the extra-song section covers --songs only", eval::SHARED_SONGS);
+        eprintln!(
+            "note: {} not found; the extra-song section covers --songs only",
+            eval::SHARED_SONGS
+        );
     }
     let result = eval::evaluate(&options).context("choreo eval")?;
     print!("{}", eval::markdown(&result));
     if let Some(path) = &args.json {
         let text = serde_json::to_string_pretty(&result).context("choreo eval")?;
-        std::fs::write(path, text).with_context(|| format!("choreo eval: writing {}", path.display()))?;
+        std::fs::write(path, text)
+            .with_context(|| format!("choreo eval: writing {}", path.display()))?;
     }
     Ok(())
 }

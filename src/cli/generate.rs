@@ -102,7 +102,8 @@ pub fn generate(cmd: &GenerateCmd) -> anyhow::Result<()> {
         bar.set_message(stage.as_str());
         bar.set_position((done * 1000.0) as u64);
     };
-    let g = standalone::generate(&args.clone().into(), &mut on_progress).context("choreo generate")?;
+    let g =
+        standalone::generate(&args.clone().into(), &mut on_progress).context("choreo generate")?;
     if let Some(bar) = &bar {
         bar.finish_with_message("done");
     }
@@ -122,15 +123,20 @@ pub fn generate(cmd: &GenerateCmd) -> anyhow::Result<()> {
 fn progress_bar() -> indicatif::ProgressBar {
     let bar = indicatif::ProgressBar::new(1000);
     bar.set_style(
-        indicatif::ProgressStyle::with_template("{spinner} {msg:>9} [{bar:40}] {percent:>3}% {elapsed}")
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
-            .progress_chars("=> "),
+        indicatif::ProgressStyle::with_template(
+            "{spinner} {msg:>9} [{bar:40}] {percent:>3}% {elapsed}",
+        )
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+        .progress_chars("=> "),
     );
     bar
 }
 
 /// `choreo bench generate`: prints the library's table.
 pub fn bench(args: &BenchArgs) -> anyhow::Result<()> {
-    println!("{}", standalone::bench(&args.clone().into()).context("choreo bench generate")?);
+    println!(
+        "{}",
+        standalone::bench(&args.clone().into()).context("choreo bench generate")?
+    );
     Ok(())
 }

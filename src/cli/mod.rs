@@ -35,7 +35,11 @@ pub mod retarget;
 pub mod train;
 
 #[derive(Parser)]
-#[command(name = "choreo", version, about = "A service that turns a song into a dance")]
+#[command(
+    name = "choreo",
+    version,
+    about = "A service that turns a song into a dance"
+)]
 pub struct Cli {
     /// Config file; defaults to ./config.toml when present.
     #[arg(long, global = true, env = "CHOREO_CONFIG")]
@@ -140,13 +144,21 @@ pub struct WorkerArgs {
 
 impl WorkerArgs {
     pub fn overrides(&self) -> Overrides {
-        Overrides { data_dir: self.data_dir.clone(), models_dir: self.models_dir.clone(), workers: self.workers, ..Overrides::default() }
+        Overrides {
+            data_dir: self.data_dir.clone(),
+            models_dir: self.models_dir.clone(),
+            workers: self.workers,
+            ..Overrides::default()
+        }
     }
 }
 
 /// The async runtime of the commands that need one.
 pub fn runtime() -> anyhow::Result<tokio::runtime::Runtime> {
-    tokio::runtime::Builder::new_multi_thread().enable_all().build().context("starting the async runtime")
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("starting the async runtime")
 }
 
 #[cfg(test)]
@@ -154,37 +166,93 @@ mod tests {
     use super::*;
 
     fn parse(args: &[&str]) -> Command {
-        Cli::try_parse_from(std::iter::once("choreo").chain(args.iter().copied())).expect("parses").command
+        Cli::try_parse_from(std::iter::once("choreo").chain(args.iter().copied()))
+            .expect("parses")
+            .command
     }
 
     /// Every command given no flags hands the library exactly its `Default`.
     #[test]
     fn flags_left_out_give_the_library_defaults() {
         use choreo::models::train::{self as lib, Training};
-        let same = |a: &dyn std::fmt::Debug, b: &dyn std::fmt::Debug| assert_eq!(format!("{a:?}"), format!("{b:?}"));
+        let same = |a: &dyn std::fmt::Debug, b: &dyn std::fmt::Debug| {
+            assert_eq!(format!("{a:?}"), format!("{b:?}"))
+        };
         for (name, want) in [
-            ("dance-revolution", Training::DanceRevolution(lib::dance_revolution::Options::default())),
-            ("dancenet", Training::Dancenet(lib::dancenet::Options::default())),
-            ("keypose-transformer", Training::KeyposeTransformer(lib::keypose_transformer::Options::default())),
+            (
+                "dance-revolution",
+                Training::DanceRevolution(lib::dance_revolution::Options::default()),
+            ),
+            (
+                "dancenet",
+                Training::Dancenet(lib::dancenet::Options::default()),
+            ),
+            (
+                "keypose-transformer",
+                Training::KeyposeTransformer(lib::keypose_transformer::Options::default()),
+            ),
             ("tsmt", Training::Tsmt(lib::tsmt::Options::default())),
-            ("dancenet-style", Training::DancenetStyle(lib::dancenet_style::Options::default())),
-            ("motion-style", Training::MotionStyle(lib::motion_style::Options::default())),
+            (
+                "dancenet-style",
+                Training::DancenetStyle(lib::dancenet_style::Options::default()),
+            ),
+            (
+                "motion-style",
+                Training::MotionStyle(lib::motion_style::Options::default()),
+            ),
         ] {
-            let Command::Train { model } = parse(&["train", name]) else { panic!("train {name}") };
+            let Command::Train { model } = parse(&["train", name]) else {
+                panic!("train {name}")
+            };
             same(&Training::from(model), &want);
         }
-        let Command::Eval(e) = parse(&["eval"]) else { panic!("eval") };
+        let Command::Eval(e) = parse(&["eval"]) else {
+            panic!("eval")
+        };
         same(&e.options(), &choreo::eval::EvalOptions::default());
         assert_eq!(e.reference_out, PathBuf::from(choreo::eval::REFERENCE_PATH));
-        let Command::Generate(g) = parse(&["generate", "song.ogg", "--out", "o"]) else { panic!("generate") };
-        let want = choreo::worker::standalone::GenerateSong { song: "song.ogg".into(), out: "o".into(), ..Default::default() };
+        let Command::Generate(g) = parse(&["generate", "song.ogg", "--out", "o"]) else {
+            panic!("generate")
+        };
+        let want = choreo::worker::standalone::GenerateSong {
+            song: "song.ogg".into(),
+            out: "o".into(),
+            ..Default::default()
+        };
         assert_eq!(g.rig, "choreo");
-        same(&choreo::worker::standalone::GenerateSong::from(g.song), &want);
-        let Command::Bench { what: BenchCommand::Generate(b) } = parse(&["bench", "generate"]) else { panic!("bench generate") };
-        same(&choreo::worker::standalone::BenchOptions::from(b), &choreo::worker::standalone::BenchOptions::default());
-        let Command::Bench { what: BenchCommand::Audio(a) } = parse(&["bench", "audio"]) else { panic!("bench audio") };
-        same(&a.options(".".into()), &choreo::audio::bench::BenchOptions::default());
-        let Command::Train { model: train::TrainArgs::DancenetStyle(s) } = parse(&["train", "dancenet-style", "--readout", "last"]) else { panic!("readout") };
-        assert_eq!(lib::classify::ClassifyOptions::from(s.schedule).readout, Some(choreo::models::dancenet::style::Readout::Last));
+        same(
+            &choreo::worker::standalone::GenerateSong::from(g.song),
+            &want,
+        );
+        let Command::Bench {
+            what: BenchCommand::Generate(b),
+        } = parse(&["bench", "generate"])
+        else {
+            panic!("bench generate")
+        };
+        same(
+            &choreo::worker::standalone::BenchOptions::from(b),
+            &choreo::worker::standalone::BenchOptions::default(),
+        );
+        let Command::Bench {
+            what: BenchCommand::Audio(a),
+        } = parse(&["bench", "audio"])
+        else {
+            panic!("bench audio")
+        };
+        same(
+            &a.options(".".into()),
+            &choreo::audio::bench::BenchOptions::default(),
+        );
+        let Command::Train {
+            model: train::TrainArgs::DancenetStyle(s),
+        } = parse(&["train", "dancenet-style", "--readout", "last"])
+        else {
+            panic!("readout")
+        };
+        assert_eq!(
+            lib::classify::ClassifyOptions::from(s.schedule).readout,
+            Some(choreo::models::dancenet::style::Readout::Last)
+        );
     }
 }

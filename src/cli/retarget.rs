@@ -28,7 +28,8 @@ pub fn target(rig: &str) -> anyhow::Result<TargetSkeleton> {
     if Path::new(rig).is_file() {
         // The same reader `POST /v1/rigs` uses: BVH or glb in a rest pose, joints mapped by name.
         let bytes = std::fs::read(rig).with_context(|| format!("reading {rig}"))?;
-        let read = retarget::uploaded::read(&bytes, &Default::default()).with_context(|| format!("reading the skeleton of {rig}"))?;
+        let read = retarget::uploaded::read(&bytes, &Default::default())
+            .with_context(|| format!("reading the skeleton of {rig}"))?;
         return Ok(read.skeleton);
     }
     bail!(

@@ -39,7 +39,10 @@ impl From<TrainArgs> for Training {
 /// Trains (or evaluates) and prints what it wrote.
 pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "info");
-    println!("{}", Training::from(args.clone()).run().context("choreo train")?);
+    println!(
+        "{}",
+        Training::from(args.clone()).run().context("choreo train")?
+    );
     Ok(())
 }
 

@@ -30,24 +30,24 @@
 mod rows;
 mod songs;
 pub mod style_control;
-pub mod tempo;
 pub mod tables;
+pub mod tempo;
 
 use std::path::{Path, PathBuf};
 
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 
+use crate::audio::{self, AudioError};
 use crate::metrics::diversity::Diversity;
 use crate::metrics::reference::ReferenceStats;
 use crate::metrics::rotation_flips::RotationFlips;
 use crate::metrics::score::{score_dance, SetScores};
-use crate::audio::{self, AudioError};
 use crate::metrics::MetricsError;
 use crate::models::motion_style::{MotionStyle, StyleError};
 use crate::models::{ModelError, ModelId, Registry};
-use crate::motion::dataset::{Dance, Dataset};
 use crate::motion::beat_align::BeatAlignSummary;
+use crate::motion::dataset::{Dance, Dataset};
 use crate::motion::{KeyPose, Motion, MotionError};
 use crate::report::preview::PreviewError;
 use rows::{crop, model_rows, row, Quiet};
@@ -142,16 +142,30 @@ pub enum EvalError {
     UnknownModel { id: String, dir: PathBuf },
     /// `model` may carry the style asked for, e.g. `dancenet (waltz)`.
     #[error("{model} on {song}: {source}")]
-    Generate { model: String, song: String, source: ModelError },
+    Generate {
+        model: String,
+        song: String,
+        source: ModelError,
+    },
     #[error("{model} on {song}: export: {source}")]
-    Export { model: String, song: String, source: MotionError },
+    Export {
+        model: String,
+        song: String,
+        source: MotionError,
+    },
     /// `dance`: the real dance being classified, if it was one.
     #[error("motion style classifier{}: {source}", .dance.as_ref().map(|d| format!(" on {d}")).unwrap_or_default())]
-    Classifier { dance: Option<String>, source: StyleError },
+    Classifier {
+        dance: Option<String>,
+        source: StyleError,
+    },
     #[error("{path}: {source}")]
     Preview { path: PathBuf, source: PreviewError },
     #[error("i/o error on {path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
 }
 
 impl EvalError {
@@ -253,11 +267,21 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, EvalEr
     let mut beats = Vec::with_capacity(dances.len());
     for d in &dances {
         let start = d.song_time_s(0);
-        beats.push(audio::analyze(&audio::decode_path(&d.audio_path)?)?.beat_times.iter().map(|t| t - start).collect::<Vec<f64>>());
+        beats.push(
+            audio::analyze(&audio::decode_path(&d.audio_path)?)?
+                .beat_times
+                .iter()
+                .map(|t| t - start)
+                .collect::<Vec<f64>>(),
+        );
     }
     let motions: Vec<Motion> = dances.into_iter().map(|d| d.motion).collect();
     let mut stats = ReferenceStats::compute("dance-with-melody train split", ids, &motions)?;
-    let paired: Vec<(&Motion, &[f64])> = motions.iter().zip(&beats).map(|(m, b)| (m, b.as_slice())).collect();
+    let paired: Vec<(&Motion, &[f64])> = motions
+        .iter()
+        .zip(&beats)
+        .map(|(m, b)| (m, b.as_slice()))
+        .collect();
     stats.musicality = crate::metrics::musicality::MusicalityReference::compute(&paired);
     stats.write(out)?;
     Ok(stats)
@@ -267,15 +291,33 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, EvalEr
 /// planted (the motion stages every job runs, [`crate::motion::after_model`]), then fitted to the
 /// export's rigid skeleton with the key poses as anchors (what motion.json holds). `beats` are
 /// the song's on the dance's clock. Also what the beat-align stage did.
-pub(super) fn as_served(raw: Motion, keys: &[KeyPose], beats: &[f64]) -> Result<(Motion, BeatAlignSummary), MotionError> {
+pub(super) fn as_served(
+    raw: Motion,
+    keys: &[KeyPose],
+    beats: &[f64],
+) -> Result<(Motion, BeatAlignSummary), MotionError> {
     as_served_measured(raw, keys, beats).map(|(m, summary, _)| (m, summary))
 }
 
 /// As [`as_served`], with the rotation flips of the exported rig (what motion.bvh carries).
-pub(super) fn as_served_measured(raw: Motion, keys: &[KeyPose], beats: &[f64]) -> Result<(Motion, BeatAlignSummary, RotationFlips), MotionError> {
-    let (finished, summary) = crate::motion::after_model(raw, beats, keys, 0.0, crate::motion::MotionStages::default());
+pub(super) fn as_served_measured(
+    raw: Motion,
+    keys: &[KeyPose],
+    beats: &[f64],
+) -> Result<(Motion, BeatAlignSummary, RotationFlips), MotionError> {
+    let (finished, summary) = crate::motion::after_model(
+        raw,
+        beats,
+        keys,
+        0.0,
+        crate::motion::MotionStages::default(),
+    );
     let served = crate::motion::serve(&finished, keys, true)?;
-    Ok((served.motion, summary.unwrap_or_default(), RotationFlips::of(&served.rig)))
+    Ok((
+        served.motion,
+        summary.unwrap_or_default(),
+        RotationFlips::of(&served.rig),
+    ))
 }
 
 /// Runs the evaluation and returns the rows (printing nothing; without [`SHARED_SONGS`] the
@@ -289,7 +331,10 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
         other => return Err(EvalError::UnknownSplit(other.to_string())),
     };
     let eval_dances = ds.load_all(&ids)?;
-    let songs: Vec<Song> = eval_dances.iter().map(song_segment).collect::<Result<_, _>>()?;
+    let songs: Vec<Song> = eval_dances
+        .iter()
+        .map(song_segment)
+        .collect::<Result<_, _>>()?;
     let mut rows = Vec::new();
 
     // Real: each dance with its own music.
@@ -297,8 +342,20 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
     for (d, s) in eval_dances.iter().zip(&songs) {
         let mut sc = score_dance(&d.motion, &s.beats, &[], &reference)?;
         // Its rotations as `choreo export` writes them.
-        sc.scores.rotation_flips = Some(RotationFlips::of(&crate::motion::export::prepare_with_root(&d.motion, d.center.view())?));
-        real.push((EvalDance { song: s.name.clone(), motion: d.id.clone(), seconds: d.motion.duration_s(), scores: sc.scores.clone(), musicality_raw: None, beat_align: None }, sc));
+        sc.scores.rotation_flips = Some(RotationFlips::of(
+            &crate::motion::export::prepare_with_root(&d.motion, d.center.view())?,
+        ));
+        real.push((
+            EvalDance {
+                song: s.name.clone(),
+                motion: d.id.clone(),
+                seconds: d.motion.duration_s(),
+                scores: sc.scores.clone(),
+                musicality_raw: None,
+                beat_align: None,
+            },
+            sc,
+        ));
     }
     rows.push(row("Real", real, None, &reference));
 
@@ -308,7 +365,10 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
     let mut mism = Vec::new();
     for (d, s) in eval_dances.iter().zip(&songs) {
         let t = d.motion.num_frames();
-        let mut candidates: Vec<&Dance> = train.iter().filter(|o| o.id != d.id && o.motion.num_frames() >= t).collect();
+        let mut candidates: Vec<&Dance> = train
+            .iter()
+            .filter(|o| o.id != d.id && o.motion.num_frames() >= t)
+            .collect();
         if candidates.is_empty() {
             // No train dance is as long: take the longest ones and score the shorter span.
             candidates = train.iter().filter(|o| o.id != d.id).collect();
@@ -319,7 +379,17 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
         for o in candidates.choose_multiple(&mut rng, args.mismatch_per_song.max(1)) {
             let m = crop(&o.motion, t);
             let sc = score_dance(&m, &s.beats, &[], &reference)?;
-            mism.push((EvalDance { song: s.name.clone(), motion: o.id.clone(), seconds: m.duration_s(), scores: sc.scores.clone(), musicality_raw: None, beat_align: None }, sc));
+            mism.push((
+                EvalDance {
+                    song: s.name.clone(),
+                    motion: o.id.clone(),
+                    seconds: m.duration_s(),
+                    scores: sc.scores.clone(),
+                    musicality_raw: None,
+                    beat_align: None,
+                },
+                sc,
+            ));
         }
     }
     rows.push(row("Mismatched real", mism, None, &reference));
@@ -347,15 +417,39 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
             }
         }
         extra_names = extra.iter().map(|s| s.name.clone()).collect();
-        let ids: Vec<String> = if args.models.is_empty() { registry.list().into_iter().map(|m| m.id.0).collect() } else { args.models.clone() };
+        let ids: Vec<String> = if args.models.is_empty() {
+            registry.list().into_iter().map(|m| m.id.0).collect()
+        } else {
+            args.models.clone()
+        };
         // The motion style classifier, for style control (absent: distances and verdicts only).
         let classifier_dir = args.models_dir.join(crate::models::motion_style::ID);
-        let classifier = if classifier_dir.is_dir() { Some(MotionStyle::load(&classifier_dir).map_err(|source| EvalError::Classifier { dance: None, source })?) } else { None };
+        let classifier = if classifier_dir.is_dir() {
+            Some(
+                MotionStyle::load(&classifier_dir).map_err(|source| EvalError::Classifier {
+                    dance: None,
+                    source,
+                })?,
+            )
+        } else {
+            None
+        };
         for id in &ids {
-            let model = registry
-                .get(&ModelId(id.clone()))
-                .ok_or_else(|| EvalError::UnknownModel { id: id.clone(), dir: args.models_dir.clone() })?;
-            let r = model_rows(model.as_ref(), id, (&songs, &eval_dances), &extra, args, &reference)?;
+            let model =
+                registry
+                    .get(&ModelId(id.clone()))
+                    .ok_or_else(|| EvalError::UnknownModel {
+                        id: id.clone(),
+                        dir: args.models_dir.clone(),
+                    })?;
+            let r = model_rows(
+                model.as_ref(),
+                id,
+                (&songs, &eval_dances),
+                &extra,
+                args,
+                &reference,
+            )?;
             rows.extend(r.test);
             if let Some(e) = r.extra {
                 extra_rows.extend(e);
@@ -364,15 +458,42 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
                 tempo_rows.push(tempo::tempo_row(model.as_ref(), id, &extra_paths, args)?);
             }
             if model.info().capabilities.style {
-                let all: Vec<style_control::StyleSong<'_>> =
-                    songs.iter().chain(&extra).map(|s| style_control::StyleSong { name: &s.name, audio: &s.audio, beats: &s.beats }).collect();
-                style_control.push(style_control::style_control(model.as_ref(), id, &all, args.seed, classifier.as_ref(), &reference, &mut Quiet)?);
+                let all: Vec<style_control::StyleSong<'_>> = songs
+                    .iter()
+                    .chain(&extra)
+                    .map(|s| style_control::StyleSong {
+                        name: &s.name,
+                        audio: &s.audio,
+                        beats: &s.beats,
+                    })
+                    .collect();
+                style_control.push(style_control::style_control(
+                    model.as_ref(),
+                    id,
+                    &all,
+                    args.seed,
+                    classifier.as_ref(),
+                    &reference,
+                    &mut Quiet,
+                )?);
             }
         }
         if let (Some(c), false) = (&classifier, style_control.is_empty()) {
-            let real: Vec<(&str, &Motion)> = eval_dances.iter().map(|d| (d.id.as_str(), &d.motion)).collect();
+            let real: Vec<(&str, &Motion)> = eval_dances
+                .iter()
+                .map(|d| (d.id.as_str(), &d.motion))
+                .collect();
             real_styles = Some(style_control::real_styles(c, &real)?);
         }
     }
-    Ok(EvalResult { split: args.split.clone(), seed: args.seed, rows, extra_songs: extra_names, extra_rows, style_control, real_styles, tempo: tempo_rows })
+    Ok(EvalResult {
+        split: args.split.clone(),
+        seed: args.seed,
+        rows,
+        extra_songs: extra_names,
+        extra_rows,
+        style_control,
+        real_styles,
+        tempo: tempo_rows,
+    })
 }

@@ -23,7 +23,10 @@ impl Progress for Quiet {
 
 pub(super) fn crop(m: &Motion, frames: usize) -> Motion {
     let n = frames.min(m.positions.dim().0);
-    Motion { fps: m.fps, positions: m.positions.slice(ndarray::s![..n, .., ..]).to_owned() }
+    Motion {
+        fps: m.fps,
+        positions: m.positions.slice(ndarray::s![..n, .., ..]).to_owned(),
+    }
 }
 
 /// Mean and smallest of the distances that are numbers (none without any).
@@ -32,21 +35,44 @@ fn mean_and_min(mut distances: Vec<f64>) -> (Option<f64>, Option<f64>) {
     if distances.is_empty() {
         return (None, None);
     }
-    (Some(distances.iter().sum::<f64>() / distances.len() as f64), distances.iter().copied().reduce(f64::min))
+    (
+        Some(distances.iter().sum::<f64>() / distances.len() as f64),
+        distances.iter().copied().reduce(f64::min),
+    )
 }
 
 /// A row of scored dances; `per_song` groups the indices of dances of one song (different
 /// seeds), with their motions, for multimodality and the seed distance.
-pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: Option<Vec<Vec<(usize, Motion)>>>, reference: &ReferenceStats) -> EvalRow {
+pub(super) fn row(
+    name: &str,
+    scored: Vec<(EvalDance, ScoredDance)>,
+    per_song: Option<Vec<Vec<(usize, Motion)>>>,
+    reference: &ReferenceStats,
+) -> EvalRow {
     let dances: Vec<ScoredDance> = scored.iter().map(|(_, s)| s.clone()).collect();
     let mut scores = score_set(&dances, reference);
     // The paper's diversity measures: dances grouped by song (each dance alone without groups).
-    let normed: Vec<Vec<Vec<f64>>> = dances.iter().map(|s| s.features.kinetic.iter().map(|r| reference.kinetic.normalise(r)).collect()).collect();
+    let normed: Vec<Vec<Vec<f64>>> = dances
+        .iter()
+        .map(|s| {
+            s.features
+                .kinetic
+                .iter()
+                .map(|r| reference.kinetic.normalise(r))
+                .collect()
+        })
+        .collect();
     let song_groups: Vec<Vec<usize>> = match &per_song {
-        Some(groups) => groups.iter().map(|g| g.iter().map(|(i, _)| *i).collect()).collect(),
+        Some(groups) => groups
+            .iter()
+            .map(|g| g.iter().map(|(i, _)| *i).collect())
+            .collect(),
         None => (0..dances.len()).map(|i| vec![i]).collect(),
     };
-    let by_song: Vec<Vec<&[Vec<f64>]>> = song_groups.iter().map(|g| g.iter().map(|&i| normed[i].as_slice()).collect()).collect();
+    let by_song: Vec<Vec<&[Vec<f64>]>> = song_groups
+        .iter()
+        .map(|g| g.iter().map(|&i| normed[i].as_slice()).collect())
+        .collect();
     let diversity_v = diversity(&by_song);
     let (mut multimodality_v, mut seed_mean, mut seed_min) = (None, None, None);
     let (mut song_mean, mut song_min) = (None, None);
@@ -61,7 +87,10 @@ pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: O
             }
         }
         (song_mean, song_min) = mean_and_min(per_song_pair);
-        let g: Vec<Vec<&ScoredDance>> = groups.iter().map(|ix| ix.iter().map(|(i, _)| &dances[*i]).collect()).collect();
+        let g: Vec<Vec<&ScoredDance>> = groups
+            .iter()
+            .map(|ix| ix.iter().map(|(i, _)| &dances[*i]).collect())
+            .collect();
         multimodality_v = multimodality(&g, reference);
         let per_pair: Vec<f64> = groups
             .iter()
@@ -78,10 +107,15 @@ pub(super) fn row(name: &str, scored: Vec<(EvalDance, ScoredDance)>, per_song: O
         (seed_mean, seed_min) = mean_and_min(per_pair);
         scores.mean.verdict = scores.mean.verdict.clone().with_seed_distance(seed_min);
     }
-    let raw: Option<Vec<&crate::metrics::musicality::Musicality>> = scored.iter().map(|(e, _)| e.musicality_raw.as_ref()).collect();
+    let raw: Option<Vec<&crate::metrics::musicality::Musicality>> = scored
+        .iter()
+        .map(|(e, _)| e.musicality_raw.as_ref())
+        .collect();
     EvalRow {
         name: name.into(),
-        musicality_raw: raw.filter(|r| !r.is_empty()).map(crate::metrics::musicality::MusicalitySummary::of),
+        musicality_raw: raw
+            .filter(|r| !r.is_empty())
+            .map(crate::metrics::musicality::MusicalitySummary::of),
         scores,
         multimodality: multimodality_v,
         seed_distance_m: seed_mean,
@@ -120,17 +154,35 @@ fn dance_songs(
         let keys = keys_of(i);
         let mut groups: [Vec<(usize, Motion)>; 2] = Default::default();
         for seed in args.seed..args.seed + args.seeds.max(1) {
-            let req = GenerateRequest { key_poses: &keys, ..GenerateRequest::plain(&s.audio, seed) };
-            let raw = model.generate(&req, &mut Quiet).map_err(|source| EvalError::Generate { model: id.into(), song: s.name.clone(), source })?.motion;
+            let req = GenerateRequest {
+                key_poses: &keys,
+                ..GenerateRequest::plain(&s.audio, seed)
+            };
+            let raw = model
+                .generate(&req, &mut Quiet)
+                .map_err(|source| EvalError::Generate {
+                    model: id.into(),
+                    song: s.name.clone(),
+                    source,
+                })?
+                .motion;
             // The motion stage every job runs (feet planted), and the network's motion as it came.
             // Served: planted and exported through the rigid skeleton, as motion.json holds it.
             // Served: beat-aligned, planted and exported through the rigid skeleton.
-            let (served, aligned, flips) = as_served_measured(raw.clone(), &keys, &s.beats).map_err(|source| EvalError::Export { model: id.into(), song: s.name.clone(), source })?;
+            let (served, aligned, flips) = as_served_measured(raw.clone(), &keys, &s.beats)
+                .map_err(|source| EvalError::Export {
+                    model: id.into(),
+                    song: s.name.clone(),
+                    source,
+                })?;
             let finished = [served, crate::motion::finish(raw, false)];
             if let Some(dir) = &args.previews {
                 write_preview(dir, id, s, seed, &finished[0], &keys)?;
             }
-            let mut scored = [score_dance(&finished[0], &s.beats, &keys, reference)?, score_dance(&finished[1], &s.beats, &keys, reference)?];
+            let mut scored = [
+                score_dance(&finished[0], &s.beats, &keys, reference)?,
+                score_dance(&finished[1], &s.beats, &keys, reference)?,
+            ];
             scored[0].scores.rotation_flips = Some(flips);
             // Both rows keep the network's own musicality beside their own.
             let raw_musicality = scored[1].scores.musicality;
@@ -156,12 +208,21 @@ fn dance_songs(
 
 /// Names of the two rows of a model.
 fn row_names(base: &str) -> [String; 2] {
-    [base.to_string(), format!("{base} (raw network output, feet not planted)")]
+    [
+        base.to_string(),
+        format!("{base} (raw network output, feet not planted)"),
+    ]
 }
 
 fn rows_of(d: Danced, names: &[String; 2], reference: &ReferenceStats) -> [EvalRow; 2] {
-    let Danced { scored: [s0, s1], per_song: [g0, g1] } = d;
-    [row(&names[0], s0, Some(g0), reference), row(&names[1], s1, Some(g1), reference)]
+    let Danced {
+        scored: [s0, s1],
+        per_song: [g0, g1],
+    } = d;
+    [
+        row(&names[0], s0, Some(g0), reference),
+        row(&names[1], s1, Some(g1), reference),
+    ]
 }
 
 pub(super) fn model_rows(
@@ -174,29 +235,80 @@ pub(super) fn model_rows(
 ) -> Result<ModelRows, EvalError> {
     let keyed = args.key_poses > 0 && model.info().capabilities.key_poses;
     let (songs, dances) = test;
-    let keys_of = |i: usize| if keyed { key_poses_of(&dances[i], args.key_poses, args.seed + i as u64) } else { Vec::new() };
-    let base = if keyed { format!("{id} + {} key poses", args.key_poses) } else { id.to_string() };
-    let test_rows = rows_of(dance_songs(model, id, songs, keys_of, args, reference)?, &row_names(&base), reference);
+    let keys_of = |i: usize| {
+        if keyed {
+            key_poses_of(&dances[i], args.key_poses, args.seed + i as u64)
+        } else {
+            Vec::new()
+        }
+    };
+    let base = if keyed {
+        format!("{id} + {} key poses", args.key_poses)
+    } else {
+        id.to_string()
+    };
+    let test_rows = rows_of(
+        dance_songs(model, id, songs, keys_of, args, reference)?,
+        &row_names(&base),
+        reference,
+    );
     let extra_rows = if extra.is_empty() {
         None
     } else {
-        Some(rows_of(dance_songs(model, id, extra, |_| Vec::new(), args, reference)?, &row_names(id), reference))
+        Some(rows_of(
+            dance_songs(model, id, extra, |_| Vec::new(), args, reference)?,
+            &row_names(id),
+            reference,
+        ))
     };
-    Ok(ModelRows { test: test_rows, extra: extra_rows })
+    Ok(ModelRows {
+        test: test_rows,
+        extra: extra_rows,
+    })
 }
 
 /// Writes the contact sheet of `model`'s dance to `song` with `seed` into `dir`.
-fn write_preview(dir: &Path, model: &str, song: &Song, seed: u64, motion: &Motion, keys: &[KeyPose]) -> Result<(), EvalError> {
+fn write_preview(
+    dir: &Path,
+    model: &str,
+    song: &Song,
+    seed: u64,
+    motion: &Motion,
+    keys: &[KeyPose],
+) -> Result<(), EvalError> {
     use crate::report::preview::{write_png, Caption, Sheet};
-    let stem = song.name.rsplit_once('.').map_or(song.name.as_str(), |(stem, _)| stem);
+    let stem = song
+        .name
+        .rsplit_once('.')
+        .map_or(song.name.as_str(), |(stem, _)| stem);
     let name: String = format!("{model}_{stem}_seed{seed}.png")
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || "-_.".contains(c) { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "-_.".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
         .collect();
-    std::fs::create_dir_all(dir).map_err(|source| EvalError::Io { path: dir.to_path_buf(), source })?;
-    let caption = Caption { model: model.to_string(), seed, song: Some(song.name.clone()), style: None };
+    std::fs::create_dir_all(dir).map_err(|source| EvalError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let caption = Caption {
+        model: model.to_string(),
+        seed,
+        song: Some(song.name.clone()),
+        style: None,
+    };
     let key_pose_times: Vec<f64> = keys.iter().map(|k| k.time_s).collect();
-    let sheet = Sheet { motion, beat_times: &song.beats, key_pose_times: &key_pose_times, song_duration_s: song.audio.duration_s, caption: &caption };
+    let sheet = Sheet {
+        motion,
+        beat_times: &song.beats,
+        key_pose_times: &key_pose_times,
+        song_duration_s: song.audio.duration_s,
+        caption: &caption,
+    };
     let path = dir.join(name);
     write_png(&path, &sheet).map_err(|source| EvalError::Preview { path, source })
 }

@@ -27,22 +27,45 @@ pub(super) fn song_segment(d: &Dance) -> Result<Song, EvalError> {
     let sr = full.sample_rate as f64;
     let a = ((start * sr).round() as usize).min(full.samples.len());
     let b = (((start + dur) * sr).round() as usize).min(full.samples.len());
-    let audio = DecodedAudio { samples: full.samples[a..b].to_vec(), duration_s: (b - a) as f64 / sr, ..full };
-    let beats = analysis.beat_times.iter().map(|t| t - start).filter(|t| *t >= 0.0 && *t <= dur).collect();
-    Ok(Song { name: d.id.clone(), audio, beats })
+    let audio = DecodedAudio {
+        samples: full.samples[a..b].to_vec(),
+        duration_s: (b - a) as f64 / sr,
+        ..full
+    };
+    let beats = analysis
+        .beat_times
+        .iter()
+        .map(|t| t - start)
+        .filter(|t| *t >= 0.0 && *t <= dur)
+        .collect();
+    Ok(Song {
+        name: d.id.clone(),
+        audio,
+        beats,
+    })
 }
 
 /// An extra song, whole.
 pub(super) fn whole_song(path: &Path) -> Result<Song, EvalError> {
     let audio = audio::decode_path(path)?;
     let analysis = audio::analyze(&audio)?;
-    let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    Ok(Song { name, audio, beats: analysis.beat_times })
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    Ok(Song {
+        name,
+        audio,
+        beats: analysis.beat_times,
+    })
 }
 /// The audio files of a folder, sorted by name.
 pub(super) fn songs_in(dir: &Path) -> Result<Vec<PathBuf>, EvalError> {
     let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
-        .map_err(|source| EvalError::Io { path: dir.to_path_buf(), source })?
+        .map_err(|source| EvalError::Io {
+            path: dir.to_path_buf(),
+            source,
+        })?
         .filter_map(|e| e.ok().map(|e| e.path()))
         .filter(|p| p.is_file() && audio::decode_path(p).is_ok())
         .collect();
@@ -64,7 +87,9 @@ pub(super) fn key_poses_of(d: &Dance, n: usize, seed: u64) -> Vec<KeyPose> {
         .into_iter()
         .map(|f| KeyPose {
             time_s: f as f64 / d.motion.fps,
-            joints: (0..rel.dim().1).map(|j| [0, 1, 2].map(|a| f64::from(rel[[f, j, a]]))).collect(),
+            joints: (0..rel.dim().1)
+                .map(|j| [0, 1, 2].map(|a| f64::from(rel[[f, j, a]])))
+                .collect(),
         })
         .collect()
 }

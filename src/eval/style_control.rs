@@ -64,15 +64,28 @@ pub struct RealStyles {
 }
 
 /// Classifies real dances `(id, motion)`, their style from the id.
-pub fn real_styles(classifier: &MotionStyle, dances: &[(&str, &Motion)]) -> Result<RealStyles, EvalError> {
+pub fn real_styles(
+    classifier: &MotionStyle,
+    dances: &[(&str, &Motion)],
+) -> Result<RealStyles, EvalError> {
     let mut out = Vec::new();
     for (id, m) in dances {
-        let Some(truth) = DanceStyle::of_dance_id(id) else { continue };
-        let p = classifier.classify(m).map_err(|source| EvalError::Classifier { dance: Some(id.to_string()), source })?;
+        let Some(truth) = DanceStyle::of_dance_id(id) else {
+            continue;
+        };
+        let p = classifier
+            .classify(m)
+            .map_err(|source| EvalError::Classifier {
+                dance: Some(id.to_string()),
+                source,
+            })?;
         out.push((id.to_string(), truth, most_probable(&p)));
     }
     let accuracy = out.iter().filter(|(_, a, b)| a == b).count() as f64 / out.len().max(1) as f64;
-    Ok(RealStyles { dances: out, accuracy })
+    Ok(RealStyles {
+        dances: out,
+        accuracy,
+    })
 }
 
 /// Dances every song in every style with `seed` and measures the differences.
@@ -92,14 +105,32 @@ pub fn style_control(
         let (mut passing, mut speed, mut classified) = (0, 0.0, vec![0usize; 4]);
         let mut motions = Vec::new();
         for s in songs {
-            let req = GenerateRequest { style: Some(style), ..GenerateRequest::plain(s.audio, seed) };
-            let raw = model.generate(&req, progress).map_err(|source| EvalError::Generate { model: format!("{id} ({})", style.name()), song: s.name.to_string(), source })?.motion;
-            let (m, _) = super::as_served(raw, &[], s.beats).map_err(|source| EvalError::Export { model: id.into(), song: s.name.to_string(), source })?;
+            let req = GenerateRequest {
+                style: Some(style),
+                ..GenerateRequest::plain(s.audio, seed)
+            };
+            let raw = model
+                .generate(&req, progress)
+                .map_err(|source| EvalError::Generate {
+                    model: format!("{id} ({})", style.name()),
+                    song: s.name.to_string(),
+                    source,
+                })?
+                .motion;
+            let (m, _) =
+                super::as_served(raw, &[], s.beats).map_err(|source| EvalError::Export {
+                    model: id.into(),
+                    song: s.name.to_string(),
+                    source,
+                })?;
             let sc = score_dance(&m, s.beats, &[], reference)?;
             passing += usize::from(sc.scores.verdict.pass);
             speed += sc.scores.physical.mean_speed_m_s;
             if let Some(c) = classifier {
-                let p = c.classify(&m).map_err(|source| EvalError::Classifier { dance: None, source })?;
+                let p = c.classify(&m).map_err(|source| EvalError::Classifier {
+                    dance: None,
+                    source,
+                })?;
                 classified[most_probable(&p).index()] += 1;
             }
             motions.push(m);
@@ -119,31 +150,55 @@ pub fn style_control(
     let mut min_distance_m = f64::INFINITY;
     for a in 0..4 {
         for b in a + 1..4 {
-            let d: Vec<f64> = (0..songs.len()).map(|k| seed_distance_m(&served[a][k], &served[b][k])).filter(|x| !x.is_nan()).collect();
+            let d: Vec<f64> = (0..songs.len())
+                .map(|k| seed_distance_m(&served[a][k], &served[b][k]))
+                .filter(|x| !x.is_nan())
+                .collect();
             let mean = d.iter().sum::<f64>() / d.len().max(1) as f64;
             distance_m[a][b] = mean;
             distance_m[b][a] = mean;
             min_distance_m = min_distance_m.min(mean);
         }
     }
-    Ok(StyleControl { model: id.into(), seed, songs: songs.iter().map(|s| s.name.to_string()).collect(), asked, distance_m, min_distance_m })
+    Ok(StyleControl {
+        model: id.into(),
+        seed,
+        songs: songs.iter().map(|s| s.name.to_string()).collect(),
+        asked,
+        distance_m,
+        min_distance_m,
+    })
 }
 
 /// The Markdown of the style-control section.
 pub fn markdown(controls: &[StyleControl], real: Option<&RealStyles>) -> String {
     let mut out = String::new();
     if let Some(r) = real {
-        let wrong: Vec<String> = r.dances.iter().filter(|(_, a, b)| a != b).map(|(id, _, b)| format!("{id} as {}", b.name())).collect();
+        let wrong: Vec<String> = r
+            .dances
+            .iter()
+            .filter(|(_, a, b)| a != b)
+            .map(|(id, _, b)| format!("{id} as {}", b.name()))
+            .collect();
         out += &format!(
             "Motion style classifier on the real test dances: {}/{} right ({:.0} %){}.\n\n",
             r.dances.len() - wrong.len(),
             r.dances.len(),
             100.0 * r.accuracy,
-            if wrong.is_empty() { String::new() } else { format!("; wrong: {}", wrong.join(", ")) }
+            if wrong.is_empty() {
+                String::new()
+            } else {
+                format!("; wrong: {}", wrong.join(", "))
+            }
         );
     }
     for c in controls {
-        out += &format!("**{}**, seed {}, {} songs; each row one style asked for:\n\n", c.model, c.seed, c.songs.len());
+        out += &format!(
+            "**{}**, seed {}, {} songs; each row one style asked for:\n\n",
+            c.model,
+            c.seed,
+            c.songs.len()
+        );
         out += "| Style asked | Dances | Pass | Speed m/s | Classified cha-cha / rumba / tango / waltz | Agrees | Distance to cha-cha / rumba / tango / waltz m |\n|---|---|---|---|---|---|---|\n";
         for (i, a) in c.asked.iter().enumerate() {
             let d: Vec<String> = c.distance_m[i].iter().map(|x| format!("{x:.2}")).collect();
@@ -154,12 +209,20 @@ pub fn markdown(controls: &[StyleControl], real: Option<&RealStyles>) -> String 
                 a.passing,
                 a.dances,
                 a.mean_speed_m_s,
-                a.classified.iter().map(usize::to_string).collect::<Vec<_>>().join(" / "),
-                a.agrees.map_or("–".into(), |x| format!("{:.0} %", 100.0 * x)),
+                a.classified
+                    .iter()
+                    .map(usize::to_string)
+                    .collect::<Vec<_>>()
+                    .join(" / "),
+                a.agrees
+                    .map_or("–".into(), |x| format!("{:.0} %", 100.0 * x)),
                 d.join(" / ")
             );
         }
-        out += &format!("\nSmallest distance between two styles' dances: {:.2} m.\n\n", c.min_distance_m);
+        out += &format!(
+            "\nSmallest distance between two styles' dances: {:.2} m.\n\n",
+            c.min_distance_m
+        );
     }
     out
 }

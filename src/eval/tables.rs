@@ -101,16 +101,38 @@ fn paper_table(rows: &[EvalRow]) -> String {
 }
 
 /// One line of the physical table: `tail` is the seed distance, key error, verdict and passing cells.
-fn physical_cells(name: &str, n: usize, p: &PhysicalScores, freeze: f64, tail: [String; 5]) -> String {
+fn physical_cells(
+    name: &str,
+    n: usize,
+    p: &PhysicalScores,
+    freeze: f64,
+    tail: [String; 5],
+) -> String {
     let [seeds, key_err, verdict, passing, flips] = tail;
     let cells = [
         name.to_string(),
         n.to_string(),
-        format!("{} / {} / {}", f2(p.lowest_foot_m.p5), f2(p.lowest_foot_m.median), f2(p.lowest_foot_m.p95)),
+        format!(
+            "{} / {} / {}",
+            f2(p.lowest_foot_m.p5),
+            f2(p.lowest_foot_m.median),
+            f2(p.lowest_foot_m.p95)
+        ),
         format!("{:.1} %", 100.0 * p.below_floor_share),
         f2(p.deepest_m),
-        format!("{} / {} / {} / {}", f2(p.acceleration_m_s2.median), f2(p.acceleration_m_s2.p99), f2(p.acceleration_m_s2.p99_9), f2(p.acceleration_m_s2.max)),
-        p.key_pose_pops_m_s2.iter().copied().reduce(f64::max).map(f2).unwrap_or_else(|| "–".into()),
+        format!(
+            "{} / {} / {} / {}",
+            f2(p.acceleration_m_s2.median),
+            f2(p.acceleration_m_s2.p99),
+            f2(p.acceleration_m_s2.p99_9),
+            f2(p.acceleration_m_s2.max)
+        ),
+        p.key_pose_pops_m_s2
+            .iter()
+            .copied()
+            .reduce(f64::max)
+            .map(f2)
+            .unwrap_or_else(|| "–".into()),
         f2(p.mean_speed_m_s),
         f2(p.speed_ratio),
         f(freeze),
@@ -128,8 +150,17 @@ fn physical_table(rows: &[EvalRow], reference: Option<&ReferenceStats>) -> Strin
     let mut out = String::from(PHYSICAL_HEADER);
     if let Some(r) = reference {
         let p = &r.physical;
-        let name = format!("Real train (reference; speed per dance {:.2}–{:.2})", p.mean_speed_range_m_s[0], p.mean_speed_range_m_s[1]);
-        out.push_str(&physical_cells(&name, r.dances.len(), &p.pooled, f64::NAN, ["–".into(), "–".into(), "–".into(), "–".into(), "–".into()]));
+        let name = format!(
+            "Real train (reference; speed per dance {:.2}–{:.2})",
+            p.mean_speed_range_m_s[0], p.mean_speed_range_m_s[1]
+        );
+        out.push_str(&physical_cells(
+            &name,
+            r.dances.len(),
+            &p.pooled,
+            f64::NAN,
+            ["–".into(), "–".into(), "–".into(), "–".into(), "–".into()],
+        ));
     }
     for r in rows {
         let m = &r.scores.mean;
@@ -139,7 +170,19 @@ fn physical_table(rows: &[EvalRow], reference: Option<&ReferenceStats>) -> Strin
         };
         let passing = format!("{}/{}", r.scores.dances_passing, r.scores.dances);
         let key_err = worst_key_error(r).map(f2).unwrap_or_else(|| "–".into());
-        out.push_str(&physical_cells(&r.name, r.scores.dances, &m.physical, m.freezing_ratio, [seeds, key_err, verdict_cell(&m.verdict), passing, flips_cell(m.rotation_flips.as_ref())]));
+        out.push_str(&physical_cells(
+            &r.name,
+            r.scores.dances,
+            &m.physical,
+            m.freezing_ratio,
+            [
+                seeds,
+                key_err,
+                verdict_cell(&m.verdict),
+                passing,
+                flips_cell(m.rotation_flips.as_ref()),
+            ],
+        ));
     }
     out
 }
@@ -148,13 +191,24 @@ fn physical_table(rows: &[EvalRow], reference: Option<&ReferenceStats>) -> Strin
 fn flips_cell(f: Option<&crate::metrics::rotation_flips::RotationFlips>) -> String {
     f.map_or_else(
         || "–".into(),
-        |f| format!("{:.2} % / {:.2} % ({})", 100.0 * f.share_over_60, 100.0 * f.share_over_90, f.worst_joint.as_deref().unwrap_or("none")),
+        |f| {
+            format!(
+                "{:.2} % / {:.2} % ({})",
+                100.0 * f.share_over_60,
+                100.0 * f.share_over_90,
+                f.worst_joint.as_deref().unwrap_or("none")
+            )
+        },
     )
 }
 
 /// The row's worst key-pose error (cm), from its verdict.
 fn worst_key_error(r: &EvalRow) -> Option<f64> {
-    r.scores.mean.verdict.get(crate::metrics::physical::names::KEY_POSES).and_then(|c| c.value)
+    r.scores
+        .mean
+        .verdict
+        .get(crate::metrics::physical::names::KEY_POSES)
+        .and_then(|c| c.value)
 }
 
 /// Issue 25's bars on each row: tempo-locked dances (step rate within 3 % of 1/6…1 of the beat
@@ -167,13 +221,29 @@ fn musicality_table(rows: &[EvalRow]) -> String {
         if m.measured == 0 {
             "–".to_string()
         } else {
-            format!("{}/{} ({:.0} %)", m.tempo_locked, m.measured, 100.0 * m.tempo_locked_share)
+            format!(
+                "{}/{} ({:.0} %)",
+                m.tempo_locked,
+                m.measured,
+                100.0 * m.tempo_locked_share
+            )
         }
     };
     for r in rows {
         let m = &r.scores.musicality;
-        let own = r.musicality_raw.as_ref().map_or_else(|| "–".to_string(), locked);
-        let cells = [r.name.clone(), r.scores.dances.to_string(), locked(m), own, f2(m.arm_speed_min_m_s), format!("{:.1} %", 100.0 * m.knee_backward_max), opt(r.song_distance_min_m)];
+        let own = r
+            .musicality_raw
+            .as_ref()
+            .map_or_else(|| "–".to_string(), locked);
+        let cells = [
+            r.name.clone(),
+            r.scores.dances.to_string(),
+            locked(m),
+            own,
+            f2(m.arm_speed_min_m_s),
+            format!("{:.1} %", 100.0 * m.knee_backward_max),
+            opt(r.song_distance_min_m),
+        ];
         out.push_str(&format!("| {} |\n", cells.join(" | ")));
     }
     out
@@ -197,10 +267,24 @@ fn section(rows: &[EvalRow], reference: Option<&ReferenceStats>, notes: [&str; 2
 /// every frame of the row pooled).
 pub fn markdown(result: &EvalResult) -> String {
     let reference = ReferenceStats::builtin().ok();
-    let mut out = format!("## {} split ({} songs, each cut to its dance)\n\n", result.split, result.rows.first().map_or(0, |r| r.scores.dances));
-    out += &section(&result.rows, reference.as_ref(), [" (diversity on z-normalised kinetic 5-s windows, beat P/R/F ±0.1 s)", " (issue 25: tempo lock, arms, knees, song sensitivity)"]);
+    let mut out = format!(
+        "## {} split ({} songs, each cut to its dance)\n\n",
+        result.split,
+        result.rows.first().map_or(0, |r| r.scores.dances)
+    );
+    out += &section(
+        &result.rows,
+        reference.as_ref(),
+        [
+            " (diversity on z-normalised kinetic 5-s windows, beat P/R/F ±0.1 s)",
+            " (issue 25: tempo lock, arms, knees, song sensitivity)",
+        ],
+    );
     if !result.extra_rows.is_empty() {
-        out += &format!("\n## Extra songs, whole ({})\n\n", result.extra_songs.join(", "));
+        out += &format!(
+            "\n## Extra songs, whole ({})\n\n",
+            result.extra_songs.join(", ")
+        );
         out += &section(&result.extra_rows, reference.as_ref(), ["", ""]);
     }
     if !result.tempo.is_empty() {

@@ -51,28 +51,46 @@ pub struct TempoRow {
 
 /// `song` at `factor` × its tempo (pitch kept), written by sox into `dir` and decoded.
 fn stretched(song: &Path, factor: f64, dir: &Path) -> Result<Song, EvalError> {
-    let stem = song.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let stem = song
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let out = dir.join(format!("{stem}@{factor}x.wav"));
     let status = Command::new("sox")
         .arg(song)
         .arg(&out)
         .args(["tempo", &factor.to_string()])
         .status()
-        .map_err(|source| EvalError::Io { path: "sox (Debian's sox package; scripts/setup.sh --test installs it)".into(), source })?;
+        .map_err(|source| EvalError::Io {
+            path: "sox (Debian's sox package; scripts/setup.sh --test installs it)".into(),
+            source,
+        })?;
     if !status.success() {
-        return Err(EvalError::Io { path: out, source: std::io::Error::other(format!("sox exited with {status}")) });
+        return Err(EvalError::Io {
+            path: out,
+            source: std::io::Error::other(format!("sox exited with {status}")),
+        });
     }
     whole_song(&out)
 }
 
 /// Every song of `paths` at every factor of `args.tempi`, danced by `model` with the eval's
 /// seeds, as served and as the network made it.
-pub(super) fn tempo_row(model: &dyn DanceModel, id: &str, paths: &[std::path::PathBuf], args: &EvalOptions) -> Result<TempoRow, EvalError> {
-    let dir = tempfile::tempdir().map_err(|source| EvalError::Io { path: std::env::temp_dir(), source })?;
+pub(super) fn tempo_row(
+    model: &dyn DanceModel,
+    id: &str,
+    paths: &[std::path::PathBuf],
+    args: &EvalOptions,
+) -> Result<TempoRow, EvalError> {
+    let dir = tempfile::tempdir().map_err(|source| EvalError::Io {
+        path: std::env::temp_dir(),
+        source,
+    })?;
     let mut tempi = args.tempi.clone();
     tempi.sort_by(f64::total_cmp);
     // [served, the network's own] for each count.
-    let (mut dances, mut measured, mut locked, mut ratios) = (0, [0; 2], [0; 2], [Vec::new(), Vec::new()]);
+    let (mut dances, mut measured, mut locked, mut ratios) =
+        (0, [0; 2], [0; 2], [Vec::new(), Vec::new()]);
     for path in paths {
         // step rate per (tempo, seed), served and the network's own
         let mut steps: Vec<Vec<[Option<f64>; 2]>> = Vec::new();
@@ -81,11 +99,23 @@ pub(super) fn tempo_row(model: &dyn DanceModel, id: &str, paths: &[std::path::Pa
             let mut per_seed = Vec::new();
             for seed in args.seed..args.seed + args.seeds.max(1) {
                 let raw = model
-                    .generate(&GenerateRequest::plain(&song.audio, seed), &mut super::rows::Quiet)
-                    .map_err(|source| EvalError::Generate { model: id.into(), song: song.name.clone(), source })?
+                    .generate(
+                        &GenerateRequest::plain(&song.audio, seed),
+                        &mut super::rows::Quiet,
+                    )
+                    .map_err(|source| EvalError::Generate {
+                        model: id.into(),
+                        song: song.name.clone(),
+                        source,
+                    })?
                     .motion;
                 let own = Musicality::of(&raw, &song.beats).tempo_lock;
-                let (served, _) = as_served(raw, &[], &song.beats).map_err(|source| EvalError::Export { model: id.into(), song: song.name.clone(), source })?;
+                let (served, _) =
+                    as_served(raw, &[], &song.beats).map_err(|source| EvalError::Export {
+                        model: id.into(),
+                        song: song.name.clone(),
+                        source,
+                    })?;
                 let lock = Musicality::of(&served, &song.beats).tempo_lock;
                 dances += 1;
                 for (n, lock) in [lock, own].into_iter().enumerate() {
@@ -101,7 +131,11 @@ pub(super) fn tempo_row(model: &dyn DanceModel, id: &str, paths: &[std::path::Pa
         if let (Some(slow), Some(fast)) = (steps.first(), steps.last()) {
             if tempi.len() >= 2 {
                 for (n, r) in ratios.iter_mut().enumerate() {
-                    r.extend(slow.iter().zip(fast).filter_map(|(s, f)| Some(f[n].as_ref()? / s[n].as_ref()?)));
+                    r.extend(
+                        slow.iter()
+                            .zip(fast)
+                            .filter_map(|(s, f)| Some(f[n].as_ref()? / s[n].as_ref()?)),
+                    );
                 }
             }
         }
@@ -109,7 +143,11 @@ pub(super) fn tempo_row(model: &dyn DanceModel, id: &str, paths: &[std::path::Pa
     let median = |r: &[f64]| {
         let mut sorted = r.to_vec();
         sorted.sort_by(f64::total_cmp);
-        if sorted.is_empty() { f64::NAN } else { sorted[sorted.len() / 2] }
+        if sorted.is_empty() {
+            f64::NAN
+        } else {
+            sorted[sorted.len() / 2]
+        }
     };
     let [ratios, ratios_raw] = ratios;
     let followed = match (tempi.first(), tempi.last()) {
@@ -135,7 +173,16 @@ pub(super) fn tempo_row(model: &dyn DanceModel, id: &str, paths: &[std::path::Pa
 /// The section's Markdown table: served (beat-aligned) and the network's own, side by side.
 pub fn markdown(rows: &[TempoRow]) -> String {
     let mut out = String::from("| Model | tempi | n | tempo-locked ↑ served | network's own | step-rate ratio fast/slow (median) served | network's own | a dancer who follows |\n|---|---|---|---|---|---|---|---|\n");
-    let share = |locked: usize, measured: usize| if measured == 0 { "–".into() } else { format!("{locked}/{measured} ({:.0} %)", 100.0 * locked as f64 / measured as f64) };
+    let share = |locked: usize, measured: usize| {
+        if measured == 0 {
+            "–".into()
+        } else {
+            format!(
+                "{locked}/{measured} ({:.0} %)",
+                100.0 * locked as f64 / measured as f64
+            )
+        }
+    };
     for r in rows {
         let tempi: Vec<String> = r.tempi.iter().map(|t| format!("{t}×")).collect();
         out += &format!(

@@ -101,7 +101,10 @@ pub fn kinematic_beats_fact(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64
     let mut envelope = vec![0.0f64];
     envelope.extend(speeds.iter().map(|row| row.iter().sum::<f64>()));
     let order = fact_order(fps);
-    argrelmin(&envelope, order).into_iter().map(|i| i as f64 / fps).collect()
+    argrelmin(&envelope, order)
+        .into_iter()
+        .map(|i| i as f64 / fps)
+        .collect()
 }
 
 /// The FACT minima order at `fps`: `round(10 · fps / 60)`, at least 1.
@@ -122,14 +125,23 @@ pub fn kinematic_beats_bailando(positions: ArrayView3<'_, f32>, fps: f64) -> Vec
     if speeds.is_empty() {
         return Vec::new();
     }
-    let mean: Vec<f64> = speeds.iter().map(|row| row.iter().sum::<f64>() / row.len() as f64).collect();
+    let mean: Vec<f64> = speeds
+        .iter()
+        .map(|row| row.iter().sum::<f64>() / row.len() as f64)
+        .collect();
     let smooth = gaussian_filter1d(&mean, bailando_sigma(fps));
-    argrelmin(&smooth, 1).into_iter().map(|i| i as f64 / fps).collect()
+    argrelmin(&smooth, 1)
+        .into_iter()
+        .map(|i| i as f64 / fps)
+        .collect()
 }
 
 /// `exp(−d² / 2σ²)` for the distance from `t` to the nearest of `others`; 0 when `others` is empty.
 fn nearest_gauss(t: f64, others: &[f64], sigma: f64) -> f64 {
-    let d = others.iter().map(|o| (o - t).abs()).fold(f64::INFINITY, f64::min);
+    let d = others
+        .iter()
+        .map(|o| (o - t).abs())
+        .fold(f64::INFINITY, f64::min);
     if d.is_finite() {
         (-(d * d) / (2.0 * sigma * sigma)).exp()
     } else {
@@ -143,7 +155,10 @@ pub fn bas_fact(music_beats: &[f64], motion_beats: &[f64]) -> f64 {
     if motion_beats.is_empty() {
         return 0.0;
     }
-    motion_beats.iter().map(|&b| nearest_gauss(b, music_beats, BAS_SIGMA_S)).sum::<f64>()
+    motion_beats
+        .iter()
+        .map(|&b| nearest_gauss(b, music_beats, BAS_SIGMA_S))
+        .sum::<f64>()
         / motion_beats.len() as f64
 }
 
@@ -153,7 +168,10 @@ pub fn bas_bailando(music_beats: &[f64], motion_beats: &[f64]) -> f64 {
     if music_beats.is_empty() {
         return 0.0;
     }
-    music_beats.iter().map(|&b| nearest_gauss(b, motion_beats, BAS_SIGMA_S)).sum::<f64>()
+    music_beats
+        .iter()
+        .map(|&b| nearest_gauss(b, motion_beats, BAS_SIGMA_S))
+        .sum::<f64>()
         / music_beats.len() as f64
 }
 
@@ -203,7 +221,10 @@ pub fn beat_hit_rate(music_beats: &[f64], motion_beats: &[f64]) -> f64 {
     if motion_beats.is_empty() {
         return 0.0;
     }
-    let aligned = motion_beats.iter().filter(|&&b| has_within(b, music_beats, ALIGN_TOLERANCE_S)).count();
+    let aligned = motion_beats
+        .iter()
+        .filter(|&&b| has_within(b, music_beats, ALIGN_TOLERANCE_S))
+        .count();
     aligned as f64 / motion_beats.len() as f64
 }
 
@@ -212,7 +233,10 @@ pub fn rhythm_hit(music_beats: &[f64], motion_beats: &[f64]) -> f64 {
     if music_beats.is_empty() {
         return 0.0;
     }
-    let hit = music_beats.iter().filter(|&&b| has_within(b, motion_beats, RHYTHM_HIT_TOLERANCE_S)).count();
+    let hit = music_beats
+        .iter()
+        .filter(|&&b| has_within(b, motion_beats, RHYTHM_HIT_TOLERANCE_S))
+        .count();
     hit as f64 / music_beats.len() as f64
 }
 
@@ -226,7 +250,9 @@ pub fn match_events(reference: &[f64], estimated: &[f64], window: f64) -> usize 
     let mut used = vec![false; estimated.len()];
     let mut count = 0;
     for &r in reference {
-        if let Some(j) = (0..estimated.len()).find(|&j| !used[j] && r >= estimated[j] - window && r <= estimated[j] + window) {
+        if let Some(j) = (0..estimated.len())
+            .find(|&j| !used[j] && r >= estimated[j] - window && r <= estimated[j] + window)
+        {
             used[j] = true;
             count += 1;
         }
@@ -256,7 +282,10 @@ pub fn cemgil(reference: &[f64], estimated: &[f64]) -> f64 {
     }
     let mut acc = 0.0;
     for &r in reference {
-        let d = estimated.iter().map(|e| (r - e).abs()).fold(f64::INFINITY, f64::min);
+        let d = estimated
+            .iter()
+            .map(|e| (r - e).abs())
+            .fold(f64::INFINITY, f64::min);
         acc += (-(d * d) / (2.0 * CEMGIL_SIGMA_S * CEMGIL_SIGMA_S)).exp();
     }
     acc / (0.5 * (estimated.len() + reference.len()) as f64)
@@ -270,9 +299,16 @@ pub fn p_score(reference: &[f64], estimated: &[f64]) -> f64 {
         return 0.0;
     }
     let sampling_rate = 100.0f64;
-    let offset = reference.iter().chain(estimated).copied().fold(f64::INFINITY, f64::min);
+    let offset = reference
+        .iter()
+        .chain(estimated)
+        .copied()
+        .fold(f64::INFINITY, f64::min);
     let train = |b: &[f64]| -> Vec<i64> {
-        let mut idx: Vec<i64> = b.iter().map(|t| ((t - offset) * sampling_rate).ceil() as i64).collect();
+        let mut idx: Vec<i64> = b
+            .iter()
+            .map(|t| ((t - offset) * sampling_rate).ceil() as i64)
+            .collect();
         idx.sort_unstable();
         idx.dedup();
         idx
@@ -286,7 +322,11 @@ pub fn p_score(reference: &[f64], estimated: &[f64]) -> f64 {
     }
     intervals.sort_by(f64::total_cmp);
     let k = intervals.len();
-    let median = if k % 2 == 1 { intervals[k / 2] } else { 0.5 * (intervals[k / 2 - 1] + intervals[k / 2]) };
+    let median = if k % 2 == 1 {
+        intervals[k / 2]
+    } else {
+        0.5 * (intervals[k / 2 - 1] + intervals[k / 2])
+    };
     // np.round rounds half to even.
     let win = (P_SCORE_THRESHOLD * median).round_ties_even() as i64;
     let mut hits = 0usize;
@@ -306,7 +346,9 @@ pub fn p_score(reference: &[f64], estimated: &[f64]) -> f64 {
 pub const BEAT_PRF_WINDOW_S: f64 = ALIGN_TOLERANCE_S;
 
 /// Beat precision, recall and F of motion beats against music beats.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct BeatPrf {
     /// Matched motion beats over all motion beats: how many of the dance's accents fall on a beat.
     pub precision: f64,
@@ -325,17 +367,31 @@ pub fn beat_prf(music_beats: &[f64], motion_beats: &[f64], window: f64) -> BeatP
     let m = match_events(music_beats, motion_beats, window) as f64;
     let precision = m / motion_beats.len() as f64;
     let recall = m / music_beats.len() as f64;
-    let f = if precision + recall > 0.0 { 2.0 * precision * recall / (precision + recall) } else { 0.0 };
-    BeatPrf { precision, recall, f }
+    let f = if precision + recall > 0.0 {
+        2.0 * precision * recall / (precision + recall)
+    } else {
+        0.0
+    };
+    BeatPrf {
+        precision,
+        recall,
+        f,
+    }
 }
 
 /// Music beats that fall within `[0, duration_s]`, the span a dance covers.
 pub fn beats_within(beats: &[f64], duration_s: f64) -> Vec<f64> {
-    beats.iter().copied().filter(|&b| b >= 0.0 && b <= duration_s).collect()
+    beats
+        .iter()
+        .copied()
+        .filter(|&b| b >= 0.0 && b <= duration_s)
+        .collect()
 }
 
 /// Every rhythm number for one dance against one song's beats.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct RhythmScores {
     /// BAS, FACT convention (mean over motion beats; FACT kinematic beats).
     pub bas_fact: f64,
@@ -362,7 +418,12 @@ pub struct RhythmScores {
 
 /// Scores a dance's kinematic beats against music beats already clipped to the dance's span.
 /// `duration_s` is the dance's span (for the chance level).
-pub fn rhythm_scores(music_beats: &[f64], fact_beats: &[f64], bailando_beats: &[f64], duration_s: f64) -> RhythmScores {
+pub fn rhythm_scores(
+    music_beats: &[f64],
+    fact_beats: &[f64],
+    bailando_beats: &[f64],
+    duration_s: f64,
+) -> RhythmScores {
     RhythmScores {
         bas_fact: bas_fact(music_beats, fact_beats),
         bas_bailando: bas_bailando(music_beats, bailando_beats),
@@ -397,7 +458,14 @@ mod tests {
     #[test]
     fn beat_prf_of_a_perfect_and_an_empty_dance() {
         let music = [0.4, 0.8, 1.2];
-        assert_eq!(beat_prf(&music, &music, BEAT_PRF_WINDOW_S), BeatPrf { precision: 1.0, recall: 1.0, f: 1.0 });
+        assert_eq!(
+            beat_prf(&music, &music, BEAT_PRF_WINDOW_S),
+            BeatPrf {
+                precision: 1.0,
+                recall: 1.0,
+                f: 1.0
+            }
+        );
         assert_eq!(beat_prf(&music, &[], BEAT_PRF_WINDOW_S), BeatPrf::default());
         // Everything off by more than the window: nothing matches.
         let late: Vec<f64> = music.iter().map(|b| b + 0.15).collect();

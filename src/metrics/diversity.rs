@@ -15,7 +15,9 @@
 use super::fid::mean_pairwise_distance;
 
 /// The three measures of a set of dances (`None` where too few dances or windows).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct Diversity {
     pub a_seq_d: Option<f64>,
     pub i_seq_d: Option<f64>,
@@ -44,7 +46,11 @@ pub fn a_seq_d(dances: &[&[Vec<f64>]]) -> Option<f64> {
 /// I-seq-D over `dances`: the mean over dances with at least two windows of their windows'
 /// mean pairwise distance.
 pub fn i_seq_d(dances: &[&[Vec<f64>]]) -> Option<f64> {
-    let per: Vec<f64> = dances.iter().filter(|d| d.len() >= 2).map(|d| mean_pairwise_distance(d)).collect();
+    let per: Vec<f64> = dances
+        .iter()
+        .filter(|d| d.len() >= 2)
+        .map(|d| mean_pairwise_distance(d))
+        .collect();
     (!per.is_empty()).then(|| per.iter().sum::<f64>() / per.len() as f64)
 }
 
@@ -57,7 +63,11 @@ pub fn s_music_d(per_song: &[Vec<&[Vec<f64>]>]) -> Option<f64> {
 /// All three for dances grouped by song.
 pub fn diversity(per_song: &[Vec<&[Vec<f64>]>]) -> Diversity {
     let all: Vec<&[Vec<f64>]> = per_song.iter().flatten().copied().collect();
-    Diversity { a_seq_d: a_seq_d(&all), i_seq_d: i_seq_d(&all), s_music_d: s_music_d(per_song) }
+    Diversity {
+        a_seq_d: a_seq_d(&all),
+        i_seq_d: i_seq_d(&all),
+        s_music_d: s_music_d(per_song),
+    }
 }
 
 #[cfg(test)]
@@ -97,7 +107,10 @@ mod tests {
         let s1b = dance(0.0, 0.0, 2);
         let s2a = dance(10.0, 0.0, 2);
         let s2b = dance(12.0, 0.0, 2);
-        let songs = vec![vec![s1a.as_slice(), s1b.as_slice()], vec![s2a.as_slice(), s2b.as_slice()]];
+        let songs = vec![
+            vec![s1a.as_slice(), s1b.as_slice()],
+            vec![s2a.as_slice(), s2b.as_slice()],
+        ];
         let d = diversity(&songs);
         assert!((d.s_music_d.unwrap() - 1.0).abs() < 1e-12, "{:?}", d);
         assert!(d.a_seq_d.unwrap() > 5.0, "{:?}", d);

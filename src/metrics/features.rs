@@ -22,7 +22,11 @@ pub const GEOMETRIC_DIM: usize = 32;
 type V3 = [f64; 3];
 
 fn at(p: &ArrayView3<'_, f32>, t: usize, j: usize) -> V3 {
-    [p[[t, j, 0]] as f64, p[[t, j, 1]] as f64, p[[t, j, 2]] as f64]
+    [
+        p[[t, j, 0]] as f64,
+        p[[t, j, 1]] as f64,
+        p[[t, j, 2]] as f64,
+    ]
 }
 fn sub(a: V3, b: V3) -> V3 {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
@@ -34,7 +38,11 @@ fn norm(a: V3) -> f64 {
     dot(a, a).sqrt()
 }
 fn cross(a: V3, b: V3) -> V3 {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 /// Kinetic features of a window, `J × 3` values in joint order: for each joint, the mean over
@@ -58,15 +66,24 @@ pub fn kinetic_features(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
             for off in -KINETIC_SLIDING_WINDOW..=KINETIC_SLIDING_WINDOW {
                 let f = i + off;
                 if f - 1 >= 0 && f < t as isize {
-                    let d = sub(at(&positions, f as usize, k), at(&positions, f as usize - 1, k));
+                    let d = sub(
+                        at(&positions, f as usize, k),
+                        at(&positions, f as usize - 1, k),
+                    );
                     for c in 0..3 {
                         vel[c] += d[c];
                     }
                     n += 1;
                 }
                 if f - 1 >= 0 && f + 1 < t as isize {
-                    let v2 = sub(at(&positions, f as usize + 1, k), at(&positions, f as usize, k));
-                    let v1 = sub(at(&positions, f as usize, k), at(&positions, f as usize - 1, k));
+                    let v2 = sub(
+                        at(&positions, f as usize + 1, k),
+                        at(&positions, f as usize, k),
+                    );
+                    let v1 = sub(
+                        at(&positions, f as usize, k),
+                        at(&positions, f as usize - 1, k),
+                    );
                     for c in 0..3 {
                         // ((p[f+1] − p[f]) / Δt − (p[f] − p[f−1]) / Δt) / Δt
                         acc[c] += (v2[c] / dt - v1[c] / dt) / dt;
@@ -140,14 +157,23 @@ impl Frame<'_, '_> {
     }
     /// `manual.py`'s f_move(j1, j2, j3, _): velocity of `j3` relative to `j1`, along `j1 → j2`, above `thr`.
     fn f_move(&self, j1: usize, j2: usize, j3: usize, thr: f64) -> bool {
-        let vel = sub(sub(self.cur(j3), self.cur(j1)), sub(self.prev(j3), self.prev(j1)));
+        let vel = sub(
+            sub(self.cur(j3), self.cur(j1)),
+            sub(self.prev(j3), self.prev(j1)),
+        );
         let dir = sub(self.cur(j2), self.cur(j1));
         dot(vel, dir) / norm(dir) / self.dt > thr
     }
     /// F_nmove(j1, j2, j3; j4): velocity of `j4` relative to `j1` along the normal `(j3−j1)×(j2−j1)`.
     fn f_nmove(&self, j1: usize, j2: usize, j3: usize, j4: usize, thr: f64) -> bool {
-        let vel = sub(sub(self.cur(j4), self.cur(j1)), sub(self.prev(j4), self.prev(j1)));
-        let n = cross(sub(self.cur(j3), self.cur(j1)), sub(self.cur(j2), self.cur(j1)));
+        let vel = sub(
+            sub(self.cur(j4), self.cur(j1)),
+            sub(self.prev(j4), self.prev(j1)),
+        );
+        let n = cross(
+            sub(self.cur(j3), self.cur(j1)),
+            sub(self.cur(j2), self.cur(j1)),
+        );
         dot(vel, n) / norm(n) / self.dt > thr
     }
     /// F_plane(a, b, c; p): signed distance of `p` from the plane through a, b, c (normal
@@ -165,7 +191,10 @@ impl Frame<'_, '_> {
     fn f_angle(&self, j1: V3, j2: V3, k1: V3, k2: V3, lo: f64, hi: f64) -> bool {
         let a = sub(j2, j1);
         let b = sub(k2, k1);
-        let deg = (dot(a, b) / (norm(a) * norm(b))).clamp(-1.0, 1.0).acos().to_degrees();
+        let deg = (dot(a, b) / (norm(a) * norm(b)))
+            .clamp(-1.0, 1.0)
+            .acos()
+            .to_degrees();
         deg > lo && deg < hi
     }
     /// F_fast(j): speed of `j` above `thr`.
@@ -177,7 +206,12 @@ impl Frame<'_, '_> {
 /// Geometric features of a window: the share of frames `1..T−1` where each of the 32 boolean
 /// relational features of `manual.py` holds (same order, same thresholds in units of `hl`, `sw`,
 /// `hw`). Empty windows (T < 2) give zeros.
-pub fn geometric_features(positions: ArrayView3<'_, f32>, fps: f64, g: &GeometricJoints, s: &BodyScale) -> Vec<f64> {
+pub fn geometric_features(
+    positions: ArrayView3<'_, f32>,
+    fps: f64,
+    g: &GeometricJoints,
+    s: &BodyScale,
+) -> Vec<f64> {
     let (t, nj, _) = positions.dim();
     let mut sums = vec![0.0f64; GEOMETRIC_DIM];
     if t < 2 {
@@ -188,8 +222,15 @@ pub fn geometric_features(positions: ArrayView3<'_, f32>, fps: f64, g: &Geometri
     let y_unit = [0.0, 1.0, 0.0];
     let minus_y = [0.0, -1.0, 0.0];
     for f in 1..t {
-        let y_min = (0..nj).map(|j| positions[[f, j, 1]] as f64).fold(f64::INFINITY, f64::min);
-        let fr = Frame { p: &positions, t: f, dt: 1.0 / fps, y_min };
+        let y_min = (0..nj)
+            .map(|j| positions[[f, j, 1]] as f64)
+            .fold(f64::INFINITY, f64::min);
+        let fr = Frame {
+            p: &positions,
+            t: f,
+            dt: 1.0 / fps,
+            y_min,
+        };
         let c = |j: usize| fr.cur(j);
         let ymin = [0.0, fr.y_min, 0.0];
         let feats: [bool; GEOMETRIC_DIM] = [
@@ -199,9 +240,29 @@ pub fn geometric_features(positions: ArrayView3<'_, f32>, fps: f64, g: &Geometri
             fr.f_nplane(c(g.chest), c(g.neck), c(g.neck), c(g.lwrist), 0.2 * hl),
             fr.f_move(g.belly, g.chest, g.chest, 1.8 * hl),
             fr.f_move(g.belly, g.chest, g.chest, 1.8 * hl),
-            fr.f_angle(c(g.relbow), c(g.rshoulder), c(g.relbow), c(g.rwrist), 0.0, 110.0),
-            fr.f_angle(c(g.lelbow), c(g.lshoulder), c(g.lelbow), c(g.lwrist), 0.0, 110.0),
-            fr.f_nplane(c(g.lshoulder), c(g.rshoulder), c(g.lwrist), c(g.rwrist), 2.5 * sw),
+            fr.f_angle(
+                c(g.relbow),
+                c(g.rshoulder),
+                c(g.relbow),
+                c(g.rwrist),
+                0.0,
+                110.0,
+            ),
+            fr.f_angle(
+                c(g.lelbow),
+                c(g.lshoulder),
+                c(g.lelbow),
+                c(g.lwrist),
+                0.0,
+                110.0,
+            ),
+            fr.f_nplane(
+                c(g.lshoulder),
+                c(g.rshoulder),
+                c(g.lwrist),
+                c(g.rwrist),
+                2.5 * sw,
+            ),
             fr.f_move(g.lwrist, g.rwrist, g.rwrist, 1.4 * hl),
             fr.f_move(g.rwrist, g.root, g.lwrist, 1.4 * hl),
             fr.f_move(g.lwrist, g.root, g.rwrist, 1.4 * hl),
@@ -216,8 +277,22 @@ pub fn geometric_features(positions: ArrayView3<'_, f32>, fps: f64, g: &Geometri
             fr.f_angle(c(g.lknee), c(g.lhip), c(g.lknee), c(g.lankle), 0.0, 110.0),
             fr.f_fast(g.rankle, 2.5 * hl),
             fr.f_fast(g.lankle, 2.5 * hl),
-            fr.f_angle(c(g.neck), c(g.root), c(g.rshoulder), c(g.relbow), 25.0, 180.0),
-            fr.f_angle(c(g.neck), c(g.root), c(g.lshoulder), c(g.lelbow), 25.0, 180.0),
+            fr.f_angle(
+                c(g.neck),
+                c(g.root),
+                c(g.rshoulder),
+                c(g.relbow),
+                25.0,
+                180.0,
+            ),
+            fr.f_angle(
+                c(g.neck),
+                c(g.root),
+                c(g.lshoulder),
+                c(g.lelbow),
+                25.0,
+                180.0,
+            ),
             fr.f_angle(c(g.neck), c(g.root), c(g.rhip), c(g.rknee), 50.0, 180.0),
             fr.f_angle(c(g.neck), c(g.root), c(g.lhip), c(g.lknee), 50.0, 180.0),
             fr.f_plane(c(g.rankle), c(g.neck), c(g.lankle), c(g.root), 0.5 * hl),

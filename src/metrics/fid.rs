@@ -62,7 +62,11 @@ impl Gaussian {
                 }
             }
         }
-        Some(Self { mean, cov, count: n })
+        Some(Self {
+            mean,
+            cov,
+            count: n,
+        })
     }
 
     fn dim(&self) -> usize {
@@ -89,7 +93,9 @@ impl ZNorm {
         if rows.iter().any(|r| r.len() != d) {
             return None;
         }
-        let mean: Vec<f64> = (0..d).map(|k| rows.iter().map(|r| r[k]).sum::<f64>() / n).collect();
+        let mean: Vec<f64> = (0..d)
+            .map(|k| rows.iter().map(|r| r[k]).sum::<f64>() / n)
+            .collect();
         let std = (0..d)
             .map(|k| (rows.iter().map(|r| (r[k] - mean[k]).powi(2)).sum::<f64>() / n).sqrt())
             .collect();
@@ -98,14 +104,21 @@ impl ZNorm {
 
     /// `(x − μ) / (σ + 1e-10)` for each feature.
     pub fn apply(&self, row: &[f64]) -> Vec<f64> {
-        row.iter().zip(&self.mean).zip(&self.std).map(|((x, m), s)| (x - m) / (s + Z_EPS)).collect()
+        row.iter()
+            .zip(&self.mean)
+            .zip(&self.std)
+            .map(|((x, m), s)| (x - m) / (s + Z_EPS))
+            .collect()
     }
 }
 
 /// Symmetric PSD square root `U diag(√max(λ, 0)) Uᵀ`.
 fn sqrt_psd(m: DMatrix<f64>) -> DMatrix<f64> {
     let e = SymmetricEigen::new(m);
-    let s = DVector::from_iterator(e.eigenvalues.len(), e.eigenvalues.iter().map(|&l| clamp_eig(l).sqrt()));
+    let s = DVector::from_iterator(
+        e.eigenvalues.len(),
+        e.eigenvalues.iter().map(|&l| clamp_eig(l).sqrt()),
+    );
     &e.eigenvectors * DMatrix::from_diagonal(&s) * e.eigenvectors.transpose()
 }
 
@@ -123,14 +136,23 @@ pub fn trace_sqrt_product(s1: &DMatrix<f64>, s2: &DMatrix<f64>) -> f64 {
     let m = &r1 * s2 * &r1;
     // Symmetrise: the product is symmetric in exact arithmetic only.
     let m = (&m + m.transpose()) * 0.5;
-    SymmetricEigen::new(m).eigenvalues.iter().map(|&l| clamp_eig(l).sqrt()).sum()
+    SymmetricEigen::new(m)
+        .eigenvalues
+        .iter()
+        .map(|&l| clamp_eig(l).sqrt())
+        .sum()
 }
 
 /// The Fréchet distance between two fitted Gaussians of the same dimension.
 pub fn frechet_distance(a: &Gaussian, b: &Gaussian) -> f64 {
     let s1 = a.cov_matrix();
     let s2 = b.cov_matrix();
-    let dmu: f64 = a.mean.iter().zip(&b.mean).map(|(x, y)| (x - y).powi(2)).sum();
+    let dmu: f64 = a
+        .mean
+        .iter()
+        .zip(&b.mean)
+        .map(|(x, y)| (x - y).powi(2))
+        .sum();
     dmu + s1.trace() + s2.trace() - 2.0 * trace_sqrt_product(&s1, &s2)
 }
 
@@ -144,7 +166,12 @@ pub fn mean_pairwise_distance(rows: &[Vec<f64>]) -> f64 {
     let mut total = 0.0;
     for i in 0..n {
         for j in i + 1..n {
-            total += rows[i].iter().zip(&rows[j]).map(|(a, b)| (a - b).powi(2)).sum::<f64>().sqrt();
+            total += rows[i]
+                .iter()
+                .zip(&rows[j])
+                .map(|(a, b)| (a - b).powi(2))
+                .sum::<f64>()
+                .sqrt();
         }
     }
     total / (n * (n - 1) / 2) as f64

@@ -10,7 +10,9 @@ pub fn mean_speed(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
             let s: f64 = (0..j)
                 .map(|k| {
                     (0..3)
-                        .map(|c| (positions[[f, k, c]] as f64 - positions[[f - 1, k, c]] as f64).powi(2))
+                        .map(|c| {
+                            (positions[[f, k, c]] as f64 - positions[[f - 1, k, c]] as f64).powi(2)
+                        })
                         .sum::<f64>()
                         .sqrt()
                 })
@@ -46,7 +48,9 @@ pub const SKATE_SPEED_M_S: f64 = 0.2;
 pub const FLOOR_PERCENTILE: f64 = crate::motion::feet::FLOOR_PERCENTILE;
 
 /// Foot skating over a dance.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct FootSkating {
     /// Share of (foot, frame step) pairs in contact at both ends of the step.
     pub contact_share: f64,
@@ -99,8 +103,16 @@ pub fn foot_skating(positions: ArrayView3<'_, f32>, fps: f64, feet: &[usize]) ->
     }
     FootSkating {
         contact_share: contact as f64 / steps as f64,
-        skate_ratio: if contact > 0 { skate as f64 / contact as f64 } else { 0.0 },
-        mean_contact_speed_m_s: if contact > 0 { speed_sum / contact as f64 } else { 0.0 },
+        skate_ratio: if contact > 0 {
+            skate as f64 / contact as f64
+        } else {
+            0.0
+        },
+        mean_contact_speed_m_s: if contact > 0 {
+            speed_sum / contact as f64
+        } else {
+            0.0
+        },
     }
 }
 
@@ -108,7 +120,9 @@ pub fn foot_skating(positions: ArrayView3<'_, f32>, fps: f64, feet: &[usize]) ->
 pub const FREEZE_SPAN_S: f64 = 30.0;
 
 /// Motion energy over time, to see a dance that freezes.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct Freezing {
     /// Start of each 1-s bin (s).
     pub times_s: Vec<f64>,
@@ -127,7 +141,10 @@ pub fn energy_per_step(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
             (0..j)
                 .map(|k| {
                     (0..3)
-                        .map(|c| ((positions[[f, k, c]] as f64 - positions[[f - 1, k, c]] as f64) * fps).powi(2))
+                        .map(|c| {
+                            ((positions[[f, k, c]] as f64 - positions[[f - 1, k, c]] as f64) * fps)
+                                .powi(2)
+                        })
                         .sum::<f64>()
                 })
                 .sum::<f64>()
@@ -148,10 +165,16 @@ pub fn freezing(positions: ArrayView3<'_, f32>, fps: f64) -> Freezing {
         times_s.push(b as f64 * per_bin as f64 / fps);
         energy.push(chunk.iter().sum::<f64>() / chunk.len() as f64);
     }
-    let span = ((FREEZE_SPAN_S * fps).round() as usize).min(e.len() / 2).max(1);
+    let span = ((FREEZE_SPAN_S * fps).round() as usize)
+        .min(e.len() / 2)
+        .max(1);
     let first = e[..span].iter().sum::<f64>() / span as f64;
     let last = e[e.len() - span..].iter().sum::<f64>() / span as f64;
-    Freezing { times_s, energy, last_first_ratio: if first > 0.0 { last / first } else { 0.0 } }
+    Freezing {
+        times_s,
+        energy,
+        last_first_ratio: if first > 0.0 { last / first } else { 0.0 },
+    }
 }
 
 /// Key-pose consistency error in cm: at each key pose's frame (`round(time · fps)`, skipped when
@@ -159,7 +182,11 @@ pub fn freezing(positions: ArrayView3<'_, f32>, fps: f64) -> Freezing {
 /// dance's pose and the key pose, both centred on their own joint centroid (a key pose is
 /// root-relative and a generated dance carries no body centre, so centring both is the one root
 /// they share); averaged over key poses. `None` when no key pose applies.
-pub fn key_pose_error_cm(positions: ArrayView3<'_, f32>, fps: f64, key_poses: &[crate::motion::KeyPose]) -> Option<f64> {
+pub fn key_pose_error_cm(
+    positions: ArrayView3<'_, f32>,
+    fps: f64,
+    key_poses: &[crate::motion::KeyPose],
+) -> Option<f64> {
     let errs = key_pose_errors_cm(positions, fps, key_poses);
     if errs.is_empty() {
         None
@@ -169,7 +196,11 @@ pub fn key_pose_error_cm(positions: ArrayView3<'_, f32>, fps: f64, key_poses: &[
 }
 
 /// The error (cm) of each key pose that applies, as [`key_pose_error_cm`] measures it, in order.
-pub fn key_pose_errors_cm(positions: ArrayView3<'_, f32>, fps: f64, key_poses: &[crate::motion::KeyPose]) -> Vec<f64> {
+pub fn key_pose_errors_cm(
+    positions: ArrayView3<'_, f32>,
+    fps: f64,
+    key_poses: &[crate::motion::KeyPose],
+) -> Vec<f64> {
     let (t, j, _) = positions.dim();
     let mut errs = Vec::new();
     for kp in key_poses {
@@ -178,10 +209,17 @@ pub fn key_pose_errors_cm(positions: ArrayView3<'_, f32>, fps: f64, key_poses: &
             continue;
         }
         let pose = positions.slice(s![f as usize, .., ..]);
-        let pc: [f64; 3] = std::array::from_fn(|c| (0..j).map(|k| pose[[k, c]] as f64).sum::<f64>() / j as f64);
-        let kc: [f64; 3] = std::array::from_fn(|c| kp.joints.iter().map(|p| p[c]).sum::<f64>() / j as f64);
+        let pc: [f64; 3] =
+            std::array::from_fn(|c| (0..j).map(|k| pose[[k, c]] as f64).sum::<f64>() / j as f64);
+        let kc: [f64; 3] =
+            std::array::from_fn(|c| kp.joints.iter().map(|p| p[c]).sum::<f64>() / j as f64);
         let sum: f64 = (0..j)
-            .map(|k| (0..3).map(|c| (pose[[k, c]] as f64 - pc[c] - (kp.joints[k][c] - kc[c])).powi(2)).sum::<f64>().sqrt())
+            .map(|k| {
+                (0..3)
+                    .map(|c| (pose[[k, c]] as f64 - pc[c] - (kp.joints[k][c] - kc[c])).powi(2))
+                    .sum::<f64>()
+                    .sqrt()
+            })
             .sum();
         errs.push(100.0 * sum / j as f64);
     }
@@ -190,7 +228,11 @@ pub fn key_pose_errors_cm(positions: ArrayView3<'_, f32>, fps: f64, key_poses: &
 
 /// Mean per-joint distance (cm) between each key pose and the motion's root-relative joints at
 /// its frame, where `root` `[T, 3]` is the root track the motion was built around.
-pub fn key_pose_error_root_cm(motion: &crate::motion::Motion, root: ndarray::ArrayView2<'_, f32>, keys: &[crate::motion::KeyPose]) -> Option<f64> {
+pub fn key_pose_error_root_cm(
+    motion: &crate::motion::Motion,
+    root: ndarray::ArrayView2<'_, f32>,
+    keys: &[crate::motion::KeyPose],
+) -> Option<f64> {
     let mut sum = 0.0;
     let mut count = 0usize;
     for k in keys {
@@ -199,14 +241,15 @@ pub fn key_pose_error_root_cm(motion: &crate::motion::Motion, root: ndarray::Arr
             return None;
         }
         for (j, p) in k.joints.iter().enumerate() {
-            let d: f64 = (0..3).map(|a| (f64::from(motion.positions[[f, j, a]] - root[[f, a]]) - p[a]).powi(2)).sum();
+            let d: f64 = (0..3)
+                .map(|a| (f64::from(motion.positions[[f, j, a]] - root[[f, a]]) - p[a]).powi(2))
+                .sum();
             sum += d.sqrt();
             count += 1;
         }
     }
     (count > 0).then(|| 100.0 * sum / count as f64)
 }
-
 
 /// Start frames of windows of `len` frames taken every `stride` frames; one window starting at 0
 /// covering everything when the motion is shorter than `len` (but at least 2 frames).

@@ -54,7 +54,10 @@ pub enum MetricsError {
     #[error("reference statistics: the dances have different frame rates")]
     MixedFrameRates,
     #[error("i/o error on {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),
 }

@@ -39,7 +39,13 @@ const FRACTION_NAMES: [&str; 6] = ["1/6", "1/4", "1/3", "1/2", "2/3", "1"];
 
 /// The nearest of [`TEMPO_FRACTIONS`] to `q`, written as a fraction ("1/2").
 pub fn fraction_name(q: f64) -> &'static str {
-    let nearest = (0..TEMPO_FRACTIONS.len()).min_by(|&a, &b| (TEMPO_FRACTIONS[a] - q).abs().total_cmp(&(TEMPO_FRACTIONS[b] - q).abs())).unwrap_or(0);
+    let nearest = (0..TEMPO_FRACTIONS.len())
+        .min_by(|&a, &b| {
+            (TEMPO_FRACTIONS[a] - q)
+                .abs()
+                .total_cmp(&(TEMPO_FRACTIONS[b] - q).abs())
+        })
+        .unwrap_or(0);
     FRACTION_NAMES[nearest]
 }
 
@@ -79,7 +85,9 @@ pub struct TempoLock {
 
 /// The three measures of this module for one dance (`Default`: nothing measured, for reports
 /// written before they existed).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct Musicality {
     /// `None` when the dance is shorter than 2 s or has fewer than 4 beats.
     pub tempo_lock: Option<TempoLock>,
@@ -104,7 +112,9 @@ impl Musicality {
 
 /// A set of dances against issue 25's bars: the share tempo-locked, the stillest arms, the worst
 /// knees (each bar is on every dance, so the set reports its extremes, not its means).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct MusicalitySummary {
     /// Dances with a measurable step rate.
     pub measured: usize,
@@ -121,7 +131,10 @@ pub struct MusicalitySummary {
 impl MusicalitySummary {
     /// Summarises the dances' measures.
     pub fn of<'a>(dances: impl IntoIterator<Item = &'a Musicality>) -> Self {
-        let mut s = Self { arm_speed_min_m_s: f64::INFINITY, ..Self::default() };
+        let mut s = Self {
+            arm_speed_min_m_s: f64::INFINITY,
+            ..Self::default()
+        };
         let mut any = false;
         for m in dances {
             any = true;
@@ -135,7 +148,11 @@ impl MusicalitySummary {
         if !any {
             s.arm_speed_min_m_s = f64::NAN;
         }
-        s.tempo_locked_share = if s.measured == 0 { f64::NAN } else { s.tempo_locked as f64 / s.measured as f64 };
+        s.tempo_locked_share = if s.measured == 0 {
+            f64::NAN
+        } else {
+            s.tempo_locked as f64 / s.measured as f64
+        };
         s
     }
 
@@ -145,15 +162,26 @@ impl MusicalitySummary {
         let n = dances.clone().into_iter().count().max(1) as f64;
         Musicality {
             tempo_lock: None,
-            arm_speed_m_s: dances.clone().into_iter().map(|m| m.arm_speed_m_s).sum::<f64>() / n,
-            knee_backward_share: dances.into_iter().map(|m| m.knee_backward_share).sum::<f64>() / n,
+            arm_speed_m_s: dances
+                .clone()
+                .into_iter()
+                .map(|m| m.arm_speed_m_s)
+                .sum::<f64>()
+                / n,
+            knee_backward_share: dances
+                .into_iter()
+                .map(|m| m.knee_backward_share)
+                .sum::<f64>()
+                / n,
         }
     }
 }
 
 /// What the real dances measure (`reference_train.json`, `choreo eval --write-reference`), each
 /// against its own song's beats.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct MusicalityReference {
     /// The bars on the set (tempo-locked share, stillest arms, worst knees).
     pub summary: MusicalitySummary,
@@ -168,13 +196,22 @@ pub struct MusicalityReference {
 impl MusicalityReference {
     /// Measures real dances, each with the song's beats on its own clock.
     pub fn compute(dances: &[(&Motion, &[f64])]) -> Self {
-        let all: Vec<Musicality> = dances.iter().map(|(m, beats)| Musicality::of(m, beats)).collect();
+        let all: Vec<Musicality> = dances
+            .iter()
+            .map(|(m, beats)| Musicality::of(m, beats))
+            .collect();
         let mut arms: Vec<f64> = all.iter().map(|m| m.arm_speed_m_s).collect();
         arms.sort_by(f64::total_cmp);
         Self {
             summary: MusicalitySummary::of(&all),
-            within_2_percent: all.iter().filter(|m| m.tempo_lock.is_some_and(|l| l.distance <= 0.02)).count(),
-            arm_speed_range_m_s: [arms.first().copied().unwrap_or(f64::NAN), arms.last().copied().unwrap_or(f64::NAN)],
+            within_2_percent: all
+                .iter()
+                .filter(|m| m.tempo_lock.is_some_and(|l| l.distance <= 0.02))
+                .count(),
+            arm_speed_range_m_s: [
+                arms.first().copied().unwrap_or(f64::NAN),
+                arms.last().copied().unwrap_or(f64::NAN),
+            ],
             arm_speed_median_m_s: arms.get(arms.len() / 2).copied().unwrap_or(f64::NAN),
         }
     }
@@ -182,7 +219,11 @@ impl MusicalityReference {
 
 /// The beat rate (Hz) of the beats within `[0, duration_s]`: `(n − 1) / (last − first)`.
 pub fn beat_rate_hz(beat_times_s: &[f64], duration_s: f64) -> Option<f64> {
-    let inside: Vec<f64> = beat_times_s.iter().copied().filter(|t| (0.0..=duration_s).contains(t)).collect();
+    let inside: Vec<f64> = beat_times_s
+        .iter()
+        .copied()
+        .filter(|t| (0.0..=duration_s).contains(t))
+        .collect();
     let (first, last) = (inside.first()?, inside.last()?);
     (inside.len() >= MIN_BEATS && last > first).then(|| (inside.len() - 1) as f64 / (last - first))
 }
@@ -218,14 +259,23 @@ pub fn spectral_peak_hz(x: &[f64], rate: f64, band: (f64, f64)) -> Option<f64> {
 
 /// Tempo lock of a dance (positions `[T, 23, 3]` in metres) against the song's beats on the
 /// dance's clock.
-pub fn tempo_lock(positions: ArrayView3<'_, f32>, fps: f64, beat_times_s: &[f64]) -> Option<TempoLock> {
+pub fn tempo_lock(
+    positions: ArrayView3<'_, f32>,
+    fps: f64,
+    beat_times_s: &[f64],
+) -> Option<TempoLock> {
     let frames = positions.len_of(Axis(0));
     if frames < MIN_FRAMES {
         return None;
     }
     let beat_hz = beat_rate_hz(beat_times_s, frames as f64 / fps)?;
     let speed: Vec<f64> = (1..frames)
-        .map(|f| ANKLES.iter().map(|&j| step_length(positions, f, j) * fps).sum())
+        .map(|f| {
+            ANKLES
+                .iter()
+                .map(|&j| step_length(positions, f, j) * fps)
+                .sum()
+        })
         .collect();
     let step_hz = spectral_peak_hz(&speed, fps, STEP_BAND_HZ)?;
     let ratio = step_hz / beat_hz;
@@ -233,11 +283,21 @@ pub fn tempo_lock(positions: ArrayView3<'_, f32>, fps: f64, beat_times_s: &[f64]
         .iter()
         .map(|&q| (q, (ratio - q).abs() / q))
         .min_by(|a, b| a.1.total_cmp(&b.1))?;
-    Some(TempoLock { step_hz, beat_hz, ratio, fraction, distance, locked: distance <= TEMPO_LOCK_TOLERANCE })
+    Some(TempoLock {
+        step_hz,
+        beat_hz,
+        ratio,
+        fraction,
+        distance,
+        locked: distance <= TEMPO_LOCK_TOLERANCE,
+    })
 }
 
 fn step_length(p: ArrayView3<'_, f32>, f: usize, j: usize) -> f64 {
-    (0..3).map(|c| (f64::from(p[[f, j, c]]) - f64::from(p[[f - 1, j, c]])).powi(2)).sum::<f64>().sqrt()
+    (0..3)
+        .map(|c| (f64::from(p[[f, j, c]]) - f64::from(p[[f - 1, j, c]])).powi(2))
+        .sum::<f64>()
+        .sqrt()
 }
 
 /// Mean speed (m/s) of [`ARM_JOINTS`] relative to the spine joint; 0 for fewer than 2 frames.
@@ -246,11 +306,16 @@ pub fn arm_speed_m_s(positions: ArrayView3<'_, f32>, fps: f64) -> f64 {
     if frames < 2 {
         return 0.0;
     }
-    let rel = |f: usize, j: usize, c: usize| f64::from(positions[[f, j, c]]) - f64::from(positions[[f, SPINE, c]]);
+    let rel = |f: usize, j: usize, c: usize| {
+        f64::from(positions[[f, j, c]]) - f64::from(positions[[f, SPINE, c]])
+    };
     let mut sum = 0.0;
     for f in 1..frames {
         for &j in &ARM_JOINTS {
-            sum += (0..3).map(|c| (rel(f, j, c) - rel(f - 1, j, c)).powi(2)).sum::<f64>().sqrt();
+            sum += (0..3)
+                .map(|c| (rel(f, j, c) - rel(f - 1, j, c)).powi(2))
+                .sum::<f64>()
+                .sqrt();
         }
     }
     sum * fps / ((frames - 1) * ARM_JOINTS.len()) as f64
@@ -274,7 +339,9 @@ pub fn knee_backward_share(positions: ArrayView3<'_, f32>) -> f64 {
             let (hip, knee, ankle) = (at(f, HIPS[leg]), at(f, knees[leg]), at(f, ANKLES[leg]));
             let (thigh, shin) = (knee - hip, ankle - knee);
             let bent = thigh.angle(&shin).to_degrees() > KNEE_BENT_DEG;
-            let Some(line) = (ankle - hip).try_normalize(1e-9) else { continue };
+            let Some(line) = (ankle - hip).try_normalize(1e-9) else {
+                continue;
+            };
             let off_line = |v: nalgebra::Vector3<f64>| v - line * v.dot(&line);
             let knee_side = off_line(knee - hip);
             let foot = off_line(at(f, TOES[leg]) - at(f, HEELS[leg]));
@@ -306,7 +373,8 @@ mod tests {
                 p[[f, HIPS[leg] + 1, 1]] = ky;
                 p[[f, HIPS[leg] + 1, 2]] = 0.05; // knee forward (+z)
                 p[[f, ANKLES[leg], 1]] = ay;
-                p[[f, ANKLES[leg], 2]] = (0.2 * (2.0 * std::f64::consts::PI * ankle_hz * t + phase).sin()) as f32;
+                p[[f, ANKLES[leg], 2]] =
+                    (0.2 * (2.0 * std::f64::consts::PI * ankle_hz * t + phase).sin()) as f32;
                 p[[f, HEELS[leg], 1]] = 0.02;
                 p[[f, TOES[leg], 1]] = 0.02;
                 p[[f, TOES[leg], 2]] = 0.15; // toes forward (+z)
@@ -328,7 +396,8 @@ mod tests {
         assert_eq!(lock.fraction, 0.5);
         assert!(!lock.locked, "{lock:?}");
         // At 0.375 Hz the ankles' speed peaks at 0.75 Hz = half the beat: locked.
-        let lock = tempo_lock(stepping(25 * 60, fps, 0.375).view(), fps, &beats).expect("measurable");
+        let lock =
+            tempo_lock(stepping(25 * 60, fps, 0.375).view(), fps, &beats).expect("measurable");
         assert!(lock.distance < 0.005 && lock.locked, "{lock:?}");
     }
 
@@ -339,7 +408,10 @@ mod tests {
         let p = stepping(500, 25.0, 0.5);
         assert_eq!(tempo_lock(p.view(), 25.0, &[0.0, 0.5, 1.0]), None);
         // Beats after the dance do not count.
-        assert_eq!(tempo_lock(p.view(), 25.0, &[0.0, 0.5, 30.0, 31.0, 32.0]), None);
+        assert_eq!(
+            tempo_lock(p.view(), 25.0, &[0.0, 0.5, 30.0, 31.0, 32.0]),
+            None
+        );
     }
 
     #[test]
@@ -365,7 +437,11 @@ mod tests {
     #[test]
     fn a_knee_behind_the_line_against_the_toes_is_backwards() {
         let mut p = stepping(10, 25.0, 0.0);
-        assert_eq!(knee_backward_share(p.view()), 0.0, "knee forward of the line, with the toes");
+        assert_eq!(
+            knee_backward_share(p.view()),
+            0.0,
+            "knee forward of the line, with the toes"
+        );
         // Move one knee 10 cm behind the hip–ankle line (against the toes, −z): bent ~23°.
         for f in 0..10 {
             p[[f, HIPS[0] + 1, 2]] = -0.1;

@@ -32,7 +32,14 @@ use super::kinematics::{mean_speed, percentile};
 use crate::motion::{skeleton as sk, KeyPose, Motion};
 
 /// The foot points whose lowest is the body's contact with the floor: ankles, heels, toes.
-pub const FOOT_JOINTS: [usize; 6] = [sk::ANKLES[0], sk::HEELS[0], sk::TOES[0], sk::ANKLES[1], sk::HEELS[1], sk::TOES[1]];
+pub const FOOT_JOINTS: [usize; 6] = [
+    sk::ANKLES[0],
+    sk::HEELS[0],
+    sk::TOES[0],
+    sk::ANKLES[1],
+    sk::HEELS[1],
+    sk::TOES[1],
+];
 /// A lowest foot below this height (metres) is in the floor.
 pub const PENETRATION_M: f64 = -0.05;
 /// The span around a key pose searched for its largest pop (seconds either side).
@@ -57,7 +64,9 @@ pub mod thresholds {
 }
 
 /// p5, median and p95 of a per-frame series.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct Spread {
     pub p5: f64,
     pub median: f64,
@@ -67,12 +76,18 @@ pub struct Spread {
 impl Spread {
     /// The spread of `v` (NaN when empty).
     pub fn of(v: &[f64]) -> Self {
-        Self { p5: percentile(v, 5.0), median: percentile(v, 50.0), p95: percentile(v, 95.0) }
+        Self {
+            p5: percentile(v, 5.0),
+            median: percentile(v, 50.0),
+            p95: percentile(v, 95.0),
+        }
     }
 }
 
 /// Percentiles of the per-frame mean joint acceleration (m/s²).
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct Pops {
     pub median: f64,
     pub p99: f64,
@@ -94,7 +109,9 @@ impl Pops {
 
 /// The physical-plausibility numbers of a dance (or, in `choreo eval`, of every frame of a row's
 /// dances pooled).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct PhysicalScores {
     /// Per-frame lowest foot height (m, floor at 0).
     pub lowest_foot_m: Spread,
@@ -138,7 +155,9 @@ pub fn joint_acceleration(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> 
                 .map(|k| {
                     (0..3)
                         .map(|c| {
-                            let a = f64::from(positions[[f + 1, k, c]]) - 2.0 * f64::from(positions[[f, k, c]]) + f64::from(positions[[f - 1, k, c]]);
+                            let a = f64::from(positions[[f + 1, k, c]])
+                                - 2.0 * f64::from(positions[[f, k, c]])
+                                + f64::from(positions[[f - 1, k, c]]);
                             a * a
                         })
                         .sum::<f64>()
@@ -152,7 +171,12 @@ pub fn joint_acceleration(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> 
 
 /// For each key pose, the largest of `acceleration` (from [`joint_acceleration`]) within
 /// ±[`KEY_POP_SPAN_S`] of its frame; key poses outside the dance are left out.
-pub fn key_pose_pops(acceleration: &[f64], fps: f64, frames: usize, key_poses: &[KeyPose]) -> Vec<f64> {
+pub fn key_pose_pops(
+    acceleration: &[f64],
+    fps: f64,
+    frames: usize,
+    key_poses: &[KeyPose],
+) -> Vec<f64> {
     let span = (KEY_POP_SPAN_S * fps + 1e-9).floor() as i64;
     key_poses
         .iter()
@@ -164,7 +188,12 @@ pub fn key_pose_pops(acceleration: &[f64], fps: f64, frames: usize, key_poses: &
             // acceleration[i] is frame i + 1.
             let lo = (f - span - 1).max(0) as usize;
             let hi = ((f + span - 1).max(0) as usize).min(acceleration.len() - 1);
-            (lo <= hi).then(|| acceleration[lo..=hi].iter().copied().fold(f64::NAN, f64::max))
+            (lo <= hi).then(|| {
+                acceleration[lo..=hi]
+                    .iter()
+                    .copied()
+                    .fold(f64::NAN, f64::max)
+            })
         })
         .collect()
 }
@@ -174,7 +203,12 @@ pub fn physical_series(motion: &Motion, key_poses: &[KeyPose]) -> PhysicalSeries
     let p = motion.positions.view();
     let acceleration = joint_acceleration(p, motion.fps);
     let key_pose_pops = key_pose_pops(&acceleration, motion.fps, p.dim().0, key_poses);
-    PhysicalSeries { lowest_foot: lowest_foot(p, &FOOT_JOINTS), acceleration, speed: mean_speed(p, motion.fps), key_pose_pops }
+    PhysicalSeries {
+        lowest_foot: lowest_foot(p, &FOOT_JOINTS),
+        acceleration,
+        speed: mean_speed(p, motion.fps),
+        key_pose_pops,
+    }
 }
 
 fn mean(v: &[f64]) -> f64 {
@@ -200,11 +234,19 @@ impl PhysicalSeries {
 
     /// Summarises the series; `real_mean_speed_m_s` is the train split's mean joint speed.
     pub fn scores(&self, real_mean_speed_m_s: f64) -> PhysicalScores {
-        let below = self.lowest_foot.iter().filter(|&&h| h < PENETRATION_M).count();
+        let below = self
+            .lowest_foot
+            .iter()
+            .filter(|&&h| h < PENETRATION_M)
+            .count();
         let speed = mean(&self.speed);
         PhysicalScores {
             lowest_foot_m: Spread::of(&self.lowest_foot),
-            below_floor_share: if self.lowest_foot.is_empty() { f64::NAN } else { below as f64 / self.lowest_foot.len() as f64 },
+            below_floor_share: if self.lowest_foot.is_empty() {
+                f64::NAN
+            } else {
+                below as f64 / self.lowest_foot.len() as f64
+            },
             deepest_m: self.lowest_foot.iter().copied().fold(f64::NAN, f64::min),
             acceleration_m_s2: Pops::of(&self.acceleration),
             key_pose_pops_m_s2: self.key_pose_pops.clone(),
@@ -231,7 +273,8 @@ pub fn seed_distance_m(a: &Motion, b: &Motion) -> f64 {
         for k in 0..j {
             sum += (0..3)
                 .map(|c| {
-                    let d = (f64::from(pa[[f, k, c]]) - f64::from(ca[[f, c]])) - (f64::from(pb[[f, k, c]]) - f64::from(cb[[f, c]]));
+                    let d = (f64::from(pa[[f, k, c]]) - f64::from(ca[[f, c]]))
+                        - (f64::from(pb[[f, k, c]]) - f64::from(cb[[f, c]]));
                     d * d
                 })
                 .sum::<f64>()
@@ -242,7 +285,9 @@ pub fn seed_distance_m(a: &Motion, b: &Motion) -> f64 {
 }
 
 /// What the train split's dances measure (`choreo eval --write-reference`).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct PhysicalReference {
     /// Every train frame pooled.
     pub pooled: PhysicalScores,
@@ -263,7 +308,10 @@ impl PhysicalReference {
         let per: Vec<PhysicalScores> = series.iter().map(|s| s.scores(real_speed)).collect();
         let range = |f: &dyn Fn(&PhysicalScores) -> f64| {
             let v: Vec<f64> = per.iter().map(f).collect();
-            [v.iter().copied().fold(f64::INFINITY, f64::min), v.iter().copied().fold(f64::NEG_INFINITY, f64::max)]
+            [
+                v.iter().copied().fold(f64::INFINITY, f64::min),
+                v.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+            ]
         };
         Self {
             pooled: pooled_series.scores(real_speed),
@@ -292,7 +340,13 @@ impl Criterion {
     fn new(name: &str, value: Option<f64>, min: Option<f64>, max: Option<f64>) -> Self {
         let value = value.filter(|v| !v.is_nan());
         let pass = value.map(|v| min.is_none_or(|lo| v >= lo) && max.is_none_or(|hi| v <= hi));
-        Self { name: name.into(), value, min, max, pass }
+        Self {
+            name: name.into(),
+            value,
+            min,
+            max,
+            pass,
+        }
     }
 
     /// How far inside its bounds the value is (negative: outside); `None` when it does not apply.
@@ -305,7 +359,9 @@ impl Criterion {
 }
 
 /// Pass or fail per criterion of issue 10, with the measured values.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct Verdict {
     /// True when every criterion that applies passes.
     pub pass: bool,
@@ -314,12 +370,19 @@ pub struct Verdict {
 
 impl Verdict {
     fn from_criteria(criteria: Vec<Criterion>) -> Self {
-        Self { pass: criteria.iter().all(|c| c.pass != Some(false)), criteria }
+        Self {
+            pass: criteria.iter().all(|c| c.pass != Some(false)),
+            criteria,
+        }
     }
 
     /// The names of the failing criteria.
     pub fn failures(&self) -> Vec<&str> {
-        self.criteria.iter().filter(|c| c.pass == Some(false)).map(|c| c.name.as_str()).collect()
+        self.criteria
+            .iter()
+            .filter(|c| c.pass == Some(false))
+            .map(|c| c.name.as_str())
+            .collect()
     }
 
     /// The criterion called `name`.
@@ -353,7 +416,12 @@ impl Verdict {
 
     /// Adds (or replaces) the criterion that two seeds differ, `distance_m` from [`seed_distance_m`].
     pub fn with_seed_distance(mut self, distance_m: Option<f64>) -> Verdict {
-        let c = Criterion::new(names::SEEDS, distance_m, Some(thresholds::MIN_SEED_DISTANCE_M), None);
+        let c = Criterion::new(
+            names::SEEDS,
+            distance_m,
+            Some(thresholds::MIN_SEED_DISTANCE_M),
+            None,
+        );
         self.criteria.retain(|o| o.name != names::SEEDS);
         self.criteria.push(c);
         Verdict::from_criteria(self.criteria)
@@ -374,17 +442,46 @@ pub mod names {
 /// The verdict of one dance. `key_pose_errors_cm` are the per-key errors
 /// ([`super::kinematics::key_pose_errors_cm`]; empty: no key poses); `seed_distance_m` the
 /// distance to the same song danced with another seed, when there is one.
-pub fn verdict(s: &PhysicalScores, key_pose_errors_cm: &[f64], seed_distance_m: Option<f64>) -> Verdict {
+pub fn verdict(
+    s: &PhysicalScores,
+    key_pose_errors_cm: &[f64],
+    seed_distance_m: Option<f64>,
+) -> Verdict {
     use thresholds as t;
     let worst_key_pop = s.key_pose_pops_m_s2.iter().copied().reduce(f64::max);
     let worst_key = key_pose_errors_cm.iter().copied().reduce(f64::max);
     let criteria = vec![
-        Criterion::new(names::FOOT_MEDIAN, Some(s.lowest_foot_m.median), Some(t::FOOT_MEDIAN_M.0), Some(t::FOOT_MEDIAN_M.1)),
-        Criterion::new(names::FOOT_P5, Some(s.lowest_foot_m.p5), Some(t::FOOT_P5_M.0), Some(t::FOOT_P5_M.1)),
-        Criterion::new(names::POP_P999, Some(s.acceleration_m_s2.p99_9), None, Some(t::POP_P999_M_S2)),
+        Criterion::new(
+            names::FOOT_MEDIAN,
+            Some(s.lowest_foot_m.median),
+            Some(t::FOOT_MEDIAN_M.0),
+            Some(t::FOOT_MEDIAN_M.1),
+        ),
+        Criterion::new(
+            names::FOOT_P5,
+            Some(s.lowest_foot_m.p5),
+            Some(t::FOOT_P5_M.0),
+            Some(t::FOOT_P5_M.1),
+        ),
+        Criterion::new(
+            names::POP_P999,
+            Some(s.acceleration_m_s2.p99_9),
+            None,
+            Some(t::POP_P999_M_S2),
+        ),
         Criterion::new(names::KEY_POPS, worst_key_pop, None, Some(t::KEY_POP_M_S2)),
-        Criterion::new(names::SPEED, Some(s.mean_speed_m_s), Some(t::MIN_SPEED_M_S), None),
-        Criterion::new(names::SEEDS, seed_distance_m, Some(t::MIN_SEED_DISTANCE_M), None),
+        Criterion::new(
+            names::SPEED,
+            Some(s.mean_speed_m_s),
+            Some(t::MIN_SPEED_M_S),
+            None,
+        ),
+        Criterion::new(
+            names::SEEDS,
+            seed_distance_m,
+            Some(t::MIN_SEED_DISTANCE_M),
+            None,
+        ),
         Criterion::new(names::KEY_POSES, worst_key, None, Some(t::KEY_POSE_CM)),
     ];
     Verdict::from_criteria(criteria)
@@ -397,7 +494,16 @@ mod tests {
     use ndarray::Array3;
 
     fn still(frames: usize, y: f32) -> Motion {
-        Motion { fps: 25.0, positions: Array3::from_shape_fn((frames, NUM_JOINTS, 3), |(_, j, c)| if c == 1 { y + j as f32 * 0.05 } else { j as f32 * 0.01 }) }
+        Motion {
+            fps: 25.0,
+            positions: Array3::from_shape_fn((frames, NUM_JOINTS, 3), |(_, j, c)| {
+                if c == 1 {
+                    y + j as f32 * 0.05
+                } else {
+                    j as f32 * 0.01
+                }
+            }),
+        }
     }
 
     #[test]
@@ -410,12 +516,18 @@ mod tests {
         assert!((a[9] - 12.5).abs() < 1e-3, "{}", a[9]);
         assert!((a[8] - 6.25).abs() < 1e-3 && (a[10] - 6.25).abs() < 1e-3);
         assert!(a[..8].iter().chain(&a[11..]).all(|&x| x.abs() < 1e-6));
-        let kp = |t: f64| KeyPose { time_s: t, joints: vec![] };
+        let kp = |t: f64| KeyPose {
+            time_s: t,
+            joints: vec![],
+        };
         // ±0.5 s is ±12 frames: a key at frame 22 still sees frame 10's spike, one at 23 only
         // frame 11's half, one at 40 nothing; a key after the end is left out.
         let pops = key_pose_pops(&a, 25.0, 60, &[kp(0.88), kp(0.92), kp(1.6), kp(5.0)]);
         assert_eq!(pops.len(), 3);
-        assert!((pops[0] - 12.5).abs() < 1e-3 && (pops[1] - 6.25).abs() < 1e-3 && pops[2].abs() < 1e-6, "{pops:?}");
+        assert!(
+            (pops[0] - 12.5).abs() < 1e-3 && (pops[1] - 6.25).abs() < 1e-3 && pops[2].abs() < 1e-6,
+            "{pops:?}"
+        );
     }
 
     #[test]
@@ -437,20 +549,43 @@ mod tests {
     #[test]
     fn the_worst_member_decides_a_sets_verdict() {
         let good = PhysicalScores {
-            lowest_foot_m: Spread { p5: 0.01, median: 0.16, p95: 0.4 },
-            acceleration_m_s2: Pops { median: 3.0, p99: 20.0, p99_9: 50.0, max: 90.0 },
+            lowest_foot_m: Spread {
+                p5: 0.01,
+                median: 0.16,
+                p95: 0.4,
+            },
+            acceleration_m_s2: Pops {
+                median: 3.0,
+                p99: 20.0,
+                p99_9: 50.0,
+                max: 90.0,
+            },
             mean_speed_m_s: 1.0,
             ..Default::default()
         };
-        let floating = PhysicalScores { lowest_foot_m: Spread { p5: 1.1, median: 1.22, p95: 1.5 }, ..good.clone() };
+        let floating = PhysicalScores {
+            lowest_foot_m: Spread {
+                p5: 1.1,
+                median: 1.22,
+                p95: 1.5,
+            },
+            ..good.clone()
+        };
         let a = verdict(&good, &[], Some(0.2));
         assert!(a.pass, "{a:?}");
-        assert_eq!(a.get(names::KEY_POSES).and_then(|c| c.pass), None, "no key poses: does not apply");
+        assert_eq!(
+            a.get(names::KEY_POSES).and_then(|c| c.pass),
+            None,
+            "no key poses: does not apply"
+        );
         let b = verdict(&floating, &[], Some(0.2));
         assert_eq!(b.failures(), vec![names::FOOT_MEDIAN, names::FOOT_P5]);
         let set = Verdict::worst([&a, &b]);
         assert!(!set.pass);
-        assert_eq!(set.get(names::FOOT_MEDIAN).and_then(|c| c.value), Some(1.22));
+        assert_eq!(
+            set.get(names::FOOT_MEDIAN).and_then(|c| c.value),
+            Some(1.22)
+        );
         assert_eq!(set.with_seed_distance(Some(0.0)).failures().len(), 3);
     }
 }

@@ -24,7 +24,10 @@ pub struct AngleLimits {
 }
 
 /// The bend angle (degrees) of every triple on every frame, `[T][K]`.
-pub fn joint_angles(positions: ArrayView3<'_, f32>, triples: &[(usize, usize, usize)]) -> Vec<Vec<f64>> {
+pub fn joint_angles(
+    positions: ArrayView3<'_, f32>,
+    triples: &[(usize, usize, usize)],
+) -> Vec<Vec<f64>> {
     let t = positions.dim().0;
     (0..t)
         .map(|f| {
@@ -32,7 +35,9 @@ pub fn joint_angles(positions: ArrayView3<'_, f32>, triples: &[(usize, usize, us
                 .iter()
                 .map(|&(p, j, c)| {
                     let v = |a: usize, b: usize| -> [f64; 3] {
-                        std::array::from_fn(|k| positions[[f, b, k]] as f64 - positions[[f, a, k]] as f64)
+                        std::array::from_fn(|k| {
+                            positions[[f, b, k]] as f64 - positions[[f, a, k]] as f64
+                        })
                     };
                     let (u, w) = (v(p, j), v(j, c));
                     let dot = u[0] * w[0] + u[1] * w[1] + u[2] * w[2];
@@ -51,7 +56,10 @@ pub fn joint_angles(positions: ArrayView3<'_, f32>, triples: &[(usize, usize, us
 
 /// Angular velocities (deg/s) from [`joint_angles`], `[T−1][K]`.
 pub fn angular_velocities(angles: &[Vec<f64>], fps: f64) -> Vec<Vec<f64>> {
-    angles.windows(2).map(|w| w[1].iter().zip(&w[0]).map(|(b, a)| (b - a) * fps).collect()).collect()
+    angles
+        .windows(2)
+        .map(|w| w[1].iter().zip(&w[0]).map(|(b, a)| (b - a) * fps).collect())
+        .collect()
 }
 
 /// Share of rows whose every value lies within its `[lo, hi]`; 0 for no rows.
@@ -59,12 +67,17 @@ fn share_within(rows: &[Vec<f64>], limits: &[[f64; 2]]) -> f64 {
     if rows.is_empty() {
         return 0.0;
     }
-    let ok = rows.iter().filter(|r| r.iter().zip(limits).all(|(x, l)| *x >= l[0] && *x <= l[1])).count();
+    let ok = rows
+        .iter()
+        .filter(|r| r.iter().zip(limits).all(|(x, l)| *x >= l[0] && *x <= l[1]))
+        .count();
     ok as f64 / rows.len() as f64
 }
 
 /// Authenticity and coherence of one dance.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct Plausibility {
     /// Share of frames with every joint angle within the real 0.5–99.5 % limits.
     pub authenticity: f64,
@@ -73,7 +86,11 @@ pub struct Plausibility {
 }
 
 /// Authenticity and coherence of `positions` against `limits`.
-pub fn plausibility(positions: ArrayView3<'_, f32>, fps: f64, limits: &AngleLimits) -> Plausibility {
+pub fn plausibility(
+    positions: ArrayView3<'_, f32>,
+    fps: f64,
+    limits: &AngleLimits,
+) -> Plausibility {
     let angles = joint_angles(positions, &limits.triples);
     let vel = angular_velocities(&angles, fps);
     Plausibility {

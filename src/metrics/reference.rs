@@ -29,7 +29,6 @@ pub const MIN_FEATURE_STD: f64 = 1e-8;
 /// The `window_s` (and `stride_s`) recorded for whole-dance features: one vector per dance.
 pub const WHOLE_DANCE: f64 = 0.0;
 
-
 /// Statistics of one feature kind over the real train windows.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct FeatureStats {
@@ -47,18 +46,36 @@ pub struct FeatureStats {
 impl FeatureStats {
     /// Fits the statistics to raw train window features.
     pub fn fit(window_s: f64, stride_s: f64, rows: &[Vec<f64>]) -> Result<Self, MetricsError> {
-        let full = ZNorm::fit(rows).ok_or_else(|| MetricsError::NotEnoughData("no train windows".into()))?;
-        let kept: Vec<usize> = (0..full.std.len()).filter(|&k| full.std[k] >= MIN_FEATURE_STD).collect();
-        let sel: Vec<Vec<f64>> = rows.iter().map(|r| kept.iter().map(|&k| r[k]).collect()).collect();
-        let znorm = ZNorm::fit(&sel).ok_or_else(|| MetricsError::NotEnoughData("no train windows".into()))?;
+        let full = ZNorm::fit(rows)
+            .ok_or_else(|| MetricsError::NotEnoughData("no train windows".into()))?;
+        let kept: Vec<usize> = (0..full.std.len())
+            .filter(|&k| full.std[k] >= MIN_FEATURE_STD)
+            .collect();
+        let sel: Vec<Vec<f64>> = rows
+            .iter()
+            .map(|r| kept.iter().map(|&k| r[k]).collect())
+            .collect();
+        let znorm = ZNorm::fit(&sel)
+            .ok_or_else(|| MetricsError::NotEnoughData("no train windows".into()))?;
         let normed: Vec<Vec<f64>> = sel.iter().map(|r| znorm.apply(r)).collect();
-        let gaussian = Gaussian::fit(&normed).ok_or_else(|| MetricsError::NotEnoughData("no train windows".into()))?;
-        Ok(Self { window_s, stride_s, kept, znorm, gaussian })
+        let gaussian = Gaussian::fit(&normed)
+            .ok_or_else(|| MetricsError::NotEnoughData("no train windows".into()))?;
+        Ok(Self {
+            window_s,
+            stride_s,
+            kept,
+            znorm,
+            gaussian,
+        })
     }
 
     /// Keeps the informative features of a raw row and z-normalises them.
     pub fn normalise(&self, raw: &[f64]) -> Vec<f64> {
-        let sel: Vec<f64> = self.kept.iter().map(|&k| raw.get(k).copied().unwrap_or(0.0)).collect();
+        let sel: Vec<f64> = self
+            .kept
+            .iter()
+            .map(|&k| raw.get(k).copied().unwrap_or(0.0))
+            .collect();
         self.znorm.apply(&sel)
     }
 }
@@ -112,7 +129,12 @@ pub fn kinetic_windows(motion: &Motion, window_s: f64, stride_s: f64) -> Vec<Vec
 }
 
 /// Raw geometric features of windows of `window_s` every `stride_s`.
-pub fn geometric_windows(motion: &Motion, scale: &BodyScale, window_s: f64, stride_s: f64) -> Vec<Vec<f64>> {
+pub fn geometric_windows(
+    motion: &Motion,
+    scale: &BodyScale,
+    window_s: f64,
+    stride_s: f64,
+) -> Vec<Vec<f64>> {
     let aug = augment(motion.positions.view());
     let len = (window_s * motion.fps).round() as usize;
     let stride = (stride_s * motion.fps).round() as usize;
@@ -120,7 +142,12 @@ pub fn geometric_windows(motion: &Motion, scale: &BodyScale, window_s: f64, stri
         .into_iter()
         .map(|s0| {
             let end = (s0 + len).min(aug.dim().0);
-            geometric_features(aug.slice(ndarray::s![s0..end, .., ..]), motion.fps, &GEOMETRIC_JOINTS, scale)
+            geometric_features(
+                aug.slice(ndarray::s![s0..end, .., ..]),
+                motion.fps,
+                &GEOMETRIC_JOINTS,
+                scale,
+            )
         })
         .collect()
 }
@@ -130,11 +157,17 @@ pub fn geometric_windows(motion: &Motion, scale: &BodyScale, window_s: f64, stri
 pub fn dance_features(motion: &Motion, scale: &BodyScale) -> (Vec<f64>, Vec<f64>) {
     let aug = augment(motion.positions.view());
     let kin = kinetic_view(&aug);
-    (kinetic_features(kin.view(), motion.fps), geometric_features(aug.view(), motion.fps, &GEOMETRIC_JOINTS, scale))
+    (
+        kinetic_features(kin.view(), motion.fps),
+        geometric_features(aug.view(), motion.fps, &GEOMETRIC_JOINTS, scale),
+    )
 }
 
 fn dist(p: ArrayView3<'_, f32>, f: usize, a: usize, b: usize) -> f64 {
-    (0..3).map(|c| (p[[f, a, c]] as f64 - p[[f, b, c]] as f64).powi(2)).sum::<f64>().sqrt()
+    (0..3)
+        .map(|c| (p[[f, a, c]] as f64 - p[[f, b, c]] as f64).powi(2))
+        .sum::<f64>()
+        .sqrt()
 }
 
 /// Median humerus length (both arms), shoulder width and hip width over every frame of `motions`.
@@ -149,14 +182,19 @@ pub fn body_scale(motions: &[Motion]) -> BodyScale {
             hw.push(dist(p, f, sk::HIPS[0], sk::HIPS[1]));
         }
     }
-    BodyScale { humerus: percentile(&hl, 50.0), shoulder_width: percentile(&sw, 50.0), hip_width: percentile(&hw, 50.0) }
+    BodyScale {
+        humerus: percentile(&hl, 50.0),
+        shoulder_width: percentile(&sw, 50.0),
+        hip_width: percentile(&hw, 50.0),
+    }
 }
 
 /// Joint-angle and angular-velocity limits: 0.5 and 99.5 percentiles over every frame of `motions`.
 pub fn angle_limits(motions: &[Motion]) -> AngleLimits {
     let triples = angle_triples();
     let k = triples.len();
-    let (mut ang, mut vel): (Vec<Vec<f64>>, Vec<Vec<f64>>) = (vec![Vec::new(); k], vec![Vec::new(); k]);
+    let (mut ang, mut vel): (Vec<Vec<f64>>, Vec<Vec<f64>>) =
+        (vec![Vec::new(); k], vec![Vec::new(); k]);
     for m in motions {
         let a = joint_angles(m.positions.view(), &triples);
         for row in angular_velocities(&a, m.fps) {
@@ -173,8 +211,14 @@ pub fn angle_limits(motions: &[Motion]) -> AngleLimits {
     let (lo, hi) = LIMIT_PERCENTILES;
     AngleLimits {
         triples,
-        angle_deg: ang.iter().map(|v| [percentile(v, lo), percentile(v, hi)]).collect(),
-        velocity_deg_s: vel.iter().map(|v| [percentile(v, lo), percentile(v, hi)]).collect(),
+        angle_deg: ang
+            .iter()
+            .map(|v| [percentile(v, lo), percentile(v, hi)])
+            .collect(),
+        velocity_deg_s: vel
+            .iter()
+            .map(|v| [percentile(v, lo), percentile(v, hi)])
+            .collect(),
     }
 }
 
@@ -185,8 +229,15 @@ impl ReferenceStats {
     }
 
     /// Computes the statistics from real dances (the train split; `names` label them).
-    pub fn compute(source: &str, names: Vec<String>, motions: &[Motion]) -> Result<Self, MetricsError> {
-        let fps = motions.first().map(|m| m.fps).ok_or_else(|| MetricsError::NotEnoughData("no dances".into()))?;
+    pub fn compute(
+        source: &str,
+        names: Vec<String>,
+        motions: &[Motion],
+    ) -> Result<Self, MetricsError> {
+        let fps = motions
+            .first()
+            .map(|m| m.fps)
+            .ok_or_else(|| MetricsError::NotEnoughData("no dances".into()))?;
         if motions.iter().any(|m| (m.fps - fps).abs() > 1e-9) {
             return Err(MetricsError::MixedFrameRates);
         }
@@ -200,7 +251,12 @@ impl ReferenceStats {
             kin_dance.push(k);
             geo_dance.push(g);
             kin.extend(kinetic_windows(m, FID_WINDOW_S, FID_STRIDE_S));
-            geo.extend(geometric_windows(m, &body_scale, FID_WINDOW_S, FID_STRIDE_S));
+            geo.extend(geometric_windows(
+                m,
+                &body_scale,
+                FID_WINDOW_S,
+                FID_STRIDE_S,
+            ));
             curve.extend(kinetic_windows(m, CURVE_WINDOW_S, FID_STRIDE_S));
         }
         Ok(Self {
@@ -223,6 +279,9 @@ impl ReferenceStats {
     /// Writes the statistics as pretty JSON.
     pub fn write(&self, path: &std::path::Path) -> Result<(), MetricsError> {
         let text = serde_json::to_string(self)?;
-        std::fs::write(path, text).map_err(|source| MetricsError::Io { path: path.display().to_string(), source })
+        std::fs::write(path, text).map_err(|source| MetricsError::Io {
+            path: path.display().to_string(),
+            source,
+        })
     }
 }

@@ -1,11 +1,18 @@
 //! Every metric of one dance, and of a set of dances (a row of `choreo eval`).
-use super::beats::{beats_within, kinematic_beats_bailando, kinematic_beats_fact, rhythm_scores, RhythmScores};
+use super::beats::{
+    beats_within, kinematic_beats_bailando, kinematic_beats_fact, rhythm_scores, RhythmScores,
+};
 use super::fid::{frechet_distance, mean_pairwise_distance, Gaussian};
-use super::kinematics::{foot_skating, freezing, key_pose_errors_cm, smoothness_cv, FootSkating, Freezing};
+use super::kinematics::{
+    foot_skating, freezing, key_pose_errors_cm, smoothness_cv, FootSkating, Freezing,
+};
 use super::musicality::{Musicality, MusicalitySummary};
 use super::physical::{physical_series, verdict, PhysicalScores, PhysicalSeries, Verdict};
 use super::plausibility::{plausibility, Plausibility};
-use super::reference::{dance_features, geometric_windows, kinetic_windows, FeatureStats, ReferenceStats, CURVE_WINDOW_S};
+use super::reference::{
+    dance_features, geometric_windows, kinetic_windows, FeatureStats, ReferenceStats,
+    CURVE_WINDOW_S,
+};
 use super::rotation_flips::RotationFlips;
 use super::MetricsError;
 use crate::motion::{skeleton as sk, KeyPose, Motion, NUM_JOINTS};
@@ -22,7 +29,9 @@ pub struct WindowFeatures {
 }
 
 /// Kinematic beat times (seconds from the first frame).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct KinematicBeats {
     /// FACT variant: minima of summed joint speed, order 10 at 60 fps scaled.
     pub fact: Vec<f64>,
@@ -31,7 +40,9 @@ pub struct KinematicBeats {
 }
 
 /// Every per-dance number.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct DanceScores {
     pub rhythm: RhythmScores,
     /// FID_k of this dance's 5-s windows against the real train windows.
@@ -81,10 +92,16 @@ pub struct ScoredDance {
 fn check(motion: &Motion) -> Result<(), MetricsError> {
     let dim = motion.positions.dim();
     if dim.1 != NUM_JOINTS || dim.2 != 3 {
-        return Err(MetricsError::JointCount { got: dim.1, want: NUM_JOINTS });
+        return Err(MetricsError::JointCount {
+            got: dim.1,
+            want: NUM_JOINTS,
+        });
     }
     if dim.0 < 2 || !(motion.fps.is_finite() && motion.fps > 0.0) {
-        return Err(MetricsError::NotEnoughData(format!("{} frames at {} fps", dim.0, motion.fps)));
+        return Err(MetricsError::NotEnoughData(format!(
+            "{} frames at {} fps",
+            dim.0, motion.fps
+        )));
     }
     if motion.positions.iter().any(|v| !v.is_finite()) {
         return Err(MetricsError::NotEnoughData("non-finite positions".into()));
@@ -109,17 +126,34 @@ pub fn diversity(stats: &FeatureStats, raw: &[Vec<f64>]) -> f64 {
 
 /// Scores one dance. `music_beats` are on the dance's clock (motion frame 0 at 0 s); beats outside
 /// the dance are ignored.
-pub fn score_dance(motion: &Motion, music_beats: &[f64], key_poses: &[KeyPose], reference: &ReferenceStats) -> Result<ScoredDance, MetricsError> {
+pub fn score_dance(
+    motion: &Motion,
+    music_beats: &[f64],
+    key_poses: &[KeyPose],
+    reference: &ReferenceStats,
+) -> Result<ScoredDance, MetricsError> {
     check(motion)?;
     let p = motion.positions.view();
     let fps = motion.fps;
     let span = (p.dim().0 - 1) as f64 / fps;
     let music = beats_within(music_beats, span);
-    let kb = KinematicBeats { fact: kinematic_beats_fact(p, fps), bailando: kinematic_beats_bailando(p, fps) };
+    let kb = KinematicBeats {
+        fact: kinematic_beats_fact(p, fps),
+        bailando: kinematic_beats_bailando(p, fps),
+    };
     let (kinetic_dance, geometric_dance) = dance_features(motion, &reference.body_scale);
     let features = WindowFeatures {
-        kinetic: kinetic_windows(motion, reference.kinetic.window_s, reference.kinetic.stride_s),
-        geometric: geometric_windows(motion, &reference.body_scale, reference.geometric.window_s, reference.geometric.stride_s),
+        kinetic: kinetic_windows(
+            motion,
+            reference.kinetic.window_s,
+            reference.kinetic.stride_s,
+        ),
+        geometric: geometric_windows(
+            motion,
+            &reference.body_scale,
+            reference.geometric.window_s,
+            reference.geometric.stride_s,
+        ),
         kinetic_dance,
         geometric_dance,
     };
@@ -137,13 +171,24 @@ pub fn score_dance(motion: &Motion, music_beats: &[f64], key_poses: &[KeyPose], 
         foot_skating: foot_skating(p, fps, &sk::FOOT_POINTS),
         freezing_ratio: fr.last_first_ratio,
         plausibility: plausibility(p, fps, &reference.angle_limits),
-        key_pose_error_cm: if key_errors.is_empty() { None } else { Some(key_errors.iter().sum::<f64>() / key_errors.len() as f64) },
+        key_pose_error_cm: if key_errors.is_empty() {
+            None
+        } else {
+            Some(key_errors.iter().sum::<f64>() / key_errors.len() as f64)
+        },
         verdict: verdict(&physical, &key_errors, None),
         physical,
         musicality: Musicality::of(motion, &music),
         rotation_flips: None,
     };
-    Ok(ScoredDance { scores, music_beats: music, kinematic_beats: kb, freezing: fr, features, physical: series })
+    Ok(ScoredDance {
+        scores,
+        music_beats: music,
+        kinematic_beats: kb,
+        freezing: fr,
+        features,
+        physical: series,
+    })
 }
 
 /// One point of the windowed FID_k curve.
@@ -165,9 +210,19 @@ pub fn fid_k_curve(motion: &Motion, reference: &ReferenceStats) -> Vec<CurvePoin
     let mut out = Vec::new();
     let mut s0 = 0;
     while s0 + len <= t {
-        let clip = Motion { fps: motion.fps, positions: motion.positions.slice(ndarray::s![s0..s0 + len, .., ..]).to_owned() };
+        let clip = Motion {
+            fps: motion.fps,
+            positions: motion
+                .positions
+                .slice(ndarray::s![s0..s0 + len, .., ..])
+                .to_owned(),
+        };
         let raw = kinetic_windows(&clip, CURVE_WINDOW_S, CURVE_WINDOW_S);
-        out.push(CurvePoint { start_s: s0 as f64 / motion.fps, end_s: (s0 + len) as f64 / motion.fps, fid_k: fid_against(stats, &raw) });
+        out.push(CurvePoint {
+            start_s: s0 as f64 / motion.fps,
+            end_s: (s0 + len) as f64 / motion.fps,
+            fid_k: fid_against(stats, &raw),
+        });
         s0 += len;
     }
     out
@@ -176,7 +231,9 @@ pub fn fid_k_curve(motion: &Motion, reference: &ReferenceStats) -> Vec<CurvePoin
 /// Means of the per-dance scores over a set, with FID and diversity recomputed on the pooled
 /// windows of the whole set (the way papers report a model), FID also on one vector per dance
 /// (Bailando's protocol), and the physical numbers on every frame of the set pooled.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct SetScores {
     /// Dances in the set.
     pub dances: usize,
@@ -216,8 +273,14 @@ fn mean_of(v: impl Iterator<Item = f64>) -> f64 {
 pub fn score_set(dances: &[ScoredDance], reference: &ReferenceStats) -> SetScores {
     let d = || dances.iter().map(|s| &s.scores);
     let r = || d().map(|s| &s.rhythm);
-    let kin: Vec<Vec<f64>> = dances.iter().flat_map(|s| s.features.kinetic.iter().cloned()).collect();
-    let geo: Vec<Vec<f64>> = dances.iter().flat_map(|s| s.features.geometric.iter().cloned()).collect();
+    let kin: Vec<Vec<f64>> = dances
+        .iter()
+        .flat_map(|s| s.features.kinetic.iter().cloned())
+        .collect();
+    let geo: Vec<Vec<f64>> = dances
+        .iter()
+        .flat_map(|s| s.features.geometric.iter().cloned())
+        .collect();
     let kp: Vec<f64> = d().filter_map(|s| s.key_pose_error_cm).collect();
     let mean = DanceScores {
         rhythm: RhythmScores {
@@ -251,17 +314,29 @@ pub fn score_set(dances: &[ScoredDance], reference: &ReferenceStats) -> SetScore
             authenticity: mean_of(d().map(|s| s.plausibility.authenticity)),
             coherence: mean_of(d().map(|s| s.plausibility.coherence)),
         },
-        key_pose_error_cm: if kp.is_empty() { None } else { Some(mean_of(kp.into_iter())) },
-        physical: PhysicalSeries::pooled(dances.iter().map(|s| &s.physical)).scores(reference.physical.pooled.mean_speed_m_s),
+        key_pose_error_cm: if kp.is_empty() {
+            None
+        } else {
+            Some(mean_of(kp.into_iter()))
+        },
+        physical: PhysicalSeries::pooled(dances.iter().map(|s| &s.physical))
+            .scores(reference.physical.pooled.mean_speed_m_s),
         verdict: Verdict::worst(d().map(|s| &s.verdict)),
         musicality: MusicalitySummary::mean(d().map(|s| &s.musicality)),
         rotation_flips: {
-            let measured: Vec<&RotationFlips> = d().filter_map(|s| s.rotation_flips.as_ref()).collect();
+            let measured: Vec<&RotationFlips> =
+                d().filter_map(|s| s.rotation_flips.as_ref()).collect();
             (!measured.is_empty()).then(|| RotationFlips::pooled(measured.into_iter()))
         },
     };
-    let kin_dance: Vec<Vec<f64>> = dances.iter().map(|s| s.features.kinetic_dance.clone()).collect();
-    let geo_dance: Vec<Vec<f64>> = dances.iter().map(|s| s.features.geometric_dance.clone()).collect();
+    let kin_dance: Vec<Vec<f64>> = dances
+        .iter()
+        .map(|s| s.features.kinetic_dance.clone())
+        .collect();
+    let geo_dance: Vec<Vec<f64>> = dances
+        .iter()
+        .map(|s| s.features.geometric_dance.clone())
+        .collect();
     SetScores {
         dances: dances.len(),
         mean,
@@ -286,7 +361,12 @@ pub fn multimodality(per_song: &[Vec<&ScoredDance>], reference: &ReferenceStats)
             let means: Vec<Vec<f64>> = v
                 .iter()
                 .filter_map(|s| {
-                    let normed: Vec<Vec<f64>> = s.features.kinetic.iter().map(|r| reference.kinetic.normalise(r)).collect();
+                    let normed: Vec<Vec<f64>> = s
+                        .features
+                        .kinetic
+                        .iter()
+                        .map(|r| reference.kinetic.normalise(r))
+                        .collect();
                     Gaussian::fit(&normed).map(|g| g.mean)
                 })
                 .collect();

@@ -41,7 +41,9 @@ pub const HEAD: usize = crate::motion::NUM_JOINTS + 2;
 pub const AUGMENTED_JOINTS: usize = crate::motion::NUM_JOINTS + 3;
 
 /// Joints (augmented indices) whose kinetic features make up FID_k: 21 anatomical + pelvis.
-pub const KINETIC_JOINTS: [usize; 22] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, PELVIS];
+pub const KINETIC_JOINTS: [usize; 22] = [
+    0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18, 19, 20, PELVIS,
+];
 
 /// The SMPL joints of the geometric features, as augmented indices.
 pub const GEOMETRIC_JOINTS: GeometricJoints = GeometricJoints {
@@ -70,7 +72,9 @@ pub fn augment(positions: ArrayView3<'_, f32>) -> Array3<f32> {
     let (t, j, _) = positions.dim();
     let mut out = Array3::<f32>::zeros((t, j + 3, 3));
     out.slice_mut(s![.., ..j, ..]).assign(&positions);
-    let mid = |a: usize, b: usize, f: usize, c: usize| 0.5 * (positions[[f, a, c]] + positions[[f, b, c]]);
+    let mid = |a: usize, b: usize, f: usize, c: usize| {
+        0.5 * (positions[[f, a, c]] + positions[[f, b, c]])
+    };
     for f in 0..t {
         for c in 0..3 {
             out[[f, PELVIS, c]] = mid(sk::HIPS[0], sk::HIPS[1], f, c);

@@ -21,11 +21,13 @@ use std::path::Path;
 
 use super::folder;
 use super::layers::{sinusoid, Lstm, LstmState};
-use super::{to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
+use super::{
+    to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
+    InstancePool, ModelError, ModelId, ModelInfo, Progress,
+};
 use crate::motion::dataset::NormStats;
 use crate::motion::repr::RootStart;
 use crate::stage::Stage;
-
 
 /// Hyper-parameters, with the paper's symbols.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -76,7 +78,19 @@ impl Config {
 
     /// A tiny configuration for tests: same blocks, a fraction of the width.
     pub fn tiny(music_dim: i64, pose_dim: i64) -> Self {
-        Self { music_dim, pose_dim, d_z: 16, n_layers: 1, n_heads: 2, k: 8, d_ff: 32, hidden: 32, lstm_layers: 2, dropout: 0.0, beat_clock: false }
+        Self {
+            music_dim,
+            pose_dim,
+            d_z: 16,
+            n_layers: 1,
+            n_heads: 2,
+            k: 8,
+            d_ff: 32,
+            hidden: 32,
+            lstm_layers: 2,
+            dropout: 0.0,
+            beat_clock: false,
+        }
     }
 }
 
@@ -115,25 +129,42 @@ impl LocalSelfAttention {
         let np = nb * w; // padded length
         let dev = x.device();
         // [b, n, 3, h, dh] → three of [b, h, nb, w, dh], time padded to a whole number of blocks.
-        let qkv = x.apply(&self.qkv).view([b, n, 3, h, dh]).permute([2, 0, 3, 1, 4]);
-        let qkv = qkv.constant_pad_nd([0, 0, 0, np - n]).view([3, b, h, nb, w, dh]);
+        let qkv = x
+            .apply(&self.qkv)
+            .view([b, n, 3, h, dh])
+            .permute([2, 0, 3, 1, 4]);
+        let qkv = qkv
+            .constant_pad_nd([0, 0, 0, np - n])
+            .view([3, b, h, nb, w, dh]);
         let (q, k, v) = (qkv.get(0), qkv.get(1), qkv.get(2));
         let window = |t: Tensor| {
             let p = t.constant_pad_nd([0, 0, 0, 0, 1, 1]); // one empty block each side: [b, h, nb+2, w, dh]
-            Tensor::cat(&[p.narrow(2, 0, nb), p.narrow(2, 1, nb), p.narrow(2, 2, nb)], 3) // [b, h, nb, 3w, dh]
+            Tensor::cat(
+                &[p.narrow(2, 0, nb), p.narrow(2, 1, nb), p.narrow(2, 2, nb)],
+                3,
+            ) // [b, h, nb, 3w, dh]
         };
         let (k, v) = (window(k), window(v));
         let scores = q.matmul(&k.transpose(-1, -2)) / (dh as f64).sqrt(); // [b, h, nb, w, 3w]
-        // Query at blk*w + r, key slot s ↔ position (blk-1)*w + s: keep |offset| ≤ w, inside [0, n).
+                                                                          // Query at blk*w + r, key slot s ↔ position (blk-1)*w + s: keep |offset| ≤ w, inside [0, n).
         let r = Tensor::arange(w, (Kind::Int64, dev)).view([1, w, 1]);
         let s = Tensor::arange(3 * w, (Kind::Int64, dev)).view([1, 1, 3 * w]);
         let blk = Tensor::arange(nb, (Kind::Int64, dev)).view([nb, 1, 1]);
         let kpos = (&blk - 1) * w + &s;
         let off = &s - &r; // = kpos - qpos + w
-        let outside = off.lt(0).logical_or(&off.gt(2 * w)).logical_or(&kpos.lt(0)).logical_or(&kpos.ge(n));
-        let attn = scores.masked_fill(&outside.view([1, 1, nb, w, 3 * w]), f64::NEG_INFINITY).softmax(-1, Kind::Float);
+        let outside = off
+            .lt(0)
+            .logical_or(&off.gt(2 * w))
+            .logical_or(&kpos.lt(0))
+            .logical_or(&kpos.ge(n));
+        let attn = scores
+            .masked_fill(&outside.view([1, 1, nb, w, 3 * w]), f64::NEG_INFINITY)
+            .softmax(-1, Kind::Float);
         let y = attn.matmul(&v).view([b, h, np, dh]).narrow(2, 0, n); // [b, h, n, dh]
-        y.permute([0, 2, 1, 3]).contiguous().view([b, n, d]).apply(&self.out)
+        y.permute([0, 2, 1, 3])
+            .contiguous()
+            .view([b, n, d])
+            .apply(&self.out)
     }
 }
 
@@ -163,7 +194,11 @@ impl EncoderLayer {
     fn forward(&self, x: &Tensor, train: bool) -> Tensor {
         let a = self.attn.forward(x).dropout(self.dropout, train);
         let x = (x + a).apply(&self.norm1);
-        let f = x.apply(&self.ff1).relu().apply(&self.ff2).dropout(self.dropout, train);
+        let f = x
+            .apply(&self.ff1)
+            .relu()
+            .apply(&self.ff2)
+            .dropout(self.dropout, train);
         (x + f).apply(&self.norm2)
     }
 }
@@ -181,7 +216,9 @@ impl MusicEncoder {
     fn new(p: nn::Path, c: &Config) -> Self {
         Self {
             embed: nn::linear(&p / "embed", c.music_dim, c.d_z, Default::default()),
-            layers: (0..c.n_layers).map(|i| EncoderLayer::new(&p / "layers" / i, c)).collect(),
+            layers: (0..c.n_layers)
+                .map(|i| EncoderLayer::new(&p / "layers" / i, c))
+                .collect(),
             d_z: c.d_z,
             k: c.k,
         }
@@ -190,7 +227,8 @@ impl MusicEncoder {
     /// Encodes a window whose first frame is song frame `start` (for the position encoding).
     pub fn forward(&self, music: &Tensor, start: i64, train: bool) -> Tensor {
         let n = music.size()[1];
-        let mut x = music.apply(&self.embed) + sinusoid(start, n, self.d_z, music.device()).unsqueeze(0);
+        let mut x =
+            music.apply(&self.embed) + sinusoid(start, n, self.d_z, music.device()).unsqueeze(0);
         for layer in &self.layers {
             x = layer.forward(&x, train);
         }
@@ -200,10 +238,21 @@ impl MusicEncoder {
     /// Encodes a whole song `[1, n, music_dim]` in overlapping chunks so memory stays bounded.
     /// Each chunk carries `k` frames of context on each side, which covers every window that an
     /// `N`-layer stack of local attention can see (`N·k/2` per side for `N` ≤ 2).
-    pub fn forward_chunked(&self, music: &Tensor, chunk: i64, on_chunk: impl FnMut(f32) -> bool) -> Option<Tensor> {
+    pub fn forward_chunked(
+        &self,
+        music: &Tensor,
+        chunk: i64,
+        on_chunk: impl FnMut(f32) -> bool,
+    ) -> Option<Tensor> {
         let n = music.size()[1];
         let ctx = self.k * (self.layers.len() as i64).max(1) / 2 + 1;
-        super::layers::chunked(n, chunk, ctx, |cs, len| self.forward(&music.narrow(1, cs, len), cs, false), on_chunk)
+        super::layers::chunked(
+            n,
+            chunk,
+            ctx,
+            |cs, len| self.forward(&music.narrow(1, cs, len), cs, false),
+            on_chunk,
+        )
     }
 }
 
@@ -218,7 +267,12 @@ impl DanceDecoder {
     fn new(p: nn::Path, c: &Config) -> Self {
         Self {
             lstm: Lstm::new(&p / "lstm", c.pose_dim, c.hidden, c.lstm_layers),
-            readout: nn::linear(&p / "readout", c.hidden + c.d_z, c.pose_dim, Default::default()),
+            readout: nn::linear(
+                &p / "readout",
+                c.hidden + c.d_z,
+                c.pose_dim,
+                Default::default(),
+            ),
         }
     }
 
@@ -231,7 +285,9 @@ impl DanceDecoder {
     /// Runs `inputs` `[b, t, pose]` (the poses *before* each output frame) against `z` `[b, t, d_z]`.
     fn run(&self, inputs: &Tensor, z: &Tensor, state: &mut LstmState) -> Tensor {
         let t = inputs.size()[1];
-        let hs: Vec<Tensor> = (0..t).map(|i| self.lstm.step(&inputs.select(1, i), state)).collect();
+        let hs: Vec<Tensor> = (0..t)
+            .map(|i| self.lstm.step(&inputs.select(1, i), state))
+            .collect();
         Tensor::cat(&[Tensor::stack(&hs, 1), z.shallow_clone()], 2).apply(&self.readout)
     }
 }
@@ -247,7 +303,11 @@ pub struct DanceRevolution {
 impl DanceRevolution {
     /// Builds the model's variables under `p` (checkpoint keys `encoder.*`, `decoder.*`).
     pub fn new(p: &nn::Path, config: Config) -> Self {
-        Self { encoder: MusicEncoder::new(p / "encoder", &config), decoder: DanceDecoder::new(p / "decoder", &config), config }
+        Self {
+            encoder: MusicEncoder::new(p / "encoder", &config),
+            decoder: DanceDecoder::new(p / "decoder", &config),
+            config,
+        }
     }
 
     /// Training forward pass with the dynamic auto-condition curriculum (§3.3).
@@ -260,7 +320,16 @@ impl DanceRevolution {
     /// position a served song can reach ([`MAX_POSITION`]), so training and serving see the same
     /// encodings.
     #[allow(clippy::too_many_arguments)]
-    pub fn forward_curriculum(&self, music: &Tensor, poses: &Tensor, start: i64, p: i64, q: i64, seed: u64, train: bool) -> Tensor {
+    pub fn forward_curriculum(
+        &self,
+        music: &Tensor,
+        poses: &Tensor,
+        start: i64,
+        p: i64,
+        q: i64,
+        seed: u64,
+        train: bool,
+    ) -> Tensor {
         let (b, t, _) = music.size3().expect("music is [b, t, music_dim]");
         let z = self.encoder.forward(music, start, train);
         let mut state = self.decoder.initial_state(b, seed, music.device());
@@ -270,7 +339,11 @@ impl DanceRevolution {
             // Ground-truth segment: inputs are the true poses before frames i..i+p.
             let len = p.min(t - i);
             if len > 0 {
-                outputs.push(self.decoder.run(&poses.narrow(1, i, len), &z.narrow(1, i, len), &mut state));
+                outputs.push(self.decoder.run(
+                    &poses.narrow(1, i, len),
+                    &z.narrow(1, i, len),
+                    &mut state,
+                ));
                 i += len;
             }
             // Auto-conditioned segment: each input is the previous prediction.
@@ -328,7 +401,9 @@ impl DanceRevolution {
         if let Some(s) = seed_poses.filter(|_| seeded > 0) {
             // Teacher-force the seed frames: inputs are [mean, s_0 .. s_{m-2}], outputs replaced by s.
             let inputs = Tensor::cat(&[prev.shallow_clone(), s.narrow(1, 0, seeded - 1)], 1);
-            let _ = self.decoder.run(&inputs, &z.narrow(1, 0, seeded), &mut state);
+            let _ = self
+                .decoder
+                .run(&inputs, &z.narrow(1, 0, seeded), &mut state);
             let seg = s.narrow(1, 0, seeded);
             prev = seg.narrow(1, seeded - 1, 1);
             out.push(seg);
@@ -340,12 +415,19 @@ impl DanceRevolution {
             }
             prev = y.shallow_clone();
             out.push(y);
-            if report_every > 0 && (i + 1) % report_every == 0 && !on_step((i + 1) as f32 / n as f32) {
+            if report_every > 0
+                && (i + 1) % report_every == 0
+                && !on_step((i + 1) as f32 / n as f32)
+            {
                 return None;
             }
         }
         if let Some(w) = watch {
-            tracing::debug!(frames = n, kicked = w.kicked, "dance-revolution stall guard");
+            tracing::debug!(
+                frames = n,
+                kicked = w.kicked,
+                "dance-revolution stall guard"
+            );
         }
         Some(Tensor::cat(&out, 1))
     }
@@ -367,7 +449,11 @@ pub struct StallGuard {
 impl StallGuard {
     /// What is served: 2-s windows, 0.10 m (below the 5th percentile of most served dances'
     /// reach), kick 0.3 per frame (h_0 itself is N(0, 1)).
-    pub const SERVED: StallGuard = StallGuard { min_reach_m: 0.10, window_frames: 50, kick: 0.3 };
+    pub const SERVED: StallGuard = StallGuard {
+        min_reach_m: 0.10,
+        window_frames: 50,
+        kick: 0.3,
+    };
 }
 
 /// Warm-up frames served: 3 s.
@@ -376,7 +462,10 @@ pub const WARM_UP_FRAMES: i64 = 75;
 impl Serving {
     /// What `choreo train` writes: the served guard and warm-up.
     pub fn served() -> Self {
-        Self { stall_guard: Some(StallGuard::SERVED), warm_up_frames: WARM_UP_FRAMES }
+        Self {
+            stall_guard: Some(StallGuard::SERVED),
+            warm_up_frames: WARM_UP_FRAMES,
+        }
     }
 }
 
@@ -405,27 +494,46 @@ impl<'a> StallWatch<'a> {
     fn new(guard: StallGuard, norm: &'a NormStats, seed: u64) -> Self {
         use rand::SeedableRng;
         let rng = rand::rngs::StdRng::seed_from_u64(seed ^ 0x5354_414c_4c00_0000);
-        Self { guard, norm, history: std::collections::VecDeque::with_capacity(guard.window_frames + 1), rng, kicked: 0 }
+        Self {
+            guard,
+            norm,
+            history: std::collections::VecDeque::with_capacity(guard.window_frames + 1),
+            rng,
+            kicked: 0,
+        }
     }
 
     /// Records output `y` `[1, 1, pose]` (normalised) and kicks `state` if the dance has stalled.
     fn observe(&mut self, y: &Tensor, state: &mut LstmState) {
         // The root-relative joints lead the pose vector ([`crate::motion::repr`]).
-        let width = (y.size().last().copied().unwrap_or(0) as usize).min(crate::motion::repr::POSE_DIM) / 3 * 3;
-        let v: Vec<f32> = Vec::<f32>::try_from(y.flatten(0, -1).narrow(0, 0, width as i64)).unwrap_or_default();
-        let metres: Vec<f32> = v.iter().enumerate().map(|(k, x)| x * self.norm.std[k] + self.norm.mean[k]).collect();
+        let width =
+            (y.size().last().copied().unwrap_or(0) as usize).min(crate::motion::repr::POSE_DIM) / 3
+                * 3;
+        let v: Vec<f32> =
+            Vec::<f32>::try_from(y.flatten(0, -1).narrow(0, 0, width as i64)).unwrap_or_default();
+        let metres: Vec<f32> = v
+            .iter()
+            .enumerate()
+            .map(|(k, x)| x * self.norm.std[k] + self.norm.mean[k])
+            .collect();
         self.history.push_back(metres);
         if self.history.len() > self.guard.window_frames {
             self.history.pop_front();
         }
-        if self.history.len() < self.guard.window_frames || reach_m(&self.history) >= self.guard.min_reach_m {
+        if self.history.len() < self.guard.window_frames
+            || reach_m(&self.history) >= self.guard.min_reach_m
+        {
             return;
         }
         use rand_distr::{Distribution, StandardNormal};
         self.kicked += 1;
         for (h, _) in state.iter_mut() {
-            let noise: Vec<f32> = (0..h.numel()).map(|_| StandardNormal.sample(&mut self.rng)).collect();
-            let noise = Tensor::from_slice(&noise).view(h.size().as_slice()).to_device(h.device());
+            let noise: Vec<f32> = (0..h.numel())
+                .map(|_| StandardNormal.sample(&mut self.rng))
+                .collect();
+            let noise = Tensor::from_slice(&noise)
+                .view(h.size().as_slice())
+                .to_device(h.device());
             *h = &*h + noise * self.guard.kick;
         }
     }
@@ -433,13 +541,20 @@ impl<'a> StallWatch<'a> {
 
 /// The largest distance (mean over joints, metres) of any pose in `history` from the newest.
 fn reach_m(history: &std::collections::VecDeque<Vec<f32>>) -> f32 {
-    let Some(last) = history.back() else { return 0.0 };
+    let Some(last) = history.back() else {
+        return 0.0;
+    };
     let joints = last.len() / 3;
     history
         .iter()
         .map(|f| {
             let sum: f32 = (0..joints)
-                .map(|j| (0..3).map(|c| (last[3 * j + c] - f[3 * j + c]).powi(2)).sum::<f32>().sqrt())
+                .map(|j| {
+                    (0..3)
+                        .map(|c| (last[3 * j + c] - f[3 * j + c]).powi(2))
+                        .sum::<f32>()
+                        .sqrt()
+                })
                 .sum();
             sum / joints.max(1) as f32
         })
@@ -470,19 +585,23 @@ pub struct Served {
 impl Served {
     /// Loads `dir/model.json` and `dir/weights.safetensors`.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| DanceRevolution::new(p, f.config.clone()))?;
+        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| {
+            DanceRevolution::new(p, f.config.clone())
+        })?;
         Ok(Self { file, pool })
     }
 
-
     /// Music features of a whole song, normalised, as `[1, n, F]`.
     fn music(&self, audio: &crate::audio::DecodedAudio, n: usize) -> Result<Tensor, ModelError> {
-        let features = if self.file.config.beat_clock { crate::audio::features::dance_revolution_clock_at } else { crate::audio::features::dance_revolution_at };
+        let features = if self.file.config.beat_clock {
+            crate::audio::features::dance_revolution_clock_at
+        } else {
+            crate::audio::features::dance_revolution_at
+        };
         let feats = features(audio, self.file.fps, 0.0, n)?;
         Ok(to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0))
     }
 }
-
 
 impl DanceModel for Served {
     fn info(&self) -> ModelInfo {
@@ -493,7 +612,11 @@ impl DanceModel for Served {
         }
     }
 
-    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
+    fn generate(
+        &self,
+        req: &GenerateRequest<'_>,
+        progress: &mut dyn Progress,
+    ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let fps = self.file.fps;
         let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
@@ -508,22 +631,41 @@ impl DanceModel for Served {
             }
             None => None,
         };
-        let out = self.pool.with(|model| tch::no_grad(|| -> Result<Tensor, ModelError> {
-            let mut cancelled = false;
-            let z = model.encoder.forward_chunked(&music, 1000, |f| {
-                cancelled = progress.report(Stage::Encode, f).is_err();
-                !cancelled
-            });
-            let z = z.ok_or(Cancelled)?;
-            let guard = self.file.extra.stall_guard.as_ref().map(|g| (g, &self.file.pose_norm));
-            let y = model.decode(&z, req.seed, seed_poses.as_ref(), guard, self.file.extra.warm_up_frames, 250, |f| {
-                cancelled = progress.report(Stage::Generate, f).is_err();
-                !cancelled
-            });
-            y.ok_or(ModelError::Cancelled(Cancelled))
-        }))?;
-        let poses = self.file.pose_norm.denormalize(&to_array(&out?.squeeze_dim(0))?)?;
-        let (motion, _root) = crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
+        let out = self.pool.with(|model| {
+            tch::no_grad(|| -> Result<Tensor, ModelError> {
+                let mut cancelled = false;
+                let z = model.encoder.forward_chunked(&music, 1000, |f| {
+                    cancelled = progress.report(Stage::Encode, f).is_err();
+                    !cancelled
+                });
+                let z = z.ok_or(Cancelled)?;
+                let guard = self
+                    .file
+                    .extra
+                    .stall_guard
+                    .as_ref()
+                    .map(|g| (g, &self.file.pose_norm));
+                let y = model.decode(
+                    &z,
+                    req.seed,
+                    seed_poses.as_ref(),
+                    guard,
+                    self.file.extra.warm_up_frames,
+                    250,
+                    |f| {
+                        cancelled = progress.report(Stage::Generate, f).is_err();
+                        !cancelled
+                    },
+                );
+                y.ok_or(ModelError::Cancelled(Cancelled))
+            })
+        })?;
+        let poses = self
+            .file
+            .pose_norm
+            .denormalize(&to_array(&out?.squeeze_dim(0))?)?;
+        let (motion, _root) =
+            crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
         Ok(motion.into())
     }
 }
@@ -555,8 +697,14 @@ mod tests {
         let x2 = x.copy();
         let _ = x2.narrow(1, 39, 1).fill_(5.0);
         let y1 = attn.forward(&x2);
-        let d0 = (y0.narrow(1, 0, 1) - y1.narrow(1, 0, 1)).abs().max().double_value(&[]);
-        let d39 = (y0.narrow(1, 39, 1) - y1.narrow(1, 39, 1)).abs().max().double_value(&[]);
+        let d0 = (y0.narrow(1, 0, 1) - y1.narrow(1, 0, 1))
+            .abs()
+            .max()
+            .double_value(&[]);
+        let d39 = (y0.narrow(1, 39, 1) - y1.narrow(1, 39, 1))
+            .abs()
+            .max()
+            .double_value(&[]);
         assert!(d0 < 1e-6, "frame 0 moved by {d0}");
         assert!(d39 > 1e-3, "frame 39 did not move");
     }
@@ -586,8 +734,12 @@ mod tests {
 
     #[test]
     fn reach_is_the_farthest_pose_of_the_window_from_the_newest() {
-        let h: std::collections::VecDeque<Vec<f32>> =
-            [vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0], vec![0.3, 0.4, 0.0, 0.0, 0.0, 0.0], vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.1]].into();
+        let h: std::collections::VecDeque<Vec<f32>> = [
+            vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            vec![0.3, 0.4, 0.0, 0.0, 0.0, 0.0],
+            vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.1],
+        ]
+        .into();
         // Newest is frame 2: frame 1 is (0.5 + 0.1) / 2 away, frame 0 is (0 + 0.1) / 2.
         assert!((reach_m(&h) - 0.3).abs() < 1e-6, "{}", reach_m(&h));
     }
@@ -597,21 +749,47 @@ mod tests {
         let (_vs, m) = model(5);
         let x = Tensor::randn([1, 40, 6], (Kind::Float, Device::Cpu));
         let z = m.encoder.forward(&x, 0, false);
-        let norm = NormStats { mean: vec![0.0; 5], std: vec![1.0; 5] };
+        let norm = NormStats {
+            mean: vec![0.0; 5],
+            std: vec![1.0; 5],
+        };
         let plain = m.decode(&z, 3, None, None, 0, 0, |_| true).unwrap();
         // A reach of 0 is always met: nothing is kicked and the dance is the unguarded one.
-        let never = StallGuard { min_reach_m: 0.0, window_frames: 10, kick: 0.3 };
-        let same = m.decode(&z, 3, None, Some((&never, &norm)), 0, 0, |_| true).unwrap();
-        assert_eq!((plain.shallow_clone() - same).abs().max().double_value(&[]), 0.0);
+        let never = StallGuard {
+            min_reach_m: 0.0,
+            window_frames: 10,
+            kick: 0.3,
+        };
+        let same = m
+            .decode(&z, 3, None, Some((&never, &norm)), 0, 0, |_| true)
+            .unwrap();
+        assert_eq!(
+            (plain.shallow_clone() - same).abs().max().double_value(&[]),
+            0.0
+        );
         // A reach no pose meets: the state is kicked from the 10th frame on, so frames 0..9 are as before.
-        let always = StallGuard { min_reach_m: 1e9, window_frames: 10, kick: 0.3 };
-        let kicked = m.decode(&z, 3, None, Some((&always, &norm)), 0, 0, |_| true).unwrap();
-        let head = (plain.narrow(1, 0, 10) - kicked.narrow(1, 0, 10)).abs().max().double_value(&[]);
-        let tail = (plain.narrow(1, 10, 30) - kicked.narrow(1, 10, 30)).abs().max().double_value(&[]);
+        let always = StallGuard {
+            min_reach_m: 1e9,
+            window_frames: 10,
+            kick: 0.3,
+        };
+        let kicked = m
+            .decode(&z, 3, None, Some((&always, &norm)), 0, 0, |_| true)
+            .unwrap();
+        let head = (plain.narrow(1, 0, 10) - kicked.narrow(1, 0, 10))
+            .abs()
+            .max()
+            .double_value(&[]);
+        let tail = (plain.narrow(1, 10, 30) - kicked.narrow(1, 10, 30))
+            .abs()
+            .max()
+            .double_value(&[]);
         assert_eq!(head, 0.0);
         assert!(tail > 1e-4, "kicks changed nothing");
         // Warm-up drops its frames: the dance still has one frame per music frame.
-        let warmed = m.decode(&z, 3, None, Some((&never, &norm)), 12, 0, |_| true).unwrap();
+        let warmed = m
+            .decode(&z, 3, None, Some((&never, &norm)), 12, 0, |_| true)
+            .unwrap();
         assert_eq!(warmed.size(), vec![1, 40, 5]);
         assert!((plain - warmed).abs().max().double_value(&[]) > 1e-4);
     }
@@ -635,7 +813,11 @@ mod tests {
         let mut opt = nn::Adam::default().build(&vs, 3e-3).unwrap();
         let x = Tensor::randn([4, 20, 6], (Kind::Float, Device::Cpu));
         let y = Tensor::randn([4, 21, 5], (Kind::Float, Device::Cpu)).cumsum(1, Kind::Float) * 0.1;
-        let loss = |m: &DanceRevolution| (m.forward_curriculum(&x, &y, 0, 10, 2, 9, true) - y.narrow(1, 1, 20)).abs().mean(Kind::Float);
+        let loss = |m: &DanceRevolution| {
+            (m.forward_curriculum(&x, &y, 0, 10, 2, 9, true) - y.narrow(1, 1, 20))
+                .abs()
+                .mean(Kind::Float)
+        };
         let first = loss(&m).double_value(&[]);
         for _ in 0..40 {
             opt.backward_step(&loss(&m));

@@ -36,7 +36,6 @@ pub mod style;
 
 pub use served::Served;
 
-
 /// The API id.
 pub const ID: &str = "dancenet";
 /// Smallest and largest log σ of a mixture component (normalised units), so a component can
@@ -108,7 +107,19 @@ impl Config {
 
     /// A tiny configuration for tests and smoke runs.
     pub fn tiny(pose_dim: i64) -> Self {
-        Self { enc_channels: 4, enc_convs: 1, enc_hidden: 4, d_code: 4, enc_window: 16, enc_hop: 8, residual: 8, skip: 8, dilations: vec![1, 2, 4], mixtures: 2, ..Self::cpu(pose_dim) }
+        Self {
+            enc_channels: 4,
+            enc_convs: 1,
+            enc_hidden: 4,
+            d_code: 4,
+            enc_window: 16,
+            enc_hop: 8,
+            residual: 8,
+            skip: 8,
+            dilations: vec![1, 2, 4],
+            mixtures: 2,
+            ..Self::cpu(pose_dim)
+        }
     }
 
     /// Frames of history each prediction sees: `1 + Σ dilations` (kernel 2).
@@ -137,11 +148,28 @@ impl ContextEncoder {
     fn new(p: nn::Path, c: &Config) -> Self {
         let conv = |i: i64| {
             let inp = if i == 0 { c.music_dim } else { c.enc_channels };
-            nn::conv1d(&p / format!("conv{i}"), inp, c.enc_channels, c.enc_kernel, nn::ConvConfig { padding: c.enc_kernel / 2, ..Default::default() })
+            nn::conv1d(
+                &p / format!("conv{i}"),
+                inp,
+                c.enc_channels,
+                c.enc_kernel,
+                nn::ConvConfig {
+                    padding: c.enc_kernel / 2,
+                    ..Default::default()
+                },
+            )
         };
         Self {
             convs: (0..c.enc_convs).map(conv).collect(),
-            lstm: nn::lstm(&p / "lstm", c.enc_channels, c.enc_hidden, nn::RNNConfig { bidirectional: true, ..Default::default() }),
+            lstm: nn::lstm(
+                &p / "lstm",
+                c.enc_channels,
+                c.enc_hidden,
+                nn::RNNConfig {
+                    bidirectional: true,
+                    ..Default::default()
+                },
+            ),
             out: nn::linear(&p / "out", 2 * c.enc_hidden, c.d_code, Default::default()),
             window: c.enc_window,
             hop: c.enc_hop,
@@ -162,17 +190,28 @@ impl ContextEncoder {
     /// `enc_hop`, each frame's code the mean of the windows over it weighted by a triangle that
     /// peaks mid-window (a cross-fade: a window's edges see the least context). `on_window` gets
     /// the fraction done and may stop it.
-    pub fn encode_song(&self, music: &Tensor, mut on_window: impl FnMut(f32) -> bool) -> Option<Tensor> {
+    pub fn encode_song(
+        &self,
+        music: &Tensor,
+        mut on_window: impl FnMut(f32) -> bool,
+    ) -> Option<Tensor> {
         let n = music.size()[1];
         let d = self.out.ws.size()[0];
         let w = self.window.min(n).max(1);
-        let mut starts: Vec<i64> = (0..).map(|k| k * self.hop).take_while(|&s| s + w < n).collect();
+        let mut starts: Vec<i64> = (0..)
+            .map(|k| k * self.hop)
+            .take_while(|&s| s + w < n)
+            .collect();
         starts.push((n - w).max(0));
         starts.dedup();
         let sum = Tensor::zeros([n, d], (Kind::Float, music.device()));
         let weight = Tensor::zeros([n, 1], (Kind::Float, music.device()));
-        let tri: Vec<f32> = (0..w).map(|i| 1.0 - ((i as f32 + 0.5) / w as f32 - 0.5).abs()).collect();
-        let tri = Tensor::from_slice(&tri).view([w, 1]).to_device(music.device());
+        let tri: Vec<f32> = (0..w)
+            .map(|i| 1.0 - ((i as f32 + 0.5) / w as f32 - 0.5).abs())
+            .collect();
+        let tri = Tensor::from_slice(&tri)
+            .view([w, 1])
+            .to_device(music.device());
         for (i, &s) in starts.iter().enumerate() {
             let code = self.forward(&music.narrow(1, s, w)).squeeze_dim(0); // [w, d]
             let _ = sum.narrow(0, s, w).g_add_(&(code * &tri));
@@ -201,10 +240,30 @@ struct GatedLayer {
 
 impl GatedLayer {
     fn new(p: nn::Path, c: &Config, dilation: i64) -> Self {
-        let one = |name: &str, i: i64, o: i64, bias: bool| nn::conv1d(&p / name, i, o, 1, nn::ConvConfig { bias, ..Default::default() });
+        let one = |name: &str, i: i64, o: i64, bias: bool| {
+            nn::conv1d(
+                &p / name,
+                i,
+                o,
+                1,
+                nn::ConvConfig {
+                    bias,
+                    ..Default::default()
+                },
+            )
+        };
         Self {
             dilation,
-            conv: nn::conv1d(&p / "conv", c.residual, 2 * c.residual, 2, nn::ConvConfig { dilation, ..Default::default() }),
+            conv: nn::conv1d(
+                &p / "conv",
+                c.residual,
+                2 * c.residual,
+                2,
+                nn::ConvConfig {
+                    dilation,
+                    ..Default::default()
+                },
+            ),
             cond: one("cond", c.d_code, 2 * c.residual, true),
             style: one("style", c.styles, 2 * c.residual, false),
             res: one("res", c.residual, c.residual, true),
@@ -248,7 +307,12 @@ impl Decoder {
         let one = |name: &str, i: i64, o: i64| nn::conv1d(&p / name, i, o, 1, Default::default());
         Self {
             input: one("input", c.pose_dim + c.contacts, c.residual),
-            layers: c.dilations.iter().enumerate().map(|(i, &d)| GatedLayer::new(&p / "layers" / i, c, d)).collect(),
+            layers: c
+                .dilations
+                .iter()
+                .enumerate()
+                .map(|(i, &d)| GatedLayer::new(&p / "layers" / i, c, d))
+                .collect(),
             head: one("head", c.skip, c.skip),
             out: one("out", c.skip, c.out_dim()),
         }
@@ -283,13 +347,21 @@ pub struct Losses {
 impl DanceNet {
     /// Builds the variables under `p` (checkpoint keys `encoder.*`, `decoder.*`).
     pub fn new(p: &nn::Path, config: Config) -> Self {
-        Self { encoder: ContextEncoder::new(p / "encoder", &config), decoder: Decoder::new(p / "decoder", &config), config }
+        Self {
+            encoder: ContextEncoder::new(p / "encoder", &config),
+            decoder: Decoder::new(p / "decoder", &config),
+            config,
+        }
     }
 
     /// Style one-hots `[b, styles, 1]` of style indices.
     pub fn style_one_hot(&self, styles: &[usize], device: Device) -> Tensor {
         let idx: Vec<i64> = styles.iter().map(|&s| s as i64).collect();
-        Tensor::from_slice(&idx).to_device(device).one_hot(self.config.styles).to_kind(Kind::Float).unsqueeze(-1)
+        Tensor::from_slice(&idx)
+            .to_device(device)
+            .one_hot(self.config.styles)
+            .to_kind(Kind::Float)
+            .unsqueeze(-1)
     }
 
     /// Splits the decoder's raw output `[.., out_dim]` relative to the current frames `[.., D]`.
@@ -297,14 +369,32 @@ impl DanceNet {
         let (k, d) = (self.config.mixtures, self.config.pose_dim);
         let mut lead = raw.size();
         lead.pop();
-        let shape = |tail: &[i64]| -> Vec<i64> { lead.iter().copied().chain(tail.iter().copied()).collect() };
+        let shape = |tail: &[i64]| -> Vec<i64> {
+            lead.iter().copied().chain(tail.iter().copied()).collect()
+        };
         let logits = raw.narrow(-1, 0, k);
         let delta = raw.narrow(-1, k, k * d).reshape(shape(&[k, d]).as_slice());
-        let log_sigma = raw.narrow(-1, k + k * d, k * d).reshape(shape(&[k, d]).as_slice()).clamp(LOG_SIGMA.0, LOG_SIGMA.1);
+        let log_sigma = raw
+            .narrow(-1, k + k * d, k * d)
+            .reshape(shape(&[k, d]).as_slice())
+            .clamp(LOG_SIGMA.0, LOG_SIGMA.1);
         let contacts = raw.narrow(-1, k * (1 + 2 * d), self.config.contacts);
         let relative = current.narrow(-1, self.config.absolute_dims, d - self.config.absolute_dims);
-        let base = Tensor::cat(&[current.narrow(-1, 0, self.config.absolute_dims).zeros_like(), relative], -1);
-        Mixture { logits, mean: base.unsqueeze(-2) + delta, log_sigma, contacts }
+        let base = Tensor::cat(
+            &[
+                current
+                    .narrow(-1, 0, self.config.absolute_dims)
+                    .zeros_like(),
+                relative,
+            ],
+            -1,
+        );
+        Mixture {
+            logits,
+            mean: base.unsqueeze(-2) + delta,
+            log_sigma,
+            contacts,
+        }
     }
 
     /// Teacher-forced pass: `frames` `[b, n, D + contacts]` (frame t's features and contacts,
@@ -326,15 +416,29 @@ impl DanceNet {
             });
         }
         let skip = skip.unwrap_or_else(|| Tensor::zeros([1], (Kind::Float, frames.device())));
-        let raw = skip.relu().apply(&self.decoder.head).relu().apply(&self.decoder.out).transpose(1, 2); // [b, n − 1, out]
-        let current = frames.narrow(1, 0, n - 1).narrow(2, 0, self.config.pose_dim);
+        let raw = skip
+            .relu()
+            .apply(&self.decoder.head)
+            .relu()
+            .apply(&self.decoder.out)
+            .transpose(1, 2); // [b, n − 1, out]
+        let current = frames
+            .narrow(1, 0, n - 1)
+            .narrow(2, 0, self.config.pose_dim);
         self.mixture(&raw, &current)
     }
 
     /// Training losses on a window: `input` the frames the decoder reads (noised), `target` the
     /// clean frames `[b, n, D + contacts]`, `music` `[b, n, music_dim]`; frames before `warmup`
     /// are context only (they would see zero padding instead of history).
-    pub fn losses(&self, input: &Tensor, target: &Tensor, music: &Tensor, style: &Tensor, warmup: i64) -> Losses {
+    pub fn losses(
+        &self,
+        input: &Tensor,
+        target: &Tensor,
+        music: &Tensor,
+        style: &Tensor,
+        warmup: i64,
+    ) -> Losses {
         let code = self.encoder.forward(music);
         let m = self.forward(input, &code, style);
         let n = target.size()[1] - 1;
@@ -344,11 +448,17 @@ impl DanceNet {
         let y = keep(&target.narrow(1, 1, n).narrow(2, 0, d)).unsqueeze(-2); // [b, m, 1, D]
         let (mean, log_sigma) = (keep(&m.mean), keep(&m.log_sigma));
         let z = (&y - mean) * (-&log_sigma).exp();
-        let log_n = (z.square() * -0.5 - &log_sigma).sum_dim_intlist(-1, false, Kind::Float) - 0.5 * (d as f64) * (2.0 * std::f64::consts::PI).ln();
+        let log_n = (z.square() * -0.5 - &log_sigma).sum_dim_intlist(-1, false, Kind::Float)
+            - 0.5 * (d as f64) * (2.0 * std::f64::consts::PI).ln();
         let log_p = (keep(&m.logits).log_softmax(-1, Kind::Float) + log_n).logsumexp(-1, false); // [b, m]
         let gmm = -log_p.mean(Kind::Float) / d as f64;
         let contacts = keep(&target.narrow(1, 1, n).narrow(2, d, self.config.contacts));
-        let foot = keep(&m.contacts).binary_cross_entropy_with_logits::<Tensor>(&contacts, None, None, tch::Reduction::Mean);
+        let foot = keep(&m.contacts).binary_cross_entropy_with_logits::<Tensor>(
+            &contacts,
+            None,
+            None,
+            tch::Reduction::Mean,
+        );
         Losses { gmm, foot }
     }
 
@@ -377,14 +487,33 @@ impl DanceNet {
         let dev = code.device();
         let style = self.style_one_hot(&[style], dev); // [1, styles, 1]
         let code_t = code.transpose(0, 1).unsqueeze(0); // [1, d_code, m − 1 + n]
-        let conds: Vec<Tensor> = self.decoder.layers.iter().map(|l| l.conditioning(&code_t, &style)).collect(); // [1, 2C, m − 1 + n]
-        // The context but its last frame, as one teacher-forced pass; each layer keeps the inputs
-        // of its last `dilation` positions.
-        let mut queues: Vec<std::collections::VecDeque<Tensor>> = self.decoder.layers.iter().map(|_| std::collections::VecDeque::new()).collect();
+        let conds: Vec<Tensor> = self
+            .decoder
+            .layers
+            .iter()
+            .map(|l| l.conditioning(&code_t, &style))
+            .collect(); // [1, 2C, m − 1 + n]
+                        // The context but its last frame, as one teacher-forced pass; each layer keeps the inputs
+                        // of its last `dilation` positions.
+        let mut queues: Vec<std::collections::VecDeque<Tensor>> = self
+            .decoder
+            .layers
+            .iter()
+            .map(|_| std::collections::VecDeque::new())
+            .collect();
         if m > 1 {
-            let x = super::to_tensor(&prefix.slice(ndarray::s![..m - 1, ..]).to_owned()).to_device(dev).transpose(0, 1).unsqueeze(0);
+            let x = super::to_tensor(&prefix.slice(ndarray::s![..m - 1, ..]).to_owned())
+                .to_device(dev)
+                .transpose(0, 1)
+                .unsqueeze(0);
             let mut h = x.apply(&self.decoder.input); // [1, C, m − 1]
-            for ((l, cond), q) in self.decoder.layers.iter().zip(&conds).zip(queues.iter_mut()) {
+            for ((l, cond), q) in self
+                .decoder
+                .layers
+                .iter()
+                .zip(&conds)
+                .zip(queues.iter_mut())
+            {
                 let keep = (m - 1).min(l.dilation as usize);
                 for t in m - 1 - keep..m - 1 {
                     q.push_back(h.get(0).select(1, t as i64));
@@ -395,7 +524,11 @@ impl DanceNet {
         // Per layer: taps at t − d and t `[2C, C]`, conditioning rows `[m − 1 + n, 2C]`, and the
         // 1×1 convolutions as matrices.
         let mat = |conv: &nn::Conv1D| {
-            let b = conv.bs.as_ref().map(|b| b.shallow_clone()).unwrap_or_else(|| Tensor::zeros([conv.ws.size()[0]], (Kind::Float, dev)));
+            let b = conv
+                .bs
+                .as_ref()
+                .map(|b| b.shallow_clone())
+                .unwrap_or_else(|| Tensor::zeros([conv.ws.size()[0]], (Kind::Float, dev)));
             (conv.ws.squeeze_dim(-1), b)
         };
         let layers: Vec<_> = self
@@ -403,7 +536,16 @@ impl DanceNet {
             .layers
             .iter()
             .zip(&conds)
-            .map(|(l, cond)| (l.conv.ws.select(2, 0), l.conv.ws.select(2, 1), cond.squeeze_dim(0).transpose(0, 1).contiguous(), mat(&l.res), mat(&l.skip), l.dilation as usize))
+            .map(|(l, cond)| {
+                (
+                    l.conv.ws.select(2, 0),
+                    l.conv.ws.select(2, 1),
+                    cond.squeeze_dim(0).transpose(0, 1).contiguous(),
+                    mat(&l.res),
+                    mat(&l.skip),
+                    l.dilation as usize,
+                )
+            })
             .collect();
         let (w_in, b_in) = mat(&self.decoder.input);
         let (w_head, b_head) = mat(&self.decoder.head);
@@ -421,8 +563,14 @@ impl DanceNet {
             let row = (m - 1 + t) as i64;
             let mut h = w_in.mv(&Tensor::from_slice(&frame).to_device(dev)) + &b_in;
             let mut skip: Option<Tensor> = None;
-            for ((w_past, w_now, cond, (w_res, b_res), (w_skip, b_skip), dilation), q) in layers.iter().zip(queues.iter_mut()) {
-                let past = if q.len() >= *dilation { q[q.len() - dilation].shallow_clone() } else { zeros.shallow_clone() };
+            for ((w_past, w_now, cond, (w_res, b_res), (w_skip, b_skip), dilation), q) in
+                layers.iter().zip(queues.iter_mut())
+            {
+                let past = if q.len() >= *dilation {
+                    q[q.len() - dilation].shallow_clone()
+                } else {
+                    zeros.shallow_clone()
+                };
                 let z = w_past.mv(&past) + w_now.mv(&h) + cond.get(row);
                 let zs = z.chunk(2, 0);
                 let g = zs[0].tanh() * zs[1].sigmoid();
@@ -441,7 +589,16 @@ impl DanceNet {
             let raw: Vec<f32> = Vec::<f32>::try_from(raw).ok()?;
             let mut base = frame[..d].to_vec();
             base[..c.absolute_dims as usize].fill(0.0);
-            let next = sampling.draw(&raw, &base, k, d, c.contacts as usize, &mut probs, &mut draws, rng);
+            let next = sampling.draw(
+                &raw,
+                &base,
+                k,
+                d,
+                c.contacts as usize,
+                &mut probs,
+                &mut draws,
+                rng,
+            );
             out.row_mut(t).assign(&ndarray::ArrayView1::from(&next));
             frame = next;
             if (t + 1) % 250 == 0 && !on_step(t + 1) {
@@ -512,7 +669,10 @@ pub struct Sampling {
 
 impl Default for Sampling {
     fn default() -> Self {
-        Self { temperature: 1.0, coherence: 0.0 }
+        Self {
+            temperature: 1.0,
+            coherence: 0.0,
+        }
     }
 }
 
@@ -526,7 +686,10 @@ pub struct Draws {
 impl Draws {
     /// Fresh standard normals for `d` dimensions.
     pub fn new(d: usize, rng: &mut StdRng) -> Self {
-        Self { z: (0..d).map(|_| StandardNormal.sample(rng)).collect(), pick: StandardNormal.sample(rng) }
+        Self {
+            z: (0..d).map(|_| StandardNormal.sample(rng)).collect(),
+            pick: StandardNormal.sample(rng),
+        }
     }
 }
 
@@ -541,7 +704,17 @@ impl Sampling {
     /// relative to `base` `[D]` (the current frame, zero where means are absolute); `probs` is
     /// scratch of `k` entries.
     #[allow(clippy::too_many_arguments)]
-    pub fn draw(&self, raw: &[f32], base: &[f32], k: usize, d: usize, contacts: usize, probs: &mut [f32], draws: &mut Draws, rng: &mut StdRng) -> Vec<f32> {
+    pub fn draw(
+        &self,
+        raw: &[f32],
+        base: &[f32],
+        k: usize,
+        d: usize,
+        contacts: usize,
+        probs: &mut [f32],
+        draws: &mut Draws,
+        rng: &mut StdRng,
+    ) -> Vec<f32> {
         let rho = self.coherence.clamp(0.0, 0.999) as f32;
         let fresh = (1.0 - rho * rho).sqrt();
         let mut step = |z: &mut f32| {
@@ -578,7 +751,11 @@ impl Sampling {
             })
             .collect();
         let c0 = k * (1 + 2 * d);
-        next.extend(raw[c0..c0 + contacts].iter().map(|&l| if l > 0.0 { 1.0 } else { 0.0 }));
+        next.extend(
+            raw[c0..c0 + contacts]
+                .iter()
+                .map(|&l| if l > 0.0 { 1.0 } else { 0.0 }),
+        );
         next
     }
 }
@@ -594,7 +771,13 @@ mod tests {
     fn model(seed: i64) -> (nn::VarStore, DanceNet) {
         tch::manual_seed(seed);
         let vs = nn::VarStore::new(Device::Cpu);
-        let m = DanceNet::new(&vs.root(), Config { music_dim: 3, ..Config::tiny(D) });
+        let m = DanceNet::new(
+            &vs.root(),
+            Config {
+                music_dim: 3,
+                ..Config::tiny(D)
+            },
+        );
         (vs, m)
     }
 
@@ -614,9 +797,15 @@ mod tests {
         let x2 = x.copy();
         let _ = x2.narrow(1, 8, 1).fill_(3.0);
         let b = m.forward(&x2, &code, &s);
-        let early = (a.mean.narrow(1, 0, 8) - b.mean.narrow(1, 0, 8)).abs().max().double_value(&[]);
+        let early = (a.mean.narrow(1, 0, 8) - b.mean.narrow(1, 0, 8))
+            .abs()
+            .max()
+            .double_value(&[]);
         assert!(early < 1e-6, "positions < 8 moved by {early}");
-        let late = (a.mean.narrow(1, 8, 1) - b.mean.narrow(1, 8, 1)).abs().max().double_value(&[]);
+        let late = (a.mean.narrow(1, 8, 1) - b.mean.narrow(1, 8, 1))
+            .abs()
+            .max()
+            .double_value(&[]);
         assert!(late > 1e-6, "position 8 did not see frame 8");
     }
 
@@ -634,7 +823,10 @@ mod tests {
             let x2 = x.copy();
             let _ = x2.narrow(1, f, 1).fill_(5.0);
             let b = m.forward(&x2, &code, &s);
-            let d = (a.mean.narrow(1, 20, 1) - b.mean.narrow(1, 20, 1)).abs().max().double_value(&[]);
+            let d = (a.mean.narrow(1, 20, 1) - b.mean.narrow(1, 20, 1))
+                .abs()
+                .max()
+                .double_value(&[]);
             assert_eq!(d > 1e-6, seen, "frame {f}: change {d}");
         }
     }
@@ -645,12 +837,33 @@ mod tests {
         // teacher-forced pass must reproduce every step.
         tch::manual_seed(2);
         let vs = nn::VarStore::new(Device::Cpu);
-        let m = DanceNet::new(&vs.root(), Config { music_dim: 3, mixtures: 1, ..Config::tiny(D) });
-        let prefix = Array2::from_shape_fn((10, (D + 4) as usize), |(t, c)| ((t * 7 + c * 3) % 5) as f32 * 0.3 - 0.6);
+        let m = DanceNet::new(
+            &vs.root(),
+            Config {
+                music_dim: 3,
+                mixtures: 1,
+                ..Config::tiny(D)
+            },
+        );
+        let prefix = Array2::from_shape_fn((10, (D + 4) as usize), |(t, c)| {
+            ((t * 7 + c * 3) % 5) as f32 * 0.3 - 0.6
+        });
         let n = 12;
         let code = Tensor::randn([10 + n, 4], (Kind::Float, Device::Cpu));
         let mut rng = StdRng::seed_from_u64(0);
-        let out = m.sample(&prefix, &code.narrow(0, 1, 9 + n), 1, Sampling { temperature: 0.0, coherence: 0.0 }, &mut rng, |_| true).expect("sampled");
+        let out = m
+            .sample(
+                &prefix,
+                &code.narrow(0, 1, 9 + n),
+                1,
+                Sampling {
+                    temperature: 0.0,
+                    coherence: 0.0,
+                },
+                &mut rng,
+                |_| true,
+            )
+            .expect("sampled");
         assert_eq!(out.nrows(), n as usize);
         let all = ndarray::concatenate(ndarray::Axis(0), &[prefix.view(), out.view()]).unwrap();
         let x = crate::models::to_tensor(&all).unsqueeze(0);
@@ -666,10 +879,21 @@ mod tests {
     #[test]
     fn same_seed_same_dance_other_seed_other_dance() {
         let (_vs, m) = model(3);
-        let prefix = Array2::from_shape_fn((10, (D + 4) as usize), |(t, c)| ((t + c) % 4) as f32 * 0.2);
+        let prefix =
+            Array2::from_shape_fn((10, (D + 4) as usize), |(t, c)| ((t + c) % 4) as f32 * 0.2);
         let code = Tensor::randn([39, 4], (Kind::Float, Device::Cpu));
         let s = Sampling::default();
-        let run = |seed: u64| m.sample(&prefix, &code, 3, s, &mut StdRng::seed_from_u64(seed), |_| true).expect("sampled");
+        let run = |seed: u64| {
+            m.sample(
+                &prefix,
+                &code,
+                3,
+                s,
+                &mut StdRng::seed_from_u64(seed),
+                |_| true,
+            )
+            .expect("sampled")
+        };
         assert_eq!(run(7), run(7));
         assert_ne!(run(7), run(8));
     }
@@ -683,7 +907,10 @@ mod tests {
         // A song no longer than one window is one pass.
         let short = music.narrow(1, 0, 16);
         let one = m.encoder.forward(&short).squeeze_dim(0);
-        let d = (m.encoder.encode_song(&short, |_| true).expect("encoded") - one).abs().max().double_value(&[]);
+        let d = (m.encoder.encode_song(&short, |_| true).expect("encoded") - one)
+            .abs()
+            .max()
+            .double_value(&[]);
         assert!(d < 1e-5, "{d}");
     }
 
@@ -711,10 +938,15 @@ mod tests {
         // One component, one dimension, mean 0, σ 1 (log σ 0), no contacts.
         let raw = [0.0f32, 0.0, 0.0];
         let stats = |rho: f64| {
-            let s = Sampling { temperature: 2.0, coherence: rho };
+            let s = Sampling {
+                temperature: 2.0,
+                coherence: rho,
+            };
             let mut rng = StdRng::seed_from_u64(1);
             let mut draws = Draws::new(1, &mut rng);
-            let x: Vec<f32> = (0..20_000).map(|_| s.draw(&raw, &[0.0], 1, 1, 0, &mut [0.0], &mut draws, &mut rng)[0]).collect();
+            let x: Vec<f32> = (0..20_000)
+                .map(|_| s.draw(&raw, &[0.0], 1, 1, 0, &mut [0.0], &mut draws, &mut rng)[0])
+                .collect();
             let var = x.iter().map(|v| v * v).sum::<f32>() / x.len() as f32;
             let lag1 = x.windows(2).map(|w| w[0] * w[1]).sum::<f32>() / (x.len() - 1) as f32 / var;
             (var, lag1)
@@ -722,7 +954,13 @@ mod tests {
         let (var0, lag0) = stats(0.0);
         let (var9, lag9) = stats(0.9);
         // σ × temperature = 2 either way; only independent draws are uncorrelated.
-        assert!((var0 - 4.0).abs() < 0.3 && (var9 - 4.0).abs() < 0.6, "variances {var0} {var9}");
-        assert!(lag0.abs() < 0.05 && (lag9 - 0.9).abs() < 0.05, "lag-1 correlations {lag0} {lag9}");
+        assert!(
+            (var0 - 4.0).abs() < 0.3 && (var9 - 4.0).abs() < 0.6,
+            "variances {var0} {var9}"
+        );
+        assert!(
+            lag0.abs() < 0.05 && (lag9 - 0.9).abs() < 0.05,
+            "lag-1 correlations {lag0} {lag9}"
+        );
     }
 }

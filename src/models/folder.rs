@@ -56,12 +56,18 @@ pub struct Nothing {}
 
 /// Reads `dir/model.json`, or says the model is missing.
 pub fn read<F: DeserializeOwned>(dir: &Path, id: &str) -> Result<F, ModelError> {
-    let text = std::fs::read_to_string(dir.join(MODEL_FILE)).map_err(|_| ModelError::MissingWeights(id.into(), dir.display().to_string()))?;
-    serde_json::from_str(&text).map_err(|e| ModelError::BadModelFile(format!("{id}/{MODEL_FILE}: {e}")))
+    let text = std::fs::read_to_string(dir.join(MODEL_FILE))
+        .map_err(|_| ModelError::MissingWeights(id.into(), dir.display().to_string()))?;
+    serde_json::from_str(&text)
+        .map_err(|e| ModelError::BadModelFile(format!("{id}/{MODEL_FILE}: {e}")))
 }
 
 /// Reads `model.json` and loads the weights into a pool of networks built by `build`.
-pub fn load<F, M>(dir: &Path, id: &str, build: impl Fn(&tch::nn::Path, &F) -> M + Send + Sync + 'static) -> Result<(F, InstancePool<M>), ModelError>
+pub fn load<F, M>(
+    dir: &Path,
+    id: &str,
+    build: impl Fn(&tch::nn::Path, &F) -> M + Send + Sync + 'static,
+) -> Result<(F, InstancePool<M>), ModelError>
 where
     F: DeserializeOwned + Clone + Send + Sync + 'static,
     M: Send,
@@ -83,10 +89,17 @@ pub struct SeedClips {
 
 impl SeedClips {
     /// `count` clips of `frames` frames at seeded starts over `seqs` (each a dance's features).
-    pub fn draw(seqs: &[&Array2<f32>], count: usize, frames: usize, seed: u64) -> Result<Self, ModelError> {
+    pub fn draw(
+        seqs: &[&Array2<f32>],
+        count: usize,
+        frames: usize,
+        seed: u64,
+    ) -> Result<Self, ModelError> {
         let usable: Vec<&&Array2<f32>> = seqs.iter().filter(|s| s.nrows() > frames + 50).collect();
         if usable.is_empty() || count == 0 {
-            return Err(ModelError::Input(format!("no dance longer than {frames} frames for seed clips")));
+            return Err(ModelError::Input(format!(
+                "no dance longer than {frames} frames for seed clips"
+            )));
         }
         let mut rng = StdRng::seed_from_u64(seed);
         let width = usable[0].ncols();
@@ -94,7 +107,9 @@ impl SeedClips {
         for k in 0..count {
             let s = usable[k % usable.len()];
             let start = rng.gen_range(25..s.nrows() - frames - 25);
-            clips.slice_mut(s![k, .., ..]).assign(&s.slice(s![start..start + frames, ..]));
+            clips
+                .slice_mut(s![k, .., ..])
+                .assign(&s.slice(s![start..start + frames, ..]));
         }
         Ok(Self { clips })
     }
@@ -109,7 +124,10 @@ impl SeedClips {
         let clips = read_clips(path)?;
         let (k, f, d) = clips.dim();
         if d != width || k == 0 || f == 0 {
-            return Err(ModelError::BadModelFile(format!("{}: clips are {k}×{f}×{d}", path.display())));
+            return Err(ModelError::BadModelFile(format!(
+                "{}: clips are {k}×{f}×{d}",
+                path.display()
+            )));
         }
         Ok(Self { clips })
     }
@@ -136,10 +154,17 @@ pub fn write_clips(clips: &Array3<f32>, path: &Path) -> Result<(), ModelError> {
 /// Reads clips written by [`write_clips`], any shape.
 pub fn read_clips(path: &Path) -> Result<Array3<f32>, ModelError> {
     let named = Tensor::read_safetensors(path)?;
-    let t = named.into_iter().find(|(n, _)| n == CLIPS).map(|(_, t)| t).ok_or_else(|| ModelError::BadModelFile(format!("{}: no `{CLIPS}` tensor", path.display())))?;
+    let t = named
+        .into_iter()
+        .find(|(n, _)| n == CLIPS)
+        .map(|(_, t)| t)
+        .ok_or_else(|| {
+            ModelError::BadModelFile(format!("{}: no `{CLIPS}` tensor", path.display()))
+        })?;
     let (k, f, d) = t.size3()?;
     let data = Vec::<f32>::try_from(t.to_kind(tch::Kind::Float).contiguous().view([-1]))?;
-    Array3::from_shape_vec((k as usize, f as usize, d as usize), data).map_err(|e| ModelError::BadModelFile(e.to_string()))
+    Array3::from_shape_vec((k as usize, f as usize, d as usize), data)
+        .map_err(|e| ModelError::BadModelFile(e.to_string()))
 }
 
 #[cfg(test)]
@@ -155,14 +180,31 @@ mod tests {
 
     #[test]
     fn own_fields_are_flat_and_older_files_read() {
-        let norm = NormStats { mean: vec![0.0], std: vec![1.0] };
+        let norm = NormStats {
+            mean: vec![0.0],
+            std: vec![1.0],
+        };
         let f = ModelFile {
             config: 3u8,
             music_norm: norm.clone(),
             pose_norm: norm,
             fps: 25.0,
-            training: TrainingRecord { epochs: 2, lr: 1e-3, batch: 4, seed: 9, final_train_loss: 0.5, minutes: 1.0, extra: Own { steps: 7, weight: 2.0 } },
-            extra: Own { steps: 1, weight: 0.0 },
+            training: TrainingRecord {
+                epochs: 2,
+                lr: 1e-3,
+                batch: 4,
+                seed: 9,
+                final_train_loss: 0.5,
+                minutes: 1.0,
+                extra: Own {
+                    steps: 7,
+                    weight: 2.0,
+                },
+            },
+            extra: Own {
+                steps: 1,
+                weight: 0.0,
+            },
         };
         let v = serde_json::to_value(&f).unwrap();
         assert_eq!(v["training"]["steps"], 7);
@@ -171,6 +213,12 @@ mod tests {
         let mut old = v.clone();
         old["training"].as_object_mut().unwrap().remove("weight");
         let back: ModelFile<u8, Own, Own> = serde_json::from_value(old).unwrap();
-        assert_eq!(back.training.extra, Own { steps: 7, weight: 0.0 });
+        assert_eq!(
+            back.training.extra,
+            Own {
+                steps: 7,
+                weight: 0.0
+            }
+        );
     }
 }

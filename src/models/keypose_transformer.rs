@@ -77,7 +77,12 @@ pub struct Config {
 impl Config {
     /// The sizes of every transformer stack of the model.
     pub fn dims(&self) -> Dims {
-        Dims { d: self.d, n_heads: self.n_heads, d_ff: self.d_ff, dropout: self.dropout }
+        Dims {
+            d: self.d,
+            n_heads: self.n_heads,
+            d_ff: self.d_ff,
+            dropout: self.dropout,
+        }
     }
 
     /// The configuration the committed weights were trained with: small enough for CPU.
@@ -131,8 +136,16 @@ pub fn local_position_embedding(n: i64, keys: &[i64], d: i64) -> Vec<f32> {
     let mut left = Vec::with_capacity(n as usize);
     let mut right = Vec::with_capacity(n as usize);
     for t in 0..n {
-        let l = keys.iter().filter(|&&k| k <= t).map(|&k| (t - k) as f64).fold(NO_KEY_DISTANCE, f64::min);
-        let r = keys.iter().filter(|&&k| k >= t).map(|&k| (k - t) as f64).fold(NO_KEY_DISTANCE, f64::min);
+        let l = keys
+            .iter()
+            .filter(|&&k| k <= t)
+            .map(|&k| (t - k) as f64)
+            .fold(NO_KEY_DISTANCE, f64::min);
+        let r = keys
+            .iter()
+            .filter(|&&k| k >= t)
+            .map(|&k| (k - t) as f64)
+            .fold(NO_KEY_DISTANCE, f64::min);
         left.push(l);
         right.push(r);
     }
@@ -149,7 +162,10 @@ pub fn local_position_embedding(n: i64, keys: &[i64], d: i64) -> Vec<f32> {
 pub fn loss_weights(n: i64, keys: &[i64], lambda: f64, sigma: f64) -> Vec<f32> {
     (0..n)
         .map(|t| {
-            let s: f64 = keys.iter().map(|&k| (-((t - k) as f64).powi(2) / (2.0 * sigma * sigma)).exp()).sum();
+            let s: f64 = keys
+                .iter()
+                .map(|&k| (-((t - k) as f64).powi(2) / (2.0 * sigma * sigma)).exp())
+                .sum();
             (1.0 + lambda * s) as f32
         })
         .collect()
@@ -165,12 +181,20 @@ pub struct MusicEncoder {
 
 impl MusicEncoder {
     fn new(p: nn::Path, c: &Config) -> Self {
-        Self { embed: nn::linear(&p / "embed", c.music_dim, c.d, Default::default()), stack: Stack::new(&p / "encoder", c.dims(), c.music_layers), d: c.d }
+        Self {
+            embed: nn::linear(&p / "embed", c.music_dim, c.d, Default::default()),
+            stack: Stack::new(&p / "encoder", c.dims(), c.music_layers),
+            d: c.d,
+        }
     }
 
     pub fn forward(&self, music: &Tensor, train: bool) -> Tensor {
         let n = music.size()[1];
-        self.stack.forward(&(music.apply(&self.embed) + position_encoding(n, self.d, music.device()).unsqueeze(0)), None, train)
+        self.stack.forward(
+            &(music.apply(&self.embed) + position_encoding(n, self.d, music.device()).unsqueeze(0)),
+            None,
+            train,
+        )
     }
 }
 
@@ -184,12 +208,20 @@ pub struct MotionEncoder {
 
 impl MotionEncoder {
     fn new(p: nn::Path, c: &Config) -> Self {
-        Self { embed: nn::linear(&p / "embed", c.pose_dim, c.d, Default::default()), stack: Stack::new(&p / "encoder", c.dims(), c.motion_layers), d: c.d }
+        Self {
+            embed: nn::linear(&p / "embed", c.pose_dim, c.d, Default::default()),
+            stack: Stack::new(&p / "encoder", c.dims(), c.motion_layers),
+            d: c.d,
+        }
     }
 
     pub fn forward(&self, seed: &Tensor, train: bool) -> Tensor {
         let n = seed.size()[1];
-        self.stack.forward(&(seed.apply(&self.embed) + position_encoding(n, self.d, seed.device()).unsqueeze(0)), None, train)
+        self.stack.forward(
+            &(seed.apply(&self.embed) + position_encoding(n, self.d, seed.device()).unsqueeze(0)),
+            None,
+            train,
+        )
     }
 }
 
@@ -201,7 +233,9 @@ pub struct KeyPoseEmbedding {
 
 impl KeyPoseEmbedding {
     fn new(p: nn::Path, c: &Config) -> Self {
-        Self { proj: nn::linear(&p / "proj", c.key_dim, c.d, Default::default()) }
+        Self {
+            proj: nn::linear(&p / "proj", c.key_dim, c.d, Default::default()),
+        }
     }
 
     /// `keys` `[b, T, key_dim]`, `mask` `[b, T]` (1 on key frames) → `[b, T, d]`.
@@ -221,7 +255,18 @@ pub struct CrossModalTransformer {
 
 impl CrossModalTransformer {
     fn new(p: nn::Path, c: &Config) -> Self {
-        Self { segment: p.var("segment", &[2, c.d], nn::Init::Randn { mean: 0.0, stdev: 0.02 }), stack: Stack::new(&p / "encoder", c.dims(), c.cross_layers), d: c.d }
+        Self {
+            segment: p.var(
+                "segment",
+                &[2, c.d],
+                nn::Init::Randn {
+                    mean: 0.0,
+                    stdev: 0.02,
+                },
+            ),
+            stack: Stack::new(&p / "encoder", c.dims(), c.cross_layers),
+            d: c.d,
+        }
     }
 
     /// `motion` `[b, T′, d]`, `music` `[b, T, d]` (already carrying key-pose and local position
@@ -231,7 +276,9 @@ impl CrossModalTransformer {
         let dev = music.device();
         let m = motion + position_encoding(ts, self.d, dev).unsqueeze(0) + self.segment.get(0);
         let a = music + position_encoding(t, self.d, dev).unsqueeze(0) + self.segment.get(1);
-        self.stack.forward(&Tensor::cat(&[m, a], 1), None, train).narrow(1, ts, t)
+        self.stack
+            .forward(&Tensor::cat(&[m, a], 1), None, train)
+            .narrow(1, ts, t)
     }
 }
 
@@ -278,7 +325,11 @@ pub fn generation_windows(total: i64, w: i64, ts: i64) -> Vec<i64> {
 pub fn join_frames(n: usize, config: &Config) -> Vec<usize> {
     let (w, ts) = (config.window, config.seed_len);
     let starts = generation_windows((n as i64).max(w), w, ts);
-    starts.windows(2).map(|p| ((p[1] + ts + p[0] + w) / 2) as usize).filter(|&f| f < n).collect()
+    starts
+        .windows(2)
+        .map(|p| ((p[1] + ts + p[0] + w) / 2) as usize)
+        .filter(|&f| f < n)
+        .collect()
 }
 
 /// `3u² − 2u³`: a C¹ ramp from 0 to 1 on `[0, 1]`.
@@ -313,13 +364,20 @@ impl KeyposeTransformer {
 
     /// One window → poses `[b, T, pose_dim]` (normalised).
     pub fn forward(&self, x: &WindowInput, train: bool) -> Tensor {
-        let music = self.music.forward(&x.music, train) + self.key_embed.forward(&x.keys, &x.key_mask) + &x.local_pos;
+        let music = self.music.forward(&x.music, train)
+            + self.key_embed.forward(&x.keys, &x.key_mask)
+            + &x.local_pos;
         let motion = self.motion.forward(&x.seed, train);
         self.cross.forward(&motion, &music, train).apply(&self.head)
     }
 
     /// Builds one window's inputs (batch 1) from rows and key frames local to the window.
-    pub fn window_input(&self, music: &Tensor, seed: &Tensor, keys: &[(i64, Vec<f32>)]) -> WindowInput {
+    pub fn window_input(
+        &self,
+        music: &Tensor,
+        seed: &Tensor,
+        keys: &[(i64, Vec<f32>)],
+    ) -> WindowInput {
         let c = &self.config;
         let t = music.size()[0];
         let mut k = vec![0f32; (t * c.key_dim) as usize];
@@ -335,7 +393,8 @@ impl KeyposeTransformer {
             seed: seed.unsqueeze(0),
             keys: Tensor::from_slice(&k).view([1, t, c.key_dim]),
             key_mask: Tensor::from_slice(&mask).view([1, t]),
-            local_pos: Tensor::from_slice(&local_position_embedding(t, &frames, c.d)).view([1, t, c.d]),
+            local_pos: Tensor::from_slice(&local_position_embedding(t, &frames, c.d))
+                .view([1, t, c.d]),
         }
     }
 
@@ -347,14 +406,31 @@ impl KeyposeTransformer {
     /// continued, not redrawn); without, the network's own rendering of them is, which joins the
     /// frames after them without a jump (a seed drawn from the pose bank only has to start the
     /// dance). `on_window(done, total)` may stop the loop. Returns `[n, pose_dim]`.
-    pub fn generate_long(&self, music: &Tensor, seed: Option<&Tensor>, keep_seed: bool, keys: &[(i64, Vec<f32>)], mut on_window: impl FnMut(usize, usize) -> bool) -> Option<Tensor> {
+    pub fn generate_long(
+        &self,
+        music: &Tensor,
+        seed: Option<&Tensor>,
+        keep_seed: bool,
+        keys: &[(i64, Vec<f32>)],
+        mut on_window: impl FnMut(usize, usize) -> bool,
+    ) -> Option<Tensor> {
         let c = &self.config;
         let (w, ts) = (c.window, c.seed_len);
         let n = music.size()[0];
         let dev = music.device();
         // Pad short songs with the mean (zero) music to one whole window.
         let total = n.max(w);
-        let music = if total > n { Tensor::cat(&[music.shallow_clone(), Tensor::zeros([total - n, c.music_dim], (Kind::Float, dev))], 0) } else { music.shallow_clone() };
+        let music = if total > n {
+            Tensor::cat(
+                &[
+                    music.shallow_clone(),
+                    Tensor::zeros([total - n, c.music_dim], (Kind::Float, dev)),
+                ],
+                0,
+            )
+        } else {
+            music.shallow_clone()
+        };
         let starts = generation_windows(total, w, ts);
         let out = Tensor::zeros([total, c.pose_dim], (Kind::Float, dev));
         let mut written = 0i64; // frames [0, written) have output
@@ -368,8 +444,17 @@ impl KeyposeTransformer {
             } else {
                 out.narrow(0, s, ts)
             };
-            let local: Vec<(i64, Vec<f32>)> = keys.iter().filter(|(f, _)| *f >= s && *f < s + w).map(|(f, p)| (f - s, p.clone())).collect();
-            let y = self.forward(&self.window_input(&music.narrow(0, s, w), &seed_rows, &local), false).squeeze_dim(0);
+            let local: Vec<(i64, Vec<f32>)> = keys
+                .iter()
+                .filter(|(f, _)| *f >= s && *f < s + w)
+                .map(|(f, p)| (f - s, p.clone()))
+                .collect();
+            let y = self
+                .forward(
+                    &self.window_input(&music.narrow(0, s, w), &seed_rows, &local),
+                    false,
+                )
+                .squeeze_dim(0);
             if i == 0 {
                 // The given seed stays as it is; the network writes the rest of the window.
                 let keep = if seeded {
@@ -378,21 +463,25 @@ impl KeyposeTransformer {
                 } else {
                     0
                 };
-                out.narrow(0, keep, w - keep).copy_(&y.narrow(0, keep, w - keep));
+                out.narrow(0, keep, w - keep)
+                    .copy_(&y.narrow(0, keep, w - keep));
             } else {
                 // [s, s + T′) is this window's seed. Over [s + T′, written) the previous window
                 // has output too: crossfade from it to this one, so the join has no jump; write
                 // the rest as it is.
                 let (b0, l) = (s + ts, written - s - ts);
                 if l > 0 {
-                    let ramp: Vec<f32> = (1..=l).map(|k| smoothstep(k as f64 / (l + 1) as f64) as f32).collect();
+                    let ramp: Vec<f32> = (1..=l)
+                        .map(|k| smoothstep(k as f64 / (l + 1) as f64) as f32)
+                        .collect();
                     let ramp = Tensor::from_slice(&ramp).view([l, 1]).to_device(dev);
                     let blended = out.narrow(0, b0, l) * (1.0 - &ramp) + y.narrow(0, ts, l) * &ramp;
                     out.narrow(0, b0, l).copy_(&blended);
                 }
                 let new = s + w - written.max(b0);
                 if new > 0 {
-                    out.narrow(0, s + w - new, new).copy_(&y.narrow(0, w - new, new));
+                    out.narrow(0, s + w - new, new)
+                        .copy_(&y.narrow(0, w - new, new));
                 }
             }
             written = s + w;
@@ -403,7 +492,6 @@ impl KeyposeTransformer {
         Some(out.narrow(0, 0, n))
     }
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -421,13 +509,23 @@ mod tests {
     #[test]
     fn window_shapes() {
         let (_vs, m) = model(0);
-        let x = m.window_input(&Tensor::randn([20, 4], (Kind::Float, Device::Cpu)), &Tensor::randn([5, 7], (Kind::Float, Device::Cpu)), &[(7, vec![0.5; 6])]);
+        let x = m.window_input(
+            &Tensor::randn([20, 4], (Kind::Float, Device::Cpu)),
+            &Tensor::randn([5, 7], (Kind::Float, Device::Cpu)),
+            &[(7, vec![0.5; 6])],
+        );
         assert_eq!(m.forward(&x, false).size(), vec![1, 20, 7]);
     }
 
     #[test]
     fn windows_seed_from_final_frames_and_overlap_for_the_crossfade() {
-        for (total, w, ts) in [(100, 100, 25), (101, 100, 25), (1234, 100, 25), (53, 20, 5), (20, 20, 5)] {
+        for (total, w, ts) in [
+            (100, 100, 25),
+            (101, 100, 25),
+            (1234, 100, 25),
+            (53, 20, 5),
+            (20, 20, 5),
+        ] {
             let starts = generation_windows(total, w, ts);
             assert_eq!(starts[0], 0);
             assert_eq!(*starts.last().unwrap() + w, total, "{total} {w} {ts}");
@@ -438,7 +536,11 @@ mod tests {
             }
         }
         assert_eq!(crossfade_len(100, 25), 25);
-        let c = Config { window: 100, seed_len: 25, ..Config::tiny(4, 7, 6) };
+        let c = Config {
+            window: 100,
+            seed_len: 25,
+            ..Config::tiny(4, 7, 6)
+        };
         assert_eq!(join_frames(300, &c), vec![87, 137, 187, 237]);
     }
 
@@ -448,22 +550,40 @@ mod tests {
         let music = Tensor::randn([53, 4], (Kind::Float, Device::Cpu));
         let keys = vec![(30i64, vec![1.0f32; 6])];
         let mut windows = 0;
-        let a = m.generate_long(&music, None, true, &keys, |_, _| { windows += 1; true }).unwrap();
-        let b = m.generate_long(&music, None, true, &keys, |_, _| true).unwrap();
+        let a = m
+            .generate_long(&music, None, true, &keys, |_, _| {
+                windows += 1;
+                true
+            })
+            .unwrap();
+        let b = m
+            .generate_long(&music, None, true, &keys, |_, _| true)
+            .unwrap();
         assert_eq!(a.size(), vec![53, 7]);
-        assert_eq!(windows, 5, "windows of 20 advancing by 10 (5 seed + 5 crossfade frames) over 53 frames");
+        assert_eq!(
+            windows, 5,
+            "windows of 20 advancing by 10 (5 seed + 5 crossfade frames) over 53 frames"
+        );
         assert_eq!((&a - &b).abs().max().double_value(&[]), 0.0);
         // The key pose is an input: removing it changes the dance near it.
-        let c = m.generate_long(&music, None, true, &[], |_, _| true).unwrap();
+        let c = m
+            .generate_long(&music, None, true, &[], |_, _| true)
+            .unwrap();
         assert!((&a - &c).abs().max().double_value(&[]) > 1e-5);
         // A given seed is kept verbatim at the start.
         let seed = Tensor::randn([5, 7], (Kind::Float, Device::Cpu));
-        let d = m.generate_long(&music, Some(&seed), true, &keys, |_, _| true).unwrap();
+        let d = m
+            .generate_long(&music, Some(&seed), true, &keys, |_, _| true)
+            .unwrap();
         assert!((d.narrow(0, 0, 5) - &seed).abs().max().double_value(&[]) < 1e-6);
         // Cancelling stops it.
-        assert!(m.generate_long(&music, None, true, &keys, |i, _| i < 2).is_none());
+        assert!(m
+            .generate_long(&music, None, true, &keys, |i, _| i < 2)
+            .is_none());
         // A drawn seed is not kept: the network's rendering of it starts the dance.
-        let e = m.generate_long(&music, Some(&seed), false, &keys, |_, _| true).unwrap();
+        let e = m
+            .generate_long(&music, Some(&seed), false, &keys, |_, _| true)
+            .unwrap();
         assert!((e.narrow(0, 0, 5) - &seed).abs().max().double_value(&[]) > 1e-4);
         assert_eq!(e.size(), vec![53, 7]);
     }
@@ -492,7 +612,8 @@ mod tests {
         let (vs, m) = model(4);
         let mut opt = nn::Adam::default().build(&vs, 3e-3).unwrap();
         let music = Tensor::randn([4, 20, 4], (Kind::Float, Device::Cpu));
-        let poses = Tensor::randn([4, 20, 7], (Kind::Float, Device::Cpu)).cumsum(1, Kind::Float) * 0.2;
+        let poses =
+            Tensor::randn([4, 20, 7], (Kind::Float, Device::Cpu)).cumsum(1, Kind::Float) * 0.2;
         let x = WindowInput {
             music,
             seed: poses.narrow(1, 0, 5),
@@ -501,7 +622,8 @@ mod tests {
             local_pos: Tensor::zeros([4, 20, 16], (Kind::Float, Device::Cpu)),
         };
         let w = Tensor::from_slice(&loss_weights(20, &[10], 3.0, 2.0)).view([1, 20, 1]);
-        let loss = |m: &KeyposeTransformer| ((m.forward(&x, true) - &poses).abs() * &w).mean(Kind::Float);
+        let loss =
+            |m: &KeyposeTransformer| ((m.forward(&x, true) - &poses).abs() * &w).mean(Kind::Float);
         let first = loss(&m).double_value(&[]);
         for _ in 0..40 {
             opt.backward_step(&loss(&m));

@@ -14,7 +14,11 @@ pub fn sinusoid_of(pos: &[f64], d: i64) -> Vec<f32> {
     for (t, &p) in pos.iter().enumerate() {
         for i in 0..d {
             let rate = 1.0 / 10000f64.powf((2 * (i / 2)) as f64 / d as f64);
-            let v = if i % 2 == 0 { (p * rate).sin() } else { (p * rate).cos() };
+            let v = if i % 2 == 0 {
+                (p * rate).sin()
+            } else {
+                (p * rate).cos()
+            };
             data[t * d as usize + i as usize] = v as f32;
         }
     }
@@ -25,7 +29,13 @@ pub fn sinusoid_of(pos: &[f64], d: i64) -> Vec<f32> {
 /// `forward(start, len)` sees each chunk widened by `ctx` frames on both sides (enough context to
 /// equal one whole pass) and only the chunk's own frames are kept, joined along dim 1.
 /// `on_chunk` gets the fraction done and may stop it.
-pub fn chunked(n: i64, chunk: i64, ctx: i64, mut forward: impl FnMut(i64, i64) -> Tensor, mut on_chunk: impl FnMut(f32) -> bool) -> Option<Tensor> {
+pub fn chunked(
+    n: i64,
+    chunk: i64,
+    ctx: i64,
+    mut forward: impl FnMut(i64, i64) -> Tensor,
+    mut on_chunk: impl FnMut(f32) -> bool,
+) -> Option<Tensor> {
     let mut parts = Vec::new();
     let mut s = 0;
     while s < n {
@@ -43,7 +53,9 @@ pub fn chunked(n: i64, chunk: i64, ctx: i64, mut forward: impl FnMut(i64, i64) -
 /// Sinusoidal position encoding `[n, d]` of positions `start..start + n`.
 pub fn sinusoid(start: i64, n: i64, d: i64, device: Device) -> Tensor {
     let pos: Vec<f64> = (start..start + n).map(|t| t as f64).collect();
-    Tensor::from_slice(&sinusoid_of(&pos, d)).view([n, d]).to_device(device)
+    Tensor::from_slice(&sinusoid_of(&pos, d))
+        .view([n, d])
+        .to_device(device)
 }
 
 /// Position encoding `[n, d]` of positions `0..n`.
@@ -121,13 +133,22 @@ impl MultiHeadAttention {
     pub fn forward(&self, x: &Tensor, mask: Option<&Tensor>) -> Tensor {
         let (b, n, d) = x.size3().expect("attention input is [b, n, d]");
         let (h, dh) = (self.n_heads, d / self.n_heads);
-        let qkv = x.apply(&self.qkv).view([b, n, 3, h, dh]).permute([2, 0, 3, 1, 4]);
+        let qkv = x
+            .apply(&self.qkv)
+            .view([b, n, 3, h, dh])
+            .permute([2, 0, 3, 1, 4]);
         let (q, k, v) = (qkv.get(0), qkv.get(1), qkv.get(2));
         let mut scores = q.matmul(&k.transpose(-1, -2)) / (dh as f64).sqrt(); // [b, h, n, n]
         if let Some(m) = mask {
             scores = scores + m;
         }
-        scores.softmax(-1, Kind::Float).matmul(&v).permute([0, 2, 1, 3]).contiguous().view([b, n, d]).apply(&self.out)
+        scores
+            .softmax(-1, Kind::Float)
+            .matmul(&v)
+            .permute([0, 2, 1, 3])
+            .contiguous()
+            .view([b, n, d])
+            .apply(&self.out)
     }
 
     /// New steps `x` `[b, m, d]` attending causally to the cache and to themselves; the cache
@@ -135,7 +156,10 @@ impl MultiHeadAttention {
     pub fn forward_cached(&self, x: &Tensor, cache: &mut KvCache) -> Tensor {
         let (b, m, d) = x.size3().expect("attention input is [b, m, d]");
         let (h, dh) = (self.n_heads, d / self.n_heads);
-        let qkv = x.apply(&self.qkv).view([b, m, 3, h, dh]).permute([2, 0, 3, 1, 4]);
+        let qkv = x
+            .apply(&self.qkv)
+            .view([b, m, 3, h, dh])
+            .permute([2, 0, 3, 1, 4]);
         let (q, k, v) = (qkv.get(0), qkv.get(1), qkv.get(2));
         let past = cache.len();
         let k = match &cache.k {
@@ -151,7 +175,13 @@ impl MultiHeadAttention {
             let full = causal_mask(past + m, x.device()).narrow(0, past, m);
             scores = scores + full;
         }
-        let y = scores.softmax(-1, Kind::Float).matmul(&v).permute([0, 2, 1, 3]).contiguous().view([b, m, d]).apply(&self.out);
+        let y = scores
+            .softmax(-1, Kind::Float)
+            .matmul(&v)
+            .permute([0, 2, 1, 3])
+            .contiguous()
+            .view([b, m, d])
+            .apply(&self.out);
         cache.k = Some(k);
         cache.v = Some(v);
         y
@@ -183,13 +213,21 @@ impl EncoderLayer {
     }
 
     fn ffn(&self, x: Tensor, train: bool) -> Tensor {
-        let f = x.apply(&self.norm2).apply(&self.ff1).gelu("none").apply(&self.ff2).dropout(self.dropout, train);
+        let f = x
+            .apply(&self.norm2)
+            .apply(&self.ff1)
+            .gelu("none")
+            .apply(&self.ff2)
+            .dropout(self.dropout, train);
         x + f
     }
 
     /// `x` `[b, n, d]` → `[b, n, d]`, with an optional additive attention mask.
     pub fn forward(&self, x: &Tensor, mask: Option<&Tensor>, train: bool) -> Tensor {
-        let x = x + self.attn.forward(&x.apply(&self.norm1), mask).dropout(self.dropout, train);
+        let x = x + self
+            .attn
+            .forward(&x.apply(&self.norm1), mask)
+            .dropout(self.dropout, train);
         self.ffn(x, train)
     }
 
@@ -210,7 +248,12 @@ pub struct Stack {
 impl Stack {
     /// `n` layers of `dims` under `p`.
     pub fn new(p: nn::Path, dims: Dims, n: i64) -> Self {
-        Self { layers: (0..n).map(|i| EncoderLayer::new(&p / "layers" / i, dims)).collect(), norm: nn::layer_norm(&p / "norm", vec![dims.d], Default::default()) }
+        Self {
+            layers: (0..n)
+                .map(|i| EncoderLayer::new(&p / "layers" / i, dims))
+                .collect(),
+            norm: nn::layer_norm(&p / "norm", vec![dims.d], Default::default()),
+        }
     }
 
     /// `x` `[b, n, d]` → `[b, n, d]`.
@@ -256,12 +299,22 @@ impl Lstm {
     /// `layers` layers, the first taking `input` features.
     pub fn new(p: nn::Path, input: i64, hidden: i64, layers: i64) -> Self {
         let bound = 1.0 / (hidden as f64).sqrt();
-        let init = nn::Init::Uniform { lo: -bound, up: bound };
-        let mut me = Self { w_ih: vec![], w_hh: vec![], b: vec![], hidden };
+        let init = nn::Init::Uniform {
+            lo: -bound,
+            up: bound,
+        };
+        let mut me = Self {
+            w_ih: vec![],
+            w_hh: vec![],
+            b: vec![],
+            hidden,
+        };
         for l in 0..layers {
             let inp = if l == 0 { input } else { hidden };
-            me.w_ih.push(p.var(&format!("w_ih_l{l}"), &[4 * hidden, inp], init));
-            me.w_hh.push(p.var(&format!("w_hh_l{l}"), &[4 * hidden, hidden], init));
+            me.w_ih
+                .push(p.var(&format!("w_ih_l{l}"), &[4 * hidden, inp], init));
+            me.w_hh
+                .push(p.var(&format!("w_hh_l{l}"), &[4 * hidden, hidden], init));
             me.b.push(p.var(&format!("b_l{l}"), &[4 * hidden], init));
         }
         me
@@ -288,9 +341,16 @@ impl Lstm {
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
         (0..self.w_ih.len())
             .map(|_| {
-                let h: Vec<f32> = (0..batch * self.hidden).map(|_| StandardNormal.sample(&mut rng)).collect();
-                let h = Tensor::from_slice(&h).view([batch, self.hidden]).to_device(device);
-                (h, Tensor::zeros([batch, self.hidden], (Kind::Float, device)))
+                let h: Vec<f32> = (0..batch * self.hidden)
+                    .map(|_| StandardNormal.sample(&mut rng))
+                    .collect();
+                let h = Tensor::from_slice(&h)
+                    .view([batch, self.hidden])
+                    .to_device(device);
+                (
+                    h,
+                    Tensor::zeros([batch, self.hidden], (Kind::Float, device)),
+                )
             })
             .collect()
     }
@@ -301,7 +361,12 @@ mod tests {
     use super::*;
 
     fn dims() -> Dims {
-        Dims { d: 8, n_heads: 2, d_ff: 16, dropout: 0.0 }
+        Dims {
+            d: 8,
+            n_heads: 2,
+            d_ff: 16,
+            dropout: 0.0,
+        }
     }
 
     #[test]
@@ -315,7 +380,10 @@ mod tests {
         let x2 = x.copy();
         let _ = x2.narrow(1, 9, 1).fill_(3.0);
         let b = s.forward(&x2, Some(&mask), false);
-        let early = (a.narrow(1, 0, 9) - b.narrow(1, 0, 9)).abs().max().double_value(&[]);
+        let early = (a.narrow(1, 0, 9) - b.narrow(1, 0, 9))
+            .abs()
+            .max()
+            .double_value(&[]);
         assert!(early < 1e-6, "frames before 9 moved by {early}");
     }
 

@@ -20,10 +20,22 @@ pub mod tsmt;
 /// One row per served model: its id (the folder name under the models dir) and how to load it.
 /// Adding a model is one row here, one `pub mod` above and one trainer under [`train`].
 pub const MODELS: &[Entry] = &[
-    Entry { id: dance_revolution::ID, load: |dir| Ok(std::sync::Arc::new(dance_revolution::Served::load(dir)?)) },
-    Entry { id: dancenet::ID, load: |dir| Ok(std::sync::Arc::new(dancenet::Served::load(dir)?)) },
-    Entry { id: keypose_transformer::ID, load: |dir| Ok(std::sync::Arc::new(keypose_transformer::Served::load(dir)?)) },
-    Entry { id: tsmt::ID, load: |dir| Ok(std::sync::Arc::new(tsmt::Served::load(dir)?)) },
+    Entry {
+        id: dance_revolution::ID,
+        load: |dir| Ok(std::sync::Arc::new(dance_revolution::Served::load(dir)?)),
+    },
+    Entry {
+        id: dancenet::ID,
+        load: |dir| Ok(std::sync::Arc::new(dancenet::Served::load(dir)?)),
+    },
+    Entry {
+        id: keypose_transformer::ID,
+        load: |dir| Ok(std::sync::Arc::new(keypose_transformer::Served::load(dir)?)),
+    },
+    Entry {
+        id: tsmt::ID,
+        load: |dir| Ok(std::sync::Arc::new(tsmt::Served::load(dir)?)),
+    },
 ];
 
 /// A row of [`MODELS`].
@@ -66,7 +78,12 @@ pub enum DanceStyle {
 
 impl DanceStyle {
     /// Every style, in index order.
-    pub const ALL: [DanceStyle; 4] = [DanceStyle::ChaCha, DanceStyle::Rumba, DanceStyle::Tango, DanceStyle::Waltz];
+    pub const ALL: [DanceStyle; 4] = [
+        DanceStyle::ChaCha,
+        DanceStyle::Rumba,
+        DanceStyle::Tango,
+        DanceStyle::Waltz,
+    ];
 
     /// The style of a dataset dance folder's letter (`DANCE_W_1` → waltz).
     pub fn from_letter(c: char) -> Option<Self> {
@@ -81,7 +98,9 @@ impl DanceStyle {
 
     /// The style of a dataset dance id (`DANCE_R_4`).
     pub fn of_dance_id(id: &str) -> Option<Self> {
-        id.strip_prefix("DANCE_").and_then(|r| r.chars().next()).and_then(Self::from_letter)
+        id.strip_prefix("DANCE_")
+            .and_then(|r| r.chars().next())
+            .and_then(Self::from_letter)
     }
 
     /// Position in [`Self::ALL`] (a one-hot's index).
@@ -129,7 +148,10 @@ pub struct Generated {
 
 impl From<Motion> for Generated {
     fn from(motion: Motion) -> Self {
-        Self { motion, style: None }
+        Self {
+            motion,
+            style: None,
+        }
     }
 }
 
@@ -162,7 +184,9 @@ pub struct GenerateRequest<'a> {
 
 impl<'a> GenerateRequest<'a> {
     /// The song's analysis: the caller's ([`Self::analysis`]), else analysed here, unbudgeted.
-    pub fn analysis_or_analyze(&self) -> Result<std::borrow::Cow<'a, Analysis>, crate::audio::AudioError> {
+    pub fn analysis_or_analyze(
+        &self,
+    ) -> Result<std::borrow::Cow<'a, Analysis>, crate::audio::AudioError> {
         match self.analysis {
             Some(a) => Ok(std::borrow::Cow::Borrowed(a)),
             None => crate::audio::analyze(self.audio).map(std::borrow::Cow::Owned),
@@ -171,7 +195,16 @@ impl<'a> GenerateRequest<'a> {
 
     /// A request with only the song and the seed: no key poses, no seed motion, model defaults.
     pub fn plain(audio: &'a DecodedAudio, seed: u64) -> Self {
-        Self { audio, seed, key_poses: &[], seed_motion: None, style: None, temperature: None, top_k: None, analysis: None }
+        Self {
+            audio,
+            seed,
+            key_poses: &[],
+            seed_motion: None,
+            style: None,
+            temperature: None,
+            top_k: None,
+            analysis: None,
+        }
     }
 }
 
@@ -244,7 +277,8 @@ pub fn to_tensor(m: &ndarray::Array2<f32>) -> tch::Tensor {
 pub fn to_array(t: &tch::Tensor) -> Result<ndarray::Array2<f32>, ModelError> {
     let (r, c) = t.size2()?;
     let data: Vec<f32> = Vec::<f32>::try_from(t.contiguous().view([-1]))?;
-    ndarray::Array2::from_shape_vec((r as usize, c as usize), data).map_err(|e| ModelError::Shape(e.to_string()))
+    ndarray::Array2::from_shape_vec((r as usize, c as usize), data)
+        .map_err(|e| ModelError::Shape(e.to_string()))
 }
 
 /// Smooths every column of `[T, D]` feature rows over time (Gaussian, σ `sigma` frames, scipy's
@@ -266,7 +300,11 @@ pub fn smooth_columns(features: &mut ndarray::Array2<f32>, keep: usize, sigma: f
 /// A trained model, ready to dance.
 pub trait DanceModel: Send + Sync {
     fn info(&self) -> ModelInfo;
-    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError>;
+    fn generate(
+        &self,
+        req: &GenerateRequest<'_>,
+        progress: &mut dyn Progress,
+    ) -> Result<Generated, ModelError>;
 
     /// Refuses a request with an input this model's [`Capabilities`] do not list, as the API does
     /// before queueing; every model's `generate` starts with it, so the CLI and the eval refuse too.
@@ -327,10 +365,20 @@ pub struct InstancePool<M> {
 
 impl<M: Send> InstancePool<M> {
     /// Loads one copy now, so a bad weights file fails at start-up rather than on the first job.
-    pub fn new(weights: std::path::PathBuf, build: impl Fn(&tch::nn::Path) -> M + Send + Sync + 'static) -> Result<Self, ModelError> {
-        let pool = Self { weights, build: Box::new(build), free: std::sync::Mutex::new(Vec::new()) };
+    pub fn new(
+        weights: std::path::PathBuf,
+        build: impl Fn(&tch::nn::Path) -> M + Send + Sync + 'static,
+    ) -> Result<Self, ModelError> {
+        let pool = Self {
+            weights,
+            build: Box::new(build),
+            free: std::sync::Mutex::new(Vec::new()),
+        };
         let first = pool.load()?;
-        pool.free.lock().unwrap_or_else(|p| p.into_inner()).push(first);
+        pool.free
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .push(first);
         Ok(pool)
     }
 
@@ -349,7 +397,10 @@ impl<M: Send> InstancePool<M> {
             None => self.load()?,
         };
         let out = f(&instance.0);
-        self.free.lock().unwrap_or_else(|p| p.into_inner()).push(instance);
+        self.free
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .push(instance);
         Ok(out)
     }
 }
@@ -363,17 +414,34 @@ mod tests {
 
     impl DanceModel for Takes {
         fn info(&self) -> ModelInfo {
-            ModelInfo { id: ModelId("m".into()), paper: String::new(), capabilities: self.0 }
+            ModelInfo {
+                id: ModelId("m".into()),
+                paper: String::new(),
+                capabilities: self.0,
+            }
         }
-        fn generate(&self, _: &GenerateRequest<'_>, _: &mut dyn Progress) -> Result<Generated, ModelError> {
+        fn generate(
+            &self,
+            _: &GenerateRequest<'_>,
+            _: &mut dyn Progress,
+        ) -> Result<Generated, ModelError> {
             unreachable!("refuse_unsupported only")
         }
     }
 
     #[test]
     fn inputs_a_model_does_not_take_are_refused_by_name() {
-        let audio = DecodedAudio { format: crate::audio::AudioFormat::Wav, sample_rate: 22_050, channels: 1, duration_s: 0.0, samples: Vec::new() };
-        let key = [KeyPose { time_s: 0.0, joints: vec![[0.0; 3]; 23] }];
+        let audio = DecodedAudio {
+            format: crate::audio::AudioFormat::Wav,
+            sample_rate: 22_050,
+            channels: 1,
+            duration_s: 0.0,
+            samples: Vec::new(),
+        };
+        let key = [KeyPose {
+            time_s: 0.0,
+            joints: vec![[0.0; 3]; 23],
+        }];
         let plain = GenerateRequest::plain(&audio, 0);
         let with = |f: fn(&mut GenerateRequest<'_>)| {
             let mut r = GenerateRequest::plain(&audio, 0);
@@ -386,13 +454,37 @@ mod tests {
             Err(ModelError::Unsupported(id, what)) => Some((id, what)),
             _ => None,
         };
-        assert_eq!(refused(&nothing, &with(|r| r.style = Some(DanceStyle::ALL[0]))), Some(("m".into(), "a style")));
-        assert_eq!(refused(&nothing, &with(|r| r.temperature = Some(0.8))), Some(("m".into(), "a temperature")));
-        assert_eq!(refused(&nothing, &with(|r| r.top_k = Some(4))), Some(("m".into(), "top_k")));
-        let keyed = GenerateRequest { key_poses: &key, ..GenerateRequest::plain(&audio, 0) };
+        assert_eq!(
+            refused(&nothing, &with(|r| r.style = Some(DanceStyle::ALL[0]))),
+            Some(("m".into(), "a style"))
+        );
+        assert_eq!(
+            refused(&nothing, &with(|r| r.temperature = Some(0.8))),
+            Some(("m".into(), "a temperature"))
+        );
+        assert_eq!(
+            refused(&nothing, &with(|r| r.top_k = Some(4))),
+            Some(("m".into(), "top_k"))
+        );
+        let keyed = GenerateRequest {
+            key_poses: &key,
+            ..GenerateRequest::plain(&audio, 0)
+        };
         assert_eq!(refused(&nothing, &keyed), Some(("m".into(), "key poses")));
-        let all = Takes(Capabilities { key_poses: true, seed_motion: true, style: true, temperature: true, top_k: true });
-        let everything = GenerateRequest { key_poses: &key, style: Some(DanceStyle::ALL[0]), temperature: Some(0.8), top_k: Some(4), ..GenerateRequest::plain(&audio, 0) };
+        let all = Takes(Capabilities {
+            key_poses: true,
+            seed_motion: true,
+            style: true,
+            temperature: true,
+            top_k: true,
+        });
+        let everything = GenerateRequest {
+            key_poses: &key,
+            style: Some(DanceStyle::ALL[0]),
+            temperature: Some(0.8),
+            top_k: Some(4),
+            ..GenerateRequest::plain(&audio, 0)
+        };
         assert!(all.refuse_unsupported(&everything).is_ok());
     }
 }

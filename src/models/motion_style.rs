@@ -43,7 +43,9 @@ use std::path::Path;
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 
-use crate::models::dancenet::style::{Evaluation, HeldOut, Schedule, StyleConfig, WindowedClassifier, STYLES};
+use crate::models::dancenet::style::{
+    Evaluation, HeldOut, Schedule, StyleConfig, WindowedClassifier, STYLES,
+};
 use crate::models::folder::{self, TrainingRecord};
 use crate::models::ModelError;
 use crate::motion::dataset::NormStats;
@@ -82,7 +84,12 @@ pub const FEATURE_DIM: usize = 3 * BONES.len() + 4;
 /// The network's configuration: DanceNet's classifier with the motion's input width and wider
 /// layers (52 features carry more than 15).
 pub fn config() -> StyleConfig {
-    StyleConfig { input_dim: FEATURE_DIM as i64, channels: vec![32, 48, 64], hidden: 48, ..StyleConfig::cpu() }
+    StyleConfig {
+        input_dim: FEATURE_DIM as i64,
+        channels: vec![32, 48, 64],
+        hidden: 48,
+        ..StyleConfig::cpu()
+    }
 }
 
 /// Errors of the motion style classifier.
@@ -168,9 +175,19 @@ impl MotionStyle {
     pub fn load(dir: &Path) -> Result<Self, StyleError> {
         let file: MotionStyleFile = folder::read(dir, ID)?;
         if file.config.input_dim != FEATURE_DIM as i64 {
-            return Err(ModelError::BadModelFile(format!("{ID}: {} input features, these features are {FEATURE_DIM}", file.config.input_dim)).into());
+            return Err(ModelError::BadModelFile(format!(
+                "{ID}: {} input features, these features are {FEATURE_DIM}",
+                file.config.input_dim
+            ))
+            .into());
         }
-        let classifier = WindowedClassifier::load(dir.join(folder::WEIGHTS_FILE), file.config.clone(), file.pose_norm.clone(), file.window, file.hop)?;
+        let classifier = WindowedClassifier::load(
+            dir.join(folder::WEIGHTS_FILE),
+            file.config.clone(),
+            file.pose_norm.clone(),
+            file.window,
+            file.hop,
+        )?;
         Ok(Self { file, classifier })
     }
 
@@ -183,7 +200,10 @@ impl MotionStyle {
     /// over 10-s windows every 5 s (one shorter window for a shorter motion).
     pub fn classify(&self, motion: &Motion) -> Result<[f32; STYLES], StyleError> {
         if (motion.fps - self.file.fps).abs() > 1e-6 {
-            return Err(StyleError::Fps { got: motion.fps, want: self.file.fps });
+            return Err(StyleError::Fps {
+                got: motion.fps,
+                want: self.file.fps,
+            });
         }
         Ok(self.classifier.probabilities(&features(motion)?)?)
     }
@@ -212,7 +232,10 @@ mod tests {
                 p[[t, j, 2]] = rz * scale + shift[2];
             }
         }
-        Motion { fps: MOTION_FPS, positions: p }
+        Motion {
+            fps: MOTION_FPS,
+            positions: p,
+        }
     }
 
     fn max_diff(a: &Array2<f32>, b: &Array2<f32>) -> f32 {
@@ -223,10 +246,16 @@ mod tests {
     fn features_see_movement_whatever_the_body_place_heading_or_pose() {
         let a = features(&body(12, 0.0, 1.0, [0.0; 3], false)).unwrap();
         assert_eq!(a.dim(), (12, FEATURE_DIM));
-        assert!(a.row(5).iter().take(48).any(|v| v.abs() > 1e-3), "swinging limbs show no change");
+        assert!(
+            a.row(5).iter().take(48).any(|v| v.abs() > 1e-3),
+            "swinging limbs show no change"
+        );
         let b = features(&body(12, 1.1, 1.0, [3.0, 0.5, -2.0], false)).unwrap();
         let d = max_diff(&a, &b);
-        assert!(d < 1e-4, "turning and moving the dancer changed the features by {d}");
+        assert!(
+            d < 1e-4,
+            "turning and moving the dancer changed the features by {d}"
+        );
         // A bigger body: the same changes of direction (the root's speeds scale with it).
         let c = features(&body(12, 0.0, 1.2, [0.0; 3], false)).unwrap();
         let limbs = |m: &Array2<f32>| m.slice(ndarray::s![.., ..48]).to_owned();
@@ -235,7 +264,10 @@ mod tests {
         // A body held still reads all zeros, whatever its pose.
         let still = features(&body(12, 0.7, 1.3, [1.0, 0.0, 1.0], true)).unwrap();
         assert!(still.iter().all(|v| v.abs() < 1e-5));
-        assert!(a.row(0).iter().all(|&v| v == 0.0), "the first frame has no previous one");
+        assert!(
+            a.row(0).iter().all(|&v| v == 0.0),
+            "the first frame has no previous one"
+        );
     }
 
     #[test]
@@ -245,8 +277,14 @@ mod tests {
             // Every segment is a bone of the skeleton but the left hand point's, taken from the
             // wrist as on the right.
             assert!(all.contains(&b) || b == (15, 21), "{b:?} is not a bone");
-            assert!(!skeleton::HEAD.contains(&b.1) && b.1 != skeleton::SPINE && b.0 != skeleton::SPINE, "{b:?} is a torso bone");
-            assert!(BONES.contains(&(skeleton::MIRROR[b.0], skeleton::MIRROR[b.1])), "{b:?} has no mirror");
+            assert!(
+                !skeleton::HEAD.contains(&b.1) && b.1 != skeleton::SPINE && b.0 != skeleton::SPINE,
+                "{b:?} is a torso bone"
+            );
+            assert!(
+                BONES.contains(&(skeleton::MIRROR[b.0], skeleton::MIRROR[b.1])),
+                "{b:?} has no mirror"
+            );
         }
     }
 

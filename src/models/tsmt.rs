@@ -114,7 +114,21 @@ impl Config {
 
     /// A tiny configuration for tests and smoke runs.
     pub fn tiny() -> Self {
-        Self { e_bin: 4, d_x: 16, x_layers: 1, x_heads: 2, d_a: 8, a_layers: 1, a_heads: 2, a_band: 6, e_out: 8, head_hidden: 8, window: 16, dropout: 0.0, ..Self::cpu() }
+        Self {
+            e_bin: 4,
+            d_x: 16,
+            x_layers: 1,
+            x_heads: 2,
+            d_a: 8,
+            a_layers: 1,
+            a_heads: 2,
+            a_band: 6,
+            e_out: 8,
+            head_hidden: 8,
+            window: 16,
+            dropout: 0.0,
+            ..Self::cpu()
+        }
     }
 }
 
@@ -134,13 +148,22 @@ const BIN_TAIL: f64 = 0.001;
 impl Bins {
     /// Ranges from the 0.1th to the 99.9th percentile of each column of `rows`, widened by 5 %
     /// each side.
-    pub fn fit<'a>(rows: impl IntoIterator<Item = &'a Array2<f32>>, n: usize) -> Result<Self, ModelError> {
+    pub fn fit<'a>(
+        rows: impl IntoIterator<Item = &'a Array2<f32>>,
+        n: usize,
+    ) -> Result<Self, ModelError> {
         let rows: Vec<&Array2<f32>> = rows.into_iter().collect();
-        let d = rows.first().map(|r| r.ncols()).ok_or_else(|| ModelError::Input("no rows to fit bins on".into()))?;
+        let d = rows
+            .first()
+            .map(|r| r.ncols())
+            .ok_or_else(|| ModelError::Input("no rows to fit bins on".into()))?;
         let (mut lo, mut hi) = (Vec::with_capacity(d), Vec::with_capacity(d));
         for c in 0..d {
             let col: Vec<f32> = rows.iter().flat_map(|r| r.column(c).to_vec()).collect();
-            let (a, b) = (repr::percentile(&col, 100.0 * BIN_TAIL), repr::percentile(&col, 100.0 * (1.0 - BIN_TAIL)));
+            let (a, b) = (
+                repr::percentile(&col, 100.0 * BIN_TAIL),
+                repr::percentile(&col, 100.0 * (1.0 - BIN_TAIL)),
+            );
             let pad = 0.05 * (b - a).max(1e-4);
             lo.push(a - pad);
             hi.push(b + pad);
@@ -192,11 +215,23 @@ fn band_mask(n: i64, band: i64, device: Device) -> Tensor {
 
 impl AudioStream {
     fn new(p: nn::Path, c: &Config) -> Self {
-        let conv_cfg = nn::ConvConfig { padding: c.a_kernel / 2, ..Default::default() };
+        let conv_cfg = nn::ConvConfig {
+            padding: c.a_kernel / 2,
+            ..Default::default()
+        };
         Self {
             embed: nn::linear(&p / "embed", c.music_dim, c.d_a, Default::default()),
             conv: nn::conv1d(&p / "conv", c.d_a, c.d_a, c.a_kernel, conv_cfg),
-            stack: Stack::new(&p / "stack", Dims { d: c.d_a, n_heads: c.a_heads, d_ff: 4 * c.d_a, dropout: c.dropout }, c.a_layers),
+            stack: Stack::new(
+                &p / "stack",
+                Dims {
+                    d: c.d_a,
+                    n_heads: c.a_heads,
+                    d_ff: 4 * c.d_a,
+                    dropout: c.dropout,
+                },
+                c.a_layers,
+            ),
             d_a: c.d_a,
             band: c.a_band,
         }
@@ -206,9 +241,14 @@ impl AudioStream {
     pub fn forward(&self, music: &Tensor, start: i64, train: bool) -> Tensor {
         let n = music.size()[1];
         let x = music.apply(&self.embed); // [b, n, d_a]
-        let x = x.transpose(1, 2).apply(&self.conv).gelu("none").transpose(1, 2); // [b, n, d_a]
+        let x = x
+            .transpose(1, 2)
+            .apply(&self.conv)
+            .gelu("none")
+            .transpose(1, 2); // [b, n, d_a]
         let x = x + sinusoid(start, n, self.d_a, music.device()).unsqueeze(0);
-        self.stack.forward(&x, Some(&band_mask(n, self.band, music.device())), train)
+        self.stack
+            .forward(&x, Some(&band_mask(n, self.band, music.device())), train)
     }
 
     /// Frames on each side of a chunk that every output inside it can see: the convolution's
@@ -219,9 +259,22 @@ impl AudioStream {
 
     /// Encodes a whole song `[1, n, music_dim]` in chunks with enough context on each side to
     /// equal one pass; `on_chunk` gets the fraction done and may stop it.
-    pub fn forward_chunked(&self, music: &Tensor, kernel: i64, start: i64, chunk: i64, on_chunk: impl FnMut(f32) -> bool) -> Option<Tensor> {
+    pub fn forward_chunked(
+        &self,
+        music: &Tensor,
+        kernel: i64,
+        start: i64,
+        chunk: i64,
+        on_chunk: impl FnMut(f32) -> bool,
+    ) -> Option<Tensor> {
         let n = music.size()[1];
-        super::layers::chunked(n, chunk, self.reach(kernel), |cs, len| self.forward(&music.narrow(1, cs, len), start + cs, false), on_chunk)
+        super::layers::chunked(
+            n,
+            chunk,
+            self.reach(kernel),
+            |cs, len| self.forward(&music.narrow(1, cs, len), start + cs, false),
+            on_chunk,
+        )
     }
 }
 
@@ -237,7 +290,16 @@ impl PoseStream {
     fn new(p: nn::Path, c: &Config) -> Self {
         Self {
             merge: nn::linear(&p / "merge", c.coords * c.e_bin, c.d_x, Default::default()),
-            stack: Stack::new(&p / "stack", Dims { d: c.d_x, n_heads: c.x_heads, d_ff: 4 * c.d_x, dropout: c.dropout }, c.x_layers),
+            stack: Stack::new(
+                &p / "stack",
+                Dims {
+                    d: c.d_x,
+                    n_heads: c.x_heads,
+                    d_ff: 4 * c.d_x,
+                    dropout: c.dropout,
+                },
+                c.x_layers,
+            ),
             d_x: c.d_x,
         }
     }
@@ -245,7 +307,8 @@ impl PoseStream {
     /// Embedded frames `[b, n, coords, e_bin]` → merged `[b, n, d_x]` with positions from `start`.
     fn merge(&self, emb: &Tensor, start: i64) -> Tensor {
         let (b, n, c, e) = emb.size4().expect("embedded poses are [b, n, coords, e]");
-        emb.reshape([b, n, c * e]).apply(&self.merge) + sinusoid(start, n, self.d_x, emb.device()).unsqueeze(0)
+        emb.reshape([b, n, c * e]).apply(&self.merge)
+            + sinusoid(start, n, self.d_x, emb.device()).unsqueeze(0)
     }
 }
 
@@ -278,12 +341,32 @@ impl Tsmt {
             bin_embed: nn::embedding(p / "bin_embed", c.n_bins, c.e_bin, Default::default()),
             pose: PoseStream::new(p / "pose", c),
             audio: AudioStream::new(p / "audio", c),
-            w_x: nn::linear(p / "w_x", c.d_x, c.coords * c.e_out, nn::LinearConfig { bias: false, ..Default::default() }),
+            w_x: nn::linear(
+                p / "w_x",
+                c.d_x,
+                c.coords * c.e_out,
+                nn::LinearConfig {
+                    bias: false,
+                    ..Default::default()
+                },
+            ),
             w_a: nn::linear(p / "w_a", c.d_a, c.coords * c.e_out, Default::default()),
-            head: (c.head_hidden > 0).then(|| nn::linear(p / "head", c.e_out, c.head_hidden, Default::default())),
+            head: (c.head_hidden > 0)
+                .then(|| nn::linear(p / "head", c.e_out, c.head_hidden, Default::default())),
             bin_out: {
-                let w = if c.head_hidden > 0 { c.head_hidden } else { c.e_out };
-                p.var("bin_out", &[c.n_bins, w], nn::Init::Randn { mean: 0.0, stdev: 1.0 / (w as f64).sqrt() })
+                let w = if c.head_hidden > 0 {
+                    c.head_hidden
+                } else {
+                    c.e_out
+                };
+                p.var(
+                    "bin_out",
+                    &[c.n_bins, w],
+                    nn::Init::Randn {
+                        mean: 0.0,
+                        stdev: 1.0 / (w as f64).sqrt(),
+                    },
+                )
             },
             bias: p.var("bias", &[c.coords, c.n_bins], nn::Init::Const(0.0)),
             config,
@@ -309,7 +392,10 @@ impl Tsmt {
     pub fn forward(&self, tokens: &Tensor, music: &Tensor, start: i64, train: bool) -> Tensor {
         let n = tokens.size()[1] - 1;
         let emb = tokens.narrow(1, 0, n).apply(&self.bin_embed); // [b, n, coords, e_bin]
-        let x = self.pose.merge(&emb, start).dropout(self.config.dropout, train);
+        let x = self
+            .pose
+            .merge(&emb, start)
+            .dropout(self.config.dropout, train);
         let mask = super::layers::causal_mask(n, tokens.device());
         let z_x = self.pose.stack.forward(&x, Some(&mask), train); // [b, n, d_x]
         let z_a = self.audio.forward(music, start, train).narrow(1, 1, n); // [b, n, d_a]
@@ -323,11 +409,20 @@ impl Tsmt {
 
     /// As [`Self::loss`], with the pose stream reading `input` (e.g. noised tokens) while the
     /// targets are `tokens`.
-    pub fn loss_with_input(&self, input: &Tensor, tokens: &Tensor, music: &Tensor, start: i64, train: bool) -> Tensor {
+    pub fn loss_with_input(
+        &self,
+        input: &Tensor,
+        tokens: &Tensor,
+        music: &Tensor,
+        start: i64,
+        train: bool,
+    ) -> Tensor {
         let n = tokens.size()[1] - 1;
         let logits = self.forward(input, music, start, train);
         let target = tokens.narrow(1, 1, n).reshape([-1]);
-        logits.reshape([-1, self.config.n_bins]).cross_entropy_for_logits(&target)
+        logits
+            .reshape([-1, self.config.n_bins])
+            .cross_entropy_for_logits(&target)
     }
 
     /// As [`Self::loss_with_input`], scoring only the predicted frames listed in `frames`
@@ -335,21 +430,48 @@ impl Tsmt {
     /// scored frame sees its full causal context); only the read-out, which is three quarters of
     /// a step's arithmetic (`coords × n_bins` logits per frame), runs on the chosen frames. An
     /// unbiased estimate of the full loss at a fraction of the cost.
-    pub fn loss_on_frames(&self, input: &Tensor, tokens: &Tensor, music: &Tensor, start: i64, frames: &Tensor, train: bool) -> Tensor {
+    pub fn loss_on_frames(
+        &self,
+        input: &Tensor,
+        tokens: &Tensor,
+        music: &Tensor,
+        start: i64,
+        frames: &Tensor,
+        train: bool,
+    ) -> Tensor {
         let n = tokens.size()[1] - 1;
         let emb = input.narrow(1, 0, n).apply(&self.bin_embed);
-        let x = self.pose.merge(&emb, start).dropout(self.config.dropout, train);
+        let x = self
+            .pose
+            .merge(&emb, start)
+            .dropout(self.config.dropout, train);
         let mask = super::layers::causal_mask(n, tokens.device());
-        let z_x = self.pose.stack.forward(&x, Some(&mask), train).index_select(1, frames);
-        let z_a = self.audio.forward(music, start, train).narrow(1, 1, n).index_select(1, frames);
+        let z_x = self
+            .pose
+            .stack
+            .forward(&x, Some(&mask), train)
+            .index_select(1, frames);
+        let z_a = self
+            .audio
+            .forward(music, start, train)
+            .narrow(1, 1, n)
+            .index_select(1, frames);
         let logits = self.logits(&(z_x.apply(&self.w_x) + z_a.apply(&self.w_a)));
         let target = tokens.narrow(1, 1, n).index_select(1, frames).reshape([-1]);
-        logits.reshape([-1, self.config.n_bins]).cross_entropy_for_logits(&target)
+        logits
+            .reshape([-1, self.config.n_bins])
+            .cross_entropy_for_logits(&target)
     }
 
     /// Encodes a whole song `[1, n, music_dim]`: `W^A z^A` `[n, coords * e_out]`.
-    pub fn audio_logit_vectors(&self, music: &Tensor, mut on_chunk: impl FnMut(f32) -> bool) -> Option<Tensor> {
-        let z = self.audio.forward_chunked(music, self.config.a_kernel, 0, 1000, &mut on_chunk)?;
+    pub fn audio_logit_vectors(
+        &self,
+        music: &Tensor,
+        mut on_chunk: impl FnMut(f32) -> bool,
+    ) -> Option<Tensor> {
+        let z = self
+            .audio
+            .forward_chunked(music, self.config.a_kernel, 0, 1000, &mut on_chunk)?;
         Some(z.squeeze_dim(0).apply(&self.w_a))
     }
 
@@ -379,7 +501,15 @@ mod tests {
     fn model(seed: i64) -> (nn::VarStore, Tsmt) {
         tch::manual_seed(seed);
         let vs = nn::VarStore::new(Device::Cpu);
-        let m = Tsmt::new(&vs.root(), Config { coords: 5, n_bins: 12, music_dim: 3, ..Config::tiny() });
+        let m = Tsmt::new(
+            &vs.root(),
+            Config {
+                coords: 5,
+                n_bins: 12,
+                music_dim: 3,
+                ..Config::tiny()
+            },
+        );
         (vs, m)
     }
 
@@ -394,8 +524,13 @@ mod tests {
         let back = b.values(&b.tokens(&x));
         for c in 0..2 {
             let width = (b.hi[c] - b.lo[c]) / 300.0;
-            let err = (&back.column(c) - &x.column(c)).mapv(f32::abs).fold(0f32, |a, &v| a.max(v));
-            assert!(err <= 0.5 * width + 1e-6, "column {c}: error {err}, bin {width}");
+            let err = (&back.column(c) - &x.column(c))
+                .mapv(f32::abs)
+                .fold(0f32, |a, &v| a.max(v));
+            assert!(
+                err <= 0.5 * width + 1e-6,
+                "column {c}: error {err}, bin {width}"
+            );
         }
         assert_eq!(b.index(0, -100.0), 0);
         assert_eq!(b.index(0, 100.0), 299);
@@ -406,16 +541,26 @@ mod tests {
         // A slow ramp drawn one bin off at random every frame, after 5 given frames.
         let mut rng = StdRng::seed_from_u64(1);
         let clean = Array2::from_shape_fn((200, 1), |(t, _)| t as f32 * 0.004);
-        let mut x = clean.mapv(|v| v) + Array2::from_shape_fn((200, 1), |_| 0.004 * rng.gen_range(-1..=1) as f32);
+        let mut x = clean.mapv(|v| v)
+            + Array2::from_shape_fn((200, 1), |_| 0.004 * rng.gen_range(-1..=1) as f32);
         let given = x.slice(s![..5, ..]).to_owned();
-        let accel = |a: &Array2<f32>| (6..194).map(|t| (a[[t + 1, 0]] - 2.0 * a[[t, 0]] + a[[t - 1, 0]]).abs()).fold(0f32, f32::max);
+        let accel = |a: &Array2<f32>| {
+            (6..194)
+                .map(|t| (a[[t + 1, 0]] - 2.0 * a[[t, 0]] + a[[t - 1, 0]]).abs())
+                .fold(0f32, f32::max)
+        };
         let before = accel(&x);
         smooth_columns(&mut x, 5, 1.5);
         assert_eq!(x.slice(s![..5, ..]), given);
         let after = accel(&x);
-        assert!(after < 0.25 * before, "second difference {before} -> {after}");
+        assert!(
+            after < 0.25 * before,
+            "second difference {before} -> {after}"
+        );
         // The ramp itself is kept (away from the ends).
-        let off = (20..180).map(|t| (x[[t, 0]] - clean[[t, 0]]).abs()).fold(0f32, f32::max);
+        let off = (20..180)
+            .map(|t| (x[[t, 0]] - clean[[t, 0]]).abs())
+            .fold(0f32, f32::max);
         assert!(off < 0.004, "smoothing moved the ramp by {off}");
     }
 
@@ -430,7 +575,10 @@ mod tests {
         let x2 = x.copy();
         let _ = x2.narrow(1, 6, 1).fill_(3);
         let b = m.forward(&x2, &music, 0, false);
-        let early = (a.narrow(1, 0, 6) - b.narrow(1, 0, 6)).abs().max().double_value(&[]);
+        let early = (a.narrow(1, 0, 6) - b.narrow(1, 0, 6))
+            .abs()
+            .max()
+            .double_value(&[]);
         assert!(early < 1e-6, "frames ≤ 6 moved by {early}");
     }
 
@@ -439,7 +587,10 @@ mod tests {
         let (_vs, m) = model(1);
         let music = Tensor::randn([1, 70, 3], (Kind::Float, Device::Cpu));
         let whole = m.audio.forward(&music, 0, false);
-        let chunked = m.audio.forward_chunked(&music, m.config.a_kernel, 0, 9, |_| true).unwrap();
+        let chunked = m
+            .audio
+            .forward_chunked(&music, m.config.a_kernel, 0, 9, |_| true)
+            .unwrap();
         let d = (whole - chunked).abs().max().double_value(&[]);
         assert!(d < 1e-5, "chunked audio differs by {d}");
     }
@@ -450,7 +601,11 @@ mod tests {
         let x = tokens(1, 9);
         let music = Tensor::randn([1, 9, 3], (Kind::Float, Device::Cpu));
         let logits = m.forward(&x, &music, 0, false); // [1, 8, 5, 12]
-        let av = m.audio.forward(&music, 0, false).squeeze_dim(0).apply(&m.w_a);
+        let av = m
+            .audio
+            .forward(&music, 0, false)
+            .squeeze_dim(0)
+            .apply(&m.w_a);
         let mut caches = m.pose.stack.new_caches();
         for t in 0..8 {
             let wx = m.step(&x.get(0).get(t), t, &mut caches);
@@ -474,8 +629,14 @@ mod tests {
         assert_eq!(a, b);
         assert_ne!(a, c);
         // top_k = 1 is greedy: the same whatever the seed.
-        let g = Sampling { temperature: 1.0, top_k: 1 };
-        assert_eq!(m.sample(&prefix, &av, g, 1, |_| true).unwrap(), m.sample(&prefix, &av, g, 2, |_| true).unwrap());
+        let g = Sampling {
+            temperature: 1.0,
+            top_k: 1,
+        };
+        assert_eq!(
+            m.sample(&prefix, &av, g, 1, |_| true).unwrap(),
+            m.sample(&prefix, &av, g, 2, |_| true).unwrap()
+        );
     }
 
     #[test]
@@ -492,13 +653,32 @@ mod tests {
         let music = Tensor::randn([1, 30, 3], (Kind::Float, Device::Cpu));
         let av = m.audio_logit_vectors(&music, |_| true).unwrap();
         let prefix = Array2::from_shape_fn((10, 5), |(t, c)| ((t + c) % 12) as i64);
-        let s = Sampling { temperature: 0.3, top_k: 3 };
+        let s = Sampling {
+            temperature: 0.3,
+            top_k: 3,
+        };
         let w = vec![0.01f32; 3];
-        let never = StallGuard { min_reach_m: 0.0, window_frames: 5, boost: 10.0 };
-        let always = StallGuard { min_reach_m: 1e9, window_frames: 5, boost: 10.0 };
+        let never = StallGuard {
+            min_reach_m: 0.0,
+            window_frames: 5,
+            boost: 10.0,
+        };
+        let always = StallGuard {
+            min_reach_m: 1e9,
+            window_frames: 5,
+            boost: 10.0,
+        };
         let plain = m.sample(&prefix, &av, s, 3, |_| true).unwrap();
-        assert_eq!(m.sample_guarded(&prefix, &av, s, Some((&never, &w)), 3, |_| true).unwrap(), plain);
-        assert_ne!(m.sample_guarded(&prefix, &av, s, Some((&always, &w)), 3, |_| true).unwrap(), plain);
+        assert_eq!(
+            m.sample_guarded(&prefix, &av, s, Some((&never, &w)), 3, |_| true)
+                .unwrap(),
+            plain
+        );
+        assert_ne!(
+            m.sample_guarded(&prefix, &av, s, Some((&always, &w)), 3, |_| true)
+                .unwrap(),
+            plain
+        );
     }
 
     #[test]
@@ -506,13 +686,27 @@ mod tests {
         let logits = [0.0f32, 1.0, 2.0, 3.0];
         let mut probs = [0f32; 4];
         let mut rng = StdRng::seed_from_u64(0);
-        let k2 = Sampling { temperature: 1.0, top_k: 2 };
+        let k2 = Sampling {
+            temperature: 1.0,
+            top_k: 2,
+        };
         assert!((0..200).all(|_| k2.draw(&logits, &mut probs, &mut rng) >= 2));
-        let cold = Sampling { temperature: 0.05, top_k: 0 };
+        let cold = Sampling {
+            temperature: 0.05,
+            top_k: 0,
+        };
         assert!((0..200).all(|_| cold.draw(&logits, &mut probs, &mut rng) == 3));
-        let hot = Sampling { temperature: 5.0, top_k: 0 };
-        let zeros = (0..400).filter(|_| hot.draw(&logits, &mut probs, &mut rng) == 0).count();
-        assert!(zeros > 40, "a hot draw picked bin 0 only {zeros} of 400 times");
+        let hot = Sampling {
+            temperature: 5.0,
+            top_k: 0,
+        };
+        let zeros = (0..400)
+            .filter(|_| hot.draw(&logits, &mut probs, &mut rng) == 0)
+            .count();
+        assert!(
+            zeros > 40,
+            "a hot draw picked bin 0 only {zeros} of 400 times"
+        );
     }
 
     #[test]
@@ -522,7 +716,9 @@ mod tests {
         let music = Tensor::randn([2, 9, 3], (Kind::Float, Device::Cpu));
         let all = Tensor::arange(8, (Kind::Int64, Device::Cpu));
         let full = m.loss(&x, &music, 3, false).double_value(&[]);
-        let picked = m.loss_on_frames(&x, &x, &music, 3, &all, false).double_value(&[]);
+        let picked = m
+            .loss_on_frames(&x, &x, &music, 3, &all, false)
+            .double_value(&[]);
         assert!((full - picked).abs() < 1e-5, "{full} vs {picked}");
     }
 

@@ -79,7 +79,9 @@ const DISTORTION_AT_LIMIT_PER_S: f64 = 0.5;
 const SKIP: f64 = 0.2;
 
 /// What the stage did to one dance (report.json's `beat_align`, and each eval dance's).
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
+)]
 pub struct BeatAlignSummary {
     /// Whether the motion was warped.
     pub applied: bool,
@@ -109,7 +111,12 @@ pub struct BeatAlignSummary {
 
 impl BeatAlignSummary {
     fn skipped(why: &str) -> Self {
-        Self { skipped: Some(why.to_string()), slope_min: 1.0, slope_max: 1.0, ..Self::default() }
+        Self {
+            skipped: Some(why.to_string()),
+            slope_min: 1.0,
+            slope_max: 1.0,
+            ..Self::default()
+        }
     }
 }
 
@@ -122,9 +129,17 @@ pub struct Warp {
 
 /// The stage: `motion` warped onto the grid of `beat_times_s` (on the dance's clock), with
 /// `fixed_times_s` (the key poses' times) mapped to themselves, and what was done.
-pub fn align(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> (Motion, BeatAlignSummary) {
+pub fn align(
+    motion: &Motion,
+    beat_times_s: &[f64],
+    fixed_times_s: &[f64],
+) -> (Motion, BeatAlignSummary) {
     let warp = plan(motion, beat_times_s, fixed_times_s);
-    let out = if warp.summary.applied { resample(motion, &warp.source_frames) } else { motion.clone() };
+    let out = if warp.summary.applied {
+        resample(motion, &warp.source_frames)
+    } else {
+        motion.clone()
+    };
     (out, warp.summary)
 }
 
@@ -132,7 +147,10 @@ pub fn align(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> (M
 pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> Warp {
     let frames = motion.num_frames();
     let fps = motion.fps;
-    let identity = |why: &str| Warp { source_frames: (0..frames).map(|f| f as f64).collect(), summary: BeatAlignSummary::skipped(why) };
+    let identity = |why: &str| Warp {
+        source_frames: (0..frames).map(|f| f as f64).collect(),
+        summary: BeatAlignSummary::skipped(why),
+    };
     if frames < MIN_FRAMES || fps <= 0.0 || !fps.is_finite() {
         return identity("the dance is too short");
     }
@@ -146,7 +164,11 @@ pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> War
     };
     let kin = kinematic_beats(&filtered, fps, step_hz);
     // Fixed frames: the start, the end, and each key pose's frame (as `serve` anchors them).
-    let mut fixed: Vec<usize> = fixed_times_s.iter().filter(|t| t.is_finite()).map(|t| ((t * fps).round().max(0.0) as usize).min(frames - 1)).collect();
+    let mut fixed: Vec<usize> = fixed_times_s
+        .iter()
+        .filter(|t| t.is_finite())
+        .map(|t| ((t * fps).round().max(0.0) as usize).min(frames - 1))
+        .collect();
     fixed.extend([0, frames - 1]);
     fixed.sort_unstable();
     fixed.dedup();
@@ -160,7 +182,8 @@ pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> War
         // the served dance's step rate: a waltz at 87 bpm stepped every 6 beats (0.24 Hz) reads
         // as 0.25 Hz, 4 % off (eval 2026-11-25: dancenet's four waltz test dances).
         let grid_hz = q * clock.rate_hz;
-        let in_band = grid_hz >= STEP_BAND_HZ.0 * (1.0 + LOCK_TOLERANCE) && grid_hz <= STEP_BAND_HZ.1 / (1.0 + LOCK_TOLERANCE);
+        let in_band = grid_hz >= STEP_BAND_HZ.0 * (1.0 + LOCK_TOLERANCE)
+            && grid_hz <= STEP_BAND_HZ.1 / (1.0 + LOCK_TOLERANCE);
         if !in_band || !(SLOPE_RANGE.0..=SLOPE_RANGE.1).contains(&slope) {
             continue;
         }
@@ -182,14 +205,24 @@ pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> War
         }
     }
     let Some((_, q, pairs, locked_s, _)) = best else {
-        return identity("no grid of the beat is within the warp's reach of the motion's step rate");
+        return identity(
+            "no grid of the beat is within the warp's reach of the motion's step rate",
+        );
     };
     // Knots (served s, source s): the fixed frames and the matched beats, in time order.
-    let mut knots: Vec<Pair> = anchors.iter().map(|&a| Pair { out: a, src: a }).chain(pairs.iter().copied()).collect();
+    let mut knots: Vec<Pair> = anchors
+        .iter()
+        .map(|&a| Pair { out: a, src: a })
+        .chain(pairs.iter().copied())
+        .collect();
     knots.sort_by(|x, y| x.out.total_cmp(&y.out));
     let source_frames = smooth_warp(&knots, &fixed, frames, fps);
     let slopes: Vec<f64> = source_frames.windows(2).map(|w| w[1] - w[0]).collect();
-    let shifts: Vec<f64> = source_frames.iter().enumerate().map(|(f, &s)| (s - f as f64).abs() / fps).collect();
+    let shifts: Vec<f64> = source_frames
+        .iter()
+        .enumerate()
+        .map(|(f, &s)| (s - f as f64).abs() / fps)
+        .collect();
     let summary = BeatAlignSummary {
         applied: true,
         skipped: None,
@@ -205,7 +238,10 @@ pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> War
         slope_min: slopes.iter().copied().fold(f64::INFINITY, f64::min),
         slope_max: slopes.iter().copied().fold(f64::NEG_INFINITY, f64::max),
     };
-    Warp { source_frames, summary }
+    Warp {
+        source_frames,
+        summary,
+    }
 }
 
 /// The motion shown at the warp's source frames: Catmull-Rom between frames, exact on them.
@@ -226,13 +262,19 @@ pub fn resample(motion: &Motion, source_frames: &[f64]) -> Motion {
                 let v = if u == 0.0 {
                     p1
                 } else {
-                    0.5 * (2.0 * p1 + (p2 - p0) * u + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * u * u + (3.0 * p1 - p0 - 3.0 * p2 + p3) * u * u * u)
+                    0.5 * (2.0 * p1
+                        + (p2 - p0) * u
+                        + (2.0 * p0 - 5.0 * p1 + 4.0 * p2 - p3) * u * u
+                        + (3.0 * p1 - p0 - 3.0 * p2 + p3) * u * u * u)
                 };
                 out[[f, j, c]] = v as f32;
             }
         }
     }
-    Motion { fps: motion.fps, positions: out }
+    Motion {
+        fps: motion.fps,
+        positions: out,
+    }
 }
 
 /// The ankles' summed speed (m/s) between consecutive frames: sample `i` lies at `(i + ½)/fps`.
@@ -242,7 +284,13 @@ fn ankle_speed(p: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
         .map(|f| {
             ANKLES
                 .iter()
-                .map(|&j| (0..3).map(|c| (f64::from(p[[f, j, c]]) - f64::from(p[[f - 1, j, c]])).powi(2)).sum::<f64>().sqrt() * fps)
+                .map(|&j| {
+                    (0..3)
+                        .map(|c| (f64::from(p[[f, j, c]]) - f64::from(p[[f - 1, j, c]])).powi(2))
+                        .sum::<f64>()
+                        .sqrt()
+                        * fps
+                })
                 .sum()
         })
         .collect()
@@ -286,7 +334,11 @@ fn rhythm(speed: &[f64], fps: f64) -> Option<(f64, Vec<f64>)> {
     let bin_hz = fps / padded as f64;
     for (k, c) in spectrum.iter_mut().enumerate() {
         let f = k as f64 * bin_hz;
-        let gain = if k == 0 { 0.0 } else { (-0.5 * ((f / step_hz).ln() / BAND_WIDTH_LN).powi(2)).exp() };
+        let gain = if k == 0 {
+            0.0
+        } else {
+            (-0.5 * ((f / step_hz).ln() / BAND_WIDTH_LN).powi(2)).exp()
+        };
         *c *= gain / padded as f64;
     }
     let ifft = planner.plan_fft_inverse(padded);
@@ -306,7 +358,11 @@ fn kinematic_beats(x: &[f64], fps: f64, step_hz: f64) -> Vec<f64> {
             continue;
         }
         let curvature = x[i - 1] - 2.0 * x[i] + x[i + 1];
-        let offset = if curvature > 0.0 { (0.5 * (x[i - 1] - x[i + 1]) / curvature).clamp(-0.5, 0.5) } else { 0.0 };
+        let offset = if curvature > 0.0 {
+            (0.5 * (x[i - 1] - x[i + 1]) / curvature).clamp(-0.5, 0.5)
+        } else {
+            0.0
+        };
         let t = (i as f64 + offset + 0.5) / fps;
         match out.last_mut() {
             Some(last) if t - last.0 < min_gap_s => {
@@ -332,17 +388,29 @@ struct BeatClock {
 
 impl BeatClock {
     fn new(beat_times_s: &[f64], duration_s: f64) -> Option<Self> {
-        let mut times: Vec<f64> = beat_times_s.iter().copied().filter(|t| t.is_finite()).collect();
+        let mut times: Vec<f64> = beat_times_s
+            .iter()
+            .copied()
+            .filter(|t| t.is_finite())
+            .collect();
         times.sort_by(f64::total_cmp);
         times.dedup_by(|a, b| (*a - *b).abs() < 1e-6);
-        let inside: Vec<f64> = times.iter().copied().filter(|t| (0.0..=duration_s).contains(t)).collect();
+        let inside: Vec<f64> = times
+            .iter()
+            .copied()
+            .filter(|t| (0.0..=duration_s).contains(t))
+            .collect();
         let (first, last) = (*inside.first()?, *inside.last()?);
         if inside.len() < MIN_BEATS || last <= first {
             return None;
         }
         let rate_hz = (inside.len() - 1) as f64 / (last - first);
         let period = (times[times.len() - 1] - times[0]) / (times.len() - 1) as f64;
-        Some(Self { times, period, rate_hz })
+        Some(Self {
+            times,
+            period,
+            rate_hz,
+        })
     }
 
     /// Beat index (fractional) at time `t`.
@@ -377,7 +445,10 @@ impl BeatClock {
         let (p0, p1) = (self.phase(0.0), self.phase(end_s));
         let first = ((p0 - start) / spacing).ceil() as i64;
         let last = ((p1 - start) / spacing).floor() as i64;
-        (first..=last).map(|n| self.time_at(start + n as f64 * spacing)).filter(|&t| t > 0.0 && t < end_s).collect()
+        (first..=last)
+            .map(|n| self.time_at(start + n as f64 * spacing))
+            .filter(|&t| t > 0.0 && t < end_s)
+            .collect()
     }
 }
 
@@ -385,8 +456,14 @@ impl BeatClock {
 /// beat of its 1½).
 fn grid_phases(q: f64) -> Vec<f64> {
     let spacing = 1.0 / q;
-    let step = if (spacing - spacing.round()).abs() < 1e-9 { 1.0 } else { 0.5 };
-    (0..(spacing / step).round() as usize).map(|m| m as f64 * step).collect()
+    let step = if (spacing - spacing.round()).abs() < 1e-9 {
+        1.0
+    } else {
+        0.5
+    };
+    (0..(spacing / step).round() as usize)
+        .map(|m| m as f64 * step)
+        .collect()
 }
 
 /// A knot of the warp: served time `out` shows source time `src` (s).
@@ -423,7 +500,11 @@ fn segment_cost(d_out: f64, d_src: f64, locked: bool, skips: usize) -> Option<f6
 fn match_span(a: f64, b: f64, k: &[f64], g: &[f64]) -> SpanPlan {
     let (m, n) = (k.len(), g.len());
     // Leaving the span as it is: slope 1, nothing locked.
-    let mut best = SpanPlan { cost: UNLOCKED_PER_S * (b - a) + SKIP * (m + n) as f64, pairs: Vec::new(), locked_s: 0.0 };
+    let mut best = SpanPlan {
+        cost: UNLOCKED_PER_S * (b - a) + SKIP * (m + n) as f64,
+        pairs: Vec::new(),
+        locked_s: 0.0,
+    };
     if m == 0 || n == 0 {
         return best;
     }
@@ -445,10 +526,18 @@ fn match_span(a: f64, b: f64, k: &[f64], g: &[f64]) -> SpanPlan {
             for da in 1..=MAX_RUN.min(i) {
                 for db in 1..=MAX_RUN.min(j) {
                     let p = (i - da) * n + (j - db);
-                    let Some((pc, _, pl)) = table[p] else { continue };
+                    let Some((pc, _, pl)) = table[p] else {
+                        continue;
+                    };
                     let locked = da == db;
-                    if let Some(c) = segment_cost(g[j] - g[j - db], k[i] - k[i - da], locked, da + db - 2) {
-                        offer(pc + c, Some(p), pl + if locked { g[j] - g[j - db] } else { 0.0 });
+                    if let Some(c) =
+                        segment_cost(g[j] - g[j - db], k[i] - k[i - da], locked, da + db - 2)
+                    {
+                        offer(
+                            pc + c,
+                            Some(p),
+                            pl + if locked { g[j] - g[j - db] } else { 0.0 },
+                        );
                     }
                 }
             }
@@ -458,7 +547,9 @@ fn match_span(a: f64, b: f64, k: &[f64], g: &[f64]) -> SpanPlan {
     let mut end: Option<(f64, usize, f64)> = None;
     for i in m.saturating_sub(MAX_EDGE_SKIP)..m {
         for j in n.saturating_sub(MAX_EDGE_SKIP)..n {
-            let Some((c, _, l)) = table[i * n + j] else { continue };
+            let Some((c, _, l)) = table[i * n + j] else {
+                continue;
+            };
             if let Some(e) = segment_cost(b - g[j], b - k[i], false, (m - 1 - i) + (n - 1 - j)) {
                 if end.is_none_or(|x| c + e < x.0) {
                     end = Some((c + e, i * n + j, l));
@@ -471,11 +562,18 @@ fn match_span(a: f64, b: f64, k: &[f64], g: &[f64]) -> SpanPlan {
         let mut at = Some(last);
         while let Some(node) = at {
             let prev = table[node].and_then(|(_, prev, _)| prev);
-            pairs.push(Pair { out: g[node % n], src: k[node / n] });
+            pairs.push(Pair {
+                out: g[node % n],
+                src: k[node / n],
+            });
             at = prev;
         }
         pairs.reverse();
-        best = SpanPlan { cost, pairs, locked_s };
+        best = SpanPlan {
+            cost,
+            pairs,
+            locked_s,
+        };
     }
     best
 }
@@ -484,7 +582,8 @@ fn match_span(a: f64, b: f64, k: &[f64], g: &[f64]) -> SpanPlan {
 /// per-frame slope Gaussian-smoothed, then scaled per span between `fixed` frames so each maps to
 /// itself.
 fn smooth_warp(knots: &[Pair], fixed: &[usize], frames: usize, fps: f64) -> Vec<f64> {
-    let (outs, srcs): (Vec<f64>, Vec<f64>) = knots.iter().map(|p| (p.out * fps, p.src * fps)).unzip();
+    let (outs, srcs): (Vec<f64>, Vec<f64>) =
+        knots.iter().map(|p| (p.out * fps, p.src * fps)).unzip();
     let linear = |f: f64| -> f64 {
         let i = outs.partition_point(|&o| o <= f).clamp(1, outs.len() - 1);
         let (o0, o1, s0, s1) = (outs[i - 1], outs[i], srcs[i - 1], srcs[i]);
@@ -494,14 +593,25 @@ fn smooth_warp(knots: &[Pair], fixed: &[usize], frames: usize, fps: f64) -> Vec<
             s0
         }
     };
-    let slope: Vec<f64> = (0..frames - 1).map(|f| linear(f as f64 + 1.0) - linear(f as f64)).collect();
+    let slope: Vec<f64> = (0..frames - 1)
+        .map(|f| linear(f as f64 + 1.0) - linear(f as f64))
+        .collect();
     let sigma = SLOPE_SMOOTH_S * fps;
     let radius = (3.0 * sigma).ceil() as isize;
-    let kernel: Vec<f64> = (-radius..=radius).map(|d| (-0.5 * (d as f64 / sigma).powi(2)).exp()).collect();
+    let kernel: Vec<f64> = (-radius..=radius)
+        .map(|d| (-0.5 * (d as f64 / sigma).powi(2)).exp())
+        .collect();
     let total: f64 = kernel.iter().sum();
     let last = slope.len() as isize - 1;
     let smoothed: Vec<f64> = (0..slope.len() as isize)
-        .map(|f| kernel.iter().zip(-radius..=radius).map(|(w, d)| w * slope[(f + d).clamp(0, last) as usize]).sum::<f64>() / total)
+        .map(|f| {
+            kernel
+                .iter()
+                .zip(-radius..=radius)
+                .map(|(w, d)| w * slope[(f + d).clamp(0, last) as usize])
+                .sum::<f64>()
+                / total
+        })
         .collect();
     let mut out = vec![0.0; frames];
     for span in fixed.windows(2) {
@@ -537,16 +647,23 @@ mod tests {
             let x = s + 0.8 * (std::f64::consts::TAU * f * s).sin() / (std::f64::consts::TAU * f);
             for (side, &j) in ANKLES.iter().enumerate() {
                 p[[t, j, 0]] = x as f32;
-                p[[t, j, 1]] = (0.1 + 0.05 * (std::f64::consts::TAU * f * s + side as f64).cos()) as f32;
+                p[[t, j, 1]] =
+                    (0.1 + 0.05 * (std::f64::consts::TAU * f * s + side as f64).cos()) as f32;
                 p[[t, j, 2]] = side as f32 * 0.3;
             }
         }
-        Motion { fps: FPS, positions: p }
+        Motion {
+            fps: FPS,
+            positions: p,
+        }
     }
 
     /// Beats every `period` s from `first` to past `seconds`.
     fn beats(seconds: f64, period: f64, first: f64) -> Vec<f64> {
-        (0..).map(|i| first + i as f64 * period).take_while(|&t| t < seconds + period).collect()
+        (0..)
+            .map(|i| first + i as f64 * period)
+            .take_while(|&t| t < seconds + period)
+            .collect()
     }
 
     #[test]
@@ -564,7 +681,10 @@ mod tests {
         assert!(summary.applied, "{summary:?}");
         assert_eq!(summary.grid_fraction, 0.5);
         let after = tempo_lock(aligned.positions.view(), FPS, &beats).expect("measured");
-        assert!(after.locked && (after.fraction - 0.5).abs() < 1e-9, "{after:?} {summary:?}");
+        assert!(
+            after.locked && (after.fraction - 0.5).abs() < 1e-9,
+            "{after:?} {summary:?}"
+        );
         assert!(summary.locked_share > 0.6, "{summary:?}");
         // Tempo changes: the same dance to a song 15 % faster locks too.
         let faster = beats_for(60.0, 0.5 / 1.15);
@@ -604,7 +724,11 @@ mod tests {
         }
         let (aligned, _) = align(&motion, &beats, &keys);
         for f in [0, 175, 488, 775, last] {
-            assert_eq!(aligned.positions.index_axis(Axis(0), f), motion.positions.index_axis(Axis(0), f), "frame {f}");
+            assert_eq!(
+                aligned.positions.index_axis(Axis(0), f),
+                motion.positions.index_axis(Axis(0), f),
+                "frame {f}"
+            );
         }
     }
 
@@ -615,10 +739,17 @@ mod tests {
             let warp = plan(&motion, &beats, &[20.0]);
             for w in warp.source_frames.windows(2) {
                 let s = w[1] - w[0];
-                assert!(s >= SLOPE_RANGE.0 * 0.97 && s <= SLOPE_RANGE.1 * 1.03, "slope {s} ({f} Hz, {period} s): {:?}", warp.summary);
+                assert!(
+                    s >= SLOPE_RANGE.0 * 0.97 && s <= SLOPE_RANGE.1 * 1.03,
+                    "slope {s} ({f} Hz, {period} s): {:?}",
+                    warp.summary
+                );
             }
             let s = &warp.summary;
-            assert!(s.slope_min >= SLOPE_RANGE.0 * 0.97 && s.slope_max <= SLOPE_RANGE.1 * 1.03, "{s:?}");
+            assert!(
+                s.slope_min >= SLOPE_RANGE.0 * 0.97 && s.slope_max <= SLOPE_RANGE.1 * 1.03,
+                "{s:?}"
+            );
         }
     }
 
@@ -628,7 +759,10 @@ mod tests {
         assert!(!s.applied && out.positions.dim().0 == 25, "{s:?}");
         let m = periodic(40.0, 1.0);
         let (out, s) = align(&m, &[1.0, 2.0], &[]);
-        assert!(!s.applied && s.skipped.as_deref().is_some_and(|w| w.contains("beats")), "{s:?}");
+        assert!(
+            !s.applied && s.skipped.as_deref().is_some_and(|w| w.contains("beats")),
+            "{s:?}"
+        );
         assert_eq!(out.positions, m.positions);
         // Steps at 2.9 Hz against a 60-bpm song: the fastest grid (1 Hz) is out of reach.
         let m = periodic(40.0, 2.9);

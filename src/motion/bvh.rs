@@ -122,7 +122,11 @@ pub fn euler_zyx_deg_near(q: &UnitQuaternion<f64>, previous: [f64; 3]) -> [f64; 
     }
     let near = |a: f64, p: f64| a + 360.0 * ((p - a) / 360.0).round();
     let fit = |c: [f64; 3]| {
-        let v = [near(c[0], previous[0]), near(c[1], previous[1]), near(c[2], previous[2])];
+        let v = [
+            near(c[0], previous[0]),
+            near(c[1], previous[1]),
+            near(c[2], previous[2]),
+        ];
         let cost: f64 = v.iter().zip(&previous).map(|(a, p)| (a - p).abs()).sum();
         (v, cost)
     };
@@ -234,9 +238,15 @@ impl Bvh {
                     Channel::Xposition => trans[j].x = self.offsets[j].x + v,
                     Channel::Yposition => trans[j].y = self.offsets[j].y + v,
                     Channel::Zposition => trans[j].z = self.offsets[j].z + v,
-                    Channel::Xrotation => q *= UnitQuaternion::from_axis_angle(&Vector3::x_axis(), v.to_radians()),
-                    Channel::Yrotation => q *= UnitQuaternion::from_axis_angle(&Vector3::y_axis(), v.to_radians()),
-                    Channel::Zrotation => q *= UnitQuaternion::from_axis_angle(&Vector3::z_axis(), v.to_radians()),
+                    Channel::Xrotation => {
+                        q *= UnitQuaternion::from_axis_angle(&Vector3::x_axis(), v.to_radians())
+                    }
+                    Channel::Yrotation => {
+                        q *= UnitQuaternion::from_axis_angle(&Vector3::y_axis(), v.to_radians())
+                    }
+                    Channel::Zrotation => {
+                        q *= UnitQuaternion::from_axis_angle(&Vector3::z_axis(), v.to_radians())
+                    }
                 }
             }
             rots[j] = q;
@@ -285,9 +295,10 @@ impl Bvh {
         JOINT_NAMES
             .iter()
             .map(|name| {
-                self.names.iter().position(|n| n == name).ok_or_else(|| {
-                    MotionError::Invalid(format!("BVH has no joint named {name:?}"))
-                })
+                self.names
+                    .iter()
+                    .position(|n| n == name)
+                    .ok_or_else(|| MotionError::Invalid(format!("BVH has no joint named {name:?}")))
             })
             .collect()
     }
@@ -462,7 +473,11 @@ mod tests {
 
     #[test]
     fn euler_zyx_round_trips() {
-        for (a, b, c) in [(0.3, -0.4, 1.2), (-2.0, 1.0, 0.1), (0.0, std::f64::consts::FRAC_PI_2 - 1e-4, 0.4)] {
+        for (a, b, c) in [
+            (0.3, -0.4, 1.2),
+            (-2.0, 1.0, 0.1),
+            (0.0, std::f64::consts::FRAC_PI_2 - 1e-4, 0.4),
+        ] {
             let q = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), a)
                 * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), b)
                 * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), c);
@@ -489,15 +504,26 @@ mod tests {
             for t in 1..100 {
                 let q = zyx(turn * t as f64, tilt + 0.3 * t as f64, 30.0);
                 let e = euler_zyx_deg_near(&q, prev);
-                assert!(zyx(e[0], e[1], e[2]).angle_to(&q) < 1e-6, "frame {t}: {e:?}");
-                let step = e.iter().zip(&prev).map(|(a, p)| (a - p).abs()).fold(0.0, f64::max);
+                assert!(
+                    zyx(e[0], e[1], e[2]).angle_to(&q) < 1e-6,
+                    "frame {t}: {e:?}"
+                );
+                let step = e
+                    .iter()
+                    .zip(&prev)
+                    .map(|(a, p)| (a - p).abs())
+                    .fold(0.0, f64::max);
                 assert!(step < 20.0, "frame {t}: {prev:?} → {e:?}");
                 prev = e;
             }
         }
         // Gimbal lock: x kept, z takes the rest.
         let e = euler_zyx_deg_near(&zyx(40.0, 90.0, 10.0), [35.0, 89.0, 12.0]);
-        assert!((e[2] - 12.0).abs() < 1e-9 && zyx(e[0], e[1], e[2]).angle_to(&zyx(40.0, 90.0, 10.0)) < 1e-6, "{e:?}");
+        assert!(
+            (e[2] - 12.0).abs() < 1e-9
+                && zyx(e[0], e[1], e[2]).angle_to(&zyx(40.0, 90.0, 10.0)) < 1e-6,
+            "{e:?}"
+        );
     }
 
     #[test]

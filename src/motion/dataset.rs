@@ -224,9 +224,8 @@ impl Dataset {
         if !dir.is_dir() {
             return Err(MotionError::UnknownDance { id: id.to_string() });
         }
-        let style = Style::from_dance_id(id).ok_or_else(|| MotionError::UnknownDance {
-            id: id.to_string(),
-        })?;
+        let style = Style::from_dance_id(id)
+            .ok_or_else(|| MotionError::UnknownDance { id: id.to_string() })?;
         let config: DanceConfig = read_json(&dir.join("config.json"))?;
         let skel_path = dir.join("skeletons.npy");
         let center_path = dir.join("center.npy");
@@ -236,7 +235,10 @@ impl Dataset {
         if skeletons.shape()[1..] != [NUM_JOINTS, 3] {
             return Err(MotionError::Malformed {
                 path: skel_path,
-                reason: format!("shape {:?}, expected [T, {NUM_JOINTS}, 3]", skeletons.shape()),
+                reason: format!(
+                    "shape {:?}, expected [T, {NUM_JOINTS}, 3]",
+                    skeletons.shape()
+                ),
             });
         }
         if center.shape() != [t, 3] {
@@ -245,7 +247,11 @@ impl Dataset {
                 reason: format!("shape {:?}, expected [{t}, 3]", center.shape()),
             });
         }
-        if skeletons.iter().chain(center.iter()).any(|v| !v.is_finite()) {
+        if skeletons
+            .iter()
+            .chain(center.iter())
+            .any(|v| !v.is_finite())
+        {
             return Err(MotionError::Malformed {
                 path: dir,
                 reason: "non-finite coordinates".into(),
@@ -307,7 +313,9 @@ impl NormStats {
     pub const MIN_STD: f32 = 1e-4;
 
     /// Fits mean and std over the rows of every `[N, D]` array (all must share `D`).
-    pub fn fit<'a>(rows: impl IntoIterator<Item = &'a Array2<f32>>) -> Result<NormStats, MotionError> {
+    pub fn fit<'a>(
+        rows: impl IntoIterator<Item = &'a Array2<f32>>,
+    ) -> Result<NormStats, MotionError> {
         let mut acc: Option<(Vec<f64>, Vec<f64>)> = None;
         let mut n = 0usize;
         for a in rows {

@@ -10,8 +10,8 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
-use gltf_json as gj;
 use gj::validation::{Checked::Valid, USize64};
+use gltf_json as gj;
 use nalgebra::{UnitQuaternion, Vector3};
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
@@ -74,11 +74,18 @@ pub fn prepare_anchored(motion: &Motion, anchors: &[usize]) -> Result<RigMotion,
 }
 
 /// Fits the rigid skeleton of a motion around a known root track `[T, 3]` (carried exactly).
-pub fn prepare_with_root(motion: &Motion, root: ArrayView2<'_, f32>) -> Result<RigMotion, MotionError> {
+pub fn prepare_with_root(
+    motion: &Motion,
+    root: ArrayView2<'_, f32>,
+) -> Result<RigMotion, MotionError> {
     prepare_root_anchored(motion, root, &[])
 }
 
-fn prepare_root_anchored(motion: &Motion, root: ArrayView2<'_, f32>, anchors: &[usize]) -> Result<RigMotion, MotionError> {
+fn prepare_root_anchored(
+    motion: &Motion,
+    root: ArrayView2<'_, f32>,
+    anchors: &[usize],
+) -> Result<RigMotion, MotionError> {
     if motion.num_frames() == 0 {
         return Err(MotionError::Shape("motion has no frames".into()));
     }
@@ -240,7 +247,11 @@ pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
         };
         root.push(gj::Node {
             name: Some(m.rig.names[j].clone()),
-            translation: Some([translation.x as f32, translation.y as f32, translation.z as f32]),
+            translation: Some([
+                translation.x as f32,
+                translation.y as f32,
+                translation.z as f32,
+            ]),
             rotation: Some(gj::scene::UnitQuaternion([
                 q[0] as f32,
                 q[1] as f32,
@@ -271,8 +282,22 @@ pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
     let mut ibm = Vec::with_capacity(16 * n);
     for r in &rest {
         ibm.extend_from_slice(&[
-            1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -r.x as f32,
-            -r.y as f32, -r.z as f32, 1.0,
+            1.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+            1.0,
+            0.0,
+            -r.x as f32,
+            -r.y as f32,
+            -r.z as f32,
+            1.0,
         ]);
     }
     let ibm_acc = add(&mut root, &ibm, gj::accessor::Type::Mat4, n, None);
@@ -329,8 +354,19 @@ pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
             [p.x as f32, p.y as f32, p.z as f32]
         })
         .collect();
-    let acc = add(&mut root, &root_track, gj::accessor::Type::Vec3, t_len, None);
-    channel(&mut samplers, acc, root_joint, gj::animation::Property::Translation);
+    let acc = add(
+        &mut root,
+        &root_track,
+        gj::accessor::Type::Vec3,
+        t_len,
+        None,
+    );
+    channel(
+        &mut samplers,
+        acc,
+        root_joint,
+        gj::animation::Property::Translation,
+    );
     for j in 0..n {
         let track: Vec<f32> = m
             .rotations
@@ -391,7 +427,9 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), MotionError> {
     std::fs::create_dir_all(dir).map_err(|e| MotionError::io(dir, e))?;
     let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| MotionError::io(dir, e))?;
     tmp.write_all(bytes).map_err(|e| MotionError::io(path, e))?;
-    tmp.as_file().sync_all().map_err(|e| MotionError::io(path, e))?;
+    tmp.as_file()
+        .sync_all()
+        .map_err(|e| MotionError::io(path, e))?;
     // Temporary files are private (0600); results are ordinary readable files.
     #[cfg(unix)]
     {
@@ -400,7 +438,8 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), MotionError> {
             .set_permissions(std::fs::Permissions::from_mode(0o644))
             .map_err(|e| MotionError::io(path, e))?;
     }
-    tmp.persist(path).map_err(|e| MotionError::io(path, e.error))?;
+    tmp.persist(path)
+        .map_err(|e| MotionError::io(path, e.error))?;
     Ok(())
 }
 
@@ -427,7 +466,11 @@ pub fn write_all(motion: &Motion, dir: &Path) -> Result<ExportPaths, MotionError
 }
 
 /// As [`write_all`], with the skeleton fitted to the key-pose frames `anchors` when there are any.
-pub fn write_all_anchored(motion: &Motion, dir: &Path, anchors: &[usize]) -> Result<ExportPaths, MotionError> {
+pub fn write_all_anchored(
+    motion: &Motion,
+    dir: &Path,
+    anchors: &[usize],
+) -> Result<ExportPaths, MotionError> {
     let m = prepare_anchored(motion, anchors)?;
     write_all_rig(&m, dir)
 }
@@ -436,8 +479,13 @@ pub fn write_all_anchored(motion: &Motion, dir: &Path, anchors: &[usize]) -> Res
 /// centre (joint 0) and the branch joints after them, i.e. what a user downloads, in [`Motion`] form.
 pub fn served_motion(m: &RigMotion) -> Motion {
     let world = m.world_positions();
-    let positions = world.slice(ndarray::s![.., 1..=super::NUM_JOINTS, ..]).mapv(|v| v as f32);
-    Motion { fps: m.fps, positions }
+    let positions = world
+        .slice(ndarray::s![.., 1..=super::NUM_JOINTS, ..])
+        .mapv(|v| v as f32);
+    Motion {
+        fps: m.fps,
+        positions,
+    }
 }
 
 /// Export formats the CLI and the API name.

@@ -25,7 +25,11 @@ pub const FLOOR_PERCENTILE: f64 = 1.0;
 /// The lowest of `feet`'s heights (y) on every frame of `[T, J, 3]`, metres.
 pub fn lowest_foot(positions: ArrayView3<'_, f32>, feet: &[usize]) -> Vec<f64> {
     (0..positions.dim().0)
-        .map(|f| feet.iter().map(|&j| f64::from(positions[[f, j, 1]])).fold(f64::INFINITY, f64::min))
+        .map(|f| {
+            feet.iter()
+                .map(|&j| f64::from(positions[[f, j, 1]]))
+                .fold(f64::INFINITY, f64::min)
+        })
         .collect()
 }
 
@@ -44,7 +48,10 @@ pub fn floor_height(positions: ArrayView3<'_, f32>, feet: &[usize]) -> f64 {
 }
 
 /// The two feet as (heel, toe) points: right, left.
-const FEET: [[usize; 2]; 2] = [[FOOT_POINTS[0], FOOT_POINTS[1]], [FOOT_POINTS[2], FOOT_POINTS[3]]];
+const FEET: [[usize; 2]; 2] = [
+    [FOOT_POINTS[0], FOOT_POINTS[1]],
+    [FOOT_POINTS[2], FOOT_POINTS[3]],
+];
 
 /// Holds the supporting foot in place (see the module doc), in place on world positions
 /// `[T, J, 3]` in metres, y up. Returns the number of frame steps that had a support.
@@ -76,7 +83,12 @@ pub fn plant_feet(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> usize {
                 })
                 .collect()
         };
-        let low = |foot: usize| FEET[foot].iter().map(|&j| positions[[f, j, 1]]).fold(f32::INFINITY, f32::min);
+        let low = |foot: usize| {
+            FEET[foot]
+                .iter()
+                .map(|&j| positions[[f, j, 1]])
+                .fold(f32::INFINITY, f32::min)
+        };
         let points = [touching(0), touching(1)];
         support = match support {
             Some(foot) if !points[foot].is_empty() => Some(foot),
@@ -90,7 +102,11 @@ pub fn plant_feet(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> usize {
         let Some(foot) = support else { continue };
         let n = points[foot].len() as f32;
         for (k, axis) in [0, 2].into_iter().enumerate() {
-            step[f][k] = -points[foot].iter().map(|&j| positions[[f, j, axis]] - positions[[f - 1, j, axis]]).sum::<f32>() / n;
+            step[f][k] = -points[foot]
+                .iter()
+                .map(|&j| positions[[f, j, axis]] - positions[[f - 1, j, axis]])
+                .sum::<f32>()
+                / n;
         }
         supported += 1;
     }
@@ -157,7 +173,14 @@ pub fn ground(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> f64 {
     let lowest = lowest_foot(positions.view(), &FOOT_POINTS);
     let w = (GROUND_WINDOW_S * fps).round().max(1.0) as usize;
     let window = |f: usize| f.saturating_sub(w)..(f + w + 1).min(t);
-    let minimum: Vec<f64> = (0..t).map(|f| lowest[window(f)].iter().copied().fold(f64::INFINITY, f64::min)).collect();
+    let minimum: Vec<f64> = (0..t)
+        .map(|f| {
+            lowest[window(f)]
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
     let shift: Vec<f64> = (0..t)
         .map(|f| {
             let r = window(f);
@@ -203,7 +226,10 @@ mod tests {
         let shift = ground(p.view_mut(), 25.0);
         assert!((shift - 1.2).abs() < 1e-4, "shift {shift}");
         for f in 0..300 {
-            let low = FOOT_POINTS.iter().map(|&j| p[[f, j, 1]]).fold(f32::INFINITY, f32::min);
+            let low = FOOT_POINTS
+                .iter()
+                .map(|&j| p[[f, j, 1]])
+                .fold(f32::INFINITY, f32::min);
             assert!(low.abs() < 0.31, "frame {f}: lowest foot {low}");
             // The pose and horizontal travel are untouched; only heights move, all by one amount.
             let d0 = p[[f, 0, 1]] - before[[f, 0, 1]];
@@ -229,10 +255,16 @@ mod tests {
         for f in 0..50 {
             for j in 0..NUM_JOINTS {
                 if (r..50 - r).contains(&f) {
-                    assert!((p[[f, j, 0]] - p[[r, j, 0]]).abs() < 1e-5, "frame {f} travels");
+                    assert!(
+                        (p[[f, j, 0]] - p[[r, j, 0]]).abs() < 1e-5,
+                        "frame {f} travels"
+                    );
                 }
                 assert_eq!(p[[f, j, 1]], before[[f, j, 1]]);
-                assert!(((p[[f, j, 0]] - p[[f, 0, 0]]) - (before[[f, j, 0]] - before[[f, 0, 0]])).abs() < 1e-5);
+                assert!(
+                    ((p[[f, j, 0]] - p[[f, 0, 0]]) - (before[[f, j, 0]] - before[[f, 0, 0]])).abs()
+                        < 1e-5
+                );
             }
         }
         // The whole glide is taken back.
@@ -247,8 +279,13 @@ mod tests {
         let mut p = gliding(60, |f| if f < 30 { 0.3 } else { 0.0 });
         let before = p.clone();
         plant_feet(p.view_mut(), 25.0);
-        let acc = |q: &ndarray::Array3<f32>, f: usize| ((q[[f + 1, 0, 0]] - 2.0 * q[[f, 0, 0]] + q[[f - 1, 0, 0]]) * 625.0).abs();
-        let (raw, planted) = ((1..59).map(|f| acc(&before, f)).fold(0.0, f32::max), (1..59).map(|f| acc(&p, f)).fold(0.0, f32::max));
+        let acc = |q: &ndarray::Array3<f32>, f: usize| {
+            ((q[[f + 1, 0, 0]] - 2.0 * q[[f, 0, 0]] + q[[f - 1, 0, 0]]) * 625.0).abs()
+        };
+        let (raw, planted) = (
+            (1..59).map(|f| acc(&before, f)).fold(0.0, f32::max),
+            (1..59).map(|f| acc(&p, f)).fold(0.0, f32::max),
+        );
         assert!(raw < 1e-3, "the glide itself is steady: {raw}");
         assert!(planted < 25.0 / 2.0, "landing pops at {planted} m/s²");
         // Once the spread has passed, the body stands still.

@@ -29,10 +29,10 @@
 use ndarray::{Array3, Axis};
 use serde::{Deserialize, Serialize};
 
+use super::input_error::InputError;
+pub use super::input_error::JointSet;
 use super::rig::{self, RIG_JOINTS};
 use super::skeleton::JOINT_NAMES;
-pub use super::input_error::JointSet;
-use super::input_error::InputError;
 use super::validate::{self, MAX_SEED_FPS};
 use super::{KeyPose, Motion, MOTION_FPS, NUM_JOINTS};
 
@@ -52,10 +52,16 @@ pub struct BvhFrame {
 fn whole_number<'de, D: serde::Deserializer<'de>>(deserializer: D) -> Result<usize, D::Error> {
     use serde::de::Error;
     let n = serde_json::Number::deserialize(deserializer)?;
-    let whole = n.as_u64().or_else(|| n.as_f64().filter(|f| f.fract() == 0.0 && (0.0..=u64::MAX as f64).contains(f)).map(|f| f as u64));
-    whole
-        .and_then(|u| usize::try_from(u).ok())
-        .ok_or_else(|| D::Error::custom(format!("invalid value {n}, expected a frame index (a whole number from 0)")))
+    let whole = n.as_u64().or_else(|| {
+        n.as_f64()
+            .filter(|f| f.fract() == 0.0 && (0.0..=u64::MAX as f64).contains(f))
+            .map(|f| f as u64)
+    });
+    whole.and_then(|u| usize::try_from(u).ok()).ok_or_else(|| {
+        D::Error::custom(format!(
+            "invalid value {n}, expected a frame index (a whole number from 0)"
+        ))
+    })
 }
 
 /// A key pose as sent: `joints` (either joint set) or one frame of a BVH, and its time in the song.
@@ -298,7 +304,10 @@ mod tests {
 
     #[test]
     fn a_bvh_frame_is_any_json_form_of_a_whole_number() {
-        let frame = |v: &str| serde_json::from_str::<BvhFrame>(&format!(r#"{{"text": "", "frame": {v}}}"#)).map(|b| b.frame);
+        let frame = |v: &str| {
+            serde_json::from_str::<BvhFrame>(&format!(r#"{{"text": "", "frame": {v}}}"#))
+                .map(|b| b.frame)
+        };
         assert_eq!(frame("380").ok(), Some(380));
         assert_eq!(frame("380.0").ok(), Some(380));
         for bad in ["1.5", "-1", "\"3\"", "1e300"] {

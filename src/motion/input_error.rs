@@ -120,7 +120,11 @@ fn joint_sets_wanted(asked: Option<JointSet>) -> String {
         JointSet::Dataset.joint_count()
     );
     match asked {
-        Some(set) => format!("joint_set \"{}\" has {}: {both}", set.name(), set.joint_count()),
+        Some(set) => format!(
+            "joint_set \"{}\" has {}: {both}",
+            set.name(),
+            set.joint_count()
+        ),
         None => both,
     }
 }

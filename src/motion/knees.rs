@@ -62,9 +62,27 @@ pub fn bend_forward(mut positions: ArrayViewMut3<'_, f32>) -> usize {
     let mut moved = 0;
     for f in 0..frames {
         for leg in 0..2 {
-            let at = |p: &ArrayViewMut3<'_, f32>, j: usize| Vector3::new(f64::from(p[[f, j, 0]]), f64::from(p[[f, j, 1]]), f64::from(p[[f, j, 2]]));
-            let (hip, knee, ankle) = (at(&positions, HIPS[leg]), at(&positions, KNEES[leg]), at(&positions, ANKLES[leg]));
-            let Some(turned) = forward_knee(hip, knee, ankle, at(&positions, HEELS[leg]), at(&positions, TOES[leg])) else { continue };
+            let at = |p: &ArrayViewMut3<'_, f32>, j: usize| {
+                Vector3::new(
+                    f64::from(p[[f, j, 0]]),
+                    f64::from(p[[f, j, 1]]),
+                    f64::from(p[[f, j, 2]]),
+                )
+            };
+            let (hip, knee, ankle) = (
+                at(&positions, HIPS[leg]),
+                at(&positions, KNEES[leg]),
+                at(&positions, ANKLES[leg]),
+            );
+            let Some(turned) = forward_knee(
+                hip,
+                knee,
+                ankle,
+                at(&positions, HEELS[leg]),
+                at(&positions, TOES[leg]),
+            ) else {
+                continue;
+            };
             for c in 0..3 {
                 positions[[f, KNEES[leg], c]] = turned[c] as f32;
             }
@@ -75,7 +93,13 @@ pub fn bend_forward(mut positions: ArrayViewMut3<'_, f32>) -> usize {
 }
 
 /// Where the knee goes (see the module doc), or `None` where it stays.
-fn forward_knee(hip: Vector3<f64>, knee: Vector3<f64>, ankle: Vector3<f64>, heel: Vector3<f64>, toe: Vector3<f64>) -> Option<Vector3<f64>> {
+fn forward_knee(
+    hip: Vector3<f64>,
+    knee: Vector3<f64>,
+    ankle: Vector3<f64>,
+    heel: Vector3<f64>,
+    toe: Vector3<f64>,
+) -> Option<Vector3<f64>> {
     let line = Unit::try_new(ankle - hip, 1e-9)?;
     let off_line = |v: Vector3<f64>| v - line.into_inner() * v.dot(&line);
     let bend = (knee - hip).angle(&(ankle - knee)).to_degrees();
@@ -84,7 +108,11 @@ fn forward_knee(hip: Vector3<f64>, knee: Vector3<f64>, ankle: Vector3<f64>, heel
     let shin = Unit::try_new(ankle - knee, 1e-9)?;
     let along_shin = foot.dot(&shin) / foot.norm().max(1e-9);
     let weight = smoothstep(STRAIGHT_DEG, KNEE_BENT_DEG, bend)
-        * smoothstep(FOOT_ACROSS, 2.0 * FOOT_ACROSS, across.norm() / foot.norm().max(1e-9))
+        * smoothstep(
+            FOOT_ACROSS,
+            2.0 * FOOT_ACROSS,
+            across.norm() / foot.norm().max(1e-9),
+        )
         * (1.0 - smoothstep(POINTED_COS.0, POINTED_COS.1, along_shin));
     let forward = Unit::try_new(across, 1e-9)?;
     let side = line.cross(&forward);
@@ -112,7 +140,9 @@ mod tests {
     fn legs(knee_z: f32, knee_x: f32) -> Array3<f32> {
         let mut p = Array3::<f32>::zeros((1, NUM_JOINTS, 3));
         for (leg, x) in [(0usize, -0.1f32), (1, 0.1)] {
-            let set = |p: &mut Array3<f32>, j: usize, v: [f32; 3]| (0..3).for_each(|c| p[[0, j, c]] = v[c]);
+            let set = |p: &mut Array3<f32>, j: usize, v: [f32; 3]| {
+                (0..3).for_each(|c| p[[0, j, c]] = v[c])
+            };
             set(&mut p, HIPS[leg], [x, 0.0, 0.0]);
             set(&mut p, KNEES[leg], [x + knee_x, -0.4, knee_z]);
             set(&mut p, ANKLES[leg], [x, -0.8, 0.0]);
@@ -123,7 +153,10 @@ mod tests {
     }
 
     fn dist(p: &Array3<f32>, a: usize, b: usize) -> f32 {
-        (0..3).map(|c| (p[[0, a, c]] - p[[0, b, c]]).powi(2)).sum::<f32>().sqrt()
+        (0..3)
+            .map(|c| (p[[0, a, c]] - p[[0, b, c]]).powi(2))
+            .sum::<f32>()
+            .sqrt()
     }
 
     #[test]
@@ -134,13 +167,19 @@ mod tests {
         for leg in 0..2 {
             let k = KNEES[leg];
             assert!(p[[0, k, 2]] > 0.08, "knee now {} in front", p[[0, k, 2]]);
-            assert!(p[[0, k, 0]] - p[[0, HIPS[leg], 0]] > 0.0, "the knee keeps its side");
+            assert!(
+                p[[0, k, 0]] - p[[0, HIPS[leg], 0]] > 0.0,
+                "the knee keeps its side"
+            );
             assert!((dist(&p, k, HIPS[leg]) - dist(&before, k, HIPS[leg])).abs() < 1e-5);
             assert!((dist(&p, k, ANKLES[leg]) - dist(&before, k, ANKLES[leg])).abs() < 1e-5);
         }
         // Nothing but the knees moved.
         for j in (0..NUM_JOINTS).filter(|j| !KNEES.contains(j)) {
-            assert_eq!(p.slice(ndarray::s![0, j, ..]), before.slice(ndarray::s![0, j, ..]));
+            assert_eq!(
+                p.slice(ndarray::s![0, j, ..]),
+                before.slice(ndarray::s![0, j, ..])
+            );
         }
     }
 
@@ -166,12 +205,24 @@ mod tests {
             let a = i as f32 / steps as f32 * std::f32::consts::TAU;
             let mut p = legs(r * a.cos(), r * a.sin());
             bend_forward(p.view_mut());
-            let k = [p[[0, KNEES[0], 0]], p[[0, KNEES[0], 1]], p[[0, KNEES[0], 2]]];
-            let behind_limit = -r * (LEFT_ALONE_DEG.to_radians() - std::f64::consts::FRAC_PI_2).sin() as f32;
-            assert!(k[2] >= behind_limit - 1e-5, "step {i}: knee behind at {}", k[2]);
+            let k = [
+                p[[0, KNEES[0], 0]],
+                p[[0, KNEES[0], 1]],
+                p[[0, KNEES[0], 2]],
+            ];
+            let behind_limit =
+                -r * (LEFT_ALONE_DEG.to_radians() - std::f64::consts::FRAC_PI_2).sin() as f32;
+            assert!(
+                k[2] >= behind_limit - 1e-5,
+                "step {i}: knee behind at {}",
+                k[2]
+            );
             if let Some(q) = prev {
                 let d = (0..3).map(|c| (k[c] - q[c]).powi(2)).sum::<f32>().sqrt();
-                assert!(d <= 2.05 * r * std::f32::consts::TAU / steps as f32, "step {i}: knee jumped {d}");
+                assert!(
+                    d <= 2.05 * r * std::f32::consts::TAU / steps as f32,
+                    "step {i}: knee jumped {d}"
+                );
             }
             prev = Some(k);
         }
@@ -182,11 +233,21 @@ mod tests {
         // Thigh forward and down, shin back and up, the foot pointed along the shin: the knee is
         // bent the right way, but the foot's heel → toe lies behind the hip–ankle line.
         let mut p = legs(0.0, 0.0);
-        let (hip, knee, ankle) = (Vector3::new(-0.1, 0.0, 0.0), Vector3::new(-0.1, -0.4, 0.15), Vector3::new(-0.1, -0.45, -0.3));
+        let (hip, knee, ankle) = (
+            Vector3::new(-0.1, 0.0, 0.0),
+            Vector3::new(-0.1, -0.4, 0.15),
+            Vector3::new(-0.1, -0.45, -0.3),
+        );
         let shin = (ankle - knee).normalize();
         let heel = ankle - shin * 0.05 + Vector3::new(0.0, 0.03, 0.0);
         let toe = ankle + shin * 0.15;
-        for (j, v) in [(HIPS[0], hip), (KNEES[0], knee), (ANKLES[0], ankle), (HEELS[0], heel), (TOES[0], toe)] {
+        for (j, v) in [
+            (HIPS[0], hip),
+            (KNEES[0], knee),
+            (ANKLES[0], ankle),
+            (HEELS[0], heel),
+            (TOES[0], toe),
+        ] {
             (0..3).for_each(|c| p[[0, j, c]] = v[c] as f32);
         }
         let before = p.clone();
@@ -200,32 +261,50 @@ mod tests {
     fn real_dances_are_nearly_unchanged() {
         let ds = match crate::motion::dataset::Dataset::open_default() {
             Ok(ds) => ds,
-            Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => panic!("../shared is needed under CI=true: {e}"),
+            Err(e) if std::env::var("CI").is_ok_and(|v| v == "true") => {
+                panic!("../shared is needed under CI=true: {e}")
+            }
             Err(e) => return eprintln!("skipping: {e}"),
         };
-        let (mut frames, mut moved, mut max_move, mut dances_moved, mut far) = (0usize, 0usize, 0f32, 0usize, 0usize);
+        let (mut frames, mut moved, mut max_move, mut dances_moved, mut far) =
+            (0usize, 0usize, 0f32, 0usize, 0usize);
         for id in ds.all_ids() {
             let Ok(d) = ds.load(&id) else { continue };
             let mut p = d.motion.positions.clone();
             let n = bend_forward(p.view_mut());
-            let dance_max = (&p - &d.motion.positions).mapv(f32::abs).fold(0f32, |a, &v| a.max(v));
+            let dance_max = (&p - &d.motion.positions)
+                .mapv(f32::abs)
+                .fold(0f32, |a, &v| a.max(v));
             far += (0..p.dim().0)
                 .flat_map(|f| KNEES.map(|k| (f, k)))
-                .filter(|&(f, k)| (0..3).map(|c| (p[[f, k, c]] - d.motion.positions[[f, k, c]]).powi(2)).sum::<f32>() > 0.2 * 0.2)
+                .filter(|&(f, k)| {
+                    (0..3)
+                        .map(|c| (p[[f, k, c]] - d.motion.positions[[f, k, c]]).powi(2))
+                        .sum::<f32>()
+                        > 0.2 * 0.2
+                })
                 .count();
             // Over the three coordinates of a knee: at most √3 times the largest coordinate move.
             max_move = max_move.max(dance_max * 3f32.sqrt());
             frames += 2 * p.dim().0;
             moved += n;
             dances_moved += usize::from(n > 0);
-            println!("{id}: {n} knee-frames of {} moved, largest coordinate move {:.3} m", 2 * p.dim().0, dance_max);
+            println!(
+                "{id}: {n} knee-frames of {} moved, largest coordinate move {:.3} m",
+                2 * p.dim().0,
+                dance_max
+            );
         }
         if frames == 0 {
             return;
         }
         let share = moved as f64 / frames as f64;
         println!("real dances: {moved} of {frames} knee-frames moved ({:.2} %) in {dances_moved} dances; largest knee move ≤ {max_move:.3} m", 100.0 * share);
-        assert!(share < 0.035, "{:.1} % of real knee-frames moved", 100.0 * share);
+        assert!(
+            share < 0.035,
+            "{:.1} % of real knee-frames moved",
+            100.0 * share
+        );
         // Before the pointed-foot rule, 18 knee-frames moved more than 20 cm (legs flicked back in
         // the first 1.6 s of DANCE_C_2, C_4, R_5); the 4 left are DANCE_C_4's first second, where
         // the heel marker sits 19 cm below the ankle (a capture glitch, no foot direction to trust).

@@ -69,7 +69,10 @@ pub struct MotionStages {
 
 impl Default for MotionStages {
     fn default() -> Self {
-        Self { beat_align: true, plant_feet: true }
+        Self {
+            beat_align: true,
+            plant_feet: true,
+        }
     }
 }
 
@@ -79,7 +82,13 @@ impl Default for MotionStages {
 /// and `choreo eval` all go through it. `seed_s`: the length of the seed motion the request
 /// brought (0 without), whose frames open the dance as they are: every frame of that span is
 /// fixed, so the warp is the identity there. The summary is `None` when alignment was not asked for.
-pub fn after_model(motion: Motion, beat_times_s: &[f64], key_poses: &[KeyPose], seed_s: f64, stages: MotionStages) -> (Motion, Option<beat_align::BeatAlignSummary>) {
+pub fn after_model(
+    motion: Motion,
+    beat_times_s: &[f64],
+    key_poses: &[KeyPose],
+    seed_s: f64,
+    stages: MotionStages,
+) -> (Motion, Option<beat_align::BeatAlignSummary>) {
     let (motion, summary) = if stages.beat_align {
         let seed_frames = (seed_s * motion.fps).ceil().max(0.0) as usize;
         let mut fixed: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
@@ -105,8 +114,15 @@ pub struct Served {
 /// all go through it, so what is scored is what is served. `ground`: the fitted skeleton is put
 /// back on the floor ([`ground_rig`]) where [`finish`] grounded the motion (not where the caller
 /// asked for the model's motion as it came).
-pub fn serve(finished: &Motion, key_poses: &[KeyPose], ground: bool) -> Result<Served, MotionError> {
-    let anchors: Vec<usize> = key_poses.iter().map(|k| (k.time_s * finished.fps).round() as usize).collect();
+pub fn serve(
+    finished: &Motion,
+    key_poses: &[KeyPose],
+    ground: bool,
+) -> Result<Served, MotionError> {
+    let anchors: Vec<usize> = key_poses
+        .iter()
+        .map(|k| (k.time_s * finished.fps).round() as usize)
+        .collect();
     let mut rig = export::prepare_anchored(finished, &anchors)?;
     if ground {
         ground_rig(&mut rig);

@@ -207,7 +207,11 @@ pub fn foot_contacts(positions: ArrayView3<'_, f32>, fps: f64) -> Result<Array2<
             }
             let speed = (d2.sqrt() / span) as f32;
             let low = heights[t] - floor < CONTACT_HEIGHT_M;
-            out[[t, k]] = if low && speed < CONTACT_SPEED_M_S { 1.0 } else { 0.0 };
+            out[[t, k]] = if low && speed < CONTACT_SPEED_M_S {
+                1.0
+            } else {
+                0.0
+            };
         }
     }
     Ok(out)
@@ -230,7 +234,10 @@ pub(crate) fn percentile(values: &[f32], p: f64) -> f32 {
 /// Height of the lowest foot point ([`FOOT_POINTS`]) relative to the root, from one feature row's
 /// local pose (metres; negative: the feet are below the body centre).
 pub fn lowest_foot_local_y(row: ndarray::ArrayView1<'_, f32>) -> f32 {
-    FOOT_POINTS.iter().map(|&j| row[3 * j + 1]).fold(f32::INFINITY, f32::min)
+    FOOT_POINTS
+        .iter()
+        .map(|&j| row[3 * j + 1])
+        .fold(f32::INFINITY, f32::min)
 }
 
 /// Replaces the root height (column [`ROOT_Y`]) by the lowest foot's clearance above `floor`
@@ -256,7 +263,11 @@ pub fn clearance_to_height(features: &mut Array2<f32>) {
 /// The floor of a dance in feature form: the 1st percentile of the lowest foot's world height
 /// (the floor foot planting and the metrics use, `motion::feet::FLOOR_PERCENTILE`).
 pub fn floor_of_features(features: ndarray::ArrayView2<'_, f32>) -> f32 {
-    let lows: Vec<f32> = features.rows().into_iter().map(|r| r[ROOT_Y] + lowest_foot_local_y(r)).collect();
+    let lows: Vec<f32> = features
+        .rows()
+        .into_iter()
+        .map(|r| r[ROOT_Y] + lowest_foot_local_y(r))
+        .collect();
     percentile(&lows, super::feet::FLOOR_PERCENTILE)
 }
 
@@ -267,7 +278,10 @@ pub fn end_effectors(positions: ArrayView3<'_, f32>) -> Result<Array3<f32>, Moti
     let t_len = check_positions(positions)?;
     let mut out = Array3::zeros((t_len, 5, 3));
     for t in 0..t_len {
-        for (k, j) in [WRISTS[0], WRISTS[1], TOES[0], TOES[1]].into_iter().enumerate() {
+        for (k, j) in [WRISTS[0], WRISTS[1], TOES[0], TOES[1]]
+            .into_iter()
+            .enumerate()
+        {
             for c in 0..3 {
                 out[[t, k, c]] = positions[[t, j, c]];
             }
@@ -326,9 +340,13 @@ mod tests {
         let (f, start) = to_features(pos.view(), root.view()).expect("features");
         assert_eq!(f.shape(), &[200, FEATURE_DIM]);
         let (m, root2) = from_features(f.view(), start, 25.0).expect("inverse");
-        let err = (&m.positions - &pos).mapv(f32::abs).fold(0.0f32, |a, &b| a.max(b));
+        let err = (&m.positions - &pos)
+            .mapv(f32::abs)
+            .fold(0.0f32, |a, &b| a.max(b));
         assert!(err < 1e-5, "max error {err}");
-        let rerr = (&root2 - &root).mapv(f32::abs).fold(0.0f32, |a, &b| a.max(b));
+        let rerr = (&root2 - &root)
+            .mapv(f32::abs)
+            .fold(0.0f32, |a, &b| a.max(b));
         assert!(rerr < 1e-5);
         // Local pose is heading invariant: every frame of the walker has the same local pose.
         let d = (&f.slice(s![0, ..POSE_DIM]) - &f.slice(s![150, ..POSE_DIM]))

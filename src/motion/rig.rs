@@ -262,7 +262,10 @@ fn targets(
 impl Rig {
     /// Fits the rigid skeleton of a motion: median bone lengths, mean bone directions in the
     /// facing frame.
-    pub fn fit(positions: ArrayView3<'_, f32>, root: ArrayView2<'_, f32>) -> Result<Rig, MotionError> {
+    pub fn fit(
+        positions: ArrayView3<'_, f32>,
+        root: ArrayView2<'_, f32>,
+    ) -> Result<Rig, MotionError> {
         let tg = targets(positions, root)?;
         if tg.is_empty() {
             return Err(MotionError::Shape("motion has no frames".into()));
@@ -318,8 +321,11 @@ impl Rig {
                 let rest: Vec<Vector3<f64>> = kids.iter().map(|&c| self.offsets[c]).collect();
                 let mut sums = vec![Vector3::zeros(); kids.len()];
                 for frame in tg {
-                    let target: Vec<Vector3<f64>> = kids.iter().map(|&c| frame[c] - frame[j]).collect();
-                    let Some(r) = wahba(&rest, &target) else { continue };
+                    let target: Vec<Vector3<f64>> =
+                        kids.iter().map(|&c| frame[c] - frame[j]).collect();
+                    let Some(r) = wahba(&rest, &target) else {
+                        continue;
+                    };
                     let r_inv = r.inverse();
                     for (s, d) in sums.iter_mut().zip(&target) {
                         *s += r_inv * d;
@@ -339,9 +345,20 @@ impl Rig {
     pub fn from_offsets(offsets: &[[f64; 3]]) -> Result<Rig, MotionError> {
         let (names, parents) = hierarchy();
         if offsets.len() != names.len() || offsets.iter().flatten().any(|v| !v.is_finite()) {
-            return Err(MotionError::Shape(format!("{} rig offsets, expected {} finite ones", offsets.len(), names.len())));
+            return Err(MotionError::Shape(format!(
+                "{} rig offsets, expected {} finite ones",
+                offsets.len(),
+                names.len()
+            )));
         }
-        Ok(Rig { names, parents, offsets: offsets.iter().map(|o| Vector3::new(o[0], o[1], o[2])).collect() })
+        Ok(Rig {
+            names,
+            parents,
+            offsets: offsets
+                .iter()
+                .map(|o| Vector3::new(o[0], o[1], o[2]))
+                .collect(),
+        })
     }
 
     /// The rest offsets as plain arrays (the form [`Rig::from_offsets`] takes).
@@ -381,7 +398,11 @@ fn arc(a: &Vector3<f64>, b: &Vector3<f64>) -> UnitQuaternion<f64> {
     UnitQuaternion::rotation_between(a, b).unwrap_or_else(|| {
         // Opposite vectors: half a turn about any axis perpendicular to `a`.
         let perp = a.cross(&Vector3::x());
-        let perp = if perp.norm() < 1e-6 { a.cross(&Vector3::y()) } else { perp };
+        let perp = if perp.norm() < 1e-6 {
+            a.cross(&Vector3::y())
+        } else {
+            perp
+        };
         UnitQuaternion::from_axis_angle(&Unit::new_normalize(perp), std::f64::consts::PI)
     })
 }
@@ -432,7 +453,9 @@ pub fn rotation_from_6d(v: &[f32; 6]) -> Option<UnitQuaternion<f64>> {
     let y = (b - x * x.dot(&b)).try_normalize(1e-12)?;
     let z = x.cross(&y);
     let m = Matrix3::from_columns(&[x, y, z]);
-    Some(UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(m)))
+    Some(UnitQuaternion::from_rotation_matrix(
+        &Rotation3::from_matrix_unchecked(m),
+    ))
 }
 
 /// Local rotations as quaternions `[T, RIG_JOINTS, 4]` in `x, y, z, w` order.
@@ -453,7 +476,10 @@ pub fn rotations_quat(motion: &RigMotion) -> Array3<f32> {
 
 /// Per-joint distance (metres) between two `[T, J, 3]` position arrays, `[T, J]`.
 pub fn joint_errors(a: ArrayView3<'_, f32>, b: ArrayView3<'_, f32>) -> Array2<f32> {
-    let (t_len, j_len) = (a.shape()[0].min(b.shape()[0]), a.shape()[1].min(b.shape()[1]));
+    let (t_len, j_len) = (
+        a.shape()[0].min(b.shape()[0]),
+        a.shape()[1].min(b.shape()[1]),
+    );
     let mut out = Array2::zeros((t_len, j_len));
     for t in 0..t_len {
         for j in 0..j_len {

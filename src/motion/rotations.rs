@@ -40,7 +40,8 @@ pub const CLEARANCE: usize = 2;
 pub const YAW_VEL: usize = 3;
 /// End effectors as dataset joints: the head (midpoint of its two markers), right and left
 /// wrists, right and left toes.
-pub const END_EFFECTORS: [&[usize]; 5] = [&HEAD, &[WRISTS[0]], &[WRISTS[1]], &[TOES[0]], &[TOES[1]]];
+pub const END_EFFECTORS: [&[usize]; 5] =
+    [&HEAD, &[WRISTS[0]], &[WRISTS[1]], &[TOES[0]], &[TOES[1]]];
 /// End-effector columns (3 each).
 pub const EE_DIMS: usize = 3 * END_EFFECTORS.len();
 
@@ -54,7 +55,11 @@ pub struct Layout {
 impl Layout {
     /// The joints of `rig` that have a child, but the root.
     pub fn of(rig: &Rig) -> Self {
-        Self { joints: (1..rig.parents.len()).filter(|&j| !rig.children(j).is_empty()).collect() }
+        Self {
+            joints: (1..rig.parents.len())
+                .filter(|&j| !rig.children(j).is_empty())
+                .collect(),
+        }
     }
 
     /// Width of a row.
@@ -100,7 +105,10 @@ fn check_rig(rig: &Rig) -> Result<(), MotionError> {
     }
     for c in rig.children(0) {
         if (rig.offsets[c] - rig.offsets[ANCHOR]).norm() > 1e-6 {
-            return Err(MotionError::Invalid(format!("rig joint {} is not at the anchor's rest offset", rig.names[c])));
+            return Err(MotionError::Invalid(format!(
+                "rig joint {} is not at the anchor's rest offset",
+                rig.names[c]
+            )));
         }
     }
     Ok(())
@@ -108,7 +116,10 @@ fn check_rig(rig: &Rig) -> Result<(), MotionError> {
 
 /// Lowest foot point's height in world positions of the rig `[RIG_JOINTS]`.
 fn lowest_foot(pos: &[Vector3<f64>]) -> f64 {
-    FOOT_POINTS.iter().map(|&j| pos[rig_index(j)].y).fold(f64::INFINITY, f64::min)
+    FOOT_POINTS
+        .iter()
+        .map(|&j| pos[rig_index(j)].y)
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Rotation features of world positions `[T, 23, 3]` on `rig`.
@@ -118,19 +129,26 @@ pub fn encode(rig: &Rig, positions: ArrayView3<'_, f32>, fps: f64) -> Result<Enc
     // The root track that puts the anchor exactly on the spine joint: with the body centre as
     // the root (as the export does), the spine would land off its target by however much the
     // centre-to-spine distance differs from the rig's, and every joint below it with it.
-    let yaws: Vec<f64> = positions.outer_iter().map(|f| f64::from(facing_yaw(f))).collect();
+    let yaws: Vec<f64> = positions
+        .outer_iter()
+        .map(|f| f64::from(facing_yaw(f)))
+        .collect();
     let mut root = Array2::<f32>::zeros((positions.dim().0, 3));
     for (t, &yaw) in yaws.iter().enumerate() {
-        let r = Vector3::new(f64::from(positions[[t, SPINE, 0]]), f64::from(positions[[t, SPINE, 1]]), f64::from(positions[[t, SPINE, 2]]))
-            - yaw_rotation(yaw) * rig.offsets[ANCHOR];
+        let r = Vector3::new(
+            f64::from(positions[[t, SPINE, 0]]),
+            f64::from(positions[[t, SPINE, 1]]),
+            f64::from(positions[[t, SPINE, 2]]),
+        ) - yaw_rotation(yaw) * rig.offsets[ANCHOR];
         for c in 0..3 {
             root[[t, c]] = r[c] as f32;
         }
     }
     let rigid = solve(rig, positions, root.view(), fps)?;
     let t_len = rigid.num_frames();
-    let frames: Vec<(Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>)> =
-        (0..t_len).map(|t| fk_frame(rig, &rigid.root_translation[t], &rigid.rotations[t])).collect();
+    let frames: Vec<(Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>)> = (0..t_len)
+        .map(|t| fk_frame(rig, &rigid.root_translation[t], &rigid.rotations[t]))
+        .collect();
     let mut rigid_positions = Array3::<f32>::zeros((t_len, NUM_JOINTS, 3));
     for (t, (pos, _)) in frames.iter().enumerate() {
         for j in 0..NUM_JOINTS {
@@ -169,7 +187,11 @@ pub fn encode(rig: &Rig, positions: ArrayView3<'_, f32>, fps: f64) -> Result<Enc
         }
         let ee0 = layout.end_effectors().start;
         for (e, joints) in END_EFFECTORS.iter().enumerate() {
-            let p = joints.iter().map(|&j| pos[rig_index(j)]).sum::<Vector3<f64>>() / joints.len() as f64;
+            let p = joints
+                .iter()
+                .map(|&j| pos[rig_index(j)])
+                .sum::<Vector3<f64>>()
+                / joints.len() as f64;
             let local = unfaced * (p - anchor);
             for c in 0..3 {
                 row[ee0 + 3 * e + c] = local[c] as f32;
@@ -179,19 +201,36 @@ pub fn encode(rig: &Rig, positions: ArrayView3<'_, f32>, fps: f64) -> Result<Enc
     let contacts = foot_contacts(rigid_positions.view(), fps)?;
     let start = match t_len {
         0 => RootStart::default(),
-        _ => RootStart { x: frames[0].0[ANCHOR].x as f32, z: frames[0].0[ANCHOR].z as f32, yaw: yaws[0] as f32 },
+        _ => RootStart {
+            x: frames[0].0[ANCHOR].x as f32,
+            z: frames[0].0[ANCHOR].z as f32,
+            yaw: yaws[0] as f32,
+        },
     };
-    Ok(Encoded { features: out, contacts, start })
+    Ok(Encoded {
+        features: out,
+        contacts,
+        start,
+    })
 }
 
 /// The rigid motion of rotation features `[T, Layout::dim]` on `rig`, its floor at `y = 0`; a
 /// clearance below 0 (a foot under the floor) is raised to 0. The end-effector columns are not
 /// used: the rotations place every joint.
-pub fn decode(rig: &Rig, features: ArrayView2<'_, f32>, start: RootStart, fps: f64) -> Result<Motion, MotionError> {
+pub fn decode(
+    rig: &Rig,
+    features: ArrayView2<'_, f32>,
+    start: RootStart,
+    fps: f64,
+) -> Result<Motion, MotionError> {
     check_rig(rig)?;
     let layout = Layout::of(rig);
     if features.ncols() != layout.dim() {
-        return Err(MotionError::Shape(format!("features {:?}, expected [T, {}]", features.shape(), layout.dim())));
+        return Err(MotionError::Shape(format!(
+            "features {:?}, expected [T, {}]",
+            features.shape(),
+            layout.dim()
+        )));
     }
     let t_len = features.nrows();
     let n = rig.parents.len();
@@ -201,7 +240,8 @@ pub fn decode(rig: &Rig, features: ArrayView2<'_, f32>, start: RootStart, fps: f
     for t in 0..t_len {
         let f = features.row(t);
         if t > 0 {
-            let d = yaw_rotation(yaw) * Vector3::new(f64::from(f[ROOT_VX]), 0.0, f64::from(f[ROOT_VZ]));
+            let d =
+                yaw_rotation(yaw) * Vector3::new(f64::from(f[ROOT_VX]), 0.0, f64::from(f[ROOT_VZ]));
             x += d.x;
             z += d.z;
             yaw += f64::from(f[YAW_VEL]);
@@ -211,7 +251,9 @@ pub fn decode(rig: &Rig, features: ArrayView2<'_, f32>, start: RootStart, fps: f
         for (k, &j) in layout.joints.iter().enumerate() {
             let c = ROOT_DIMS + 6 * k;
             let v = [f[c], f[c + 1], f[c + 2], f[c + 3], f[c + 4], f[c + 5]];
-            local[j] = rotation_from_6d(&v).ok_or_else(|| MotionError::Invalid(format!("frame {t}: degenerate rotation of rig joint {j}")))?;
+            local[j] = rotation_from_6d(&v).ok_or_else(|| {
+                MotionError::Invalid(format!("frame {t}: degenerate rotation of rig joint {j}"))
+            })?;
         }
         // The anchor at (x, 0, z) first; then the height that puts the lowest foot at its clearance.
         let root = Vector3::new(x, 0.0, z) - facing * rig.offsets[ANCHOR];
@@ -239,7 +281,11 @@ mod tests {
         let mut rng = rand::rngs::StdRng::seed_from_u64(3);
         let mut r = Rig::from_offsets(&vec![[0.0; 3]; RIG_JOINTS]).expect("hierarchy");
         for j in 1..RIG_JOINTS {
-            r.offsets[j] = Vector3::new(rng.gen_range(-0.1..0.1), rng.gen_range(-0.3..-0.1), rng.gen_range(-0.1..0.1));
+            r.offsets[j] = Vector3::new(
+                rng.gen_range(-0.1..0.1),
+                rng.gen_range(-0.3..-0.1),
+                rng.gen_range(-0.1..0.1),
+            );
         }
         let anchor = Vector3::new(0.0, 0.1, 0.0);
         for c in r.children(0) {
@@ -257,8 +303,19 @@ mod tests {
         let mut rng = rand::rngs::StdRng::seed_from_u64(11);
         let (pose, spin): (Vec<UnitQuaternion<f64>>, Vec<Vector3<f64>>) = (0..RIG_JOINTS)
             .map(|_| {
-                let q = UnitQuaternion::from_euler_angles(rng.gen_range(-0.6..0.6), rng.gen_range(-0.6..0.6), rng.gen_range(-0.6..0.6));
-                (q, Vector3::new(rng.gen_range(-0.1..0.1), rng.gen_range(-0.1..0.1), rng.gen_range(-0.1..0.1)))
+                let q = UnitQuaternion::from_euler_angles(
+                    rng.gen_range(-0.6..0.6),
+                    rng.gen_range(-0.6..0.6),
+                    rng.gen_range(-0.6..0.6),
+                );
+                (
+                    q,
+                    Vector3::new(
+                        rng.gen_range(-0.1..0.1),
+                        rng.gen_range(-0.1..0.1),
+                        rng.gen_range(-0.1..0.1),
+                    ),
+                )
             })
             .unzip();
         let mut out = Array3::zeros((t_len, NUM_JOINTS, 3));
@@ -266,7 +323,11 @@ mod tests {
             let local: Vec<UnitQuaternion<f64>> = (0..RIG_JOINTS)
                 .map(|j| {
                     if j == 0 {
-                        UnitQuaternion::from_euler_angles(0.1 * (t as f64 * 0.3).sin(), 0.05 * t as f64, 0.0)
+                        UnitQuaternion::from_euler_angles(
+                            0.1 * (t as f64 * 0.3).sin(),
+                            0.05 * t as f64,
+                            0.0,
+                        )
                     } else if rig.children(j).is_empty() {
                         UnitQuaternion::identity()
                     } else {
@@ -295,11 +356,16 @@ mod tests {
         // The decoded dance stands on y = 0: compare after moving the original onto its floor.
         let floor = feet::floor_height(p.view(), &FOOT_POINTS) as f32;
         let mut want = p.clone();
-        want.slice_mut(ndarray::s![.., .., 1]).mapv_inplace(|y| y - floor);
+        want.slice_mut(ndarray::s![.., .., 1])
+            .mapv_inplace(|y| y - floor);
         // A frame whose lowest foot is under the floor (the 1st percentile) is raised onto it.
-        for (t, low) in feet::lowest_foot(want.view(), &FOOT_POINTS).into_iter().enumerate() {
+        for (t, low) in feet::lowest_foot(want.view(), &FOOT_POINTS)
+            .into_iter()
+            .enumerate()
+        {
             if low < 0.0 {
-                want.slice_mut(ndarray::s![t, .., 1]).mapv_inplace(|y| y - low as f32);
+                want.slice_mut(ndarray::s![t, .., 1])
+                    .mapv_inplace(|y| y - low as f32);
             }
         }
         let err = joint_errors(back.positions.view(), want.view()).fold(0f32, |a, &b| a.max(b));

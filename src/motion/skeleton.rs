@@ -140,9 +140,8 @@ pub const ANATOMICAL: [usize; 21] = [
 /// residual of 2.3 mm median, 5.0 mm p95, 11 mm max. Motions without a known centre (generated
 /// ones) take their root from these weights via [`body_centre`].
 pub const CENTRE_WEIGHTS: [f32; NUM_JOINTS] = [
-    0.0619, 0.0490, 0.0862, 0.0416, 0.0493, 0.0239, 0.0250, 0.0587, 0.0488, 0.0568, 0.0375,
-    0.0192, 0.0518, 0.0241, 0.0172, 0.0384, 0.0576, 0.0429, 0.0834, 0.0206, 0.0139, 0.0552,
-    0.0370,
+    0.0619, 0.0490, 0.0862, 0.0416, 0.0493, 0.0239, 0.0250, 0.0587, 0.0488, 0.0568, 0.0375, 0.0192,
+    0.0518, 0.0241, 0.0172, 0.0384, 0.0576, 0.0429, 0.0834, 0.0206, 0.0139, 0.0552, 0.0370,
 ];
 
 /// The body centre (root) of one frame of `[J, 3]` positions, from [`CENTRE_WEIGHTS`].
@@ -234,7 +233,11 @@ mod tests {
             if j == 0 || j == 1 || j == 21 || j == 22 {
                 continue; // head markers and hand points are chained, not mirrored
             }
-            assert_eq!(PARENTS[MIRROR[j]], PARENTS[j].map(|p| MIRROR[p]), "joint {j}");
+            assert_eq!(
+                PARENTS[MIRROR[j]],
+                PARENTS[j].map(|p| MIRROR[p]),
+                "joint {j}"
+            );
         }
     }
 }

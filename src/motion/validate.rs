@@ -154,7 +154,11 @@ pub fn key_frames(poses: &[KeyPose], frames: usize, fps: f64) -> Result<Vec<usiz
                 asked: Some(JointSet::Dataset),
             });
         }
-        if let Some(j) = p.joints.iter().position(|v| v.iter().any(|c| !c.is_finite())) {
+        if let Some(j) = p
+            .joints
+            .iter()
+            .position(|v| v.iter().any(|c| !c.is_finite()))
+        {
             return Err(InputError::NonFinite {
                 what: format!("key pose {i}, joint {}", JOINT_NAMES[j]),
             });
@@ -166,7 +170,11 @@ pub fn key_frames(poses: &[KeyPose], frames: usize, fps: f64) -> Result<Vec<usiz
 
 /// Validates canonical key poses for a dance of `frames` frames at `fps` and returns each one's
 /// frame: [`key_frames`], and plausible bone lengths ([`check_pose`]). The API's check.
-pub fn validate_key_poses(poses: &[KeyPose], frames: usize, fps: f64) -> Result<Vec<usize>, InputError> {
+pub fn validate_key_poses(
+    poses: &[KeyPose],
+    frames: usize,
+    fps: f64,
+) -> Result<Vec<usize>, InputError> {
     let at = key_frames(poses, frames, fps)?;
     for (i, p) in poses.iter().enumerate() {
         // Key poses are relative to the body centre, so the root is the origin.
@@ -238,7 +246,12 @@ pub fn seed_from_bvh(text: &str) -> Result<Motion, InputError> {
 /// Key pose `index` at `time_s` from frame `frame` of BVH text (metres, y up, our joint names),
 /// relative to its body centre: the root joint when the file has one (choreo's exports), else the
 /// weighted centroid. Its time is checked by [`validate_key_poses`].
-pub fn key_pose_from_bvh(text: &str, frame: usize, index: usize, time_s: f64) -> Result<KeyPose, InputError> {
+pub fn key_pose_from_bvh(
+    text: &str,
+    frame: usize,
+    index: usize,
+    time_s: f64,
+) -> Result<KeyPose, InputError> {
     let what = format!("key pose {index} BVH");
     let bvh = Bvh::parse(text).map_err(|e| bvh_input(&what, e))?;
     if frame >= bvh.frames.len() {
@@ -286,7 +299,10 @@ mod tests {
 
     #[test]
     fn accepts_plausible_key_poses() {
-        assert_eq!(validate_key_poses(&[pose(1.0), pose(2.0)], 250, 25.0), Ok(vec![25, 50]));
+        assert_eq!(
+            validate_key_poses(&[pose(1.0), pose(2.0)], 250, 25.0),
+            Ok(vec![25, 50])
+        );
     }
 
     #[test]
@@ -298,9 +314,17 @@ mod tests {
         assert_eq!(key_frame(0, 131.0 / 25.0, n, 25.0), Ok(131));
         assert_eq!(key_frame(0, 5.259, n, 25.0), Ok(131));
         for outside in [5.26, 5.29, 5.3, -0.001] {
-            assert_eq!(key_frame(0, outside, n, 25.0).unwrap_err().code(), "time-outside-song", "{outside}");
+            assert_eq!(
+                key_frame(0, outside, n, 25.0).unwrap_err().code(),
+                "time-outside-song",
+                "{outside}"
+            );
         }
-        assert_eq!(song_frames(0.01, 25.0), 1, "the models make at least one frame");
+        assert_eq!(
+            song_frames(0.01, 25.0),
+            1,
+            "the models make at least one frame"
+        );
         assert_eq!(song_frames(f64::NAN, 25.0), 1);
     }
 
@@ -323,13 +347,20 @@ mod tests {
         long_arm.joints[6][0] += 1.0; // right wrist a metre from the forearm
         assert_eq!(v(&[long_arm]), "absurd-bone-length");
         let mut collapsed = pose(1.0);
-        collapsed.joints.iter_mut().flatten().for_each(|v| *v *= 0.1);
+        collapsed
+            .joints
+            .iter_mut()
+            .flatten()
+            .for_each(|v| *v *= 0.1);
         assert_eq!(v(&[collapsed]), "absurd-skeleton-size");
         assert_eq!(v(&[pose(12.0)]), "time-outside-song");
         assert_eq!(v(&[pose(-0.5)]), "time-outside-song");
         // 3.0 s and 3.01 s are both frame 75; 3.03 s is frame 76 (0.03 s apart, yet distinct frames).
         assert_eq!(v(&[pose(3.0), pose(1.0), pose(3.01)]), "duplicate-time");
-        assert_eq!(validate_key_poses(&[pose(3.0), pose(3.03)], 250, 25.0), Ok(vec![75, 76]));
+        assert_eq!(
+            validate_key_poses(&[pose(3.0), pose(3.03)], 250, 25.0),
+            Ok(vec![75, 76])
+        );
         // 3.021 s and 3.059 s are 0.038 s apart but share frame 76.
         assert_eq!(v(&[pose(3.021), pose(3.059)]), "duplicate-time");
     }

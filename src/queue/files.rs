@@ -10,13 +10,19 @@
 //! Names come from ids and the decoded format only, never from user input, so no upload can
 //! name a path outside the data dir.
 use super::{JobId, RigId, SongId};
-use crate::motion::retarget::uploaded::RigFormat;
 use crate::audio::AudioFormat;
+use crate::motion::retarget::uploaded::RigFormat;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
 /// The result files a generate job may write, in the order the API lists them.
-pub const RESULT_FILES: &[&str] = &["motion.bvh", "motion.json", "motion.glb", "report.json", "preview.png"];
+pub const RESULT_FILES: &[&str] = &[
+    "motion.bvh",
+    "motion.json",
+    "motion.glb",
+    "report.json",
+    "preview.png",
+];
 
 /// The data dir and the paths inside it.
 #[derive(Clone, Debug)]
@@ -41,7 +47,9 @@ impl DataDir {
         for sub in ["songs", "rigs", "jobs", "tmp"] {
             std::fs::create_dir_all(root.join(sub))?;
         }
-        Ok(Self { root: root.to_path_buf() })
+        Ok(Self {
+            root: root.to_path_buf(),
+        })
     }
 
     /// The root.
@@ -51,12 +59,16 @@ impl DataDir {
 
     /// Where an uploaded song lives.
     pub fn song_path(&self, id: SongId, format: AudioFormat) -> PathBuf {
-        self.root.join("songs").join(format!("{id}.{}", extension(format)))
+        self.root
+            .join("songs")
+            .join(format!("{id}.{}", extension(format)))
     }
 
     /// Where an uploaded rig's file lives.
     pub fn rig_path(&self, id: RigId, format: RigFormat) -> PathBuf {
-        self.root.join("rigs").join(format!("{id}.{}", format.extension()))
+        self.root
+            .join("rigs")
+            .join(format!("{id}.{}", format.extension()))
     }
 
     /// Where a job's results live.
@@ -66,7 +78,9 @@ impl DataDir {
 
     /// A fresh temporary file inside the data dir (same filesystem, so rename is atomic).
     pub fn temp_file(&self) -> std::io::Result<tempfile::NamedTempFile> {
-        tempfile::Builder::new().prefix("upload-").tempfile_in(self.root.join("tmp"))
+        tempfile::Builder::new()
+            .prefix("upload-")
+            .tempfile_in(self.root.join("tmp"))
     }
 
     /// Removes temp files left by a previous process (uploads cut off by a crash).
@@ -85,9 +99,13 @@ impl DataDir {
 
 /// Writes `bytes` to `path` atomically: a temp file in the same dir, fsync, then rename.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
-    let dir = path.parent().ok_or_else(|| std::io::Error::other(format!("{} has no parent dir", path.display())))?;
+    let dir = path
+        .parent()
+        .ok_or_else(|| std::io::Error::other(format!("{} has no parent dir", path.display())))?;
     std::fs::create_dir_all(dir)?;
-    let mut tmp = tempfile::Builder::new().prefix(".partial-").tempfile_in(dir)?;
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".partial-")
+        .tempfile_in(dir)?;
     tmp.write_all(bytes)?;
     tmp.as_file().sync_all()?;
     tmp.persist(path).map_err(|e| e.error)?;
@@ -108,7 +126,9 @@ mod tests {
         write_atomic(&path, b"abc").expect("write");
         write_atomic(&path, b"de").expect("overwrite");
         assert_eq!(std::fs::read(&path).expect("read"), b"de");
-        let leftovers: Vec<_> = std::fs::read_dir(path.parent().expect("dir")).expect("ls").collect();
+        let leftovers: Vec<_> = std::fs::read_dir(path.parent().expect("dir"))
+            .expect("ls")
+            .collect();
         assert_eq!(leftovers.len(), 1, "no partial files remain");
     }
 }

@@ -133,6 +133,35 @@ typed_id!(
     /// An uploaded rig's id: a UUID v7, naming its stored file as a song's id does.
     RigId
 );
+typed_id!(
+    /// Whose a song, job or rig is: the API key that made it ([`TenantId::OPEN`] without keys).
+    TenantId
+);
+
+impl TenantId {
+    /// The tenant of an open service and of the single `auth_token`; every row stored before
+    /// keys existed belongs to it.
+    pub const OPEN: TenantId = TenantId(Uuid::nil());
+}
+
+/// Whose rows a read or a change may touch. Every API request is one tenant's; workers, sweeps
+/// and operators' tools see all. A row outside the scope is "not found", never "forbidden", so
+/// a tenant cannot learn that another's id exists.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Scope {
+    Tenant(TenantId),
+    All,
+}
+
+impl Scope {
+    /// The one tenant the scope is limited to; none for [`Scope::All`].
+    pub fn tenant(self) -> Option<TenantId> {
+        match self {
+            Scope::Tenant(tenant) => Some(tenant),
+            Scope::All => None,
+        }
+    }
+}
 
 /// Where a job is in its life.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize, Deserialize, utoipa::ToSchema)]
@@ -147,7 +176,13 @@ pub enum Status {
 
 impl Status {
     /// Every status, in life order.
-    pub const ALL: [Status; 5] = [Status::Queued, Status::Running, Status::Succeeded, Status::Failed, Status::Cancelled];
+    pub const ALL: [Status; 5] = [
+        Status::Queued,
+        Status::Running,
+        Status::Succeeded,
+        Status::Failed,
+        Status::Cancelled,
+    ];
 
     /// The lowercase name stored in the database and shown by the API.
     pub fn as_str(self) -> &'static str {
@@ -183,7 +218,10 @@ pub struct UnknownStatus(pub String);
 impl FromStr for Status {
     type Err = UnknownStatus;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Status::ALL.into_iter().find(|status| status.as_str() == s).ok_or_else(|| UnknownStatus(s.to_string()))
+        Status::ALL
+            .into_iter()
+            .find(|status| status.as_str() == s)
+            .ok_or_else(|| UnknownStatus(s.to_string()))
     }
 }
 
@@ -287,6 +325,7 @@ pub enum Outcome {
 #[derive(Clone, Debug)]
 pub struct Job {
     pub id: JobId,
+    pub tenant: TenantId,
     pub kind: JobKind,
     pub status: Status,
     /// What the job is doing now; a stored name this build does not know reads as none.
@@ -308,6 +347,8 @@ pub struct Job {
 /// A job to be registered.
 #[derive(Clone, Debug)]
 pub struct NewJob {
+    /// Whose job it is; the song it works on must be the same tenant's.
+    pub tenant: TenantId,
     pub kind: JobKind,
     pub priority: i64,
     pub max_attempts: u32,
@@ -377,6 +418,7 @@ pub struct LeasePolicy {
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Song {
     pub id: SongId,
+    pub tenant: TenantId,
     /// The upload's own name, for display only.
     pub filename: String,
     pub format: AudioFormat,
@@ -393,6 +435,7 @@ pub struct Song {
 #[derive(Clone, Debug)]
 pub struct UploadedRig {
     pub id: RigId,
+    pub tenant: TenantId,
     /// The upload's own name, for display only.
     pub filename: String,
     /// Found from the bytes.
@@ -425,20 +468,28 @@ pub trait JobStore: Send + Sync {
         policy: LeasePolicy,
     ) -> StoreFuture<'a, Beat>;
     /// Marks the job succeeded; `false` when `owner` no longer holds it (nothing changes then).
-    fn complete<'a>(&'a self, id: JobId, owner: &'a str, outcome: Outcome) -> StoreFuture<'a, bool>;
+    fn complete<'a>(&'a self, id: JobId, owner: &'a str, outcome: Outcome)
+        -> StoreFuture<'a, bool>;
     /// Records a failed attempt: requeued with backoff when `retry` and attempts remain,
     /// failed otherwise. `false` when `owner` no longer holds the job.
-    fn fail<'a>(&'a self, id: JobId, owner: &'a str, error: &'a str, retry: bool, policy: LeasePolicy) -> StoreFuture<'a, bool>;
+    fn fail<'a>(
+        &'a self,
+        id: JobId,
+        owner: &'a str,
+        error: &'a str,
+        retry: bool,
+        policy: LeasePolicy,
+    ) -> StoreFuture<'a, bool>;
     /// Marks a running job cancelled after its worker stopped at a checkpoint.
     fn finish_cancelled<'a>(&'a self, id: JobId, owner: &'a str) -> StoreFuture<'a, bool>;
     /// Cancels a queued job at once, or asks a running one to stop; returns the job after.
-    fn cancel(&self, id: JobId) -> StoreFuture<'_, Job>;
+    fn cancel(&self, scope: Scope, id: JobId) -> StoreFuture<'_, Job>;
     /// Requeues (or fails, past `max_attempts`) running jobs whose lease has expired.
     fn requeue_expired(&self, policy: LeasePolicy) -> StoreFuture<'_, Requeued>;
     /// One job.
-    fn job(&self, id: JobId) -> StoreFuture<'_, Job>;
+    fn job(&self, scope: Scope, id: JobId) -> StoreFuture<'_, Job>;
     /// Jobs, newest first.
-    fn jobs(&self, filter: JobFilter) -> StoreFuture<'_, Vec<Job>>;
+    fn jobs(&self, scope: Scope, filter: JobFilter) -> StoreFuture<'_, Vec<Job>>;
     /// Job counts by status.
     fn counts(&self) -> StoreFuture<'_, Vec<(Status, u64)>>;
     /// Whether the database answers.
@@ -450,13 +501,17 @@ pub trait JobStore: Send + Sync {
 
 /// The song catalogue.
 pub trait SongStore: Send + Sync {
-    /// Stores a new song with its analyze job in one transaction; when a song with the same
-    /// sha256 exists, returns it and stores nothing (`false`).
+    /// Stores a new song with its analyze job in one transaction; when the same tenant has a
+    /// song with the same sha256, returns it and stores nothing (`false`).
     fn add_song(&self, song: Song, analyze: NewJob) -> StoreFuture<'_, (Song, bool)>;
     /// One song.
-    fn song(&self, id: SongId) -> StoreFuture<'_, Song>;
-    /// The song with these bytes, if uploaded before.
-    fn song_by_sha256<'a>(&'a self, sha256: &'a str) -> StoreFuture<'a, Option<Song>>;
+    fn song(&self, scope: Scope, id: SongId) -> StoreFuture<'_, Song>;
+    /// The tenant's song with these bytes, if it uploaded them before.
+    fn song_by_sha256<'a>(
+        &'a self,
+        tenant: TenantId,
+        sha256: &'a str,
+    ) -> StoreFuture<'a, Option<Song>>;
     /// The latest analyze job of a song.
     fn analyze_job(&self, song: SongId) -> StoreFuture<'_, Option<Job>>;
 }
@@ -466,7 +521,7 @@ pub trait RigStore: Send + Sync {
     /// Stores a new rig (its file is already published).
     fn add_rig(&self, rig: UploadedRig) -> StoreFuture<'_, UploadedRig>;
     /// One rig.
-    fn rig(&self, id: RigId) -> StoreFuture<'_, UploadedRig>;
+    fn rig(&self, scope: Scope, id: RigId) -> StoreFuture<'_, UploadedRig>;
 }
 
 /// Everything the service stores.
@@ -476,7 +531,10 @@ impl<T: JobStore + SongStore + RigStore> Store for T {}
 
 /// Opens the store `database` names, running its migrations. `timeout` bounds how long a call
 /// waits for a PostgreSQL connection (the config's `db_timeout_s`).
-pub async fn open(database: &crate::config::Database, timeout: Duration) -> Result<Arc<dyn Store>, QueueError> {
+pub async fn open(
+    database: &crate::config::Database,
+    timeout: Duration,
+) -> Result<Arc<dyn Store>, QueueError> {
     use crate::config::Database;
     Ok(match database {
         Database::Sqlite(path) => Arc::new(SqliteStore::open(path).await?),

@@ -52,7 +52,11 @@ impl Dialect for Postgres {
         done.rows_affected()
     }
 
-    fn watch(pool: &Pool<Postgres>, wake: Arc<Notify>, shutdown: CancellationToken) -> StoreFuture<'_, ()> {
+    fn watch(
+        pool: &Pool<Postgres>,
+        wake: Arc<Notify>,
+        shutdown: CancellationToken,
+    ) -> StoreFuture<'_, ()> {
         Box::pin(async move {
             while !shutdown.is_cancelled() {
                 let mut listener = match PgListener::connect_with(pool).await {

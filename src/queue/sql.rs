@@ -19,12 +19,16 @@
 //! connections, encodings of the Rust types it binds and reads); those bounds sit on the three
 //! `impl` blocks below and are met by both SQLite and PostgreSQL.
 use super::{
-    Beat, Idempotency, Job, JobFiles, JobFilter, JobId, JobKind, JobStore, LeasePolicy, NewJob, Outcome, QueueError,
-    Registered, Requeued, Song, SongId, SongStore, Status, StoreFuture,
+    Beat, Idempotency, Job, JobFiles, JobFilter, JobId, JobKind, JobStore, LeasePolicy, NewJob,
+    Outcome, QueueError, Registered, Requeued, Scope, Song, SongId, SongStore, Status, StoreFuture,
+    TenantId,
 };
 use chrono::{DateTime, TimeZone, Utc};
 use sqlx::pool::PoolConnection;
-use sqlx::{ColumnIndex, Database, Decode, Encode, Executor, IntoArguments, Pool, Row, TransactionManager, Type};
+use sqlx::{
+    ColumnIndex, Database, Decode, Encode, Executor, IntoArguments, Pool, Row, TransactionManager,
+    Type,
+};
 use std::str::FromStr;
 use std::sync::Arc;
 use std::time::Duration;
@@ -38,15 +42,20 @@ mod rigs;
 pub const MAX_BACKOFF_DOUBLINGS: i64 = 16;
 
 /// The columns a job row is read from.
-pub const JOB_COLUMNS: &str = "id, options, status, stage, progress, priority, attempts, max_attempts, cancel_requested, \
+pub const JOB_COLUMNS: &str = "id, tenant_id, options, status, stage, progress, priority, attempts, max_attempts, cancel_requested, \
      error, result, created_at, started_at, finished_at";
 /// The columns a song row is read from.
-pub const SONG_COLUMNS: &str = "id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, analysis, created_at";
+pub const SONG_COLUMNS: &str = "id, tenant_id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, analysis, created_at";
 
 /// What differs between the SQL of the two stores; everything else is one statement for both.
 pub trait Dialect: Database {
     /// How an id is stored: hyphenated TEXT in SQLite, UUID in PostgreSQL.
-    type Id: for<'q> Encode<'q, Self> + for<'r> Decode<'r, Self> + Type<Self> + Send + Sync + 'static;
+    type Id: for<'q> Encode<'q, Self>
+        + for<'r> Decode<'r, Self>
+        + Type<Self>
+        + Send
+        + Sync
+        + 'static;
 
     /// Ends the sub-select that picks the rows a claim or the reaper updates. PostgreSQL has
     /// many writers and skips rows another transaction is taking; SQLite has one writer and
@@ -67,7 +76,11 @@ pub trait Dialect: Database {
 
     /// Wakes `wake` whenever a job becomes claimable in another process, until `shutdown`
     /// ([`JobStore::watch`]).
-    fn watch(pool: &Pool<Self>, wake: Arc<Notify>, shutdown: CancellationToken) -> StoreFuture<'_, ()>;
+    fn watch(
+        pool: &Pool<Self>,
+        wake: Arc<Notify>,
+        shutdown: CancellationToken,
+    ) -> StoreFuture<'_, ()>;
 }
 
 /// The jobs and songs of one SQL database: [`super::SqliteStore`] or [`super::PgStore`].
@@ -78,7 +91,9 @@ pub struct SqlStore<D: Database> {
 
 impl<D: Database> Clone for SqlStore<D> {
     fn clone(&self) -> Self {
-        Self { pool: self.pool.clone() }
+        Self {
+            pool: self.pool.clone(),
+        }
     }
 }
 
@@ -133,7 +148,9 @@ pub fn now_ms() -> i64 {
 
 /// A stored time back to a `DateTime`.
 pub fn to_time(ms: i64) -> Result<DateTime<Utc>, QueueError> {
-    Utc.timestamp_millis_opt(ms).single().ok_or_else(|| QueueError::Corrupt(format!("timestamp {ms}")))
+    Utc.timestamp_millis_opt(ms)
+        .single()
+        .ok_or_else(|| QueueError::Corrupt(format!("timestamp {ms}")))
 }
 
 /// An optional stored time back to a `DateTime`.
@@ -184,7 +201,9 @@ where
         if D::TransactionManager::get_transaction_depth(&*write) != 0 {
             // A pooled connection is never inside a transaction (`Write` closes those); if one
             // is, BEGIN would only open a savepoint, so refuse it rather than write into it.
-            return Err(QueueError::Database(sqlx::Error::Protocol("pooled connection inside a transaction".into())));
+            return Err(QueueError::Database(sqlx::Error::Protocol(
+                "pooled connection inside a transaction".into(),
+            )));
         }
         D::TransactionManager::begin(&mut *write, None).await?;
         Ok(write)
@@ -205,19 +224,35 @@ where
         Ok(())
     }
 
+    fn tenant_from_row(row: &D::Row) -> Result<TenantId, QueueError> {
+        Ok(TenantId(
+            D::uuid(row.try_get("tenant_id")?).map_err(|e| corrupt("tenant id", e))?,
+        ))
+    }
+
     fn job_from_row(row: &D::Row) -> Result<Job, QueueError> {
         let options: String = row.try_get("options")?;
         let status: String = row.try_get("status")?;
         let result: Option<String> = row.try_get("result")?;
         Ok(Job {
             id: JobId(D::uuid(row.try_get("id")?).map_err(|e| corrupt("job id", e))?),
-            kind: serde_json::from_str::<JobKind>(&options).map_err(|e| corrupt("job options", e))?,
+            tenant: Self::tenant_from_row(row)?,
+            kind: serde_json::from_str::<JobKind>(&options)
+                .map_err(|e| corrupt("job options", e))?,
             status: Status::from_str(&status).map_err(|e| corrupt("job status", e))?,
-            stage: crate::stage::Stage::from_stored(row.try_get::<Option<String>, _>("stage")?.as_deref()),
+            stage: crate::stage::Stage::from_stored(
+                row.try_get::<Option<String>, _>("stage")?.as_deref(),
+            ),
             progress: row.try_get("progress")?,
             priority: row.try_get("priority")?,
-            attempts: row.try_get::<i64, _>("attempts")?.try_into().map_err(|e| corrupt("attempts", e))?,
-            max_attempts: row.try_get::<i64, _>("max_attempts")?.try_into().map_err(|e| corrupt("max_attempts", e))?,
+            attempts: row
+                .try_get::<i64, _>("attempts")?
+                .try_into()
+                .map_err(|e| corrupt("attempts", e))?,
+            max_attempts: row
+                .try_get::<i64, _>("max_attempts")?
+                .try_into()
+                .map_err(|e| corrupt("max_attempts", e))?,
             cancel_requested: row.try_get("cancel_requested")?,
             error: row.try_get("error")?,
             files: match result {
@@ -235,30 +270,51 @@ where
         let analysis: Option<String> = row.try_get("analysis")?;
         Ok(Song {
             id: SongId(D::uuid(row.try_get("id")?).map_err(|e| corrupt("song id", e))?),
+            tenant: Self::tenant_from_row(row)?,
             filename: row.try_get("filename")?,
-            format: serde_json::from_value(serde_json::Value::String(format)).map_err(|e| corrupt("song format", e))?,
+            format: serde_json::from_value(serde_json::Value::String(format))
+                .map_err(|e| corrupt("song format", e))?,
             duration_s: row.try_get("duration_s")?,
-            sample_rate: row.try_get::<i64, _>("sample_rate")?.try_into().map_err(|e| corrupt("sample_rate", e))?,
-            channels: row.try_get::<i64, _>("channels")?.try_into().map_err(|e| corrupt("channels", e))?,
+            sample_rate: row
+                .try_get::<i64, _>("sample_rate")?
+                .try_into()
+                .map_err(|e| corrupt("sample_rate", e))?,
+            channels: row
+                .try_get::<i64, _>("channels")?
+                .try_into()
+                .map_err(|e| corrupt("channels", e))?,
             sha256: row.try_get("sha256")?,
-            size_bytes: row.try_get::<i64, _>("size_bytes")?.try_into().map_err(|e| corrupt("size_bytes", e))?,
-            analysis: analysis.map(|json| serde_json::from_str(&json)).transpose().map_err(|e| corrupt("analysis", e))?,
+            size_bytes: row
+                .try_get::<i64, _>("size_bytes")?
+                .try_into()
+                .map_err(|e| corrupt("size_bytes", e))?,
+            analysis: analysis
+                .map(|json| serde_json::from_str(&json))
+                .transpose()
+                .map_err(|e| corrupt("analysis", e))?,
             created_at: to_time(row.try_get("created_at")?)?,
         })
     }
 
     /// Inserts a queued job: the one statement that creates a job. `None` when its idempotency
     /// key is already taken.
-    async fn insert_job(conn: &mut D::Connection, job: &NewJob, now: i64) -> Result<Option<Job>, QueueError> {
+    async fn insert_job(
+        conn: &mut D::Connection,
+        job: &NewJob,
+        now: i64,
+    ) -> Result<Option<Job>, QueueError> {
         let options = serde_json::to_string(&job.kind).map_err(|e| corrupt("job options", e))?;
         let (key, hash) = match &job.idempotency {
-            Some(Idempotency { key, request_hash }) => (Some(key.as_str()), Some(request_hash.as_str())),
+            Some(Idempotency { key, request_hash }) => {
+                (Some(key.as_str()), Some(request_hash.as_str()))
+            }
             None => (None, None),
         };
         let sql = format!(
             "INSERT INTO jobs (id, kind, song_id, model, options, status, priority, max_attempts, run_after, \
-             idempotency_key, request_hash, created_at) VALUES ($1, $2, $3, $4, $5, 'queued', $6, $7, $8, $9, $10, $8) \
-             ON CONFLICT (idempotency_key) DO NOTHING RETURNING {JOB_COLUMNS}"
+             idempotency_key, request_hash, created_at, tenant_id) \
+             VALUES ($1, $2, $3, $4, $5, 'queued', $6, $7, $8, $9, $10, $8, $11) \
+             ON CONFLICT (tenant_id, idempotency_key) DO NOTHING RETURNING {JOB_COLUMNS}"
         );
         let row = sqlx::query(&sql)
             .bind(D::id(JobId::new().0))
@@ -271,6 +327,7 @@ where
             .bind(now)
             .bind(key)
             .bind(hash)
+            .bind(D::id(job.tenant.0))
             .fetch_optional(conn)
             .await?;
         row.as_ref().map(Self::job_from_row).transpose()
@@ -295,7 +352,12 @@ where
     fn register(&self, job: NewJob) -> StoreFuture<'_, Registered> {
         Box::pin(async move {
             let song = job.kind.song_id();
-            let exists = sqlx::query("SELECT 1 FROM songs WHERE id = $1").bind(D::id(song.0)).fetch_optional(&self.pool).await?;
+            // A job works on its own tenant's song: another tenant's reads as missing.
+            let exists = sqlx::query("SELECT 1 FROM songs WHERE id = $1 AND tenant_id = $2")
+                .bind(D::id(song.0))
+                .bind(D::id(job.tenant.0))
+                .fetch_optional(&self.pool)
+                .await?;
             if exists.is_none() {
                 return Err(QueueError::SongNotFound(song));
             }
@@ -307,10 +369,16 @@ where
             }
             // Only the idempotency key can conflict: the id is fresh.
             let Some(idem) = &job.idempotency else {
-                return Err(QueueError::Corrupt("insert of a job without idempotency key returned nothing".into()));
+                return Err(QueueError::Corrupt(
+                    "insert of a job without idempotency key returned nothing".into(),
+                ));
             };
-            let sql = format!("SELECT {JOB_COLUMNS}, request_hash FROM jobs WHERE idempotency_key = $1");
-            let row = sqlx::query(&sql).bind(&idem.key).fetch_one(&self.pool).await?;
+            let sql = format!("SELECT {JOB_COLUMNS}, request_hash FROM jobs WHERE tenant_id = $1 AND idempotency_key = $2");
+            let row = sqlx::query(&sql)
+                .bind(D::id(job.tenant.0))
+                .bind(&idem.key)
+                .fetch_one(&self.pool)
+                .await?;
             let existing = Self::job_from_row(&row)?;
             let hash: Option<String> = row.try_get("request_hash")?;
             if hash.as_deref() == Some(idem.request_hash.as_str()) {
@@ -371,16 +439,25 @@ where
             .await?;
             Self::commit(tx).await?;
             Ok(match row {
-                Some(row) => Beat::Held { cancel_requested: row.try_get("cancel_requested")? },
+                Some(row) => Beat::Held {
+                    cancel_requested: row.try_get("cancel_requested")?,
+                },
                 None => Beat::Lost,
             })
         })
     }
 
-    fn complete<'a>(&'a self, id: JobId, owner: &'a str, outcome: Outcome) -> StoreFuture<'a, bool> {
+    fn complete<'a>(
+        &'a self,
+        id: JobId,
+        owner: &'a str,
+        outcome: Outcome,
+    ) -> StoreFuture<'a, bool> {
         Box::pin(async move {
             let files = match &outcome {
-                Outcome::Files(files) => Some(serde_json::to_string(files).map_err(|e| corrupt("job result", e))?),
+                Outcome::Files(files) => {
+                    Some(serde_json::to_string(files).map_err(|e| corrupt("job result", e))?)
+                }
                 Outcome::Analysis(_) => None,
             };
             let mut tx = self.begin().await?;
@@ -402,14 +479,25 @@ where
             if let Outcome::Analysis(analysis) = &outcome {
                 let song_id: D::Id = row.try_get("song_id")?;
                 let json = serde_json::to_string(analysis).map_err(|e| corrupt("analysis", e))?;
-                sqlx::query("UPDATE songs SET analysis = $1 WHERE id = $2").bind(json).bind(song_id).execute(&mut *tx).await?;
+                sqlx::query("UPDATE songs SET analysis = $1 WHERE id = $2")
+                    .bind(json)
+                    .bind(song_id)
+                    .execute(&mut *tx)
+                    .await?;
             }
             Self::commit(tx).await?;
             Ok(true)
         })
     }
 
-    fn fail<'a>(&'a self, id: JobId, owner: &'a str, error: &'a str, retry: bool, policy: LeasePolicy) -> StoreFuture<'a, bool> {
+    fn fail<'a>(
+        &'a self,
+        id: JobId,
+        owner: &'a str,
+        error: &'a str,
+        retry: bool,
+        policy: LeasePolicy,
+    ) -> StoreFuture<'a, bool> {
         Box::pin(async move {
             let now = now_ms();
             let sql = format!(
@@ -455,7 +543,7 @@ where
         })
     }
 
-    fn cancel(&self, id: JobId) -> StoreFuture<'_, Job> {
+    fn cancel(&self, scope: Scope, id: JobId) -> StoreFuture<'_, Job> {
         Box::pin(async move {
             // In the SET of both databases, every column reads the row as it was before.
             let sql = format!(
@@ -463,10 +551,15 @@ where
                    status = CASE WHEN status = 'queued' THEN 'cancelled' ELSE status END, \
                    finished_at = CASE WHEN status = 'queued' THEN $1 ELSE finished_at END, \
                    cancel_requested = CASE WHEN status IN ('queued', 'running') THEN TRUE ELSE cancel_requested END \
-                 WHERE id = $2 RETURNING {JOB_COLUMNS}"
+                 WHERE id = $2 AND ($3 IS NULL OR tenant_id = $3) RETURNING {JOB_COLUMNS}"
             );
             let mut tx = self.begin().await?;
-            let row = sqlx::query(&sql).bind(now_ms()).bind(D::id(id.0)).fetch_optional(&mut *tx).await?;
+            let row = sqlx::query(&sql)
+                .bind(now_ms())
+                .bind(D::id(id.0))
+                .bind(scope.tenant().map(|t| D::id(t.0)))
+                .fetch_optional(&mut *tx)
+                .await?;
             Self::commit(tx).await?;
             match row {
                 Some(row) => Self::job_from_row(&row),
@@ -520,28 +613,37 @@ where
         })
     }
 
-    fn job(&self, id: JobId) -> StoreFuture<'_, Job> {
+    fn job(&self, scope: Scope, id: JobId) -> StoreFuture<'_, Job> {
         Box::pin(async move {
-            let sql = format!("SELECT {JOB_COLUMNS} FROM jobs WHERE id = $1");
-            match sqlx::query(&sql).bind(D::id(id.0)).fetch_optional(&self.pool).await? {
+            let sql = format!(
+                "SELECT {JOB_COLUMNS} FROM jobs WHERE id = $1 AND ($2 IS NULL OR tenant_id = $2)"
+            );
+            let tenant = scope.tenant().map(|t| D::id(t.0));
+            match sqlx::query(&sql)
+                .bind(D::id(id.0))
+                .bind(tenant)
+                .fetch_optional(&self.pool)
+                .await?
+            {
                 Some(row) => Self::job_from_row(&row),
                 None => Err(QueueError::JobNotFound(id)),
             }
         })
     }
 
-    fn jobs(&self, filter: JobFilter) -> StoreFuture<'_, Vec<Job>> {
+    fn jobs(&self, scope: Scope, filter: JobFilter) -> StoreFuture<'_, Vec<Job>> {
         Box::pin(async move {
             // Each parameter is bound with its type, so `$n IS NULL` needs no cast.
             let sql = format!(
                 "SELECT {JOB_COLUMNS} FROM jobs WHERE ($1 IS NULL OR status = $1) AND ($2 IS NULL OR model = $2) \
-                 AND ($3 IS NULL OR id < $3) ORDER BY id DESC LIMIT $4"
+                 AND ($3 IS NULL OR id < $3) AND ($5 IS NULL OR tenant_id = $5) ORDER BY id DESC LIMIT $4"
             );
             let rows = sqlx::query(&sql)
                 .bind(filter.status.map(Status::as_str))
                 .bind(filter.model)
                 .bind(filter.before.map(|id| D::id(id.0)))
                 .bind(i64::from(filter.limit))
+                .bind(scope.tenant().map(|t| D::id(t.0)))
                 .fetch_all(&self.pool)
                 .await?;
             rows.iter().map(Self::job_from_row).collect()
@@ -550,7 +652,9 @@ where
 
     fn counts(&self) -> StoreFuture<'_, Vec<(Status, u64)>> {
         Box::pin(async move {
-            let rows = sqlx::query("SELECT status, COUNT(*) AS n FROM jobs GROUP BY status").fetch_all(&self.pool).await?;
+            let rows = sqlx::query("SELECT status, COUNT(*) AS n FROM jobs GROUP BY status")
+                .fetch_all(&self.pool)
+                .await?;
             let mut counts: Vec<(Status, u64)> = Status::ALL.iter().map(|s| (*s, 0)).collect();
             for row in rows {
                 let status: String = row.try_get("status")?;
@@ -596,8 +700,9 @@ where
             let now = now_ms();
             let mut tx = self.begin().await?;
             let sql = format!(
-                "INSERT INTO songs (id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, created_at) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) ON CONFLICT (sha256) DO NOTHING RETURNING {SONG_COLUMNS}"
+                "INSERT INTO songs (id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, created_at, \
+                 tenant_id) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10) \
+                 ON CONFLICT (tenant_id, sha256) DO NOTHING RETURNING {SONG_COLUMNS}"
             );
             let inserted = sqlx::query(&sql)
                 .bind(D::id(song.id.0))
@@ -609,40 +714,66 @@ where
                 .bind(&song.sha256)
                 .bind(i64::try_from(song.size_bytes).map_err(|e| corrupt("size_bytes", e))?)
                 .bind(now)
+                .bind(D::id(song.tenant.0))
                 .fetch_optional(&mut *tx)
                 .await?;
             let Some(row) = inserted else {
                 // The conflicting row is committed (SQLite has one writer; PostgreSQL's ON
                 // CONFLICT waits for the other transaction), so a fresh read in this one sees it.
-                let sql = format!("SELECT {SONG_COLUMNS} FROM songs WHERE sha256 = $1");
-                let row = sqlx::query(&sql).bind(&song.sha256).fetch_one(&mut *tx).await?;
+                let sql = format!(
+                    "SELECT {SONG_COLUMNS} FROM songs WHERE tenant_id = $1 AND sha256 = $2"
+                );
+                let row = sqlx::query(&sql)
+                    .bind(D::id(song.tenant.0))
+                    .bind(&song.sha256)
+                    .fetch_one(&mut *tx)
+                    .await?;
                 let existing = Self::song_from_row(&row)?;
                 Self::commit(tx).await?;
                 return Ok((existing, false));
             };
             let stored = Self::song_from_row(&row)?;
             if Self::insert_job(&mut tx, &analyze, now).await?.is_none() {
-                return Err(QueueError::Corrupt("analyze job insert returned nothing".into()));
+                return Err(QueueError::Corrupt(
+                    "analyze job insert returned nothing".into(),
+                ));
             }
             Self::commit(tx).await?;
             Ok((stored, true))
         })
     }
 
-    fn song(&self, id: SongId) -> StoreFuture<'_, Song> {
+    fn song(&self, scope: Scope, id: SongId) -> StoreFuture<'_, Song> {
         Box::pin(async move {
-            let sql = format!("SELECT {SONG_COLUMNS} FROM songs WHERE id = $1");
-            match sqlx::query(&sql).bind(D::id(id.0)).fetch_optional(&self.pool).await? {
+            let sql = format!(
+                "SELECT {SONG_COLUMNS} FROM songs WHERE id = $1 AND ($2 IS NULL OR tenant_id = $2)"
+            );
+            let tenant = scope.tenant().map(|t| D::id(t.0));
+            match sqlx::query(&sql)
+                .bind(D::id(id.0))
+                .bind(tenant)
+                .fetch_optional(&self.pool)
+                .await?
+            {
                 Some(row) => Self::song_from_row(&row),
                 None => Err(QueueError::SongNotFound(id)),
             }
         })
     }
 
-    fn song_by_sha256<'a>(&'a self, sha256: &'a str) -> StoreFuture<'a, Option<Song>> {
+    fn song_by_sha256<'a>(
+        &'a self,
+        tenant: TenantId,
+        sha256: &'a str,
+    ) -> StoreFuture<'a, Option<Song>> {
         Box::pin(async move {
-            let sql = format!("SELECT {SONG_COLUMNS} FROM songs WHERE sha256 = $1");
-            let row = sqlx::query(&sql).bind(sha256).fetch_optional(&self.pool).await?;
+            let sql =
+                format!("SELECT {SONG_COLUMNS} FROM songs WHERE tenant_id = $1 AND sha256 = $2");
+            let row = sqlx::query(&sql)
+                .bind(D::id(tenant.0))
+                .bind(sha256)
+                .fetch_optional(&self.pool)
+                .await?;
             row.as_ref().map(Self::song_from_row).transpose()
         })
     }
@@ -650,7 +781,10 @@ where
     fn analyze_job(&self, song: SongId) -> StoreFuture<'_, Option<Job>> {
         Box::pin(async move {
             let sql = format!("SELECT {JOB_COLUMNS} FROM jobs WHERE song_id = $1 AND kind = 'analyze' ORDER BY id DESC LIMIT 1");
-            let row = sqlx::query(&sql).bind(D::id(song.0)).fetch_optional(&self.pool).await?;
+            let row = sqlx::query(&sql)
+                .bind(D::id(song.0))
+                .fetch_optional(&self.pool)
+                .await?;
             row.as_ref().map(Self::job_from_row).transpose()
         })
     }

@@ -6,7 +6,10 @@
 //! waiting writer is handled by the busy timeout and never surfaces as `SQLITE_BUSY`.
 use super::sql::{Dialect, SqlStore};
 use super::{QueueError, StoreFuture};
-use sqlx::sqlite::{Sqlite, SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteQueryResult, SqliteSynchronous};
+use sqlx::sqlite::{
+    Sqlite, SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteQueryResult,
+    SqliteSynchronous,
+};
 use sqlx::Pool;
 use std::path::Path;
 use std::sync::Arc;
@@ -45,7 +48,11 @@ impl Dialect for Sqlite {
         done.rows_affected()
     }
 
-    fn watch(_pool: &Pool<Sqlite>, _wake: Arc<Notify>, _shutdown: CancellationToken) -> StoreFuture<'_, ()> {
+    fn watch(
+        _pool: &Pool<Sqlite>,
+        _wake: Arc<Notify>,
+        _shutdown: CancellationToken,
+    ) -> StoreFuture<'_, ()> {
         // SQLite cannot notify another process: this process's registrations wake its workers
         // directly (`worker::Context::wake`), other processes' jobs are found by polling.
         Box::pin(async { Ok(()) })

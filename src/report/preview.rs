@@ -24,9 +24,11 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::motion::feet::SUPPORT_HEIGHT_M;
 use crate::motion::feet::floor_height;
-use crate::motion::skeleton::{body_centre, ANATOMICAL, FOOT_POINTS, HEAD, HIPS, PARENTS, SHOULDERS, SPINE};
+use crate::motion::feet::SUPPORT_HEIGHT_M;
+use crate::motion::skeleton::{
+    body_centre, ANATOMICAL, FOOT_POINTS, HEAD, HIPS, PARENTS, SHOULDERS, SPINE,
+};
 use crate::motion::{Motion, NUM_JOINTS};
 
 /// File name of the picture next to a dance's other results.
@@ -119,7 +121,10 @@ pub enum PreviewError {
     #[error("PNG encoding failed: {0}")]
     Encode(#[from] png::EncodingError),
     #[error("cannot write {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
 }
 
 impl PreviewError {
@@ -148,7 +153,8 @@ fn ensure_font() -> Result<(), PreviewError> {
     static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
     REGISTERED
         .get_or_init(|| {
-            plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, FONT).map_err(|_| "DejaVu Sans is not a valid font".to_string())
+            plotters::style::register_font(FONT_FAMILY, FontStyle::Normal, FONT)
+                .map_err(|_| "DejaVu Sans is not a valid font".to_string())
         })
         .clone()
         .map_err(PreviewError::Font)
@@ -199,7 +205,12 @@ pub fn render_rgb(sheet: &Sheet<'_>) -> Result<Vec<u8>, PreviewError> {
         rows.draw(&front, motion, View::Front)?;
         rows.draw(&side, motion, View::Side)?;
         draw_speed(&speed, sheet, &series, &rows.frames)?;
-        draw_feet(&feet, &series, motion.duration_s(), floor_height(motion.positions.view(), &FOOT_POINTS))?;
+        draw_feet(
+            &feet,
+            &series,
+            motion.duration_s(),
+            floor_height(motion.positions.view(), &FOOT_POINTS),
+        )?;
         root.present()?;
     }
     Ok(rgb)
@@ -208,7 +219,10 @@ pub fn render_rgb(sheet: &Sheet<'_>) -> Result<Vec<u8>, PreviewError> {
 /// Writes the picture to `path` (not atomically: jobs go through the exporter's atomic writer).
 pub fn write_png(path: &std::path::Path, sheet: &Sheet<'_>) -> Result<(), PreviewError> {
     let bytes = render_png(sheet)?;
-    std::fs::write(path, bytes).map_err(|source| PreviewError::Io { path: path.display().to_string(), source })
+    std::fs::write(path, bytes).map_err(|source| PreviewError::Io {
+        path: path.display().to_string(),
+        source,
+    })
 }
 
 /// The time series the plots and the title show.
@@ -231,7 +245,9 @@ impl Series {
                 let sum: f64 = ANATOMICAL
                     .iter()
                     .map(|&j| {
-                        let d: f64 = (0..3).map(|k| f64::from(p[[f, j, k]] - p[[f - 1, j, k]]).powi(2)).sum();
+                        let d: f64 = (0..3)
+                            .map(|k| f64::from(p[[f, j, k]] - p[[f - 1, j, k]]).powi(2))
+                            .sum();
                         d.sqrt()
                     })
                     .sum();
@@ -245,8 +261,16 @@ impl Series {
             .map(|(f, y)| (f as f64 / fps, y))
             .filter(|(_, y)| y.is_finite())
             .collect();
-        let mean_speed = if speed.is_empty() { f64::NAN } else { speed.iter().map(|(_, v)| v).sum::<f64>() / speed.len() as f64 };
-        Series { speed, lowest_foot, mean_speed }
+        let mean_speed = if speed.is_empty() {
+            f64::NAN
+        } else {
+            speed.iter().map(|(_, v)| v).sum::<f64>() / speed.len() as f64
+        };
+        Series {
+            speed,
+            lowest_foot,
+            mean_speed,
+        }
     }
 }
 
@@ -269,27 +293,52 @@ fn clock(seconds: f64) -> String {
     format!("{}:{:02}", s / 60, s % 60)
 }
 
-fn draw_title<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, sheet: &Sheet<'_>, series: &Series) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+fn draw_title<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    sheet: &Sheet<'_>,
+    series: &Series,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let c = sheet.caption;
     let mut parts = vec![c.model.clone(), format!("seed {}", c.seed)];
     if let Some(s) = &c.style {
-        parts.push(format!("{}{}", s.style.name(), if s.predicted { " (from the song)" } else { "" }));
+        parts.push(format!(
+            "{}{}",
+            s.style.name(),
+            if s.predicted { " (from the song)" } else { "" }
+        ));
     }
     if let Some(song) = &c.song {
         // The name is the user's: keep it to one line.
-        let song: String = song.chars().filter(|ch| !ch.is_control()).take(60).collect();
+        let song: String = song
+            .chars()
+            .filter(|ch| !ch.is_control())
+            .take(60)
+            .collect();
         parts.push(song);
     }
-    parts.push(format!("song {} ({:.1} s)", clock(sheet.song_duration_s), sheet.song_duration_s));
+    parts.push(format!(
+        "song {} ({:.1} s)",
+        clock(sheet.song_duration_s),
+        sheet.song_duration_s
+    ));
     parts.push(format!("mean joint speed {:.2} m/s", series.mean_speed));
     // Does it go with this song (issue 25): the step rate against the beat, and the arms.
     let m = crate::metrics::musicality::Musicality::of(sheet.motion, sheet.beat_times);
     if let Some(lock) = m.tempo_lock {
         let mark = if lock.locked { "locked" } else { "off" };
-        parts.push(format!("steps {:.2}× beat ({mark}, {:+.0} % from {})", lock.ratio, 100.0 * (lock.ratio / lock.fraction - 1.0), crate::metrics::musicality::fraction_name(lock.fraction)));
+        parts.push(format!(
+            "steps {:.2}× beat ({mark}, {:+.0} % from {})",
+            lock.ratio,
+            100.0 * (lock.ratio / lock.fraction - 1.0),
+            crate::metrics::musicality::fraction_name(lock.fraction)
+        ));
     }
     parts.push(format!("arms {:.2} m/s", m.arm_speed_m_s));
-    area.draw_text(&parts.join("  ·  "), &font(24).pos(Pos::new(HPos::Left, VPos::Center)), (16, TITLE_H as i32 / 2))
+    area.draw_text(
+        &parts.join("  ·  "),
+        &font(24).pos(Pos::new(HPos::Left, VPos::Center)),
+        (16, TITLE_H as i32 / 2),
+    )
 }
 
 /// Which way a row of figures looks at the dancer.
@@ -314,15 +363,28 @@ impl FigureRows {
         let t = motion.num_frames();
         let n = FIGURES.min(t);
         // The middle of each of n equal spans: the whole dance, evenly.
-        let frames: Vec<usize> = (0..n).map(|i| (((i as f64 + 0.5) * t as f64 / n as f64) as usize).min(t - 1)).collect();
-        let heights = frames.iter().flat_map(|&f| (0..NUM_JOINTS).map(move |j| f64::from(motion.positions[[f, j, 1]])));
-        let (lo, hi) = heights.filter(|y| y.is_finite()).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), y| (lo.min(y), hi.max(y)));
+        let frames: Vec<usize> = (0..n)
+            .map(|i| (((i as f64 + 0.5) * t as f64 / n as f64) as usize).min(t - 1))
+            .collect();
+        let heights = frames
+            .iter()
+            .flat_map(|&f| (0..NUM_JOINTS).map(move |j| f64::from(motion.positions[[f, j, 1]])));
+        let (lo, hi) = heights
+            .filter(|y| y.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), y| {
+                (lo.min(y), hi.max(y))
+            });
         // A standing dancer and some ground fit by default; a floating or sunken one widens it.
         let y_range = ((lo - 0.1).min(-0.25), (hi + 0.15).max(2.0));
         FigureRows { frames, y_range }
     }
 
-    fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>, motion: &Motion, view: View) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    fn draw<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+        motion: &Motion,
+        view: View,
+    ) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
         let (w, h) = area.dim_in_pixel();
         let (w, h) = (w as i32, h as i32);
         let top = 6;
@@ -333,23 +395,49 @@ impl FigureRows {
         let cell_w = (w - ROW_LEFT - 8) / FIGURES as i32;
 
         // Ground, floor line and height grid across the whole row.
-        area.draw(&Rectangle::new([(ROW_LEFT, row_y(0.0)), (w - 8, top + fig_h)], GROUND.filled()))?;
+        area.draw(&Rectangle::new(
+            [(ROW_LEFT, row_y(0.0)), (w - 8, top + fig_h)],
+            GROUND.filled(),
+        ))?;
         for metres in [1.0, 2.0] {
             if metres < y_hi {
-                area.draw(&PathElement::new(vec![(ROW_LEFT, row_y(metres)), (w - 8, row_y(metres))], GRID.stroke_width(1)))?;
-                area.draw_text(&format!("{metres:.0} m"), &font(14).pos(Pos::new(HPos::Right, VPos::Center)), (ROW_LEFT - 6, row_y(metres)))?;
+                area.draw(&PathElement::new(
+                    vec![(ROW_LEFT, row_y(metres)), (w - 8, row_y(metres))],
+                    GRID.stroke_width(1),
+                ))?;
+                area.draw_text(
+                    &format!("{metres:.0} m"),
+                    &font(14).pos(Pos::new(HPos::Right, VPos::Center)),
+                    (ROW_LEFT - 6, row_y(metres)),
+                )?;
             }
         }
-        area.draw(&PathElement::new(vec![(ROW_LEFT, row_y(0.0)), (w - 8, row_y(0.0))], FLOOR.stroke_width(2)))?;
-        area.draw_text("floor 0 m", &font(14).color(&FLOOR).pos(Pos::new(HPos::Right, VPos::Center)), (ROW_LEFT - 6, row_y(0.0)))?;
+        area.draw(&PathElement::new(
+            vec![(ROW_LEFT, row_y(0.0)), (w - 8, row_y(0.0))],
+            FLOOR.stroke_width(2),
+        ))?;
+        area.draw_text(
+            "floor 0 m",
+            &font(14)
+                .color(&FLOOR)
+                .pos(Pos::new(HPos::Right, VPos::Center)),
+            (ROW_LEFT - 6, row_y(0.0)),
+        )?;
         let name = match view {
             View::Front => "front",
             View::Side => "side (from right)",
         };
-        area.draw_text(name, &font(16).pos(Pos::new(HPos::Left, VPos::Top)), (8, top))?;
+        area.draw_text(
+            name,
+            &font(16).pos(Pos::new(HPos::Left, VPos::Top)),
+            (8, top),
+        )?;
         for i in 1..FIGURES as i32 {
             let x = ROW_LEFT + i * cell_w;
-            area.draw(&PathElement::new(vec![(x, top), (x, row_y(0.0))], GRID.stroke_width(1)))?;
+            area.draw(&PathElement::new(
+                vec![(x, top), (x, row_y(0.0))],
+                GRID.stroke_width(1),
+            ))?;
         }
 
         for (i, &f) in self.frames.iter().enumerate() {
@@ -358,12 +446,20 @@ impl FigureRows {
             let points = project(frame, view);
             let px = |k: usize| -> Option<(i32, i32)> {
                 let (x, y) = points[k];
-                (x.is_finite() && y.is_finite()).then(|| (centre_x + (x * ppm).round() as i32, row_y(y)))
+                (x.is_finite() && y.is_finite())
+                    .then(|| (centre_x + (x * ppm).round() as i32, row_y(y)))
             };
             // Torso lines first, then limbs, so the limbs' sides stay visible. The two head
             // markers become one head (a circle at their midpoint) on a neck from the spine.
-            let mut segments: Vec<(usize, usize, RGBColor)> = vec![(HIPS[0], HIPS[1], CENTRE), (SHOULDERS[0], SHOULDERS[1], CENTRE)];
-            segments.extend((0..NUM_JOINTS).filter(|c| !HEAD.contains(c)).filter_map(|c| PARENTS[c].map(|p| (p, c, side_colour(c)))));
+            let mut segments: Vec<(usize, usize, RGBColor)> = vec![
+                (HIPS[0], HIPS[1], CENTRE),
+                (SHOULDERS[0], SHOULDERS[1], CENTRE),
+            ];
+            segments.extend(
+                (0..NUM_JOINTS)
+                    .filter(|c| !HEAD.contains(c))
+                    .filter_map(|c| PARENTS[c].map(|p| (p, c, side_colour(c)))),
+            );
             for (a, b, colour) in segments {
                 if let (Some(pa), Some(pb)) = (px(a), px(b)) {
                     area.draw(&PathElement::new(vec![pa, pb], colour.stroke_width(3)))?;
@@ -376,13 +472,20 @@ impl FigureRows {
                 let (dx, dy) = (f64::from(spine.0 - head.0), f64::from(spine.1 - head.1));
                 let len = dx.hypot(dy);
                 if len > radius {
-                    let rim = (head.0 + (dx / len * radius).round() as i32, head.1 + (dy / len * radius).round() as i32);
+                    let rim = (
+                        head.0 + (dx / len * radius).round() as i32,
+                        head.1 + (dy / len * radius).round() as i32,
+                    );
                     area.draw(&PathElement::new(vec![spine, rim], CENTRE.stroke_width(3)))?;
                 }
                 area.draw(&Circle::new(head, radius as i32, CENTRE.stroke_width(2)))?;
             }
             let seconds = f as f64 / motion.fps;
-            area.draw_text(&format!("{seconds:.1} s"), &font(15).pos(Pos::new(HPos::Center, VPos::Bottom)), (centre_x, h - 2))?;
+            area.draw_text(
+                &format!("{seconds:.1} s"),
+                &font(15).pos(Pos::new(HPos::Center, VPos::Bottom)),
+                (centre_x, h - 2),
+            )?;
         }
         Ok(())
     }
@@ -432,7 +535,14 @@ fn plot<'a, DB: DrawingBackend>(
     caption: &str,
     x: std::ops::Range<f64>,
     y: std::ops::Range<f64>,
-) -> Result<ChartContext<'a, DB, Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>>, DrawingAreaErrorKind<DB::ErrorType>> {
+) -> Result<
+    ChartContext<
+        'a,
+        DB,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    DrawingAreaErrorKind<DB::ErrorType>,
+> {
     let mut chart = ChartBuilder::on(area)
         .margin_left(16)
         .margin_right(24)
@@ -460,12 +570,20 @@ fn smooth(v: &[(f64, f64)], window: usize) -> Vec<(f64, f64)> {
     (0..v.len())
         .map(|i| {
             let (a, b) = (i.saturating_sub(half), (i + half + 1).min(v.len()));
-            (v[i].0, v[a..b].iter().map(|p| p.1).sum::<f64>() / (b - a) as f64)
+            (
+                v[i].0,
+                v[a..b].iter().map(|p| p.1).sum::<f64>() / (b - a) as f64,
+            )
         })
         .collect()
 }
 
-fn draw_speed<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, sheet: &Sheet<'_>, series: &Series, figure_frames: &[usize]) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+fn draw_speed<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    sheet: &Sheet<'_>,
+    series: &Series,
+    figure_frames: &[usize],
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let duration = sheet.motion.duration_s().max(1.0 / sheet.motion.fps);
     // A glitch should not flatten the curve: the top is a high quantile, spikes are cut there.
     let top = (quantile(series.speed.iter().map(|p| p.1), 0.995) * 1.25).max(0.2);
@@ -477,30 +595,63 @@ fn draw_speed<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, sheet: &Sheet<'
     };
     let mut chart = plot(area, &caption, 0.0..duration, 0.0..top)?;
     let clip = |(t, v): (f64, f64)| (t, v.min(top));
-    chart.draw_series(LineSeries::new(series.speed.iter().copied().map(clip), RAW.stroke_width(1)))?;
+    chart.draw_series(LineSeries::new(
+        series.speed.iter().copied().map(clip),
+        RAW.stroke_width(1),
+    ))?;
     let window = (SMOOTH_S * sheet.motion.fps).round().max(1.0) as usize;
-    chart.draw_series(LineSeries::new(smooth(&series.speed, window).into_iter().map(clip), LEFT.stroke_width(2)))?;
+    chart.draw_series(LineSeries::new(
+        smooth(&series.speed, window).into_iter().map(clip),
+        LEFT.stroke_width(2),
+    ))?;
     let inside = |t: &&f64| t.is_finite() && (0.0..=duration).contains(*t);
-    chart.draw_series(sheet.beat_times.iter().filter(inside).map(|&b| PathElement::new(vec![(b, top), (b, top * 0.9)], BEAT.stroke_width(2))))?;
-    chart.draw_series(sheet.key_pose_times.iter().filter(inside).map(|&k| PathElement::new(vec![(k, 0.0), (k, top)], KEY.stroke_width(2))))?;
+    chart.draw_series(
+        sheet
+            .beat_times
+            .iter()
+            .filter(inside)
+            .map(|&b| PathElement::new(vec![(b, top), (b, top * 0.9)], BEAT.stroke_width(2))),
+    )?;
+    chart.draw_series(
+        sheet
+            .key_pose_times
+            .iter()
+            .filter(inside)
+            .map(|&k| PathElement::new(vec![(k, 0.0), (k, top)], KEY.stroke_width(2))),
+    )?;
     chart.draw_series(
         figure_frames
             .iter()
             .map(|&f| f as f64 / sheet.motion.fps)
-            .map(|t| PathElement::new(vec![(t, 0.0), (t, top * 0.06)], RGBColor(120, 120, 120).stroke_width(3))),
+            .map(|t| {
+                PathElement::new(
+                    vec![(t, 0.0), (t, top * 0.06)],
+                    RGBColor(120, 120, 120).stroke_width(3),
+                )
+            }),
     )?;
     Ok(())
 }
 
 /// The lowest foot's height over time; `rest` is where the dance's own floor is
 /// ([`floor_height`]: feet rest there, whatever y = 0 says).
-fn draw_feet<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, series: &Series, duration: f64, rest: f64) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+fn draw_feet<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    series: &Series,
+    duration: f64,
+    rest: f64,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
     let duration = duration.max(1e-3);
     let heights = || series.lowest_foot.iter().map(|p| p.1);
     let lo = heights().fold(f64::INFINITY, f64::min);
     let hi = quantile(heights(), 0.995);
-    let (lo, hi) = if lo.is_finite() && hi.is_finite() { ((lo - 0.05).min(-0.1), (hi + 0.05).max(0.4)) } else { (-0.1, 0.4) };
-    let on_floor = heights().filter(|y| y.abs() <= SUPPORT_HEIGHT_M).count() as f64 / series.lowest_foot.len().max(1) as f64;
+    let (lo, hi) = if lo.is_finite() && hi.is_finite() {
+        ((lo - 0.05).min(-0.1), (hi + 0.05).max(0.4))
+    } else {
+        (-0.1, 0.4)
+    };
+    let on_floor = heights().filter(|y| y.abs() <= SUPPORT_HEIGHT_M).count() as f64
+        / series.lowest_foot.len().max(1) as f64;
     let caption = format!(
         "lowest foot point height (m) · brown: the floor (y = 0), within {:.0} cm of it {:.0} % of the time · grey dashes: where this dance's feet rest ({:+.1} cm)",
         SUPPORT_HEIGHT_M * 100.0,
@@ -509,16 +660,28 @@ fn draw_feet<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, series: &Series,
         (rest * 1000.0).round() / 10.0 + 0.0
     );
     let mut chart = plot(area, &caption, 0.0..duration, lo..hi)?;
-    chart.draw_series(std::iter::once(Rectangle::new([(0.0, lo), (duration, 0.0)], GROUND.filled())))?;
-    chart.draw_series(std::iter::once(PathElement::new(vec![(0.0, 0.0), (duration, 0.0)], FLOOR.stroke_width(2))))?;
+    chart.draw_series(std::iter::once(Rectangle::new(
+        [(0.0, lo), (duration, 0.0)],
+        GROUND.filled(),
+    )))?;
+    chart.draw_series(std::iter::once(PathElement::new(
+        vec![(0.0, 0.0), (duration, 0.0)],
+        FLOOR.stroke_width(2),
+    )))?;
     if rest.is_finite() {
         let dash = duration / 150.0;
         chart.draw_series((0..150).step_by(2).map(|i| {
             let t = i as f64 * dash;
-            PathElement::new(vec![(t, rest), (t + dash, rest)], RGBColor(110, 110, 110).stroke_width(2))
+            PathElement::new(
+                vec![(t, rest), (t + dash, rest)],
+                RGBColor(110, 110, 110).stroke_width(2),
+            )
         }))?;
     }
-    chart.draw_series(LineSeries::new(series.lowest_foot.iter().map(|&(t, y)| (t, y.min(hi))), CENTRE.stroke_width(1)))?;
+    chart.draw_series(LineSeries::new(
+        series.lowest_foot.iter().map(|&(t, y)| (t, y.min(hi))),
+        CENTRE.stroke_width(1),
+    ))?;
     Ok(())
 }
 
@@ -561,12 +724,26 @@ mod tests {
                 positions[[f, j, 2]] = p[2];
             }
         }
-        Motion { fps: 25.0, positions }
+        Motion {
+            fps: 25.0,
+            positions,
+        }
     }
 
     fn rgb_of(motion: &Motion) -> Vec<u8> {
-        let caption = Caption { model: "test".into(), seed: 1, song: Some("a song".into()), style: None };
-        let sheet = Sheet { motion, beat_times: &[0.5, 1.0, 1.5], key_pose_times: &[1.2], song_duration_s: motion.duration_s(), caption: &caption };
+        let caption = Caption {
+            model: "test".into(),
+            seed: 1,
+            song: Some("a song".into()),
+            style: None,
+        };
+        let sheet = Sheet {
+            motion,
+            beat_times: &[0.5, 1.0, 1.5],
+            key_pose_times: &[1.2],
+            song_duration_s: motion.duration_s(),
+            caption: &caption,
+        };
         render_rgb(&sheet).expect("draws")
     }
 
@@ -582,41 +759,90 @@ mod tests {
         let count = |y: u32, c: RGBColor| cols.clone().filter(|&x| pixel(rgb, x, y) == c).count();
         let floor = rows.clone().max_by_key(|&y| count(y, FLOOR)).expect("rows");
         assert!(count(floor, FLOOR) > 100, "a floor line crosses the cell");
-        let feet = rows.filter(|&y| count(y, RIGHT) + count(y, LEFT) > 0).max().expect("legs are drawn");
+        let feet = rows
+            .filter(|&y| count(y, RIGHT) + count(y, LEFT) > 0)
+            .max()
+            .expect("legs are drawn");
         (floor, feet)
     }
 
     #[test]
     fn the_floor_line_shows_a_floating_or_sinking_dancer() {
         let (floor, feet) = floor_and_feet(&rgb_of(&standing(0.0, 50)));
-        assert!(feet.abs_diff(floor) <= 4, "grounded: feet at row {feet}, floor at {floor}");
+        assert!(
+            feet.abs_diff(floor) <= 4,
+            "grounded: feet at row {feet}, floor at {floor}"
+        );
         let (floor, feet) = floor_and_feet(&rgb_of(&standing(0.5, 50)));
-        assert!(floor > feet + 30, "floating 0.5 m: feet at row {feet} well above the floor at {floor}");
+        assert!(
+            floor > feet + 30,
+            "floating 0.5 m: feet at row {feet} well above the floor at {floor}"
+        );
         let (floor, feet) = floor_and_feet(&rgb_of(&standing(-0.4, 50)));
-        assert!(feet > floor + 25, "sunk 0.4 m: feet at row {feet} well below the floor at {floor}");
+        assert!(
+            feet > floor + 25,
+            "sunk 0.4 m: feet at row {feet} well below the floor at {floor}"
+        );
     }
 
     #[test]
     fn the_png_decodes_to_the_picture() {
         let motion = standing(0.0, 30);
-        let caption = Caption { model: "test".into(), seed: 3, song: None, style: None };
-        let sheet = Sheet { motion: &motion, beat_times: &[], key_pose_times: &[], song_duration_s: 1.2, caption: &caption };
+        let caption = Caption {
+            model: "test".into(),
+            seed: 3,
+            song: None,
+            style: None,
+        };
+        let sheet = Sheet {
+            motion: &motion,
+            beat_times: &[],
+            key_pose_times: &[],
+            song_duration_s: 1.2,
+            caption: &caption,
+        };
         let bytes = render_png(&sheet).expect("png");
         let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
         let mut reader = decoder.read_info().expect("header");
         let mut buf = vec![0; reader.output_buffer_size()];
         let info = reader.next_frame(&mut buf).expect("frame");
         assert_eq!((info.width, info.height), (WIDTH, HEIGHT));
-        assert_eq!(&buf[..info.buffer_size()], render_rgb(&sheet).expect("rgb").as_slice());
+        assert_eq!(
+            &buf[..info.buffer_size()],
+            render_rgb(&sheet).expect("rgb").as_slice()
+        );
     }
 
     #[test]
     fn bad_motions_are_refused_not_drawn() {
-        let caption = Caption { model: "test".into(), seed: 0, song: None, style: None };
-        let empty = Motion { fps: 25.0, positions: Array3::zeros((0, NUM_JOINTS, 3)) };
-        let sheet = |m| Sheet { motion: m, beat_times: &[], key_pose_times: &[], song_duration_s: 1.0, caption: &caption };
-        assert!(matches!(render_rgb(&sheet(&empty)), Err(PreviewError::Empty)));
-        let few = Motion { fps: 25.0, positions: Array3::zeros((5, 3, 3)) };
-        assert!(matches!(render_rgb(&sheet(&few)), Err(PreviewError::Joints(3))));
+        let caption = Caption {
+            model: "test".into(),
+            seed: 0,
+            song: None,
+            style: None,
+        };
+        let empty = Motion {
+            fps: 25.0,
+            positions: Array3::zeros((0, NUM_JOINTS, 3)),
+        };
+        let sheet = |m| Sheet {
+            motion: m,
+            beat_times: &[],
+            key_pose_times: &[],
+            song_duration_s: 1.0,
+            caption: &caption,
+        };
+        assert!(matches!(
+            render_rgb(&sheet(&empty)),
+            Err(PreviewError::Empty)
+        ));
+        let few = Motion {
+            fps: 25.0,
+            positions: Array3::zeros((5, 3, 3)),
+        };
+        assert!(matches!(
+            render_rgb(&sheet(&few)),
+            Err(PreviewError::Joints(3))
+        ));
     }
 }

@@ -12,7 +12,9 @@
 use crate::artifacts::{Artifact, ArtifactStore};
 use crate::audio::AudioError;
 use crate::models::{Cancelled, ModelError, ModelId, Progress, Registry};
-use crate::queue::{Beat, DataDir, Job, JobStore, LeasePolicy, Outcome, QueueError, Song, Store};
+use crate::queue::{
+    Beat, DataDir, Job, JobStore, LeasePolicy, Outcome, QueueError, Scope, Song, Store,
+};
 use crate::stage::Stage;
 use crate::telemetry;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
@@ -126,7 +128,12 @@ impl WorkerError {
 /// Runs one job's work on a blocking thread. The service uses [`Pipeline`].
 pub trait Execute: Send + Sync + 'static {
     /// Does the work of `job` on `song`, reporting through `progress`.
-    fn execute(&self, job: &Job, song: &Song, progress: &mut dyn Progress) -> Result<Outcome, WorkerError>;
+    fn execute(
+        &self,
+        job: &Job,
+        song: &Song,
+        progress: &mut dyn Progress,
+    ) -> Result<Outcome, WorkerError>;
 }
 
 /// What every worker shares.
@@ -221,7 +228,11 @@ impl Progress for JobProgress {
 
 /// A unique name for this process's workers, stored as the lease owner.
 fn owner_prefix() -> String {
-    format!("{}-{}", std::process::id(), &uuid::Uuid::now_v7().simple().to_string()[24..])
+    format!(
+        "{}-{}",
+        std::process::id(),
+        &uuid::Uuid::now_v7().simple().to_string()[24..]
+    )
 }
 
 /// Starts `count` workers, the lease reaper and the store's wake-ups (jobs queued by other
@@ -264,7 +275,9 @@ async fn reaper(ctx: Context, shutdown: CancellationToken) {
                     tracing::warn!(jobs = ?done.failed, "failed jobs whose lease expired on their last attempt");
                 }
             }
-            Err(e) => tracing::error!(error = %e, "requeueing expired leases failed; retrying next round"),
+            Err(e) => {
+                tracing::error!(error = %e, "requeueing expired leases failed; retrying next round")
+            }
         }
     }
 }
@@ -275,7 +288,10 @@ async fn supervise(ctx: Context, owner: String, shutdown: CancellationToken) {
     loop {
         let span = tracing::info_span!("worker", worker = %owner);
         let started = Instant::now();
-        let run = tokio::spawn(worker_loop(ctx.clone(), owner.clone(), shutdown.clone()).instrument(span)).await;
+        let run = tokio::spawn(
+            worker_loop(ctx.clone(), owner.clone(), shutdown.clone()).instrument(span),
+        )
+        .await;
         let Err(death) = run else { return };
         metrics::counter!(telemetry::WORKER_RESTARTS).increment(1);
         if shutdown.is_cancelled() {
@@ -341,7 +357,9 @@ fn lower_priority() {
     #[cfg(target_os = "linux")]
     {
         // SAFETY: gettid has no preconditions; setpriority only reads its arguments.
-        let rc = unsafe { libc::setpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t, JOB_NICE) };
+        let rc = unsafe {
+            libc::setpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t, JOB_NICE)
+        };
         if rc != 0 {
             tracing::debug!(error = %std::io::Error::last_os_error(), "could not lower the job thread's priority");
         }
@@ -366,34 +384,54 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
 
     let state = Arc::new(JobState::default());
     let done = CancellationToken::new();
-    let heartbeat = tokio::spawn(heartbeat_loop(ctx.clone(), owner.to_string(), job.id, state.clone(), done.clone(), shutdown.clone()));
+    let heartbeat = tokio::spawn(heartbeat_loop(
+        ctx.clone(),
+        owner.to_string(),
+        job.id,
+        state.clone(),
+        done.clone(),
+        shutdown.clone(),
+    ));
 
-    let song = match ctx.store.song(job.kind.song_id()).await {
+    let song = match ctx.store.song(Scope::All, job.kind.song_id()).await {
         Err(e) => Err(WorkerError::Queue(e)),
         // The song in the local data dir, where the pipeline reads it (a bucket's is fetched).
-        Ok(song) => ctx.artifacts.fetch(Artifact::Song(song.id, song.format)).await.map(|_| song).map_err(WorkerError::from),
+        Ok(song) => ctx
+            .artifacts
+            .fetch(Artifact::Song(song.id, song.format))
+            .await
+            .map(|_| song)
+            .map_err(WorkerError::from),
     };
     let result = match song {
         Err(e) => Err(e),
         Ok(song) => {
             let executor = ctx.executor.clone();
-            let mut progress = JobProgress { state: state.clone() };
+            let mut progress = JobProgress {
+                state: state.clone(),
+            };
             let job = job.clone();
             let (done_tx, done_rx) = tokio::sync::oneshot::channel();
             // A thread of its own per job, so its settings (threads, priority) touch no other work.
-            let spawned = std::thread::Builder::new().name(format!("job-{}", job.id)).spawn(move || {
-                // One intra-op thread per worker, so N workers never oversubscribe N cores.
-                tch::set_num_threads(1);
-                lower_priority();
-                let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| executor.execute(&job, &song, &mut progress)));
-                let _ = done_tx.send(result);
-            });
+            let spawned = std::thread::Builder::new()
+                .name(format!("job-{}", job.id))
+                .spawn(move || {
+                    // One intra-op thread per worker, so N workers never oversubscribe N cores.
+                    tch::set_num_threads(1);
+                    lower_priority();
+                    let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                        executor.execute(&job, &song, &mut progress)
+                    }));
+                    let _ = done_tx.send(result);
+                });
             match spawned {
                 Err(e) => Err(WorkerError::Io(e)),
                 Ok(_) => match done_rx.await {
                     Ok(Ok(result)) => result,
                     Ok(Err(panic)) => Err(WorkerError::Panicked(panic_message(panic.as_ref()))),
-                    Err(_) => Err(WorkerError::Panicked("the job's thread ended without a result".into())),
+                    Err(_) => Err(WorkerError::Panicked(
+                        "the job's thread ended without a result".into(),
+                    )),
                 },
             }
         }
@@ -401,7 +439,9 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
     // Results are published before the job is marked succeeded, so a succeeded job's files
     // are there for every API process to serve.
     let result = match result {
-        Ok(Outcome::Files(files)) => publish(ctx, job.id, &files).await.map(|()| Outcome::Files(files)),
+        Ok(Outcome::Files(files)) => publish(ctx, job.id, &files)
+            .await
+            .map(|()| Outcome::Files(files)),
         other => other,
     };
     done.cancel();
@@ -412,33 +452,56 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
     let lost = state.lease_lost.load(Ordering::Relaxed);
     let cancel_requested = state.cancel.load(Ordering::Relaxed) && !shutdown.is_cancelled();
     let write = match &result {
-        Ok(outcome) => ctx.store.complete(job.id, owner, outcome.clone()).await.map(|held| (held, "succeeded")),
-        Err(WorkerError::Cancelled) if cancel_requested || lost => {
-            ctx.store.finish_cancelled(job.id, owner).await.map(|held| (held, "cancelled"))
-        }
+        Ok(outcome) => ctx
+            .store
+            .complete(job.id, owner, outcome.clone())
+            .await
+            .map(|held| (held, "succeeded")),
+        Err(WorkerError::Cancelled) if cancel_requested || lost => ctx
+            .store
+            .finish_cancelled(job.id, owner)
+            .await
+            .map(|held| (held, "cancelled")),
         Err(WorkerError::Cancelled) => ctx
             .store
-            .fail(job.id, owner, "interrupted by a server shutdown", true, ctx.policy)
+            .fail(
+                job.id,
+                owner,
+                "interrupted by a server shutdown",
+                true,
+                ctx.policy,
+            )
             .await
             .map(|held| (held, "interrupted")),
         Err(e) => {
             let message = without_paths(&format!("{} ({})", e, e.code()), &ctx.data_root);
-            ctx.store.fail(job.id, owner, &message, e.is_retryable(), ctx.policy).await.map(|held| (held, "failed"))
+            ctx.store
+                .fail(job.id, owner, &message, e.is_retryable(), ctx.policy)
+                .await
+                .map(|held| (held, "failed"))
         }
     };
     metrics::gauge!(telemetry::BUSY_WORKERS).decrement(1.0);
-    metrics::histogram!(telemetry::JOB_DURATION, "kind" => kind).record(started.elapsed().as_secs_f64());
+    metrics::histogram!(telemetry::JOB_DURATION, "kind" => kind)
+        .record(started.elapsed().as_secs_f64());
     match write {
         Ok((true, outcome)) => {
-            metrics::counter!(telemetry::JOBS_FINISHED, "kind" => kind, "status" => outcome).increment(1);
+            metrics::counter!(telemetry::JOBS_FINISHED, "kind" => kind, "status" => outcome)
+                .increment(1);
             match &result {
                 Ok(_) => tracing::info!(seconds = started.elapsed().as_secs_f64(), "job succeeded"),
-                Err(WorkerError::Model(m)) => tracing::warn!(error = %m, model_error = m.code(), outcome, "job did not succeed"),
+                Err(WorkerError::Model(m)) => {
+                    tracing::warn!(error = %m, model_error = m.code(), outcome, "job did not succeed")
+                }
                 Err(e) => tracing::warn!(error = %e, outcome, "job did not succeed"),
             }
         }
-        Ok((false, _)) => tracing::warn!("lease lost before the outcome was written; the queue owns the job now"),
-        Err(e) => tracing::error!(error = %e, "writing the job outcome failed; its lease will expire and it will be retried"),
+        Ok((false, _)) => {
+            tracing::warn!("lease lost before the outcome was written; the queue owns the job now")
+        }
+        Err(e) => {
+            tracing::error!(error = %e, "writing the job outcome failed; its lease will expire and it will be retried")
+        }
     }
 }
 
@@ -449,10 +512,16 @@ fn without_paths(message: &str, root: &std::path::Path) -> String {
     if root.is_empty() {
         return message.to_string();
     }
-    message.replace(&format!("{}/", root.trim_end_matches('/')), "").replace(root.as_ref(), "data dir")
+    message
+        .replace(&format!("{}/", root.trim_end_matches('/')), "")
+        .replace(root.as_ref(), "data dir")
 }
 
-async fn publish(ctx: &Context, id: crate::queue::JobId, files: &crate::queue::JobFiles) -> Result<(), WorkerError> {
+async fn publish(
+    ctx: &Context,
+    id: crate::queue::JobId,
+    files: &crate::queue::JobFiles,
+) -> Result<(), WorkerError> {
     for file in &files.files {
         ctx.artifacts.publish(Artifact::Result(id, file)).await?;
     }
@@ -480,7 +549,11 @@ async fn heartbeat_loop(
         }
         let (stage, progress) = state.snapshot();
         let stage = stage.unwrap_or(Stage::Claimed);
-        match ctx.store.heartbeat(id, &owner, stage.as_str(), progress, ctx.policy).await {
+        match ctx
+            .store
+            .heartbeat(id, &owner, stage.as_str(), progress, ctx.policy)
+            .await
+        {
             Ok(Beat::Held { cancel_requested }) => {
                 if cancel_requested {
                     state.cancel.store(true, Ordering::Relaxed);
@@ -492,7 +565,9 @@ async fn heartbeat_loop(
                 state.cancel.store(true, Ordering::Relaxed);
                 return;
             }
-            Err(e) => tracing::warn!(error = %e, "heartbeat failed; the lease expires unless a later one succeeds"),
+            Err(e) => {
+                tracing::warn!(error = %e, "heartbeat failed; the lease expires unless a later one succeeds")
+            }
         }
     }
 }
@@ -517,12 +592,16 @@ pub fn context(
         poll: Duration::from_secs_f64(config.poll_s),
         wake: Arc::new(Notify::new()),
         alive: Arc::new(AtomicUsize::new(0)),
-        data_root: std::path::absolute(&config.data_dir).unwrap_or_else(|_| config.data_dir.clone()),
+        data_root: std::path::absolute(&config.data_dir)
+            .unwrap_or_else(|_| config.data_dir.clone()),
     }
 }
 
 /// Requeues expired leases once; call at start-up before the workers begin.
-pub async fn recover(store: &dyn JobStore, policy: LeasePolicy) -> Result<crate::queue::Requeued, QueueError> {
+pub async fn recover(
+    store: &dyn JobStore,
+    policy: LeasePolicy,
+) -> Result<crate::queue::Requeued, QueueError> {
     store.requeue_expired(policy).await
 }
 

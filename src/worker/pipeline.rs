@@ -60,24 +60,44 @@ impl Pipeline {
     }
 
     #[tracing::instrument(skip_all, fields(song_id = %song.id))]
-    fn decode(&self, kind: &'static str, song: &Song, keep: Keep, progress: &mut dyn Progress) -> Result<DecodedAudio, WorkerError> {
+    fn decode(
+        &self,
+        kind: &'static str,
+        song: &Song,
+        keep: Keep,
+        progress: &mut dyn Progress,
+    ) -> Result<DecodedAudio, WorkerError> {
         let _timer = StageTimer::start(kind, Stage::DecodeAudio);
         let path = self.data.song_path(song.id, song.format);
         let max_duration_s = self.max_duration_s;
         let decoded = self.budgeted(progress, Stage::DecodeAudio, 0.0, |budget| {
-            audio::decode_file(&path, &DecodeOptions { keep, max_duration_s, budget })
+            audio::decode_file(
+                &path,
+                &DecodeOptions {
+                    keep,
+                    max_duration_s,
+                    budget,
+                },
+            )
         })?;
         Ok(decoded.audio)
     }
 
     #[tracing::instrument(skip_all, fields(job_id = %job.id))]
-    fn analyze(&self, job: &Job, song: &Song, progress: &mut dyn Progress) -> Result<Outcome, WorkerError> {
+    fn analyze(
+        &self,
+        job: &Job,
+        song: &Song,
+        progress: &mut dyn Progress,
+    ) -> Result<Outcome, WorkerError> {
         progress.report(Stage::DecodeAudio, 0.0)?;
         // Decoded straight to the analysis rate: the song never exists at its native rate.
         let decoded = self.decode("analyze", song, Keep::At(audio::ANALYSIS_SR), progress)?;
         progress.report(Stage::Analyze, 0.5)?;
         let _timer = StageTimer::start("analyze", Stage::Analyze);
-        let analysis = self.budgeted(progress, Stage::Analyze, 0.5, |budget| audio::analyze_within(&decoded, budget))?;
+        let analysis = self.budgeted(progress, Stage::Analyze, 0.5, |budget| {
+            audio::analyze_within(&decoded, budget)
+        })?;
         Ok(Outcome::Analysis(analysis))
     }
 
@@ -89,7 +109,10 @@ impl Pipeline {
         options: &GenerateOptions,
         progress: &mut dyn Progress,
     ) -> Result<Outcome, WorkerError> {
-        let model = self.registry.get(&options.model).ok_or_else(|| WorkerError::ModelUnavailable(options.model.clone()))?;
+        let model = self
+            .registry
+            .get(&options.model)
+            .ok_or_else(|| WorkerError::ModelUnavailable(options.model.clone()))?;
         progress.report(Stage::DecodeAudio, 0.0)?;
         let decoded = self.decode("generate", song, Keep::AtMost(GENERATE_MAX_SR), progress)?;
         let seed_motion = options.seed_motion.as_ref().map(seed_motion).transpose()?;
@@ -98,7 +121,9 @@ impl Pipeline {
         progress.report(Stage::Analyze, MODEL_START)?;
         let analysis = {
             let _timer = StageTimer::start("generate", Stage::Analyze);
-            self.budgeted(progress, Stage::Analyze, MODEL_START, |budget| audio::analyze_within(&decoded, budget))?
+            self.budgeted(progress, Stage::Analyze, MODEL_START, |budget| {
+                audio::analyze_within(&decoded, budget)
+            })?
         };
         // The model's first stage is its features; each stage it reports is timed as it goes.
         progress.report(Stage::Features, MODEL_START)?;
@@ -113,24 +138,58 @@ impl Pipeline {
                 top_k: options.top_k,
                 analysis: Some(&analysis),
             };
-            model.generate(&request, &mut Scaled { inner: progress, from: MODEL_START, to: MODEL_END, timer: None })?
+            model.generate(
+                &request,
+                &mut Scaled {
+                    inner: progress,
+                    from: MODEL_START,
+                    to: MODEL_END,
+                    timer: None,
+                },
+            )?
         };
         progress.report(Stage::BeatAlign, MODEL_END)?;
         let finished = {
             let _timer = StageTimer::start("generate", Stage::BeatAlign);
-            let stages = MotionStages { beat_align: true, plant_feet: options.plant_feet };
-            after_model(generated.motion, analysis, decoded.duration_s, &options.key_poses, seed_motion.as_ref(), stages)
+            let stages = MotionStages {
+                beat_align: true,
+                plant_feet: options.plant_feet,
+            };
+            after_model(
+                generated.motion,
+                analysis,
+                decoded.duration_s,
+                &options.key_poses,
+                seed_motion.as_ref(),
+                stages,
+            )
         };
         progress.report(Stage::Export, MODEL_END)?;
         let _timer = StageTimer::start("generate", Stage::Export);
-        let caption = Caption { model: options.model.0.clone(), seed: options.seed, song: Some(song.filename.clone()), style: generated.style };
-        let files = render(&self.data.job_dir(job.id), &finished, &options.key_poses, &caption, &mut |_| {})?;
+        let caption = Caption {
+            model: options.model.0.clone(),
+            seed: options.seed,
+            song: Some(song.filename.clone()),
+            style: generated.style,
+        };
+        let files = render(
+            &self.data.job_dir(job.id),
+            &finished,
+            &options.key_poses,
+            &caption,
+            &mut |_| {},
+        )?;
         Ok(Outcome::Files(files))
     }
 }
 
 impl Execute for Pipeline {
-    fn execute(&self, job: &Job, song: &Song, progress: &mut dyn Progress) -> Result<Outcome, WorkerError> {
+    fn execute(
+        &self,
+        job: &Job,
+        song: &Song,
+        progress: &mut dyn Progress,
+    ) -> Result<Outcome, WorkerError> {
         match &job.kind {
             JobKind::Analyze { .. } => self.analyze(job, song, progress),
             JobKind::Generate(options) => self.generate(job, song, options, progress),
@@ -153,8 +212,13 @@ impl Progress for Scaled<'_> {
             self.timer = None;
             self.timer = Some((stage, StageTimer::start("generate", stage)));
         }
-        let fraction = if fraction.is_finite() { fraction.clamp(0.0, 1.0) } else { 0.0 };
-        self.inner.report(stage, self.from + (self.to - self.from) * fraction)
+        let fraction = if fraction.is_finite() {
+            fraction.clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        self.inner
+            .report(stage, self.from + (self.to - self.from) * fraction)
     }
 }
 
@@ -162,16 +226,27 @@ impl Progress for Scaled<'_> {
 fn seed_motion(seed: &SeedMotion) -> Result<Motion, WorkerError> {
     let frames = seed.positions.len();
     let joints = seed.positions.first().map_or(0, Vec::len);
-    if frames == 0 || joints != crate::motion::NUM_JOINTS || seed.positions.iter().any(|f| f.len() != joints) {
+    if frames == 0
+        || joints != crate::motion::NUM_JOINTS
+        || seed.positions.iter().any(|f| f.len() != joints)
+    {
         return Err(WorkerError::InvalidOptions(format!(
             "seed_motion.positions must be T × {} × 3 with T ≥ 1",
             crate::motion::NUM_JOINTS
         )));
     }
-    let flat: Vec<f32> = seed.positions.iter().flatten().flat_map(|p| p.iter().map(|&v| v as f32)).collect();
+    let flat: Vec<f32> = seed
+        .positions
+        .iter()
+        .flatten()
+        .flat_map(|p| p.iter().map(|&v| v as f32))
+        .collect();
     let positions = ndarray::Array3::from_shape_vec((frames, joints, 3), flat)
         .map_err(|e| WorkerError::InvalidOptions(format!("seed_motion: {e}")))?;
-    Ok(Motion { fps: seed.fps, positions })
+    Ok(Motion {
+        fps: seed.fps,
+        positions,
+    })
 }
 
 /// A dance after the motion stages, with what they knew: the input of [`render`].
@@ -194,15 +269,35 @@ pub struct Finished {
 /// planted), with the network's own tempo lock measured before them for the report. Jobs and
 /// `choreo generate` both call it, so both serve the same dance.
 /// `seed_motion`: the request's, whose frames open the dance and are kept as they are.
-pub fn after_model(model_motion: Motion, analysis: Analysis, song_duration_s: f64, key_poses: &[KeyPose], seed_motion: Option<&Motion>, stages: MotionStages) -> Finished {
-    let tempo_lock_before = crate::metrics::musicality::tempo_lock(model_motion.positions.view(), model_motion.fps, &analysis.beat_times);
+pub fn after_model(
+    model_motion: Motion,
+    analysis: Analysis,
+    song_duration_s: f64,
+    key_poses: &[KeyPose],
+    seed_motion: Option<&Motion>,
+    stages: MotionStages,
+) -> Finished {
+    let tempo_lock_before = crate::metrics::musicality::tempo_lock(
+        model_motion.positions.view(),
+        model_motion.fps,
+        &analysis.beat_times,
+    );
     let seed_s = seed_motion.map_or(0.0, Motion::duration_s);
-    let (motion, summary) = crate::motion::after_model(model_motion, &analysis.beat_times, key_poses, seed_s, stages);
+    let (motion, summary) = crate::motion::after_model(
+        model_motion,
+        &analysis.beat_times,
+        key_poses,
+        seed_s,
+        stages,
+    );
     Finished {
         motion,
         analysis,
         song_duration_s,
-        beat_align: summary.map(|summary| BeatAlignReport { summary, tempo_lock_before }),
+        beat_align: summary.map(|summary| BeatAlignReport {
+            summary,
+            tempo_lock_before,
+        }),
         plant_feet: stages.plant_feet,
     }
 }
@@ -213,7 +308,13 @@ pub const REPORT_FILE: &str = "report.json";
 /// The last two stages of a dance, shared by jobs and the CLI: export (BVH, JSON, glb) and the
 /// report (report.json and the contact sheet preview.png, titled by `caption`), each file written
 /// atomically into `dir`. `on_stage` hears each stage as it starts.
-pub fn render(dir: &Path, finished: &Finished, key_poses: &[KeyPose], caption: &Caption, on_stage: &mut dyn FnMut(Stage)) -> Result<JobFiles, WorkerError> {
+pub fn render(
+    dir: &Path,
+    finished: &Finished,
+    key_poses: &[KeyPose],
+    caption: &Caption,
+    on_stage: &mut dyn FnMut(Stage),
+) -> Result<JobFiles, WorkerError> {
     use crate::motion::export::{write_all_rig, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
     std::fs::create_dir_all(dir)?;
     on_stage(Stage::Export);
@@ -225,11 +326,18 @@ pub fn render(dir: &Path, finished: &Finished, key_poses: &[KeyPose], caption: &
     on_stage(Stage::Report);
     let reference = crate::metrics::reference::ReferenceStats::builtin()?;
     let mut report = crate::report::build(motion, &finished.analysis, key_poses, &reference)?;
-    report.model_key_pose_error_cm = crate::metrics::kinematics::key_pose_error_cm(model_motion.positions.view(), model_motion.fps, key_poses);
+    report.model_key_pose_error_cm = crate::metrics::kinematics::key_pose_error_cm(
+        model_motion.positions.view(),
+        model_motion.fps,
+        key_poses,
+    );
     report.style = caption.style.clone();
     report.beat_align = finished.beat_align.clone();
-    report.scores.rotation_flips = Some(crate::metrics::rotation_flips::RotationFlips::of(&served.rig));
-    let text = serde_json::to_vec_pretty(&report).map_err(|e| WorkerError::Export(format!("report.json: {e}")))?;
+    report.scores.rotation_flips = Some(crate::metrics::rotation_flips::RotationFlips::of(
+        &served.rig,
+    ));
+    let text = serde_json::to_vec_pretty(&report)
+        .map_err(|e| WorkerError::Export(format!("report.json: {e}")))?;
     write_atomic(&dir.join(REPORT_FILE), &text)?;
     let key_pose_times: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
     let sheet = preview::Sheet {
@@ -239,9 +347,21 @@ pub fn render(dir: &Path, finished: &Finished, key_poses: &[KeyPose], caption: &
         song_duration_s: finished.song_duration_s,
         caption,
     };
-    let png = preview::render_png(&sheet).map_err(|e| WorkerError::Export(format!("{}: {e}", preview::PREVIEW_FILE)))?;
+    let png = preview::render_png(&sheet)
+        .map_err(|e| WorkerError::Export(format!("{}: {e}", preview::PREVIEW_FILE)))?;
     write_atomic(&dir.join(preview::PREVIEW_FILE), &png)?;
-    Ok(JobFiles { files: [BVH_FILE, JSON_FILE, GLB_FILE, REPORT_FILE, preview::PREVIEW_FILE].map(String::from).to_vec(), style: caption.style.clone() })
+    Ok(JobFiles {
+        files: [
+            BVH_FILE,
+            JSON_FILE,
+            GLB_FILE,
+            REPORT_FILE,
+            preview::PREVIEW_FILE,
+        ]
+        .map(String::from)
+        .to_vec(),
+        style: caption.style.clone(),
+    })
 }
 
 #[cfg(test)]
@@ -290,9 +410,13 @@ mod tests {
         let dir = tempfile::tempdir().expect("tempdir");
         let data = DataDir::create(&dir.path().join("data")).expect("data dir");
         let registry = Arc::new(Registry::load(&dir.path().join("no-models")).expect("registry"));
-        let config = Config { audio_timeout_s: timeout_s, ..Config::default() };
+        let config = Config {
+            audio_timeout_s: timeout_s,
+            ..Config::default()
+        };
         let song = Song {
             id: SongId::new(),
+            tenant: crate::queue::TenantId::OPEN,
             filename: "tone.wav".into(),
             format: AudioFormat::Wav,
             duration_s: 30.0,
@@ -306,6 +430,7 @@ mod tests {
         std::fs::write(data.song_path(song.id, song.format), wav(44_100, 30)).expect("write song");
         let job = Job {
             id: JobId::new(),
+            tenant: crate::queue::TenantId::OPEN,
             kind: JobKind::Analyze { song_id: song.id },
             status: Status::Running,
             stage: None,
@@ -326,8 +451,13 @@ mod tests {
     #[test]
     fn an_analysis_past_its_budget_fails_and_is_not_retried() {
         let (_dir, pipeline, job, song) = setup(1e-6);
-        let err = pipeline.execute(&job, &song, &mut StopAfter(usize::MAX)).expect_err("over budget");
-        assert!(matches!(err, WorkerError::Audio(AudioError::TimedOut { .. })), "{err}");
+        let err = pipeline
+            .execute(&job, &song, &mut StopAfter(usize::MAX))
+            .expect_err("over budget");
+        assert!(
+            matches!(err, WorkerError::Audio(AudioError::TimedOut { .. })),
+            "{err}"
+        );
         assert!(!err.is_retryable());
         assert_eq!(err.code(), "audio-timeout");
     }
@@ -337,9 +467,13 @@ mod tests {
         // The job's first two checkpoints pass (decode and its first packet); the third stops it
         // inside the decode, long before the 30 s song is through.
         let (_dir, pipeline, job, song) = setup(60.0);
-        let err = pipeline.execute(&job, &song, &mut StopAfter(2)).expect_err("cancelled");
+        let err = pipeline
+            .execute(&job, &song, &mut StopAfter(2))
+            .expect_err("cancelled");
         assert!(matches!(err, WorkerError::Cancelled), "{err}");
-        let analysis = pipeline.execute(&job, &song, &mut StopAfter(usize::MAX)).expect("analyses");
+        let analysis = pipeline
+            .execute(&job, &song, &mut StopAfter(usize::MAX))
+            .expect("analyses");
         assert!(matches!(analysis, Outcome::Analysis(a) if (a.tempo_bpm).is_finite()));
     }
 }

@@ -15,7 +15,10 @@ use tokio_util::sync::CancellationToken;
 #[derive(Debug, thiserror::Error)]
 pub enum StartError {
     #[error("data dir {path}: {source}")]
-    DataDir { path: String, source: std::io::Error },
+    DataDir {
+        path: String,
+        source: std::io::Error,
+    },
     #[error(transparent)]
     Config(#[from] ConfigError),
     #[error(transparent)]
@@ -49,9 +52,15 @@ pub struct WorkerProcess {
 impl WorkerProcess {
     /// Opens the store, requeues expired leases and starts `config.worker_count()` workers.
     pub async fn start(config: &Config) -> Result<Self, StartError> {
-        let data = DataDir::create(&config.data_dir)
-            .map_err(|source| StartError::DataDir { path: config.data_dir.display().to_string(), source })?;
-        let store = crate::queue::open(&config.database()?, std::time::Duration::from_secs_f64(config.db_timeout_s)).await?;
+        let data = DataDir::create(&config.data_dir).map_err(|source| StartError::DataDir {
+            path: config.data_dir.display().to_string(),
+            source,
+        })?;
+        let store = crate::queue::open(
+            &config.database()?,
+            std::time::Duration::from_secs_f64(config.db_timeout_s),
+        )
+        .await?;
         let artifacts = crate::artifacts::open(config, data.clone())?;
         let registry = Arc::new(Registry::load(&config.models_dir)?);
         let ctx: Context = super::context(store.clone(), artifacts, registry, data, config);
@@ -62,7 +71,11 @@ impl WorkerProcess {
         let count = config.worker_count();
         let shutdown = CancellationToken::new();
         let handles = super::start(ctx, count, shutdown.clone());
-        Ok(Self { shutdown, handles, count })
+        Ok(Self {
+            shutdown,
+            handles,
+            count,
+        })
     }
 
     /// How many workers run.

@@ -117,25 +117,63 @@ pub fn generate_decoded(
     on_progress: &mut dyn FnMut(Stage, f32),
 ) -> Result<Generated, WorkerError> {
     let id = model.0.clone();
-    let model = registry.get(model).ok_or_else(|| WorkerError::ModelUnavailable(model.clone()))?;
-    let mut clock = StageClock { current: None, done: Vec::new(), on_progress };
+    let model = registry
+        .get(model)
+        .ok_or_else(|| WorkerError::ModelUnavailable(model.clone()))?;
+    let mut clock = StageClock {
+        current: None,
+        done: Vec::new(),
+        on_progress,
+    };
     // The song's beats, once, before the model (as a job does): the model may listen to them, the
     // beat-align stage and the report use them.
     clock.report(Stage::Analyze, 0.0)?;
     let analysis = request.analysis_or_analyze()?;
-    let generated = model.generate(&GenerateRequest { analysis: Some(&analysis), ..*request }, &mut clock)?;
-    let caption = Caption { model: id, seed: request.seed, song, style: generated.style };
+    let generated = model.generate(
+        &GenerateRequest {
+            analysis: Some(&analysis),
+            ..*request
+        },
+        &mut clock,
+    )?;
+    let caption = Caption {
+        model: id,
+        seed: request.seed,
+        song,
+        style: generated.style,
+    };
     let analysis = analysis.into_owned();
     clock.report(Stage::BeatAlign, 0.0)?;
-    let finished = super::pipeline::after_model(generated.motion, analysis, request.audio.duration_s, request.key_poses, request.seed_motion, stages);
-    let files = super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| clock.enter(stage))?;
-    Ok(Generated { motion: finished.motion, files: files.files.iter().map(|f| out.join(f)).collect(), stages: clock.finish() })
+    let finished = super::pipeline::after_model(
+        generated.motion,
+        analysis,
+        request.audio.duration_s,
+        request.key_poses,
+        request.seed_motion,
+        stages,
+    );
+    let files =
+        super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| {
+            clock.enter(stage)
+        })?;
+    Ok(Generated {
+        motion: finished.motion,
+        files: files.files.iter().map(|f| out.join(f)).collect(),
+        stages: clock.finish(),
+    })
 }
 
 /// `choreo generate`: a dance for one song. `on_progress` hears the stage and the share of the
 /// whole run done (0..1), for a progress bar.
-pub fn generate(args: &GenerateSong, on_progress: &mut dyn FnMut(Stage, f64)) -> Result<Generated, WorkerError> {
-    tch::set_num_threads(std::thread::available_parallelism().map(|n| n.get() as i32).unwrap_or(1));
+pub fn generate(
+    args: &GenerateSong,
+    on_progress: &mut dyn FnMut(Stage, f64),
+) -> Result<Generated, WorkerError> {
+    tch::set_num_threads(
+        std::thread::available_parallelism()
+            .map(|n| n.get() as i32)
+            .unwrap_or(1),
+    );
     let registry = Registry::load(&args.models_dir)?;
     let key_inputs: Vec<crate::motion::input::KeyPoseInput> = match &args.key_poses {
         Some(p) => serde_json::from_str(&std::fs::read_to_string(p)?)
@@ -147,8 +185,9 @@ pub fn generate(args: &GenerateSong, on_progress: &mut dyn FnMut(Stage, f64)) ->
     let audio = audio::decode_path(&args.song)?;
     let decode = t0.elapsed();
     let frames = crate::motion::validate::song_frames(audio.duration_s, crate::motion::MOTION_FPS);
-    let key_poses: Vec<KeyPose> = crate::motion::input::key_poses(&key_inputs, frames, crate::motion::MOTION_FPS)
-        .map_err(|e| WorkerError::InvalidOptions(format!("key poses: {e}")))?;
+    let key_poses: Vec<KeyPose> =
+        crate::motion::input::key_poses(&key_inputs, frames, crate::motion::MOTION_FPS)
+            .map_err(|e| WorkerError::InvalidOptions(format!("key poses: {e}")))?;
     // Progress over the whole run: decode 0–5%, features 5–25%, encode 25–35%, frame loop 35–90%.
     let span = |stage: Stage| match stage {
         Stage::Claimed | Stage::DecodeAudio => (0.0, 0.05),
@@ -165,13 +204,38 @@ pub fn generate(args: &GenerateSong, on_progress: &mut dyn FnMut(Stage, f64)) ->
         on_progress(stage, a + (b - a) * f64::from(f));
     };
     let style = match &args.style {
-        Some(s) => Some(DanceStyle::parse(s).ok_or_else(|| WorkerError::InvalidOptions(format!("unknown style `{s}`: one of {}", DanceStyle::names())))?),
+        Some(s) => Some(DanceStyle::parse(s).ok_or_else(|| {
+            WorkerError::InvalidOptions(format!(
+                "unknown style `{s}`: one of {}",
+                DanceStyle::names()
+            ))
+        })?),
         None => None,
     };
-    let request = GenerateRequest { key_poses: &key_poses, style, temperature: args.temperature, top_k: args.top_k, ..GenerateRequest::plain(&audio, args.seed) };
-    let song = args.song.file_name().map(|n| n.to_string_lossy().into_owned());
-    let stages = MotionStages { beat_align: !args.no_beat_align, plant_feet: !args.no_plant_feet };
-    let mut g = generate_decoded(&registry, &ModelId(args.model.clone()), song, &request, stages, &args.out, &mut on_stage_progress)?;
+    let request = GenerateRequest {
+        key_poses: &key_poses,
+        style,
+        temperature: args.temperature,
+        top_k: args.top_k,
+        ..GenerateRequest::plain(&audio, args.seed)
+    };
+    let song = args
+        .song
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned());
+    let stages = MotionStages {
+        beat_align: !args.no_beat_align,
+        plant_feet: !args.no_plant_feet,
+    };
+    let mut g = generate_decoded(
+        &registry,
+        &ModelId(args.model.clone()),
+        song,
+        &request,
+        stages,
+        &args.out,
+        &mut on_stage_progress,
+    )?;
     g.stages.insert(0, (Stage::DecodeAudio, decode));
     Ok(g)
 }
@@ -196,7 +260,13 @@ impl Default for BenchOptions {
     fn default() -> Self {
         Self {
             model: Vec::new(),
-            songs: ["../shared/audio/vibe_ace.ogg", "../shared/audio/sugar_plum_fairy.ogg", "../shared/audio/lets_go_fishin.ogg"].map(PathBuf::from).to_vec(),
+            songs: [
+                "../shared/audio/vibe_ace.ogg",
+                "../shared/audio/sugar_plum_fairy.ogg",
+                "../shared/audio/lets_go_fishin.ogg",
+            ]
+            .map(PathBuf::from)
+            .to_vec(),
             models_dir: PathBuf::from("models"),
             threads: 1,
             scaling: false,
@@ -223,7 +293,13 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
     for p in &args.songs {
         let t = Instant::now();
         let a = audio::decode_path(p)?;
-        songs.push((p.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(), a, t.elapsed()));
+        songs.push((
+            p.file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            a,
+            t.elapsed(),
+        ));
     }
     // A 3-minute song: the given songs joined (at the first one's rate) and cut to 180 s.
     let mut scaling = Vec::new();
@@ -237,23 +313,48 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
         }
         samples.truncate(180 * sr as usize);
         let secs = samples.len() as f64 / f64::from(sr);
-        let decode_share: Duration = songs.iter().map(|(_, _, d)| *d).sum::<Duration>().mul_f64(secs / songs.iter().map(|(_, a, _)| a.duration_s).sum::<f64>());
+        let decode_share: Duration = songs
+            .iter()
+            .map(|(_, _, d)| *d)
+            .sum::<Duration>()
+            .mul_f64(secs / songs.iter().map(|(_, a, _)| a.duration_s).sum::<f64>());
         if args.scaling && !samples.is_empty() {
             // The joined songs looped to each length; decode time is charged pro rata.
             let per_s = decode_share.div_f64(secs.max(1e-9));
             for len in SCALING_LENGTHS_S {
                 let want = len as usize * sr as usize;
                 let looped: Vec<f32> = samples.iter().copied().cycle().take(want).collect();
-                let a = DecodedAudio { format: first.format, sample_rate: sr, channels: first.channels, duration_s: f64::from(len), samples: looped };
+                let a = DecodedAudio {
+                    format: first.format,
+                    sample_rate: sr,
+                    channels: first.channels,
+                    duration_s: f64::from(len),
+                    samples: looped,
+                };
                 scaling.push((format!("looped {len} s"), a, per_s.mul_f64(f64::from(len))));
             }
         }
-        let joined = DecodedAudio { format: first.format, sample_rate: sr, channels: first.channels, duration_s: secs, samples };
+        let joined = DecodedAudio {
+            format: first.format,
+            sample_rate: sr,
+            channels: first.channels,
+            duration_s: secs,
+            samples,
+        };
         songs.push((format!("joined {:.0} s", secs), joined, decode_share));
     }
     let n_timed = songs.len();
     songs.extend(scaling);
-    let stage_names = [Stage::DecodeAudio, Stage::Features, Stage::Encode, Stage::Generate, Stage::Analyze, Stage::BeatAlign, Stage::Export, Stage::Report];
+    let stage_names = [
+        Stage::DecodeAudio,
+        Stage::Features,
+        Stage::Encode,
+        Stage::Generate,
+        Stage::Analyze,
+        Stage::BeatAlign,
+        Stage::Export,
+        Stage::Report,
+    ];
     let mut table = format!(
         "| model | song | music s | {} | total s | s per music min | generate ms per frame | 3-min target |\n|---|---|---|{}---|---|---|---|\n",
         stage_names.map(Stage::as_str).join(" | "),
@@ -266,12 +367,24 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
         let mut scaled: Vec<(f64, f64, f64)> = Vec::new();
         for (k, (name, audio, decode)) in songs.iter().enumerate() {
             let request = GenerateRequest::plain(audio, 0);
-            let g = generate_decoded(&registry, model, Some(name.clone()), &request, MotionStages::default(), out.path(), &mut |_, _| {})?;
+            let g = generate_decoded(
+                &registry,
+                model,
+                Some(name.clone()),
+                &request,
+                MotionStages::default(),
+                out.path(),
+                &mut |_, _| {},
+            )?;
             let mut stages = vec![(Stage::DecodeAudio, *decode)];
             stages.extend(g.stages);
             // "–" for a stage this model does not have (the key-pose transformer has no separate encode).
             let get = |s: Stage| {
-                let times: Vec<f64> = stages.iter().filter(|(n, _)| *n == s).map(|(_, d)| d.as_secs_f64()).collect();
+                let times: Vec<f64> = stages
+                    .iter()
+                    .filter(|(n, _)| *n == s)
+                    .map(|(_, d)| d.as_secs_f64())
+                    .collect();
                 if times.is_empty() {
                     "–".to_string()
                 } else {
@@ -287,9 +400,19 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
             };
             let cells: Vec<String> = stage_names.iter().map(|&s| get(s)).collect();
             // The autoregressive loop's cost per motion frame (a TSMT "step").
-            let decode_s: f64 = stages.iter().filter(|(n, _)| *n == Stage::Generate).map(|(_, d)| d.as_secs_f64()).sum();
-            let frames = crate::motion::validate::song_frames(audio.duration_s, crate::motion::MOTION_FPS) as f64;
-            let per_frame = if decode_s > 0.0 { format!("{:.2}", 1000.0 * decode_s / frames) } else { "–".into() };
+            let decode_s: f64 = stages
+                .iter()
+                .filter(|(n, _)| *n == Stage::Generate)
+                .map(|(_, d)| d.as_secs_f64())
+                .sum();
+            let frames =
+                crate::motion::validate::song_frames(audio.duration_s, crate::motion::MOTION_FPS)
+                    as f64;
+            let per_frame = if decode_s > 0.0 {
+                format!("{:.2}", 1000.0 * decode_s / frames)
+            } else {
+                "–".into()
+            };
             table += &format!("| {} | {name} | {:.0} | {} | {total:.2} | {per_min:.2} | {per_frame} | {target} |\n", model.0, audio.duration_s, cells.join(" | "));
             if k >= n_timed {
                 scaled.push((audio.duration_s, total, decode_s));

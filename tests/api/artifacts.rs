@@ -2,6 +2,7 @@
 //! `scripts/setup.sh --test` into `.venv-moto`): an API process and a worker process with
 //! separate data dirs, as on two hosts, share PostgreSQL and a bucket. The worker fetches the
 //! song from the bucket, publishes the dance's files there, and the API serves them from it.
+use crate::common_models::models_dir;
 use crate::helpers::short_song;
 use crate::postgres::Postgres;
 use crate::scale::spawn;
@@ -11,7 +12,6 @@ use serde_json::{json, Value};
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
-use crate::common_models::models_dir;
 
 const BUCKET: &str = "choreo-test";
 const PREFIX: &str = "run";
@@ -31,14 +31,21 @@ impl Moto {
             bin.display(),
             std::env::var("CI").unwrap_or_default()
         );
-        let port = std::net::TcpListener::bind("127.0.0.1:0").expect("free port").local_addr().expect("addr").port();
+        let port = std::net::TcpListener::bind("127.0.0.1:0")
+            .expect("free port")
+            .local_addr()
+            .expect("addr")
+            .port();
         let child = Command::new(bin)
             .args(["-H", "127.0.0.1", "-p", &port.to_string()])
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .spawn()
             .expect("spawn moto_server");
-        Self { child, endpoint: format!("http://127.0.0.1:{port}") }
+        Self {
+            child,
+            endpoint: format!("http://127.0.0.1:{port}"),
+        }
     }
 }
 
@@ -49,9 +56,13 @@ impl Drop for Moto {
     }
 }
 
-
 /// `choreo <args>` on its own data dir, with the shared database and bucket.
-fn choreo(args: &[&str], data_dir: &Path, database_url: &str, endpoint: &str) -> tokio::process::Command {
+fn choreo(
+    args: &[&str],
+    data_dir: &Path,
+    database_url: &str,
+    endpoint: &str,
+) -> tokio::process::Command {
     let mut c = tokio::process::Command::new(env!("CARGO_BIN_EXE_choreo"));
     c.args(args)
         .arg("--data-dir")
@@ -90,39 +101,84 @@ fn files_under(dir: &Path) -> Vec<String> {
 async fn wait_job(client: &reqwest::Client, base: &str, id: &str) -> Value {
     let deadline = Instant::now() + Duration::from_secs(180);
     loop {
-        let job: Value = client.get(format!("{base}/v1/jobs/{id}")).send().await.expect("GET job").json().await.expect("json");
+        let job: Value = client
+            .get(format!("{base}/v1/jobs/{id}"))
+            .send()
+            .await
+            .expect("GET job")
+            .json()
+            .await
+            .expect("json");
         if ["succeeded", "failed", "cancelled"].contains(&job["status"].as_str().unwrap_or("")) {
             return job;
         }
-        assert!(Instant::now() < deadline, "job {id} not finished after 180 s: {job}");
+        assert!(
+            Instant::now() < deadline,
+            "job {id} not finished after 180 s: {job}"
+        );
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn api_and_worker_on_separate_disks_share_songs_and_results_through_a_bucket() {
-    let server = tokio::task::spawn_blocking(Postgres::start).await.expect("start postgres");
+    let server = tokio::task::spawn_blocking(Postgres::start)
+        .await
+        .expect("start postgres");
     let moto = Moto::start();
     let client = reqwest::Client::new();
     let deadline = Instant::now() + Duration::from_secs(60);
     // moto accepts unsigned requests: make the bucket once it answers.
     loop {
-        match client.put(format!("{}/{BUCKET}", moto.endpoint)).send().await {
+        match client
+            .put(format!("{}/{BUCKET}", moto.endpoint))
+            .send()
+            .await
+        {
             Ok(r) if r.status().is_success() => break,
-            other => assert!(Instant::now() < deadline, "moto_server did not come up in 60 s: {other:?}"),
+            other => assert!(
+                Instant::now() < deadline,
+                "moto_server did not come up in 60 s: {other:?}"
+            ),
         }
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
 
-    let (api_dir, worker_dir) = (tempfile::tempdir().expect("tempdir"), tempfile::tempdir().expect("tempdir"));
-    let (_api, line) = spawn(choreo(&["serve", "--no-workers", "--bind", "127.0.0.1:0"], api_dir.path(), &server.url(), &moto.endpoint)).await;
-    let base = line.strip_prefix("choreo listening on ").unwrap_or_else(|| panic!("unexpected first line {line:?}")).to_string();
-    let (_worker, line) = spawn(choreo(&["worker", "--workers", "1"], worker_dir.path(), &server.url(), &moto.endpoint)).await;
+    let (api_dir, worker_dir) = (
+        tempfile::tempdir().expect("tempdir"),
+        tempfile::tempdir().expect("tempdir"),
+    );
+    let (_api, line) = spawn(choreo(
+        &["serve", "--no-workers", "--bind", "127.0.0.1:0"],
+        api_dir.path(),
+        &server.url(),
+        &moto.endpoint,
+    ))
+    .await;
+    let base = line
+        .strip_prefix("choreo listening on ")
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+        .to_string();
+    let (_worker, line) = spawn(choreo(
+        &["worker", "--workers", "1"],
+        worker_dir.path(),
+        &server.url(),
+        &moto.endpoint,
+    ))
+    .await;
     assert_eq!(line, "choreo worker running 1 workers");
 
     let bytes = std::fs::read(short_song()).expect("song");
-    let form = reqwest::multipart::Form::new().part("file", reqwest::multipart::Part::bytes(bytes.clone()).file_name("t.ogg"));
-    let response = client.post(format!("{base}/v1/songs")).multipart(form).send().await.expect("upload");
+    let form = reqwest::multipart::Form::new().part(
+        "file",
+        reqwest::multipart::Part::bytes(bytes.clone()).file_name("t.ogg"),
+    );
+    let response = client
+        .post(format!("{base}/v1/songs"))
+        .multipart(form)
+        .send()
+        .await
+        .expect("upload");
     assert_eq!(response.status(), StatusCode::CREATED);
     let song: Value = response.json().await.expect("song");
     let song_id = song["id"].as_str().expect("id").to_string();
@@ -137,8 +193,18 @@ async fn api_and_worker_on_separate_disks_share_songs_and_results_through_a_buck
         .build()
         .expect("bucket client");
     let key = object_store::path::Path::from(format!("{PREFIX}/songs/{song_id}.ogg"));
-    let in_bucket = bucket.get(&key).await.expect("the song is in the bucket").bytes().await.expect("object");
-    assert_eq!(in_bucket.as_ref(), bytes.as_slice(), "the bucket holds the upload's bytes");
+    let in_bucket = bucket
+        .get(&key)
+        .await
+        .expect("the song is in the bucket")
+        .bytes()
+        .await
+        .expect("object");
+    assert_eq!(
+        in_bucket.as_ref(),
+        bytes.as_slice(),
+        "the bucket holds the upload's bytes"
+    );
 
     let response = client
         .post(format!("{base}/v1/jobs"))
@@ -155,30 +221,88 @@ async fn api_and_worker_on_separate_disks_share_songs_and_results_through_a_buck
     // The worker read the song from the bucket into its own disk; the API host never saw the
     // results on disk, so what it serves came from the bucket.
     let worker_files = files_under(worker_dir.path());
-    assert!(worker_files.contains(&format!("songs/{song_id}.ogg")), "{worker_files:?}");
+    assert!(
+        worker_files.contains(&format!("songs/{song_id}.ogg")),
+        "{worker_files:?}"
+    );
     let api_files = files_under(api_dir.path());
-    assert!(!api_files.iter().any(|f| f.starts_with("jobs/")), "{api_files:?}");
-    for file in ["motion.bvh", "motion.json", "motion.glb", "report.json", "preview.png"] {
-        let served = client.get(format!("{base}/v1/jobs/{job_id}/{file}")).send().await.expect("GET result");
+    assert!(
+        !api_files.iter().any(|f| f.starts_with("jobs/")),
+        "{api_files:?}"
+    );
+    for file in [
+        "motion.bvh",
+        "motion.json",
+        "motion.glb",
+        "report.json",
+        "preview.png",
+    ] {
+        let served = client
+            .get(format!("{base}/v1/jobs/{job_id}/{file}"))
+            .send()
+            .await
+            .expect("GET result");
         assert_eq!(served.status(), StatusCode::OK, "{file}");
         let served = served.bytes().await.expect("body");
-        let on_worker = std::fs::read(worker_dir.path().join("jobs").join(&job_id).join(file)).expect("worker's file");
-        assert_eq!(served.as_ref(), on_worker.as_slice(), "{file} served from the bucket is the file the worker wrote");
+        let on_worker = std::fs::read(worker_dir.path().join("jobs").join(&job_id).join(file))
+            .expect("worker's file");
+        assert_eq!(
+            served.as_ref(),
+            on_worker.as_slice(),
+            "{file} served from the bucket is the file the worker wrote"
+        );
         let key = object_store::path::Path::from(format!("{PREFIX}/jobs/{job_id}/{file}"));
-        let stored = bucket.get(&key).await.expect("the result is in the bucket").bytes().await.expect("object");
-        assert_eq!(stored.as_ref(), on_worker.as_slice(), "{file} in the bucket");
+        let stored = bucket
+            .get(&key)
+            .await
+            .expect("the result is in the bucket")
+            .bytes()
+            .await
+            .expect("object");
+        assert_eq!(
+            stored.as_ref(),
+            on_worker.as_slice(),
+            "{file} in the bucket"
+        );
     }
     // A second API host with an empty disk serves the song's audio (fetched from the bucket).
     let second_dir = tempfile::tempdir().expect("tempdir");
-    let (_second, line) = spawn(choreo(&["serve", "--no-workers", "--bind", "127.0.0.1:0"], second_dir.path(), &server.url(), &moto.endpoint)).await;
-    let second = line.strip_prefix("choreo listening on ").unwrap_or_else(|| panic!("unexpected first line {line:?}")).to_string();
-    let audio = client.get(format!("{second}/v1/songs/{song_id}/audio")).send().await.expect("GET audio");
+    let (_second, line) = spawn(choreo(
+        &["serve", "--no-workers", "--bind", "127.0.0.1:0"],
+        second_dir.path(),
+        &server.url(),
+        &moto.endpoint,
+    ))
+    .await;
+    let second = line
+        .strip_prefix("choreo listening on ")
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+        .to_string();
+    let audio = client
+        .get(format!("{second}/v1/songs/{song_id}/audio"))
+        .send()
+        .await
+        .expect("GET audio");
     assert_eq!(audio.status(), StatusCode::OK);
-    assert_eq!(audio.bytes().await.expect("body").as_ref(), bytes.as_slice(), "the second API host serves the upload's bytes");
+    assert_eq!(
+        audio.bytes().await.expect("body").as_ref(),
+        bytes.as_slice(),
+        "the second API host serves the upload's bytes"
+    );
     let second_files = files_under(second_dir.path());
-    assert!(second_files.contains(&format!("songs/{song_id}.ogg")), "{second_files:?}");
+    assert!(
+        second_files.contains(&format!("songs/{song_id}.ogg")),
+        "{second_files:?}"
+    );
     // Every write went through a temp file and a rename, or a single PUT: nothing partial is left.
-    for f in worker_files.iter().chain(api_files.iter()).chain(second_files.iter()) {
-        assert!(!f.contains(".partial-") && !f.starts_with("tmp/"), "left behind: {f}");
+    for f in worker_files
+        .iter()
+        .chain(api_files.iter())
+        .chain(second_files.iter())
+    {
+        assert!(
+            !f.contains(".partial-") && !f.starts_with("tmp/"),
+            "left behind: {f}"
+        );
     }
 }

@@ -11,18 +11,37 @@ use std::time::{Duration, Instant};
 async fn fifty_concurrent_uploads_while_polling() {
     let app = Arc::new(spawn_app().await);
     // Ten distinct files (so ten songs), each uploaded five times at once: the duplicates race.
-    let mut files = vec![short_song(), fixture("wav"), fixture("flac"), fixture("mp3"), fixture("m4a")];
-    for name in ["hungarian_dance_5.ogg", "vibe_ace.ogg", "sugar_plum_fairy.ogg", "lets_go_fishin.ogg"] {
+    let mut files = vec![
+        short_song(),
+        fixture("wav"),
+        fixture("flac"),
+        fixture("mp3"),
+        fixture("m4a"),
+    ];
+    for name in [
+        "hungarian_dance_5.ogg",
+        "vibe_ace.ogg",
+        "sugar_plum_fairy.ogg",
+        "lets_go_fishin.ogg",
+    ] {
         files.push(shared_audio().join(name));
     }
-    let bytes: Vec<Vec<u8>> = files.iter().map(|f| std::fs::read(f).expect("read")).collect();
+    let bytes: Vec<Vec<u8>> = files
+        .iter()
+        .map(|f| std::fs::read(f).expect("read"))
+        .collect();
     let distinct = bytes.iter().collect::<HashSet<_>>().len();
 
     let done = Arc::new(AtomicBool::new(false));
     let polls = Arc::new(AtomicU64::new(0));
     let poll_failures = Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
     let poller = {
-        let (app, done, polls, failures) = (app.clone(), done.clone(), polls.clone(), poll_failures.clone());
+        let (app, done, polls, failures) = (
+            app.clone(),
+            done.clone(),
+            polls.clone(),
+            poll_failures.clone(),
+        );
         tokio::spawn(async move {
             // 200 requests/s: one every 5 ms, alternating the job list and the health probe.
             let mut tick = tokio::time::interval(Duration::from_millis(5));
@@ -32,7 +51,11 @@ async fn fifty_concurrent_uploads_while_polling() {
             while !done.load(Ordering::Relaxed) {
                 tick.tick().await;
                 n += 1;
-                let path = if n % 2 == 0 { "/v1/jobs?limit=20" } else { "/healthz" };
+                let path = if n % 2 == 0 {
+                    "/v1/jobs?limit=20"
+                } else {
+                    "/healthz"
+                };
                 let (app, polls, failures) = (app.clone(), polls.clone(), failures.clone());
                 in_flight.push(tokio::spawn(async move {
                     let response = app.get(path).await;
@@ -40,7 +63,10 @@ async fn fifty_concurrent_uploads_while_polling() {
                     if response.status() != StatusCode::OK {
                         let status = response.status();
                         let body = response.text().await.unwrap_or_default();
-                        failures.lock().unwrap_or_else(|p| p.into_inner()).push(format!("{path}: {status} {body}"));
+                        failures
+                            .lock()
+                            .unwrap_or_else(|p| p.into_inner())
+                            .push(format!("{path}: {status} {body}"));
                     }
                 }));
             }
@@ -67,7 +93,10 @@ async fn fifty_concurrent_uploads_while_polling() {
     let mut created = 0;
     for upload in uploads {
         let (status, json) = upload.await.expect("upload task");
-        assert!(status == StatusCode::CREATED || status == StatusCode::OK, "{status}: {json}");
+        assert!(
+            status == StatusCode::CREATED || status == StatusCode::OK,
+            "{status}: {json}"
+        );
         created += usize::from(status == StatusCode::CREATED);
         ids.insert(json["id"].as_str().expect("id").to_string());
     }
@@ -78,13 +107,34 @@ async fn fifty_concurrent_uploads_while_polling() {
     poller.await.expect("poller");
     let seconds = started.elapsed().as_secs_f64();
 
-    let failures = poll_failures.lock().unwrap_or_else(|p| p.into_inner()).clone();
+    let failures = poll_failures
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .clone();
     assert!(failures.is_empty(), "polls failed: {failures:?}");
     let polls = polls.load(Ordering::Relaxed);
-    assert!(polls as f64 >= 150.0 * seconds, "{polls} polls in {seconds:.1} s is under 200/s");
+    assert!(
+        polls as f64 >= 150.0 * seconds,
+        "{polls} polls in {seconds:.1} s is under 200/s"
+    );
     assert_eq!(ids.len(), distinct, "each distinct file is one song");
-    assert_eq!(created, distinct, "exactly one upload per distinct file created it");
-    let page: Value = app.get("/v1/jobs?limit=100").await.json().await.expect("page");
-    assert_eq!(page["items"].as_array().map(Vec::len), Some(distinct), "one analyze job per song");
-    eprintln!("50 uploads in {:.2} s; {polls} polls in {seconds:.2} s", upload_time.as_secs_f64());
+    assert_eq!(
+        created, distinct,
+        "exactly one upload per distinct file created it"
+    );
+    let page: Value = app
+        .get("/v1/jobs?limit=100")
+        .await
+        .json()
+        .await
+        .expect("page");
+    assert_eq!(
+        page["items"].as_array().map(Vec::len),
+        Some(distinct),
+        "one analyze job per song"
+    );
+    eprintln!(
+        "50 uploads in {:.2} s; {polls} polls in {seconds:.2} s",
+        upload_time.as_secs_f64()
+    );
 }

@@ -35,15 +35,41 @@ async fn health_readiness_and_metrics() {
 async fn every_response_carries_a_request_id() {
     let app = spawn_app().await;
     let response = app.get("/healthz").await;
-    let id = response.headers().get("x-request-id").and_then(|v| v.to_str().ok()).expect("x-request-id");
+    let id = response
+        .headers()
+        .get("x-request-id")
+        .and_then(|v| v.to_str().ok())
+        .expect("x-request-id");
     assert_eq!(id.len(), 36, "a uuid: {id}");
-    let response = app.client.get(app.url("/v1/models")).header("x-request-id", "trace-me-42").send().await.expect("GET");
-    assert_eq!(response.headers().get("x-request-id").and_then(|v| v.to_str().ok()), Some("trace-me-42"));
+    let response = app
+        .client
+        .get(app.url("/v1/models"))
+        .header("x-request-id", "trace-me-42")
+        .send()
+        .await
+        .expect("GET");
+    assert_eq!(
+        response
+            .headers()
+            .get("x-request-id")
+            .and_then(|v| v.to_str().ok()),
+        Some("trace-me-42")
+    );
     let missing = app.get("/no/such/route").await;
     assert!(missing.headers().contains_key("x-request-id"));
     expect_problem(missing, StatusCode::NOT_FOUND, "not-found").await;
-    let wrong_method = app.client.put(app.url("/v1/songs")).send().await.expect("PUT");
-    expect_problem(wrong_method, StatusCode::METHOD_NOT_ALLOWED, "method-not-allowed").await;
+    let wrong_method = app
+        .client
+        .put(app.url("/v1/songs"))
+        .send()
+        .await
+        .expect("PUT");
+    expect_problem(
+        wrong_method,
+        StatusCode::METHOD_NOT_ALLOWED,
+        "method-not-allowed",
+    )
+    .await;
     app.stop().await;
 }
 
@@ -55,32 +81,70 @@ async fn cors_allows_the_configured_origins_only() {
             .request(reqwest::Method::OPTIONS, app.url("/v1/jobs"))
             .header("origin", origin)
             .header("access-control-request-method", "POST")
-            .header("access-control-request-headers", "content-type,idempotency-key")
+            .header(
+                "access-control-request-headers",
+                "content-type,idempotency-key",
+            )
             .send()
     };
     let allowed = preflight("http://studio.example").await.expect("preflight");
     assert_eq!(
-        allowed.headers().get("access-control-allow-origin").and_then(|v| v.to_str().ok()),
+        allowed
+            .headers()
+            .get("access-control-allow-origin")
+            .and_then(|v| v.to_str().ok()),
         Some("http://studio.example")
     );
-    let refused = preflight("http://elsewhere.example").await.expect("preflight");
-    assert!(refused.headers().get("access-control-allow-origin").is_none());
+    let refused = preflight("http://elsewhere.example")
+        .await
+        .expect("preflight");
+    assert!(refused
+        .headers()
+        .get("access-control-allow-origin")
+        .is_none());
     app.stop().await;
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_configured_token_guards_every_v1_route() {
     let app = spawn_app_with(|c| c.auth_token = Some(Secret::new("s3cret-token"))).await;
-    for path in ["/v1/models", "/v1/jobs", "/v1/songs/01234567-89ab-7def-8123-456789abcdef"] {
+    for path in [
+        "/v1/models",
+        "/v1/jobs",
+        "/v1/songs/01234567-89ab-7def-8123-456789abcdef",
+    ] {
         let bare = app.client.get(app.url(path)).send().await.expect("GET");
-        assert_eq!(bare.headers().get("www-authenticate").and_then(|v| v.to_str().ok()), Some("Bearer"));
+        assert_eq!(
+            bare.headers()
+                .get("www-authenticate")
+                .and_then(|v| v.to_str().ok()),
+            Some("Bearer")
+        );
         expect_problem(bare, StatusCode::UNAUTHORIZED, "unauthorized").await;
-        let wrong = app.client.get(app.url(path)).bearer_auth("s3cret-tokem").send().await.expect("GET");
+        let wrong = app
+            .client
+            .get(app.url(path))
+            .bearer_auth("s3cret-tokem")
+            .send()
+            .await
+            .expect("GET");
         expect_problem(wrong, StatusCode::UNAUTHORIZED, "unauthorized").await;
     }
-    let upload = app.client.post(app.url("/v1/songs")).body("x").send().await.expect("POST");
+    let upload = app
+        .client
+        .post(app.url("/v1/songs"))
+        .body("x")
+        .send()
+        .await
+        .expect("POST");
     // Its body is never read, so the connection is not for reuse, and the answer says so.
-    assert_eq!(upload.headers().get("connection").and_then(|v| v.to_str().ok()), Some("close"));
+    assert_eq!(
+        upload
+            .headers()
+            .get("connection")
+            .and_then(|v| v.to_str().ok()),
+        Some("close")
+    );
     expect_problem(upload, StatusCode::UNAUTHORIZED, "unauthorized").await;
     // The helper sends the right token.
     assert_eq!(app.get("/v1/models").await.status(), StatusCode::OK);

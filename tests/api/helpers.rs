@@ -101,7 +101,10 @@ pub async fn spawn_app_with(edit: impl FnOnce(&mut Config)) -> TestApp {
     let server = Server::start(config).await.expect("service starts");
     TestApp {
         addr: server.addr(),
-        client: reqwest::Client::builder().timeout(Duration::from_secs(60)).build().expect("client"),
+        client: reqwest::Client::builder()
+            .timeout(Duration::from_secs(60))
+            .build()
+            .expect("client"),
         data_dir,
         server: Some(server),
         token,
@@ -112,7 +115,13 @@ impl TestApp {
     /// The `capabilities` of model `id` as `GET /v1/models` lists them (panics when it is not listed).
     pub async fn capabilities(&self, id: &str) -> Value {
         let models: Value = self.get("/v1/models").await.json().await.expect("models");
-        let listed = models.as_array().or_else(|| models["models"].as_array()).expect("model list").iter().find(|m| m["id"] == id).cloned();
+        let listed = models
+            .as_array()
+            .or_else(|| models["models"].as_array())
+            .expect("model list")
+            .iter()
+            .find(|m| m["id"] == id)
+            .cloned();
         listed.unwrap_or_else(|| panic!("{id} is not listed: {models}"))["capabilities"].clone()
     }
 
@@ -130,30 +139,47 @@ impl TestApp {
 
     /// GET with the configured token.
     pub async fn get(&self, path: &str) -> Response {
-        self.auth(self.client.get(self.url(path))).send().await.expect("GET")
+        self.auth(self.client.get(self.url(path)))
+            .send()
+            .await
+            .expect("GET")
     }
 
     /// DELETE with the configured token.
     pub async fn delete(&self, path: &str) -> Response {
-        self.auth(self.client.delete(self.url(path))).send().await.expect("DELETE")
+        self.auth(self.client.delete(self.url(path)))
+            .send()
+            .await
+            .expect("DELETE")
     }
 
     /// POSTs a multipart form to `/v1/songs`.
     pub async fn upload_form(&self, form: Form) -> Response {
-        self.auth(self.client.post(self.url("/v1/songs"))).multipart(form).send().await.expect("upload")
+        self.auth(self.client.post(self.url("/v1/songs")))
+            .multipart(form)
+            .send()
+            .await
+            .expect("upload")
     }
 
     /// Uploads bytes as field `file` named `filename`.
     pub async fn upload_bytes(&self, filename: &str, bytes: Vec<u8>) -> Response {
         // The name goes on the wire as given (no percent-encoding), as a hostile client would send it.
-        let form = Form::new().percent_encode_noop().part("file", Part::bytes(bytes).file_name(filename.to_string()));
+        let form = Form::new()
+            .percent_encode_noop()
+            .part("file", Part::bytes(bytes).file_name(filename.to_string()));
         self.upload_form(form).await
     }
 
     /// Uploads a file under its own name.
     pub async fn upload(&self, path: &Path) -> Response {
-        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("song").to_string();
-        self.upload_bytes(&name, std::fs::read(path).expect("read song")).await
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or("song")
+            .to_string();
+        self.upload_bytes(&name, std::fs::read(path).expect("read song"))
+            .await
     }
 
     /// Uploads a file and returns the song JSON, asserting 201 or 200.
@@ -161,13 +187,24 @@ impl TestApp {
         let response = self.upload(path).await;
         let status = response.status();
         let body: Value = response.json().await.expect("song json");
-        assert!(status == StatusCode::CREATED || status == StatusCode::OK, "{status}: {body}");
+        assert!(
+            status == StatusCode::CREATED || status == StatusCode::OK,
+            "{status}: {body}"
+        );
         body
     }
 
     /// POSTs raw bytes to `/v1/jobs` with a content type and optional idempotency key.
-    pub async fn post_job_raw(&self, body: impl Into<reqwest::Body>, content_type: &str, key: Option<&str>) -> Response {
-        let mut request = self.auth(self.client.post(self.url("/v1/jobs"))).header("content-type", content_type).body(body);
+    pub async fn post_job_raw(
+        &self,
+        body: impl Into<reqwest::Body>,
+        content_type: &str,
+        key: Option<&str>,
+    ) -> Response {
+        let mut request = self
+            .auth(self.client.post(self.url("/v1/jobs")))
+            .header("content-type", content_type)
+            .body(body);
         if let Some(key) = key {
             request = request.header("idempotency-key", key);
         }
@@ -176,7 +213,8 @@ impl TestApp {
 
     /// POSTs JSON to `/v1/jobs`.
     pub async fn post_job(&self, body: &Value, key: Option<&str>) -> Response {
-        self.post_job_raw(body.to_string(), "application/json", key).await
+        self.post_job_raw(body.to_string(), "application/json", key)
+            .await
     }
 
     /// A job's JSON.
@@ -191,10 +229,14 @@ impl TestApp {
         let deadline = Instant::now() + Duration::from_secs(120);
         loop {
             let job = self.job(id).await;
-            if ["succeeded", "failed", "cancelled"].contains(&job["status"].as_str().unwrap_or("")) {
+            if ["succeeded", "failed", "cancelled"].contains(&job["status"].as_str().unwrap_or(""))
+            {
                 return job;
             }
-            assert!(Instant::now() < deadline, "job {id} not finished after 120 s: {job}");
+            assert!(
+                Instant::now() < deadline,
+                "job {id} not finished after 120 s: {job}"
+            );
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
     }
@@ -212,7 +254,12 @@ impl TestApp {
 
     /// The analyze job of a song.
     pub async fn analyze_job_of(&self, song_id: &str) -> Value {
-        let page: Value = self.get("/v1/jobs?limit=100").await.json().await.expect("jobs json");
+        let page: Value = self
+            .get("/v1/jobs?limit=100")
+            .await
+            .json()
+            .await
+            .expect("jobs json");
         page["items"]
             .as_array()
             .expect("items")
@@ -233,13 +280,21 @@ impl TestApp {
 /// Reads a problem+json body, asserting status and code.
 pub async fn expect_problem(response: Response, status: StatusCode, code: &str) -> Value {
     let got = response.status();
-    let content_type = response.headers().get("content-type").and_then(|v| v.to_str().ok()).unwrap_or("").to_string();
+    let content_type = response
+        .headers()
+        .get("content-type")
+        .and_then(|v| v.to_str().ok())
+        .unwrap_or("")
+        .to_string();
     let text = response.text().await.expect("problem body");
     assert_eq!(got, status, "expected {status} {code}, got: {text}");
     assert_eq!(content_type, "application/problem+json", "{text}");
     let body: Value = serde_json::from_str(&text).expect("problem json");
     assert_eq!(body["code"], code, "{body}");
     assert_eq!(body["status"], status.as_u16());
-    assert!(body["detail"].as_str().is_some_and(|d| !d.is_empty()), "{body}");
+    assert!(
+        body["detail"].as_str().is_some_and(|d| !d.is_empty()),
+        "{body}"
+    );
     body
 }

@@ -21,15 +21,25 @@ const THROUGH_BVH_CM: f64 = 3.0;
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn keypose_transformer_passes_through_four_real_key_poses() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let ds = Dataset::open(&root.join("../shared/data/dance-with-melody"))
-        .unwrap_or_else(|e| panic!("the key-pose API test needs ../shared (CI={}): {e}", std::env::var("CI").unwrap_or_default()));
+    let ds = Dataset::open(&root.join("../shared/data/dance-with-melody")).unwrap_or_else(|e| {
+        panic!(
+            "the key-pose API test needs ../shared (CI={}): {e}",
+            std::env::var("CI").unwrap_or_default()
+        )
+    });
     let dance = ds.load("DANCE_W_22").expect("a test dance");
     let rel = dance.root_relative();
     let keys: Vec<KeyPose> = [100usize, 300, 500, 800]
         .iter()
         .map(|&f| KeyPose {
             time_s: dance.song_time_s(f),
-            joints: rel.outer_iter().nth(f).expect("frame").outer_iter().map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])]).collect(),
+            joints: rel
+                .outer_iter()
+                .nth(f)
+                .expect("frame")
+                .outer_iter()
+                .map(|p| [f64::from(p[0]), f64::from(p[1]), f64::from(p[2])])
+                .collect(),
         })
         .collect();
 
@@ -41,9 +51,17 @@ async fn keypose_transformer_passes_through_four_real_key_poses() {
     // Bad key poses are refused before anything is queued.
     let mut outside = keys.clone();
     outside[0].time_s = duration + 1.0;
-    let short = KeyPose { time_s: 1.0, joints: vec![[0.0; 3]; 5] };
+    let short = KeyPose {
+        time_s: 1.0,
+        joints: vec![[0.0; 3]; 5],
+    };
     for bad in [json!(outside), json!([short])] {
-        let r = app.post_job(&json!({"song_id": song_id, "model": "keypose-transformer", "key_poses": bad}), None).await;
+        let r = app
+            .post_job(
+                &json!({"song_id": song_id, "model": "keypose-transformer", "key_poses": bad}),
+                None,
+            )
+            .await;
         expect_problem(r, StatusCode::UNPROCESSABLE_ENTITY, "invalid-field").await;
     }
 
@@ -54,20 +72,46 @@ async fn keypose_transformer_passes_through_four_real_key_poses() {
     let done = app.wait_job(&id).await;
     assert_eq!(done["status"], "succeeded", "{done}");
 
-    let text = app.get(&format!("/v1/jobs/{id}/motion.bvh")).await.text().await.expect("bvh");
-    let motion = choreo::motion::bvh::Bvh::parse(&text).expect("BVH parses").to_motion().expect("23 named joints");
+    let text = app
+        .get(&format!("/v1/jobs/{id}/motion.bvh"))
+        .await
+        .text()
+        .await
+        .expect("bvh");
+    let motion = choreo::motion::bvh::Bvh::parse(&text)
+        .expect("BVH parses")
+        .to_motion()
+        .expect("23 named joints");
     let errors: Vec<f64> = keys
         .iter()
         .map(|key| {
-            choreo::metrics::kinematics::key_pose_error_cm(motion.positions.view(), motion.fps, std::slice::from_ref(key))
-                .expect("key pose inside the dance")
+            choreo::metrics::kinematics::key_pose_error_cm(
+                motion.positions.view(),
+                motion.fps,
+                std::slice::from_ref(key),
+            )
+            .expect("key pose inside the dance")
         })
         .collect();
     eprintln!("key-pose errors through the BVH (cm): {errors:.2?}");
     for (key, err) in keys.iter().zip(&errors) {
-        assert!(*err < THROUGH_BVH_CM, "key pose at {:.2} s missed by {err:.2} cm", key.time_s);
+        assert!(
+            *err < THROUGH_BVH_CM,
+            "key pose at {:.2} s missed by {err:.2} cm",
+            key.time_s
+        );
     }
-    let report: Value = app.get(&format!("/v1/jobs/{id}/report.json")).await.json().await.expect("report");
-    assert!(report["scores"]["key_pose_error_cm"].as_f64().is_some_and(|e| e < KEY_POSE_TARGET_CM), "{report}");
+    let report: Value = app
+        .get(&format!("/v1/jobs/{id}/report.json"))
+        .await
+        .json()
+        .await
+        .expect("report");
+    assert!(
+        report["scores"]["key_pose_error_cm"]
+            .as_f64()
+            .is_some_and(|e| e < KEY_POSE_TARGET_CM),
+        "{report}"
+    );
     app.stop().await;
 }

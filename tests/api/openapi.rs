@@ -26,11 +26,21 @@ async fn the_checked_in_spec_matches_the_code() {
     let served: Value = app.get("/openapi.json").await.json().await.expect("json");
     let expected: Value = serde_json::from_str(&generated).expect("json");
     assert_eq!(served, expected);
-    for route in ["/v1/songs", "/v1/jobs", "/v1/jobs/{id}", "/v1/jobs/{id}/{file}", "/v1/models", "/metrics"] {
+    for route in [
+        "/v1/songs",
+        "/v1/jobs",
+        "/v1/jobs/{id}",
+        "/v1/jobs/{id}/{file}",
+        "/v1/models",
+        "/metrics",
+    ] {
         assert!(served["paths"].get(route).is_some(), "spec lacks {route}");
     }
     let docs = app.get("/docs/").await;
     assert_eq!(docs.status(), StatusCode::OK);
-    assert!(docs.text().await.expect("html").contains("swagger"), "an interactive docs page");
+    assert!(
+        docs.text().await.expect("html").contains("swagger"),
+        "an interactive docs page"
+    );
     app.stop().await;
 }

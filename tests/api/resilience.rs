@@ -33,7 +33,13 @@ struct Options<'a> {
 
 impl Default for Options<'_> {
     fn default() -> Self {
-        Self { env: &[], open_files: None, stderr: Stderr::File, models: false, data_dir: None }
+        Self {
+            env: &[],
+            open_files: None,
+            stderr: Stderr::File,
+            models: false,
+            data_dir: None,
+        }
     }
 }
 
@@ -47,13 +53,30 @@ struct Serve {
 impl Serve {
     fn start(options: Options<'_>) -> Self {
         let dir = tempfile::tempdir().expect("tempdir");
-        let models = if options.models { Path::new(env!("CARGO_MANIFEST_DIR")).join("models") } else { dir.path().join("no-models") };
+        let models = if options.models {
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("models")
+        } else {
+            dir.path().join("no-models")
+        };
         // CHOREO_BIN runs another build (e.g. main's, to measure the behaviour before a fix).
-        let bin = std::env::var("CHOREO_BIN").unwrap_or_else(|_| env!("CARGO_BIN_EXE_choreo").to_string());
+        let bin = std::env::var("CHOREO_BIN")
+            .unwrap_or_else(|_| env!("CARGO_BIN_EXE_choreo").to_string());
         let mut command = Command::new(bin);
         command
-            .args(["serve", "--bind", "127.0.0.1:0", "--workers", "2", "--data-dir"])
-            .arg(options.data_dir.clone().unwrap_or_else(|| dir.path().join("data")))
+            .args([
+                "serve",
+                "--bind",
+                "127.0.0.1:0",
+                "--workers",
+                "2",
+                "--data-dir",
+            ])
+            .arg(
+                options
+                    .data_dir
+                    .clone()
+                    .unwrap_or_else(|| dir.path().join("data")),
+            )
             .arg("--models-dir")
             .arg(models)
             .envs(options.env.iter().copied())
@@ -63,7 +86,9 @@ impl Serve {
             .stdout(Stdio::piped());
         match options.stderr {
             Stderr::File => {
-                command.stderr(std::fs::File::create(dir.path().join("stderr.log")).expect("log file"));
+                command.stderr(
+                    std::fs::File::create(dir.path().join("stderr.log")).expect("log file"),
+                );
             }
             Stderr::Closed => {
                 command.stderr(Stdio::piped());
@@ -73,7 +98,10 @@ impl Serve {
             // SAFETY: setrlimit is async-signal-safe and touches only the child being started.
             unsafe {
                 command.pre_exec(move || {
-                    let rlimit = libc::rlimit { rlim_cur: limit, rlim_max: limit };
+                    let rlimit = libc::rlimit {
+                        rlim_cur: limit,
+                        rlim_max: limit,
+                    };
                     if libc::setrlimit(libc::RLIMIT_NOFILE, &rlimit) == 0 {
                         Ok(())
                     } else {
@@ -87,8 +115,14 @@ impl Serve {
         drop(child.stderr.take());
         let stdout = child.stdout.take().expect("stdout");
         let mut line = String::new();
-        BufReader::new(stdout).read_line(&mut line).expect("read the listening line");
-        let addr = line.trim().strip_prefix("choreo listening on http://").unwrap_or_else(|| panic!("unexpected first line {line:?}")).to_string();
+        BufReader::new(stdout)
+            .read_line(&mut line)
+            .expect("read the listening line");
+        let addr = line
+            .trim()
+            .strip_prefix("choreo listening on http://")
+            .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+            .to_string();
         Self { child, addr, dir }
     }
 
@@ -98,10 +132,19 @@ impl Serve {
 
     /// A field of /proc/<pid>/status, in kB.
     fn status_kb(&self, field: &str) -> u64 {
-        let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id())).expect("proc status");
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id()))
+            .expect("proc status");
         status
             .lines()
-            .find_map(|l| l.strip_prefix(field)?.trim_start_matches(':').trim().strip_suffix("kB")?.trim().parse().ok())
+            .find_map(|l| {
+                l.strip_prefix(field)?
+                    .trim_start_matches(':')
+                    .trim()
+                    .strip_suffix("kB")?
+                    .trim()
+                    .parse()
+                    .ok()
+            })
             .unwrap_or_else(|| panic!("no {field} in /proc status"))
     }
 
@@ -110,7 +153,11 @@ impl Serve {
     }
 
     fn assert_alive(&mut self) {
-        assert!(self.child.try_wait().expect("try_wait").is_none(), "choreo serve exited; log:\n{}", self.log());
+        assert!(
+            self.child.try_wait().expect("try_wait").is_none(),
+            "choreo serve exited; log:\n{}",
+            self.log()
+        );
     }
 }
 
@@ -123,16 +170,31 @@ impl Drop for Serve {
 
 fn client() -> reqwest::Client {
     // No pooled connections: each request must win its own connection, as a new client's would.
-    reqwest::Client::builder().pool_max_idle_per_host(0).timeout(Duration::from_secs(30)).build().expect("client")
+    reqwest::Client::builder()
+        .pool_max_idle_per_host(0)
+        .timeout(Duration::from_secs(30))
+        .build()
+        .expect("client")
 }
 
 async fn upload(client: &reqwest::Client, serve: &Serve, path: &Path) -> Value {
-    let form = reqwest::multipart::Form::new()
-        .part("file", reqwest::multipart::Part::bytes(std::fs::read(path).expect("read song")).file_name("song.ogg"));
-    let response = client.post(serve.url("/v1/songs")).multipart(form).send().await.expect("upload");
+    let form = reqwest::multipart::Form::new().part(
+        "file",
+        reqwest::multipart::Part::bytes(std::fs::read(path).expect("read song"))
+            .file_name("song.ogg"),
+    );
+    let response = client
+        .post(serve.url("/v1/songs"))
+        .multipart(form)
+        .send()
+        .await
+        .expect("upload");
     let status = response.status();
     let body: Value = response.json().await.expect("song json");
-    assert!(status == StatusCode::CREATED || status == StatusCode::OK, "{status}: {body}");
+    assert!(
+        status == StatusCode::CREATED || status == StatusCode::OK,
+        "{status}: {body}"
+    );
     body
 }
 
@@ -140,31 +202,61 @@ async fn upload(client: &reqwest::Client, serve: &Serve, path: &Path) -> Value {
 async fn settle(client: &reqwest::Client, serve: &Serve, limit: Duration) -> Vec<Value> {
     let deadline = Instant::now() + limit;
     loop {
-        let page: Value = client.get(serve.url("/v1/jobs?limit=100")).send().await.expect("GET jobs").json().await.expect("jobs json");
+        let page: Value = client
+            .get(serve.url("/v1/jobs?limit=100"))
+            .send()
+            .await
+            .expect("GET jobs")
+            .json()
+            .await
+            .expect("jobs json");
         let jobs = page["items"].as_array().expect("items").clone();
-        if jobs.iter().all(|j| ["succeeded", "failed", "cancelled"].contains(&j["status"].as_str().unwrap_or(""))) {
+        if jobs.iter().all(|j| {
+            ["succeeded", "failed", "cancelled"].contains(&j["status"].as_str().unwrap_or(""))
+        }) {
             return jobs;
         }
-        assert!(Instant::now() < deadline, "jobs unfinished after {limit:?}: {jobs:?}");
+        assert!(
+            Instant::now() < deadline,
+            "jobs unfinished after {limit:?}: {jobs:?}"
+        );
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
 }
 
 async fn metric(client: &reqwest::Client, serve: &Serve, name: &str) -> f64 {
-    let text = client.get(serve.url("/metrics")).send().await.expect("GET /metrics").text().await.expect("metrics text");
-    text.lines().filter(|l| l.starts_with(name)).filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok()).sum()
+    let text = client
+        .get(serve.url("/metrics"))
+        .send()
+        .await
+        .expect("GET /metrics")
+        .text()
+        .await
+        .expect("metrics text");
+    text.lines()
+        .filter(|l| l.starts_with(name))
+        .filter_map(|l| l.rsplit(' ').next()?.parse::<f64>().ok())
+        .sum()
 }
 
 /// Raises this test process's own open-file limit so it can hold `n` sockets.
 fn allow_open_files(n: u64) {
-    let mut limit = libc::rlimit { rlim_cur: 0, rlim_max: 0 };
+    let mut limit = libc::rlimit {
+        rlim_cur: 0,
+        rlim_max: 0,
+    };
     // SAFETY: getrlimit/setrlimit read and write only the struct we own.
     unsafe {
         assert_eq!(libc::getrlimit(libc::RLIMIT_NOFILE, &mut limit), 0);
         if limit.rlim_cur < n {
             limit.rlim_cur = n.min(limit.rlim_max.max(n));
             limit.rlim_max = limit.rlim_max.max(n);
-            assert_eq!(libc::setrlimit(libc::RLIMIT_NOFILE, &limit), 0, "raise RLIMIT_NOFILE to {n}: {}", std::io::Error::last_os_error());
+            assert_eq!(
+                libc::setrlimit(libc::RLIMIT_NOFILE, &limit),
+                0,
+                "raise RLIMIT_NOFILE to {n}: {}",
+                std::io::Error::last_os_error()
+            );
         }
     }
 }
@@ -192,13 +284,21 @@ async fn a_thousand_stalled_connections_leave_health_and_jobs_working() {
     allow_open_files(4096);
     let header_timeout = HEADER_TIMEOUT_S.to_string();
     let mut serve = Serve::start(Options {
-        env: &[("CHOREO_HEADER_TIMEOUT_S", &header_timeout), ("CHOREO_RETRY_BACKOFF_S", "0.2")],
+        env: &[
+            ("CHOREO_HEADER_TIMEOUT_S", &header_timeout),
+            ("CHOREO_RETRY_BACKOFF_S", "0.2"),
+        ],
         open_files: Some(1024),
         ..Options::default()
     });
     let client = client();
     // Jobs that need file handles while the sockets are stalled: five analyses queued first.
-    let names = ["lets_go_fishin.ogg", "sugar_plum_fairy.ogg", "vibe_ace.ogg", "hungarian_dance_5.ogg"];
+    let names = [
+        "lets_go_fishin.ogg",
+        "sugar_plum_fairy.ogg",
+        "vibe_ace.ogg",
+        "hungarian_dance_5.ogg",
+    ];
     for path in names.iter().map(|n| song(n)).chain([short_song()]) {
         upload(&client, &serve, &path).await;
     }
@@ -211,24 +311,42 @@ async fn a_thousand_stalled_connections_leave_health_and_jobs_working() {
         let _ = stream.write_all(b"POST /v1/songs HTTP/1.1\r\nHost:").await;
         stalled.push(stream);
     }
-    eprintln!("opened 1000 stalled connections in {:.2} s", opened.elapsed().as_secs_f64());
+    eprintln!(
+        "opened 1000 stalled connections in {:.2} s",
+        opened.elapsed().as_secs_f64()
+    );
 
     // While they hold every slot, a new client gets an answer at once (a 503 past the cap), not a hang.
     let during = Instant::now();
-    let answer = client.get(serve.url("/healthz")).timeout(Duration::from_secs(5)).send().await;
+    let answer = client
+        .get(serve.url("/healthz"))
+        .timeout(Duration::from_secs(5))
+        .send()
+        .await;
     let during_s = during.elapsed().as_secs_f64();
     match &answer {
-        Ok(r) => assert!(r.status() == StatusCode::OK || r.status() == StatusCode::SERVICE_UNAVAILABLE, "{r:?}"),
+        Ok(r) => assert!(
+            r.status() == StatusCode::OK || r.status() == StatusCode::SERVICE_UNAVAILABLE,
+            "{r:?}"
+        ),
         // A refused connection may be reset under its 503; what matters is that it did not hang.
         Err(e) => assert!(!e.is_timeout(), "/healthz hung during the stall: {e}"),
     }
-    eprintln!("/healthz during the stall: {:?} in {during_s:.2} s", answer.as_ref().map(|r| r.status()));
+    eprintln!(
+        "/healthz during the stall: {:?} in {during_s:.2} s",
+        answer.as_ref().map(|r| r.status())
+    );
 
     // The server closes every stalled connection by the header timeout; past-the-cap ones got a 503.
     let mut refused = 0;
     for stream in &mut stalled {
         let seen = read_until_closed(stream, Duration::from_secs(HEADER_TIMEOUT_S + 10)).await;
-        let seen = seen.unwrap_or_else(|| panic!("a stalled connection was still open {} s after opening", opened.elapsed().as_secs()));
+        let seen = seen.unwrap_or_else(|| {
+            panic!(
+                "a stalled connection was still open {} s after opening",
+                opened.elapsed().as_secs()
+            )
+        });
         if seen.starts_with(b"HTTP/1.1 503") {
             assert!(String::from_utf8_lossy(&seen).contains("too-many-connections"));
             refused += 1;
@@ -236,13 +354,26 @@ async fn a_thousand_stalled_connections_leave_health_and_jobs_working() {
     }
     let closed_after = opened.elapsed().as_secs_f64();
     eprintln!("all 1000 closed by the server {closed_after:.2} s after opening; {refused} answered 503 too-many-connections");
-    assert!(refused > 0 && refused < 1000, "some connections past the cap were refused with a 503: {refused}");
-    assert!(closed_after < (HEADER_TIMEOUT_S + 8) as f64, "stalled connections closed within the header timeout: {closed_after:.1} s");
+    assert!(
+        refused > 0 && refused < 1000,
+        "some connections past the cap were refused with a 503: {refused}"
+    );
+    assert!(
+        closed_after < (HEADER_TIMEOUT_S + 8) as f64,
+        "stalled connections closed within the header timeout: {closed_after:.1} s"
+    );
 
     let health = Instant::now();
-    let response = client.get(serve.url("/healthz")).send().await.expect("/healthz after the stall");
+    let response = client
+        .get(serve.url("/healthz"))
+        .send()
+        .await
+        .expect("/healthz after the stall");
     assert_eq!(response.status(), StatusCode::OK);
-    eprintln!("/healthz after the stall: 200 in {:.3} s", health.elapsed().as_secs_f64());
+    eprintln!(
+        "/healthz after the stall: 200 in {:.3} s",
+        health.elapsed().as_secs_f64()
+    );
 
     // Every job queued before the stall ran to success: sockets did not starve the workers' files.
     let jobs = settle(&client, &serve, Duration::from_secs(120)).await;
@@ -259,7 +390,10 @@ async fn a_thousand_stalled_connections_leave_health_and_jobs_working() {
     assert!(metric(&client, &serve, "choreo_connections_refused_total").await >= refused as f64);
     serve.assert_alive();
     let log = serve.log();
-    assert!(!log.contains("Too many open files"), "the server ran out of file handles:\n{log}");
+    assert!(
+        !log.contains("Too many open files"),
+        "the server ran out of file handles:\n{log}"
+    );
 }
 
 /// A song of about six minutes (the five shared songs joined), made once per build.
@@ -270,9 +404,18 @@ fn long_song() -> PathBuf {
         return out;
     }
     std::fs::create_dir_all(&dir).expect("fixture dir");
-    let names = ["lets_go_fishin.ogg", "sugar_plum_fairy.ogg", "vibe_ace.ogg", "hungarian_dance_5.ogg"];
+    let names = [
+        "lets_go_fishin.ogg",
+        "sugar_plum_fairy.ogg",
+        "vibe_ace.ogg",
+        "hungarian_dance_5.ogg",
+    ];
     let list = dir.join("joined.txt");
-    let lines: String = names.iter().chain(names.iter()).map(|n| format!("file '{}'\n", song(n).display())).collect();
+    let lines: String = names
+        .iter()
+        .chain(names.iter())
+        .map(|n| format!("file '{}'\n", song(n).display()))
+        .collect();
     std::fs::write(&list, lines).expect("concat list");
     let partial = dir.join(format!("partial-{}-joined.ogg", std::process::id()));
     let status = Command::new("ffmpeg")
@@ -293,7 +436,11 @@ const STALLED_READERS_BUDGET_KB: u64 = 64 * 1024;
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn sixty_stalled_readers_of_a_large_result_hold_bounded_memory() {
-    let mut serve = Serve::start(Options { env: &[("CHOREO_WRITE_TIMEOUT_S", "5")], models: true, ..Options::default() });
+    let mut serve = Serve::start(Options {
+        env: &[("CHOREO_WRITE_TIMEOUT_S", "5")],
+        models: true,
+        ..Options::default()
+    });
     let client = client();
     let song = upload(&client, &serve, &long_song()).await;
     let response = client
@@ -309,7 +456,11 @@ async fn sixty_stalled_readers_of_a_large_result_hold_bounded_memory() {
         assert_eq!(job["status"], "succeeded", "{job}");
     }
     let path = format!("/v1/jobs/{id}/motion.json");
-    let whole = client.get(serve.url(&path)).send().await.expect("GET motion.json");
+    let whole = client
+        .get(serve.url(&path))
+        .send()
+        .await
+        .expect("GET motion.json");
     assert_eq!(whole.status(), StatusCode::OK);
     let size = whole.bytes().await.expect("body").len();
     assert!(size > 10_000_000, "a large result: {size} bytes");
@@ -319,10 +470,17 @@ async fn sixty_stalled_readers_of_a_large_result_hold_bounded_memory() {
     let mut readers = Vec::new();
     for _ in 0..60 {
         let mut stream = TcpStream::connect(&serve.addr).await.expect("connect");
-        stream.write_all(format!("GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").as_bytes()).await.expect("request");
+        stream
+            .write_all(format!("GET {path} HTTP/1.1\r\nHost: x\r\n\r\n").as_bytes())
+            .await
+            .expect("request");
         let mut head = [0u8; 1024];
         let n = stream.read(&mut head).await.expect("head");
-        assert!(head[..n].starts_with(b"HTTP/1.1 200"), "{}", String::from_utf8_lossy(&head[..n]));
+        assert!(
+            head[..n].starts_with(b"HTTP/1.1 200"),
+            "{}",
+            String::from_utf8_lossy(&head[..n])
+        );
         readers.push(stream);
     }
     // The server writes until the sockets' buffers are full, then waits on the readers.
@@ -336,22 +494,41 @@ async fn sixty_stalled_readers_of_a_large_result_hold_bounded_memory() {
         stalled_kb / 1024,
         growth_kb / 1024
     );
-    assert!(growth_kb < STALLED_READERS_BUDGET_KB, "60 stalled readers grew resident memory by {growth_kb} kB");
+    assert!(
+        growth_kb < STALLED_READERS_BUDGET_KB,
+        "60 stalled readers grew resident memory by {growth_kb} kB"
+    );
 
     // The write timeout (5 s) ends each stalled response; the reader then sees the close.
     let started = Instant::now();
     for stream in &mut readers {
-        assert!(read_until_closed(stream, Duration::from_secs(30)).await.is_some(), "a stalled reader was never cut off");
+        assert!(
+            read_until_closed(stream, Duration::from_secs(30))
+                .await
+                .is_some(),
+            "a stalled reader was never cut off"
+        );
     }
-    eprintln!("stalled readers cut off and drained in {:.1} s", started.elapsed().as_secs_f64());
-    let health = client.get(serve.url("/healthz")).send().await.expect("healthz");
+    eprintln!(
+        "stalled readers cut off and drained in {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+    let health = client
+        .get(serve.url("/healthz"))
+        .send()
+        .await
+        .expect("healthz");
     assert_eq!(health.status(), StatusCode::OK);
     serve.assert_alive();
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_closed_stderr_neither_stops_jobs_nor_fools_readyz() {
-    let mut serve = Serve::start(Options { stderr: Stderr::Closed, models: true, ..Options::default() });
+    let mut serve = Serve::start(Options {
+        stderr: Stderr::Closed,
+        models: true,
+        ..Options::default()
+    });
     let client = client();
     let song = upload(&client, &serve, &short_song()).await;
     let response = client
@@ -366,12 +543,27 @@ async fn a_closed_stderr_neither_stops_jobs_nor_fools_readyz() {
     for job in &jobs {
         assert_eq!(job["status"], "succeeded", "{job}");
     }
-    let ready = client.get(serve.url("/readyz")).send().await.expect("readyz");
-    assert_eq!(ready.status(), StatusCode::OK, "workers are alive and the database answers");
+    let ready = client
+        .get(serve.url("/readyz"))
+        .send()
+        .await
+        .expect("readyz");
+    assert_eq!(
+        ready.status(),
+        StatusCode::OK,
+        "workers are alive and the database answers"
+    );
     // Log lines were written, failed, and were dropped and counted rather than panicking.
     let dropped = metric(&client, &serve, "choreo_log_write_errors_total").await;
-    assert!(dropped > 0.0, "the failed log writes were counted: {dropped}");
-    assert_eq!(metric(&client, &serve, "choreo_worker_restarts_total").await, 0.0, "no worker died");
+    assert!(
+        dropped > 0.0,
+        "the failed log writes were counted: {dropped}"
+    );
+    assert_eq!(
+        metric(&client, &serve, "choreo_worker_restarts_total").await,
+        0.0,
+        "no worker died"
+    );
     eprintln!("{dropped} log lines dropped; both jobs succeeded; /readyz 200");
     serve.assert_alive();
 }
@@ -385,7 +577,11 @@ impl SmallDisk {
     /// Mounts it, or says why not: mounting needs root (CI runs as root).
     fn mount() -> Result<Self, String> {
         let dir = tempfile::tempdir().map_err(|e| e.to_string())?;
-        let out = Command::new("mount").args(["-t", "tmpfs", "-o", "size=24m", "tmpfs"]).arg(dir.path()).output().map_err(|e| e.to_string())?;
+        let out = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", "size=24m", "tmpfs"])
+            .arg(dir.path())
+            .output()
+            .map_err(|e| e.to_string())?;
         if out.status.success() {
             Ok(Self { dir })
         } else {
@@ -420,7 +616,10 @@ impl SmallDisk {
 
 impl Drop for SmallDisk {
     fn drop(&mut self) {
-        let _ = Command::new("umount").arg("-l").arg(self.dir.path()).status();
+        let _ = Command::new("umount")
+            .arg("-l")
+            .arg(self.dir.path())
+            .status();
     }
 }
 
@@ -428,7 +627,9 @@ impl Drop for SmallDisk {
 async fn a_full_disk_acknowledges_nothing_it_cannot_keep_and_recovers() {
     let disk = match SmallDisk::mount() {
         Ok(disk) => disk,
-        Err(why) if std::env::var("CI").is_ok_and(|v| v == "true") => panic!("CI=true: a 24 MB tmpfs must mount for this test: {why}"),
+        Err(why) if std::env::var("CI").is_ok_and(|v| v == "true") => {
+            panic!("CI=true: a 24 MB tmpfs must mount for this test: {why}")
+        }
         Err(why) => {
             eprintln!("NOT RUN (not root, or mounts not allowed here; CI runs it as root): mount -t tmpfs: {why}");
             return;
@@ -461,28 +662,56 @@ async fn a_full_disk_acknowledges_nothing_it_cannot_keep_and_recovers() {
                 let job: Value = response.json().await.expect("job");
                 let id = job["id"].as_str().expect("id").to_string();
                 // Acknowledged means durable: the job is there when asked for.
-                let got = client.get(serve.url(&format!("/v1/jobs/{id}"))).send().await.expect("GET job");
+                let got = client
+                    .get(serve.url(&format!("/v1/jobs/{id}")))
+                    .send()
+                    .await
+                    .expect("GET job");
                 let log = serve.log();
                 let tail: String = log.lines().rev().take(15).collect::<Vec<_>>().join("\n");
                 assert_eq!(got.status(), StatusCode::OK, "job {id} was acknowledged with 202 but is not there; server log, last lines first:\n{tail}");
                 accepted.push(id);
             }
             StatusCode::INSUFFICIENT_STORAGE => {
-                crate::helpers::expect_problem(response, StatusCode::INSUFFICIENT_STORAGE, "insufficient-storage").await;
+                crate::helpers::expect_problem(
+                    response,
+                    StatusCode::INSUFFICIENT_STORAGE,
+                    "insufficient-storage",
+                )
+                .await;
                 refused += 1;
             }
-            other => panic!("a full disk answered {other}: {}", response.text().await.unwrap_or_default()),
+            other => panic!(
+                "a full disk answered {other}: {}",
+                response.text().await.unwrap_or_default()
+            ),
         }
     }
-    eprintln!("on the full disk: {} jobs acknowledged (and there), {refused} refused with 507", accepted.len());
+    eprintln!(
+        "on the full disk: {} jobs acknowledged (and there), {refused} refused with 507",
+        accepted.len()
+    );
     let response = {
         let form = reqwest::multipart::Form::new().part(
             "file",
-            reqwest::multipart::Part::bytes(std::fs::read(crate::helpers::fixture("wav")).expect("wav")).file_name("a.wav"),
+            reqwest::multipart::Part::bytes(
+                std::fs::read(crate::helpers::fixture("wav")).expect("wav"),
+            )
+            .file_name("a.wav"),
         );
-        client.post(serve.url("/v1/songs")).multipart(form).send().await.expect("upload")
+        client
+            .post(serve.url("/v1/songs"))
+            .multipart(form)
+            .send()
+            .await
+            .expect("upload")
     };
-    crate::helpers::expect_problem(response, StatusCode::INSUFFICIENT_STORAGE, "insufficient-storage").await;
+    crate::helpers::expect_problem(
+        response,
+        StatusCode::INSUFFICIENT_STORAGE,
+        "insufficient-storage",
+    )
+    .await;
     tokio::time::sleep(Duration::from_secs(3)).await;
     serve.assert_alive();
 
@@ -495,10 +724,18 @@ async fn a_full_disk_acknowledges_nothing_it_cannot_keep_and_recovers() {
         .await
         .expect("POST /v1/jobs");
     let status = response.status();
-    assert_eq!(status, StatusCode::ACCEPTED, "accepted again once space returned: {}", response.text().await.unwrap_or_default());
+    assert_eq!(
+        status,
+        StatusCode::ACCEPTED,
+        "accepted again once space returned: {}",
+        response.text().await.unwrap_or_default()
+    );
     let jobs = settle(&client, &serve, Duration::from_secs(180)).await;
     for id in &accepted {
-        let job = jobs.iter().find(|j| j["id"] == id.as_str()).unwrap_or_else(|| panic!("acknowledged job {id} was lost: {jobs:?}"));
+        let job = jobs
+            .iter()
+            .find(|j| j["id"] == id.as_str())
+            .unwrap_or_else(|| panic!("acknowledged job {id} was lost: {jobs:?}"));
         assert_eq!(job["status"], "succeeded", "{job}");
     }
     for job in &jobs {
@@ -506,14 +743,21 @@ async fn a_full_disk_acknowledges_nothing_it_cannot_keep_and_recovers() {
     }
     // SIGTERM, then the event log: no job ran twice.
     // SAFETY: kill only signals our own child.
-    assert_eq!(unsafe { libc::kill(serve.child.id() as libc::pid_t, libc::SIGTERM) }, 0);
+    assert_eq!(
+        unsafe { libc::kill(serve.child.id() as libc::pid_t, libc::SIGTERM) },
+        0
+    );
     let deadline = Instant::now() + Duration::from_secs(30);
     while serve.child.try_wait().expect("try_wait").is_none() {
         assert!(Instant::now() < deadline, "no exit 30 s after SIGTERM");
         std::thread::sleep(Duration::from_millis(50));
     }
-    let options = sqlx::sqlite::SqliteConnectOptions::new().filename(data.join("choreo.sqlite")).read_only(true);
-    let pool = sqlx::SqlitePool::connect_with(options).await.expect("open db");
+    let options = sqlx::sqlite::SqliteConnectOptions::new()
+        .filename(data.join("choreo.sqlite"))
+        .read_only(true);
+    let pool = sqlx::SqlitePool::connect_with(options)
+        .await
+        .expect("open db");
     let rows: Vec<(String, i64, i64)> = sqlx::query_as(
         "SELECT job_id, SUM(to_status = 'running'), SUM(to_status = 'succeeded') FROM job_events GROUP BY job_id",
     )
@@ -522,32 +766,69 @@ async fn a_full_disk_acknowledges_nothing_it_cannot_keep_and_recovers() {
     .expect("events");
     assert_eq!(rows.len(), jobs.len());
     for (id, runs, successes) in rows {
-        assert_eq!((runs, successes), (1, 1), "job {id} ran once and succeeded once");
+        assert_eq!(
+            (runs, successes),
+            (1, 1),
+            "job {id} ran once and succeeded once"
+        );
     }
 }
 
 /// GET `path` until it answers `want` (bounded); how long it took.
-async fn answers(client: &reqwest::Client, serve: &Serve, path: &str, want: StatusCode, limit: Duration) -> Duration {
+async fn answers(
+    client: &reqwest::Client,
+    serve: &Serve,
+    path: &str,
+    want: StatusCode,
+    limit: Duration,
+) -> Duration {
     let start = Instant::now();
     loop {
         let last = match client.get(serve.url(path)).send().await {
             Ok(response) if response.status() == want => return start.elapsed(),
-            Ok(response) => format!("{}: {}", response.status(), response.text().await.unwrap_or_default()),
+            Ok(response) => format!(
+                "{}: {}",
+                response.status(),
+                response.text().await.unwrap_or_default()
+            ),
             Err(e) => e.to_string(),
         };
-        assert!(start.elapsed() < limit, "GET {path} did not answer {want} within {limit:?}; last: {last}");
+        assert!(
+            start.elapsed() < limit,
+            "GET {path} did not answer {want} within {limit:?}; last: {last}"
+        );
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn postgres_stopped_answers_503_within_5_s_and_recovers() {
-    let mut db = tokio::task::spawn_blocking(crate::postgres::Postgres::start).await.expect("start postgres");
+    let mut db = tokio::task::spawn_blocking(crate::postgres::Postgres::start)
+        .await
+        .expect("start postgres");
     let url = db.url();
-    let mut serve = Serve::start(Options { env: &[("CHOREO_DATABASE_URL", &url)], ..Options::default() });
+    let mut serve = Serve::start(Options {
+        env: &[("CHOREO_DATABASE_URL", &url)],
+        ..Options::default()
+    });
     let client = client();
-    answers(&client, &serve, "/readyz", StatusCode::OK, Duration::from_secs(10)).await;
-    assert_eq!(client.get(serve.url("/v1/jobs")).send().await.expect("GET jobs").status(), StatusCode::OK);
+    answers(
+        &client,
+        &serve,
+        "/readyz",
+        StatusCode::OK,
+        Duration::from_secs(10),
+    )
+    .await;
+    assert_eq!(
+        client
+            .get(serve.url("/v1/jobs"))
+            .send()
+            .await
+            .expect("GET jobs")
+            .status(),
+        StatusCode::OK
+    );
 
     let db = tokio::task::spawn_blocking(move || {
         db.stop();
@@ -556,7 +837,11 @@ async fn postgres_stopped_answers_503_within_5_s_and_recovers() {
     .await
     .expect("stop postgres");
     // Every call that needs the database fails fast with a problem, not a hang or a 500.
-    for (method, path) in [("GET", "/v1/jobs"), ("GET", "/v1/jobs/0191f0a0-0000-7000-8000-000000000000"), ("POST", "/v1/jobs")] {
+    for (method, path) in [
+        ("GET", "/v1/jobs"),
+        ("GET", "/v1/jobs/0191f0a0-0000-7000-8000-000000000000"),
+        ("POST", "/v1/jobs"),
+    ] {
         let start = Instant::now();
         let request = match method {
             "POST" => client.post(serve.url(path)).json(&json!({"song_id": "0191f0a0-0000-7000-8000-000000000000", "model": "dance-revolution"})),
@@ -564,14 +849,30 @@ async fn postgres_stopped_answers_503_within_5_s_and_recovers() {
         };
         let response = request.send().await.expect("request");
         let took = start.elapsed();
-        assert!(took < Duration::from_secs(5), "{method} {path} took {took:?} with PostgreSQL stopped");
-        crate::helpers::expect_problem(response, StatusCode::SERVICE_UNAVAILABLE, "service-unavailable").await;
+        assert!(
+            took < Duration::from_secs(5),
+            "{method} {path} took {took:?} with PostgreSQL stopped"
+        );
+        crate::helpers::expect_problem(
+            response,
+            StatusCode::SERVICE_UNAVAILABLE,
+            "service-unavailable",
+        )
+        .await;
         eprintln!("{method} {path}: 503 in {took:?}");
     }
     let start = Instant::now();
-    let ready = client.get(serve.url("/readyz")).send().await.expect("readyz");
+    let ready = client
+        .get(serve.url("/readyz"))
+        .send()
+        .await
+        .expect("readyz");
     assert_eq!(ready.status(), StatusCode::SERVICE_UNAVAILABLE);
-    assert!(start.elapsed() < Duration::from_secs(5), "/readyz took {:?}", start.elapsed());
+    assert!(
+        start.elapsed() < Duration::from_secs(5),
+        "/readyz took {:?}",
+        start.elapsed()
+    );
 
     let mut db = db;
     let db = tokio::task::spawn_blocking(move || {
@@ -580,9 +881,23 @@ async fn postgres_stopped_answers_503_within_5_s_and_recovers() {
     })
     .await
     .expect("restart postgres");
-    let took = answers(&client, &serve, "/readyz", StatusCode::OK, Duration::from_secs(15)).await;
+    let took = answers(
+        &client,
+        &serve,
+        "/readyz",
+        StatusCode::OK,
+        Duration::from_secs(15),
+    )
+    .await;
     eprintln!("ready again {took:?} after PostgreSQL restarted");
-    answers(&client, &serve, "/v1/jobs", StatusCode::OK, Duration::from_secs(5)).await;
+    answers(
+        &client,
+        &serve,
+        "/v1/jobs",
+        StatusCode::OK,
+        Duration::from_secs(5),
+    )
+    .await;
     serve.assert_alive();
     drop(db);
 }

@@ -92,14 +92,32 @@ fn click_track(bpm: f64, seed: u64) -> Vec<u8> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn workers_killed_at_random_lose_no_job_and_run_each_once() {
-    let server = tokio::task::spawn_blocking(Postgres::start).await.expect("start postgres");
+    let server = tokio::task::spawn_blocking(Postgres::start)
+        .await
+        .expect("start postgres");
     let url = server.url();
     let data = tempfile::tempdir().expect("tempdir");
-    let (_api, line) = spawn(choreo(&["serve", "--no-workers", "--bind", "127.0.0.1:0"], data.path(), &url)).await;
-    let base = line.strip_prefix("choreo listening on ").unwrap_or_else(|| panic!("unexpected first line {line:?}")).to_string();
+    let (_api, line) = spawn(choreo(
+        &["serve", "--no-workers", "--bind", "127.0.0.1:0"],
+        data.path(),
+        &url,
+    ))
+    .await;
+    let base = line
+        .strip_prefix("choreo listening on ")
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+        .to_string();
     let client = reqwest::Client::new();
-    let ready = client.get(format!("{base}/readyz")).send().await.expect("readyz");
-    assert_eq!(ready.status(), StatusCode::OK, "an API-only process is ready without workers");
+    let ready = client
+        .get(format!("{base}/readyz"))
+        .send()
+        .await
+        .expect("readyz");
+    assert_eq!(
+        ready.status(),
+        StatusCode::OK,
+        "an API-only process is ready without workers"
+    );
 
     let mut workers = Vec::new();
     for _ in 0..WORKERS {
@@ -112,15 +130,29 @@ async fn workers_killed_at_random_lose_no_job_and_run_each_once() {
         async move {
             for i in 0..SONGS {
                 let wav = click_track(80.0 + i as f64 * 0.5, i as u64);
-                let form = reqwest::multipart::Form::new()
-                    .part("file", reqwest::multipart::Part::bytes(wav).file_name(format!("click-{i}.wav")));
-                let response = client.post(format!("{base}/v1/songs")).multipart(form).send().await.expect("upload");
-                assert_eq!(response.status(), StatusCode::CREATED, "{}", response.text().await.unwrap_or_default());
+                let form = reqwest::multipart::Form::new().part(
+                    "file",
+                    reqwest::multipart::Part::bytes(wav).file_name(format!("click-{i}.wav")),
+                );
+                let response = client
+                    .post(format!("{base}/v1/songs"))
+                    .multipart(form)
+                    .send()
+                    .await
+                    .expect("upload");
+                assert_eq!(
+                    response.status(),
+                    StatusCode::CREATED,
+                    "{}",
+                    response.text().await.unwrap_or_default()
+                );
             }
         }
     });
 
-    let pool = sqlx::PgPool::connect(&url).await.expect("connect to postgres");
+    let pool = sqlx::PgPool::connect(&url)
+        .await
+        .expect("connect to postgres");
     let mut rng = rand::rngs::StdRng::seed_from_u64(15);
     let mut kills = 0;
     let deadline = Instant::now() + Duration::from_secs(420);
@@ -139,18 +171,27 @@ async fn workers_killed_at_random_lose_no_job_and_run_each_once() {
         if uploads.is_finished() && jobs == SONGS as i64 && open == 0 {
             break;
         }
-        assert!(Instant::now() < deadline, "{open} of {jobs} jobs still open after 420 s ({kills} kills)");
-        let owners: Vec<String> = sqlx::query_scalar("SELECT lease_owner FROM jobs WHERE status = 'running' AND lease_owner IS NOT NULL")
-            .fetch_all(&pool)
-            .await
-            .expect("running jobs");
+        assert!(
+            Instant::now() < deadline,
+            "{open} of {jobs} jobs still open after 420 s ({kills} kills)"
+        );
+        let owners: Vec<String> = sqlx::query_scalar(
+            "SELECT lease_owner FROM jobs WHERE status = 'running' AND lease_owner IS NOT NULL",
+        )
+        .fetch_all(&pool)
+        .await
+        .expect("running jobs");
         let busy: Vec<usize> = (0..WORKERS)
             .filter(|&w| {
                 let pid = workers[w].id().map(|p| format!("{p}-"));
                 pid.is_some_and(|pid| owners.iter().any(|o| o.starts_with(&pid)))
             })
             .collect();
-        let victim = if busy.is_empty() { rng.gen_range(0..WORKERS) } else { busy[rng.gen_range(0..busy.len())] };
+        let victim = if busy.is_empty() {
+            rng.gen_range(0..WORKERS)
+        } else {
+            busy[rng.gen_range(0..busy.len())]
+        };
         workers[victim].start_kill().expect("SIGKILL");
         workers[victim].wait().await.expect("killed worker exits");
         kills += 1;
@@ -174,9 +215,17 @@ async fn workers_killed_at_random_lose_no_job_and_run_each_once() {
     for row in &rows {
         let (id, status, attempts): (String, String, i64) = (row.get(0), row.get(1), row.get(2));
         let (succeeded, runs, requeues): (i64, i64, i64) = (row.get(3), row.get(4), row.get(5));
-        assert_eq!((status.as_str(), succeeded), ("succeeded", 1), "job {id} succeeded exactly once");
+        assert_eq!(
+            (status.as_str(), succeeded),
+            ("succeeded", 1),
+            "job {id} succeeded exactly once"
+        );
         assert_eq!(runs, attempts, "job {id}: every attempt is one claim");
-        assert_eq!(requeues, runs - 1, "job {id}: each extra run follows a requeue of a killed attempt");
+        assert_eq!(
+            requeues,
+            runs - 1,
+            "job {id}: each extra run follows a requeue of a killed attempt"
+        );
         requeued += requeues;
     }
     let analysed: i64 = sqlx::query("SELECT COUNT(*) FROM songs WHERE analysis IS NOT NULL")
@@ -185,17 +234,24 @@ async fn workers_killed_at_random_lose_no_job_and_run_each_once() {
         .expect("songs")
         .get(0);
     assert_eq!(analysed, SONGS as i64, "every song has its analysis");
-    let owners: i64 = sqlx::query("SELECT COUNT(DISTINCT worker) FROM job_events WHERE to_status = 'succeeded'")
-        .fetch_one(&pool)
-        .await
-        .expect("owners")
-        .get(0);
+    let owners: i64 =
+        sqlx::query("SELECT COUNT(DISTINCT worker) FROM job_events WHERE to_status = 'succeeded'")
+            .fetch_one(&pool)
+            .await
+            .expect("owners")
+            .get(0);
     eprintln!(
         "scale-out: {SONGS} jobs in {:.1} s on {WORKERS} worker processes, {kills} SIGKILLs, {requeued} attempts cut off and rerun, \
          finished by {owners} worker lives",
         elapsed.as_secs_f64()
     );
     assert!(kills > 0, "the test killed workers");
-    assert!(requeued > 0, "at least one kill landed mid-job, so recovery was exercised");
-    assert!(owners > WORKERS as i64, "jobs were finished by restarted workers too");
+    assert!(
+        requeued > 0,
+        "at least one kill landed mid-job, so recovery was exercised"
+    );
+    assert!(
+        owners > WORKERS as i64,
+        "jobs were finished by restarted workers too"
+    );
 }

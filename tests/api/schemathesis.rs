@@ -22,7 +22,10 @@ async fn schemathesis_finds_no_mismatch_between_spec_and_server() {
         if std::env::var("CI").as_deref() == Ok("true") {
             panic!("{} is missing: run `scripts/setup.sh --test` (or `make test`) to install schemathesis (CI=true)", st.display());
         }
-        eprintln!("NOTICE: skipping the schemathesis test: {} not found (run scripts/setup.sh --test)", st.display());
+        eprintln!(
+            "NOTICE: skipping the schemathesis test: {} not found (run scripts/setup.sh --test)",
+            st.display()
+        );
         return;
     }
     let app = spawn_app().await;
@@ -32,11 +35,25 @@ async fn schemathesis_finds_no_mismatch_between_spec_and_server() {
         .arg(root.join("tests/schemathesis/schemathesis.toml"))
         .arg("run")
         .arg(app.url("/openapi.json"))
-        .args(["--checks", "all", "--phases", "examples,coverage,fuzzing,stateful"])
+        .args([
+            "--checks",
+            "all",
+            "--phases",
+            "examples,coverage,fuzzing,stateful",
+        ])
         // One worker: with two, hypothesis parses lambda sources on two threads at once, and
         // CPython 3.11's `ast.parse` is not safe for that (an intermittent "SystemError: AST
         // constructor recursion depth mismatch" inside the tool, seen 1 run in 5).
-        .args(["--max-examples", MAX_EXAMPLES, "--seed", "11", "--workers", "1", "--request-timeout", "30"])
+        .args([
+            "--max-examples",
+            MAX_EXAMPLES,
+            "--seed",
+            "11",
+            "--workers",
+            "1",
+            "--request-timeout",
+            "30",
+        ])
         .args(["--report", "junit", "--report-dir"])
         .arg(reports.path())
         .env("NO_COLOR", "1")
@@ -48,12 +65,33 @@ async fn schemathesis_finds_no_mismatch_between_spec_and_server() {
         .await
         .unwrap_or_else(|_| panic!("schemathesis ran past {RUN_LIMIT:?}"))
         .expect("run schemathesis");
-    let text = format!("{}{}", String::from_utf8_lossy(&output.stdout), String::from_utf8_lossy(&output.stderr));
-    let tail: String = text.chars().rev().take(12_000).collect::<Vec<_>>().into_iter().rev().collect();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&output.stdout),
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let tail: String = text
+        .chars()
+        .rev()
+        .take(12_000)
+        .collect::<Vec<_>>()
+        .into_iter()
+        .rev()
+        .collect();
     eprintln!("{tail}");
-    assert!(output.status.success(), "schemathesis found failures (above)");
+    assert!(
+        output.status.success(),
+        "schemathesis found failures (above)"
+    );
     // The stateful phase ran over the links, rather than being skipped for want of them.
-    assert!(!text.contains("Invalid OpenAPI Links"), "the spec's links are invalid");
-    assert!(text.lines().any(|l| l.contains("Stateful") && !l.contains('⏭')), "the stateful phase did not run");
+    assert!(
+        !text.contains("Invalid OpenAPI Links"),
+        "the spec's links are invalid"
+    );
+    assert!(
+        text.lines()
+            .any(|l| l.contains("Stateful") && !l.contains('⏭')),
+        "the stateful phase did not run"
+    );
     app.stop().await;
 }

@@ -18,7 +18,11 @@ fn crc8(data: &[u8]) -> u8 {
     data.iter().fold(0u8, |mut c, &b| {
         c ^= b;
         for _ in 0..8 {
-            c = if c & 0x80 != 0 { (c << 1) ^ 0x07 } else { c << 1 };
+            c = if c & 0x80 != 0 {
+                (c << 1) ^ 0x07
+            } else {
+                c << 1
+            };
         }
         c
     })
@@ -28,7 +32,11 @@ fn crc16(data: &[u8]) -> u16 {
     data.iter().fold(0u16, |mut c, &b| {
         c ^= u16::from(b) << 8;
         for _ in 0..8 {
-            c = if c & 0x8000 != 0 { (c << 1) ^ 0x8005 } else { c << 1 };
+            c = if c & 0x8000 != 0 {
+                (c << 1) ^ 0x8005
+            } else {
+                c << 1
+            };
         }
         c
     })
@@ -39,8 +47,17 @@ fn utf8_number(n: u32) -> Vec<u8> {
     match n {
         0..=0x7f => vec![n as u8],
         0x80..=0x7ff => vec![0xC0 | (n >> 6) as u8, 0x80 | (n & 0x3f) as u8],
-        0x800..=0xffff => vec![0xE0 | (n >> 12) as u8, 0x80 | ((n >> 6) & 0x3f) as u8, 0x80 | (n & 0x3f) as u8],
-        _ => vec![0xF0 | (n >> 18) as u8, 0x80 | ((n >> 12) & 0x3f) as u8, 0x80 | ((n >> 6) & 0x3f) as u8, 0x80 | (n & 0x3f) as u8],
+        0x800..=0xffff => vec![
+            0xE0 | (n >> 12) as u8,
+            0x80 | ((n >> 6) & 0x3f) as u8,
+            0x80 | (n & 0x3f) as u8,
+        ],
+        _ => vec![
+            0xF0 | (n >> 18) as u8,
+            0x80 | ((n >> 12) & 0x3f) as u8,
+            0x80 | ((n >> 6) & 0x3f) as u8,
+            0x80 | (n & 0x3f) as u8,
+        ],
     }
 }
 

@@ -3,7 +3,12 @@
 use std::path::PathBuf;
 
 /// The four served models, by id.
-pub const SERVED: [&str; 4] = ["dance-revolution", "keypose-transformer", "tsmt", "dancenet"];
+pub const SERVED: [&str; 4] = [
+    "dance-revolution",
+    "keypose-transformer",
+    "tsmt",
+    "dancenet",
+];
 
 /// `models/` of this checkout; panics, naming what is missing, unless every served model's
 /// committed weights are there (they are part of the repository, so a missing file is a defect).
@@ -11,7 +16,11 @@ pub fn models_dir() -> PathBuf {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("models");
     for id in SERVED {
         let weights = dir.join(id).join("weights.safetensors");
-        assert!(weights.is_file(), "the committed weights are missing: {}", weights.display());
+        assert!(
+            weights.is_file(),
+            "the committed weights are missing: {}",
+            weights.display()
+        );
     }
     dir
 }

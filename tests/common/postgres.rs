@@ -48,7 +48,13 @@ fn is_root() -> bool {
 fn command(bin: &Path) -> Command {
     if is_root() {
         let mut c = Command::new("setpriv");
-        c.args(["--reuid=postgres", "--regid=postgres", "--init-groups", "--"]).arg(bin);
+        c.args([
+            "--reuid=postgres",
+            "--regid=postgres",
+            "--init-groups",
+            "--",
+        ])
+        .arg(bin);
         c
     } else {
         Command::new(bin)
@@ -64,22 +70,46 @@ impl Postgres {
     /// Initialises and starts a server; panics with the server's log when it does not come up.
     pub fn start() -> Self {
         let bin = bin_dir();
-        let dir = tempfile::Builder::new().prefix("choreo-pg-").tempdir().expect("tempdir");
+        let dir = tempfile::Builder::new()
+            .prefix("choreo-pg-")
+            .tempdir()
+            .expect("tempdir");
         if is_root() {
-            let status = Command::new("chown").arg("postgres:postgres").arg(dir.path()).status().expect("chown");
+            let status = Command::new("chown")
+                .arg("postgres:postgres")
+                .arg(dir.path())
+                .status()
+                .expect("chown");
             assert!(status.success(), "chown postgres {}", dir.path().display());
         }
         let data = dir.path().join("data");
         let out = command(&bin.join("initdb"))
             .arg("-D")
             .arg(&data)
-            .args(["-U", "choreo", "--auth=trust", "-E", "UTF8", "--no-sync", "--no-instructions"])
+            .args([
+                "-U",
+                "choreo",
+                "--auth=trust",
+                "-E",
+                "UTF8",
+                "--no-sync",
+                "--no-instructions",
+            ])
             .output()
             .expect("run initdb");
-        assert!(out.status.success(), "initdb failed: {}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "initdb failed: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
         std::fs::File::create(dir.path().join("postgres.log")).expect("log file");
         if is_root() {
-            let status = Command::new("chown").arg("postgres:postgres").arg(dir.path().join("postgres.log")).status().expect("chown");
+            let status = Command::new("chown")
+                .arg("postgres:postgres")
+                .arg(dir.path().join("postgres.log"))
+                .status()
+                .expect("chown");
             assert!(status.success());
         }
         let port = free_port();
@@ -91,13 +121,30 @@ impl Postgres {
 
     /// Starts the postmaster on `port` over the data dir in `dir`.
     fn spawn(bin: &Path, dir: &Path, port: u16) -> Child {
-        let log = std::fs::OpenOptions::new().append(true).open(dir.join("postgres.log")).expect("log file");
+        let log = std::fs::OpenOptions::new()
+            .append(true)
+            .open(dir.join("postgres.log"))
+            .expect("log file");
         // Durability is not under test: no fsync makes each test's server start and run faster.
         command(&bin.join("postgres"))
             .arg("-D")
             .arg(dir.join("data"))
-            .args(["-p", &port.to_string(), "-c", "listen_addresses=127.0.0.1", "-c", "fsync=off"])
-            .args(["-c", "synchronous_commit=off", "-c", "full_page_writes=off", "-c", "max_connections=200"])
+            .args([
+                "-p",
+                &port.to_string(),
+                "-c",
+                "listen_addresses=127.0.0.1",
+                "-c",
+                "fsync=off",
+            ])
+            .args([
+                "-c",
+                "synchronous_commit=off",
+                "-c",
+                "full_page_writes=off",
+                "-c",
+                "max_connections=200",
+            ])
             .arg("-k")
             .arg(dir)
             .stdin(Stdio::null())
@@ -151,12 +198,20 @@ impl Postgres {
                 panic!("postgres exited ({status}): {}", self.log());
             }
             if std::net::TcpStream::connect(("127.0.0.1", self.port)).is_ok()
-                && self.dir.path().join(format!(".s.PGSQL.{}", self.port)).exists()
+                && self
+                    .dir
+                    .path()
+                    .join(format!(".s.PGSQL.{}", self.port))
+                    .exists()
                 && self.log().contains("ready to accept connections")
             {
                 return;
             }
-            assert!(Instant::now() < deadline, "postgres not ready after 30 s: {}", self.log());
+            assert!(
+                Instant::now() < deadline,
+                "postgres not ready after 30 s: {}",
+                self.log()
+            );
             std::thread::sleep(Duration::from_millis(50));
         }
     }
@@ -178,7 +233,11 @@ impl Postgres {
 
     /// A URL of the default database over the unix socket in the temp dir.
     pub fn socket_url(&self) -> String {
-        format!("postgres://choreo@localhost/postgres?host={}&port={}", self.dir.path().display(), self.port)
+        format!(
+            "postgres://choreo@localhost/postgres?host={}&port={}",
+            self.dir.path().display(),
+            self.port
+        )
     }
 }
 

@@ -12,7 +12,10 @@ use tch::Tensor;
 use super::style::ServedStyle;
 use super::{DanceNet, ModelFile, Sampling, ID};
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
-use crate::models::{smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress, StyleChoice};
+use crate::models::{
+    smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
+    InstancePool, ModelError, ModelId, ModelInfo, Progress, StyleChoice,
+};
 use crate::motion::repr::RootStart;
 use crate::motion::rig::Rig;
 use crate::motion::rotations;
@@ -39,15 +42,30 @@ pub struct Generation {
 impl Served {
     /// Loads `dir/model.json`, the weights, the seed clips and (when present) the style classifier.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| DanceNet::new(p, f.config.clone()))?;
+        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| {
+            DanceNet::new(p, f.config.clone())
+        })?;
         let rig = Rig::from_offsets(&file.extra.rig)?;
         let width = (file.config.pose_dim + file.config.contacts) as usize;
         if rotations::Layout::of(&rig).dim() != file.config.pose_dim as usize {
-            return Err(ModelError::BadModelFile(format!("{ID}: the rig's features are not {} wide", file.config.pose_dim)));
+            return Err(ModelError::BadModelFile(format!(
+                "{ID}: the rig's features are not {} wide",
+                file.config.pose_dim
+            )));
         }
         let clips = SeedClips::load(&dir.join(SEED_CLIPS_FILE), width)?;
-        let style = if dir.join(super::style::STYLE_FILE).exists() { Some(ServedStyle::load(dir)?) } else { None };
-        Ok(Self { file, rig, clips, style, pool })
+        let style = if dir.join(super::style::STYLE_FILE).exists() {
+            Some(ServedStyle::load(dir)?)
+        } else {
+            None
+        };
+        Ok(Self {
+            file,
+            rig,
+            clips,
+            style,
+            pool,
+        })
     }
 
     /// The model's description file.
@@ -56,21 +74,48 @@ impl Served {
     }
 
     /// The style to dance: the request's, or the classifier's most likely one for the song.
-    fn style_of(&self, req: &GenerateRequest<'_>, features: &Array2<f32>) -> Result<StyleChoice, ModelError> {
+    fn style_of(
+        &self,
+        req: &GenerateRequest<'_>,
+        features: &Array2<f32>,
+    ) -> Result<StyleChoice, ModelError> {
         if let Some(style) = req.style {
-            return Ok(StyleChoice { style, predicted: false, probabilities: vec![] });
+            return Ok(StyleChoice {
+                style,
+                predicted: false,
+                probabilities: vec![],
+            });
         }
-        let classifier = self.style.as_ref().ok_or_else(|| ModelError::MissingWeights(format!("{ID} style classifier"), super::style::STYLE_FILE.into()))?;
+        let classifier = self.style.as_ref().ok_or_else(|| {
+            ModelError::MissingWeights(
+                format!("{ID} style classifier"),
+                super::style::STYLE_FILE.into(),
+            )
+        })?;
         let p = classifier.predict(features)?;
-        Ok(StyleChoice { style: super::style::most_probable(&p), predicted: true, probabilities: p.to_vec() })
+        Ok(StyleChoice {
+            style: super::style::most_probable(&p),
+            predicted: true,
+            probabilities: p.to_vec(),
+        })
     }
 
     /// Generates `n` frames of rotation features for `req`. The context is the request's seed
     /// motion (which then opens the dance), else a real clip drawn by the seed (context only).
-    pub fn generate_features(&self, req: &GenerateRequest<'_>, n: usize, progress: &mut dyn Progress) -> Result<Generation, ModelError> {
+    pub fn generate_features(
+        &self,
+        req: &GenerateRequest<'_>,
+        n: usize,
+        progress: &mut dyn Progress,
+    ) -> Result<Generation, ModelError> {
         let fps = self.file.fps;
         let d = self.file.config.pose_dim as usize;
-        let sampling = Sampling { temperature: req.temperature.unwrap_or(self.file.extra.sampling.temperature), ..self.file.extra.sampling };
+        let sampling = Sampling {
+            temperature: req
+                .temperature
+                .unwrap_or(self.file.extra.sampling.temperature),
+            ..self.file.extra.sampling
+        };
         progress.report(Stage::Features, 0.0)?;
         let feats = crate::audio::features::dancenet(req.audio, fps, 0.0, n)?;
         progress.report(Stage::Features, 1.0)?;
@@ -83,7 +128,8 @@ impl Served {
                 let keep = m.num_frames().min(n);
                 let enc = rotations::encode(&self.rig, m.positions.slice(s![..keep, .., ..]), fps)?;
                 let feats = self.file.pose_norm.normalize(&enc.features)?;
-                let rows = concatenate(Axis(1), &[feats.view(), enc.contacts.view()]).map_err(|e| ModelError::Shape(e.to_string()))?;
+                let rows = concatenate(Axis(1), &[feats.view(), enc.contacts.view()])
+                    .map_err(|e| ModelError::Shape(e.to_string()))?;
                 (rows, keep, enc.start)
             }
             _ => (self.clips.pick(req.seed), 0, RootStart::default()),
@@ -103,22 +149,57 @@ impl Served {
                 let tail = m.min(rf + 1);
                 let ctx = context.slice(s![m - tail.., ..]).to_owned();
                 let rows = if opening > 0 {
-                    code.narrow(0, (opening - tail + 1) as i64, (n - opening + tail - 1) as i64)
+                    code.narrow(
+                        0,
+                        (opening - tail + 1) as i64,
+                        (n - opening + tail - 1) as i64,
+                    )
                 } else {
-                    Tensor::cat(&[code.narrow(0, 0, 1).repeat([(tail - 1) as i64, 1]), code.shallow_clone()], 0)
+                    Tensor::cat(
+                        &[
+                            code.narrow(0, 0, 1).repeat([(tail - 1) as i64, 1]),
+                            code.shallow_clone(),
+                        ],
+                        0,
+                    )
                 };
                 let total = (n - opening).max(1);
                 let mut rng = StdRng::seed_from_u64(req.seed ^ 0xDA_2CE_2E7);
-                Ok(model.sample(&ctx, &rows, style.style.index(), sampling, &mut rng, |done| progress.report(Stage::Generate, done as f32 / total as f32).is_ok()))
+                Ok(model.sample(
+                    &ctx,
+                    &rows,
+                    style.style.index(),
+                    sampling,
+                    &mut rng,
+                    |done| {
+                        progress
+                            .report(Stage::Generate, done as f32 / total as f32)
+                            .is_ok()
+                    },
+                ))
             })
         })??;
-        let Some(sampled) = out else { return Err(Cancelled.into()) };
-        let rows = if opening > 0 { concatenate(Axis(0), &[context.view(), sampled.view()]).map_err(|e| ModelError::Shape(e.to_string()))? } else { sampled };
-        let mut features = self.file.pose_norm.denormalize(&rows.slice(s![.., ..d]).to_owned())?;
+        let Some(sampled) = out else {
+            return Err(Cancelled.into());
+        };
+        let rows = if opening > 0 {
+            concatenate(Axis(0), &[context.view(), sampled.view()])
+                .map_err(|e| ModelError::Shape(e.to_string()))?
+        } else {
+            sampled
+        };
+        let mut features = self
+            .file
+            .pose_norm
+            .denormalize(&rows.slice(s![.., ..d]).to_owned())?;
         // σ of 2 frames (0.08 s, served) keeps 60 % of a 2-Hz movement and removes what is faster
         // than 5 Hz.
         smooth_columns(&mut features, opening, self.file.extra.smooth_frames);
-        Ok(Generation { features, start, style })
+        Ok(Generation {
+            features,
+            start,
+            style,
+        })
     }
 }
 
@@ -131,11 +212,18 @@ impl DanceModel for Served {
         }
     }
 
-    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
+    fn generate(
+        &self,
+        req: &GenerateRequest<'_>,
+        progress: &mut dyn Progress,
+    ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let n = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
         let g = self.generate_features(req, n, progress)?;
         let motion = rotations::decode(&self.rig, g.features.view(), g.start, self.file.fps)?;
-        Ok(Generated { motion, style: Some(g.style) })
+        Ok(Generated {
+            motion,
+            style: Some(g.style),
+        })
     }
 }

@@ -89,7 +89,12 @@ impl StyleConfig {
 
     /// A tiny configuration for tests and smoke runs.
     pub fn tiny() -> Self {
-        Self { channels: vec![4, 6, 8], hidden: 8, dropout: 0.0, ..Self::cpu() }
+        Self {
+            channels: vec![4, 6, 8],
+            hidden: 8,
+            dropout: 0.0,
+            ..Self::cpu()
+        }
     }
 
     /// Steps the LSTM sees for an `n`-frame input, or `None` when a convolution would get fewer
@@ -140,13 +145,28 @@ impl StyleClassifier {
         let mut convs = Vec::with_capacity(c.channels.len());
         let mut inp = c.input_dim;
         for (i, &out) in c.channels.iter().enumerate() {
-            convs.push(nn::conv1d(p / "conv" / i, inp, out, c.kernel, Default::default()));
+            convs.push(nn::conv1d(
+                p / "conv" / i,
+                inp,
+                out,
+                c.kernel,
+                Default::default(),
+            ));
             inp = out;
         }
-        let rnn = nn::RNNConfig { bidirectional: true, batch_first: true, ..Default::default() };
+        let rnn = nn::RNNConfig {
+            bidirectional: true,
+            batch_first: true,
+            ..Default::default()
+        };
         let lstm = nn::lstm(p / "lstm", inp, c.hidden, rnn);
         let fc = nn::linear(p / "fc", 2 * c.hidden, c.classes, Default::default());
-        Self { convs, lstm, fc, config: c.clone() }
+        Self {
+            convs,
+            lstm,
+            fc,
+            config: c.clone(),
+        }
     }
 
     /// The configuration it was built with.
@@ -192,7 +212,10 @@ pub fn windows(n: usize, len: usize, hop: usize) -> Vec<Range<usize>> {
     if n <= len {
         return std::iter::once(0..n).collect();
     }
-    let mut out: Vec<Range<usize>> = (0..=n - len).step_by(hop.max(1)).map(|s| s..s + len).collect();
+    let mut out: Vec<Range<usize>> = (0..=n - len)
+        .step_by(hop.max(1))
+        .map(|s| s..s + len)
+        .collect();
     if out.last().is_some_and(|w| w.end < n) {
         out.push(n - len..n);
     }
@@ -200,18 +223,33 @@ pub fn windows(n: usize, len: usize, hop: usize) -> Vec<Range<usize>> {
 }
 
 /// Softmax `[windows, classes]` of each window of normalised features `x` `[T, F]`.
-pub fn window_probabilities(model: &StyleClassifier, x: &Array2<f32>, len: usize, hop: usize) -> Result<Tensor, ModelError> {
+pub fn window_probabilities(
+    model: &StyleClassifier,
+    x: &Array2<f32>,
+    len: usize,
+    hop: usize,
+) -> Result<Tensor, ModelError> {
     let (n, f) = x.dim();
     let min = model.config().min_frames();
     if n < min {
-        return Err(ModelError::Input(format!("{n} frames is too short to classify (at least {min})")));
+        return Err(ModelError::Input(format!(
+            "{n} frames is too short to classify (at least {min})"
+        )));
     }
     if f as i64 != model.config().input_dim {
-        return Err(ModelError::Shape(format!("{f} features per frame, the classifier takes {}", model.config().input_dim)));
+        return Err(ModelError::Shape(format!(
+            "{f} features per frame, the classifier takes {}",
+            model.config().input_dim
+        )));
     }
-    let parts: Vec<Tensor> = windows(n, len, hop).into_iter().map(|w| crate::models::to_tensor(&x.slice(s![w, ..]).to_owned())).collect();
+    let parts: Vec<Tensor> = windows(n, len, hop)
+        .into_iter()
+        .map(|w| crate::models::to_tensor(&x.slice(s![w, ..]).to_owned()))
+        .collect();
     let batch = Tensor::stack(&parts, 0); // [windows, len, F]
-    Ok(tch::no_grad(|| model.forward(&batch, false).softmax(-1, Kind::Float)))
+    Ok(tch::no_grad(|| {
+        model.forward(&batch, false).softmax(-1, Kind::Float)
+    }))
 }
 
 /// One dance (or song) to classify: its id, its style, and its normalised features `[T, F]`.
@@ -253,11 +291,25 @@ pub struct Evaluation {
 }
 
 fn argmax(p: &[f32]) -> usize {
-    p.iter().enumerate().fold((0, f32::NEG_INFINITY), |best, (i, &v)| if v > best.1 { (i, v) } else { best }).0
+    p.iter()
+        .enumerate()
+        .fold((0, f32::NEG_INFINITY), |best, (i, &v)| {
+            if v > best.1 {
+                (i, v)
+            } else {
+                best
+            }
+        })
+        .0
 }
 
 /// Classifies every window (`len`, `hop`, as served) of every dance and tallies the result.
-pub fn evaluate(model: &StyleClassifier, dances: &[Labelled], len: usize, hop: usize) -> Result<Evaluation, ModelError> {
+pub fn evaluate(
+    model: &StyleClassifier,
+    dances: &[Labelled],
+    len: usize,
+    hop: usize,
+) -> Result<Evaluation, ModelError> {
     let mut e = Evaluation::default();
     let mut loss = 0.0;
     for d in dances {
@@ -277,7 +329,13 @@ pub fn evaluate(model: &StyleClassifier, dances: &[Labelled], len: usize, hop: u
         }
         e.dance_confusion[truth][argmax(&mean)] += 1;
         e.windows += rows.len();
-        e.per_dance.push(DanceResult { id: d.id.clone(), style: d.style, windows: rows.len(), windows_right: right, probabilities: mean });
+        e.per_dance.push(DanceResult {
+            id: d.id.clone(),
+            style: d.style,
+            windows: rows.len(),
+            windows_right: right,
+            probabilities: mean,
+        });
     }
     e.dances = dances.len();
     let diag = |m: &[[usize; STYLES]; STYLES]| (0..STYLES).map(|i| m[i][i]).sum::<usize>() as f64;
@@ -306,12 +364,27 @@ pub struct WindowedClassifier {
 
 impl WindowedClassifier {
     /// Loads `weights` into networks of `config`.
-    pub fn load(weights: PathBuf, config: StyleConfig, norm: NormStats, window: usize, hop: usize) -> Result<Self, ModelError> {
+    pub fn load(
+        weights: PathBuf,
+        config: StyleConfig,
+        norm: NormStats,
+        window: usize,
+        hop: usize,
+    ) -> Result<Self, ModelError> {
         if norm.dim() as i64 != config.input_dim {
-            return Err(ModelError::BadModelFile(format!("normalisation has {} features, the configuration {}", norm.dim(), config.input_dim)));
+            return Err(ModelError::BadModelFile(format!(
+                "normalisation has {} features, the configuration {}",
+                norm.dim(),
+                config.input_dim
+            )));
         }
         let pool = InstancePool::new(weights, move |p| StyleClassifier::new(p, &config))?;
-        Ok(Self { norm, window, hop, pool })
+        Ok(Self {
+            norm,
+            window,
+            hop,
+            pool,
+        })
     }
 
     /// Style probabilities ([`DanceStyle::ALL`] order) of raw features `[T, F]`: the mean of the
@@ -320,8 +393,13 @@ impl WindowedClassifier {
         if raw.iter().any(|v| !v.is_finite()) {
             return Err(ModelError::Input("features are not finite".into()));
         }
-        let x = self.norm.normalize(raw).map_err(|e| ModelError::Shape(e.to_string()))?;
-        let probs = self.pool.with(|m| window_probabilities(m, &x, self.window, self.hop))??;
+        let x = self
+            .norm
+            .normalize(raw)
+            .map_err(|e| ModelError::Shape(e.to_string()))?;
+        let probs = self
+            .pool
+            .with(|m| window_probabilities(m, &x, self.window, self.hop))??;
         let mean = Vec::<f32>::try_from(probs.mean_dim(0, false, Kind::Float))?;
         let mut out = [0f32; STYLES];
         for (o, v) in out.iter_mut().zip(mean) {
@@ -388,9 +466,21 @@ impl ServedStyle {
     /// Reads `dir/style.json` and loads `dir/style.safetensors`.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
         let path = dir.join(STYLE_FILE);
-        let text = std::fs::read_to_string(&path).map_err(|_| ModelError::MissingWeights(format!("{FOLDER} style classifier"), path.display().to_string()))?;
-        let file: StyleFile = serde_json::from_str(&text).map_err(|e| ModelError::BadModelFile(format!("{}: {e}", path.display())))?;
-        let classifier = WindowedClassifier::load(dir.join(STYLE_WEIGHTS_FILE), file.config.clone(), file.music_norm.clone(), file.window, file.hop)?;
+        let text = std::fs::read_to_string(&path).map_err(|_| {
+            ModelError::MissingWeights(
+                format!("{FOLDER} style classifier"),
+                path.display().to_string(),
+            )
+        })?;
+        let file: StyleFile = serde_json::from_str(&text)
+            .map_err(|e| ModelError::BadModelFile(format!("{}: {e}", path.display())))?;
+        let classifier = WindowedClassifier::load(
+            dir.join(STYLE_WEIGHTS_FILE),
+            file.config.clone(),
+            file.music_norm.clone(),
+            file.window,
+            file.hop,
+        )?;
         Ok(Self { file, classifier })
     }
 
@@ -406,9 +496,17 @@ impl ServedStyle {
     }
 
     /// [`ServedStyle::predict`] of a whole decoded song.
-    pub fn predict_song(&self, audio: &crate::audio::DecodedAudio) -> Result<[f32; STYLES], ModelError> {
+    pub fn predict_song(
+        &self,
+        audio: &crate::audio::DecodedAudio,
+    ) -> Result<[f32; STYLES], ModelError> {
         let n = crate::motion::validate::song_frames(audio.duration_s, self.file.fps);
-        self.predict(&crate::audio::features::dancenet(audio, self.file.fps, 0.0, n)?)
+        self.predict(&crate::audio::features::dancenet(
+            audio,
+            self.file.fps,
+            0.0,
+            n,
+        )?)
     }
 }
 
@@ -443,16 +541,32 @@ mod tests {
         assert_eq!(c.min_frames(), 8);
         assert_eq!(c.steps(750), Some(93));
         assert_eq!(m.forward(&x(1, 8), false).size(), vec![1, 4]);
-        assert_eq!(StyleConfig { pool: 1, ..c.clone() }.min_frames(), 4);
+        assert_eq!(
+            StyleConfig {
+                pool: 1,
+                ..c.clone()
+            }
+            .min_frames(),
+            4
+        );
         let vs = nn::VarStore::new(Device::Cpu);
-        let last = StyleClassifier::new(&vs.root(), &StyleConfig { readout: Readout::Last, ..c });
+        let last = StyleClassifier::new(
+            &vs.root(),
+            &StyleConfig {
+                readout: Readout::Last,
+                ..c
+            },
+        );
         assert_eq!(last.forward(&x(2, 20), false).size(), vec![2, 4]);
     }
 
     #[test]
     fn windows_cover_the_sequence_to_its_end() {
         assert_eq!(windows(100, 40, 20), vec![0..40, 20..60, 40..80, 60..100]);
-        assert_eq!(windows(105, 40, 20), vec![0..40, 20..60, 40..80, 60..100, 65..105]);
+        assert_eq!(
+            windows(105, 40, 20),
+            vec![0..40, 20..60, 40..80, 60..100, 65..105]
+        );
         assert_eq!(windows(30, 40, 20), vec![0..30]);
         assert!(windows(0, 40, 20).is_empty());
     }
@@ -463,7 +577,11 @@ mod tests {
         let (_a, a) = model(7);
         let (_b, b) = model(7);
         let (_c, c) = model(8);
-        let (ya, yb, yc) = (a.forward(&input, false), b.forward(&input, false), c.forward(&input, false));
+        let (ya, yb, yc) = (
+            a.forward(&input, false),
+            b.forward(&input, false),
+            c.forward(&input, false),
+        );
         assert_eq!((&ya - &yb).abs().max().double_value(&[]), 0.0);
         assert!((&ya - &yc).abs().max().double_value(&[]) > 1e-4);
     }
@@ -474,7 +592,9 @@ mod tests {
         let mut opt = nn::Adam::default().build(&vs, 1e-2).unwrap();
         // Four styles told apart by a per-class offset of the first feature.
         let y = Tensor::from_slice(&[0i64, 1, 2, 3, 0, 1, 2, 3]);
-        let shift: Vec<f32> = (0..8).flat_map(|i| (0..40 * 15).map(move |k| if k % 15 == 0 { (i % 4) as f32 } else { 0.0 })).collect();
+        let shift: Vec<f32> = (0..8)
+            .flat_map(|i| (0..40 * 15).map(move |k| if k % 15 == 0 { (i % 4) as f32 } else { 0.0 }))
+            .collect();
         let input = x(8, 40) * 0.5 + Tensor::from_slice(&shift).view([8, 40, 15]);
         let first = m.loss(&input, &y, true).double_value(&[]);
         for _ in 0..60 {
@@ -487,8 +607,21 @@ mod tests {
     #[test]
     fn evaluation_tallies_windows_and_dances() {
         let (_vs, m) = model(1);
-        let d = |id: &str, style, t| Labelled { id: id.into(), style, features: Array2::from_shape_fn((t, 15), |(i, j)| ((i * 7 + j) % 5) as f32 - 2.0) };
-        let e = evaluate(&m, &[d("DANCE_W_1", DanceStyle::Waltz, 100), d("DANCE_C_1", DanceStyle::ChaCha, 30)], 40, 20).unwrap();
+        let d = |id: &str, style, t| Labelled {
+            id: id.into(),
+            style,
+            features: Array2::from_shape_fn((t, 15), |(i, j)| ((i * 7 + j) % 5) as f32 - 2.0),
+        };
+        let e = evaluate(
+            &m,
+            &[
+                d("DANCE_W_1", DanceStyle::Waltz, 100),
+                d("DANCE_C_1", DanceStyle::ChaCha, 30),
+            ],
+            40,
+            20,
+        )
+        .unwrap();
         assert_eq!((e.windows, e.dances), (5, 2));
         assert_eq!(e.window_confusion.iter().flatten().sum::<usize>(), 5);
         assert_eq!(e.window_confusion[3].iter().sum::<usize>(), 4);
@@ -502,9 +635,36 @@ mod tests {
     fn served(dir: &Path, window: usize, hop: usize) -> ServedStyle {
         let (vs, _m) = model(3);
         vs.save(dir.join(STYLE_WEIGHTS_FILE)).unwrap();
-        let norm = NormStats { mean: vec![0.5; 15], std: vec![2.0; 15] };
-        let training = TrainingRecord { epochs: 0, lr: 0.0, batch: 0, seed: 0, final_train_loss: 0.0, minutes: 0.0, extra: Schedule { windows_per_epoch: 0, sampling: String::new(), augmentation: String::new(), no_style: String::new(), no_style_per_batch: 0, steps: 0 } };
-        let file = StyleFile { config: StyleConfig::tiny(), music_norm: norm, fps: FPS, window, hop, training, test: Evaluation::default(), held_out: None };
+        let norm = NormStats {
+            mean: vec![0.5; 15],
+            std: vec![2.0; 15],
+        };
+        let training = TrainingRecord {
+            epochs: 0,
+            lr: 0.0,
+            batch: 0,
+            seed: 0,
+            final_train_loss: 0.0,
+            minutes: 0.0,
+            extra: Schedule {
+                windows_per_epoch: 0,
+                sampling: String::new(),
+                augmentation: String::new(),
+                no_style: String::new(),
+                no_style_per_batch: 0,
+                steps: 0,
+            },
+        };
+        let file = StyleFile {
+            config: StyleConfig::tiny(),
+            music_norm: norm,
+            fps: FPS,
+            window,
+            hop,
+            training,
+            test: Evaluation::default(),
+            held_out: None,
+        };
         std::fs::write(dir.join(STYLE_FILE), serde_json::to_string(&file).unwrap()).unwrap();
         ServedStyle::load(dir).unwrap()
     }
@@ -520,15 +680,26 @@ mod tests {
         let (mut vs, m) = model(0);
         vs.load(dir.path().join(STYLE_WEIGHTS_FILE)).unwrap();
         let norm = s.file().music_norm.normalize(&raw).unwrap();
-        let by_hand = Vec::<f32>::try_from(window_probabilities(&m, &norm, 40, 20).unwrap().mean_dim(0, false, Kind::Float)).unwrap();
+        let by_hand = Vec::<f32>::try_from(
+            window_probabilities(&m, &norm, 40, 20)
+                .unwrap()
+                .mean_dim(0, false, Kind::Float),
+        )
+        .unwrap();
         for (a, b) in p.iter().zip(&by_hand) {
             assert!((a - b).abs() < 1e-6, "{p:?} vs {by_hand:?}");
         }
         // A song shorter than the window is one window; one shorter than the network's reach,
         // the wrong width, or NaN, an error.
         assert!(s.predict(&raw.slice(s![..30, ..]).to_owned()).is_ok());
-        assert!(matches!(s.predict(&raw.slice(s![..5, ..]).to_owned()), Err(ModelError::Input(_))));
-        assert!(matches!(s.predict(&raw.slice(s![.., ..14]).to_owned()), Err(ModelError::Shape(_))));
+        assert!(matches!(
+            s.predict(&raw.slice(s![..5, ..]).to_owned()),
+            Err(ModelError::Input(_))
+        ));
+        assert!(matches!(
+            s.predict(&raw.slice(s![.., ..14]).to_owned()),
+            Err(ModelError::Shape(_))
+        ));
         let mut bad = raw.clone();
         bad[[3, 3]] = f32::NAN;
         assert!(matches!(s.predict(&bad), Err(ModelError::Input(_))));
@@ -543,7 +714,9 @@ mod tests {
         let raw = Array2::from_shape_fn((90, 15), |(t, c)| ((t + c) % 7) as f32);
         let want = s.predict(&raw).unwrap();
         std::thread::scope(|sc| {
-            let handles: Vec<_> = (0..3).map(|_| sc.spawn(|| s.predict(&raw).unwrap())).collect();
+            let handles: Vec<_> = (0..3)
+                .map(|_| sc.spawn(|| s.predict(&raw).unwrap()))
+                .collect();
             for h in handles {
                 assert_eq!(h.join().unwrap(), want);
             }
@@ -553,6 +726,9 @@ mod tests {
     #[test]
     fn missing_files_say_so() {
         let dir = tempfile::tempdir().unwrap();
-        assert!(matches!(ServedStyle::load(dir.path()), Err(ModelError::MissingWeights(..))));
+        assert!(matches!(
+            ServedStyle::load(dir.path()),
+            Err(ModelError::MissingWeights(..))
+        ));
     }
 }

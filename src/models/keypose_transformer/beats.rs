@@ -38,8 +38,19 @@ impl SongCues {
     /// Cues of an `n`-frame dance at `fps` from the song's analysis (beat and downbeat times in
     /// seconds) and its onset strength per frame. Fewer than two beats (silence, a click):
     /// a grid every `fallback_period` frames.
-    pub fn new(beat_times_s: &[f64], downbeat_times_s: &[f64], onset: &[f32], fps: f64, n: usize, fallback_period: f64) -> Self {
-        let tracked: Vec<f64> = beat_times_s.iter().map(|t| t * fps).filter(|f| f.is_finite()).collect();
+    pub fn new(
+        beat_times_s: &[f64],
+        downbeat_times_s: &[f64],
+        onset: &[f32],
+        fps: f64,
+        n: usize,
+        fallback_period: f64,
+    ) -> Self {
+        let tracked: Vec<f64> = beat_times_s
+            .iter()
+            .map(|t| t * fps)
+            .filter(|f| f.is_finite())
+            .collect();
         let period = median_step(&tracked).unwrap_or(fallback_period).max(1.0);
         let mut beats = Vec::with_capacity(tracked.len() + 8);
         for (i, &b) in tracked.iter().enumerate() {
@@ -73,14 +84,26 @@ impl SongCues {
             beats.push(beats[0] + period);
         }
         let down: Vec<f64> = downbeat_times_s.iter().map(|t| t * fps).collect();
-        let bar = median_step(&down).map_or(4, |d| if (d / period).round() as usize == 3 { 3 } else { 4 });
+        let bar = median_step(&down).map_or(4, |d| {
+            if (d / period).round() as usize == 3 {
+                3
+            } else {
+                4
+            }
+        });
         let mut energy = Vec::with_capacity(onset.len() + 1);
         energy.push(0.0);
         for &v in onset {
             let last = *energy.last().unwrap_or(&0.0);
             energy.push(last + f64::from(v).max(0.0));
         }
-        Self { beats, period, bar, energy, fps }
+        Self {
+            beats,
+            period,
+            bar,
+            energy,
+            fps,
+        }
     }
 
     /// Mean onset strength within [`ENERGY_HALF_S`] of `frame`; 0 without onsets.
@@ -101,7 +124,11 @@ impl SongCues {
 
 /// Median of the steps of an ascending sequence; none with fewer than two values.
 pub fn median_step(x: &[f64]) -> Option<f64> {
-    let mut d: Vec<f64> = x.windows(2).map(|p| p[1] - p[0]).filter(|d| *d > 0.0).collect();
+    let mut d: Vec<f64> = x
+        .windows(2)
+        .map(|p| p[1] - p[0])
+        .filter(|d| *d > 0.0)
+        .collect();
     if d.is_empty() {
         return None;
     }
@@ -166,7 +193,11 @@ pub fn row_at(rows: ArrayView2<'_, f32>, t: f64) -> Vec<f32> {
     let i = (t.floor() as usize).min(l - 1);
     let j = (i + 1).min(l - 1);
     let w = (t - i as f64) as f32;
-    rows.row(i).iter().zip(rows.row(j).iter()).map(|(a, b)| a + w * (b - a)).collect()
+    rows.row(i)
+        .iter()
+        .zip(rows.row(j).iter())
+        .map(|(a, b)| a + w * (b - a))
+        .collect()
 }
 
 /// Feature rows `[l, 73]` read at song frames `0..n` through `map` (song frame → clip frame): a
@@ -193,11 +224,20 @@ mod tests {
     #[test]
     fn the_grid_fills_missed_beats_and_covers_the_dance() {
         // Beats every 0.5 s from 1 s, one missed at 3 s; 10 s at 25 fps.
-        let times: Vec<f64> = (2..20).map(|k| k as f64 * 0.5).filter(|t| (*t - 3.0).abs() > 1e-9).collect();
+        let times: Vec<f64> = (2..20)
+            .map(|k| k as f64 * 0.5)
+            .filter(|t| (*t - 3.0).abs() > 1e-9)
+            .collect();
         let c = SongCues::new(&times, &[1.0, 3.0, 5.0, 7.0], &[1.0; 250], 25.0, 250, 12.0);
         assert!((c.period - 12.5).abs() < 1e-9);
         assert!(c.beats[0] <= 0.0 && *c.beats.last().unwrap() >= 249.0);
-        assert!(c.beats.windows(2).all(|p| (p[1] - p[0] - 12.5).abs() < 1e-9), "{:?}", c.beats);
+        assert!(
+            c.beats
+                .windows(2)
+                .all(|p| (p[1] - p[0] - 12.5).abs() < 1e-9),
+            "{:?}",
+            c.beats
+        );
         assert_eq!(c.bar, 4);
         assert!((c.energy_at(100.0) - 1.0).abs() < 1e-9);
         // Three beats a bar.
@@ -206,7 +246,12 @@ mod tests {
         assert_eq!(w.energy_at(10.0), 0.0);
         // No beats: the fallback grid.
         let s = SongCues::new(&[], &[], &[], 25.0, 100, 12.0);
-        assert!(s.beats.windows(2).all(|p| (p[1] - p[0] - 12.0).abs() < 1e-9) && s.beats.len() >= 9);
+        assert!(
+            s.beats
+                .windows(2)
+                .all(|p| (p[1] - p[0] - 12.0).abs() < 1e-9)
+                && s.beats.len() >= 9
+        );
     }
 
     #[test]
@@ -230,7 +275,13 @@ mod tests {
 
     #[test]
     fn resampled_rows_follow_the_map_and_scale_velocities() {
-        let rows = Array2::from_shape_fn((50, crate::motion::repr::FEATURE_DIM), |(t, c)| if c == ROOT_VX { 0.02 } else { t as f32 });
+        let rows = Array2::from_shape_fn((50, crate::motion::repr::FEATURE_DIM), |(t, c)| {
+            if c == ROOT_VX {
+                0.02
+            } else {
+                t as f32
+            }
+        });
         // Played twice as fast: song frame s reads clip frame 2s + 1.
         let map = TimeMap::new([(0.0, 1.0), (10.0, 21.0)]).unwrap();
         let out = resample_rows(rows.view(), &map, 12);

@@ -154,7 +154,11 @@ pub struct Scaffold {
 }
 
 fn distance(a: ArrayView1<'_, f32>, b: ArrayView1<'_, f32>) -> f32 {
-    a.iter().zip(b.iter()).take(POSE_DIM).map(|(x, y)| (x - y) * (x - y)).sum()
+    a.iter()
+        .zip(b.iter())
+        .take(POSE_DIM)
+        .map(|(x, y)| (x - y) * (x - y))
+        .sum()
 }
 
 impl PoseBank {
@@ -162,22 +166,43 @@ impl PoseBank {
     pub fn new(clips: Array3<f32>) -> Result<Self, ModelError> {
         let (k, l, d) = clips.dim();
         if k == 0 || l < 2 || d < POSE_DIM {
-            return Err(ModelError::BadModelFile(format!("pose bank of shape [{k}, {l}, {d}]")));
+            return Err(ModelError::BadModelFile(format!(
+                "pose bank of shape [{k}, {l}, {d}]"
+            )));
         }
         if clips.iter().any(|v| !v.is_finite()) {
-            return Err(ModelError::BadModelFile("pose bank has non-finite values".into()));
+            return Err(ModelError::BadModelFile(
+                "pose bank has non-finite values".into(),
+            ));
         }
-        let speeds = if d == FEATURE_DIM { Self::step_speeds(&clips)? } else { Array2::zeros((0, 0)) };
-        Ok(Self { clips, speeds, meta: None })
+        let speeds = if d == FEATURE_DIM {
+            Self::step_speeds(&clips)?
+        } else {
+            Array2::zeros((0, 0))
+        };
+        Ok(Self {
+            clips,
+            speeds,
+            meta: None,
+        })
     }
 
     /// The bank with each clip's source and beats (one [`ClipInfo`] per clip, beats within it).
     pub fn with_meta(mut self, meta: BankMeta) -> Result<Self, ModelError> {
         let (k, l, _) = self.clips.dim();
         if meta.clips.len() != k {
-            return Err(ModelError::BadModelFile(format!("{POSE_BANK_META_FILE} describes {} clips, the bank holds {k}", meta.clips.len())));
+            return Err(ModelError::BadModelFile(format!(
+                "{POSE_BANK_META_FILE} describes {} clips, the bank holds {k}",
+                meta.clips.len()
+            )));
         }
-        let bad = meta.clips.iter().any(|c| c.beats.iter().any(|b| !b.is_finite() || *b < 0.0 || *b > (l - 1) as f64) || c.beats.windows(2).any(|p| p[1] <= p[0]) || !c.energy.is_finite());
+        let bad = meta.clips.iter().any(|c| {
+            c.beats
+                .iter()
+                .any(|b| !b.is_finite() || *b < 0.0 || *b > (l - 1) as f64)
+                || c.beats.windows(2).any(|p| p[1] <= p[0])
+                || !c.energy.is_finite()
+        });
         if bad {
             return Err(ModelError::BadModelFile(format!("{POSE_BANK_META_FILE}: beats outside their clip, out of order, or a non-finite energy")));
         }
@@ -198,7 +223,8 @@ impl PoseBank {
             let mut f = clip.to_owned();
             f.column_mut(repr::ROOT_Y).fill(0.0);
             let fps = crate::motion::MOTION_FPS;
-            let (motion, _) = repr::from_features(f.view(), repr::RootStart::default(), fps).map_err(|e| ModelError::BadModelFile(e.to_string()))?;
+            let (motion, _) = repr::from_features(f.view(), repr::RootStart::default(), fps)
+                .map_err(|e| ModelError::BadModelFile(e.to_string()))?;
             let v = crate::metrics::kinematics::mean_speed(motion.positions.view(), fps);
             out.row_mut(c).assign(&ndarray::Array1::from(v));
         }
@@ -221,8 +247,10 @@ impl PoseBank {
         if !meta_path.exists() {
             return Ok(bank);
         }
-        let text = std::fs::read_to_string(&meta_path).map_err(|e| ModelError::BadModelFile(format!("{}: {e}", meta_path.display())))?;
-        let meta: BankMeta = serde_json::from_str(&text).map_err(|e| ModelError::BadModelFile(format!("{}: {e}", meta_path.display())))?;
+        let text = std::fs::read_to_string(&meta_path)
+            .map_err(|e| ModelError::BadModelFile(format!("{}: {e}", meta_path.display())))?;
+        let meta: BankMeta = serde_json::from_str(&text)
+            .map_err(|e| ModelError::BadModelFile(format!("{}: {e}", meta_path.display())))?;
         bank.with_meta(meta)
     }
 
@@ -230,8 +258,10 @@ impl PoseBank {
     pub fn save(&self, path: &Path) -> Result<(), ModelError> {
         crate::models::folder::write_clips(&self.clips, path)?;
         if let Some(meta) = &self.meta {
-            let text = serde_json::to_string_pretty(meta).map_err(|e| ModelError::BadModelFile(e.to_string()))?;
-            std::fs::write(path.with_file_name(POSE_BANK_META_FILE), text + "\n").map_err(|e| ModelError::BadModelFile(e.to_string()))?;
+            let text = serde_json::to_string_pretty(meta)
+                .map_err(|e| ModelError::BadModelFile(e.to_string()))?;
+            std::fs::write(path.with_file_name(POSE_BANK_META_FILE), text + "\n")
+                .map_err(|e| ModelError::BadModelFile(e.to_string()))?;
         }
         Ok(())
     }
@@ -243,19 +273,36 @@ impl PoseBank {
 
     /// What `seed` draws for a dance of `frames` frames with seed length `ts`, scaffold poses every
     /// `spacing` frames (none for 0) kept `spacing` frames away from the user's `keys`.
-    pub fn scaffold(&self, seed: u64, frames: usize, ts: usize, spacing: usize, keys: &[LocalKey]) -> Scaffold {
+    pub fn scaffold(
+        &self,
+        seed: u64,
+        frames: usize,
+        ts: usize,
+        spacing: usize,
+        keys: &[LocalKey],
+    ) -> Scaffold {
         let (k, l, _) = self.clips.dim();
         let ts = ts.min(l);
         let mut rng = StdRng::seed_from_u64(seed ^ 0x5CAF_F01D);
         let need = frames.clamp(ts, START_STRETCH).min(l);
         // Every draw is made, so what follows does not depend on which was taken.
-        let draws: Vec<(usize, usize)> = (0..START_TRIES).map(|_| (rng.gen_range(0..k), rng.gen_range(0..=l - need))).collect();
-        let origin = draws.iter().copied().find(|&(c, at)| self.pace(c, at, need) >= LIVELY_M_S).unwrap_or(draws[0]);
+        let draws: Vec<(usize, usize)> = (0..START_TRIES)
+            .map(|_| (rng.gen_range(0..k), rng.gen_range(0..=l - need)))
+            .collect();
+        let origin = draws
+            .iter()
+            .copied()
+            .find(|&(c, at)| self.pace(c, at, need) >= LIVELY_M_S)
+            .unwrap_or(draws[0]);
         let (mut clip, start) = origin;
         let seed_rows = self.clips.slice(s![clip, start..start + ts, ..]).to_owned();
         let mut poses = Vec::new();
         if spacing == 0 {
-            return Scaffold { seed: seed_rows, poses, start: origin };
+            return Scaffold {
+                seed: seed_rows,
+                poses,
+                start: origin,
+            };
         }
         let mut cursor = start + ts - 1;
         let mut frame = ts - 1 + spacing;
@@ -266,11 +313,18 @@ impl PoseBank {
             }
             let near_key = keys.iter().any(|key| key.frame.abs_diff(frame) < spacing);
             if !near_key {
-                poses.push((frame, self.clips.slice(s![clip, cursor, ..POSE_DIM]).to_vec()));
+                poses.push((
+                    frame,
+                    self.clips.slice(s![clip, cursor, ..POSE_DIM]).to_vec(),
+                ));
             }
             frame += spacing;
         }
-        Scaffold { seed: seed_rows, poses, start: origin }
+        Scaffold {
+            seed: seed_rows,
+            poses,
+            start: origin,
+        }
     }
 
     /// Clips ranked by how well they suit the song around song frame `at`, best first:
@@ -287,9 +341,20 @@ impl PoseBank {
             .filter_map(|(c, info)| {
                 let pc = info.period()?;
                 // The clip plays at rate u·pc/period (clip frames per song frame).
-                let (u, pace) = [0.5, 1.0, 2.0].map(|u| (u, (u * pc / cues.period).log2().abs())).into_iter().min_by(|a, b| a.1.total_cmp(&b.1))?;
-                let meter = if info.meter() == cues.bar { 0.0 } else { METER_PENALTY };
-                let energy = if e_song > 0.0 && info.energy > 0.0 { ENERGY_WEIGHT * (e_song / info.energy).ln().abs() } else { 0.0 };
+                let (u, pace) = [0.5, 1.0, 2.0]
+                    .map(|u| (u, (u * pc / cues.period).log2().abs()))
+                    .into_iter()
+                    .min_by(|a, b| a.1.total_cmp(&b.1))?;
+                let meter = if info.meter() == cues.bar {
+                    0.0
+                } else {
+                    METER_PENALTY
+                };
+                let energy = if e_song > 0.0 && info.energy > 0.0 {
+                    ENERGY_WEIGHT * (e_song / info.energy).ln().abs()
+                } else {
+                    0.0
+                };
                 Some((c, u, pace + meter + energy))
             })
             .collect();
@@ -300,24 +365,44 @@ impl PoseBank {
     /// The good candidates of a ranking: those within [`SCORE_MARGIN`] of the best, at least
     /// [`MIN_CANDIDATES`] and at most [`MAX_CANDIDATES`].
     fn good(ranked: &[(usize, f64, f64)]) -> Vec<(usize, f64)> {
-        let Some(best) = ranked.first().map(|r| r.2) else { return Vec::new() };
+        let Some(best) = ranked.first().map(|r| r.2) else {
+            return Vec::new();
+        };
         let within = ranked.iter().filter(|r| r.2 <= best + SCORE_MARGIN).count();
-        ranked.iter().take(within.clamp(MIN_CANDIDATES, MAX_CANDIDATES)).map(|r| (r.0, r.1)).collect()
+        ranked
+            .iter()
+            .take(within.clamp(MIN_CANDIDATES, MAX_CANDIDATES))
+            .map(|r| (r.0, r.1))
+            .collect()
     }
 
     /// What `seed` draws for a dance of `frames` frames to the song of `cues` with seed length
     /// `ts`, kept away from the user's `keys` (module doc); none for a bank without
     /// [`BankMeta`] or without a clip of two beats.
-    pub fn scaffold_to(&self, seed: u64, cues: &SongCues, frames: usize, ts: usize, keys: &[LocalKey]) -> Option<Scaffold> {
+    pub fn scaffold_to(
+        &self,
+        seed: u64,
+        cues: &SongCues,
+        frames: usize,
+        ts: usize,
+        keys: &[LocalKey],
+    ) -> Option<Scaffold> {
         let meta = self.meta.as_ref()?;
         let (_, l, _) = self.clips.dim();
         let ts = ts.min(l);
         // Beat index → clip frame of every clip.
-        let beat_maps: Vec<Option<TimeMap>> = meta.clips.iter().map(|c| TimeMap::new(c.beats.iter().enumerate().map(|(j, b)| (j as f64, *b)))).collect();
+        let beat_maps: Vec<Option<TimeMap>> = meta
+            .clips
+            .iter()
+            .map(|c| TimeMap::new(c.beats.iter().enumerate().map(|(j, b)| (j as f64, *b))))
+            .collect();
         let last_beat = |c: usize| meta.clips[c].beats.len().saturating_sub(1) as f64;
         let mut rng = StdRng::seed_from_u64(seed ^ 0x5CAF_F01D);
         let need = frames.clamp(ts, START_STRETCH);
-        let good: Vec<(usize, f64)> = Self::good(&Self::ranked(meta, cues, need as f64 / 2.0)).into_iter().filter(|g| beat_maps[g.0].is_some()).collect();
+        let good: Vec<(usize, f64)> = Self::good(&Self::ranked(meta, cues, need as f64 / 2.0))
+            .into_iter()
+            .filter(|g| beat_maps[g.0].is_some())
+            .collect();
         if good.is_empty() {
             return None;
         }
@@ -327,20 +412,32 @@ impl PoseBank {
             .map(|_| {
                 let (clip, u) = good[rng.gen_range(0..good.len())];
                 let room = (last_beat(clip) - u * MIN_RUN_BEATS).floor().max(0.0) as usize;
-                Run { clip, q: rng.gen_range(0..=room) as f64, u }
+                Run {
+                    clip,
+                    q: rng.gen_range(0..=room) as f64,
+                    u,
+                }
             })
             .collect();
         // The clip frames a run covers over the first stretch, and its pace there as retimed.
         let stretch = |r: &Run| -> f64 {
-            let Some(map) = beat_maps[r.clip].as_ref() else { return 0.0 };
+            let Some(map) = beat_maps[r.clip].as_ref() else {
+                return 0.0;
+            };
             let a = map.at(r.q + r.u * (0.0 - s0) / period).max(0.0);
-            let b = map.at(r.q + r.u * (need as f64 - s0) / period).min((l - 1) as f64);
+            let b = map
+                .at(r.q + r.u * (need as f64 - s0) / period)
+                .min((l - 1) as f64);
             if b <= a + 1.0 {
                 return 0.0;
             }
             self.pace(r.clip, a as usize, (b - a) as usize) * (b - a) / need as f64
         };
-        let mut run = draws.iter().copied().find(|r| stretch(r) >= LIVELY_M_S).unwrap_or(draws[0]);
+        let mut run = draws
+            .iter()
+            .copied()
+            .find(|r| stretch(r) >= LIVELY_M_S)
+            .unwrap_or(draws[0]);
         // Walk the song's beats: (song frame, run index, clip beat position, clip frame).
         let mut runs = vec![run];
         let mut points: Vec<(f64, usize, f64, f64)> = Vec::with_capacity(cues.beats.len());
@@ -350,7 +447,8 @@ impl PoseBank {
             if q > last_beat(run.clip) + 1e-9 {
                 let &(_, r, _, f) = points.last()?;
                 let here = row_at(self.clips.slice(s![runs[r].clip, .., ..]), f);
-                let (clip, q2, u) = self.continue_to(meta, &beat_maps, cues, s, run.clip, &here, &mut rng)?;
+                let (clip, q2, u) =
+                    self.continue_to(meta, &beat_maps, cues, s, run.clip, &here, &mut rng)?;
                 run = Run { clip, q: q2 + u, u };
                 runs.push(run);
                 run_start = i;
@@ -360,12 +458,19 @@ impl PoseBank {
             points.push((s, runs.len() - 1, q, f));
         }
         // The seed rows: the first clip at the song's pace.
-        let first: Vec<(f64, f64)> = points.iter().filter(|p| p.1 == 0).map(|p| (p.0, p.3)).collect();
+        let first: Vec<(f64, f64)> = points
+            .iter()
+            .filter(|p| p.1 == 0)
+            .map(|p| (p.0, p.3))
+            .collect();
         let start_clip = runs[0].clip;
         let rows = self.clips.slice(s![start_clip, .., ..]);
         let to_clip = TimeMap::new(first)?;
         let seed_rows = super::beats::resample_rows(rows, &to_clip, ts);
-        let start = (start_clip, to_clip.at(0.0).clamp(0.0, (l - 1) as f64).round() as usize);
+        let start = (
+            start_clip,
+            to_clip.at(0.0).clamp(0.0, (l - 1) as f64).round() as usize,
+        );
         tracing::debug!(period, bar = cues.bar, runs = ?runs.iter().map(|r| (r.clip, r.q, r.u)).collect::<Vec<_>>(), "scaffold runs");
         // Poses on beats (every other one when fast, half beats too when slow).
         let every = if period < MIN_SPACING { 2 } else { 1 };
@@ -377,13 +482,23 @@ impl PoseBank {
             if i % every == 0 {
                 at.push((p.0, runs[p.1].clip, p.3));
             }
-            let Some(next) = points.get(i + 1) else { continue };
+            let Some(next) = points.get(i + 1) else {
+                continue;
+            };
             for k in 1..per_beat {
                 // A share of the beat on in this run, or, where the next beat starts a run, that
                 // much before it in that one (whose first position is nearest this beat's pose).
                 let w = k as f64 / per_beat as f64;
-                let (r, q) = if next.1 == p.1 { (runs[p.1], p.2 + runs[p.1].u * w) } else { (runs[next.1], next.2 - runs[next.1].u * (1.0 - w)) };
-                at.push((p.0 + (next.0 - p.0) * w, r.clip, beat_maps[r.clip].as_ref()?.at(q)));
+                let (r, q) = if next.1 == p.1 {
+                    (runs[p.1], p.2 + runs[p.1].u * w)
+                } else {
+                    (runs[next.1], next.2 - runs[next.1].u * (1.0 - w))
+                };
+                at.push((
+                    p.0 + (next.0 - p.0) * w,
+                    r.clip,
+                    beat_maps[r.clip].as_ref()?.at(q),
+                ));
             }
         }
         let first_pose = ts as f64 - 1.0 + spacing / 2.0;
@@ -399,7 +514,11 @@ impl PoseBank {
                 (frame, pose)
             })
             .collect();
-        Some(Scaffold { seed: seed_rows, poses, start })
+        Some(Scaffold {
+            seed: seed_rows,
+            poses,
+            start,
+        })
     }
 
     /// Where the scaffold goes on at song frame `at` when clip `from` has run out of beats: among
@@ -407,16 +526,30 @@ impl PoseBank {
     /// (a whole one, so its beats stay on the song's) whose pose is nearest to `here`, with at least [`MIN_RUN_BEATS`] song beats left
     /// after it: `(clip, q, u)`.
     #[allow(clippy::too_many_arguments)]
-    fn continue_to(&self, meta: &BankMeta, beat_maps: &[Option<TimeMap>], cues: &SongCues, at: f64, from: usize, here: &[f32], rng: &mut StdRng) -> Option<(usize, f64, f64)> {
+    fn continue_to(
+        &self,
+        meta: &BankMeta,
+        beat_maps: &[Option<TimeMap>],
+        cues: &SongCues,
+        at: f64,
+        from: usize,
+        here: &[f32],
+        rng: &mut StdRng,
+    ) -> Option<(usize, f64, f64)> {
         let k = meta.clips.len();
-        let ranked: Vec<(usize, f64, f64)> = Self::ranked(meta, cues, at).into_iter().filter(|r| (r.0 != from || k == 1) && beat_maps[r.0].is_some()).collect();
+        let ranked: Vec<(usize, f64, f64)> = Self::ranked(meta, cues, at)
+            .into_iter()
+            .filter(|r| (r.0 != from || k == 1) && beat_maps[r.0].is_some())
+            .collect();
         let mut good = Self::good(&ranked);
         good.shuffle(rng);
         good.truncate((2 * good.len()).div_ceil(3).max(1));
         let here = ndarray::ArrayView1::from(here);
         let mut best: Option<(usize, f64, f64, f32)> = None;
         for &(c, u) in &good {
-            let (Some(map), n) = (beat_maps[c].as_ref(), meta.clips[c].beats.len()) else { continue };
+            let (Some(map), n) = (beat_maps[c].as_ref(), meta.clips[c].beats.len()) else {
+                continue;
+            };
             let mut q = 0.0;
             while q + u * MIN_RUN_BEATS <= (n - 1) as f64 {
                 let pose = row_at(self.clips.slice(s![c, .., ..]), map.at(q));
@@ -428,12 +561,19 @@ impl PoseBank {
             }
         }
         // No candidate has that much room: the best-ranked clip from its first beat.
-        best.map(|b| (b.0, b.1, b.2)).or_else(|| ranked.first().map(|r| (r.0, 0.0, r.1)))
+        best.map(|b| (b.0, b.1, b.2))
+            .or_else(|| ranked.first().map(|r| (r.0, 0.0, r.1)))
     }
 
     /// The bank frame, `spacing` frames after the one nearest to clip `from`'s frame `at`, among a
     /// seeded half of the other clips (all clips when the bank has one).
-    fn continue_from(&self, from: usize, at: usize, spacing: usize, rng: &mut StdRng) -> (usize, usize) {
+    fn continue_from(
+        &self,
+        from: usize,
+        at: usize,
+        spacing: usize,
+        rng: &mut StdRng,
+    ) -> (usize, usize) {
         let (k, l, _) = self.clips.dim();
         let here = self.clips.slice(s![from, at, ..]);
         let mut others: Vec<usize> = (0..k).filter(|&c| c != from || k == 1).collect();
@@ -459,7 +599,10 @@ mod tests {
 
     fn bank() -> PoseBank {
         // Clip c, frame f: every coordinate c·100 + f, so a pose tells where it came from.
-        PoseBank::new(Array3::from_shape_fn((3, 40, 73), |(c, f, _)| (c * 100 + f) as f32)).unwrap()
+        PoseBank::new(Array3::from_shape_fn((3, 40, 73), |(c, f, _)| {
+            (c * 100 + f) as f32
+        }))
+        .unwrap()
     }
 
     #[test]
@@ -469,7 +612,9 @@ mod tests {
         let a2 = b.scaffold(1, 200, 5, 10, &[]);
         assert_eq!(a.poses, a2.poses);
         assert_eq!(a.seed, a2.seed);
-        let others: Vec<_> = (2..6).map(|s| b.scaffold(s, 200, 5, 10, &[]).seed).collect();
+        let others: Vec<_> = (2..6)
+            .map(|s| b.scaffold(s, 200, 5, 10, &[]).seed)
+            .collect();
         assert!(others.iter().any(|o| o != &a.seed));
         // Poses every 10 frames after the seed, following the clip's own timing.
         let frames: Vec<usize> = a.poses.iter().map(|p| p.0).collect();
@@ -489,20 +634,30 @@ mod tests {
         for seed in 0..20 {
             // Where it starts, the next 125 frames move at the slowest real dance's pace at least.
             let (clip, start) = b.scaffold(seed, 125, 25, 12, &[]).start;
-            assert!(clip == 1 && b.pace(1, start, 125) >= LIVELY_M_S, "seed {seed} starts at {clip}/{start}");
+            assert!(
+                clip == 1 && b.pace(1, start, 125) >= LIVELY_M_S,
+                "seed {seed} starts at {clip}/{start}"
+            );
         }
         // With nothing lively the first draw is taken as it is.
         let still = PoseBank::new(Array3::zeros((2, 300, FEATURE_DIM))).unwrap();
         assert_eq!(still.scaffold(3, 125, 25, 12, &[]).seed.nrows(), 25);
         // The threshold is the slowest real train dance the metrics measure.
-        let real = crate::metrics::reference::ReferenceStats::builtin().unwrap().physical.mean_speed_range_m_s[0];
+        let real = crate::metrics::reference::ReferenceStats::builtin()
+            .unwrap()
+            .physical
+            .mean_speed_range_m_s[0];
         assert!((real - LIVELY_M_S).abs() < 0.005, "{real}");
     }
 
     #[test]
     fn scaffold_keeps_away_from_user_keys_and_can_be_off() {
         let b = bank();
-        let key = LocalKey { frame: 50, local: vec![0.0; POSE_DIM], yaw: 0.0 };
+        let key = LocalKey {
+            frame: 50,
+            local: vec![0.0; POSE_DIM],
+            yaw: 0.0,
+        };
         let a = b.scaffold(3, 200, 5, 10, std::slice::from_ref(&key));
         assert!(a.poses.iter().all(|(f, _)| f.abs_diff(50) >= 10));
         assert!(b.scaffold(3, 200, 5, 0, &[]).poses.is_empty());
@@ -511,7 +666,8 @@ mod tests {
     /// A bank of `periods.len()` clips of 200 frames, clip c's frame f holding c·1000 + f in every
     /// coordinate, its beats every `periods[c]` frames from frame 3.
     fn beat_bank(periods: &[f64]) -> PoseBank {
-        let clips = Array3::from_shape_fn((periods.len(), 200, 73), |(c, f, _)| (c * 1000 + f) as f32);
+        let clips =
+            Array3::from_shape_fn((periods.len(), 200, 73), |(c, f, _)| (c * 1000 + f) as f32);
         let infos = periods
             .iter()
             .enumerate()
@@ -519,17 +675,30 @@ mod tests {
                 dance: format!("DANCE_C_{c}"),
                 start: 0,
                 style: crate::motion::dataset::Style::ChaCha,
-                beats: (0..).map(|k| 3.0 + p * k as f64).take_while(|b| *b <= 199.0).collect(),
+                beats: (0..)
+                    .map(|k| 3.0 + p * k as f64)
+                    .take_while(|b| *b <= 199.0)
+                    .collect(),
                 bar: 4,
                 energy: 1.0,
             })
             .collect();
-        PoseBank::new(clips).unwrap().with_meta(BankMeta { made_by: "test".into(), fps: 25.0, clips: infos }).unwrap()
+        PoseBank::new(clips)
+            .unwrap()
+            .with_meta(BankMeta {
+                made_by: "test".into(),
+                fps: 25.0,
+                clips: infos,
+            })
+            .unwrap()
     }
 
     /// A song of `n` frames with beats every `period` frames from frame `first`, four a bar.
     fn song(period: f64, first: f64, n: usize) -> SongCues {
-        let beats: Vec<f64> = (0..).map(|k| (first + period * k as f64) / 25.0).take_while(|t| *t * 25.0 < n as f64).collect();
+        let beats: Vec<f64> = (0..)
+            .map(|k| (first + period * k as f64) / 25.0)
+            .take_while(|t| *t * 25.0 < n as f64)
+            .collect();
         let down: Vec<f64> = beats.iter().step_by(4).copied().collect();
         SongCues::new(&beats, &down, &vec![1.0; n], 25.0, n, 12.0)
     }
@@ -547,15 +716,27 @@ mod tests {
                 // On a song beat, and the clip's pose on one of its own beats.
                 assert_eq!((frame - 4) % 10, 0, "seed {seed}: pose at {frame}");
                 let (clip, at) = ((pose[0] / 1000.0).floor() as usize, pose[0] % 1000.0);
-                assert!(((at - 3.0) / 12.0 - ((at - 3.0) / 12.0).round()).abs() < 1e-3, "seed {seed}: clip frame {at}");
+                assert!(
+                    ((at - 3.0) / 12.0 - ((at - 3.0) / 12.0).round()).abs() < 1e-3,
+                    "seed {seed}: clip frame {at}"
+                );
                 // Within a clip the clip's time only moves forward, one clip beat per song beat.
                 if let Some((c, a)) = last.filter(|l| l.0 == clip) {
-                    assert!((at - a - 12.0).abs() < 1e-3, "seed {seed}: {a} → {at} in clip {c}");
+                    assert!(
+                        (at - a - 12.0).abs() < 1e-3,
+                        "seed {seed}: {a} → {at} in clip {c}"
+                    );
                 }
                 last = Some((clip, at));
             }
             // The seed rows are the first clip played at the song's pace: 1.2 clip frames a frame.
-            let steps: Vec<f32> = sc.seed.column(0).windows(2).into_iter().map(|w| w[1] - w[0]).collect();
+            let steps: Vec<f32> = sc
+                .seed
+                .column(0)
+                .windows(2)
+                .into_iter()
+                .map(|w| w[1] - w[0])
+                .collect();
             assert!(steps.iter().all(|d| (d - 1.2).abs() < 1e-3), "{steps:?}");
         }
     }
@@ -565,36 +746,81 @@ mod tests {
         // Clips 0–4 beat every 10 frames, clips 5–9 every 16.
         let b = beat_bank(&[10.0, 10.0, 10.0, 10.0, 10.0, 16.0, 16.0, 16.0, 16.0, 16.0]);
         let (fast, slow) = (song(10.0, 0.0, 300), song(16.0, 0.0, 300));
-        let clips = |sc: &Scaffold| -> Vec<usize> { sc.poses.iter().map(|p| (p.1[0] / 1000.0).floor() as usize).chain([sc.start.0]).collect() };
+        let clips = |sc: &Scaffold| -> Vec<usize> {
+            sc.poses
+                .iter()
+                .map(|p| (p.1[0] / 1000.0).floor() as usize)
+                .chain([sc.start.0])
+                .collect()
+        };
         let mut starts = std::collections::BTreeSet::new();
         for seed in 0..8 {
-            let (a, z) = (b.scaffold_to(seed, &fast, 300, 25, &[]).unwrap(), b.scaffold_to(seed, &slow, 300, 25, &[]).unwrap());
-            assert!(clips(&a).iter().all(|&c| c < 5), "seed {seed}: {:?}", clips(&a));
-            assert!(clips(&z).iter().all(|&c| c >= 5), "seed {seed}: {:?}", clips(&z));
+            let (a, z) = (
+                b.scaffold_to(seed, &fast, 300, 25, &[]).unwrap(),
+                b.scaffold_to(seed, &slow, 300, 25, &[]).unwrap(),
+            );
+            assert!(
+                clips(&a).iter().all(|&c| c < 5),
+                "seed {seed}: {:?}",
+                clips(&a)
+            );
+            assert!(
+                clips(&z).iter().all(|&c| c >= 5),
+                "seed {seed}: {:?}",
+                clips(&z)
+            );
             assert_ne!(a.poses, z.poses);
             starts.insert(a.start.0);
         }
-        assert!(starts.len() >= 2, "the seed draws among the good clips: {starts:?}");
+        assert!(
+            starts.len() >= 2,
+            "the seed draws among the good clips: {starts:?}"
+        );
         // Same seed, same song: the same scaffold.
-        assert_eq!(b.scaffold_to(3, &fast, 300, 25, &[]).unwrap().poses, b.scaffold_to(3, &fast, 300, 25, &[]).unwrap().poses);
+        assert_eq!(
+            b.scaffold_to(3, &fast, 300, 25, &[]).unwrap().poses,
+            b.scaffold_to(3, &fast, 300, 25, &[]).unwrap().poses
+        );
     }
 
     #[test]
     fn beat_scaffold_keeps_away_from_user_keys_and_thins_fast_beats() {
         let b = beat_bank(&[12.0; 4]);
-        let key = LocalKey { frame: 100, local: vec![0.0; POSE_DIM], yaw: 0.0 };
-        let sc = b.scaffold_to(1, &song(12.0, 0.0, 300), 300, 25, std::slice::from_ref(&key)).unwrap();
+        let key = LocalKey {
+            frame: 100,
+            local: vec![0.0; POSE_DIM],
+            yaw: 0.0,
+        };
+        let sc = b
+            .scaffold_to(
+                1,
+                &song(12.0, 0.0, 300),
+                300,
+                25,
+                std::slice::from_ref(&key),
+            )
+            .unwrap();
         assert!(sc.poses.iter().all(|(f, _)| f.abs_diff(100) >= 12));
         assert!(sc.poses.iter().all(|(f, _)| *f >= 25 && *f < 300));
         // Beats every 6 frames: a pose every other beat.
-        let fast = b.scaffold_to(1, &song(6.0, 0.0, 300), 300, 25, &[]).unwrap();
-        assert!(fast.poses.windows(2).all(|p| p[1].0 - p[0].0 == 12), "{:?}", fast.poses.iter().map(|p| p.0).collect::<Vec<_>>());
+        let fast = b
+            .scaffold_to(1, &song(6.0, 0.0, 300), 300, 25, &[])
+            .unwrap();
+        assert!(
+            fast.poses.windows(2).all(|p| p[1].0 - p[0].0 == 12),
+            "{:?}",
+            fast.poses.iter().map(|p| p.0).collect::<Vec<_>>()
+        );
         // Beats every 24 frames: poses on half beats too.
-        let slow = b.scaffold_to(1, &song(24.0, 0.0, 300), 300, 25, &[]).unwrap();
+        let slow = b
+            .scaffold_to(1, &song(24.0, 0.0, 300), 300, 25, &[])
+            .unwrap();
         assert!(slow.poses.len() > 20);
         assert!(slow.poses.windows(2).all(|p| p[1].0 - p[0].0 == 12));
         // Without the clips' beats there is no music-following scaffold.
-        assert!(bank().scaffold_to(1, &song(12.0, 0.0, 300), 300, 5, &[]).is_none());
+        assert!(bank()
+            .scaffold_to(1, &song(12.0, 0.0, 300), 300, 5, &[])
+            .is_none());
     }
 
     #[test]
@@ -607,9 +833,15 @@ mod tests {
         assert_eq!(PoseBank::load(&p).unwrap().meta(), b.meta());
         let mut meta = b.meta().unwrap().clone();
         meta.clips[0].beats.push(250.0);
-        assert!(PoseBank::new(b.clips.clone()).unwrap().with_meta(meta.clone()).is_err());
+        assert!(PoseBank::new(b.clips.clone())
+            .unwrap()
+            .with_meta(meta.clone())
+            .is_err());
         meta.clips.pop();
-        assert!(PoseBank::new(b.clips.clone()).unwrap().with_meta(meta).is_err());
+        assert!(PoseBank::new(b.clips.clone())
+            .unwrap()
+            .with_meta(meta)
+            .is_err());
     }
 
     #[test]

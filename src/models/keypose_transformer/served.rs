@@ -9,12 +9,18 @@ use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 use tch::Tensor;
 
-use super::keys::{bridge_keys, jump_frames, local_keys, normalize_key, pass_through_keys, pass_through_yaws, LocalKey, BRIDGE_HALF, JUMP_HALF};
 use super::beats::SongCues;
+use super::keys::{
+    bridge_keys, jump_frames, local_keys, normalize_key, pass_through_keys, pass_through_yaws,
+    LocalKey, BRIDGE_HALF, JUMP_HALF,
+};
 use super::scaffold::{PoseBank, Scaffold, POSE_BANK_FILE};
 use super::{Config, KeyposeTransformer};
 use crate::models::folder;
-use crate::models::{to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
+use crate::models::{
+    to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
+    InstancePool, ModelError, ModelId, ModelInfo, Progress,
+};
 use crate::motion::repr::{self, RootStart, POSE_DIM};
 use crate::stage::Stage;
 
@@ -108,9 +114,18 @@ pub fn generate_features(
         }
         None => None,
     };
-    let mut nkeys: Vec<(i64, Vec<f32>)> = keys.iter().map(|k| (k.frame as i64, normalize_key(&file.pose_norm, &k.local))).collect();
-    nkeys.extend(scaffold.iter().map(|(f, local)| (*f as i64, normalize_key(&file.pose_norm, local))));
-    let y = tch::no_grad(|| model.generate_long(music, seed_norm.as_ref(), keep_seed, &nkeys, &mut on_window));
+    let mut nkeys: Vec<(i64, Vec<f32>)> = keys
+        .iter()
+        .map(|k| (k.frame as i64, normalize_key(&file.pose_norm, &k.local)))
+        .collect();
+    nkeys.extend(
+        scaffold
+            .iter()
+            .map(|(f, local)| (*f as i64, normalize_key(&file.pose_norm, local))),
+    );
+    let y = tch::no_grad(|| {
+        model.generate_long(music, seed_norm.as_ref(), keep_seed, &nkeys, &mut on_window)
+    });
     let Some(y) = y else { return Ok(None) };
     let mut network = file.pose_norm.denormalize(&to_array(&y)?)?;
     let mut served = network.clone();
@@ -136,7 +151,11 @@ pub fn generate_features(
     for (i, &c) in cols.iter().enumerate() {
         served.column_mut(c).assign(&posed.column(i));
     }
-    bridge_keys(&mut served, &keys.iter().map(|k| k.frame).collect::<Vec<_>>(), BRIDGE_HALF);
+    bridge_keys(
+        &mut served,
+        &keys.iter().map(|k| k.frame).collect::<Vec<_>>(),
+        BRIDGE_HALF,
+    );
     let targets: Vec<(usize, Vec<f32>)> = keys.iter().map(|k| (k.frame, k.local.clone())).collect();
     pass_through_keys(&mut served, 0..POSE_DIM, &targets, BLEND_RADIUS);
     if file.extra.root_height == RootHeight::FootClearance {
@@ -148,7 +167,11 @@ pub fn generate_features(
     if !yaws.is_empty() {
         start.yaw = pass_through_yaws(&mut served, start.yaw, &yaws, YAW_BLEND_RADIUS);
     }
-    Ok(Some(Generation { network, served, start }))
+    Ok(Some(Generation {
+        network,
+        served,
+        start,
+    }))
 }
 
 /// A trained key-pose transformer, ready to serve.
@@ -161,9 +184,15 @@ pub struct Served {
 impl Served {
     /// Loads `dir/model.json`, `dir/weights.safetensors` and, when present, `dir/pose_bank.safetensors`.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| KeyposeTransformer::new(p, f.config.clone()))?;
+        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| {
+            KeyposeTransformer::new(p, f.config.clone())
+        })?;
         let bank_path = dir.join(POSE_BANK_FILE);
-        let bank = if bank_path.exists() { Some(PoseBank::load(&bank_path)?) } else { None };
+        let bank = if bank_path.exists() {
+            Some(PoseBank::load(&bank_path)?)
+        } else {
+            None
+        };
         Ok(Self { file, bank, pool })
     }
 
@@ -174,19 +203,42 @@ impl Served {
 
     /// The seed rows and scaffold the job's seed draws for the song of `cues`, or none without a
     /// pose bank. A bank without its clips' beats ([`super::scaffold::BankMeta`]) draws by the seed alone.
-    pub fn scaffold(&self, seed: u64, cues: &SongCues, frames: usize, keys: &[LocalKey]) -> Option<Scaffold> {
+    pub fn scaffold(
+        &self,
+        seed: u64,
+        cues: &SongCues,
+        frames: usize,
+        keys: &[LocalKey],
+    ) -> Option<Scaffold> {
         let bank = self.bank.as_ref()?;
         let ts = self.file.config.seed_len as usize;
         let on = self.file.extra.scaffold_spacing > 0;
-        on.then(|| bank.scaffold_to(seed, cues, frames, ts, keys)).flatten().or_else(|| Some(bank.scaffold(seed, frames, ts, self.file.extra.scaffold_spacing, keys)))
+        on.then(|| bank.scaffold_to(seed, cues, frames, ts, keys))
+            .flatten()
+            .or_else(|| {
+                Some(bank.scaffold(seed, frames, ts, self.file.extra.scaffold_spacing, keys))
+            })
     }
 
     /// What the scaffold hears of the song: the analysis's beats and downbeats (the ones the
     /// report measures against) and the onset strength of the model's own features `[n, 15]`.
-    pub fn cues(&self, analysis: &crate::audio::Analysis, feats: &Array2<f32>) -> Result<SongCues, ModelError> {
-        let onset: Vec<f32> = feats.column(crate::audio::features::KEYPOSE_DIM - 1).to_vec();
+    pub fn cues(
+        &self,
+        analysis: &crate::audio::Analysis,
+        feats: &Array2<f32>,
+    ) -> Result<SongCues, ModelError> {
+        let onset: Vec<f32> = feats
+            .column(crate::audio::features::KEYPOSE_DIM - 1)
+            .to_vec();
         let fallback = self.file.extra.scaffold_spacing.max(1) as f64;
-        Ok(SongCues::new(&analysis.beat_times, &analysis.downbeat_times, &onset, self.file.fps, feats.nrows(), fallback))
+        Ok(SongCues::new(
+            &analysis.beat_times,
+            &analysis.downbeat_times,
+            &onset,
+            self.file.fps,
+            feats.nrows(),
+            fallback,
+        ))
     }
 }
 
@@ -199,7 +251,11 @@ impl DanceModel for Served {
         }
     }
 
-    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
+    fn generate(
+        &self,
+        req: &GenerateRequest<'_>,
+        progress: &mut dyn Progress,
+    ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let fps = self.file.fps;
         let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
@@ -208,13 +264,19 @@ impl DanceModel for Served {
         let feats = crate::audio::features::keypose(req.audio, fps, 0.0, n)?;
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?);
         // Only a bank with its clips' beats listens to the song; the analysis is skipped without.
-        let cues = if self.bank.as_ref().is_some_and(|b| b.meta().is_some()) { Some(self.cues(&*req.analysis_or_analyze()?, &feats)?) } else { None };
+        let cues = if self.bank.as_ref().is_some_and(|b| b.meta().is_some()) {
+            Some(self.cues(&*req.analysis_or_analyze()?, &feats)?)
+        } else {
+            None
+        };
         progress.report(Stage::Features, 1.0)?;
         let given = match req.seed_motion {
             Some(m) if m.num_frames() > 0 => {
                 // The network continues from the seed's last T′ frames, so the root starts there.
                 let ts = self.file.config.seed_len as usize;
-                let tail = m.positions.slice(ndarray::s![m.num_frames().saturating_sub(ts).., .., ..]);
+                let tail =
+                    m.positions
+                        .slice(ndarray::s![m.num_frames().saturating_sub(ts).., .., ..]);
                 let root = crate::motion::skeleton::body_centre_track(tail);
                 let (mut f, start) = repr::to_features(tail, root.view())?;
                 let mut floor = 0.0;
@@ -231,19 +293,45 @@ impl DanceModel for Served {
         let given = given.map(|(f, s, _)| (f, s));
         let plan = match &cues {
             Some(cues) => self.scaffold(req.seed, cues, n, &keys),
-            None => self.bank.as_ref().map(|b| b.scaffold(req.seed, n, self.file.config.seed_len as usize, self.file.extra.scaffold_spacing, &keys)),
+            None => self.bank.as_ref().map(|b| {
+                b.scaffold(
+                    req.seed,
+                    n,
+                    self.file.config.seed_len as usize,
+                    self.file.extra.scaffold_spacing,
+                    &keys,
+                )
+            }),
         };
         let keep_seed = given.is_some();
         // A given seed motion wins over the drawn one; the scaffold stays either way.
-        let seed = given.or_else(|| plan.as_ref().map(|p| (p.seed.clone(), RootStart::default())));
+        let seed = given.or_else(|| {
+            plan.as_ref()
+                .map(|p| (p.seed.clone(), RootStart::default()))
+        });
         let scaffold = plan.map(|p| p.poses).unwrap_or_default();
         let out = self.pool.with(|model| {
-            generate_features(model, &self.file, &music, seed.as_ref().map(|(f, s)| (f, *s)), keep_seed, &keys, &scaffold, |done, total| {
-                progress.report(Stage::Generate, done as f32 / total as f32).is_ok()
-            })
+            generate_features(
+                model,
+                &self.file,
+                &music,
+                seed.as_ref().map(|(f, s)| (f, *s)),
+                keep_seed,
+                &keys,
+                &scaffold,
+                |done, total| {
+                    progress
+                        .report(Stage::Generate, done as f32 / total as f32)
+                        .is_ok()
+                },
+            )
         })?;
-        let Some(mut g) = out? else { return Err(Cancelled.into()) };
-        g.served.column_mut(repr::ROOT_Y).mapv_inplace(|y| y + floor);
+        let Some(mut g) = out? else {
+            return Err(Cancelled.into());
+        };
+        g.served
+            .column_mut(repr::ROOT_Y)
+            .mapv_inplace(|y| y + floor);
         let (motion, _root) = repr::from_features(g.served.view(), g.start, fps)?;
         Ok(motion.into())
     }

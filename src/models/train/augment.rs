@@ -35,7 +35,12 @@ impl MusicLayout {
     /// The DanceRevolution set, with or without its beat clock.
     pub fn dance_revolution(beat_clock: bool) -> Self {
         use crate::audio::features::dance_revolution_cols as c;
-        Self { one_hot: vec![c::BEAT], rates: vec![c::DMFCC], lags: Some(c::TEMPOGRAM), clock: beat_clock.then_some(c::CLOCK.start) }
+        Self {
+            one_hot: vec![c::BEAT],
+            rates: vec![c::DMFCC],
+            lags: Some(c::TEMPOGRAM),
+            clock: beat_clock.then_some(c::CLOCK.start),
+        }
     }
 }
 
@@ -52,7 +57,11 @@ pub struct Augment {
 
 impl Augment {
     /// No augmentation: windows as danced.
-    pub const NONE: Self = Self { min_tempo: 1.0, max_tempo: 1.0, mirror: false };
+    pub const NONE: Self = Self {
+        min_tempo: 1.0,
+        max_tempo: 1.0,
+        mirror: false,
+    };
 
     /// Source frames a window of `len` output frames may span at the fastest tempo.
     pub fn source_len(&self, len: usize) -> usize {
@@ -62,7 +71,11 @@ impl Augment {
     /// A tempo factor and a mirror flag for one window.
     pub fn draw(&self, rng: &mut impl Rng) -> (f64, bool) {
         let (lo, hi) = (self.min_tempo.ln(), self.max_tempo.ln());
-        let f = if hi > lo { rng.gen_range(lo..hi).exp() } else { 1.0 };
+        let f = if hi > lo {
+            rng.gen_range(lo..hi).exp()
+        } else {
+            1.0
+        };
         (f, self.mirror && rng.gen_bool(0.5))
     }
 }
@@ -82,13 +95,23 @@ fn lerp_row(src: ArrayView2<'_, f32>, t: f64, out: &mut [f32]) {
 fn resample(src: ArrayView2<'_, f32>, start: usize, len: usize, f: f64) -> Array2<f32> {
     let mut out = Array2::<f32>::zeros((len, src.ncols()));
     for (j, mut row) in out.outer_iter_mut().enumerate() {
-        lerp_row(src, start as f64 + j as f64 * f, row.as_slice_mut().expect("standard layout"));
+        lerp_row(
+            src,
+            start as f64 + j as f64 * f,
+            row.as_slice_mut().expect("standard layout"),
+        );
     }
     out
 }
 
 /// Music window at tempo `f` (see the module doc for each column kind).
-pub fn stretch_music(src: ArrayView2<'_, f32>, start: usize, len: usize, f: f64, layout: &MusicLayout) -> Array2<f32> {
+pub fn stretch_music(
+    src: ArrayView2<'_, f32>,
+    start: usize,
+    len: usize,
+    f: f64,
+    layout: &MusicLayout,
+) -> Array2<f32> {
     let mut out = resample(src, start, len, f);
     if (f - 1.0).abs() < 1e-12 {
         return out;
@@ -106,7 +129,8 @@ pub fn stretch_music(src: ArrayView2<'_, f32>, start: usize, len: usize, f: f64,
         }
     }
     for r in &layout.rates {
-        out.slice_mut(s![.., r.clone()]).mapv_inplace(|v| v * f as f32);
+        out.slice_mut(s![.., r.clone()])
+            .mapv_inplace(|v| v * f as f32);
     }
     if let Some(lags) = &layout.lags {
         // A figure that repeated every L frames now repeats every L/f: lag k reads old lag k·f.
@@ -129,7 +153,10 @@ pub fn stretch_music(src: ArrayView2<'_, f32>, start: usize, len: usize, f: f64,
     if let Some(c0) = layout.clock {
         use clock::cols;
         for mut row in out.outer_iter_mut() {
-            for (a, b) in [(cols::BEAT_SIN, cols::BEAT_COS), (cols::BAR_SIN, cols::BAR_COS)] {
+            for (a, b) in [
+                (cols::BEAT_SIN, cols::BEAT_COS),
+                (cols::BAR_SIN, cols::BAR_COS),
+            ] {
                 // Interpolating across a wrap shortens the vector; the phase is its angle.
                 let (x, y) = (row[c0 + a], row[c0 + b]);
                 let r = (x * x + y * y).sqrt();
@@ -171,7 +198,15 @@ pub fn mirror_joints() -> Vec<usize> {
             n.to_string()
         }
     };
-    JOINT_NAMES.iter().map(|n| JOINT_NAMES.iter().position(|m| *m == swap(n)).unwrap_or_else(|| panic!("joint {n} has no mirror"))).collect()
+    JOINT_NAMES
+        .iter()
+        .map(|n| {
+            JOINT_NAMES
+                .iter()
+                .position(|m| *m == swap(n))
+                .unwrap_or_else(|| panic!("joint {n} has no mirror"))
+        })
+        .collect()
 }
 
 /// Mirrors pose rows in place, left ↔ right: in the facing frame x is the lateral axis, so each
@@ -203,7 +238,11 @@ mod tests {
             m[[k, 0]] = 1.0;
         }
         m.column_mut(1).assign(&Array1::linspace(0.0, 99.0, 100));
-        let layout = MusicLayout { one_hot: vec![0], rates: vec![2..3], ..Default::default() };
+        let layout = MusicLayout {
+            one_hot: vec![0],
+            rates: vec![2..3],
+            ..Default::default()
+        };
         m.column_mut(2).fill(1.0);
         let out = stretch_music(m.view(), 0, 40, 2.0, &layout);
         let marks: Vec<usize> = (0..40).filter(|&j| out[[j, 0]] == 1.0).collect();
@@ -217,7 +256,10 @@ mod tests {
     fn the_clock_keeps_unit_phases_and_gains_the_tempo() {
         let beats: Vec<usize> = (0..20).map(|i| 10 * i).collect();
         let c = clock::beat_clock(&beats, &[], 200, 25.0);
-        let layout = MusicLayout { clock: Some(0), ..Default::default() };
+        let layout = MusicLayout {
+            clock: Some(0),
+            ..Default::default()
+        };
         let out = stretch_music(c.view(), 0, 80, 1.25, &layout);
         for row in out.outer_iter() {
             assert!(((row[0] * row[0] + row[1] * row[1]) - 1.0).abs() < 1e-4);
@@ -229,15 +271,24 @@ mod tests {
     fn a_tempogram_peak_moves_to_the_shorter_lag() {
         let mut m = Array2::<f32>::zeros((50, 40));
         m.column_mut(20).fill(1.0);
-        let layout = MusicLayout { lags: Some(0..40), ..Default::default() };
+        let layout = MusicLayout {
+            lags: Some(0..40),
+            ..Default::default()
+        };
         let out = stretch_music(m.view(), 0, 20, 1.25, &layout);
-        assert!((out[[3, 16]] - 1.0).abs() < 1e-5, "lag 20 at ×1.25 is lag 16");
+        assert!(
+            (out[[3, 16]] - 1.0).abs() < 1e-5,
+            "lag 20 at ×1.25 is lag 16"
+        );
     }
 
     #[test]
     fn mirroring_twice_is_the_identity_and_swaps_the_wrists() {
         let partner = mirror_joints();
-        let rw = JOINT_NAMES.iter().position(|n| *n == "right_wrist").unwrap();
+        let rw = JOINT_NAMES
+            .iter()
+            .position(|n| *n == "right_wrist")
+            .unwrap();
         let lw = JOINT_NAMES.iter().position(|n| *n == "left_wrist").unwrap();
         assert_eq!(partner[rw], lw);
         let orig = Array2::from_shape_fn((3, FEATURE_DIM), |(i, k)| (i * 100 + k) as f32 * 0.01);

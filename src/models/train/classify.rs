@@ -20,7 +20,10 @@ use serde::Serialize;
 use tch::{Kind, Tensor};
 
 use super::{CommonOptions, EpochLog, EpochResult, FolderFiles, TrainError, Trainer};
-use crate::models::dancenet::style::{evaluate, Evaluation, HeldOut, Labelled, Readout, Schedule, StyleClassifier, StyleConfig, STYLES};
+use crate::models::dancenet::style::{
+    evaluate, Evaluation, HeldOut, Labelled, Readout, Schedule, StyleClassifier, StyleConfig,
+    STYLES,
+};
 use crate::models::folder::TrainingRecord;
 use crate::motion::dataset::NormStats;
 
@@ -72,7 +75,12 @@ impl Default for ClassifyOptions {
 impl ClassifyOptions {
     /// `config` with this run's overrides.
     pub fn apply(&self, config: StyleConfig) -> StyleConfig {
-        StyleConfig { pool: self.pool.unwrap_or(config.pool), dropout: self.dropout.unwrap_or(config.dropout), readout: self.readout.unwrap_or(config.readout), ..config }
+        StyleConfig {
+            pool: self.pool.unwrap_or(config.pool),
+            dropout: self.dropout.unwrap_or(config.dropout),
+            readout: self.readout.unwrap_or(config.readout),
+            ..config
+        }
     }
 }
 
@@ -102,9 +110,16 @@ pub struct Fold {
 impl Fold {
     /// Parses `K/N`.
     pub fn parse(s: &str) -> Result<Self, TrainError> {
-        let bad = || TrainError::InvalidOption(format!("--hold-out {s:?}: expected K/N with 1 ≤ K ≤ N, N ≥ 2"));
+        let bad = || {
+            TrainError::InvalidOption(format!(
+                "--hold-out {s:?}: expected K/N with 1 ≤ K ≤ N, N ≥ 2"
+            ))
+        };
         let (k, n) = s.split_once('/').ok_or_else(bad)?;
-        let (k, n): (usize, usize) = (k.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
+        let (k, n): (usize, usize) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
         if n < 2 || k == 0 || k > n {
             return Err(bad());
         }
@@ -149,11 +164,22 @@ impl Splits {
     /// Leaves `fold` out of `train_raw`, fits the normalisation on the rest (one mean and
     /// standard deviation shared by the columns of each range of `tied`, so that permuting them
     /// commutes with normalising), normalises all.
-    pub fn new(train_raw: Vec<Labelled>, test_raw: Vec<Labelled>, fold: Option<Fold>, tied: &[Range<usize>]) -> Result<Self, TrainError> {
-        let holds = fold.map(|f| f.holds(&train_raw)).unwrap_or_else(|| vec![false; train_raw.len()]);
+    pub fn new(
+        train_raw: Vec<Labelled>,
+        test_raw: Vec<Labelled>,
+        fold: Option<Fold>,
+        tied: &[Range<usize>],
+    ) -> Result<Self, TrainError> {
+        let holds = fold
+            .map(|f| f.holds(&train_raw))
+            .unwrap_or_else(|| vec![false; train_raw.len()]);
         let (mut train, mut held_out) = (Vec::new(), Vec::new());
         for (d, h) in train_raw.into_iter().zip(holds) {
-            if h { held_out.push(d) } else { train.push(d) }
+            if h {
+                held_out.push(d)
+            } else {
+                train.push(d)
+            }
         }
         let mut norm = NormStats::fit(train.iter().map(|d| &d.features))?;
         for cols in tied {
@@ -169,7 +195,13 @@ impl Splits {
         apply(&mut train)?;
         apply(&mut held_out)?;
         apply(&mut test)?;
-        Ok(Self { train, held_out, test, norm, fold })
+        Ok(Self {
+            train,
+            held_out,
+            test,
+            norm,
+            fold,
+        })
     }
 }
 
@@ -182,7 +214,11 @@ pub fn tie(norm: &mut NormStats, cols: Range<usize>) {
         return;
     }
     let mean = cols.clone().map(|c| f64::from(norm.mean[c])).sum::<f64>() / n;
-    let second = cols.clone().map(|c| f64::from(norm.std[c]).powi(2) + f64::from(norm.mean[c]).powi(2)).sum::<f64>() / n;
+    let second = cols
+        .clone()
+        .map(|c| f64::from(norm.std[c]).powi(2) + f64::from(norm.mean[c]).powi(2))
+        .sum::<f64>()
+        / n;
     let std = ((second - mean * mean).max(0.0).sqrt() as f32).max(NormStats::MIN_STD);
     for c in cols {
         norm.mean[c] = mean as f32;
@@ -192,7 +228,13 @@ pub fn tie(norm: &mut NormStats, cols: Range<usize>) {
 
 /// Draws `n` windows `(dance, start)` of `len` frames, class-balanced (module doc). Dances
 /// shorter than `len` are never drawn.
-pub fn balanced_windows(dances: &[Labelled], len: usize, n: usize, balance: f64, rng: &mut StdRng) -> Result<Vec<(usize, usize)>, TrainError> {
+pub fn balanced_windows(
+    dances: &[Labelled],
+    len: usize,
+    n: usize,
+    balance: f64,
+    rng: &mut StdRng,
+) -> Result<Vec<(usize, usize)>, TrainError> {
     // Per style: its dances and their number of window starts.
     let mut by_style: Vec<Vec<(usize, usize)>> = vec![Vec::new(); STYLES];
     for (i, d) in dances.iter().enumerate() {
@@ -205,21 +247,41 @@ pub fn balanced_windows(dances: &[Labelled], len: usize, n: usize, balance: f64,
     if present.is_empty() {
         return Err(TrainError::NoWindows(len));
     }
-    let weights: Vec<f64> = present.iter().map(|v| (v.len() as f64).powf(1.0 - balance)).collect();
-    let styles = rand::distributions::WeightedIndex::new(&weights).map_err(|e| TrainError::InvalidOption(format!("--balance {balance}: {e}")))?;
+    let weights: Vec<f64> = present
+        .iter()
+        .map(|v| (v.len() as f64).powf(1.0 - balance))
+        .collect();
+    let styles = rand::distributions::WeightedIndex::new(&weights)
+        .map_err(|e| TrainError::InvalidOption(format!("--balance {balance}: {e}")))?;
     Ok((0..n)
         .map(|_| {
             let style = present[rng.sample(&styles)];
             let total: usize = style.iter().map(|&(_, starts)| starts).sum();
             let mut k = rng.gen_range(0..total);
-            let &(dance, starts) = style.iter().find(|&&(_, starts)| if k < starts { true } else { k -= starts; false }).unwrap_or(&style[0]);
+            let &(dance, starts) = style
+                .iter()
+                .find(|&&(_, starts)| {
+                    if k < starts {
+                        true
+                    } else {
+                        k -= starts;
+                        false
+                    }
+                })
+                .unwrap_or(&style[0]);
             (dance, k.min(starts - 1))
         })
         .collect())
 }
 
 /// Windows `[b, len, F]` (each through `augment`, when given) and their styles `[b]`.
-fn batch(dances: &[Labelled], picks: &[(usize, usize)], len: usize, augment: Option<Augment>, rng: &mut StdRng) -> (Tensor, Tensor) {
+fn batch(
+    dances: &[Labelled],
+    picks: &[(usize, usize)],
+    len: usize,
+    augment: Option<Augment>,
+    rng: &mut StdRng,
+) -> (Tensor, Tensor) {
     let xs: Vec<Tensor> = picks
         .iter()
         .map(|&(d, f)| {
@@ -230,7 +292,10 @@ fn batch(dances: &[Labelled], picks: &[(usize, usize)], len: usize, augment: Opt
             crate::models::to_tensor(&w)
         })
         .collect();
-    let ys: Vec<i64> = picks.iter().map(|&(d, _)| dances[d].style.index() as i64).collect();
+    let ys: Vec<i64> = picks
+        .iter()
+        .map(|&(d, _)| dances[d].style.index() as i64)
+        .collect();
     (Tensor::stack(&xs, 0), Tensor::from_slice(&ys))
 }
 
@@ -258,7 +323,15 @@ impl Fitted {
         );
         if let Some(h) = &self.held_out {
             let e = &h.evaluation;
-            line += &format!("; held-out fold {}: {:.3} of {} windows (balanced {:.3}), {:.3} of {} dances", h.fold, e.window_accuracy, e.windows, e.window_balanced_accuracy, e.dance_accuracy, e.dances);
+            line += &format!(
+                "; held-out fold {}: {:.3} of {} windows (balanced {:.3}), {:.3} of {} dances",
+                h.fold,
+                e.window_accuracy,
+                e.windows,
+                e.window_balanced_accuracy,
+                e.dance_accuracy,
+                e.dances
+            );
         }
         line
     }
@@ -280,15 +353,24 @@ pub fn fit<F: Serialize>(
     additions: Additions,
     file: impl Fn(TrainingRecord<Schedule>, Evaluation, Option<HeldOut>) -> F,
 ) -> Result<(Fitted, std::path::PathBuf), TrainError> {
-    let (mut trainer, model) = Trainer::with_files(common, id, files, opts.lr, opts.seed, |p| StyleClassifier::new(p, config))?;
+    let (mut trainer, model) = Trainer::with_files(common, id, files, opts.lr, opts.seed, |p| {
+        StyleClassifier::new(p, config)
+    })?;
     let no_style: Vec<Tensor> = match &additions.no_style {
-        Some((windows, _)) if additions.no_style_per_batch > 0 => windows.iter().map(|w| Ok(crate::models::to_tensor(&splits.norm.normalize(w)?))).collect::<Result<_, TrainError>>()?,
+        Some((windows, _)) if additions.no_style_per_batch > 0 => windows
+            .iter()
+            .map(|w| Ok(crate::models::to_tensor(&splits.norm.normalize(w)?)))
+            .collect::<Result<_, TrainError>>()?,
         _ => Vec::new(),
     };
-    let latest: RefCell<(Evaluation, Option<HeldOut>, usize)> = RefCell::new((Evaluation::default(), None, 0));
+    let latest: RefCell<(Evaluation, Option<HeldOut>, usize)> =
+        RefCell::new((Evaluation::default(), None, 0));
     let held = |model: &StyleClassifier| -> Result<Option<HeldOut>, TrainError> {
         match splits.fold {
-            Some(f) if !splits.held_out.is_empty() => Ok(Some(HeldOut { fold: f.to_string(), evaluation: evaluate(model, &splits.held_out, window, hop)? })),
+            Some(f) if !splits.held_out.is_empty() => Ok(Some(HeldOut {
+                fold: f.to_string(),
+                evaluation: evaluate(model, &splits.held_out, window, hop)?,
+            })),
             _ => Ok(None),
         }
     };
@@ -296,18 +378,38 @@ pub fn fit<F: Serialize>(
         0..opts.epochs,
         5,
         |epoch, opt, deadline| {
-            let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
-            let picks = balanced_windows(&splits.train, window, opts.windows_per_epoch, opts.balance, &mut rng)?;
+            let mut rng = StdRng::seed_from_u64(
+                opts.seed ^ (epoch as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+            );
+            let picks = balanced_windows(
+                &splits.train,
+                window,
+                opts.windows_per_epoch,
+                opts.balance,
+                &mut rng,
+            )?;
             let (mut total, mut batches) = (0.0, 0usize);
             for chunk in picks.chunks(opts.batch.max(1)) {
-                let (x, y) = batch(&splits.train, chunk, window, additions.augment.map(|a| a.0), &mut rng);
+                let (x, y) = batch(
+                    &splits.train,
+                    chunk,
+                    window,
+                    additions.augment.map(|a| a.0),
+                    &mut rng,
+                );
                 let loss = if !no_style.is_empty() {
                     let (b, n) = (chunk.len() as i64, additions.no_style_per_batch as i64);
-                    let drawn: Vec<Tensor> = (0..n).map(|_| no_style[rng.gen_range(0..no_style.len())].shallow_clone()).collect();
-                    let logits = model.forward(&Tensor::cat(&[x, Tensor::stack(&drawn, 0)], 0), true); // [b + n, classes]
+                    let drawn: Vec<Tensor> = (0..n)
+                        .map(|_| no_style[rng.gen_range(0..no_style.len())].shallow_clone())
+                        .collect();
+                    let logits =
+                        model.forward(&Tensor::cat(&[x, Tensor::stack(&drawn, 0)], 0), true); // [b + n, classes]
                     let real = logits.narrow(0, 0, b).cross_entropy_for_logits(&y);
                     // Cross-entropy against the uniform distribution: −mean over styles of log p.
-                    let uniform = -logits.narrow(0, b, n).log_softmax(-1, Kind::Float).mean(Kind::Float);
+                    let uniform = -logits
+                        .narrow(0, b, n)
+                        .log_softmax(-1, Kind::Float)
+                        .mean(Kind::Float);
                     (real * b as f64 + uniform * n as f64) / (b + n) as f64
                 } else {
                     model.loss(&x, &y, true)
@@ -321,31 +423,65 @@ pub fn fit<F: Serialize>(
             }
             let test = evaluate(&model, &splits.test, window, hop)?;
             let held_out = held(&model)?;
-            let mut note = format!("test: windows {:.3} (balanced {:.3}), dances {:.3}", test.window_accuracy, test.window_balanced_accuracy, test.dance_accuracy);
+            let mut note = format!(
+                "test: windows {:.3} (balanced {:.3}), dances {:.3}",
+                test.window_accuracy, test.window_balanced_accuracy, test.dance_accuracy
+            );
             if let Some(h) = &held_out {
-                note += &format!("; held out: windows {:.3} (balanced {:.3}), dances {:.3}", h.evaluation.window_accuracy, h.evaluation.window_balanced_accuracy, h.evaluation.dance_accuracy);
+                note += &format!(
+                    "; held out: windows {:.3} (balanced {:.3}), dances {:.3}",
+                    h.evaluation.window_accuracy,
+                    h.evaluation.window_balanced_accuracy,
+                    h.evaluation.dance_accuracy
+                );
             }
             let test_loss = Some(test.window_loss);
             let mut l = latest.borrow_mut();
             let steps = l.2 + batches;
             *l = (test, held_out, steps);
-            Ok(EpochResult { train_loss: total / batches.max(1) as f64, test_loss, note })
+            Ok(EpochResult {
+                train_loss: total / batches.max(1) as f64,
+                test_loss,
+                note,
+            })
         },
         |t| {
             let l = latest.borrow();
             let schedule = Schedule {
                 windows_per_epoch: opts.windows_per_epoch,
                 sampling: SAMPLING.into(),
-                augmentation: additions.augment.map(|a| a.1.to_string()).unwrap_or_default(),
-                no_style: additions.no_style.as_ref().map(|n| n.1.to_string()).unwrap_or_default(),
-                no_style_per_batch: if no_style.is_empty() { 0 } else { additions.no_style_per_batch },
+                augmentation: additions
+                    .augment
+                    .map(|a| a.1.to_string())
+                    .unwrap_or_default(),
+                no_style: additions
+                    .no_style
+                    .as_ref()
+                    .map(|n| n.1.to_string())
+                    .unwrap_or_default(),
+                no_style_per_batch: if no_style.is_empty() {
+                    0
+                } else {
+                    additions.no_style_per_batch
+                },
                 steps: l.2,
             };
-            file(t.record(opts.lr, opts.batch, opts.seed, schedule), l.0.clone(), l.1.clone())
+            file(
+                t.record(opts.lr, opts.batch, opts.seed, schedule),
+                l.0.clone(),
+                l.1.clone(),
+            )
         },
     )?;
     let (test, held_out, _) = latest.into_inner();
-    Ok((Fitted { logs: trainer.logs, test, held_out }, trainer.out))
+    Ok((
+        Fitted {
+            logs: trainer.logs,
+            test,
+            held_out,
+        },
+        trainer.out,
+    ))
 }
 
 #[cfg(test)]
@@ -354,13 +490,19 @@ mod tests {
     use crate::models::DanceStyle;
 
     fn dance(id: &str, style: DanceStyle, t: usize) -> Labelled {
-        Labelled { id: id.into(), style, features: Array2::zeros((t, 2)) }
+        Labelled {
+            id: id.into(),
+            style,
+            features: Array2::zeros((t, 2)),
+        }
     }
 
     #[test]
     fn every_style_gets_a_quarter_of_the_windows() {
         // 6 waltzes, 1 cha-cha, 2 rumbas, 1 tango, and one waltz too short for a window.
-        let mut d: Vec<Labelled> = (0..6).map(|i| dance(&format!("W{i}"), DanceStyle::Waltz, 100)).collect();
+        let mut d: Vec<Labelled> = (0..6)
+            .map(|i| dance(&format!("W{i}"), DanceStyle::Waltz, 100))
+            .collect();
         d.push(dance("C", DanceStyle::ChaCha, 50));
         d.push(dance("R1", DanceStyle::Rumba, 40));
         d.push(dance("R2", DanceStyle::Rumba, 200));
@@ -386,7 +528,13 @@ mod tests {
     fn folds_leave_out_each_style_in_turn_but_never_a_lone_one() {
         let d: Vec<Labelled> = ["W1", "W2", "W3", "C1", "C2", "T1", "W4"]
             .iter()
-            .map(|id| dance(id, DanceStyle::from_letter(id.chars().next().unwrap()).unwrap(), 10))
+            .map(|id| {
+                dance(
+                    id,
+                    DanceStyle::from_letter(id.chars().next().unwrap()).unwrap(),
+                    10,
+                )
+            })
             .collect();
         let f1 = Fold::parse("1/2").unwrap().holds(&d);
         let f2 = Fold::parse("2/2").unwrap().holds(&d);

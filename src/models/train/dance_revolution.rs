@@ -5,8 +5,13 @@ use tch::{Device, Kind, Tensor};
 use rand::SeedableRng;
 
 use super::augment::{Augment, MusicLayout};
-use super::{batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, TrainError, Trainer, Windows};
-use crate::models::dance_revolution::{curriculum_q, Config, Curriculum, DanceRevolution, ModelFile, Serving, ID};
+use super::{
+    batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, TrainError, Trainer,
+    Windows,
+};
+use crate::models::dance_revolution::{
+    curriculum_q, Config, Curriculum, DanceRevolution, ModelFile, Serving, ID,
+};
 
 /// Options of one training run; the defaults reproduce the committed weights' schedule (the
 /// card gives the runs).
@@ -69,17 +74,45 @@ impl Default for Options {
 
 /// Trains and writes the model folder; returns the per-epoch log.
 pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
-    let features = if opts.beat_clock { crate::audio::features::dance_revolution_clock_at } else { crate::audio::features::dance_revolution_at };
+    let features = if opts.beat_clock {
+        crate::audio::features::dance_revolution_clock_at
+    } else {
+        crate::audio::features::dance_revolution_at
+    };
     let data = Data::load(&opts.common.data, features, |_| Ok(()))?;
-    let base = if opts.common.tiny { Config::tiny(0, 0) } else { Config::cpu() };
-    let config = Config { music_dim: data.music_norm.dim() as i64, pose_dim: data.pose_norm.dim() as i64, beat_clock: opts.beat_clock, ..base };
-    let augment = Augment { min_tempo: opts.min_tempo, max_tempo: opts.max_tempo, mirror: opts.mirror };
-    let windows = Windows::new(&data, MusicLayout::dance_revolution(opts.beat_clock), augment);
-    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| DanceRevolution::new(p, config.clone()))?;
+    let base = if opts.common.tiny {
+        Config::tiny(0, 0)
+    } else {
+        Config::cpu()
+    };
+    let config = Config {
+        music_dim: data.music_norm.dim() as i64,
+        pose_dim: data.pose_norm.dim() as i64,
+        beat_clock: opts.beat_clock,
+        ..base
+    };
+    let augment = Augment {
+        min_tempo: opts.min_tempo,
+        max_tempo: opts.max_tempo,
+        mirror: opts.mirror,
+    };
+    let windows = Windows::new(
+        &data,
+        MusicLayout::dance_revolution(opts.beat_clock),
+        augment,
+    );
+    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
+        DanceRevolution::new(p, config.clone())
+    })?;
     let test = &data.test;
     // Windows hold window + 1 frames: frame 0 is only the decoder's first input.
     let len = opts.window + 1;
-    let curriculum = Curriculum { window: opts.window, p: opts.p, lambda: opts.lambda, q_max: opts.q_max };
+    let curriculum = Curriculum {
+        window: opts.window,
+        p: opts.p,
+        lambda: opts.lambda,
+        q_max: opts.q_max,
+    };
     let epochs = opts.first_epoch..opts.first_epoch + opts.epochs;
     trainer.run(
         epochs,
@@ -137,11 +170,26 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
 /// (`music`, `poses`: `[b, len, ·]`, normalised), plus `velocity_weight` × the L1 of their
 /// frame-to-frame changes.
 #[allow(clippy::too_many_arguments)]
-fn window_loss(model: &DanceRevolution, music: &Tensor, poses: &Tensor, p: i64, q: i64, seed: u64, train: bool, random_positions: bool, velocity_weight: f64) -> Tensor {
+fn window_loss(
+    model: &DanceRevolution,
+    music: &Tensor,
+    poses: &Tensor,
+    p: i64,
+    q: i64,
+    seed: u64,
+    train: bool,
+    random_positions: bool,
+    velocity_weight: f64,
+) -> Tensor {
     let len = poses.size()[1];
     let music = music.narrow(1, 1, len - 1);
     // A position offset drawn per batch over the whole range a served song uses (issue 10 §5).
-    let start = if random_positions { (seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11) as i64 % (crate::models::dance_revolution::MAX_POSITION - len).max(1) } else { 0 };
+    let start = if random_positions {
+        (seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11) as i64
+            % (crate::models::dance_revolution::MAX_POSITION - len).max(1)
+    } else {
+        0
+    };
     let pred = model.forward_curriculum(&music, poses, start, p, q, seed, train);
     let truth = poses.narrow(1, 1, len - 1);
     let loss = (&pred - &truth).abs().mean(Kind::Float);

@@ -8,11 +8,14 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use tch::{Device, Kind, Tensor};
 
-use super::{batch_tensor, window_starts, CommonOptions, EpochLog, EpochResult, Sequence, TrainError, Trainer};
+use super::{
+    batch_tensor, window_starts, CommonOptions, EpochLog, EpochResult, Sequence, TrainError,
+    Trainer,
+};
+use crate::metrics::physical::seed_distance_m;
 use crate::models::dancenet::{Config, DanceNet, ModelFile, Sampling, Schedule, Serving, ID};
 use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
 use crate::models::DanceStyle;
-use crate::metrics::physical::seed_distance_m;
 use crate::motion::dataset::{Dance, Dataset, NormStats};
 use crate::motion::rig::Rig;
 use crate::motion::rotations;
@@ -111,18 +114,27 @@ fn prepare(dances: &[Dance], rig: &Rig) -> Result<(Vec<Prepared>, f64), TrainErr
     let (mut err_sum, mut err_n) = (0.0f64, 0usize);
     for dance in dances {
         let id = &dance.id;
-        let style = DanceStyle::of_dance_id(id).ok_or_else(|| TrainError::Motion(crate::motion::MotionError::UnknownDance { id: id.clone() }))?;
+        let style = DanceStyle::of_dance_id(id).ok_or_else(|| {
+            TrainError::Motion(crate::motion::MotionError::UnknownDance { id: id.clone() })
+        })?;
         let audio = crate::audio::decode_path(&dance.audio_path)?;
         let t = dance.motion.num_frames();
-        let music = crate::audio::features::dancenet(&audio, dance.motion.fps, dance.song_time_s(0), t)?;
+        let music =
+            crate::audio::features::dancenet(&audio, dance.motion.fps, dance.song_time_s(0), t)?;
         let enc = rotations::encode(rig, dance.motion.positions.view(), dance.motion.fps)?;
         let back = rotations::decode(rig, enc.features.view(), enc.start, dance.motion.fps)?;
         let n = t * crate::motion::NUM_JOINTS;
         err_sum += seed_distance_m(&dance.motion, &back) * n as f64;
         err_n += n;
-        let frames = concatenate(Axis(1), &[enc.features.view(), enc.contacts.view()]).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
+        let frames = concatenate(Axis(1), &[enc.features.view(), enc.contacts.view()])
+            .map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
         tracing::info!(dance = %id, frames = t, "loaded");
-        out.push(Prepared { id: id.clone(), style, music, frames });
+        out.push(Prepared {
+            id: id.clone(),
+            style,
+            music,
+            frames,
+        });
     }
     Ok((out, err_sum / err_n.max(1) as f64))
 }
@@ -133,37 +145,92 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     // One skeleton for every dance, fitted on the train split: rotations are relative to its
     // rest pose, which must be the same for all.
     let train_dances = ds.load_all(ds.train_ids())?;
-    let all_pos = concatenate(Axis(0), &train_dances.iter().map(|d| d.motion.positions.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
-    let all_root = concatenate(Axis(0), &train_dances.iter().map(|d| d.center.view()).collect::<Vec<_>>()).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
+    let all_pos = concatenate(
+        Axis(0),
+        &train_dances
+            .iter()
+            .map(|d| d.motion.positions.view())
+            .collect::<Vec<_>>(),
+    )
+    .map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
+    let all_root = concatenate(
+        Axis(0),
+        &train_dances
+            .iter()
+            .map(|d| d.center.view())
+            .collect::<Vec<_>>(),
+    )
+    .map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
     let rig = Rig::fit(all_pos.view(), all_root.view())?;
     drop((all_pos, all_root));
     let (train_raw, fit_err) = prepare(&train_dances, &rig)?;
     drop(train_dances);
     let (test_raw, test_fit_err) = prepare(&ds.load_all(ds.test_ids())?, &rig)?;
-    tracing::info!(train_cm = 100.0 * fit_err, test_cm = 100.0 * test_fit_err, "rigid representation error (mean per joint, root-relative)");
+    tracing::info!(
+        train_cm = 100.0 * fit_err,
+        test_cm = 100.0 * test_fit_err,
+        "rigid representation error (mean per joint, root-relative)"
+    );
     let layout = rotations::Layout::of(&rig);
     let d = layout.dim();
     let music_norm = NormStats::fit(train_raw.iter().map(|p| &p.music))?;
-    let pose_norm = NormStats::fit(train_raw.iter().map(|p| p.frames.slice(ndarray::s![.., ..d]).to_owned()).collect::<Vec<_>>().iter())?;
+    let pose_norm = NormStats::fit(
+        train_raw
+            .iter()
+            .map(|p| p.frames.slice(ndarray::s![.., ..d]).to_owned())
+            .collect::<Vec<_>>()
+            .iter(),
+    )?;
     let normalise = |seqs: &[Prepared]| -> Result<Vec<Sequence>, TrainError> {
         seqs.iter()
             .map(|p| {
-                let feats = pose_norm.normalize(&p.frames.slice(ndarray::s![.., ..d]).to_owned())?;
-                let poses = concatenate(Axis(1), &[feats.view(), p.frames.slice(ndarray::s![.., d..])]).map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
-                Ok(Sequence { id: p.id.clone(), music: music_norm.normalize(&p.music)?, poses })
+                let feats =
+                    pose_norm.normalize(&p.frames.slice(ndarray::s![.., ..d]).to_owned())?;
+                let poses = concatenate(
+                    Axis(1),
+                    &[feats.view(), p.frames.slice(ndarray::s![.., d..])],
+                )
+                .map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
+                Ok(Sequence {
+                    id: p.id.clone(),
+                    music: music_norm.normalize(&p.music)?,
+                    poses,
+                })
             })
             .collect()
     };
     let (train, test) = (normalise(&train_raw)?, normalise(&test_raw)?);
     let train_style: Vec<usize> = train_raw.iter().map(|p| p.style.index()).collect();
     let test_style: Vec<usize> = test_raw.iter().map(|p| p.style.index()).collect();
-    let base = if opts.common.tiny { Config::tiny(d as i64) } else { Config::cpu(d as i64) };
-    let config = Config { music_dim: music_norm.dim() as i64, mixtures: opts.mixtures.unwrap_or(base.mixtures), absolute_dims: opts.absolute_dims.unwrap_or(base.absolute_dims).clamp(0, d as i64), ..base };
-    let warmup = opts.warmup.unwrap_or(config.receptive_field() as usize).min(opts.window.saturating_sub(2));
-    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| DanceNet::new(p, config.clone()))?;
+    let base = if opts.common.tiny {
+        Config::tiny(d as i64)
+    } else {
+        Config::cpu(d as i64)
+    };
+    let config = Config {
+        music_dim: music_norm.dim() as i64,
+        mixtures: opts.mixtures.unwrap_or(base.mixtures),
+        absolute_dims: opts
+            .absolute_dims
+            .unwrap_or(base.absolute_dims)
+            .clamp(0, d as i64),
+        ..base
+    };
+    let warmup = opts
+        .warmup
+        .unwrap_or(config.receptive_field() as usize)
+        .min(opts.window.saturating_sub(2));
+    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
+        DanceNet::new(p, config.clone())
+    })?;
     // Seed clips: normalised rows (features and contacts), long enough to fill the receptive field.
     let clip_frames = config.receptive_field() as usize + 1;
-    let clips = SeedClips::draw(&train.iter().map(|s| &s.poses).collect::<Vec<_>>(), SEED_CLIPS, clip_frames, opts.seed)?;
+    let clips = SeedClips::draw(
+        &train.iter().map(|s| &s.poses).collect::<Vec<_>>(),
+        SEED_CLIPS,
+        clip_frames,
+        opts.seed,
+    )?;
     clips.save(&trainer.out.join(SEED_CLIPS_FILE))?;
     // How often each style's windows repeat in an epoch.
     let mut style_frames = [0usize; 4];
@@ -171,17 +238,51 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         style_frames[p.style.index()] += p.frames.nrows();
     }
     let most = *style_frames.iter().max().unwrap_or(&1) as f64;
-    let repeats: Vec<usize> = style_frames.iter().map(|&f| if f == 0 || opts.style_balance <= 0.0 { 1 } else { ((most / f as f64).powf(opts.style_balance).round() as usize).clamp(1, 4) }).collect();
-    tracing::info!(?style_frames, ?repeats, warmup, receptive_field = config.receptive_field(), "training set-up");
+    let repeats: Vec<usize> = style_frames
+        .iter()
+        .map(|&f| {
+            if f == 0 || opts.style_balance <= 0.0 {
+                1
+            } else {
+                ((most / f as f64).powf(opts.style_balance).round() as usize).clamp(1, 4)
+            }
+        })
+        .collect();
+    tracing::info!(
+        ?style_frames,
+        ?repeats,
+        warmup,
+        receptive_field = config.receptive_field(),
+        "training set-up"
+    );
     let len = opts.window;
-    let schedule = |steps: usize| Schedule { window: len, stride: opts.stride, input_noise: opts.input_noise, input_coherence: opts.input_coherence, input_offset: opts.input_offset, input_walk: opts.input_walk, lambda_foot: opts.lambda_foot, warmup, style_balance: opts.style_balance, steps, rigid_fit_error_cm: 100.0 * fit_err };
+    let schedule = |steps: usize| Schedule {
+        window: len,
+        stride: opts.stride,
+        input_noise: opts.input_noise,
+        input_coherence: opts.input_coherence,
+        input_offset: opts.input_offset,
+        input_walk: opts.input_walk,
+        lambda_foot: opts.lambda_foot,
+        warmup,
+        style_balance: opts.style_balance,
+        steps,
+        rigid_fit_error_cm: 100.0 * fit_err,
+    };
     let file_of = |t: &Trainer, steps: usize| ModelFile {
         config: config.clone(),
         music_norm: music_norm.clone(),
         pose_norm: pose_norm.clone(),
         fps: crate::motion::MOTION_FPS,
         training: t.record(opts.lr, opts.batch, opts.seed, schedule(steps)),
-        extra: Serving { rig: rig.offset_arrays(), sampling: Sampling { temperature: opts.temperature, coherence: opts.coherence }, smooth_frames: opts.smooth_frames },
+        extra: Serving {
+            rig: rig.offset_arrays(),
+            sampling: Sampling {
+                temperature: opts.temperature,
+                coherence: opts.coherence,
+            },
+            smooth_frames: opts.smooth_frames,
+        },
     };
     let steps = std::cell::Cell::new(0usize);
     let dev = Device::Cpu;

@@ -8,7 +8,10 @@ use rand::Rng;
 
 use super::classify::{fit, Additions, Augment, ClassifyOptions, Fold, Splits};
 use super::{CommonOptions, FolderFiles, TrainError};
-use crate::models::dancenet::style::{Labelled, StyleConfig, StyleFile, CHROMA, FOLDER, FPS, HOP_S, STYLE_FILE, STYLE_LOG_FILE, STYLE_WEIGHTS_FILE, WINDOW_S};
+use crate::models::dancenet::style::{
+    Labelled, StyleConfig, StyleFile, CHROMA, FOLDER, FPS, HOP_S, STYLE_FILE, STYLE_LOG_FILE,
+    STYLE_WEIGHTS_FILE, WINDOW_S,
+};
 use crate::models::DanceStyle;
 use crate::motion::dataset::Dataset;
 
@@ -37,12 +40,17 @@ pub fn transpose(w: &mut Array2<f32>, rng: &mut StdRng) {
     let k = rng.gen_range(0..CHROMA.len());
     let chroma = w.slice(s![.., CHROMA]).to_owned();
     for (i, col) in chroma.columns().into_iter().enumerate() {
-        w.column_mut(CHROMA.start + (i + k) % CHROMA.len()).assign(&col);
+        w.column_mut(CHROMA.start + (i + k) % CHROMA.len())
+            .assign(&col);
     }
 }
 
 /// The classifier's files in DanceNet's folder.
-pub const FILES: FolderFiles = FolderFiles { weights: STYLE_WEIGHTS_FILE, description: STYLE_FILE, log: STYLE_LOG_FILE };
+pub const FILES: FolderFiles = FolderFiles {
+    weights: STYLE_WEIGHTS_FILE,
+    description: STYLE_FILE,
+    log: STYLE_LOG_FILE,
+};
 
 /// Every song of `ids`, whole, as raw DanceNet features at 25 fps.
 pub fn songs(ds: &Dataset, ids: &[String]) -> Result<Vec<Labelled>, TrainError> {
@@ -52,32 +60,71 @@ pub fn songs(ds: &Dataset, ids: &[String]) -> Result<Vec<Labelled>, TrainError> 
             let audio = crate::audio::decode_path(&dance.audio_path)?;
             let n = crate::motion::validate::song_frames(audio.duration_s, FPS);
             let features = crate::audio::features::dancenet(&audio, FPS, 0.0, n)?;
-            let style = DanceStyle::of_dance_id(id).ok_or_else(|| crate::motion::MotionError::UnknownDance { id: id.clone() })?;
+            let style = DanceStyle::of_dance_id(id)
+                .ok_or_else(|| crate::motion::MotionError::UnknownDance { id: id.clone() })?;
             tracing::info!(song = %id, seconds = audio.duration_s, "features");
-            Ok(Labelled { id: id.clone(), style, features })
+            Ok(Labelled {
+                id: id.clone(),
+                style,
+                features,
+            })
         })
         .collect()
 }
 
 /// Trains and writes the classifier; returns a one-line summary.
 pub fn train(opts: &Options) -> Result<String, TrainError> {
-    let fold = opts.schedule.hold_out.as_deref().map(Fold::parse).transpose()?;
+    let fold = opts
+        .schedule
+        .hold_out
+        .as_deref()
+        .map(Fold::parse)
+        .transpose()?;
     let ds = Dataset::open(&opts.common.data)?;
     // The chroma shares one normalisation so that rolling it commutes with normalising.
-    let splits = Splits::new(songs(&ds, ds.train_ids())?, songs(&ds, ds.test_ids())?, fold, &[CHROMA])?;
-    let config = opts.schedule.apply(if opts.common.tiny { StyleConfig::tiny() } else { StyleConfig::cpu() });
-    let additions = Additions { augment: opts.transpose.then_some((transpose as Augment, "chroma rolled by a random 0-11 semitones per window")), ..Default::default() };
-    let (window, hop) = ((WINDOW_S * FPS).round() as usize, (HOP_S * FPS).round() as usize);
-    let (fitted, out) = fit(&opts.common, FOLDER, FILES, &opts.schedule, &config, &splits, window, hop, additions, |training, test, held_out| StyleFile {
-        config: config.clone(),
-        music_norm: splits.norm.clone(),
-        fps: FPS,
+    let splits = Splits::new(
+        songs(&ds, ds.train_ids())?,
+        songs(&ds, ds.test_ids())?,
+        fold,
+        &[CHROMA],
+    )?;
+    let config = opts.schedule.apply(if opts.common.tiny {
+        StyleConfig::tiny()
+    } else {
+        StyleConfig::cpu()
+    });
+    let additions = Additions {
+        augment: opts.transpose.then_some((
+            transpose as Augment,
+            "chroma rolled by a random 0-11 semitones per window",
+        )),
+        ..Default::default()
+    };
+    let (window, hop) = (
+        (WINDOW_S * FPS).round() as usize,
+        (HOP_S * FPS).round() as usize,
+    );
+    let (fitted, out) = fit(
+        &opts.common,
+        FOLDER,
+        FILES,
+        &opts.schedule,
+        &config,
+        &splits,
         window,
         hop,
-        training,
-        test,
-        held_out,
-    })?;
+        additions,
+        |training, test, held_out| StyleFile {
+            config: config.clone(),
+            music_norm: splits.norm.clone(),
+            fps: FPS,
+            window,
+            hop,
+            training,
+            test,
+            held_out,
+        },
+    )?;
     Ok(fitted.summary(&out))
 }
 
@@ -92,7 +139,9 @@ mod tests {
         let mut w = w0.clone();
         transpose(&mut w, &mut StdRng::seed_from_u64(3));
         assert_eq!(w.slice(s![.., ..3]), w0.slice(s![.., ..3]));
-        let k = (0..12).find(|&k| w[[0, 3 + k]] == w0[[0, 3]]).expect("C moved somewhere");
+        let k = (0..12)
+            .find(|&k| w[[0, 3 + k]] == w0[[0, 3]])
+            .expect("C moved somewhere");
         for i in 0..12 {
             assert_eq!(w.column(3 + (i + k) % 12), w0.column(3 + i));
         }

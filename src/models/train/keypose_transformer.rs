@@ -13,15 +13,18 @@ use serde::{Deserialize, Serialize};
 use tch::nn;
 use tch::{Device, Kind, Tensor};
 
-use super::{batch_tensor, load_sequences, window_starts, write_atomic, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError, Trainer};
+use super::{
+    batch_tensor, load_sequences, window_starts, write_atomic, CommonOptions, Data, EpochLog,
+    EpochResult, Sequence, TrainError, Trainer,
+};
 use crate::models::folder;
 use crate::models::keypose_transformer::scaffold::{BankMeta, ClipInfo, PoseBank, POSE_BANK_FILE};
 use crate::models::keypose_transformer::served::RootHeight;
-use crate::models::to_tensor;
 use crate::models::keypose_transformer::{
-    generate_features, local_position_embedding, loss_weights, to_local, Config, KeySampling, KeyposeTransformer, LocalKey, ModelFile, Serving,
-    WindowInput, ID,
+    generate_features, local_position_embedding, loss_weights, to_local, Config, KeySampling,
+    KeyposeTransformer, LocalKey, ModelFile, Serving, WindowInput, ID,
 };
+use crate::models::to_tensor;
 use crate::motion::dataset::Dataset;
 use crate::motion::repr::{self, POSE_DIM};
 use crate::motion::{KeyPose, NUM_JOINTS};
@@ -122,7 +125,11 @@ const SEGMENT_HALF: usize = 12;
 
 /// Segments of `2·half` frames centred on `centres`, those that fit in `n` frames.
 fn segments(centres: &[usize], half: usize, n: usize) -> Vec<std::ops::Range<usize>> {
-    centres.iter().filter(|&&c| c >= half && c + half <= n).map(|&c| c - half..c + half).collect()
+    centres
+        .iter()
+        .filter(|&&c| c >= half && c + half <= n)
+        .map(|&c| c - half..c + half)
+        .collect()
 }
 
 /// The centres midway between consecutive joins (and between the seed's end and the first join,
@@ -131,12 +138,25 @@ fn mid_window_centres(joins: &[usize], first: usize, n: usize) -> Vec<usize> {
     let mut bounds = vec![first];
     bounds.extend_from_slice(joins);
     bounds.push(n);
-    bounds.windows(2).filter(|p| p[1] > p[0] + 2 * SEGMENT_HALF).map(|p| (p[0] + p[1]) / 2).collect()
+    bounds
+        .windows(2)
+        .filter(|p| p[1] > p[0] + 2 * SEGMENT_HALF)
+        .map(|p| (p[0] + p[1]) / 2)
+        .collect()
 }
 
 /// Sums of `S_cv` over the segments of a motion, and their count.
-fn segment_scv(positions: ndarray::ArrayView3<'_, f32>, segs: &[std::ops::Range<usize>], fps: f64) -> (f64, usize) {
-    let sum = segs.iter().map(|r| crate::metrics::kinematics::smoothness_cv(positions.slice(s![r.clone(), .., ..]), fps)).sum();
+fn segment_scv(
+    positions: ndarray::ArrayView3<'_, f32>,
+    segs: &[std::ops::Range<usize>],
+    fps: f64,
+) -> (f64, usize) {
+    let sum = segs
+        .iter()
+        .map(|r| {
+            crate::metrics::kinematics::smoothness_cv(positions.slice(s![r.clone(), .., ..]), fps)
+        })
+        .sum();
     (sum, segs.len())
 }
 
@@ -147,14 +167,20 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         tch::set_num_threads(opts.common.threads);
         let eval = evaluate_folder(&out, &opts.common.data, opts.eval_keys, opts.seed)?;
         tracing::info!(?eval, "key-pose consistency on the test split");
-        write_atomic(&out.join("eval.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
+        write_atomic(
+            &out.join("eval.json"),
+            serde_json::to_string_pretty(&eval)?.as_bytes(),
+        )?;
         return Ok(Vec::new());
     }
     if opts.bank_only {
         let ds = Dataset::open(&opts.common.data)?;
         let mut train = load_sequences(&ds, ds.train_ids(), crate::audio::features::keypose)?;
         train.iter_mut().for_each(|s| to_clearance(&mut s.poses));
-        std::fs::create_dir_all(&out).map_err(|source| TrainError::Io { path: out.clone(), source })?;
+        std::fs::create_dir_all(&out).map_err(|source| TrainError::Io {
+            path: out.clone(),
+            source,
+        })?;
         let bank = pose_bank(&ds, &train, opts)?;
         bank.save(&out.join(POSE_BANK_FILE))?;
         tracing::info!(clips = opts.bank_clips, out = %out.display(), "pose bank redrawn");
@@ -164,9 +190,22 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         to_clearance(&mut seq.poses);
         Ok(())
     })?;
-    let base = if opts.common.tiny { Config::tiny(0, 0, 0) } else { Config::cpu() };
-    let config = Config { music_dim: data.music_norm.dim() as i64, pose_dim: data.pose_norm.dim() as i64, key_dim: POSE_DIM as i64, lambda: opts.lambda, sigma: opts.sigma, ..base };
-    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| KeyposeTransformer::new(p, config.clone()))?;
+    let base = if opts.common.tiny {
+        Config::tiny(0, 0, 0)
+    } else {
+        Config::cpu()
+    };
+    let config = Config {
+        music_dim: data.music_norm.dim() as i64,
+        pose_dim: data.pose_norm.dim() as i64,
+        key_dim: POSE_DIM as i64,
+        lambda: opts.lambda,
+        sigma: opts.sigma,
+        ..base
+    };
+    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
+        KeyposeTransformer::new(p, config.clone())
+    })?;
     let (train, test) = (&data.train, &data.test);
     let len = config.window as usize;
     let steps = std::cell::Cell::new(0usize);
@@ -175,8 +214,20 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         music_norm: data.music_norm.clone(),
         pose_norm: data.pose_norm.clone(),
         fps: crate::motion::MOTION_FPS,
-        training: t.record(opts.lr, opts.batch, opts.seed, KeySampling { steps: steps.get(), max_keys: opts.max_keys, velocity_weight: opts.velocity_weight }),
-        extra: Serving { root_height: RootHeight::FootClearance, scaffold_spacing: opts.scaffold_spacing },
+        training: t.record(
+            opts.lr,
+            opts.batch,
+            opts.seed,
+            KeySampling {
+                steps: steps.get(),
+                max_keys: opts.max_keys,
+                velocity_weight: opts.velocity_weight,
+            },
+        ),
+        extra: Serving {
+            root_height: RootHeight::FootClearance,
+            scaffold_spacing: opts.scaffold_spacing,
+        },
     };
     pose_bank(&data.dataset, &data.train_raw, opts)?
         .save(&trainer.out.join(POSE_BANK_FILE))
@@ -189,10 +240,20 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             if starts.is_empty() {
                 return Err(TrainError::NoWindows(len));
             }
-            let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
+            let mut rng =
+                StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
             let (mut total, mut batches) = (0.0, 0);
             for chunk in starts.chunks(opts.batch) {
-                let loss = window_loss(&model, &config, train, chunk, opts.max_keys, opts.velocity_weight, &mut rng, true);
+                let loss = window_loss(
+                    &model,
+                    &config,
+                    train,
+                    chunk,
+                    opts.max_keys,
+                    opts.velocity_weight,
+                    &mut rng,
+                    true,
+                );
                 opt.backward_step_clip(&loss, 1.0);
                 total += loss.double_value(&[]);
                 batches += 1;
@@ -204,18 +265,47 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             let test_loss = tch::no_grad(|| {
                 let mut rng = StdRng::seed_from_u64(7);
                 let starts = window_starts(test, len, len, 0);
-                let losses: Vec<f64> = starts.chunks(opts.batch).map(|c| window_loss(&model, &config, test, c, opts.max_keys, opts.velocity_weight, &mut rng, false).double_value(&[])).collect();
+                let losses: Vec<f64> = starts
+                    .chunks(opts.batch)
+                    .map(|c| {
+                        window_loss(
+                            &model,
+                            &config,
+                            test,
+                            c,
+                            opts.max_keys,
+                            opts.velocity_weight,
+                            &mut rng,
+                            false,
+                        )
+                        .double_value(&[])
+                    })
+                    .collect();
                 (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
             });
-            Ok(EpochResult { train_loss: total / batches.max(1) as f64, test_loss, note: format!("steps={} λ={} σ={}", steps.get(), opts.lambda, opts.sigma) })
+            Ok(EpochResult {
+                train_loss: total / batches.max(1) as f64,
+                test_loss,
+                note: format!("steps={} λ={} σ={}", steps.get(), opts.lambda, opts.sigma),
+            })
         },
         model_file,
     )?;
     let file = model_file(&trainer);
     trainer.save(&file)?;
-    let eval = evaluate(&model, &file, &data.dataset, &data.test_raw, opts.eval_keys, opts.seed)?;
+    let eval = evaluate(
+        &model,
+        &file,
+        &data.dataset,
+        &data.test_raw,
+        opts.eval_keys,
+        opts.seed,
+    )?;
     tracing::info!(?eval, "key-pose consistency on the test split");
-    write_atomic(&trainer.out.join("eval.json"), serde_json::to_string_pretty(&eval)?.as_bytes())?;
+    write_atomic(
+        &trainer.out.join("eval.json"),
+        serde_json::to_string_pretty(&eval)?.as_bytes(),
+    )?;
     Ok(trainer.logs)
 }
 
@@ -228,10 +318,20 @@ fn to_clearance(poses: &mut Array2<f32>) {
 /// `clips` clips of `frames` frames from the train dances (features as the model predicts them,
 /// denormalised), at seeded starts spread over the dances in proportion to their length: the
 /// dance (index into `train`) and start frame of each.
-fn bank_picks(train: &[Sequence], clips: usize, frames: usize, seed: u64) -> Result<Vec<(usize, usize)>, TrainError> {
+fn bank_picks(
+    train: &[Sequence],
+    clips: usize,
+    frames: usize,
+    seed: u64,
+) -> Result<Vec<(usize, usize)>, TrainError> {
     let mut rng = StdRng::seed_from_u64(seed ^ 0xBA_4C);
-    let long: Vec<usize> = (0..train.len()).filter(|&i| train[i].poses.nrows() >= frames).collect();
-    let total: usize = long.iter().map(|&i| train[i].poses.nrows() - frames + 1).sum();
+    let long: Vec<usize> = (0..train.len())
+        .filter(|&i| train[i].poses.nrows() >= frames)
+        .collect();
+    let total: usize = long
+        .iter()
+        .map(|&i| train[i].poses.nrows() - frames + 1)
+        .sum();
     if long.is_empty() || clips == 0 {
         return Err(TrainError::NoWindows(frames));
     }
@@ -261,29 +361,54 @@ fn pose_bank(ds: &Dataset, train: &[Sequence], opts: &Options) -> Result<PoseBan
     let width = train[picks[0].0].poses.ncols();
     let mut bank = ndarray::Array3::<f32>::zeros((clips, frames, width));
     let mut infos = Vec::with_capacity(clips);
-    let mut analysed: std::collections::HashMap<usize, (crate::motion::dataset::Dance, crate::audio::Analysis)> = std::collections::HashMap::new();
+    let mut analysed: std::collections::HashMap<
+        usize,
+        (crate::motion::dataset::Dance, crate::audio::Analysis),
+    > = std::collections::HashMap::new();
     for (c, &(i, at)) in picks.iter().enumerate() {
         let seq = &train[i];
-        bank.slice_mut(s![c, .., ..]).assign(&seq.poses.slice(s![at..at + frames, ..]));
+        bank.slice_mut(s![c, .., ..])
+            .assign(&seq.poses.slice(s![at..at + frames, ..]));
         let (dance, analysis) = match analysed.entry(i) {
             std::collections::hash_map::Entry::Occupied(e) => e.into_mut(),
             std::collections::hash_map::Entry::Vacant(e) => {
                 let dance = ds.load(&seq.id)?;
-                let analysis = crate::audio::analyze(&crate::audio::decode_path(&dance.audio_path)?)?;
+                let analysis =
+                    crate::audio::analyze(&crate::audio::decode_path(&dance.audio_path)?)?;
                 e.insert((dance, analysis))
             }
         };
         let fps = dance.motion.fps;
         let first = dance.song_time_s(at);
-        let on_clip = |times: &[f64]| -> Vec<f64> { times.iter().map(|t| (t - first) * fps).filter(|f| *f >= 0.0 && *f <= (frames - 1) as f64).collect() };
+        let on_clip = |times: &[f64]| -> Vec<f64> {
+            times
+                .iter()
+                .map(|t| (t - first) * fps)
+                .filter(|f| *f >= 0.0 && *f <= (frames - 1) as f64)
+                .collect()
+        };
         let beats = on_clip(&analysis.beat_times);
         let bar = crate::models::keypose_transformer::beats::median_step(&analysis.downbeat_times)
-            .zip(crate::models::keypose_transformer::beats::median_step(&analysis.beat_times))
-            .map_or(4, |(d, b)| if (d / b).round() as usize == 3 { 3 } else { 4 });
-        let onset = seq.music.slice(s![at..at + frames, crate::audio::features::KEYPOSE_DIM - 1]);
+            .zip(crate::models::keypose_transformer::beats::median_step(
+                &analysis.beat_times,
+            ))
+            .map_or(
+                4,
+                |(d, b)| if (d / b).round() as usize == 3 { 3 } else { 4 },
+            );
+        let onset = seq
+            .music
+            .slice(s![at..at + frames, crate::audio::features::KEYPOSE_DIM - 1]);
         let energy = onset.iter().map(|v| f64::from(*v)).sum::<f64>() / frames as f64;
         tracing::info!(clip = c, dance = %seq.id, start = at, beats = beats.len(), tempo = analysis.tempo_bpm, bar, energy, "bank clip");
-        infos.push(ClipInfo { dance: seq.id.clone(), start: at, style: dance.style, beats, bar, energy });
+        infos.push(ClipInfo {
+            dance: seq.id.clone(),
+            start: at,
+            style: dance.style,
+            beats,
+            bar,
+            energy,
+        });
     }
     let meta = BankMeta {
         made_by: format!(
@@ -309,7 +434,16 @@ fn sample_keys(rng: &mut StdRng, c: &Config, max_keys: usize) -> Vec<i64> {
 /// Weighted L1 between one batch's predictions and the ground truth, with ω(t) from the sampled
 /// key frames (§3.4).
 #[allow(clippy::too_many_arguments)]
-fn window_loss(model: &KeyposeTransformer, c: &Config, seqs: &[Sequence], starts: &[(usize, usize)], max_keys: usize, velocity_weight: f64, rng: &mut StdRng, train: bool) -> Tensor {
+fn window_loss(
+    model: &KeyposeTransformer,
+    c: &Config,
+    seqs: &[Sequence],
+    starts: &[(usize, usize)],
+    max_keys: usize,
+    velocity_weight: f64,
+    rng: &mut StdRng,
+    train: bool,
+) -> Tensor {
     let len = c.window as usize;
     let music = batch_tensor(seqs, starts, len, |s| &s.music, Device::Cpu);
     let poses = batch_tensor(seqs, starts, len, |s| &s.poses, Device::Cpu); // [b, T, pose]
@@ -340,14 +474,27 @@ fn window_loss(model: &KeyposeTransformer, c: &Config, seqs: &[Sequence], starts
     let pose_term = err.sum(Kind::Float) / (w.sum(Kind::Float) * c.pose_dim as f64);
     // Frame differences after the seed: [b, T − T′ − 1, pose].
     let (from, len) = (c.seed_len, c.window - c.seed_len);
-    let (p, y) = (pred.narrow(1, from - 1, len + 1), poses.narrow(1, from - 1, len + 1));
-    let vel = (p.diff(1, 1, None::<Tensor>, None::<Tensor>) - y.diff(1, 1, None::<Tensor>, None::<Tensor>)).abs().mean(Kind::Float);
+    let (p, y) = (
+        pred.narrow(1, from - 1, len + 1),
+        poses.narrow(1, from - 1, len + 1),
+    );
+    let vel = (p.diff(1, 1, None::<Tensor>, None::<Tensor>)
+        - y.diff(1, 1, None::<Tensor>, None::<Tensor>))
+    .abs()
+    .mean(Kind::Float);
     pose_term + vel * velocity_weight
 }
 
 /// Key-pose consistency on whole test dances through the served path: each dance is seeded with
 /// its first `T′` real frames and given `keys` real poses at random frames after the seed.
-pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test: &[Sequence], keys: usize, seed: u64) -> Result<KeyPoseEval, TrainError> {
+pub fn evaluate(
+    model: &KeyposeTransformer,
+    file: &ModelFile,
+    ds: &Dataset,
+    test: &[Sequence],
+    keys: usize,
+    seed: u64,
+) -> Result<KeyPoseEval, TrainError> {
     let mut rng = StdRng::seed_from_u64(seed);
     let ts = file.config.seed_len as usize;
     let (mut net, mut served, mut dance, mut dance_free, mut n) = (0.0, 0.0, 0.0, 0.0, 0usize);
@@ -367,7 +514,12 @@ pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test
         frames.sort_unstable();
         let key_poses: Vec<KeyPose> = frames
             .iter()
-            .map(|&f| KeyPose { time_s: f as f64 / file.fps, joints: (0..NUM_JOINTS).map(|j| [0, 1, 2].map(|a| f64::from(rel[[f, j, a]]))).collect() })
+            .map(|&f| KeyPose {
+                time_s: f as f64 / file.fps,
+                joints: (0..NUM_JOINTS)
+                    .map(|j| [0, 1, 2].map(|a| f64::from(rel[[f, j, a]])))
+                    .collect(),
+            })
             .collect();
         let local: Vec<LocalKey> = key_poses
             .iter()
@@ -375,17 +527,31 @@ pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test
             .map(|(k, &f)| {
                 let joints = Array2::from_shape_fn((NUM_JOINTS, 3), |(j, a)| k.joints[j][a] as f32);
                 let (local, yaw) = to_local(joints.view());
-                LocalKey { frame: f, local, yaw }
+                LocalKey {
+                    frame: f,
+                    local,
+                    yaw,
+                }
             })
             .collect();
         let music = to_tensor(&file.music_norm.normalize(&seq.music)?);
-        let (mut seed_feats, start) = repr::to_features(d.motion.positions.view(), d.center.view())?;
+        let (mut seed_feats, start) =
+            repr::to_features(d.motion.positions.view(), d.center.view())?;
         to_clearance(&mut seed_feats);
         let seed_rows = seed_feats.slice(s![0..ts, ..]).to_owned();
         let gen = |keys: &[LocalKey]| {
-            generate_features(model, file, &music, Some((&seed_rows, start)), true, keys, &[], |_, _| true)
-                .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?
-                .ok_or(TrainError::NoWindows(0))
+            generate_features(
+                model,
+                file,
+                &music,
+                Some((&seed_rows, start)),
+                true,
+                keys,
+                &[],
+                |_, _| true,
+            )
+            .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?
+            .ok_or(TrainError::NoWindows(0))
         };
         let g = gen(&local)?;
         let (raw, out, start2) = (g.network, g.served, g.start);
@@ -394,7 +560,10 @@ pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test
             net += joint_error_cm(&raw.row(*k).to_vec(), &lk.local);
         }
         let (motion, root) = repr::from_features(out.view(), start2, file.fps)?;
-        served += crate::metrics::kinematics::key_pose_error_root_cm(&motion, root.view(), &key_poses).unwrap_or(f64::NAN) * keys as f64;
+        served +=
+            crate::metrics::kinematics::key_pose_error_root_cm(&motion, root.view(), &key_poses)
+                .unwrap_or(f64::NAN)
+                * keys as f64;
         let fps = file.fps;
         let smooth = crate::metrics::kinematics::smoothness_cv;
         let (net_motion, _) = repr::from_features(raw.view(), start2, fps)?;
@@ -404,7 +573,15 @@ pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test
         let joins = crate::models::keypose_transformer::join_frames(t, &file.config);
         let at = segments(&joins, SEGMENT_HALF, t);
         let within = segments(&mid_window_centres(&joins, ts, t), SEGMENT_HALF, t);
-        for (slot, (pos, segs)) in [(&motion.positions, &at), (&motion.positions, &within), (&d.motion.positions, &at), (&d.motion.positions, &within)].into_iter().enumerate() {
+        for (slot, (pos, segs)) in [
+            (&motion.positions, &at),
+            (&motion.positions, &within),
+            (&d.motion.positions, &at),
+            (&d.motion.positions, &within),
+        ]
+        .into_iter()
+        .enumerate()
+        {
             let (sum, count) = segment_scv(pos.view(), segs, fps);
             seg[slot].0 += sum;
             seg[slot].1 += count;
@@ -416,7 +593,13 @@ pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test
     }
     let k = (n * keys).max(1) as f64;
     let per_dance = |x: f64| x / n.max(1) as f64;
-    let mean = |(sum, count): (f64, usize)| if count == 0 { f64::NAN } else { sum / count as f64 };
+    let mean = |(sum, count): (f64, usize)| {
+        if count == 0 {
+            f64::NAN
+        } else {
+            sum / count as f64
+        }
+    };
     Ok(KeyPoseEval {
         dances: n,
         keys_per_dance: keys,
@@ -436,18 +619,36 @@ pub fn evaluate(model: &KeyposeTransformer, file: &ModelFile, ds: &Dataset, test
 
 /// Mean per-joint distance (cm) between two 69-long local pose vectors.
 fn joint_error_cm(a: &[f32], b: &[f32]) -> f64 {
-    (0..NUM_JOINTS).map(|j| (0..3).map(|k| f64::from(a[3 * j + k] - b[3 * j + k]).powi(2)).sum::<f64>().sqrt()).sum::<f64>() * 100.0 / NUM_JOINTS as f64
+    (0..NUM_JOINTS)
+        .map(|j| {
+            (0..3)
+                .map(|k| f64::from(a[3 * j + k] - b[3 * j + k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .sum::<f64>()
+        * 100.0
+        / NUM_JOINTS as f64
 }
 
 /// Mean per-joint distance (cm) over all frames of two feature matrices' local poses.
 fn mean_rows_error_cm(a: &Array2<f32>, b: &Array2<f32>) -> f64 {
     let n = a.nrows().min(b.nrows());
-    (0..n).map(|t| joint_error_cm(&a.row(t).to_vec(), &b.row(t).to_vec())).sum::<f64>() / n.max(1) as f64
+    (0..n)
+        .map(|t| joint_error_cm(&a.row(t).to_vec(), &b.row(t).to_vec()))
+        .sum::<f64>()
+        / n.max(1) as f64
 }
 
 /// Re-runs the test-split evaluation for a trained folder (`model.json` + weights).
-pub fn evaluate_folder(dir: &Path, data: &Path, keys: usize, seed: u64) -> Result<KeyPoseEval, TrainError> {
-    let file: ModelFile = folder::read(dir, ID).map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?;
+pub fn evaluate_folder(
+    dir: &Path,
+    data: &Path,
+    keys: usize,
+    seed: u64,
+) -> Result<KeyPoseEval, TrainError> {
+    let file: ModelFile = folder::read(dir, ID)
+        .map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(e.to_string())))?;
     let mut vs = nn::VarStore::new(Device::Cpu);
     let model = KeyposeTransformer::new(&vs.root(), file.config.clone());
     vs.load(dir.join(folder::WEIGHTS_FILE))?;

@@ -6,9 +6,9 @@ use ndarray::{s, Array2};
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
+use std::time::Instant;
 use tch::nn::{self, OptimizerConfig};
 use tch::{Device, Tensor};
-use std::time::Instant;
 
 use crate::audio::DecodedAudio;
 use crate::models::folder::{TrainingRecord, MODEL_FILE, TRAIN_LOG_FILE, WEIGHTS_FILE};
@@ -24,7 +24,10 @@ pub enum TrainError {
     #[error("libtorch: {0}")]
     Torch(#[from] tch::TchError),
     #[error("i/o at {path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),
     #[error("model: {0}")]
@@ -52,7 +55,8 @@ impl TrainError {
 }
 
 /// Computes a feature matrix `[n_frames, F]` at `fps` whose row i is the music at `start_s + i/fps`.
-pub type FeatureFn = fn(&DecodedAudio, f64, f64, usize) -> Result<Array2<f32>, crate::audio::AudioError>;
+pub type FeatureFn =
+    fn(&DecodedAudio, f64, f64, usize) -> Result<Array2<f32>, crate::audio::AudioError>;
 
 /// One dance with its music, frame-aligned: row i of both is motion frame i.
 #[derive(Clone, Debug)]
@@ -64,7 +68,11 @@ pub struct Sequence {
 
 /// Loads the dances `ids` with their music features, aligned so that motion frame i gets the
 /// music at song time `(start_position + i) / fps`, and poses as `motion::repr` features.
-pub fn load_sequences(ds: &Dataset, ids: &[String], features: FeatureFn) -> Result<Vec<Sequence>, TrainError> {
+pub fn load_sequences(
+    ds: &Dataset,
+    ids: &[String],
+    features: FeatureFn,
+) -> Result<Vec<Sequence>, TrainError> {
     let mut out = Vec::new();
     for id in ids {
         let dance = ds.load(id)?;
@@ -72,9 +80,14 @@ pub fn load_sequences(ds: &Dataset, ids: &[String], features: FeatureFn) -> Resu
         let fps = dance.motion.fps;
         let t = dance.motion.num_frames();
         let music = features(&audio, fps, dance.song_time_s(0), t)?;
-        let (poses, _) = crate::motion::repr::to_features(dance.motion.positions.view(), dance.center.view())?;
+        let (poses, _) =
+            crate::motion::repr::to_features(dance.motion.positions.view(), dance.center.view())?;
         tracing::info!(dance = %id, frames = t, "loaded");
-        out.push(Sequence { id: id.clone(), music, poses });
+        out.push(Sequence {
+            id: id.clone(),
+            music,
+            poses,
+        });
     }
     Ok(out)
 }
@@ -113,7 +126,9 @@ impl Default for CommonOptions {
 impl CommonOptions {
     /// The model folder: `--out`, or `models/<id>`.
     pub fn out_dir(&self, id: &str) -> PathBuf {
-        self.out.clone().unwrap_or_else(|| Path::new("models").join(id))
+        self.out
+            .clone()
+            .unwrap_or_else(|| Path::new("models").join(id))
     }
 }
 
@@ -132,7 +147,11 @@ pub struct Data {
 impl Data {
     /// Loads both splits with `features` for the music, applies `map` to each loaded sequence
     /// (a model's own pose representation), and normalises.
-    pub fn load(folder: &Path, features: FeatureFn, mut map: impl FnMut(&mut Sequence) -> Result<(), TrainError>) -> Result<Self, TrainError> {
+    pub fn load(
+        folder: &Path,
+        features: FeatureFn,
+        mut map: impl FnMut(&mut Sequence) -> Result<(), TrainError>,
+    ) -> Result<Self, TrainError> {
         let started = Instant::now();
         let dataset = Dataset::open(folder)?;
         let mut train_raw = load_sequences(&dataset, dataset.train_ids(), features)?;
@@ -143,12 +162,31 @@ impl Data {
         let (music_norm, pose_norm) = fit_normalizers(&train_raw)?;
         let norm = |seqs: &[Sequence]| -> Result<Vec<Sequence>, TrainError> {
             seqs.iter()
-                .map(|s| Ok(Sequence { music: music_norm.normalize(&s.music)?, poses: pose_norm.normalize(&s.poses)?, id: s.id.clone() }))
+                .map(|s| {
+                    Ok(Sequence {
+                        music: music_norm.normalize(&s.music)?,
+                        poses: pose_norm.normalize(&s.poses)?,
+                        id: s.id.clone(),
+                    })
+                })
                 .collect()
         };
         let (train, test) = (norm(&train_raw)?, norm(&test_raw)?);
-        tracing::info!(seconds = started.elapsed().as_secs_f64(), train = train.len(), test = test.len(), "data ready");
-        Ok(Self { dataset, train_raw, test_raw, train, test, music_norm, pose_norm })
+        tracing::info!(
+            seconds = started.elapsed().as_secs_f64(),
+            train = train.len(),
+            test = test.len(),
+            "data ready"
+        );
+        Ok(Self {
+            dataset,
+            train_raw,
+            test_raw,
+            train,
+            test,
+            music_norm,
+            pose_norm,
+        })
     }
 }
 
@@ -162,7 +200,8 @@ pub struct Deadline {
 impl Deadline {
     /// True once the run has used its minutes.
     pub fn expired(&self) -> bool {
-        self.max_minutes.is_some_and(|m| self.started.elapsed().as_secs_f64() > m * 60.0)
+        self.max_minutes
+            .is_some_and(|m| self.started.elapsed().as_secs_f64() > m * 60.0)
     }
 
     /// Minutes since the run started.
@@ -191,7 +230,11 @@ pub struct FolderFiles {
 
 impl FolderFiles {
     /// `weights.safetensors`, `model.json`, `train_log.jsonl`.
-    pub const MODEL: Self = Self { weights: WEIGHTS_FILE, description: MODEL_FILE, log: TRAIN_LOG_FILE };
+    pub const MODEL: Self = Self {
+        weights: WEIGHTS_FILE,
+        description: MODEL_FILE,
+        log: TRAIN_LOG_FILE,
+    };
 }
 
 /// The training set-up every model shares: threads and seed, the network's variables and Adam,
@@ -208,12 +251,25 @@ pub struct Trainer {
 impl Trainer {
     /// Builds the network with `build` under a fresh VarStore (after seeding libtorch), loads
     /// `--init` if given, and prepares the folder and its log.
-    pub fn new<M>(common: &CommonOptions, id: &str, lr: f64, seed: u64, build: impl FnOnce(&nn::Path) -> M) -> Result<(Self, M), TrainError> {
+    pub fn new<M>(
+        common: &CommonOptions,
+        id: &str,
+        lr: f64,
+        seed: u64,
+        build: impl FnOnce(&nn::Path) -> M,
+    ) -> Result<(Self, M), TrainError> {
         Self::with_files(common, id, FolderFiles::MODEL, lr, seed, build)
     }
 
     /// [`Trainer::new`] writing `files` rather than the model folder's own.
-    pub fn with_files<M>(common: &CommonOptions, id: &str, files: FolderFiles, lr: f64, seed: u64, build: impl FnOnce(&nn::Path) -> M) -> Result<(Self, M), TrainError> {
+    pub fn with_files<M>(
+        common: &CommonOptions,
+        id: &str,
+        files: FolderFiles,
+        lr: f64,
+        seed: u64,
+        build: impl FnOnce(&nn::Path) -> M,
+    ) -> Result<(Self, M), TrainError> {
         tch::set_num_threads(common.threads);
         tch::manual_seed(seed as i64);
         let vs = nn::VarStore::new(Device::Cpu);
@@ -224,12 +280,28 @@ impl Trainer {
         }
         let opt = nn::Adam::default().build(&vs, lr)?;
         let out = common.out_dir(id);
-        std::fs::create_dir_all(&out).map_err(|source| TrainError::Io { path: out.clone(), source })?;
+        std::fs::create_dir_all(&out).map_err(|source| TrainError::Io {
+            path: out.clone(),
+            source,
+        })?;
         if common.init.is_none() {
             let _ = std::fs::remove_file(out.join(files.log));
         }
-        let deadline = Deadline { started: Instant::now(), max_minutes: common.max_minutes };
-        Ok((Self { vs, opt, out, files, logs: Vec::new(), deadline }, model))
+        let deadline = Deadline {
+            started: Instant::now(),
+            max_minutes: common.max_minutes,
+        };
+        Ok((
+            Self {
+                vs,
+                opt,
+                out,
+                files,
+                logs: Vec::new(),
+                deadline,
+            },
+            model,
+        ))
     }
 
     /// Runs `epochs`, calling `one(epoch, optimiser, deadline)` for each, logging it, and saving
@@ -246,7 +318,13 @@ impl Trainer {
         for epoch in epochs.clone() {
             let t0 = Instant::now();
             let r = one(epoch, &mut self.opt, &self.deadline)?;
-            let line = EpochLog { epoch, train_loss: r.train_loss, test_loss: r.test_loss, note: r.note, seconds: t0.elapsed().as_secs_f64() };
+            let line = EpochLog {
+                epoch,
+                train_loss: r.train_loss,
+                test_loss: r.test_loss,
+                note: r.note,
+                seconds: t0.elapsed().as_secs_f64(),
+            };
             tracing::info!(epoch, train_loss = line.train_loss, test_loss = ?line.test_loss, note = %line.note, seconds = line.seconds, "epoch");
             append_log(&self.out.join(self.files.log), &line)?;
             self.logs.push(line);
@@ -286,26 +364,36 @@ impl Trainer {
 /// leading slice and the rest start at zero, so the widened network computes exactly what the
 /// earlier one did until training moves the new weights. Returns the widened variables' names.
 pub fn load_widened(vs: &nn::VarStore, path: &Path) -> Result<Vec<String>, TrainError> {
-    let saved: std::collections::HashMap<String, Tensor> = Tensor::read_safetensors(path)?.into_iter().collect();
+    let saved: std::collections::HashMap<String, Tensor> =
+        Tensor::read_safetensors(path)?.into_iter().collect();
     let mut widened = Vec::new();
     let mut vars: Vec<(String, Tensor)> = vs.variables().into_iter().collect();
     vars.sort_by(|a, b| a.0.cmp(&b.0));
     tch::no_grad(|| -> Result<(), TrainError> {
         for (name, mut var) in vars {
-            let src = saved.get(&name).ok_or_else(|| TrainError::InvalidOption(format!("--init {}: no variable {name}", path.display())))?;
+            let src = saved.get(&name).ok_or_else(|| {
+                TrainError::InvalidOption(format!("--init {}: no variable {name}", path.display()))
+            })?;
             let (want, have) = (var.size(), src.size());
             if want == have {
                 var.copy_(src);
                 continue;
             }
-            let differing: Vec<usize> = (0..want.len()).filter(|&d| want.len() == have.len() && want[d] != have[d]).collect();
+            let differing: Vec<usize> = (0..want.len())
+                .filter(|&d| want.len() == have.len() && want[d] != have[d])
+                .collect();
             match differing.as_slice() {
                 [d] if want[*d] > have[*d] => {
                     let _ = var.zero_();
                     var.narrow(*d as i64, 0, have[*d]).copy_(src);
                     widened.push(name);
                 }
-                _ => return Err(TrainError::InvalidOption(format!("--init {}: {name} is {have:?}, the network's is {want:?}", path.display()))),
+                _ => {
+                    return Err(TrainError::InvalidOption(format!(
+                        "--init {}: {name} is {have:?}, the network's is {want:?}",
+                        path.display()
+                    )))
+                }
             }
         }
         Ok(())
@@ -314,21 +402,39 @@ pub fn load_widened(vs: &nn::VarStore, path: &Path) -> Result<Vec<String>, Train
 }
 
 /// Writes `weights.safetensors` and `model.json` into `dir`, each atomically.
-pub fn save_folder<F: Serialize>(vs: &nn::VarStore, dir: &Path, file: &F) -> Result<(), TrainError> {
+pub fn save_folder<F: Serialize>(
+    vs: &nn::VarStore,
+    dir: &Path,
+    file: &F,
+) -> Result<(), TrainError> {
     save_files(vs, dir, FolderFiles::MODEL, file)
 }
 
 /// Writes the weights and the description named by `files` into `dir`, each atomically.
-pub fn save_files<F: Serialize>(vs: &nn::VarStore, dir: &Path, files: FolderFiles, file: &F) -> Result<(), TrainError> {
+pub fn save_files<F: Serialize>(
+    vs: &nn::VarStore,
+    dir: &Path,
+    files: FolderFiles,
+    file: &F,
+) -> Result<(), TrainError> {
     let tmp = dir.join(format!("{}.tmp.safetensors", files.weights));
     vs.save(&tmp)?;
-    std::fs::rename(&tmp, dir.join(files.weights)).map_err(|source| TrainError::Io { path: dir.to_owned(), source })?;
-    write_atomic(&dir.join(files.description), serde_json::to_string_pretty(file)?.as_bytes())
+    std::fs::rename(&tmp, dir.join(files.weights)).map_err(|source| TrainError::Io {
+        path: dir.to_owned(),
+        source,
+    })?;
+    write_atomic(
+        &dir.join(files.description),
+        serde_json::to_string_pretty(file)?.as_bytes(),
+    )
 }
 
 /// Normalisation for music and poses, fitted on the given (train) sequences.
 pub fn fit_normalizers(seqs: &[Sequence]) -> Result<(NormStats, NormStats), TrainError> {
-    Ok((NormStats::fit(seqs.iter().map(|s| &s.music))?, NormStats::fit(seqs.iter().map(|s| &s.poses))?))
+    Ok((
+        NormStats::fit(seqs.iter().map(|s| &s.music))?,
+        NormStats::fit(seqs.iter().map(|s| &s.poses))?,
+    ))
 }
 
 /// Training windows drawn from the raw train split, varied by [`augment::Augment`] and
@@ -342,14 +448,27 @@ pub struct Windows<'a> {
 
 impl<'a> Windows<'a> {
     pub fn new(data: &'a Data, layout: augment::MusicLayout, augment: augment::Augment) -> Self {
-        Self { data, layout, augment, partner: augment::mirror_joints() }
+        Self {
+            data,
+            layout,
+            augment,
+            partner: augment::mirror_joints(),
+        }
     }
 
     /// `[b, len, ·]` normalised music and poses of the windows starting at `starts` (sequence,
     /// frame) of the raw train split, each at its own drawn tempo and mirroring. The starts must
     /// leave [`augment::Augment::source_len`] frames.
-    pub fn train_batch(&self, starts: &[(usize, usize)], len: usize, rng: &mut impl rand::Rng) -> Result<(Tensor, Tensor), TrainError> {
-        let (mut music, mut poses) = (Vec::with_capacity(starts.len()), Vec::with_capacity(starts.len()));
+    pub fn train_batch(
+        &self,
+        starts: &[(usize, usize)],
+        len: usize,
+        rng: &mut impl rand::Rng,
+    ) -> Result<(Tensor, Tensor), TrainError> {
+        let (mut music, mut poses) = (
+            Vec::with_capacity(starts.len()),
+            Vec::with_capacity(starts.len()),
+        );
         for &(i, f0) in starts {
             let seq = &self.data.train_raw[i];
             let (f, mirror) = self.augment.draw(rng);
@@ -357,19 +476,32 @@ impl<'a> Windows<'a> {
             let mut p = augment::stretch_poses(seq.poses.view(), f0, len, f);
             if mirror {
                 if p.ncols() != crate::motion::repr::FEATURE_DIM {
-                    return Err(TrainError::InvalidOption(format!("mirroring needs the {}-column pose rows, not {}", crate::motion::repr::FEATURE_DIM, p.ncols())));
+                    return Err(TrainError::InvalidOption(format!(
+                        "mirroring needs the {}-column pose rows, not {}",
+                        crate::motion::repr::FEATURE_DIM,
+                        p.ncols()
+                    )));
                 }
                 augment::mirror_poses(&mut p, &self.partner);
             }
-            music.push(crate::models::to_tensor(&self.data.music_norm.normalize(&m)?));
-            poses.push(crate::models::to_tensor(&self.data.pose_norm.normalize(&p)?));
+            music.push(crate::models::to_tensor(
+                &self.data.music_norm.normalize(&m)?,
+            ));
+            poses.push(crate::models::to_tensor(
+                &self.data.pose_norm.normalize(&p)?,
+            ));
         }
         Ok((Tensor::stack(&music, 0), Tensor::stack(&poses, 0)))
     }
 }
 
 /// Every window start `(sequence, frame)` of `len` frames with stride `stride`, shuffled by `seed`.
-pub fn window_starts(seqs: &[Sequence], len: usize, stride: usize, seed: u64) -> Vec<(usize, usize)> {
+pub fn window_starts(
+    seqs: &[Sequence],
+    len: usize,
+    stride: usize,
+    seed: u64,
+) -> Vec<(usize, usize)> {
     let mut v = Vec::new();
     for (i, s) in seqs.iter().enumerate() {
         let t = s.poses.nrows();
@@ -384,7 +516,13 @@ pub fn window_starts(seqs: &[Sequence], len: usize, stride: usize, seed: u64) ->
 }
 
 /// Stacks windows `[start, start + len)` of `pick(seq)` into a `[b, len, F]` tensor.
-pub fn batch_tensor(seqs: &[Sequence], starts: &[(usize, usize)], len: usize, pick: impl Fn(&Sequence) -> &Array2<f32>, device: Device) -> Tensor {
+pub fn batch_tensor(
+    seqs: &[Sequence],
+    starts: &[(usize, usize)],
+    len: usize,
+    pick: impl Fn(&Sequence) -> &Array2<f32>,
+    device: Device,
+) -> Tensor {
     let parts: Vec<Tensor> = starts
         .iter()
         .map(|&(i, f)| {
@@ -415,13 +553,22 @@ pub fn append_log(path: &Path, line: &EpochLog) -> Result<(), TrainError> {
         .create(true)
         .append(true)
         .open(path)
-        .map_err(|source| TrainError::Io { path: path.to_owned(), source })?;
-    writeln!(f, "{}", serde_json::to_string(line)?).map_err(|source| TrainError::Io { path: path.to_owned(), source })
+        .map_err(|source| TrainError::Io {
+            path: path.to_owned(),
+            source,
+        })?;
+    writeln!(f, "{}", serde_json::to_string(line)?).map_err(|source| TrainError::Io {
+        path: path.to_owned(),
+        source,
+    })
 }
 
 /// Writes `bytes` to `path` atomically (temp file in the same folder, then rename).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
-    let io = |source| TrainError::Io { path: path.to_owned(), source };
+    let io = |source| TrainError::Io {
+        path: path.to_owned(),
+        source,
+    };
     let dir = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).map_err(io)?;
     let tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
@@ -467,11 +614,21 @@ impl Training {
         match self {
             Self::DanceRevolution(o) => {
                 let logs = dance_revolution::train(o)?;
-                Ok(format!("trained {} epochs into {}", logs.len(), o.common.out_dir(crate::models::dance_revolution::ID).display()))
+                Ok(format!(
+                    "trained {} epochs into {}",
+                    logs.len(),
+                    o.common
+                        .out_dir(crate::models::dance_revolution::ID)
+                        .display()
+                ))
             }
             Self::Dancenet(o) => {
                 let logs = dancenet::train(o)?;
-                Ok(format!("trained {} epochs into {}", logs.len(), o.common.out_dir(crate::models::dancenet::ID).display()))
+                Ok(format!(
+                    "trained {} epochs into {}",
+                    logs.len(),
+                    o.common.out_dir(crate::models::dancenet::ID).display()
+                ))
             }
             Self::KeyposeTransformer(o) => {
                 let logs = keypose_transformer::train(o)?;
@@ -480,11 +637,17 @@ impl Training {
                     format!("evaluated {} (eval.json rewritten)", out.display())
                 } else if o.bank_only {
                     format!("redrew the pose bank in {}", out.display())
-                } else { format!("trained {} epochs into {}", logs.len(), out.display()) })
+                } else {
+                    format!("trained {} epochs into {}", logs.len(), out.display())
+                })
             }
             Self::Tsmt(o) => {
                 let logs = tsmt::train(o)?;
-                Ok(format!("trained {} epochs into {}", logs.len(), o.common.out_dir(crate::models::tsmt::ID).display()))
+                Ok(format!(
+                    "trained {} epochs into {}",
+                    logs.len(),
+                    o.common.out_dir(crate::models::tsmt::ID).display()
+                ))
             }
             Self::DancenetStyle(o) => dancenet_style::train(o),
             Self::MotionStyle(o) => motion_style::train(o),
@@ -508,7 +671,10 @@ mod tests {
         narrow_vs.save(&path).unwrap();
         let wide_vs = nn::VarStore::new(Device::Cpu);
         let wide = nn::linear(wide_vs.root() / "embed", 5, 4, Default::default());
-        assert_eq!(load_widened(&wide_vs, &path).unwrap(), vec!["embed.weight".to_string()]);
+        assert_eq!(
+            load_widened(&wide_vs, &path).unwrap(),
+            vec!["embed.weight".to_string()]
+        );
         let x = Tensor::from_slice(&[0.5f32, -1.0, 2.0]).view([1, 3]);
         let x_wide = Tensor::from_slice(&[0.5f32, -1.0, 2.0, 0.0, 0.0]).view([1, 5]);
         use tch::nn::Module;

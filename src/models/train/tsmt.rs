@@ -7,10 +7,14 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use tch::{Device, Tensor};
 
-use super::{batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError};
 use super::Trainer;
-use crate::models::tsmt::{Bins, Config, ModelFile, Sampling, Schedule, Serving, StallGuard, Tsmt, ID, MAX_POSITION};
+use super::{
+    batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError,
+};
 use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
+use crate::models::tsmt::{
+    Bins, Config, ModelFile, Sampling, Schedule, Serving, StallGuard, Tsmt, ID, MAX_POSITION,
+};
 use crate::motion::repr;
 
 /// Options of one training run (the card gives the run behind the committed weights).
@@ -80,26 +84,65 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         repr::height_to_clearance(&mut s.poses, floor);
         Ok(())
     })?;
-    let base = if opts.common.tiny { Config::tiny() } else { Config::cpu() };
-    let config = Config { music_dim: data.music_norm.dim() as i64, coords: data.pose_norm.dim() as i64, ..base };
-    let bins = Bins::fit(data.train_raw.iter().map(|s| &s.poses), config.n_bins as usize)?;
-    let tokens = |seqs: &[Sequence]| -> Vec<Array2<i64>> { seqs.iter().map(|s| bins.tokens(&s.poses)).collect() };
+    let base = if opts.common.tiny {
+        Config::tiny()
+    } else {
+        Config::cpu()
+    };
+    let config = Config {
+        music_dim: data.music_norm.dim() as i64,
+        coords: data.pose_norm.dim() as i64,
+        ..base
+    };
+    let bins = Bins::fit(
+        data.train_raw.iter().map(|s| &s.poses),
+        config.n_bins as usize,
+    )?;
+    let tokens = |seqs: &[Sequence]| -> Vec<Array2<i64>> {
+        seqs.iter().map(|s| bins.tokens(&s.poses)).collect()
+    };
     let (train_tokens, test_tokens) = (tokens(&data.train_raw), tokens(&data.test_raw));
-    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| Tsmt::new(p, config.clone()))?;
-    let clips = SeedClips::draw(&data.train_raw.iter().map(|s| &s.poses).collect::<Vec<_>>(), SEED_CLIPS, SEED_CLIP_FRAMES, opts.seed)?;
+    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
+        Tsmt::new(p, config.clone())
+    })?;
+    let clips = SeedClips::draw(
+        &data.train_raw.iter().map(|s| &s.poses).collect::<Vec<_>>(),
+        SEED_CLIPS,
+        SEED_CLIP_FRAMES,
+        opts.seed,
+    )?;
     clips.save(&trainer.out.join(SEED_CLIPS_FILE))?;
     let len = config.window as usize + 1;
     // Windows where the dancer stands still (mostly the closing hold of a dance) are left out:
     // a held pose is an attractor for a sampled model, which once in it repeats it for minutes.
-    let speeds: Vec<Vec<f32>> = data.train_raw.iter().map(|s| local_speed(&s.poses, crate::motion::MOTION_FPS as f32)).collect();
+    let speeds: Vec<Vec<f32>> = data
+        .train_raw
+        .iter()
+        .map(|s| local_speed(&s.poses, crate::motion::MOTION_FPS as f32))
+        .collect();
     // Judged on the window's last second: a window that ends in a hold teaches "stay still".
     let tail = (crate::motion::MOTION_FPS as usize).min(len - 1);
-    let moving = |&(i, f): &(usize, usize)| speeds[i][f + len - tail..f + len].iter().sum::<f32>() / tail as f32 >= opts.min_window_speed as f32;
+    let moving = |&(i, f): &(usize, usize)| {
+        speeds[i][f + len - tail..f + len].iter().sum::<f32>() / tail as f32
+            >= opts.min_window_speed as f32
+    };
     let all = window_starts(&data.train, len, opts.stride, 0).len();
-    let kept = window_starts(&data.train, len, opts.stride, 0).iter().filter(|w| moving(w)).count();
-    tracing::info!(all, kept, min_speed = opts.min_window_speed, "training windows where the dancer moves");
+    let kept = window_starts(&data.train, len, opts.stride, 0)
+        .iter()
+        .filter(|w| moving(w))
+        .count();
+    tracing::info!(
+        all,
+        kept,
+        min_speed = opts.min_window_speed,
+        "training windows where the dancer moves"
+    );
     let mut steps = 0usize;
-    let noise = Normal::new(0.0, opts.input_noise_bins.max(1e-9)).map_err(|e| TrainError::Motion(crate::motion::MotionError::Invalid(format!("--input-noise-bins: {e}"))))?;
+    let noise = Normal::new(0.0, opts.input_noise_bins.max(1e-9)).map_err(|e| {
+        TrainError::Motion(crate::motion::MotionError::Invalid(format!(
+            "--input-noise-bins: {e}"
+        )))
+    })?;
     let epochs = 0..opts.epochs;
     let (train, test) = (&data.train, &data.test);
     let file_of = |t: &Trainer, steps: usize| ModelFile {
@@ -107,31 +150,75 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         music_norm: data.music_norm.clone(),
         pose_norm: data.pose_norm.clone(),
         fps: crate::motion::MOTION_FPS,
-        training: t.record(opts.lr, opts.batch, opts.seed, Schedule { window: config.window as usize, stride: opts.stride, input_noise_bins: opts.input_noise_bins, loss_frames: opts.loss_frames, min_window_speed: opts.min_window_speed, steps }),
-        extra: Serving { bins: bins.clone(), sampling: Sampling { temperature: opts.temperature, top_k: opts.top_k }, smooth_frames: opts.smooth_frames, smooth_height_frames: opts.smooth_height_frames, stall_guard: (opts.stall_reach > 0.0).then_some(StallGuard { min_reach_m: opts.stall_reach as f32, window_frames: 50, boost: 1.5 }) },
+        training: t.record(
+            opts.lr,
+            opts.batch,
+            opts.seed,
+            Schedule {
+                window: config.window as usize,
+                stride: opts.stride,
+                input_noise_bins: opts.input_noise_bins,
+                loss_frames: opts.loss_frames,
+                min_window_speed: opts.min_window_speed,
+                steps,
+            },
+        ),
+        extra: Serving {
+            bins: bins.clone(),
+            sampling: Sampling {
+                temperature: opts.temperature,
+                top_k: opts.top_k,
+            },
+            smooth_frames: opts.smooth_frames,
+            smooth_height_frames: opts.smooth_height_frames,
+            stall_guard: (opts.stall_reach > 0.0).then_some(StallGuard {
+                min_reach_m: opts.stall_reach as f32,
+                window_frames: 50,
+                boost: 1.5,
+            }),
+        },
     };
     let steps_cell = std::cell::Cell::new(0usize);
     trainer.run(
         epochs,
         2,
         |epoch, opt, deadline| {
-            let starts: Vec<(usize, usize)> = window_starts(train, len, opts.stride, opts.seed + epoch as u64).into_iter().filter(|w| moving(w)).collect();
+            let starts: Vec<(usize, usize)> =
+                window_starts(train, len, opts.stride, opts.seed + epoch as u64)
+                    .into_iter()
+                    .filter(|w| moving(w))
+                    .collect();
             if starts.is_empty() {
                 return Err(TrainError::NoWindows(len));
             }
-            let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
+            let mut rng =
+                StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
             let (mut total, mut batches) = (0.0, 0);
             for chunk in starts.chunks(opts.batch) {
                 let target = token_batch(&train_tokens, chunk, len);
-                let input = if opts.input_noise_bins > 0.0 { noised(&train_tokens, chunk, len, config.n_bins, &noise, &mut rng) } else { target.shallow_clone() };
+                let input = if opts.input_noise_bins > 0.0 {
+                    noised(&train_tokens, chunk, len, config.n_bins, &noise, &mut rng)
+                } else {
+                    target.shallow_clone()
+                };
                 let music = batch_tensor(train, chunk, len, |s| &s.music, Device::Cpu);
                 let start = rng.gen_range(0..MAX_POSITION - len as i64);
                 let loss = if opts.loss_frames < 1.0 {
                     let n = len - 1;
                     let m = ((n as f64 * opts.loss_frames).ceil() as usize).clamp(1, n);
-                    let mut idx: Vec<i64> = rand::seq::index::sample(&mut rng, n, m).into_iter().map(|i| i as i64).collect();
+                    let mut idx: Vec<i64> = rand::seq::index::sample(&mut rng, n, m)
+                        .into_iter()
+                        .map(|i| i as i64)
+                        .collect();
                     idx.sort_unstable();
-                    model.loss_on_frames(&input, &target, &music, start, &Tensor::from_slice(&idx), true)
+                    model.loss_on_frames(
+                        &input,
+                        &target,
+                        &music,
+                        start,
+                        &Tensor::from_slice(&idx),
+                        true,
+                    )
                 } else {
                     model.loss_with_input(&input, &target, &music, start, true)
                 };
@@ -152,12 +239,23 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     .map(|(i, c)| {
                         let t = token_batch(&test_tokens, c, len);
                         let m = batch_tensor(test, c, len, |s| &s.music, Device::Cpu);
-                        model.loss(&t, &m, (i as i64 * 997) % (MAX_POSITION - len as i64), false).double_value(&[])
+                        model
+                            .loss(
+                                &t,
+                                &m,
+                                (i as i64 * 997) % (MAX_POSITION - len as i64),
+                                false,
+                            )
+                            .double_value(&[])
                     })
                     .collect();
                 (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
             });
-            Ok(EpochResult { train_loss: total / batches.max(1) as f64, test_loss, note: format!("steps={steps} (cross-entropy, nats per coordinate)") })
+            Ok(EpochResult {
+                train_loss: total / batches.max(1) as f64,
+                test_loss,
+                note: format!("steps={steps} (cross-entropy, nats per coordinate)"),
+            })
         },
         |t| file_of(t, steps_cell.get()),
     )?;
@@ -171,7 +269,14 @@ fn local_speed(poses: &Array2<f32>, fps: f32) -> Vec<f32> {
     let mut out = vec![0f32; poses.nrows()];
     for t in 1..poses.nrows() {
         let (a, b) = (poses.row(t - 1), poses.row(t));
-        let sum: f32 = (0..joints).map(|j| (0..3).map(|c| (b[3 * j + c] - a[3 * j + c]).powi(2)).sum::<f32>().sqrt()).sum();
+        let sum: f32 = (0..joints)
+            .map(|j| {
+                (0..3)
+                    .map(|c| (b[3 * j + c] - a[3 * j + c]).powi(2))
+                    .sum::<f32>()
+                    .sqrt()
+            })
+            .sum();
         out[t] = sum / joints as f32 * fps;
     }
     out
@@ -191,13 +296,23 @@ fn token_batch(tokens: &[Array2<i64>], starts: &[(usize, usize)], len: usize) ->
 }
 
 /// [`token_batch`] with rounded Gaussian noise on every token, clamped to the bins.
-fn noised(tokens: &[Array2<i64>], starts: &[(usize, usize)], len: usize, n_bins: i64, noise: &Normal<f64>, rng: &mut StdRng) -> Tensor {
+fn noised(
+    tokens: &[Array2<i64>],
+    starts: &[(usize, usize)],
+    len: usize,
+    n_bins: i64,
+    noise: &Normal<f64>,
+    rng: &mut StdRng,
+) -> Tensor {
     let parts: Vec<Tensor> = starts
         .iter()
         .map(|&(i, f)| {
             let m = tokens[i].slice(s![f..f + len, ..]);
             let (r, c) = m.dim();
-            let v: Vec<i64> = m.iter().map(|&b| (b + noise.sample(rng).round() as i64).clamp(0, n_bins - 1)).collect();
+            let v: Vec<i64> = m
+                .iter()
+                .map(|&b| (b + noise.sample(rng).round() as i64).clamp(0, n_bins - 1))
+                .collect();
             Tensor::from_slice(&v).view([r as i64, c as i64])
         })
         .collect();

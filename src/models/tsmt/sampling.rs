@@ -12,7 +12,14 @@ impl Tsmt {
     /// Generates `n` frames of tokens after the context `prefix` `[m ≥ 1, coords]`, frame t
     /// from the last frames and row t of `audio_vectors` ([`Self::audio_logit_vectors`]).
     /// `on_step(done)` is called before the first frame and every 250 frames, and may stop it.
-    pub fn sample(&self, prefix: &Array2<i64>, audio_vectors: &Tensor, sampling: Sampling, seed: u64, on_step: impl FnMut(usize) -> bool) -> Option<Array2<i64>> {
+    pub fn sample(
+        &self,
+        prefix: &Array2<i64>,
+        audio_vectors: &Tensor,
+        sampling: Sampling,
+        seed: u64,
+        on_step: impl FnMut(usize) -> bool,
+    ) -> Option<Array2<i64>> {
         self.sample_guarded(prefix, audio_vectors, sampling, None, seed, on_step)
     }
 
@@ -53,7 +60,12 @@ impl Tsmt {
             let logits = self.logits(&(wx.shallow_clone() + audio_vectors.get(t as i64))); // [coords, n_bins]
             let flat: Vec<f32> = Vec::<f32>::try_from(logits.contiguous().view([-1])).ok()?;
             let now = match guard {
-                Some((g, widths)) if recent.len() >= g.window_frames && reach_m(&recent, widths) < g.min_reach_m => g.boosted(sampling),
+                Some((g, widths))
+                    if recent.len() >= g.window_frames
+                        && reach_m(&recent, widths) < g.min_reach_m =>
+                {
+                    g.boosted(sampling)
+                }
                 _ => sampling,
             };
             for (ci, row) in flat.chunks(self.config.n_bins as usize).enumerate() {
@@ -81,7 +93,9 @@ impl Tsmt {
 /// A bin or two of sampling jitter adds a centimetre or so; a dancer who moves reaches tens.
 pub(super) fn reach_m(frames: &std::collections::VecDeque<Vec<i64>>, widths: &[f32]) -> f32 {
     let joints = widths.len() / 3;
-    let Some(last) = frames.back() else { return 0.0 };
+    let Some(last) = frames.back() else {
+        return 0.0;
+    };
     if joints == 0 || last.len() < 3 * joints {
         return 0.0;
     }
@@ -89,7 +103,14 @@ pub(super) fn reach_m(frames: &std::collections::VecDeque<Vec<i64>>, widths: &[f
         .iter()
         .map(|f| {
             let sum: f32 = (0..joints)
-                .map(|j| (0..3).map(|c| ((last[3 * j + c] - f[3 * j + c]) as f32 * widths[3 * j + c]).powi(2)).sum::<f32>().sqrt())
+                .map(|j| {
+                    (0..3)
+                        .map(|c| {
+                            ((last[3 * j + c] - f[3 * j + c]) as f32 * widths[3 * j + c]).powi(2)
+                        })
+                        .sum::<f32>()
+                        .sqrt()
+                })
                 .sum();
             sum / joints as f32
         })
@@ -110,7 +131,10 @@ pub struct StallGuard {
 
 impl StallGuard {
     fn boosted(&self, s: Sampling) -> Sampling {
-        Sampling { temperature: s.temperature * self.boost, top_k: if s.top_k == 0 { 0 } else { s.top_k * 2 } }
+        Sampling {
+            temperature: s.temperature * self.boost,
+            top_k: if s.top_k == 0 { 0 } else { s.top_k * 2 },
+        }
     }
 }
 
@@ -124,7 +148,10 @@ pub struct Sampling {
 
 impl Default for Sampling {
     fn default() -> Self {
-        Self { temperature: 1.0, top_k: 0 }
+        Self {
+            temperature: 1.0,
+            top_k: 0,
+        }
     }
 }
 
@@ -132,7 +159,11 @@ impl Sampling {
     /// Draws a bin from one coordinate's `logits`; `probs` is scratch of the same length.
     pub fn draw(&self, logits: &[f32], probs: &mut [f32], rng: &mut StdRng) -> usize {
         let t = self.temperature.max(1e-3) as f32;
-        let k = if self.top_k == 0 { logits.len() } else { self.top_k.min(logits.len()) };
+        let k = if self.top_k == 0 {
+            logits.len()
+        } else {
+            self.top_k.min(logits.len())
+        };
         // The k-th largest logit is the cut (ties at the cut are kept).
         let cut = if k < logits.len() {
             let mut sorted: Vec<f32> = logits.to_vec();

@@ -8,7 +8,10 @@ use serde::{Deserialize, Serialize};
 
 use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
-use crate::models::{smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated, InstancePool, ModelError, ModelId, ModelInfo, Progress};
+use crate::models::{
+    smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
+    InstancePool, ModelError, ModelId, ModelInfo, Progress,
+};
 use crate::motion::repr::{self, RootStart, FEATURE_DIM};
 use crate::stage::Stage;
 
@@ -75,9 +78,14 @@ pub struct Generation {
 impl Served {
     /// Loads `dir/model.json`, `dir/weights.safetensors` and `dir/seed_clips.safetensors`.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| Tsmt::new(p, f.config.clone()))?;
+        let (file, pool) =
+            folder::load(dir, ID, |p, f: &ModelFile| Tsmt::new(p, f.config.clone()))?;
         let path = dir.join(SEED_CLIPS_FILE);
-        let clips = if path.exists() { Some(SeedClips::load(&path, FEATURE_DIM)?) } else { None };
+        let clips = if path.exists() {
+            Some(SeedClips::load(&path, FEATURE_DIM)?)
+        } else {
+            None
+        };
         Ok(Self { file, clips, pool })
     }
 
@@ -88,12 +96,22 @@ impl Served {
 
     /// Generates `n` frames of features (clearance heights) for `audio`. The context is the seed
     /// motion's features (which then open the dance), else a drawn clip (context only).
-    pub fn generate_features(&self, req: &GenerateRequest<'_>, n: usize, progress: &mut dyn Progress) -> Result<Generation, ModelError> {
+    pub fn generate_features(
+        &self,
+        req: &GenerateRequest<'_>,
+        n: usize,
+        progress: &mut dyn Progress,
+    ) -> Result<Generation, ModelError> {
         let fps = self.file.fps;
         let bins = &self.file.extra.bins;
         let sampling = Sampling {
-            temperature: req.temperature.unwrap_or(self.file.extra.sampling.temperature),
-            top_k: req.top_k.map(|k| k as usize).unwrap_or(self.file.extra.sampling.top_k),
+            temperature: req
+                .temperature
+                .unwrap_or(self.file.extra.sampling.temperature),
+            top_k: req
+                .top_k
+                .map(|k| k as usize)
+                .unwrap_or(self.file.extra.sampling.top_k),
         };
         progress.report(Stage::Features, 0.0)?;
         let feats = crate::audio::features::tsmt(req.audio, fps, 0.0, n)?;
@@ -113,7 +131,11 @@ impl Served {
             _ => {
                 let clip = match &self.clips {
                     Some(c) => c.pick(req.seed),
-                    None => return Err(ModelError::BadModelFile(format!("{ID}: no seed motion and no {SEED_CLIPS_FILE}"))),
+                    None => {
+                        return Err(ModelError::BadModelFile(format!(
+                            "{ID}: no seed motion and no {SEED_CLIPS_FILE}"
+                        )))
+                    }
                 };
                 (bins.tokens(&clip), None, RootStart::default())
             }
@@ -130,16 +152,32 @@ impl Served {
                 };
                 let rest = vectors.narrow(0, opened as i64, (n - opened) as i64);
                 let total = (n - opened).max(1);
-                let widths: Vec<f32> = (0..repr::POSE_DIM).map(|c| (bins.hi[c] - bins.lo[c]) / bins.n as f32).collect();
-                let guard = self.file.extra.stall_guard.as_ref().map(|g| (g, widths.as_slice()));
-                Ok(model.sample_guarded(&context, &rest, sampling, guard, req.seed, |done| progress.report(Stage::Generate, done as f32 / total as f32).is_ok()))
+                let widths: Vec<f32> = (0..repr::POSE_DIM)
+                    .map(|c| (bins.hi[c] - bins.lo[c]) / bins.n as f32)
+                    .collect();
+                let guard = self
+                    .file
+                    .extra
+                    .stall_guard
+                    .as_ref()
+                    .map(|g| (g, widths.as_slice()));
+                Ok(
+                    model.sample_guarded(&context, &rest, sampling, guard, req.seed, |done| {
+                        progress
+                            .report(Stage::Generate, done as f32 / total as f32)
+                            .is_ok()
+                    }),
+                )
             })
         })??;
-        let Some(tokens) = out else { return Err(Cancelled.into()) };
+        let Some(tokens) = out else {
+            return Err(Cancelled.into());
+        };
         let mut sampled = bins.values(&tokens);
         smooth_columns(&mut sampled, 0, self.file.extra.smooth_frames);
         let features = match opening {
-            Some(o) => ndarray::concatenate(ndarray::Axis(0), &[o.view(), sampled.view()]).map_err(|e| ModelError::Shape(e.to_string()))?,
+            Some(o) => ndarray::concatenate(ndarray::Axis(0), &[o.view(), sampled.view()])
+                .map_err(|e| ModelError::Shape(e.to_string()))?,
             None => sampled,
         };
         Ok(Generation { features, start })
@@ -155,7 +193,11 @@ impl DanceModel for Served {
         }
     }
 
-    fn generate(&self, req: &GenerateRequest<'_>, progress: &mut dyn Progress) -> Result<Generated, ModelError> {
+    fn generate(
+        &self,
+        req: &GenerateRequest<'_>,
+        progress: &mut dyn Progress,
+    ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let n = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
         let mut g = self.generate_features(req, n, progress)?;
@@ -164,7 +206,11 @@ impl DanceModel for Served {
         // their coordinates are drawn; smoothing the height itself (not the clearance) keeps the
         // body from jumping with it. The opening (a request's seed motion) is kept.
         let keep = req.seed_motion.map_or(0, |m| m.num_frames().min(n));
-        let mut h = g.features.column(repr::ROOT_Y).to_owned().insert_axis(ndarray::Axis(1));
+        let mut h = g
+            .features
+            .column(repr::ROOT_Y)
+            .to_owned()
+            .insert_axis(ndarray::Axis(1));
         smooth_columns(&mut h, keep, self.file.extra.smooth_height_frames);
         g.features.column_mut(repr::ROOT_Y).assign(&h.column(0));
         let (motion, _root) = repr::from_features(g.features.view(), g.start, self.file.fps)?;

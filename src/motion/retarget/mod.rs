@@ -21,8 +21,8 @@ use serde::{Deserialize, Serialize};
 use super::rig::Rig;
 
 mod body;
-pub mod names;
 pub mod mixamo;
+pub mod names;
 pub mod smpl;
 mod solve;
 mod source;
@@ -40,7 +40,19 @@ pub use vrm::{vrm, vrma_bytes};
 ///
 /// The vocabulary every mapping goes through: Mixamo, Unreal, Rigify and SMPL names are mapped
 /// onto it, and the solver maps it onto choreo's joints.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize, utoipa::ToSchema)]
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Hash,
+    PartialOrd,
+    Ord,
+    Serialize,
+    Deserialize,
+    utoipa::ToSchema,
+)]
 #[serde(rename_all = "camelCase")]
 pub enum HumanBone {
     Hips,

@@ -504,13 +504,20 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     // (markers sit a little differently on either foot); both feet's median, or the rest pose's,
     // for a foot that never does.
     let flat_height = |ankle: &str, frames: &[usize]| -> Option<f64> {
-        let mut h: Vec<f64> = frames.iter().map(|&t| choreo_frames[t].0[choreo[ankle]].y - choreo_floor).collect();
+        let mut h: Vec<f64> = frames
+            .iter()
+            .map(|&t| choreo_frames[t].0[choreo[ankle]].y - choreo_floor)
+            .collect();
         h.sort_by(f64::total_cmp);
         h.get(h.len() / 2).copied()
     };
     let both: Vec<usize> = flat_frames.concat();
     let fallback = flat_height("left_ankle", &both).unwrap_or_else(|| {
-        let heel = ["left_heel", "right_heel"].iter().filter_map(|s| choreo.get(s)).map(|&k| choreo_rest[k].y).fold(f64::INFINITY, f64::min);
+        let heel = ["left_heel", "right_heel"]
+            .iter()
+            .filter_map(|s| choreo.get(s))
+            .map(|&k| choreo_rest[k].y)
+            .fold(f64::INFINITY, f64::min);
         cr("left_ankle").y - heel.min(cr("left_toe").y)
     });
     let choreo_ankle_h = [
@@ -520,10 +527,16 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     // Each leg's own ratio: choreo's legs differ by up to 2-3 cm (marker placement), the target's
     // need not, so a lifted foot keeps its knee angle with its own leg's ratio.
     let side_scale = [
-        leg(&tb(HumanBone::LeftUpperLeg), &tb(HumanBone::LeftLowerLeg), &tb(HumanBone::LeftFoot))
-            / leg(&cr("left_hip"), &cr("left_knee"), &cr("left_ankle")),
-        leg(&tb(HumanBone::RightUpperLeg), &tb(HumanBone::RightLowerLeg), &tb(HumanBone::RightFoot))
-            / leg(&cr("right_hip"), &cr("right_knee"), &cr("right_ankle")),
+        leg(
+            &tb(HumanBone::LeftUpperLeg),
+            &tb(HumanBone::LeftLowerLeg),
+            &tb(HumanBone::LeftFoot),
+        ) / leg(&cr("left_hip"), &cr("left_knee"), &cr("left_ankle")),
+        leg(
+            &tb(HumanBone::RightUpperLeg),
+            &tb(HumanBone::RightLowerLeg),
+            &tb(HumanBone::RightFoot),
+        ) / leg(&cr("right_hip"), &cr("right_knee"), &cr("right_ankle")),
     ];
     let to_target =
         |p: &Vector3<f64>| Vector3::new(p.x * scale, (p.y - choreo_floor) * scale, p.z * scale);
@@ -562,9 +575,11 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
             for (k, (thigh, _, _, ankle)) in LEGS.iter().enumerate() {
                 let side = if k == 0 { "left" } else { "right" };
                 let a = to_target(&pos[choreo[*ankle]]);
-                let floor_goal = Vector3::new(a.x, target_ankle_h + a.y - scale * choreo_ankle_h[k], a.z);
+                let floor_goal =
+                    Vector3::new(a.x, target_ankle_h + a.y - scale * choreo_ankle_h[k], a.z);
                 let hip = pos[choreo[format!("{side}_hip").as_str()]];
-                let reach_goal = p[prepared.bones[thigh]] + side_scale[k] * (pos[choreo[*ankle]] - hip);
+                let reach_goal =
+                    p[prepared.bones[thigh]] + side_scale[k] * (pos[choreo[*ankle]] - hip);
                 let low = [format!("{side}_heel"), format!("{side}_toe")]
                     .iter()
                     .filter_map(|n| choreo.get(n.as_str()))

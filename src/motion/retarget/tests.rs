@@ -12,12 +12,22 @@ fn dance() -> Option<RigMotion> {
         Ok(ds) => {
             let d = ds.load("DANCE_R_9").expect("DANCE_R_9");
             let n = 500.min(d.motion.num_frames());
-            let motion = crate::motion::Motion { fps: d.motion.fps, positions: d.motion.positions.slice(ndarray::s![..n, .., ..]).to_owned() };
+            let motion = crate::motion::Motion {
+                fps: d.motion.fps,
+                positions: d
+                    .motion
+                    .positions
+                    .slice(ndarray::s![..n, .., ..])
+                    .to_owned(),
+            };
             let center = d.center.slice(ndarray::s![..n, ..]).to_owned();
             Some(crate::motion::export::prepare_with_root(&motion, center.view()).expect("rig"))
         }
         Err(e) => {
-            assert!(std::env::var("CI").as_deref() != Ok("true"), "CI=true but the dataset is missing: {e}");
+            assert!(
+                std::env::var("CI").as_deref() != Ok("true"),
+                "CI=true but the dataset is missing: {e}"
+            );
             eprintln!("SKIPPED: {e}");
             None
         }
@@ -25,19 +35,35 @@ fn dance() -> Option<RigMotion> {
 }
 
 fn angle(a: Vector3<f64>, b: Vector3<f64>) -> f64 {
-    (a.dot(&b) / (a.norm() * b.norm())).clamp(-1.0, 1.0).acos().to_degrees()
+    (a.dot(&b) / (a.norm() * b.norm()))
+        .clamp(-1.0, 1.0)
+        .acos()
+        .to_degrees()
 }
 
 /// The reference body with its arms hanging 45° (an A-pose), scaled by `scale`, optionally under
 /// an extra root joint at the floor (as rigs exported from DCC tools have).
 fn variant(scale: f64, a_pose: bool, extra_root: bool) -> TargetSkeleton {
     let mut t = mixamo();
-    let rest = fk_frame(&t.rig, &Vector3::zeros(), &vec![UnitQuaternion::identity(); t.rig.names.len()]).0;
+    let rest = fk_frame(
+        &t.rig,
+        &Vector3::zeros(),
+        &vec![UnitQuaternion::identity(); t.rig.names.len()],
+    )
+    .0;
     let mut pos: Vec<Vector3<f64>> = rest.iter().map(|p| p * scale).collect();
     if a_pose {
         for (side, sign) in [("Left", 1.0), ("Right", -1.0)] {
-            let arm = t.rig.names.iter().position(|n| n == &format!("mixamorig:{side}Arm")).unwrap();
-            let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), -sign * std::f64::consts::FRAC_PI_4);
+            let arm = t
+                .rig
+                .names
+                .iter()
+                .position(|n| n == &format!("mixamorig:{side}Arm"))
+                .unwrap();
+            let turn = UnitQuaternion::from_axis_angle(
+                &Vector3::z_axis(),
+                -sign * std::f64::consts::FRAC_PI_4,
+            );
             let mut stack = t.rig.children(arm);
             while let Some(j) = stack.pop() {
                 pos[j] = pos[arm] + turn * (pos[j] - pos[arm]);
@@ -82,10 +108,30 @@ fn every_target_points_its_bones_where_the_dance_does_and_keeps_its_feet_on_the_
             let c = choreo(t);
             let p = fk_frame(&out.rig, &out.root_translation[t], &out.rotations[t]).0;
             for (a, b, x, y) in [
-                ("left_shoulder", "left_elbow", HumanBone::LeftUpperArm, HumanBone::LeftLowerArm),
-                ("left_elbow", "left_wrist", HumanBone::LeftLowerArm, HumanBone::LeftHand),
-                ("right_shoulder", "right_elbow", HumanBone::RightUpperArm, HumanBone::RightLowerArm),
-                ("right_elbow", "right_wrist", HumanBone::RightLowerArm, HumanBone::RightHand),
+                (
+                    "left_shoulder",
+                    "left_elbow",
+                    HumanBone::LeftUpperArm,
+                    HumanBone::LeftLowerArm,
+                ),
+                (
+                    "left_elbow",
+                    "left_wrist",
+                    HumanBone::LeftLowerArm,
+                    HumanBone::LeftHand,
+                ),
+                (
+                    "right_shoulder",
+                    "right_elbow",
+                    HumanBone::RightUpperArm,
+                    HumanBone::RightLowerArm,
+                ),
+                (
+                    "right_elbow",
+                    "right_wrist",
+                    HumanBone::RightLowerArm,
+                    HumanBone::RightHand,
+                ),
             ] {
                 worst_arm = worst_arm.max(angle(c[ci(b)] - c[ci(a)], p[tj(y)] - p[tj(x)]));
             }
@@ -94,16 +140,28 @@ fn every_target_points_its_bones_where_the_dance_does_and_keeps_its_feet_on_the_
             }
         }
         eprintln!("{label}: arm bones at most {worst_arm:.4}° off the dance's; lowest ankle {lowest:.3} m");
-        assert!(worst_arm < 0.01, "{label}: an arm bone points {worst_arm}° off the dance's");
-        assert!(lowest > 0.0, "{label}: an ankle went below the floor ({lowest} m)");
+        assert!(
+            worst_arm < 0.01,
+            "{label}: an arm bone points {worst_arm}° off the dance's"
+        );
+        assert!(
+            lowest > 0.0,
+            "{label}: an ankle went below the floor ({lowest} m)"
+        );
         // No twist flips on the target either: its rotations come from choreo's continuous ones.
         let flips = crate::metrics::rotation_flips::RotationFlips::of(&out);
-        eprintln!("{label}: {} of {} steps turn a joint past 60° (largest {:.1}°)", flips.steps_over_60, flips.steps, flips.max_step_deg);
+        eprintln!(
+            "{label}: {} of {} steps turn a joint past 60° (largest {:.1}°)",
+            flips.steps_over_60, flips.steps, flips.max_step_deg
+        );
         assert!(flips.share_over_60 <= 0.001, "{label}: {flips:?}");
         // Quaternion tracks stay on one hemisphere frame to frame.
         for t in 1..out.num_frames() {
             for (a, b) in out.rotations[t - 1].iter().zip(&out.rotations[t]) {
-                assert!(a.coords.dot(&b.coords) >= 0.0, "{label}: a rotation track flips sign at frame {t}");
+                assert!(
+                    a.coords.dot(&b.coords) >= 0.0,
+                    "{label}: a rotation track flips sign at frame {t}"
+                );
             }
         }
     }
@@ -112,7 +170,11 @@ fn every_target_points_its_bones_where_the_dance_does_and_keeps_its_feet_on_the_
 #[test]
 fn a_target_without_a_needed_bone_is_refused_by_name() {
     let mut t = mixamo();
-    let foot = t.humanoid.iter().position(|h| *h == Some(HumanBone::LeftFoot)).unwrap();
+    let foot = t
+        .humanoid
+        .iter()
+        .position(|h| *h == Some(HumanBone::LeftFoot))
+        .unwrap();
     t.humanoid[foot] = None;
     let motion = RigMotion {
         rig: mixamo().rig,
@@ -125,15 +187,24 @@ fn a_target_without_a_needed_bone_is_refused_by_name() {
     assert_eq!(e.code(), "not-choreo-motion");
     let Some(src) = dance() else { return };
     let e = retarget(&src, &t).unwrap_err();
-    assert!(matches!(e, RetargetError::MissingBone(HumanBone::LeftFoot)), "{e}");
+    assert!(
+        matches!(e, RetargetError::MissingBone(HumanBone::LeftFoot)),
+        "{e}"
+    );
     assert_eq!(e.code(), "target-bone-missing");
     assert!(e.to_string().contains("leftFoot"), "{e}");
     let mut t = mixamo();
     t.humanoid[foot] = Some(HumanBone::Hips);
-    assert_eq!(retarget(&src, &t).unwrap_err().code(), "target-bone-duplicated");
+    assert_eq!(
+        retarget(&src, &t).unwrap_err().code(),
+        "target-bone-duplicated"
+    );
     let mut t = mixamo();
     t.rig.parents[3] = Some(3);
-    assert_eq!(retarget(&src, &t).unwrap_err().code(), "invalid-target-skeleton");
+    assert_eq!(
+        retarget(&src, &t).unwrap_err().code(),
+        "invalid-target-skeleton"
+    );
 }
 
 #[test]
@@ -150,7 +221,11 @@ fn the_files_carry_what_their_readers_expect() {
     assert_eq!(ext["humanoid"]["humanBones"]["hips"]["node"], 0);
     assert_eq!(ext["humanoid"]["humanBones"].as_object().unwrap().len(), 22);
     // Rest nodes carry no rotation: the loader's p · a · c⁻¹ is then the track itself.
-    assert!(doc["nodes"].as_array().unwrap().iter().all(|n| n.get("rotation").is_none()));
+    assert!(doc["nodes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .all(|n| n.get("rotation").is_none()));
     let npz = render(&back, &smpl(), Format::SmplNpz).expect("npz");
     assert_eq!(&npz[..2], b"PK");
     let bvh = String::from_utf8(render(&back, &mixamo(), Format::Bvh).expect("bvh")).unwrap();

@@ -22,14 +22,21 @@ pub fn fit_and_solve(
     fps: f64,
     anchors: &[usize],
 ) -> Result<RigMotion, MotionError> {
-    let mut keep: Vec<usize> = anchors.iter().copied().filter(|&f| f < positions.dim().0).collect();
+    let mut keep: Vec<usize> = anchors
+        .iter()
+        .copied()
+        .filter(|&f| f < positions.dim().0)
+        .collect();
     keep.sort_unstable();
     keep.dedup();
     if keep.is_empty() {
         let rig = Rig::fit(positions, root)?;
         return solve(&rig, positions, root, fps);
     }
-    let (key_positions, key_root) = (positions.select(Axis(0), &keep), root.select(Axis(0), &keep));
+    let (key_positions, key_root) = (
+        positions.select(Axis(0), &keep),
+        root.select(Axis(0), &keep),
+    );
     let mut rig = Rig::fit(key_positions.view(), key_root.view())?;
     rig.fit_lengths(key_positions.view(), key_root.view())?;
     solve_least_squares(&rig, positions, root, fps)
@@ -49,20 +56,36 @@ impl Rig {
     /// each frame's root translation is free), `LENGTH_ROUNDS` times. The spine's offset from
     /// the body centre is kept: with every frame's root free, it and the pelvis's could slide
     /// together without changing any joint.
-    pub fn fit_lengths(&mut self, positions: ArrayView3<'_, f32>, root: ArrayView2<'_, f32>) -> Result<(), MotionError> {
+    pub fn fit_lengths(
+        &mut self,
+        positions: ArrayView3<'_, f32>,
+        root: ArrayView2<'_, f32>,
+    ) -> Result<(), MotionError> {
         let tg = targets(positions, root)?;
         // Unrelated poses, not a motion: no limit on how far a joint turns from one to the next.
         let chain = solve(self, positions, root, f64::NAN)?;
-        let mut poses: Vec<(Vector3<f64>, Vec<UnitQuaternion<f64>>)> = chain.root_translation.into_iter().zip(chain.rotations).collect();
+        let mut poses: Vec<(Vector3<f64>, Vec<UnitQuaternion<f64>>)> = chain
+            .root_translation
+            .into_iter()
+            .zip(chain.rotations)
+            .collect();
         for _ in 0..LENGTH_ROUNDS {
-            poses = poses.iter().zip(&tg).map(|((r, l), t)| fit_frame(self, r, l, t)).collect();
+            poses = poses
+                .iter()
+                .zip(&tg)
+                .map(|((r, l), t)| fit_frame(self, r, l, t))
+                .collect();
             self.solve_lengths(&poses, &tg);
         }
         Ok(())
     }
 
     /// One least-squares solve of the bone lengths for posed frames; see [`Rig::fit_lengths`].
-    fn solve_lengths(&mut self, poses: &[(Vector3<f64>, Vec<UnitQuaternion<f64>>)], tg: &[Vec<Vector3<f64>>]) {
+    fn solve_lengths(
+        &mut self,
+        poses: &[(Vector3<f64>, Vec<UnitQuaternion<f64>>)],
+        tg: &[Vec<Vector3<f64>>],
+    ) {
         let spine = rig_index(skeleton::SPINE);
         let bones: Vec<usize> = (0..self.parents.len())
             .filter(|&j| self.parents[j].is_some() && j != spine && self.offsets[j].norm() > 1e-6)
@@ -115,7 +138,9 @@ impl Rig {
             ata[(i, i)] += 1e-4;
             atb[i] += 1e-4 * self.offsets[b].norm();
         }
-        let Some(x) = ata.cholesky().map(|ch| ch.solve(&atb)) else { return };
+        let Some(x) = ata.cholesky().map(|ch| ch.solve(&atb)) else {
+            return;
+        };
         for (i, &b) in bones.iter().enumerate() {
             // A bone is never shorter than 1 cm (none of the data's is).
             if x[i].is_finite() && x[i] > 0.01 {
@@ -163,7 +188,12 @@ pub fn solve_least_squares(
             *c = limit_turn(*p, *c, max);
         }
     }
-    Ok(RigMotion { rig: rig.clone(), fps, root_translation, rotations })
+    Ok(RigMotion {
+        rig: rig.clone(),
+        fps,
+        root_translation,
+        rotations,
+    })
 }
 
 /// Most Levenberg–Marquardt steps of [`fit_frame`]; 200 change no key error on the test dances.
@@ -198,7 +228,9 @@ pub fn fit_frame(
     target: &[Vector3<f64>],
 ) -> (Vector3<f64>, Vec<UnitQuaternion<f64>>) {
     let measured: Vec<usize> = (0..NUM_JOINTS).map(rig_index).collect();
-    let movers: Vec<usize> = (0..rig.names.len()).filter(|&j| rig.parents[j].is_some() && !rig.children(j).is_empty()).collect();
+    let movers: Vec<usize> = (0..rig.names.len())
+        .filter(|&j| rig.parents[j].is_some() && !rig.children(j).is_empty())
+        .collect();
     let is_below = |j: usize, k: usize| {
         let mut a = rig.parents[j];
         while let Some(p) = a {
@@ -210,18 +242,32 @@ pub fn fit_frame(
         false
     };
     // below[m][i]: measured joint i moves with mover m's rotation.
-    let below: Vec<Vec<bool>> = movers.iter().map(|&k| measured.iter().map(|&j| is_below(j, k)).collect()).collect();
+    let below: Vec<Vec<bool>> = movers
+        .iter()
+        .map(|&k| measured.iter().map(|&j| is_below(j, k)).collect())
+        .collect();
     let start = local.to_vec();
     // A mover's turn away from its start, as a rotation vector in world axes.
-    let turn = |k: usize, local: &[UnitQuaternion<f64>], world: &[UnitQuaternion<f64>]| -> Vector3<f64> {
-        let d = start[k].inverse() * local[k];
-        let d = if d.w < 0.0 { UnitQuaternion::new_unchecked(-d.into_inner()) } else { d };
-        world[k] * d.scaled_axis()
-    };
+    let turn =
+        |k: usize, local: &[UnitQuaternion<f64>], world: &[UnitQuaternion<f64>]| -> Vector3<f64> {
+            let d = start[k].inverse() * local[k];
+            let d = if d.w < 0.0 {
+                UnitQuaternion::new_unchecked(-d.into_inner())
+            } else {
+                d
+            };
+            world[k] * d.scaled_axis()
+        };
     let cost_of = |root: &Vector3<f64>, local: &[UnitQuaternion<f64>]| {
         let (pos, world) = fk_frame(rig, root, local);
-        let c = measured.iter().map(|&j| (pos[j] - target[j]).norm_squared()).sum::<f64>()
-            + movers.iter().map(|&k| (turn(k, local, &world) * ROTATION_PRIOR_M).norm_squared()).sum::<f64>();
+        let c = measured
+            .iter()
+            .map(|&j| (pos[j] - target[j]).norm_squared())
+            .sum::<f64>()
+            + movers
+                .iter()
+                .map(|&k| (turn(k, local, &world) * ROTATION_PRIOR_M).norm_squared())
+                .sum::<f64>();
         (c, pos, world)
     };
     let mut root = *root;
@@ -244,7 +290,8 @@ pub fn fit_frame(
             for (m, &k) in movers.iter().enumerate() {
                 if below[m][i] {
                     // ω × d = −[d]× ω
-                    jac.view_mut((3 * i, 3 + 3 * m), (3, 3)).copy_from(&(-(pos[j] - pos[k]).cross_matrix()));
+                    jac.view_mut((3 * i, 3 + 3 * m), (3, 3))
+                        .copy_from(&(-(pos[j] - pos[k]).cross_matrix()));
                 }
             }
         }
@@ -273,7 +320,8 @@ pub fn fit_frame(
             for (m, &k) in movers.iter().enumerate() {
                 let w = Vector3::new(step[3 + 3 * m], step[4 + 3 * m], step[5 + 3 * m]);
                 let parent_world = rig.parents[k].map_or(UnitQuaternion::identity(), |p| world[p]);
-                new_local[k] = parent_world.inverse() * UnitQuaternion::from_scaled_axis(w) * world[k];
+                new_local[k] =
+                    parent_world.inverse() * UnitQuaternion::from_scaled_axis(w) * world[k];
             }
             let (c, p, w) = cost_of(&new_root, &new_local);
             if c < cost {

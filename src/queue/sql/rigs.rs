@@ -2,11 +2,12 @@
 use super::{corrupt, now_ms, to_time, Dialect, SqlStore, StoreFuture};
 use crate::motion::retarget::uploaded::SkeletonJson;
 use crate::motion::retarget::TargetSkeleton;
-use crate::queue::{QueueError, RigId, RigStore, UploadedRig};
+use crate::queue::{QueueError, RigId, RigStore, Scope, TenantId, UploadedRig};
 use sqlx::{ColumnIndex, Decode, Encode, Executor, IntoArguments, Row, Type};
 
 /// The columns a rig row is read from.
-const RIG_COLUMNS: &str = "id, filename, format, units, sha256, size_bytes, skeleton, created_at";
+const RIG_COLUMNS: &str =
+    "id, tenant_id, filename, format, units, sha256, size_bytes, skeleton, created_at";
 
 /// A unit enum's stored text: its serde name (`bvh`, `cm`).
 fn stored_name<T: serde::Serialize>(what: &str, value: &T) -> Result<String, QueueError> {
@@ -33,6 +34,9 @@ where
             serde_json::from_str(&skeleton).map_err(|e| corrupt("rig skeleton", e))?;
         Ok(UploadedRig {
             id: RigId(D::uuid(row.try_get("id")?).map_err(|e| corrupt("rig id", e))?),
+            tenant: TenantId(
+                D::uuid(row.try_get("tenant_id")?).map_err(|e| corrupt("rig tenant", e))?,
+            ),
             filename: row.try_get("filename")?,
             format: from_stored("rig format", row.try_get("format")?)?,
             units: from_stored("rig units", row.try_get("units")?)?,
@@ -68,8 +72,8 @@ where
                 .map_err(|e| corrupt("rig skeleton", e))?;
             let mut tx = self.begin().await?;
             let sql = format!(
-                "INSERT INTO rigs (id, filename, format, units, sha256, size_bytes, skeleton, created_at) \
-                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8) RETURNING {RIG_COLUMNS}"
+                "INSERT INTO rigs (id, filename, format, units, sha256, size_bytes, skeleton, created_at, tenant_id) \
+                 VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) RETURNING {RIG_COLUMNS}"
             );
             let row = sqlx::query(&sql)
                 .bind(D::id(rig.id.0))
@@ -80,6 +84,7 @@ where
                 .bind(i64::try_from(rig.size_bytes).map_err(|e| corrupt("size_bytes", e))?)
                 .bind(skeleton)
                 .bind(now_ms())
+                .bind(D::id(rig.tenant.0))
                 .fetch_one(&mut *tx)
                 .await?;
             let stored = Self::rig_from_row(&row)?;
@@ -88,11 +93,14 @@ where
         })
     }
 
-    fn rig(&self, id: RigId) -> StoreFuture<'_, UploadedRig> {
+    fn rig(&self, scope: Scope, id: RigId) -> StoreFuture<'_, UploadedRig> {
         Box::pin(async move {
-            let sql = format!("SELECT {RIG_COLUMNS} FROM rigs WHERE id = $1");
+            let sql = format!(
+                "SELECT {RIG_COLUMNS} FROM rigs WHERE id = $1 AND ($2 IS NULL OR tenant_id = $2)"
+            );
             match sqlx::query(&sql)
                 .bind(D::id(id.0))
+                .bind(scope.tenant().map(|t| D::id(t.0)))
                 .fetch_optional(&self.pool)
                 .await?
             {
