@@ -671,6 +671,13 @@ async function* jobEvents(request, options = {}) {
 // src/index.ts
 var TERMINAL = ["succeeded", "failed", "cancelled"];
 var sleep2 = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
+function randomUuid() {
+  const b = crypto.getRandomValues(new Uint8Array(16));
+  b[6] = b[6] & 15 | 64;
+  b[8] = b[8] & 63 | 128;
+  const h = Array.from(b, (x) => x.toString(16).padStart(2, "0")).join("");
+  return `${h.slice(0, 8)}-${h.slice(8, 12)}-${h.slice(12, 16)}-${h.slice(16, 20)}-${h.slice(20)}`;
+}
 var Choreo = class {
   /** openapi-fetch's typed client, for any route: `choreo.api.GET('/v1/jobs/{id}', …)`. */
   api;
@@ -729,7 +736,7 @@ var Choreo = class {
     return data(this.api.GET("/v1/rigs/{id}", { params: { path: { id } } }));
   }
   /** POST /v1/jobs with an idempotency key (a new one unless given), so a retried call makes one job. */
-  createJob(body, idempotencyKey = crypto.randomUUID()) {
+  createJob(body, idempotencyKey = randomUuid()) {
     return data(this.api.POST("/v1/jobs", { body, params: { header: { "Idempotency-Key": idempotencyKey } } }));
   }
   /** The job's server-sent events (see jobEvents), with this client's key. */

@@ -53,6 +53,16 @@ export interface WaitOptions extends EventStreamOptions {
 
 const sleep = (ms: number) => new Promise((resolve) => setTimeout(resolve, ms));
 
+/** A random UUID v4. crypto.randomUUID exists only in secure contexts (https, localhost), and a
+ * page on http://host:8080 is not one; getRandomValues works everywhere. */
+function randomUuid(): string {
+  const b = crypto.getRandomValues(new Uint8Array(16));
+  b[6] = (b[6] & 0x0f) | 0x40;
+  b[8] = (b[8] & 0x3f) | 0x80;
+  const h = Array.from(b, (x) => x.toString(16).padStart(2, '0')).join('');
+  return `${h.slice(0, 8)}-${h.slice(8, 12)}-${h.slice(12, 16)}-${h.slice(16, 20)}-${h.slice(20)}`;
+}
+
 export class Choreo {
   /** openapi-fetch's typed client, for any route: `choreo.api.GET('/v1/jobs/{id}', …)`. */
   readonly api: Client<paths>;
@@ -124,7 +134,7 @@ export class Choreo {
   }
 
   /** POST /v1/jobs with an idempotency key (a new one unless given), so a retried call makes one job. */
-  createJob(body: CreateJob, idempotencyKey: string = crypto.randomUUID()): Promise<Job> {
+  createJob(body: CreateJob, idempotencyKey: string = randomUuid()): Promise<Job> {
     return data(this.api.POST('/v1/jobs', { body, params: { header: { 'Idempotency-Key': idempotencyKey } } }));
   }
 
