@@ -45,6 +45,9 @@ pub const SETTINGS: &[&str] = &[
     "max_part_header_bytes",
     "db_timeout_s",
     "sweep_grace_s",
+    "rate_limit_rps",
+    "max_queued_jobs",
+    "storage_quota_bytes",
 ];
 
 /// Errors from loading or checking the configuration.
@@ -187,6 +190,16 @@ pub struct Config {
     /// Crash leftovers (temp files, files without a database row) older than this are removed at
     /// start-up, in seconds.
     pub sweep_grace_s: f64,
+    /// Requests per second each tenant (API key, or the open service / `auth_token`) may make
+    /// to `/v1`, with a burst of one second's worth; past it `429` with `Retry-After`. Unset:
+    /// no limit. A key's own `--rate-limit-rps` overrides it.
+    pub rate_limit_rps: Option<f64>,
+    /// Most jobs a tenant may have queued or running; past it `POST /v1/jobs` answers `429
+    /// too-many-queued-jobs`. Unset: no limit. A key's own `--max-queued-jobs` overrides it.
+    pub max_queued_jobs: Option<u64>,
+    /// Most bytes of songs, rigs and results a tenant may store; an upload past it answers `413
+    /// storage-quota-exceeded`. Unset: no limit. A key's own `--storage-quota-bytes` overrides it.
+    pub storage_quota_bytes: Option<u64>,
 }
 
 impl Default for Config {
@@ -221,6 +234,9 @@ impl Default for Config {
             max_part_header_bytes: 8 * 1024,
             db_timeout_s: 3.0,
             sweep_grace_s: 3600.0,
+            rate_limit_rps: None,
+            max_queued_jobs: None,
+            storage_quota_bytes: None,
         }
     }
 }
@@ -387,6 +403,27 @@ impl Config {
                 "must be zero or a positive number of seconds",
             );
         }
+        if self
+            .rate_limit_rps
+            .is_some_and(|rps| !(rps.is_finite() && rps > 0.0))
+        {
+            return invalid(
+                "rate_limit_rps",
+                "must be a positive number of requests per second; leave it unset for no limit",
+            );
+        }
+        if self.max_queued_jobs == Some(0) {
+            return invalid(
+                "max_queued_jobs",
+                "must be at least 1; leave it unset for no limit",
+            );
+        }
+        if self.storage_quota_bytes == Some(0) {
+            return invalid(
+                "storage_quota_bytes",
+                "must be positive; leave it unset for no limit",
+            );
+        }
         self.database()?;
         if let Some(url) = &self.artifacts_url {
             if url != "local"
@@ -416,6 +453,15 @@ impl Config {
             std::thread::available_parallelism()
                 .map(|n| n.get())
                 .unwrap_or(1)
+        }
+    }
+
+    /// The limits of a tenant whose key sets none of its own.
+    pub fn default_limits(&self) -> crate::queue::KeyLimits {
+        crate::queue::KeyLimits {
+            rate_limit_rps: self.rate_limit_rps,
+            max_queued_jobs: self.max_queued_jobs,
+            storage_quota_bytes: self.storage_quota_bytes,
         }
     }
 

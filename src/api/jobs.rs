@@ -324,6 +324,7 @@ pub async fn create(
 ) -> Result<Response, ApiError> {
     check_sizes(&request)?;
     let idempotency = idempotency(&headers, &request)?;
+    super::tenancy::check_queue(&state, &caller).await?;
     let song = match state.store.song(caller.scope(), request.song_id).await {
         Ok(song) => song,
         // 404, as for any id that names nothing: the request itself is well formed.

@@ -40,6 +40,7 @@ pub mod problem;
 pub mod rigs;
 pub mod songs;
 pub mod system;
+pub mod tenancy;
 pub mod web;
 
 pub use problem::ApiError;
@@ -72,6 +73,8 @@ pub struct AppState {
     pub runs_workers: bool,
     /// Cancelled when the server stops; in-flight upload decodes watch it and return.
     pub shutdown: CancellationToken,
+    /// API keys as recently read, and each tenant's rate limit.
+    pub tenancy: Arc<tenancy::Tenancy>,
 }
 
 /// Errors from starting the service.
@@ -317,6 +320,7 @@ impl Server {
             workers_alive: ctx.alive.clone(),
             runs_workers: run_workers,
             shutdown: shutdown.clone(),
+            tenancy: Arc::default(),
         };
 
         let listener = tokio::net::TcpListener::bind(&config.bind)

@@ -522,8 +522,20 @@ async fn publish(
     id: crate::queue::JobId,
     files: &crate::queue::JobFiles,
 ) -> Result<(), WorkerError> {
+    // The layout exists (the server made it); this only names the result files' paths.
+    let data = crate::queue::DataDir::create(&ctx.data_root).ok();
+    let mut bytes = 0;
     for file in &files.files {
+        // Measured before publishing: a bucket store may move the local file away.
+        if let Some(data) = &data {
+            let path = Artifact::Result(id, file).local_path(data);
+            bytes += tokio::fs::metadata(path).await.map_or(0, |m| m.len());
+        }
         ctx.artifacts.publish(Artifact::Result(id, file)).await?;
+    }
+    // Counted against the tenant's storage quota; a failed write only under-counts.
+    if let Err(e) = ctx.store.set_result_bytes(id, bytes).await {
+        tracing::warn!(error = %e, "could not record the size of the job's results");
     }
     Ok(())
 }

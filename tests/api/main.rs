@@ -28,4 +28,5 @@ mod roundtrip;
 mod scale;
 mod schemathesis;
 mod songs;
+mod tenants;
 mod tsmt;
