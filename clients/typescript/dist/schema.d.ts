@@ -1049,7 +1049,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1061,6 +1061,17 @@ export interface operations {
             /** @description Bad filter value */
             422: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1103,7 +1114,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1157,6 +1168,17 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited), or has max_queued_jobs jobs queued or running already (code too-many-queued-jobs); nothing was queued */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
             /** @description The database is unreachable; nothing was queued, send it again shortly */
             503: {
                 headers: {
@@ -1198,7 +1220,7 @@ export interface operations {
                     "application/json": components["schemas"]["JobView"];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1210,6 +1232,17 @@ export interface operations {
             /** @description No such job */
             404: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1239,7 +1272,7 @@ export interface operations {
                     "application/json": components["schemas"]["JobView"];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1260,6 +1293,17 @@ export interface operations {
             /** @description The job already succeeded or failed */
             409: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1306,7 +1350,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1336,6 +1380,17 @@ export interface operations {
             /** @description The rig lacks a bone a dance needs */
             422: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1382,7 +1437,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1418,6 +1473,17 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
         };
     };
     getJobMotionSmpl: {
@@ -1441,7 +1507,7 @@ export interface operations {
                     "application/octet-stream": unknown;
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1462,6 +1528,17 @@ export interface operations {
             /** @description The job has not succeeded (yet); the body gives its status */
             409: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1491,7 +1568,7 @@ export interface operations {
                     "model/gltf-binary": unknown;
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1512,6 +1589,17 @@ export interface operations {
             /** @description The job has not succeeded (yet); the body gives its status */
             409: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1541,7 +1629,7 @@ export interface operations {
                     "image/png": string;
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1562,6 +1650,17 @@ export interface operations {
             /** @description The job has not succeeded (yet); the body gives its status */
             409: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1591,7 +1690,7 @@ export interface operations {
                 };
                 content?: never;
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1618,6 +1717,17 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
         };
     };
     listModels: {
@@ -1637,9 +1747,20 @@ export interface operations {
                     "application/json": components["schemas"]["ModelInfo"][];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1679,7 +1800,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1697,7 +1818,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description Over the size limit */
+            /** @description Over the size limit (code file-too-large), or past the key's storage quota (code storage-quota-exceeded: delete songs or results to make room) */
             413: {
                 headers: {
                     [name: string]: unknown;
@@ -1718,6 +1839,17 @@ export interface operations {
             /** @description No file; an unknown field; a skeleton that cannot be read or lacks a bone a dance needs (named); a bad `mapping` */
             422: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1774,7 +1906,7 @@ export interface operations {
                     "application/json": components["schemas"]["RigView"];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1786,6 +1918,17 @@ export interface operations {
             /** @description No such rig */
             404: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1834,7 +1977,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1852,7 +1995,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description Over the size limit */
+            /** @description Over the size limit (code file-too-large), or past the key's storage quota (code storage-quota-exceeded: delete songs or results to make room) */
             413: {
                 headers: {
                     [name: string]: unknown;
@@ -1873,6 +2016,17 @@ export interface operations {
             /** @description Over the duration limit, cut short, an unsupported sample rate, or a decode past audio_timeout_s */
             422: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1929,7 +2083,7 @@ export interface operations {
                     "application/json": components["schemas"]["SongView"];
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1941,6 +2095,17 @@ export interface operations {
             /** @description No such song */
             404: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
@@ -1974,7 +2139,7 @@ export interface operations {
                     "audio/wav": string;
                 };
             };
-            /** @description The server has an auth_token and the request did not send it as `Authorization: Bearer <token>` */
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
                 headers: {
                     [name: string]: unknown;
@@ -1986,6 +2151,17 @@ export interface operations {
             /** @description No such song */
             404: {
                 headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
                     [name: string]: unknown;
                 };
                 content: {
