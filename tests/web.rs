@@ -334,6 +334,21 @@ fn the_typescript_client_is_what_the_spec_and_its_sources_make() {
     );
 }
 
+/// A new API key (a tenant of its own) in `app`'s store, as `choreo keys create` makes one;
+/// returns its secret.
+async fn api_key(app: &TestApp, name: &str) -> String {
+    let (key, secret) =
+        choreo::queue::NewKey::mint(name, false, choreo::queue::KeyLimits::default());
+    let server = app.server.as_ref().expect("the server runs");
+    server
+        .state()
+        .store
+        .add_key(key)
+        .await
+        .expect("add the key");
+    secret
+}
+
 /// Whether the checked-in spec has the job events route (then the client must follow a job by
 /// its events, not by polling).
 fn spec_has_events() -> bool {
@@ -344,7 +359,8 @@ fn spec_has_events() -> bool {
     spec["paths"].get("/v1/jobs/{id}/events").is_some()
 }
 
-/// Runs `node script` in `dir` with `env`, within `limit`; returns its stdout's summary line as JSON.
+/// Runs `node script` in `dir` with `env`, within `limit`; returns its stdout's summary line as
+/// JSON.
 async fn run_node(
     script: &Path,
     dir: &Path,
@@ -374,7 +390,7 @@ async fn run_node(
         .unwrap_or_else(|| panic!("{} prints its summary", script.display()))
 }
 
-/// `clients/typescript` run with Node against a real server with a bearer key: it uploads a
+/// `clients/typescript` run with Node against a real server with an API key: it uploads a
 /// song, waits for a dance (by its events when the server has them) and downloads motion.glb and
 /// motion.json (`clients/typescript/test/e2e.mjs`; it needs only the committed dist/).
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -388,15 +404,13 @@ async fn the_typescript_client_uploads_waits_and_downloads_from_a_real_server() 
     ) {
         return;
     }
-    let app = spawn_app_with(|c| {
-        c.models_dir = models_dir();
-        c.auth_token = Some(choreo::config::Secret::new(TOKEN));
-    })
-    .await;
+    let mut app = spawn_app_with(|c| c.models_dir = models_dir()).await;
+    let key = api_key(&app, "typescript-client").await;
+    app.token = Some(key.clone()); // for the helpers' own check of the job below
     let events = spec_has_events();
     let env = [
         ("API_URL", format!("http://{}", app.addr)),
-        ("API_KEY", TOKEN.to_string()),
+        ("API_KEY", key.clone()),
         ("SONG", helpers::short_song().display().to_string()),
         ("MODEL", "dance-revolution".to_string()),
         ("EXPECT_EVENTS", if events { "1" } else { "0" }.to_string()),
@@ -424,9 +438,9 @@ async fn the_typescript_client_uploads_waits_and_downloads_from_a_real_server() 
 }
 
 /// `<choreo-player>` on a page of someone else's: Playwright loads `web/sample/player.html`
-/// (its server address and ids replaced, an api-key attribute added) in Chromium from another
-/// origin, the element from `/assets/choreo-player.js` of a real server; the dance plays within
-/// one motion frame of the song.
+/// (its server address and ids replaced, an api-key attribute with a real API key added) in
+/// Chromium from another origin, the element from `/assets/choreo-player.js` of a real server;
+/// the dance plays within one motion frame of the song.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() {
     if !ready(
@@ -444,12 +458,14 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
         .and_then(|l| l.local_addr())
         .expect("a free port")
         .port();
-    let app = spawn_app_with(|c| {
+    let mut app = spawn_app_with(|c| {
         c.models_dir = models_dir();
-        c.auth_token = Some(choreo::config::Secret::new(TOKEN));
         c.cors_origins = vec![format!("http://127.0.0.1:{page_port}")];
     })
     .await;
+    // The helpers send `token` as the bearer: the key's secret, so the dance is the key's tenant's.
+    let key = api_key(&app, "player-page").await;
+    app.token = Some(key.clone());
     let song = app.upload_ok(&helpers::short_song()).await;
     let song_id = song["id"].as_str().expect("song id").to_string();
     let job_id = app
@@ -460,7 +476,7 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
         ("API_URL", format!("http://{}", app.addr)),
         ("JOB_ID", job_id),
         ("SONG_ID", song_id),
-        ("TOKEN", TOKEN.to_string()),
+        ("TOKEN", key),
         ("PAGE_PORT", page_port.to_string()),
         ("OUT_DIR", out.display().to_string()),
         ("CHROMIUM", chromium().display().to_string()),
