@@ -8,10 +8,12 @@
 # formats are made from ../shared/audio at test time), blender and python3-numpy (the motion
 # exporters' round-trip test), schemathesis (PyPI) in .venv-schemathesis (the API test that
 # runs it against the real server), and for the page's browser test (tests/web.rs): Debian's
-# chromium, Node.js 20+ with npm, and `npm ci` of tests/web (playwright-core) and web (esbuild and
-# three.js, to check that web/dist is what web/src builds to), and the Standard Webhooks reference
-# library (PyPI standardwebhooks) in .venv-webhooks, which the webhook test verifies signatures with. Building choreo never needs npm:
-# the page's built files are committed under web/dist.
+# chromium, Node.js 20+ with npm, and `npm ci` of tests/web (playwright-core), clients/typescript
+# (openapi-typescript, openapi-fetch, typescript: the TypeScript client's drift checks) and web
+# (esbuild and three.js, to check that web/dist is what web/src builds to), and the Standard
+# Webhooks reference library (PyPI standardwebhooks) in .venv-webhooks, which the webhook test
+# verifies signatures with. Building choreo never needs npm: the page's and the client's built
+# files are committed (web/dist, clients/typescript/dist).
 #
 # Usage: scripts/setup.sh [--test]
 set -euo pipefail
@@ -118,7 +120,8 @@ if [[ $with_tests -eq 1 ]]; then
   if [[ $node_major -lt 20 ]]; then
     log "Node.js $(node --version) is too old for playwright-core: install Node.js 20 or later"; exit 1
   fi
-  for dir in tests/web web; do
+  # clients/typescript before web: the page bundles the client's sources and their dependencies.
+  for dir in tests/web clients/typescript web; do
     # Again only when the lockfile changed since the last install.
     if [[ ! $dir/node_modules/.package-lock.json -nt $dir/package-lock.json ]]; then
       log "npm ci in $dir"
