@@ -519,11 +519,7 @@ impl Config {
                 return invalid(field, "must be zero or a positive number of seconds");
             }
         }
-        if let Some(bad) = self
-            .webhook_allowed_hosts
-            .iter()
-            .find(|h| !is_host_port(h))
-        {
+        if let Some(bad) = self.webhook_allowed_hosts.iter().find(|h| !is_host_port(h)) {
             return invalid(
                 "webhook_allowed_hosts",
                 &format!("{bad:?} is not host:port (e.g. hooks.internal:443, 127.0.0.1:9000, [::1]:9000)"),
@@ -701,7 +697,10 @@ mod tests {
     fn webhook_settings_come_from_the_environment_and_the_secret_is_checked() {
         figment::Jail::expect_with(|jail| {
             let load = || Config::load(Some(Path::new("missing.toml")), &Overrides::default());
-            jail.set_env("CHOREO_WEBHOOK_ALLOWED_HOSTS", "Hooks.LAN:8443, 127.0.0.1:9000,[::1]:9");
+            jail.set_env(
+                "CHOREO_WEBHOOK_ALLOWED_HOSTS",
+                "Hooks.LAN:8443, 127.0.0.1:9000,[::1]:9",
+            );
             jail.set_env(
                 "CHOREO_WEBHOOK_SECRET",
                 "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw",
@@ -714,12 +713,22 @@ mod tests {
             let key = c.webhook_key().map_err(|e| e.to_string())?;
             assert_eq!(key.map(|k| k.len()), Some(24));
             assert!(!format!("{c:?}").contains("MfKQ9r8"));
-            for bad in ["MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw", "whsec_not base64!", "whsec_c2hvcnQ="] {
+            for bad in [
+                "MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw",
+                "whsec_not base64!",
+                "whsec_c2hvcnQ=",
+            ] {
                 jail.set_env("CHOREO_WEBHOOK_SECRET", bad);
                 let err = load().unwrap_err().to_string();
-                assert!(err.contains("webhook_secret") && !err.contains(bad), "{err}");
+                assert!(
+                    err.contains("webhook_secret") && !err.contains(bad),
+                    "{err}"
+                );
             }
-            jail.set_env("CHOREO_WEBHOOK_SECRET", "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw");
+            jail.set_env(
+                "CHOREO_WEBHOOK_SECRET",
+                "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw",
+            );
             jail.set_env("CHOREO_WEBHOOK_ALLOWED_HOSTS", "hooks.lan");
             let err = load().unwrap_err().to_string();
             assert!(err.contains("webhook_allowed_hosts"), "{err}");

@@ -27,7 +27,8 @@ use crate::queue::{QueueError, Scope, Store};
 use chrono::Utc;
 use std::sync::Arc;
 use std::time::Duration;
-use tokio::task::JoinHandle;
+use tokio::sync::Semaphore;
+use tokio::task::{JoinHandle, JoinSet};
 use tokio_util::sync::CancellationToken;
 
 pub mod guard;
@@ -42,7 +43,9 @@ pub const REQUEST_TIMEOUT: Duration = Duration::from_secs(10);
 const HOLD: Duration = Duration::from_secs(30);
 /// The longest pause between retries.
 const MAX_BACKOFF: Duration = Duration::from_secs(3600);
-/// The most of a receiver's answer kept in the log.
+/// Deliveries attempted at once by one process.
+const CONCURRENT: usize = 8;
+/// The longest error text kept in an attempt's log line.
 const MAX_LOGGED_ERROR: usize = 500;
 
 /// Why a submitted `webhook_url` is not taken.
@@ -114,15 +117,29 @@ pub fn spawn(
 }
 
 async fn run(store: Arc<dyn Store>, deliverer: Deliverer, shutdown: CancellationToken) {
+    let deliverer = Arc::new(deliverer);
+    // Several at once, so one slow receiver does not hold up everyone else's deliveries.
+    let permits = Arc::new(Semaphore::new(CONCURRENT));
+    let mut running = JoinSet::new();
     loop {
-        if shutdown.is_cancelled() {
-            return;
-        }
+        while running.try_join_next().is_some() {}
+        let permit = tokio::select! {
+            _ = shutdown.cancelled() => break,
+            permit = permits.clone().acquire_owned() => match permit {
+                Ok(permit) => permit,
+                Err(_) => break,
+            },
+        };
         let pause = match store.take_webhook(HOLD).await {
             Ok(Some(due)) => {
-                if let Err(e) = attempt(store.as_ref(), &deliverer, due, &shutdown).await {
-                    tracing::error!(error = %e, "logging a webhook attempt failed; it is retried once its hold lapses");
-                }
+                let (store, deliverer, shutdown) =
+                    (store.clone(), deliverer.clone(), shutdown.clone());
+                running.spawn(async move {
+                    let _permit = permit;
+                    if let Err(e) = attempt(store.as_ref(), &deliverer, due, &shutdown).await {
+                        tracing::error!(error = %e, "logging a webhook attempt failed; it is retried once its hold lapses");
+                    }
+                });
                 continue;
             }
             Ok(None) => deliverer.poll,
@@ -131,11 +148,14 @@ async fn run(store: Arc<dyn Store>, deliverer: Deliverer, shutdown: Cancellation
                 deliverer.poll.max(Duration::from_secs(1))
             }
         };
+        drop(permit);
         tokio::select! {
-            _ = shutdown.cancelled() => return,
+            _ = shutdown.cancelled() => break,
             _ = tokio::time::sleep(pause) => {}
         }
     }
+    // Attempts in flight see the shutdown too, and log themselves as cut off.
+    while running.join_next().await.is_some() {}
 }
 
 /// One attempt at `due`, logged with what becomes of it.

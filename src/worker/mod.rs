@@ -598,7 +598,16 @@ async fn heartbeat_loop(
                 continue;
             }
             last = Some((stage, progress));
-            if !beat(&ctx, &owner, id, &state, stage.unwrap_or(Stage::Claimed), progress).await {
+            if !beat(
+                &ctx,
+                &owner,
+                id,
+                &state,
+                stage.unwrap_or(Stage::Claimed),
+                progress,
+            )
+            .await
+            {
                 return;
             }
         }
