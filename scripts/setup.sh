@@ -8,9 +8,12 @@
 # formats are made from ../shared/audio at test time), blender and python3-numpy (the motion
 # exporters' round-trip test), schemathesis (PyPI) in .venv-schemathesis (the API test that
 # runs it against the real server), and for the page's browser test (tests/web.rs): Debian's
-# chromium, Node.js 20+ with npm, and `npm ci` of tests/web (playwright-core) and web (esbuild and
-# three.js, to check that web/dist is what web/src builds to). Building choreo never needs npm:
-# the page's built files are committed under web/dist.
+# chromium, Node.js 20+ with npm, and `npm ci` of tests/web (playwright-core), clients/typescript
+# (openapi-typescript, openapi-fetch, typescript: the TypeScript client's drift checks) and web
+# (esbuild and three.js, to check that web/dist is what web/src builds to), and the Standard
+# Webhooks reference library (PyPI standardwebhooks) in .venv-webhooks, which the webhook test
+# verifies signatures with. Building choreo never needs npm: the page's and the client's built
+# files are committed (web/dist, clients/typescript/dist).
 #
 # Usage: scripts/setup.sh [--test]
 set -euo pipefail
@@ -24,6 +27,8 @@ SCHEMATHESIS="schemathesis==4.32.5"
 ST_VENV=.venv-schemathesis
 MOTO="moto[server]==5.2.5"
 MOTO_VENV=.venv-moto
+STANDARDWEBHOOKS="standardwebhooks==1.1.0"
+WH_VENV=.venv-webhooks
 
 with_tests=0
 case "${1:-}" in
@@ -115,7 +120,8 @@ if [[ $with_tests -eq 1 ]]; then
   if [[ $node_major -lt 20 ]]; then
     log "Node.js $(node --version) is too old for playwright-core: install Node.js 20 or later"; exit 1
   fi
-  for dir in tests/web web; do
+  # clients/typescript before web: the page bundles the client's sources and their dependencies.
+  for dir in tests/web clients/typescript web; do
     # Again only when the lockfile changed since the last install.
     if [[ ! $dir/node_modules/.package-lock.json -nt $dir/package-lock.json ]]; then
       log "npm ci in $dir"
@@ -132,6 +138,13 @@ if [[ $with_tests -eq 1 ]]; then
     log "installing $MOTO into $MOTO_VENV"
     "$MOTO_VENV/bin/pip" install --quiet "$MOTO"
     [[ -x "$MOTO_VENV/bin/moto_server" ]] || { log "moto_server is not runnable from $MOTO_VENV"; exit 1; }
+  fi
+  # The Standard Webhooks reference library (PyPI), pinned, in its own venv: tests/api/webhooks.rs
+  # verifies the signatures choreo sends with it (tests/webhooks/verify.py), not with our code.
+  if ! "$WH_VENV/bin/python" -c 'import importlib.metadata as m; assert m.version("standardwebhooks") == "'"${STANDARDWEBHOOKS#standardwebhooks==}"'"' 2>/dev/null; then
+    [[ -x "$WH_VENV/bin/pip" ]] || python3 -m venv "$WH_VENV"
+    log "installing $STANDARDWEBHOOKS into $WH_VENV"
+    "$WH_VENV/bin/pip" install --quiet "$STANDARDWEBHOOKS"
   fi
   if [[ ! -d ../shared/audio ]]; then
     log "warning: ../shared/audio is missing; the upload tests need it"

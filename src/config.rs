@@ -45,7 +45,14 @@ pub const SETTINGS: &[&str] = &[
     "max_part_header_bytes",
     "db_timeout_s",
     "sweep_grace_s",
+    "rate_limit_rps",
+    "max_queued_jobs",
+    "storage_quota_bytes",
     "retention_days",
+    "webhook_secret",
+    "webhook_allowed_hosts",
+    "webhook_retry_s",
+    "webhook_backoff_s",
 ];
 
 /// Errors from loading or checking the configuration.
@@ -188,9 +195,68 @@ pub struct Config {
     /// Crash leftovers (temp files, files without a database row) older than this are removed at
     /// start-up, in seconds.
     pub sweep_grace_s: f64,
+    /// Requests per second each tenant (API key, or the open service / `auth_token`) may make
+    /// to `/v1`, with a burst of one second's worth; past it `429` with `Retry-After`. Unset:
+    /// no limit. A key's own `--rate-limit-rps` overrides it.
+    pub rate_limit_rps: Option<f64>,
+    /// Most jobs a tenant may have queued or running; past it `POST /v1/jobs` answers `429
+    /// too-many-queued-jobs`. Unset: no limit. A key's own `--max-queued-jobs` overrides it.
+    pub max_queued_jobs: Option<u64>,
+    /// Most bytes of songs, rigs and results a tenant may store; an upload past it answers `413
+    /// storage-quota-exceeded`. Unset: no limit. A key's own `--storage-quota-bytes` overrides it.
+    pub storage_quota_bytes: Option<u64>,
     /// Songs and results are removed this many days (fractions allowed) after their last use;
     /// unset keeps them until deleted.
     pub retention_days: Option<f64>,
+    /// The key webhooks are signed with, in Standard Webhooks' form `whsec_<base64 of 24 to 64
+    /// random bytes>` (`CHOREO_WEBHOOK_SECRET`). Unset: a job with a `webhook_url` is refused
+    /// (422 `webhooks-not-configured`), since the receiver could not check what it gets. Every
+    /// process (API and workers) needs the same one. Never printed.
+    pub webhook_secret: Option<Secret>,
+    /// `host:port` pairs webhooks may reach although they resolve to a loopback, private or
+    /// other non-global address (`CHOREO_WEBHOOK_ALLOWED_HOSTS=hooks.internal:443,127.0.0.1:9000`).
+    #[serde(deserialize_with = "comma_list")]
+    pub webhook_allowed_hosts: Vec<String>,
+    /// How long after a job ends its webhook is retried, in seconds.
+    pub webhook_retry_s: f64,
+    /// Pause before a webhook's first retry, in seconds; doubles each retry (at most an hour).
+    pub webhook_backoff_s: f64,
+}
+
+/// Whether `s` is `host:port` (an IPv6 host in brackets), as `webhook_allowed_hosts` lists them.
+fn is_host_port(s: &str) -> bool {
+    let Some((host, port)) = s.rsplit_once(':') else {
+        return false;
+    };
+    let host_ok = match host.strip_prefix('[').and_then(|h| h.strip_suffix(']')) {
+        Some(v6) => v6.parse::<std::net::Ipv6Addr>().is_ok(),
+        None => {
+            !host.is_empty()
+                && host
+                    .bytes()
+                    .all(|b| b.is_ascii_alphanumeric() || b == b'-' || b == b'.' || b == b'_')
+        }
+    };
+    host_ok && port.parse::<u16>().is_ok()
+}
+
+/// A list given as TOML array or as one comma-separated string (an environment variable).
+fn comma_list<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<String>, D::Error> {
+    #[derive(Deserialize)]
+    #[serde(untagged)]
+    enum List {
+        One(String),
+        Many(Vec<String>),
+    }
+    let items = match List::deserialize(d)? {
+        List::One(s) => s.split(',').map(str::to_string).collect(),
+        List::Many(v) => v,
+    };
+    Ok(items
+        .into_iter()
+        .map(|s| s.trim().to_ascii_lowercase())
+        .filter(|s| !s.is_empty())
+        .collect())
 }
 
 impl Default for Config {
@@ -225,7 +291,14 @@ impl Default for Config {
             max_part_header_bytes: 8 * 1024,
             db_timeout_s: 3.0,
             sweep_grace_s: 3600.0,
+            rate_limit_rps: None,
+            max_queued_jobs: None,
+            storage_quota_bytes: None,
             retention_days: None,
+            webhook_secret: None,
+            webhook_allowed_hosts: Vec::new(),
+            webhook_retry_s: 24.0 * 3600.0,
+            webhook_backoff_s: 5.0,
         }
     }
 }
@@ -271,6 +344,9 @@ struct Defaults {
     max_part_header_bytes: usize,
     db_timeout_s: f64,
     sweep_grace_s: f64,
+    webhook_allowed_hosts: Vec<String>,
+    webhook_retry_s: f64,
+    webhook_backoff_s: f64,
 }
 
 impl Defaults {
@@ -302,6 +378,9 @@ impl Defaults {
             max_part_header_bytes: d.max_part_header_bytes,
             db_timeout_s: d.db_timeout_s,
             sweep_grace_s: d.sweep_grace_s,
+            webhook_allowed_hosts: d.webhook_allowed_hosts,
+            webhook_retry_s: d.webhook_retry_s,
+            webhook_backoff_s: d.webhook_backoff_s,
         }
     }
 }
@@ -392,6 +471,27 @@ impl Config {
                 "must be zero or a positive number of seconds",
             );
         }
+        if self
+            .rate_limit_rps
+            .is_some_and(|rps| !(rps.is_finite() && rps > 0.0))
+        {
+            return invalid(
+                "rate_limit_rps",
+                "must be a positive number of requests per second; leave it unset for no limit",
+            );
+        }
+        if self.max_queued_jobs == Some(0) {
+            return invalid(
+                "max_queued_jobs",
+                "must be at least 1; leave it unset for no limit",
+            );
+        }
+        if self.storage_quota_bytes == Some(0) {
+            return invalid(
+                "storage_quota_bytes",
+                "must be positive; leave it unset for no limit",
+            );
+        }
         if let Some(days) = self.retention_days {
             if !(days.is_finite() && days > 0.0) || self.retention().is_none() {
                 return invalid(
@@ -410,6 +510,25 @@ impl Config {
                 return invalid("artifacts_url", "must be \"local\" or s3://bucket[/prefix]");
             }
         }
+        self.webhook_key()?;
+        for (field, value) in [
+            ("webhook_retry_s", self.webhook_retry_s),
+            ("webhook_backoff_s", self.webhook_backoff_s),
+        ] {
+            if !(value.is_finite() && value >= 0.0) {
+                return invalid(field, "must be zero or a positive number of seconds");
+            }
+        }
+        if let Some(bad) = self
+            .webhook_allowed_hosts
+            .iter()
+            .find(|h| !is_host_port(h))
+        {
+            return invalid(
+                "webhook_allowed_hosts",
+                &format!("{bad:?} is not host:port (e.g. hooks.internal:443, 127.0.0.1:9000, [::1]:9000)"),
+            );
+        }
         if let Some(token) = &self.auth_token {
             if token.expose().is_empty() {
                 return invalid(
@@ -421,6 +540,32 @@ impl Config {
         Ok(())
     }
 
+    /// The webhook signing key: the bytes of `webhook_secret`'s base64 after `whsec_` (Standard
+    /// Webhooks' form), or `None` when unset.
+    pub fn webhook_key(&self) -> Result<Option<Vec<u8>>, ConfigError> {
+        use base64::Engine;
+        let Some(secret) = &self.webhook_secret else {
+            return Ok(None);
+        };
+        let invalid = |message: &str| ConfigError::Invalid {
+            field: "webhook_secret",
+            message: message.into(),
+        };
+        let encoded = secret
+            .expose()
+            .strip_prefix("whsec_")
+            .ok_or_else(|| invalid("must be whsec_<base64>, Standard Webhooks' form"))?;
+        let key = base64::engine::general_purpose::STANDARD
+            .decode(encoded)
+            .map_err(|_| invalid("the part after whsec_ must be base64"))?;
+        if !(24..=64).contains(&key.len()) {
+            return Err(invalid(
+                "must hold 24 to 64 random bytes (e.g. whsec_$(openssl rand -base64 32))",
+            ));
+        }
+        Ok(Some(key))
+    }
+
     /// The worker count with 0 resolved to the number of cores.
     pub fn worker_count(&self) -> usize {
         if self.workers > 0 {
@@ -429,6 +574,15 @@ impl Config {
             std::thread::available_parallelism()
                 .map(|n| n.get())
                 .unwrap_or(1)
+        }
+    }
+
+    /// The limits of a tenant whose key sets none of its own.
+    pub fn default_limits(&self) -> crate::queue::KeyLimits {
+        crate::queue::KeyLimits {
+            rate_limit_rps: self.rate_limit_rps,
+            max_queued_jobs: self.max_queued_jobs,
+            storage_quota_bytes: self.storage_quota_bytes,
         }
     }
 
@@ -567,6 +721,36 @@ mod tests {
                 err.contains("database_url") && !err.contains("hunter2"),
                 "{err}"
             );
+            Ok(())
+        });
+    }
+
+    #[test]
+    fn webhook_settings_come_from_the_environment_and_the_secret_is_checked() {
+        figment::Jail::expect_with(|jail| {
+            let load = || Config::load(Some(Path::new("missing.toml")), &Overrides::default());
+            jail.set_env("CHOREO_WEBHOOK_ALLOWED_HOSTS", "Hooks.LAN:8443, 127.0.0.1:9000,[::1]:9");
+            jail.set_env(
+                "CHOREO_WEBHOOK_SECRET",
+                "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw",
+            );
+            let c = load().map_err(|e| e.to_string())?;
+            assert_eq!(
+                c.webhook_allowed_hosts,
+                ["hooks.lan:8443", "127.0.0.1:9000", "[::1]:9"]
+            );
+            let key = c.webhook_key().map_err(|e| e.to_string())?;
+            assert_eq!(key.map(|k| k.len()), Some(24));
+            assert!(!format!("{c:?}").contains("MfKQ9r8"));
+            for bad in ["MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw", "whsec_not base64!", "whsec_c2hvcnQ="] {
+                jail.set_env("CHOREO_WEBHOOK_SECRET", bad);
+                let err = load().unwrap_err().to_string();
+                assert!(err.contains("webhook_secret") && !err.contains(bad), "{err}");
+            }
+            jail.set_env("CHOREO_WEBHOOK_SECRET", "whsec_MfKQ9r8GKYqrTwjUPD8ILPZIo2LaLaSw");
+            jail.set_env("CHOREO_WEBHOOK_ALLOWED_HOSTS", "hooks.lan");
+            let err = load().unwrap_err().to_string();
+            assert!(err.contains("webhook_allowed_hosts"), "{err}");
             Ok(())
         });
     }

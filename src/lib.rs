@@ -16,6 +16,10 @@
 //! 6. **export + report** (`motion` exporters, `metrics`, `report`): BVH, JSON, glb, the
 //!    report of how well it dances, and `preview.png`, a contact sheet to see it at a glance.
 //!
+//! A job's status, stage and progress changes are lines of `job_events`, written by triggers on
+//! its row; `GET /v1/jobs/{id}/events` streams them (`api::events`), and when a job with a
+//! `webhook_url` ends, the workers POST it there, signed (`webhooks`).
+//!
 //! Beside the flow, `eval` (`choreo eval`) runs the models on the test split and on whole songs
 //! and judges them with `metrics`: it sits above `models` and `metrics`, and `metrics` measures
 //! motion without knowing any model. The command line (flags, printed tables, progress bar)
@@ -37,4 +41,5 @@ pub mod queue;
 pub mod report;
 pub mod stage;
 pub mod telemetry;
+pub mod webhooks;
 pub mod worker;

@@ -40,6 +40,7 @@ fn main() -> anyhow::Result<()> {
         Command::Eval(args) => cli::eval::run(args),
         Command::Export(args) => cli::export::run(args),
         Command::Retarget(args) => cli::retarget::run(args),
+        Command::Keys(args) => cli::keys::run(args, load(&args.service())?),
     }
 }
 

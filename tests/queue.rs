@@ -771,6 +771,7 @@ fn dance(song: SongId) -> NewJob {
             style: None,
             temperature: None,
             top_k: None,
+            webhook_url: None,
         }),
         ..analyze(song, 1)
     }
@@ -954,7 +955,69 @@ macro_rules! contract {
     };
 }
 
+/// One tenant's many jobs, even at a higher priority, do not keep another tenant's job waiting:
+/// the tenant with the fewest jobs running goes first, then the one served least recently;
+/// priority orders each tenant's own jobs.
+async fn claims_are_fair_between_tenants(db: TestDb) {
+    let store = db.store.as_ref();
+    let p = policy(30_000, 0);
+    let (a, b) = (TenantId::new(), TenantId::new());
+    let song_of = |tenant, sha: &str| Song {
+        tenant,
+        ..song(sha)
+    };
+    let job_of = |tenant, song, priority| NewJob {
+        tenant,
+        priority,
+        ..analyze(song, 1)
+    };
+    let sa = song_of(a, "a-bytes");
+    store
+        .add_song(sa.clone(), job_of(a, sa.id, 0))
+        .await
+        .expect("a's song");
+    for _ in 0..20 {
+        store
+            .register(job_of(a, sa.id, 100))
+            .await
+            .expect("a's urgent job");
+    }
+    let sb = song_of(b, "b-bytes");
+    store
+        .add_song(sb.clone(), job_of(b, sb.id, 0))
+        .await
+        .expect("b's song");
+
+    // Neither has run anything: priority decides, among equals.
+    let first = store.claim("w", p).await.expect("claim").expect("a job");
+    assert_eq!((first.tenant, first.priority), (a, 100));
+    assert!(store
+        .complete(first.id, "w", Outcome::Files(JobFiles::default()))
+        .await
+        .expect("complete"));
+    // Nobody runs anything: b was never served, a just was, so b's job goes before a's
+    // nineteen urgent ones.
+    let second = store.claim("w", p).await.expect("claim").expect("a job");
+    assert_eq!(
+        second.tenant, b,
+        "b's only job is not starved by a's twenty"
+    );
+    // b has one running and a none: a goes next, its highest priority first.
+    store
+        .register(job_of(b, sb.id, 0))
+        .await
+        .expect("b's second job");
+    // Times are kept in milliseconds: let a's next start be later than b's.
+    tokio::time::sleep(Duration::from_millis(5)).await;
+    let third = store.claim("w", p).await.expect("claim").expect("a job");
+    assert_eq!((third.tenant, third.priority), (a, 100));
+    // One running each; a was served last, so b's second job comes before a's others.
+    let fourth = store.claim("w", p).await.expect("claim").expect("a job");
+    assert_eq!(fourth.tenant, b);
+}
+
 contract!(
+    claims_are_fair_between_tenants,
     tenants_see_only_their_own_rows,
     claim_is_exclusive_and_expired_leases_retry_then_fail,
     cancel_queued_is_immediate_and_running_is_requested,

@@ -4,10 +4,13 @@
 //! key poses, submit, progress, playback in sync with the song, scrub, the mannequin (its skin
 //! on its joints at two times) and the stick toggle, rig upload and pick, loop, compare, report
 //! plots, downloads and deep links. Also: the embedded assets, and that `web/dist` is what
-//! `web/src` builds to.
+//! `web/src` builds to; the TypeScript client (`clients/typescript`): its drift from the spec
+//! and its sources, and with Node against a real server; and the `<choreo-player>` element on a
+//! sample page of another origin.
 //!
-//! Needs node, chromium, `npm ci` in `tests/web` and `web` (all from `scripts/setup.sh --test`)
-//! and `../shared/audio`; without them the tests fail under `CI=true` and print a notice otherwise.
+//! Needs node, chromium, `npm ci` in `tests/web`, `web` and `clients/typescript` (all from
+//! `scripts/setup.sh --test`) and `../shared/audio`; without them the tests fail under
+//! `CI=true` and print a notice otherwise.
 #[path = "common/models.rs"]
 mod common_models;
 #[allow(dead_code)]
@@ -114,6 +117,7 @@ async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
         .env("PAGE_URL", &page_origin)
         .env("API_URL", format!("http://{}", api.addr))
         .env("TOKEN", TOKEN)
+        .env("EXPECT_EVENTS", if spec_has_events() { "1" } else { "0" })
         .env("SONG", helpers::short_song())
         .env("OUT_DIR", &out)
         .env("CHROMIUM", chromium())
@@ -219,6 +223,7 @@ async fn the_page_and_its_assets_are_served_from_the_binary() {
     for (path, kind) in [
         ("/assets/app.js", "text/javascript"),
         ("/assets/app.css", "text/css"),
+        ("/assets/choreo-player.js", "text/javascript"),
     ] {
         let first = app.get(path).await;
         assert_eq!(first.status(), StatusCode::OK, "{path}");
@@ -259,8 +264,13 @@ async fn the_page_and_its_assets_are_served_from_the_binary() {
 
 #[test]
 fn web_dist_is_what_web_src_builds_to() {
+    // The page bundles the TypeScript client, so its dependencies are needed too.
     let needs = Needs {
-        node_modules: &["web/node_modules/esbuild", "web/node_modules/three"],
+        node_modules: &[
+            "web/node_modules/esbuild",
+            "web/node_modules/three",
+            "clients/typescript/node_modules/openapi-fetch",
+        ],
         browser_and_songs: false,
     };
     if !ready("the web build check", &needs) {
@@ -274,9 +284,228 @@ fn web_dist_is_what_web_src_builds_to() {
         .status()
         .expect("run node web/build.mjs");
     assert!(status.success(), "npm run build failed");
-    for file in ["index.html", "app.js", "app.css"] {
+    for file in ["index.html", "app.js", "app.css", "choreo-player.js"] {
         let built = std::fs::read(out.path().join(file)).expect("built file");
         let committed = std::fs::read(root().join("web/dist").join(file)).expect("committed file");
-        assert!(built == committed, "web/dist/{file} differs from what web/src builds to: run `npm run build` in web/ and commit web/dist");
+        assert!(
+            built == committed,
+            "web/dist/{file} differs from what web/src builds to: run `npm run build` in web/ and commit web/dist"
+        );
     }
+}
+
+/// The TypeScript client's own checks (node's test runner): its generated types are what
+/// openapi-typescript makes of `openapi/openapi.json` today, `dist/` is what its sources build to,
+/// its server-sent-events reader keeps order and resumes with Last-Event-ID (a fake server), and
+/// the README's webhook receiver verifies a Standard Webhooks signature.
+#[test]
+fn the_typescript_client_is_what_the_spec_and_its_sources_make() {
+    let needs = Needs {
+        node_modules: &[
+            "clients/typescript/node_modules/openapi-typescript",
+            "clients/typescript/node_modules/typescript",
+            "clients/typescript/node_modules/esbuild",
+            "clients/typescript/node_modules/standardwebhooks",
+        ],
+        browser_and_songs: false,
+    };
+    if !ready("the TypeScript client's checks", &needs) {
+        return;
+    }
+    let output = std::process::Command::new("node")
+        .args([
+            "--test",
+            "test/drift.test.mjs",
+            "test/events.test.mjs",
+            "test/webhook.test.mjs",
+        ])
+        .current_dir(root().join("clients/typescript"))
+        .output()
+        .expect("run node --test in clients/typescript");
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    assert!(
+        output.status.success(),
+        "the TypeScript client's tests failed:\n{stdout}{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    assert!(
+        stdout.contains("# fail 0") && !stdout.contains("# pass 0"),
+        "{stdout}"
+    );
+}
+
+/// A new API key (a tenant of its own) in `app`'s store, as `choreo keys create` makes one;
+/// returns its secret.
+async fn api_key(app: &TestApp, name: &str) -> String {
+    let (key, secret) =
+        choreo::queue::NewKey::mint(name, false, choreo::queue::KeyLimits::default());
+    let server = app.server.as_ref().expect("the server runs");
+    server
+        .state()
+        .store
+        .add_key(key)
+        .await
+        .expect("add the key");
+    secret
+}
+
+/// Whether the checked-in spec has the job events route (then the client must follow a job by
+/// its events, not by polling).
+fn spec_has_events() -> bool {
+    let spec: serde_json::Value = serde_json::from_slice(
+        &std::fs::read(root().join("openapi/openapi.json")).expect("openapi.json"),
+    )
+    .expect("spec json");
+    spec["paths"].get("/v1/jobs/{id}/events").is_some()
+}
+
+/// Runs `node script` in `dir` with `env`, within `limit`; returns its stdout's summary line as
+/// JSON.
+async fn run_node(
+    script: &Path,
+    dir: &Path,
+    env: &[(&str, String)],
+    limit: Duration,
+) -> serde_json::Value {
+    let mut command = tokio::process::Command::new("node");
+    command.arg(script).current_dir(dir).kill_on_drop(true);
+    for (name, value) in env {
+        command.env(name, value);
+    }
+    let output = tokio::time::timeout(limit, command.output())
+        .await
+        .unwrap_or_else(|_| panic!("{} ran past {limit:?}", script.display()))
+        .unwrap_or_else(|e| panic!("run node {}: {e}", script.display()));
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    eprintln!("{stdout}{}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "{} failed (above)",
+        script.display()
+    );
+    stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("summary: "))
+        .and_then(|s| serde_json::from_str(s).ok())
+        .unwrap_or_else(|| panic!("{} prints its summary", script.display()))
+}
+
+/// `clients/typescript` run with Node against a real server with an API key: it uploads a
+/// song, waits for a dance (by its events when the server has them) and downloads motion.glb and
+/// motion.json (`clients/typescript/test/e2e.mjs`; it needs only the committed dist/).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_typescript_client_uploads_waits_and_downloads_from_a_real_server() {
+    if !ready(
+        "the TypeScript client's end-to-end test",
+        &Needs {
+            node_modules: &[],
+            browser_and_songs: true,
+        },
+    ) {
+        return;
+    }
+    let mut app = spawn_app_with(|c| c.models_dir = models_dir()).await;
+    let key = api_key(&app, "typescript-client").await;
+    app.token = Some(key.clone()); // for the helpers' own check of the job below
+    let events = spec_has_events();
+    let env = [
+        ("API_URL", format!("http://{}", app.addr)),
+        ("API_KEY", key.clone()),
+        ("SONG", helpers::short_song().display().to_string()),
+        ("MODEL", "dance-revolution".to_string()),
+        ("EXPECT_EVENTS", if events { "1" } else { "0" }.to_string()),
+    ];
+    let dir = root().join("clients/typescript");
+    let summary = run_node(
+        &dir.join("test/e2e.mjs"),
+        &dir,
+        &env,
+        Duration::from_secs(240),
+    )
+    .await;
+    let job = app.job(summary["job_id"].as_str().expect("job_id")).await;
+    assert_eq!(job["status"], "succeeded", "{job}");
+    assert!(
+        summary["frames"].as_u64().is_some_and(|n| n > 25),
+        "{summary}"
+    );
+    assert_eq!(
+        summary["transport"],
+        if events { "events" } else { "poll" },
+        "{summary}"
+    );
+    app.stop().await;
+}
+
+/// `<choreo-player>` on a page of someone else's: Playwright loads `web/sample/player.html`
+/// (its server address and ids replaced, an api-key attribute with a real API key added) in
+/// Chromium from another origin, the element from `/assets/choreo-player.js` of a real server;
+/// the dance plays within one motion frame of the song.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() {
+    if !ready(
+        "the player element test",
+        &Needs {
+            node_modules: &["tests/web/node_modules/playwright-core"],
+            browser_and_songs: true,
+        },
+    ) {
+        return;
+    }
+    // The sample page's own origin: a free port for player.mjs's page server, listed for CORS.
+    // (A made-up host would not do: Chromium keeps pages on public origins from loopback servers.)
+    let page_port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port();
+    let mut app = spawn_app_with(|c| {
+        c.models_dir = models_dir();
+        c.cors_origins = vec![format!("http://127.0.0.1:{page_port}")];
+    })
+    .await;
+    // The helpers send `token` as the bearer: the key's secret, so the dance is the key's tenant's.
+    let key = api_key(&app, "player-page").await;
+    app.token = Some(key.clone());
+    let song = app.upload_ok(&helpers::short_song()).await;
+    let song_id = song["id"].as_str().expect("song id").to_string();
+    let job_id = app
+        .dance(&serde_json::json!({"song_id": song_id, "model": "dance-revolution", "seed": 2}))
+        .await;
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-player");
+    let env = [
+        ("API_URL", format!("http://{}", app.addr)),
+        ("JOB_ID", job_id),
+        ("SONG_ID", song_id),
+        ("TOKEN", key),
+        ("PAGE_PORT", page_port.to_string()),
+        ("OUT_DIR", out.display().to_string()),
+        ("CHROMIUM", chromium().display().to_string()),
+    ];
+    let summary = run_node(
+        &root().join("tests/web/player.mjs"),
+        &root().join("tests/web"),
+        &env,
+        Duration::from_secs(180),
+    )
+    .await;
+    let worst = summary["sync"]["worst_diff_s"]
+        .as_f64()
+        .expect("worst_diff_s");
+    assert!(
+        worst <= 1.0 / 25.0,
+        "|audioTime − animationTime| reached {worst} s: {summary}"
+    );
+    assert!(
+        summary["sync"]["audio_advanced_s"]
+            .as_f64()
+            .is_some_and(|s| s > 1.0),
+        "{summary}"
+    );
+    let shot = std::fs::read(summary["screenshot"].as_str().expect("screenshot"))
+        .expect("screenshot file");
+    assert!(
+        shot.starts_with(b"\x89PNG") && shot.len() > 10_000,
+        "a real screenshot"
+    );
+    app.stop().await;
 }

@@ -81,6 +81,13 @@ pub struct CreateJob {
     #[serde(default, deserialize_with = "optional_integer")]
     #[schema(minimum = -100, maximum = 100)]
     pub priority: Option<i64>,
+    /// POSTed the job (as `GET /v1/jobs/{id}` returns it) when it ends, signed per Standard
+    /// Webhooks with the server's `webhook_secret`. http(s) only; a host that resolves to a
+    /// loopback, private, link-local or otherwise non-global address is refused (422
+    /// `webhook-url-refused`) unless the server lists its `host:port` in `webhook_allowed_hosts`.
+    #[serde(default)]
+    #[schema(max_length = 2048)]
+    pub webhook_url: Option<String>,
 }
 
 /// Where to find a job and its results.
@@ -131,6 +138,9 @@ pub struct JobView {
     pub created_at: DateTime<Utc>,
     pub started_at: Option<DateTime<Utc>>,
     pub finished_at: Option<DateTime<Utc>>,
+    /// Where the job is POSTed when it ends (generate jobs submitted with one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub webhook_url: Option<String>,
     pub links: Links,
 }
 
@@ -148,9 +158,13 @@ impl From<Job> for JobView {
             preview: file("preview.png"),
             self_: base.clone(),
         };
-        let (model, seed) = match &job.kind {
-            JobKind::Analyze { .. } => (None, None),
-            JobKind::Generate(options) => (Some(options.model.0.clone()), Some(options.seed)),
+        let (model, seed, webhook_url) = match &job.kind {
+            JobKind::Analyze { .. } => (None, None, None),
+            JobKind::Generate(options) => (
+                Some(options.model.0.clone()),
+                Some(options.seed),
+                options.webhook_url.clone(),
+            ),
         };
         JobView {
             id: job.id,
@@ -170,6 +184,7 @@ impl From<Job> for JobView {
             created_at: job.created_at,
             started_at: job.started_at,
             finished_at: job.finished_at,
+            webhook_url,
             links,
         }
     }
@@ -310,7 +325,7 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
         (status = 413, description = "The body is over max_job_body_bytes", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
         (status = 408, description = "The body stalled for more than body_timeout_s", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set), the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set, or a webhook_url refused: `webhook-url-refused`, `webhooks-not-configured`), the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The database is unreachable; nothing was queued, send it again shortly", body = Problem, content_type = "application/problem+json"),
         (status = 507, description = "The server is out of storage; nothing was queued", body = Problem, content_type = "application/problem+json"),
     ),
@@ -324,6 +339,7 @@ pub async fn create(
 ) -> Result<Response, ApiError> {
     check_sizes(&request)?;
     let idempotency = idempotency(&headers, &request)?;
+    super::tenancy::check_queue(&state, &caller).await?;
     let song = match state.store.song(caller.scope(), request.song_id).await {
         Ok(song) => song,
         // 404, as for any id that names nothing: the request itself is well formed.
@@ -386,6 +402,19 @@ pub async fn create(
     if !PRIORITY_RANGE.contains(&priority) {
         return Err(invalid("priority", "must be within -100..=100"));
     }
+    let webhook_url = match request.webhook_url.take() {
+        Some(url) => Some(
+            crate::webhooks::accept_url(&state.config, &url)
+                .await
+                .map_err(|e| match e {
+                    crate::webhooks::Submission::NotConfigured => ApiError::WebhooksNotConfigured,
+                    crate::webhooks::Submission::Refused(why) => {
+                        ApiError::WebhookUrlRefused(why.to_string())
+                    }
+                })?,
+        ),
+        None => None,
+    };
     let (key_poses, seed_motion) = motion_inputs(
         std::mem::take(&mut request.key_poses),
         request.seed_motion.take(),
@@ -405,6 +434,7 @@ pub async fn create(
             style: request.style,
             temperature: request.temperature,
             top_k: request.top_k,
+            webhook_url,
         }),
         priority,
         max_attempts: state.config.max_attempts,

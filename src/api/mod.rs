@@ -31,6 +31,7 @@ use utoipa_swagger_ui::SwaggerUi;
 pub mod auth;
 pub mod bench;
 pub mod downloads;
+pub mod events;
 pub mod extract;
 pub mod jobs;
 pub mod listen;
@@ -40,6 +41,7 @@ pub mod problem;
 pub mod rigs;
 pub mod songs;
 pub mod system;
+pub mod tenancy;
 pub mod web;
 
 pub use problem::ApiError;
@@ -72,6 +74,8 @@ pub struct AppState {
     pub runs_workers: bool,
     /// Cancelled when the server stops; in-flight upload decodes watch it and return.
     pub shutdown: CancellationToken,
+    /// API keys as recently read, and each tenant's rate limit.
+    pub tenancy: Arc<tenancy::Tenancy>,
 }
 
 /// Errors from starting the service.
@@ -128,6 +132,7 @@ pub fn router(state: AppState) -> Router {
                 )),
         )
         .route("/jobs/{id}", get(jobs::get).delete(jobs::cancel_or_delete))
+        .route("/jobs/{id}/events", get(events::events))
         .route("/jobs/{id}/preview.png", get(jobs::preview))
         .route("/jobs/{id}/motion.bvh", get(downloads::motion_bvh))
         .route("/jobs/{id}/motion.glb", get(downloads::motion_glb))
@@ -312,6 +317,7 @@ impl Server {
             workers_alive: ctx.alive.clone(),
             runs_workers: run_workers,
             shutdown: shutdown.clone(),
+            tenancy: Arc::default(),
         };
 
         let listener = tokio::net::TcpListener::bind(&config.bind)
@@ -341,6 +347,12 @@ impl Server {
             );
             let mut handles = crate::worker::start(ctx, workers, shutdown.clone());
             handles.extend(retention);
+            // Webhooks are delivered on the worker side, with the workers.
+            handles.extend(crate::webhooks::spawn(
+                state.store.clone(),
+                &config,
+                shutdown.clone(),
+            ));
             handles
         } else {
             Vec::new()

@@ -1,11 +1,14 @@
 //! The OpenAPI document, generated from the handlers; `openapi/openapi.json` is its checked-in copy.
 //!
 //! The modifiers state what the middleware does for every `/v1` route, so the document says
-//! exactly what the server does: the bearer token is optional (only a server with `auth_token`
-//! set asks for it, and then answers 401), and the ids that `POST /v1/songs` and `POST /v1/jobs`
+//! exactly what the server does: the bearer secret is optional (only a server with API keys or
+//! an `auth_token` asks for it, and then answers 401), every `/v1` operation may answer 429
+//! (the caller's rate limit), and the ids that `POST /v1/songs` and `POST /v1/jobs`
 //! return (and `POST /v1/rigs`) are linked to the operations that take them.
 use serde_json::{json, Value};
+use utoipa::openapi::header::HeaderBuilder;
 use utoipa::openapi::path::{Operation, PathItem};
+use utoipa::openapi::schema::{ObjectBuilder, Type};
 use utoipa::openapi::security::{HttpAuthScheme, HttpBuilder, SecurityRequirement, SecurityScheme};
 use utoipa::openapi::{ContentBuilder, Ref, RefOr, ResponseBuilder};
 use utoipa::{Modify, OpenApi};
@@ -30,6 +33,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
         super::jobs::cancel_or_delete,
         super::jobs::result,
         super::jobs::preview,
+        super::events::events,
         super::downloads::motion_bvh,
         super::downloads::motion_glb,
         super::downloads::motion_vrma,
@@ -62,21 +66,53 @@ fn operations(item: &mut PathItem) -> impl Iterator<Item = &mut Operation> {
     .flatten()
 }
 
-/// Declares the bearer token that guards `/v1` when the server has one: every `/v1` operation
-/// may be called without it (the default) or with it, and may answer 401.
+/// Declares the bearer secret that guards `/v1` when the server has keys or a token: every `/v1`
+/// operation may be called without it (the default) or with it, and may answer 401; and the
+/// rate limit every `/v1` operation may answer 429 for.
 struct BearerAuth;
+
+/// What the `bearer` security scheme says.
+const BEARER_DESCRIPTION: &str = "An API key's secret (`choreo keys create --name N` prints it once: \
+`choreo_…`), or the server's `auth_token`. Each key is a tenant: its songs, rigs, jobs and results are its \
+own, and another tenant's ids answer 404. Once any key exists every /v1 request needs one (or the token); \
+a revoked or unknown key answers 401. A server with neither keys nor a token is open.";
 
 impl Modify for BearerAuth {
     fn modify(&self, openapi: &mut utoipa::openapi::OpenApi) {
         let components = openapi.components.get_or_insert_with(Default::default);
         components.add_security_scheme(
             "bearer",
-            SecurityScheme::Http(HttpBuilder::new().scheme(HttpAuthScheme::Bearer).build()),
+            SecurityScheme::Http(
+                HttpBuilder::new()
+                    .scheme(HttpAuthScheme::Bearer)
+                    .description(Some(BEARER_DESCRIPTION))
+                    .build(),
+            ),
         );
+        let problem = || {
+            ContentBuilder::new()
+                .schema(Some(Ref::from_schema_name("Problem")))
+                .build()
+        };
         let unauthorized = ResponseBuilder::new()
-            .description("The server has an auth_token and the request did not send it as `Authorization: Bearer <token>`")
-            .content(super::problem::PROBLEM_JSON, ContentBuilder::new().schema(Some(Ref::from_schema_name("Problem"))).build())
+            .description("The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token)")
+            .content(super::problem::PROBLEM_JSON, problem())
             .build();
+        let retry_after = HeaderBuilder::new()
+            .schema(
+                ObjectBuilder::new()
+                    .schema_type(Type::Integer)
+                    .minimum(Some(1)),
+            )
+            .description(Some("Seconds to wait before trying again"))
+            .build();
+        let rate_limited = |what: &str| {
+            ResponseBuilder::new()
+                .description(what)
+                .content(super::problem::PROBLEM_JSON, problem())
+                .header("Retry-After", retry_after.clone())
+                .build()
+        };
         for (path, item) in openapi.paths.paths.iter_mut() {
             if !path.starts_with("/v1/") {
                 continue;
@@ -90,6 +126,16 @@ impl Modify for BearerAuth {
                     .responses
                     .entry("401".into())
                     .or_insert_with(|| RefOr::T(unauthorized.clone()));
+                let too_many = if op.operation_id.as_deref() == Some("createJob") {
+                    "The key made more requests per second than its rate_limit_rps (code rate-limited), or has \
+                     max_queued_jobs jobs queued or running already (code too-many-queued-jobs); nothing was queued"
+                } else {
+                    "The key made more requests per second than its rate_limit_rps (code rate-limited)"
+                };
+                op.responses
+                    .responses
+                    .entry("429".into())
+                    .or_insert_with(|| RefOr::T(rate_limited(too_many)));
             }
         }
     }

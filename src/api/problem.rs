@@ -96,7 +96,7 @@ pub enum ApiError {
     IdempotencyConflict(JobId),
     #[error("the Idempotency-Key header must be 1 to 255 visible ASCII characters")]
     InvalidIdempotencyKey,
-    #[error("send `Authorization: Bearer <token>` with the server's token")]
+    #[error("send `Authorization: Bearer <secret>` with a valid API key's secret (or the server's token)")]
     Unauthorized,
     #[error("no route for this path; see /docs")]
     NoRoute,
@@ -116,6 +116,16 @@ pub enum ApiError {
     ServiceUnavailable(String),
     #[error("internal error: {0}")]
     Internal(String),
+    #[error("this key made more than {rps} requests per second; wait {retry_after_s} s (Retry-After) and slow down")]
+    RateLimited { rps: f64, retry_after_s: u64 },
+    #[error("this key has {limit} jobs queued or running, its most; wait for some to finish (or cancel some) and submit again")]
+    TooManyQueuedJobs { limit: u64 },
+    #[error("this key stores {used} bytes of songs, rigs and results; {size} more would pass its {quota} byte quota: delete songs or results to make room")]
+    StorageQuotaExceeded { used: u64, size: u64, quota: u64 },
+    #[error("webhook_url is refused: {0}")]
+    WebhookUrlRefused(String),
+    #[error("this server has no webhook_secret (CHOREO_WEBHOOK_SECRET) to sign webhooks with; submit without webhook_url, or ask its operator to set one")]
+    WebhooksNotConfigured,
 }
 
 impl ApiError {
@@ -158,6 +168,11 @@ impl ApiError {
             ApiError::InsufficientStorage(_) => "insufficient-storage",
             ApiError::ServiceUnavailable(_) => "service-unavailable",
             ApiError::Internal(_) => "internal",
+            ApiError::RateLimited { .. } => "rate-limited",
+            ApiError::TooManyQueuedJobs { .. } => "too-many-queued-jobs",
+            ApiError::StorageQuotaExceeded { .. } => "storage-quota-exceeded",
+            ApiError::WebhookUrlRefused(_) => "webhook-url-refused",
+            ApiError::WebhooksNotConfigured => "webhooks-not-configured",
         }
     }
 
@@ -205,6 +220,12 @@ impl ApiError {
             ApiError::InsufficientStorage(_) => StatusCode::INSUFFICIENT_STORAGE,
             ApiError::ServiceUnavailable(_) => StatusCode::SERVICE_UNAVAILABLE,
             ApiError::Internal(_) => StatusCode::INTERNAL_SERVER_ERROR,
+            ApiError::RateLimited { .. } => StatusCode::TOO_MANY_REQUESTS,
+            ApiError::TooManyQueuedJobs { .. } => StatusCode::TOO_MANY_REQUESTS,
+            // The upload is too large for the room the tenant has left: a smaller one may fit.
+            ApiError::StorageQuotaExceeded { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            ApiError::WebhookUrlRefused(_) => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::WebhooksNotConfigured => StatusCode::UNPROCESSABLE_ENTITY,
         }
     }
 
@@ -248,6 +269,9 @@ impl ApiError {
             }
             ApiError::Rig(e) => {
                 problem.field = Some(e.field().into());
+            }
+            ApiError::WebhookUrlRefused(_) | ApiError::WebhooksNotConfigured => {
+                problem.field = Some("webhook_url".into());
             }
             ApiError::JobNotFinished { status, .. } | ApiError::AlreadyFinished { status, .. } => {
                 problem.job_status = Some(*status);
@@ -340,6 +364,8 @@ impl From<QueueError> for ApiError {
             }
             QueueError::RigNotFound(id) => ApiError::RigNotFound(id.to_string()),
             QueueError::IdempotencyConflict(id) => ApiError::IdempotencyConflict(id),
+            // Keys are only looked up by `authenticate`, where a missing one is a 401.
+            QueueError::KeyNotFound(_) => ApiError::Unauthorized,
             QueueError::Database(db) => ApiError::database(&db)
                 .unwrap_or_else(|| ApiError::Internal(format!("database: {db}"))),
             other @ (QueueError::Migrate(_) | QueueError::Corrupt(_)) => {
@@ -375,6 +401,19 @@ impl IntoResponse for ApiError {
             response
                 .headers_mut()
                 .insert(header::RETRY_AFTER, HeaderValue::from_static(RETRY_AFTER_S));
+        }
+        match &self {
+            ApiError::RateLimited { retry_after_s, .. } => {
+                response
+                    .headers_mut()
+                    .insert(header::RETRY_AFTER, HeaderValue::from(*retry_after_s));
+            }
+            ApiError::TooManyQueuedJobs { .. } => {
+                response
+                    .headers_mut()
+                    .insert(header::RETRY_AFTER, HeaderValue::from_static(RETRY_AFTER_S));
+            }
+            _ => {}
         }
         if matches!(self, ApiError::Unauthorized) {
             response

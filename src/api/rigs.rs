@@ -187,7 +187,7 @@ fn parse_mapping(text: Option<&str>) -> Result<BTreeMap<String, Option<HumanBone
         (status = 201, description = "Rig stored", body = RigView),
         (status = 400, description = "Empty file, a second or unnamed field, bad file name or bad multipart", body = Problem, content_type = "application/problem+json"),
         (status = 408, description = "The body stalled for more than body_timeout_s", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "Over the size limit", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Over the size limit (code file-too-large), or past the key's storage quota (code storage-quota-exceeded: delete songs or results to make room)", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Neither BVH nor glTF", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "No file; an unknown field; a skeleton that cannot be read or lacks a bone a dance needs (named); a bad `mapping`", body = Problem, content_type = "application/problem+json"),
         (status = 431, description = "A part's headers are longer than max_part_header_bytes", body = Problem, content_type = "application/problem+json"),
@@ -206,6 +206,7 @@ pub async fn upload(
         .file
         .ok_or_else(|| ApiError::MissingField("file".into()))?;
     let overrides = parse_mapping(form.mapping.as_deref())?;
+    super::tenancy::check_storage(&state, &caller, received.size).await?;
     let bytes = tokio::fs::read(received.file.path())
         .await
         .map_err(|e| ApiError::storage("reading the upload", &e))?;

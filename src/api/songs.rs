@@ -282,7 +282,7 @@ impl axum::response::IntoResponse for UploadError {
         (status = 200, description = "These bytes were uploaded before", body = SongView),
         (status = 400, description = "Empty file, wrong field, bad file name or bad multipart", body = Problem, content_type = "application/problem+json"),
         (status = 408, description = "The body stalled for more than body_timeout_s", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "Over the size limit", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Over the size limit (code file-too-large), or past the key's storage quota (code storage-quota-exceeded: delete songs or results to make room)", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Not audio, or not decodable", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "Over the duration limit, cut short, an unsupported sample rate, or a decode past audio_timeout_s", body = Problem, content_type = "application/problem+json"),
         (status = 431, description = "A part's headers are longer than max_part_header_bytes", body = Problem, content_type = "application/problem+json"),
@@ -312,6 +312,7 @@ pub async fn upload(
             Json(view(&state, existing).await?),
         ));
     }
+    super::tenancy::check_storage(&state, &caller, received.size).await?;
 
     // Decode fully: that is the only proof the bytes are audio we can use. No samples are kept,
     // the header's length and rate are checked before decoding, and the decode stops at the

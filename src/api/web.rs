@@ -46,6 +46,13 @@ static SCRIPT: LazyLock<Asset> = LazyLock::new(|| {
         "text/javascript; charset=utf-8",
     )
 });
+/// The `<choreo-player>` element for other pages (web/src/element.js): any page may load it.
+static PLAYER: LazyLock<Asset> = LazyLock::new(|| {
+    Asset::new(
+        include_str!("../../web/dist/choreo-player.js"),
+        "text/javascript; charset=utf-8",
+    )
+});
 static STYLE: LazyLock<Asset> = LazyLock::new(|| {
     Asset::new(
         include_str!("../../web/dist/app.css"),
@@ -58,8 +65,8 @@ static STYLE: LazyLock<Asset> = LazyLock::new(|| {
 const CONTENT_SECURITY_POLICY: &str = "default-src 'none'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; \
      media-src 'self' blob:; connect-src 'self' http: https:; base-uri 'none'; form-action 'none'; frame-ancestors 'none'";
 
-/// `GET /`, `/assets/app.js`, `/assets/app.css`: public, like `/docs`; the page asks for a token
-/// when the API needs one.
+/// `GET /`, `/assets/app.js`, `/assets/app.css`, `/assets/choreo-player.js`: public, like
+/// `/docs`; the page asks for an API key when the API needs one.
 pub fn routes() -> Router<AppState> {
     Router::new()
         .route(
@@ -73,6 +80,10 @@ pub fn routes() -> Router<AppState> {
         .route(
             "/assets/app.css",
             get(|headers: HeaderMap| async move { serve(&STYLE, &headers, false) }),
+        )
+        .route(
+            "/assets/choreo-player.js",
+            get(|headers: HeaderMap| async move { serve(&PLAYER, &headers, false) }),
         )
 }
 

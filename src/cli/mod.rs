@@ -31,6 +31,7 @@ pub mod bench;
 pub mod eval;
 pub mod export;
 pub mod generate;
+pub mod keys;
 pub mod retarget;
 pub mod train;
 
@@ -75,6 +76,9 @@ pub enum Command {
     Export(export::ExportArgs),
     /// Put a motion.json's dance on another skeleton (Mixamo, VRM, SMPL): BVH, glb, .vrma or .npz.
     Retarget(retarget::RetargetArgs),
+    /// API keys: create (prints the secret once), list, revoke; on the configured database,
+    /// also while the server runs.
+    Keys(keys::KeysArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -93,7 +97,7 @@ pub enum BenchCommand {
 }
 
 /// Flags that override the config file and `CHOREO_*` environment.
-#[derive(Args)]
+#[derive(Args, Default)]
 pub struct ServiceArgs {
     /// Listen address, e.g. 127.0.0.1:8080 (port 0 picks one) [env: CHOREO_BIND].
     #[arg(long)]

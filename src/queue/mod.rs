@@ -29,12 +29,16 @@ use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 use uuid::Uuid;
 
+pub mod events;
 pub mod files;
+pub mod keys;
 pub mod postgres;
 pub mod sql;
 pub mod sqlite;
 
+pub use events::EventStore;
 pub use files::DataDir;
+pub use keys::{ApiKey, KeyLimits, NewKey, TenantStore, Usage};
 pub use postgres::PgStore;
 pub use sqlite::SqliteStore;
 
@@ -55,6 +59,8 @@ pub enum QueueError {
     RigNotFound(RigId),
     #[error("the Idempotency-Key was already used for a different request (job {0})")]
     IdempotencyConflict(JobId),
+    #[error("API key {0} not found")]
+    KeyNotFound(KeyId),
 }
 
 impl QueueError {
@@ -68,6 +74,7 @@ impl QueueError {
             QueueError::JobNotFound(_) => "job-not-found",
             QueueError::RigNotFound(_) => "rig-not-found",
             QueueError::IdempotencyConflict(_) => "idempotency-key-reused",
+            QueueError::KeyNotFound(_) => "key-not-found",
         }
     }
 
@@ -81,6 +88,7 @@ impl QueueError {
             QueueError::JobNotFound(_) => false,
             QueueError::RigNotFound(_) => false,
             QueueError::IdempotencyConflict(_) => false,
+            QueueError::KeyNotFound(_) => false,
         }
     }
 }
@@ -136,6 +144,11 @@ typed_id!(
 typed_id!(
     /// Whose a song, job or rig is: the API key that made it ([`TenantId::OPEN`] without keys).
     TenantId
+);
+
+typed_id!(
+    /// An API key's id (`choreo keys create`); not secret, it is part of the key's secret.
+    KeyId
 );
 
 impl TenantId {
@@ -260,6 +273,9 @@ pub struct GenerateOptions {
     /// Keep the k likeliest choices when sampling (models over discrete choices).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub top_k: Option<u32>,
+    /// Where the finished job is POSTed (`webhooks`); the outbox trigger reads it from here.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub webhook_url: Option<String>,
 }
 
 fn planted() -> bool {
@@ -569,9 +585,9 @@ pub trait RigStore: Send + Sync {
 }
 
 /// Everything the service stores.
-pub trait Store: JobStore + SongStore + RigStore {}
+pub trait Store: JobStore + SongStore + RigStore + TenantStore + EventStore {}
 
-impl<T: JobStore + SongStore + RigStore> Store for T {}
+impl<T: JobStore + SongStore + RigStore + TenantStore + EventStore> Store for T {}
 
 /// Opens the store `database` names, running its migrations. `timeout` bounds how long a call
 /// waits for a PostgreSQL connection (the config's `db_timeout_s`).

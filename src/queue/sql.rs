@@ -36,7 +36,9 @@ use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 use uuid::Uuid;
 
+mod keys;
 mod delete;
+mod events;
 mod rigs;
 
 /// Cap on the backoff exponent, so `1 << n` cannot overflow.
@@ -394,12 +396,20 @@ where
         Box::pin(async move {
             let now = now_ms();
             // One statement selects and leases the job, so two workers never get the same one.
+            // Fair between tenants: the tenant with the fewest jobs running goes first, then the
+            // one served least recently (its latest job started earliest, or never), so one
+            // tenant's 500 queued jobs wait behind another's single job rather than before it.
+            // Priority orders a tenant's own jobs only: a client sets it, so across tenants it
+            // would let one starve the others. (PostgreSQL: two claims at the same instant may
+            // both see a tenant as idle; the next claim evens it out.)
             let sql = format!(
                 "UPDATE jobs SET status = 'running', attempts = attempts + 1, lease_owner = $1, \
                  lease_expires_at = $2, heartbeat_at = $3, started_at = COALESCE(started_at, $3), \
                  stage = 'claimed', progress = 0 \
-                 WHERE id = (SELECT id FROM jobs WHERE status = 'queued' AND run_after <= $3 \
-                             ORDER BY priority DESC, run_after, id LIMIT 1{}) \
+                 WHERE id = (SELECT q.id FROM jobs q WHERE q.status = 'queued' AND q.run_after <= $3 \
+                             ORDER BY (SELECT COUNT(*) FROM jobs r WHERE r.tenant_id = q.tenant_id AND r.status = 'running'), \
+                                      (SELECT COALESCE(MAX(s.started_at), 0) FROM jobs s WHERE s.tenant_id = q.tenant_id), \
+                                      q.priority DESC, q.run_after, q.id LIMIT 1{}) \
                  RETURNING {JOB_COLUMNS}",
                 D::SKIP_LOCKED
             );

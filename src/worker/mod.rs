@@ -186,6 +186,11 @@ impl Drop for Alive {
 struct JobState {
     /// The stage last reported (none yet: the job is as the queue claimed it) and the progress.
     stage_progress: Mutex<(Option<Stage>, f64)>,
+    /// Stages entered since the last heartbeat, with the progress then: each is written on its
+    /// own, so the job's event stream shows every stage however short (`api::events`).
+    entered: Mutex<Vec<(Stage, f64)>>,
+    /// Wakes the heartbeat task when a stage is entered, so it is written at once.
+    stage_changed: tokio::sync::Notify,
     cancel: AtomicBool,
     lease_lost: AtomicBool,
 }
@@ -211,11 +216,21 @@ impl Progress for JobProgress {
                 Ok(guard) => guard,
                 Err(poisoned) => poisoned.into_inner(),
             };
+            let entered = guard.0 != Some(stage);
             guard.0 = Some(stage);
             // Stages report their own 0..1; the job's progress never goes backwards.
             let fraction = f64::from(fraction);
             if fraction.is_finite() {
                 guard.1 = guard.1.max(fraction.clamp(0.0, 1.0));
+            }
+            if entered {
+                let progress = guard.1;
+                drop(guard);
+                match self.state.entered.lock() {
+                    Ok(mut e) => e.push((stage, progress)),
+                    Err(poisoned) => poisoned.into_inner().push((stage, progress)),
+                }
+                self.state.stage_changed.notify_one();
             }
         }
         if self.state.cancel.load(Ordering::Relaxed) {
@@ -529,8 +544,20 @@ async fn publish(
     id: crate::queue::JobId,
     files: &crate::queue::JobFiles,
 ) -> Result<(), WorkerError> {
+    // The layout exists (the server made it); this only names the result files' paths.
+    let data = crate::queue::DataDir::create(&ctx.data_root).ok();
+    let mut bytes = 0;
     for file in &files.files {
+        // Measured before publishing: a bucket store may move the local file away.
+        if let Some(data) = &data {
+            let path = Artifact::Result(id, file).local_path(data);
+            bytes += tokio::fs::metadata(path).await.map_or(0, |m| m.len());
+        }
         ctx.artifacts.publish(Artifact::Result(id, file)).await?;
+    }
+    // Counted against the tenant's storage quota; a failed write only under-counts.
+    if let Err(e) = ctx.store.set_result_bytes(id, bytes).await {
+        tracing::warn!(error = %e, "could not record the size of the job's results");
     }
     Ok(())
 }
@@ -553,28 +580,60 @@ async fn heartbeat_loop(
                 return;
             }
             _ = tokio::time::sleep(ctx.heartbeat) => {}
+            _ = state.stage_changed.notified() => {}
         }
-        let (stage, progress) = state.snapshot();
-        let stage = stage.unwrap_or(Stage::Claimed);
-        match ctx
-            .store
-            .heartbeat(id, &owner, stage.as_str(), progress, ctx.policy)
-            .await
-        {
-            Ok(Beat::Held { cancel_requested }) => {
-                if cancel_requested {
-                    state.cancel.store(true, Ordering::Relaxed);
-                }
+        let entered = match state.entered.lock() {
+            Ok(mut e) => std::mem::take(&mut *e),
+            Err(poisoned) => std::mem::take(&mut *poisoned.into_inner()),
+        };
+        let now = state.snapshot();
+        // Each stage entered since the last beat, in order, then where the job is now.
+        let beats = entered
+            .into_iter()
+            .map(|(stage, progress)| (Some(stage), progress))
+            .chain(std::iter::once(now));
+        let mut last = None;
+        for (stage, progress) in beats {
+            if last == Some((stage, progress)) {
+                continue;
             }
-            Ok(Beat::Lost) => {
-                tracing::warn!("lease lost; stopping the job");
-                state.lease_lost.store(true, Ordering::Relaxed);
-                state.cancel.store(true, Ordering::Relaxed);
+            last = Some((stage, progress));
+            if !beat(&ctx, &owner, id, &state, stage.unwrap_or(Stage::Claimed), progress).await {
                 return;
             }
-            Err(e) => {
-                tracing::warn!(error = %e, "heartbeat failed; the lease expires unless a later one succeeds")
+        }
+    }
+}
+
+/// One heartbeat; `false` when the lease is lost and the job must stop.
+async fn beat(
+    ctx: &Context,
+    owner: &str,
+    id: crate::queue::JobId,
+    state: &JobState,
+    stage: Stage,
+    progress: f64,
+) -> bool {
+    match ctx
+        .store
+        .heartbeat(id, owner, stage.as_str(), progress, ctx.policy)
+        .await
+    {
+        Ok(Beat::Held { cancel_requested }) => {
+            if cancel_requested {
+                state.cancel.store(true, Ordering::Relaxed);
             }
+            true
+        }
+        Ok(Beat::Lost) => {
+            tracing::warn!("lease lost; stopping the job");
+            state.lease_lost.store(true, Ordering::Relaxed);
+            state.cancel.store(true, Ordering::Relaxed);
+            false
+        }
+        Err(e) => {
+            tracing::warn!(error = %e, "heartbeat failed; the lease expires unless a later one succeeds");
+            true
         }
     }
 }

@@ -79,7 +79,7 @@ impl WorkerProcess {
             shutdown.clone(),
         );
         let retention = crate::artifacts::retention::spawn(
-            store,
+            store.clone(),
             ctx.artifacts.clone(),
             config,
             shutdown.clone(),
@@ -87,6 +87,7 @@ impl WorkerProcess {
         let mut handles = super::start(ctx, count, shutdown.clone());
         handles.push(sweep);
         handles.extend(retention);
+        handles.extend(crate::webhooks::spawn(store, config, shutdown.clone()));
         Ok(Self {
             shutdown,
             handles,

@@ -16,6 +16,32 @@ const RUN_LIMIT: Duration = Duration::from_secs(300);
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn schemathesis_finds_no_mismatch_between_spec_and_server() {
+    let app = spawn_app().await;
+    run(&app, None).await;
+    app.stop().await;
+}
+
+/// The same with API keys on: every request carries one key's secret (the others' ids are 404s
+/// to it, and a request schemathesis sends without it is a 401 the spec states).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn schemathesis_finds_no_mismatch_with_api_keys_on() {
+    let app = spawn_app().await;
+    let store = &app.server.as_ref().expect("server").state().store;
+    let (key, secret) =
+        choreo::queue::NewKey::mint("schemathesis", false, choreo::queue::KeyLimits::default());
+    let id = key.id;
+    store.add_key(key).await.expect("add key");
+    let (other, _) = choreo::queue::NewKey::mint("other", false, Default::default());
+    store.add_key(other).await.expect("add key");
+    run(&app, Some(&secret)).await;
+    // The requests were the key's, not 401s for want of it.
+    let used = store.key(id).await.expect("key").last_used_at;
+    assert!(used.is_some(), "schemathesis never used the key");
+    app.stop().await;
+}
+
+/// Runs schemathesis against `app`, sending `Authorization: Bearer <secret>` when given.
+async fn run(app: &crate::helpers::TestApp, secret: Option<&str>) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
     let st = root.join(".venv-schemathesis/bin/st");
     if !st.is_file() {
@@ -28,7 +54,9 @@ async fn schemathesis_finds_no_mismatch_between_spec_and_server() {
         );
         return;
     }
-    let app = spawn_app().await;
+    let auth: Vec<String> = secret
+        .map(|s| vec!["--header".into(), format!("Authorization: Bearer {s}")])
+        .unwrap_or_default();
     let reports = tempfile::tempdir().expect("tempdir");
     let run = tokio::process::Command::new(&st)
         .arg("--config-file")
@@ -54,6 +82,7 @@ async fn schemathesis_finds_no_mismatch_between_spec_and_server() {
             "--request-timeout",
             "30",
         ])
+        .args(&auth)
         .args(["--report", "junit", "--report-dir"])
         .arg(reports.path())
         .env("NO_COLOR", "1")
@@ -93,5 +122,4 @@ async fn schemathesis_finds_no_mismatch_between_spec_and_server() {
             .any(|l| l.contains("Stateful") && !l.contains('⏭')),
         "the stateful phase did not run"
     );
-    app.stop().await;
 }

@@ -1,8 +1,10 @@
 // The choreo page: upload a song, shape a dance (model, seed, style, key poses), follow the job,
 // play the dance in 3-D in time with the song, read its report, download its files.
-// It talks to the public /v1 API only (this origin, or ?api=ORIGIN with CORS there), with the
-// bearer token from the token field when the server asks for one.
-import { Api, ApiError, waitForAnalysis, waitForJob } from './api.js';
+// It talks to the public /v1 API only (this origin, or ?api=ORIGIN with CORS there) through the
+// TypeScript client (clients/typescript: types generated from the OpenAPI document), with the API
+// key from the key field sent as a bearer secret when the server asks for one, and follows a job
+// by its server-sent events.
+import { Choreo, ApiError } from '../../clients/typescript/src/index.ts';
 import { Timeline, decodePeaks } from './timeline.js';
 import { Stage } from './player.js';
 import { ReportView } from './report.js';
@@ -15,7 +17,10 @@ const FPS = 25;
 const STYLES = ['waltz', 'rumba', 'cha-cha', 'tango'];
 
 const params = new URLSearchParams(location.search);
-let api = new Api();
+let api = new Choreo();
+/** A path of the API (a job's links, a song's audio) fetched with the key, as a Blob. */
+const blobOf = async (path) => (await api.fetch(path)).blob();
+const jsonOf = async (path) => (await api.fetch(path)).json();
 const state = {
   models: [],
   song: null, // SongView of the song being choreographed
@@ -40,7 +45,7 @@ function toast(message) {
   toastTimer = setTimeout(() => { el.hidden = true; }, 8000);
 }
 const describe = (e) => (e instanceof ApiError && e.status === 401
-  ? 'The API wants a token: enter it above and press Connect.'
+  ? 'The API wants an API key: enter it above and press Connect.'
   : e?.message || String(e));
 /** Runs an async UI action; failures become a message on the page, never an uncaught error. */
 const guard = (fn) => async (...args) => {
@@ -57,10 +62,10 @@ window.addEventListener('choreo-error', (e) => toast(describe(e.detail)));
 // ---------------------------------------------------------------- connection
 async function connect() {
   const base = $('api-base').value.trim();
-  const token = $('api-token').value.trim();
+  const key = $('api-key').value.trim();
   localStorage.setItem('choreo.api', base);
-  localStorage.setItem('choreo.token', token);
-  api = new Api(base, token);
+  localStorage.setItem('choreo.key', key);
+  api = new Choreo({ baseUrl: base, apiKey: key });
   $('api-status').textContent = 'connecting…';
   try {
     state.models = await api.models();
@@ -89,10 +94,10 @@ function setCursor(t) {
   songTimeline.set({ cursor: state.cursor });
 }
 
-/** Audio and waveform of a song, fetched once (with the token) and kept as a blob URL. */
+/** Audio and waveform of a song, fetched once (with the key) and kept as a blob URL. */
 async function songAudio(songId, blob = null) {
   if (audioCache.has(songId)) return audioCache.get(songId);
-  const bytes = blob ?? (await api.blob(`/v1/songs/${songId}/audio`));
+  const bytes = blob ?? (await api.songAudio(songId));
   let wave = { peaks: null, duration: 0 };
   try {
     wave = await decodePeaks(await bytes.arrayBuffer());
@@ -126,7 +131,7 @@ const uploadSong = guard(async (file) => {
   showSong(song);
   const audio = await songAudio(song.id, file);
   songTimeline.set({ peaks: audio.peaks });
-  showSong(await waitForAnalysis(api, song.id, showSong));
+  showSong(await api.waitForSong(song.id, showSong));
 });
 
 $('song-file').addEventListener('change', (e) => uploadSong(e.target.files[0]));
@@ -294,7 +299,7 @@ $('tab-library').addEventListener('click', () => showTab('library'));
 $('tab-job').addEventListener('click', () => showTab('job'));
 
 async function motionOf(jobId) {
-  if (!motionCache.has(jobId)) motionCache.set(jobId, await api.json(`/v1/jobs/${jobId}/motion.json`));
+  if (!motionCache.has(jobId)) motionCache.set(jobId, await (await api.download(jobId, 'motion.json')).json());
   return motionCache.get(jobId);
 }
 
@@ -383,7 +388,8 @@ async function follow(id) {
     $('job-stage').dataset.status = job.status;
     $('job-stage').dataset.jobId = job.id;
   };
-  const job = await waitForJob(api, id, show);
+  // The job's server-sent events move the bar (a server without them is polled).
+  const job = await api.wait(id, { onUpdate: show });
   $('job-cancel').hidden = true;
   state.watching = null;
   await refreshJobs();
@@ -481,10 +487,10 @@ const openJob = guard(async (id, slot = 'a') => {
   }
   if (job.status !== 'succeeded') throw new Error(`job ${id} ${job.status}${job.error ? `: ${job.error}` : ''}`);
   const [glb, motion, report, song] = await Promise.all([
-    api.arrayBuffer(job.links.motion_glb),
+    api.fetch(job.links.motion_glb).then((r) => r.arrayBuffer()),
     motionOf(job.id),
-    api.json(job.links.report),
-    api.json(job.links.song),
+    jsonOf(job.links.report),
+    jsonOf(job.links.song),
   ]);
   if (slot === 'b' && !stages.b) {
     $('view-b').hidden = false;
@@ -558,7 +564,7 @@ function rigFiles(rig) {
   return [[`motion.bvh${query}`, 'BVH'], [`motion.glb${query}`, 'glb']];
 }
 
-/** Download buttons for the open dance on the chosen rig (fetched with the token, then saved). */
+/** Download buttons for the open dance on the chosen rig (fetched with the key, then saved). */
 function showRigDownloads() {
   const box = $('rig-downloads');
   box.replaceChildren();
@@ -574,7 +580,7 @@ function showRigDownloads() {
     button.addEventListener('click', guard(async () => {
       button.disabled = true;
       try {
-        const blob = await api.blob(`/v1/jobs/${job.id}/${file}`);
+        const blob = await blobOf(`/v1/jobs/${job.id}/${file}`);
         const a = document.createElement('a');
         a.href = URL.createObjectURL(blob);
         a.download = `${job.id}-${rig}-${file.split('?')[0]}`;
@@ -662,7 +668,7 @@ $('compare').addEventListener('change', guard(async (e) => {
 
 // ---------------------------------------------------------------- jobs on the server
 async function refreshJobs() {
-  const page = await api.jobs('limit=50');
+  const page = await api.jobs({ limit: 50 });
   state.jobs = page.items.filter((j) => j.kind === 'generate');
   const done = state.jobs.filter((j) => j.status === 'succeeded');
   const label = (j) => `${j.model} · seed ${j.seed} · ${j.id.slice(0, 8)}`;
@@ -708,7 +714,8 @@ async function openLinked() {
   if (params.get('compare') && !slots.b) await openJob(params.get('compare'), 'b');
 }
 $('api-base').value = params.get('api') ?? localStorage.getItem('choreo.api') ?? '';
-$('api-token').value = localStorage.getItem('choreo.token') ?? '';
+// choreo.token: what the field was called before API keys; its value is a bearer secret too.
+$('api-key').value = localStorage.getItem('choreo.key') ?? localStorage.getItem('choreo.token') ?? '';
 renderKeys();
 setCursor(0);
 

@@ -81,11 +81,11 @@ export class ReportView {
       button.type = 'button';
       button.textContent = `Download ${label}`;
       button.dataset.file = file;
-      // Fetched with the token (a plain link could not send it), then saved from a blob URL.
+      // Fetched with the key (a plain link could not send it), then saved from a blob URL.
       button.addEventListener('click', async () => {
         button.disabled = true;
         try {
-          const blob = await api.blob(`/v1/jobs/${job.id}/${file}`);
+          const blob = await (await api.fetch(`/v1/jobs/${job.id}/${file}`)).blob();
           const a = document.createElement('a');
           a.href = URL.createObjectURL(blob);
           a.download = `${job.id}-${file}`;

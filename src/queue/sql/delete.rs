@@ -46,6 +46,14 @@ where
         reason: &str,
         now: i64,
     ) -> Result<(), QueueError> {
+        // The job's webhook outbox row and attempt log go with it (a pending delivery of a
+        // deleted job is dropped): only the audit line below stays.
+        for table in ["webhooks", "webhook_deliveries"] {
+            sqlx::query(&format!("DELETE FROM {table} WHERE job_id = $1"))
+                .bind(D::id(job.id.0))
+                .execute(&mut *conn)
+                .await?;
+        }
         sqlx::query(
             "INSERT INTO job_events (job_id, from_status, to_status, attempt, worker, error, at) \
              VALUES ($1, $2, 'deleted', $3, NULL, $4, $5)",

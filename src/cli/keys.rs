@@ -1,0 +1,125 @@
+//! `choreo keys create|list|revoke`: API keys, written straight to the configured database, so
+//! they work while the server runs (it reads keys back within `api::tenancy::KEY_CACHE`).
+use anyhow::Context;
+use choreo::config::Config;
+use choreo::queue::{ApiKey, KeyId, KeyLimits, NewKey, Store};
+use clap::{Args, Subcommand};
+use serde_json::json;
+use std::sync::Arc;
+use std::time::Duration;
+
+use super::ServiceArgs;
+
+#[derive(Args)]
+pub struct KeysArgs {
+    #[command(subcommand)]
+    pub command: KeysCommand,
+    /// Where the database lives when `database_url` is unset [env: CHOREO_DATA_DIR].
+    #[arg(long, global = true)]
+    data_dir: Option<std::path::PathBuf>,
+}
+
+impl KeysArgs {
+    pub fn service(&self) -> ServiceArgs {
+        ServiceArgs {
+            data_dir: self.data_dir.clone(),
+            ..ServiceArgs::default()
+        }
+    }
+}
+
+#[derive(Subcommand)]
+pub enum KeysCommand {
+    /// Make a key (its own tenant) and print `{"id", "name", "secret"}`: the secret is shown
+    /// this once and only its hash is kept.
+    Create(CreateArgs),
+    /// Print every key (never a secret) as a JSON array, revoked ones included.
+    List,
+    /// Revoke a key: its requests get 401 from then on (within a second); its tenant's songs,
+    /// jobs and results stay.
+    Revoke {
+        /// The key's id, as `create` and `list` print it.
+        id: KeyId,
+    },
+}
+
+#[derive(Args)]
+pub struct CreateArgs {
+    /// A label for the key (who or what uses it).
+    #[arg(long)]
+    pub name: String,
+    /// An operator's key: reads every tenant's songs, jobs and rigs.
+    #[arg(long)]
+    pub admin: bool,
+    /// This key's requests per second (default: the config's rate_limit_rps).
+    #[arg(long)]
+    pub rate_limit_rps: Option<f64>,
+    /// This key's most jobs queued or running (default: the config's max_queued_jobs).
+    #[arg(long)]
+    pub max_queued_jobs: Option<u64>,
+    /// This key's most bytes stored (default: the config's storage_quota_bytes).
+    #[arg(long)]
+    pub storage_quota_bytes: Option<u64>,
+}
+
+fn shown(key: &ApiKey) -> serde_json::Value {
+    json!({
+        "id": key.id,
+        "name": key.name,
+        "tenant": key.tenant,
+        "admin": key.admin,
+        "rate_limit_rps": key.limits.rate_limit_rps,
+        "max_queued_jobs": key.limits.max_queued_jobs,
+        "storage_quota_bytes": key.limits.storage_quota_bytes,
+        "created_at": key.created_at,
+        "last_used_at": key.last_used_at,
+        "revoked_at": key.revoked_at,
+    })
+}
+
+/// Runs one `choreo keys` command against the configured database.
+pub fn run(args: &KeysArgs, config: Config) -> anyhow::Result<()> {
+    super::runtime()?.block_on(async {
+        let database = config.database()?;
+        if let choreo::config::Database::Sqlite(path) = &database {
+            if let Some(dir) = path.parent() {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating {}", dir.display()))?;
+            }
+        }
+        let store: Arc<dyn Store> =
+            choreo::queue::open(&database, Duration::from_secs_f64(config.db_timeout_s))
+                .await
+                .context("opening the database")?;
+        let out = match &args.command {
+            KeysCommand::Create(create) => {
+                let limits = KeyLimits {
+                    rate_limit_rps: create.rate_limit_rps,
+                    max_queued_jobs: create.max_queued_jobs,
+                    storage_quota_bytes: create.storage_quota_bytes,
+                };
+                // The config's own checks, applied to the key's overrides.
+                Config {
+                    rate_limit_rps: limits.rate_limit_rps,
+                    max_queued_jobs: limits.max_queued_jobs,
+                    storage_quota_bytes: limits.storage_quota_bytes,
+                    ..config.clone()
+                }
+                .validate()
+                .context("checking the key's limits (--rate-limit-rps, --max-queued-jobs, --storage-quota-bytes)")?;
+                let (key, secret) = NewKey::mint(&create.name, create.admin, limits);
+                let key = store.add_key(key).await.context("storing the key")?;
+                json!({"id": key.id, "name": key.name, "secret": secret})
+            }
+            KeysCommand::List => {
+                let keys = store.keys().await.context("reading the keys")?;
+                serde_json::Value::Array(keys.iter().map(shown).collect())
+            }
+            KeysCommand::Revoke { id } => {
+                shown(&store.revoke_key(*id).await.context("revoking the key")?)
+            }
+        };
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        Ok(())
+    })
+}

@@ -1,0 +1,120 @@
+// Drives Debian's chromium through web/sample/player.html, a page of someone else's that shows a
+// dance with <choreo-player> (run by tests/web.rs against a real choreo server): the sample's
+// server address and ids replaced by the test's, the page served by a small server of this
+// script on another origin (http://127.0.0.1:PAGE_PORT, which the choreo server's cors_origins
+// lists), with the api-key attribute when TOKEN is set. Checks that the element loads, plays, and keeps the dance within one motion
+// frame of the song.
+//
+//   API_URL=… JOB_ID=… SONG_ID=… PAGE_PORT=… [TOKEN=…] OUT_DIR=dir node tests/web/player.mjs
+//
+// Prints one JSON summary line (prefixed "summary: ") and exits 0, or prints why and exits 1.
+import { chromium } from 'playwright-core';
+import { createServer } from 'node:http';
+import { readFileSync, mkdirSync } from 'node:fs';
+import { join } from 'node:path';
+
+const env = (name) => {
+  const value = process.env[name];
+  if (!value) throw new Error(`${name} is not set`);
+  return value;
+};
+const API = env('API_URL');
+const OUT = env('OUT_DIR');
+const TOKEN = process.env.TOKEN;
+const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
+const SAMPLE = new URL('../../web/sample/player.html', import.meta.url);
+const PAGE = `http://127.0.0.1:${env('PAGE_PORT')}/player.html`;
+const FRAME_S = 1 / 25;
+
+function check(condition, message) {
+  if (!condition) throw new Error(`check failed: ${message}`);
+}
+const log = (...args) => console.log(`[${new Date().toISOString().slice(11, 19)}]`, ...args);
+
+let html = readFileSync(SAMPLE, 'utf8')
+  .replaceAll('http://127.0.0.1:8080', API)
+  .replaceAll('JOB_ID', env('JOB_ID'))
+  .replaceAll('SONG_ID', env('SONG_ID'));
+if (TOKEN) html = html.replace('<choreo-player id="player"', `<choreo-player id="player" api-key="${TOKEN}"`);
+check(html.includes(`${API}/assets/choreo-player.js`), 'the sample loads the element from the server');
+
+// The page's own server: this page at /player.html, nothing else.
+const pages = createServer((req, res) => {
+  if (req.url === '/player.html') res.writeHead(200, { 'content-type': 'text/html; charset=utf-8' }).end(html);
+  else res.writeHead(404).end();
+});
+await new Promise((resolve) => pages.listen(Number(env('PAGE_PORT')), '127.0.0.1', resolve));
+
+mkdirSync(OUT, { recursive: true });
+const browser = await chromium.launch({
+  executablePath: CHROMIUM,
+  headless: true,
+  args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking',
+    '--disable-component-update', '--disable-sync', '--autoplay-policy=no-user-gesture-required'],
+});
+const summary = {};
+try {
+  const page = await browser.newPage({ viewport: { width: 900, height: 700 } });
+  const errors = [];
+  page.on('pageerror', (e) => errors.push(e.message));
+  page.on('console', (m) => { if (m.type() === 'error') errors.push(m.text()); });
+  const requests = [];
+  page.on('request', (r) => requests.push(r.url()));
+  page.on('response', (r) => { if (r.status() >= 400) errors.push(`${r.status()} ${r.url()}`); });
+  await page.goto(PAGE);
+  const loaded = await page.evaluate(async () => {
+    const p = document.getElementById('player');
+    await customElements.whenDefined('choreo-player');
+    await p.loaded;
+    return { duration: p.duration, frames: p.renderedFrames };
+  });
+  check(loaded.duration > 1, `the dance loaded: ${JSON.stringify(loaded)}`);
+  check(requests.some((u) => u.endsWith('/motion.glb')) && requests.some((u) => u.endsWith('/audio')), `fetched the dance and the song: ${requests}`);
+
+  // Play from the start: every sample of the two clocks, read in one animation frame after the
+  // element drew it, agrees within a motion frame (see flow.mjs's checkSync for the CPU bound).
+  await page.evaluate(() => document.getElementById('player').play());
+  await page.waitForFunction(() => document.getElementById('player').audioTime > 0.3, null, { timeout: 20_000 });
+  const samples = [];
+  const end = Date.now() + 3000;
+  while (Date.now() < end) {
+    samples.push(await page.evaluate(() => new Promise((resolve) => requestAnimationFrame(() => {
+      const p = document.getElementById('player');
+      resolve({ audio: p.audioTime, animation: p.animationTime, frames: p.renderedFrames, frameMs: p.frameMs, now: performance.now() });
+    }))));
+    await page.waitForTimeout(100);
+  }
+  const gap = (s) => Math.abs(s.audio - s.animation);
+  const inTime = samples.filter((s) => s.frameMs <= FRAME_S * 1000);
+  const starved = samples.length - inTime.length;
+  for (const s of samples) check(gap(s) <= s.frameMs / 1000 + 0.01, `a gap of ${gap(s).toFixed(4)} s is more than its frame's ${s.frameMs} ms of drawing`);
+  check(starved <= samples.length / 5, `${starved} of ${samples.length} frames took over ${FRAME_S * 1000} ms to draw`);
+  const first = samples[0], last = samples[samples.length - 1];
+  const advanced = last.audio - first.audio;
+  summary.sync = {
+    samples: samples.length, worst_diff_s: Math.max(...inTime.map(gap)), starved_frames: starved,
+    audio_advanced_s: advanced, frames_drawn: last.frames - first.frames,
+  };
+  log('sync', JSON.stringify(summary.sync));
+  check(summary.sync.worst_diff_s <= FRAME_S, `|audioTime − animationTime| reached ${summary.sync.worst_diff_s} s`);
+  check(advanced > 1, `the song played ${advanced} s`);
+  check(summary.sync.frames_drawn >= 5, 'frames were drawn while playing');
+
+  // Paused and sought: the pose drawn is the one at the new time; the dancer moved.
+  await page.evaluate(() => document.getElementById('player').pause());
+  const before = await page.evaluate(() => document.getElementById('player').joint('body_centre'));
+  await page.evaluate(() => document.getElementById('player').seek(0.2));
+  await page.waitForFunction(() => Math.abs(document.getElementById('player').animationTime - 0.2) < 1e-3, null, { timeout: 5_000 });
+  const after = await page.evaluate(() => document.getElementById('player').joint('body_centre'));
+  check(before && after && Math.hypot(...before.map((v, i) => v - after[i])) > 1e-4, `seeking moved the dancer: ${before} → ${after}`);
+  // The page's own clock line reads the element's contract.
+  await page.waitForFunction(() => /dance 0\.20 s/.test(document.getElementById('clock').textContent), null, { timeout: 5_000 });
+  const shot = join(OUT, 'choreo-player.png');
+  await page.screenshot({ path: shot });
+  summary.screenshot = shot;
+  check(errors.length === 0, `no errors on the page: ${errors}`);
+} finally {
+  await browser.close();
+  pages.close();
+}
+console.log('summary: ' + JSON.stringify(summary));

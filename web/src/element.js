@@ -1,0 +1,155 @@
+// <choreo-player src="…/motion.glb" audio="…/audio">: the page's 3-D player as a custom element,
+// for any page. One classic script (`/assets/choreo-player.js`, three.js bundled in) defines it.
+//
+// Like the page, it never keeps time itself: each display frame reads the song's audio clock
+// (the <audio> element's currentTime) and shows the dance's pose at that time, so the dance cannot
+// drift from the music. `audioTime` and `animationTime` are the two clocks as last drawn, for
+// checks: they agree within one motion frame (1/25 s).
+//
+// Attributes: src (a job's motion.glb), audio (its song), api-key (sent as
+// `Authorization: Bearer <key>` with both; the song is then fetched and played from a blob URL,
+// since an <audio> element cannot send headers), view ('figure' or 'sticks'), nocontrols.
+// Events: `choreo-load` (detail: {duration}) once both are loaded, `choreo-error` (detail: the Error).
+import { Stage } from './player.js';
+
+const STYLE = `
+:host { display: block; position: relative; width: 100%; height: 360px; min-height: 120px; }
+:host([hidden]) { display: none; }
+.wrap { display: flex; flex-direction: column; width: 100%; height: 100%; }
+.stage { flex: 1; min-height: 0; }
+.stage canvas { display: block; }
+audio { width: 100%; display: block; }
+:host([nocontrols]) audio { display: none; }
+`;
+
+export class ChoreoPlayer extends HTMLElement {
+  static observedAttributes = ['src', 'audio', 'api-key', 'view'];
+
+  #stage = null;
+  #audio;
+  #container;
+  #frame = 0;
+  #dirty = true;
+  #animationTime = 0;
+  #renderedFrames = 0;
+  #frameMs = 0;
+  #blobUrl = null;
+  #loading = 0; // counts loads, so an older one that ends late does not overwrite a newer one
+  #ready = null;
+
+  constructor() {
+    super();
+    const root = this.attachShadow({ mode: 'open' });
+    root.innerHTML = `<style>${STYLE}</style><div class="wrap"><div class="stage" part="stage"></div><audio part="audio" controls preload="auto"></audio></div>`;
+    this.#container = root.querySelector('.stage');
+    this.#audio = root.querySelector('audio');
+    this.#audio.addEventListener('seeked', () => { this.#dirty = true; });
+    this.#ready = Promise.resolve();
+  }
+
+  connectedCallback() {
+    if (!this.#stage) {
+      this.#stage = new Stage(this.#container);
+      this.#stage.controls.addEventListener('change', () => { this.#dirty = true; });
+      this.#load();
+    }
+    const tick = () => {
+      this.#draw();
+      this.#frame = requestAnimationFrame(tick);
+    };
+    this.#frame = requestAnimationFrame(tick);
+  }
+
+  disconnectedCallback() {
+    cancelAnimationFrame(this.#frame);
+    this.#audio.pause();
+  }
+
+  attributeChangedCallback(name, before, after) {
+    if (before === after || !this.#stage) return;
+    if (name === 'view') this.#stage.setView(after || 'figure');
+    else this.#load();
+  }
+
+  /** One display frame: the audio clock sets the dance's time; nothing else keeps time. */
+  #draw() {
+    if (!this.#stage?.action || !(this.#dirty || !this.#audio.paused)) return;
+    const started = performance.now();
+    this.#animationTime = this.#stage.setTime(this.#audio.currentTime);
+    this.#stage.render();
+    this.#renderedFrames++;
+    this.#dirty = false;
+    this.#frameMs = performance.now() - started;
+  }
+
+  #headers() {
+    const key = this.getAttribute('api-key');
+    return key ? { Authorization: `Bearer ${key}` } : {};
+  }
+
+  async #fetch(url) {
+    const response = await fetch(url, { headers: this.#headers() });
+    if (!response.ok) {
+      let detail = '';
+      try { detail = (await response.json()).detail ?? ''; } catch { /* not problem+json */ }
+      throw new Error(`${url}: HTTP ${response.status}${detail ? `: ${detail}` : ''}`);
+    }
+    return response;
+  }
+
+  #load() {
+    const load = ++this.#loading;
+    const src = this.getAttribute('src');
+    const audio = this.getAttribute('audio');
+    this.#ready = (async () => {
+      const [glb, song] = await Promise.all([
+        src ? this.#fetch(src).then((r) => r.arrayBuffer()) : null,
+        // With a key the song is fetched (headers); without one the browser streams it itself.
+        audio && this.getAttribute('api-key') ? this.#fetch(audio).then((r) => r.blob()) : audio,
+      ]);
+      if (load !== this.#loading) return;
+      if (this.#blobUrl) URL.revokeObjectURL(this.#blobUrl);
+      this.#blobUrl = song instanceof Blob ? URL.createObjectURL(song) : null;
+      if (song) this.#audio.src = this.#blobUrl ?? song;
+      else this.#audio.removeAttribute('src');
+      if (glb) {
+        await this.#stage.load(glb);
+        this.#stage.setView(this.getAttribute('view') || 'figure');
+      } else {
+        this.#stage.clear();
+      }
+      this.#dirty = true;
+      this.dispatchEvent(new CustomEvent('choreo-load', { detail: { duration: this.duration } }));
+    })().catch((error) => {
+      if (load === this.#loading) this.dispatchEvent(new CustomEvent('choreo-error', { detail: error }));
+      throw error;
+    });
+    this.#ready.catch(() => {}); // reported by the event; `loaded` rejects for whoever awaits it
+  }
+
+  /** Resolves when the dance and the song named now are loaded; rejects when either failed. */
+  get loaded() { return this.#ready; }
+  /** The song's position, seconds (the audio element's currentTime). */
+  get audioTime() { return this.#audio.currentTime; }
+  /** The time of the pose on screen, seconds (the animation's time at the last drawn frame). */
+  get animationTime() { return this.#animationTime; }
+  /** The dance's length, seconds. */
+  get duration() { return this.#stage?.duration ?? 0; }
+  get playing() { return !this.#audio.paused; }
+  /** Frames drawn since the element was created. */
+  get renderedFrames() { return this.#renderedFrames; }
+  /** How long the last drawn frame took, milliseconds (from reading the audio clock to the end). */
+  get frameMs() { return this.#frameMs; }
+  /** The <audio> element that keeps time (volume, muted, events). */
+  get audio() { return this.#audio; }
+  /** A joint's world position (metres), as drawn. */
+  joint(name) { return this.#stage?.joint(name) ?? null; }
+  play() { return this.#audio.play(); }
+  pause() { this.#audio.pause(); }
+  seek(t) {
+    this.#audio.currentTime = Math.max(0, Math.min(t, this.#audio.duration || t));
+    this.#dirty = true;
+  }
+}
+
+if (!customElements.get('choreo-player')) customElements.define('choreo-player', ChoreoPlayer);
