@@ -661,6 +661,34 @@ mod tests {
     }
 
     #[test]
+    fn retention_days_takes_fractions_and_refuses_nothing_to_keep() {
+        figment::Jail::expect_with(|jail| {
+            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default())
+                .map_err(|e| e.to_string())?;
+            assert_eq!(c.retention(), None, "unset keeps everything");
+            jail.set_env("CHOREO_RETENTION_DAYS", "0.5");
+            let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default())
+                .map_err(|e| e.to_string())?;
+            assert_eq!(
+                c.retention(),
+                Some(std::time::Duration::from_secs(12 * 3600))
+            );
+            for bad in ["0", "-1", "1e300"] {
+                jail.set_env("CHOREO_RETENTION_DAYS", bad);
+                let err = Config::load(Some(Path::new("missing.toml")), &Overrides::default())
+                    .expect_err(bad)
+                    .to_string();
+                // Named as the setting, or as its variable when it is not a number at all.
+                assert!(
+                    err.to_ascii_lowercase().contains("retention_days"),
+                    "{bad}: {err}"
+                );
+            }
+            Ok(())
+        });
+    }
+
+    #[test]
     fn database_url_picks_the_store_and_never_prints() {
         figment::Jail::expect_with(|jail| {
             let c = Config::load(Some(Path::new("missing.toml")), &Overrides::default())

@@ -68,30 +68,45 @@ where
         Ok(())
     }
 
-    /// Removes a song's row and its jobs' rows inside the caller's transaction.
+    /// Removes a song's row and its jobs' rows inside the caller's transaction; `None` (nothing
+    /// removed) when no song has the id in scope. Its first statement is a write, so in SQLite
+    /// the transaction holds the write lock from its start (see [`SqlStore::begin`]).
     async fn remove_song(
         conn: &mut D::Connection,
+        scope: Scope,
         id: SongId,
         reason: &str,
         now: i64,
-    ) -> Result<Vec<Job>, QueueError> {
-        let sql = format!("DELETE FROM jobs WHERE song_id = $1 RETURNING {JOB_COLUMNS}");
+    ) -> Result<Option<(Song, Vec<Job>)>, QueueError> {
+        let tenant = || scope.tenant().map(|t| D::id(t.0));
+        // A song's jobs are its tenant's (`register` refuses another's song).
+        let sql = format!(
+            "DELETE FROM jobs WHERE song_id = $1 AND ($2 IS NULL OR tenant_id = $2) RETURNING {JOB_COLUMNS}"
+        );
         let rows = sqlx::query(&sql)
             .bind(D::id(id.0))
+            .bind(tenant())
             .fetch_all(&mut *conn)
             .await?;
         let jobs = rows
             .iter()
             .map(Self::job_from_row)
             .collect::<Result<Vec<_>, _>>()?;
+        let sql = format!(
+            "DELETE FROM songs WHERE id = $1 AND ($2 IS NULL OR tenant_id = $2) RETURNING {SONG_COLUMNS}"
+        );
+        let row = sqlx::query(&sql)
+            .bind(D::id(id.0))
+            .bind(tenant())
+            .fetch_optional(&mut *conn)
+            .await?;
+        let Some(row) = row else {
+            return Ok(None);
+        };
         for job in &jobs {
             Self::audit(&mut *conn, job, reason, now).await?;
         }
-        sqlx::query("DELETE FROM songs WHERE id = $1")
-            .bind(D::id(id.0))
-            .execute(&mut *conn)
-            .await?;
-        Ok(jobs)
+        Ok(Some((Self::song_from_row(&row)?, jobs)))
     }
 
     /// [`crate::queue::JobStore::delete_job`].
@@ -129,22 +144,13 @@ where
         id: SongId,
         reason: &str,
     ) -> Result<Removed, QueueError> {
-        let now = now_ms();
-        let sql = format!(
-            "SELECT {SONG_COLUMNS} FROM songs WHERE id = $1 AND ($2 IS NULL OR tenant_id = $2)"
-        );
         let mut tx = self.begin().await?;
-        let row = sqlx::query(&sql)
-            .bind(D::id(id.0))
-            .bind(scope.tenant().map(|t| D::id(t.0)))
-            .fetch_optional(&mut *tx)
-            .await?;
-        let Some(row) = row else {
+        let Some((song, jobs)) = Self::remove_song(&mut tx, scope, id, reason, now_ms()).await?
+        else {
+            // No song has the id in scope; jobs of such an id are another tenant's, untouched.
             Self::rollback(tx).await?;
             return Err(QueueError::SongNotFound(id));
         };
-        let song = Self::song_from_row(&row)?;
-        let jobs = Self::remove_song(&mut tx, id, reason, now).await?;
         Self::commit(tx).await?;
         Ok(Removed {
             songs: vec![song],
@@ -205,12 +211,18 @@ where
             .bind(limit)
             .fetch_all(&mut *tx)
             .await?;
-        let songs = rows
+        let candidates = rows
             .iter()
             .map(Self::song_from_row)
             .collect::<Result<Vec<Song>, _>>()?;
-        for song in &songs {
-            jobs.extend(Self::remove_song(&mut tx, song.id, reason, now).await?);
+        let mut songs = Vec::with_capacity(candidates.len());
+        for song in candidates {
+            if let Some((song, removed)) =
+                Self::remove_song(&mut tx, Scope::All, song.id, reason, now).await?
+            {
+                songs.push(song);
+                jobs.extend(removed);
+            }
         }
         Self::commit(tx).await?;
         Ok(Removed { songs, jobs })
