@@ -1,15 +1,14 @@
 //! `DELETE /v1/songs/{id}`, `DELETE /v1/jobs/{id}` and `retention_days`, on SQLite and on
 //! PostgreSQL: what is deleted or expires leaves no file in the data dir (and, under moto, none in
 //! the bucket) and no row, only a `deleted` line per job in `job_events`; another tenant's ids
-//! are 404 and keep their rows.
+//! (two API keys) are 404 and keep their rows.
 use crate::artifacts::{choreo, files_under, wait_job as wait_job_at, Moto, BUCKET, PREFIX};
 use crate::common_models::models_dir;
 use crate::helpers::{expect_problem, short_song, song, spawn_app_with, TestApp};
 use crate::postgres::Postgres;
 use crate::scale::spawn;
-use choreo::audio::AudioFormat;
 use choreo::config::{Config, Secret};
-use choreo::queue::{JobId, JobKind, NewJob, PgStore, Scope, Song, SongId, SqliteStore, TenantId};
+use choreo::queue::{KeyLimits, NewKey, PgStore, SqliteStore};
 use futures::TryStreamExt;
 use object_store::ObjectStore;
 use reqwest::StatusCode;
@@ -102,7 +101,7 @@ impl Rows {
     /// A job's `job_events` lines, in order.
     async fn events(&self, job: &str) -> Vec<Event> {
         let sql = "SELECT from_status, to_status, error FROM job_events \
-                   WHERE CAST(job_id AS TEXT) = $1 ORDER BY seq";
+                   WHERE CAST(job_id AS TEXT) = $1 AND to_status IS NOT NULL ORDER BY seq";
         on_pool!(self, pool => sqlx::query(sql)
             .bind(job)
             .fetch_all(pool)
@@ -202,45 +201,18 @@ fn id(value: &Value) -> String {
     value["id"].as_str().expect("id").to_string()
 }
 
-/// Writes a song of another tenant and its analyze job through the store, as that tenant's API
-/// key would; returns their ids. No file is stored: the job is never meant to run.
-async fn other_tenants_song(app: &TestApp) -> (SongId, JobId) {
-    let other = TenantId(uuid::Uuid::now_v7());
-    let store = app.server.as_ref().expect("server").state().store.clone();
-    let song = SongId::new();
-    let (stored, created) = store
-        .add_song(
-            Song {
-                id: song,
-                tenant: other,
-                filename: "theirs.ogg".into(),
-                format: AudioFormat::Ogg,
-                duration_s: 5.3,
-                sample_rate: 44_100,
-                channels: 2,
-                sha256: "0".repeat(64),
-                size_bytes: 1,
-                analysis: None,
-                created_at: chrono::Utc::now(),
-            },
-            NewJob {
-                tenant: other,
-                kind: JobKind::Analyze { song_id: song },
-                priority: -100,
-                max_attempts: 1,
-                idempotency: None,
-            },
-        )
+/// A new API key (a tenant of its own) in `app`'s store, as `choreo keys create` makes one;
+/// returns its secret.
+async fn api_key(app: &TestApp, name: &str) -> String {
+    let (key, secret) = NewKey::mint(name, false, KeyLimits::default());
+    let server = app.server.as_ref().expect("the server runs");
+    server
+        .state()
+        .store
+        .add_key(key)
         .await
-        .expect("another tenant's song");
-    assert!(created);
-    let job = store
-        .analyze_job(stored.id)
-        .await
-        .expect("read")
-        .expect("its analyze job")
-        .id;
-    (song, job)
+        .expect("add the key");
+    secret
 }
 
 /// Deletion on one store: a finished job, another tenant's song and job, and a song whose dance
@@ -249,12 +221,15 @@ async fn deletion(postgres: bool) {
     let db = Db::start(postgres).await;
     let models = models_dir();
     // One worker: the dance of the long song runs alone, so it is running when it is deleted.
-    let app = spawn_app_with(|c| {
+    let mut app = spawn_app_with(|c| {
         c.models_dir = models;
         c.workers = 1;
         db.configure(c);
     })
     .await;
+    // Two tenants, each an API key: the helpers' requests are the first's.
+    app.token = Some(api_key(&app, "mine").await);
+    let theirs = api_key(&app, "theirs").await;
     let rows = db.rows(&app).await;
     let data = app.data_dir.path();
 
@@ -300,24 +275,45 @@ async fn deletion(postgres: bool) {
     )
     .await;
 
-    // Another tenant's song and job: 404 to this tenant, for DELETE as for GET, and still there.
-    let (their_song, their_job) = other_tenants_song(&app).await;
+    // Another tenant's song (the same bytes: a song of its own) and its analyze job: 404 to this
+    // tenant, for DELETE as for GET, and still theirs afterwards.
+    let form = reqwest::multipart::Form::new().part(
+        "file",
+        reqwest::multipart::Part::bytes(std::fs::read(short_song()).expect("song"))
+            .file_name("theirs.ogg"),
+    );
+    let response = app
+        .client
+        .post(app.url("/v1/songs"))
+        .bearer_auth(&theirs)
+        .multipart(form)
+        .send()
+        .await
+        .expect("their upload");
+    assert_eq!(response.status(), StatusCode::CREATED);
+    let their_song = id(&response.json::<Value>().await.expect("song"));
+    assert_ne!(their_song, short_id);
+    let their_get = |path: String| app.client.get(app.url(&path)).bearer_auth(&theirs).send();
+    let page: Value = their_get("/v1/jobs?limit=10".into())
+        .await
+        .expect("their jobs")
+        .json()
+        .await
+        .expect("page");
+    let their_job = id(&page["items"][0]);
     for (path, code) in [
         (format!("/v1/songs/{their_song}"), "song-not-found"),
         (format!("/v1/jobs/{their_job}"), "job-not-found"),
     ] {
         expect_problem(app.delete(&path).await, StatusCode::NOT_FOUND, code).await;
         expect_problem(app.get(&path).await, StatusCode::NOT_FOUND, code).await;
+        let theirs_still = their_get(path.clone()).await.expect("their GET");
+        assert_eq!(
+            theirs_still.status(),
+            StatusCode::OK,
+            "{path} is still theirs"
+        );
     }
-    let store = app.server.as_ref().expect("server").state().store.clone();
-    store
-        .song(Scope::All, their_song)
-        .await
-        .expect("their song is still there");
-    store
-        .job(Scope::All, their_job)
-        .await
-        .expect("their job is still there");
 
     // A song whose dance is running: DELETE stops the dance and removes the song, its analysis,
     // both jobs and every file, and the worker records and leaves nothing for the deleted job.
@@ -388,11 +384,19 @@ async fn deletion(postgres: bool) {
     rows.assert_deleted(&running, "running", &reason).await;
     rows.assert_deleted(&analyze, "succeeded", &reason).await;
 
-    // This tenant's last song goes too; what is left is the other tenant's rows.
+    // This tenant's last song goes too, and the other tenant deletes its own.
     assert_eq!(
         app.delete(&format!("/v1/songs/{short_id}")).await.status(),
         StatusCode::NO_CONTENT
     );
+    let response = app
+        .client
+        .delete(app.url(&format!("/v1/songs/{their_song}")))
+        .bearer_auth(&theirs)
+        .send()
+        .await
+        .expect("their DELETE");
+    assert_eq!(response.status(), StatusCode::NO_CONTENT);
     eventually(
         Duration::from_secs(30),
         "the data dir holds no song or result",
@@ -406,8 +410,14 @@ async fn deletion(postgres: bool) {
         },
     )
     .await;
-    assert_eq!(rows.count("songs").await, 1, "the other tenant's song");
-    assert_eq!(rows.count("jobs").await, 1, "the other tenant's job");
+    assert_eq!(rows.count("songs").await, 0);
+    assert_eq!(rows.count("jobs").await, 0);
+    rows.assert_deleted(
+        &their_job,
+        "succeeded",
+        &format!("DELETE /v1/songs/{their_song}"),
+    )
+    .await;
     let page: Value = app
         .get("/v1/jobs?limit=100")
         .await
