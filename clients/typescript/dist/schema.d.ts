@@ -87,8 +87,39 @@ export interface paths {
         get: operations["getJob"];
         put?: never;
         post?: never;
-        /** Cancel a job: a queued one at once, a running one at its next progress checkpoint. */
+        /**
+         * Cancel a job that has not finished, or delete one that has.
+         * @description A queued job is cancelled at once, a running one at its next progress checkpoint (202, the
+         *     job). A finished job (succeeded, failed or cancelled) is deleted: its result files and its row
+         *     (204); afterwards its id is 404, and `job_events` keeps a `deleted` line. So a second DELETE
+         *     of a job the first one cancelled while queued deletes it.
+         */
         delete: operations["cancelJob"];
+        options?: never;
+        head?: never;
+        patch?: never;
+        trace?: never;
+    };
+    "/v1/jobs/{id}/events": {
+        parameters: {
+            query?: never;
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        /**
+         * A job's status, stage and progress as they happen (server-sent events).
+         * @description `text/event-stream`. Each `status` and `progress` event has `id: <seq>`; send the last one
+         *     seen as `Last-Event-ID` to resume after it, missing nothing. `status` data:
+         *     `{seq, job_id, from, to, attempt, error, at}`; `progress` data: `{seq, job_id, stage,
+         *     progress, at}` (sent when the stage changes and at every 5 % of progress); `done` data: the job
+         *     as `GET /v1/jobs/{id}` returns it, sent once the job is terminal (at once when it already is),
+         *     after which the stream closes. `: keep-alive` comments every 15 s.
+         */
+        get: operations["getJobEvents"];
+        put?: never;
+        post?: never;
+        delete?: never;
         options?: never;
         head?: never;
         patch?: never;
@@ -311,7 +342,14 @@ export interface paths {
         get: operations["getSong"];
         put?: never;
         post?: never;
-        delete?: never;
+        /**
+         * Delete a song, its analysis, and every job made from it with its results.
+         * @description Jobs of the song that are queued are dropped, and running ones stop at their next progress
+         *     checkpoint, writing nothing more. Afterwards the song's id and its jobs' ids are 404, its file
+         *     and its jobs' files are gone (from the data dir and the bucket), and `job_events` keeps a
+         *     `deleted` line for each job.
+         */
+        delete: operations["deleteSong"];
         options?: never;
         head?: never;
         patch?: never;
@@ -414,6 +452,13 @@ export interface components {
              * @description Sample only among the k likeliest choices (the `top_k` capability). 1..=300.
              */
             top_k?: number | null;
+            /**
+             * @description POSTed the job (as `GET /v1/jobs/{id}` returns it) when it ends, signed per Standard
+             *     Webhooks with the server's `webhook_secret`. http(s) only; a host that resolves to a
+             *     loopback, private, link-local or otherwise non-global address is refused (422
+             *     `webhook-url-refused`) unless the server lists its `host:port` in `webhook_allowed_hosts`.
+             */
+            webhook_url?: string | null;
         };
         /**
          * @description The four ballroom styles of the training data (dance-with-melody's folder letters C, R, T, W).
@@ -470,6 +515,8 @@ export interface components {
             started_at?: string | null;
             status: components["schemas"]["Status"];
             style?: null | components["schemas"]["StyleChoice"];
+            /** @description Where the job is POSTed when it ends (generate jobs submitted with one). */
+            webhook_url?: string | null;
         };
         /**
          * @description Which joints a pose lists.
@@ -1159,7 +1206,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set), the model is unknown, or the key was reused */
+            /** @description A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set, or a webhook_url refused: `webhook-url-refused`, `webhooks-not-configured`), the model is unknown, or the key was reused */
             422: {
                 headers: {
                     [name: string]: unknown;
@@ -1263,7 +1310,7 @@ export interface operations {
         };
         requestBody?: never;
         responses: {
-            /** @description Cancelled, or cancellation requested (status running, cancel_requested true) */
+            /** @description The job had not finished: cancelled, or cancellation requested (status running, cancel_requested true) */
             202: {
                 headers: {
                     [name: string]: unknown;
@@ -1271,6 +1318,13 @@ export interface operations {
                 content: {
                     "application/json": components["schemas"]["JobView"];
                 };
+            };
+            /** @description The job had finished: its results and its row are deleted */
+            204: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
             };
             /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
@@ -1290,8 +1344,63 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The job already succeeded or failed */
-            409: {
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The database or the artifact store is unreachable; nothing was deleted, send it again shortly */
+            503: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+        };
+    };
+    getJobEvents: {
+        parameters: {
+            query?: never;
+            header?: {
+                /** @description The `id` of the last event received: the stream resumes after it */
+                "Last-Event-ID"?: number | null;
+            };
+            path: {
+                /** @description Job id */
+                id: string;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description The job's events, until it is terminal */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "text/event-stream": string;
+                };
+            };
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
+            401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description No such job */
+            404: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -2106,6 +2215,65 @@ export interface operations {
                 headers: {
                     /** @description Seconds to wait before trying again */
                     "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+        };
+    };
+    deleteSong: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                /** @description Song id */
+                id: string;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description The song, its analysis, its jobs and their results are deleted */
+            204: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
+            };
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
+            401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description No such song */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The database is unreachable; nothing was deleted, send it again shortly */
+            503: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {
