@@ -114,6 +114,8 @@ struct Cursor {
     ending: bool,
     /// `done` was sent, or the stream must end.
     over: bool,
+    /// Polls in a row that found nothing new.
+    idle: u32,
     shutdown: CancellationToken,
 }
 
@@ -159,6 +161,16 @@ impl Cursor {
                 return None;
             }
             if self.queue.is_empty() && self.last == before {
+                self.idle += 1;
+                // A deleted job's audit line is no event, so a stream on it would wait forever:
+                // every 8th idle poll (2 s) looks whether the job still exists.
+                if self.idle % 8 == 0 {
+                    if let Err(QueueError::JobNotFound(_)) =
+                        self.state.store.job(self.scope, self.id).await
+                    {
+                        return None;
+                    }
+                }
                 tokio::select! {
                     _ = self.shutdown.cancelled() => return None,
                     _ = tokio::time::sleep(POLL) => {}
@@ -218,6 +230,7 @@ pub async fn events(
         queue: VecDeque::new(),
         ending: job.status.is_terminal(),
         over: false,
+        idle: 0,
     };
     let stream = futures::stream::unfold(cursor, Cursor::next);
     let mut response = sse(stream).into_response();

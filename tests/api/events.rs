@@ -277,6 +277,44 @@ async fn an_open_stream_ends_when_the_server_stops() {
         .expect("stop");
 }
 
+/// A stream on a job that is deleted (here with its song, while it waits in the queue) ends:
+/// the deletion's audit line is no event, so without this the client would wait forever.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_open_stream_ends_when_its_job_is_deleted() {
+    let data_dir = tempfile::tempdir().expect("tempdir");
+    let config = test_config(data_dir.path());
+    // No workers: the song's analyze job stays queued until the song goes.
+    let server = choreo::api::Server::start_api_only(config)
+        .await
+        .expect("starts");
+    let app = TestApp {
+        addr: server.addr(),
+        client: reqwest::Client::new(),
+        data_dir,
+        server: Some(server),
+        token: None,
+    };
+    let song = app.upload_ok(&short_song()).await;
+    let song_id = song["id"].as_str().expect("id");
+    let job = app.analyze_job_of(song_id).await;
+    let url = app.url(&format!(
+        "/v1/jobs/{}/events",
+        job["id"].as_str().expect("id")
+    ));
+    let mut stream = SseClient::open(&app.client, &url, None).await;
+    let first = stream.next().await.expect("the registration line");
+    assert_eq!(first.event, "status");
+    assert_eq!(
+        app.delete(&format!("/v1/songs/{song_id}")).await.status(),
+        StatusCode::NO_CONTENT
+    );
+    let end = tokio::time::timeout(Duration::from_secs(10), stream.next())
+        .await
+        .expect("the stream ends within 10 s of the deletion");
+    assert_eq!(end, None);
+    app.stop().await;
+}
+
 /// `choreo <args>` on PostgreSQL, sharing `data_dir`, with the committed models.
 fn choreo(args: &[&str], data_dir: &Path, database_url: &str) -> tokio::process::Command {
     let mut c = tokio::process::Command::new(env!("CARGO_BIN_EXE_choreo"));
