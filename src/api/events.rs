@@ -164,7 +164,7 @@ impl Cursor {
                 self.idle += 1;
                 // A deleted job's audit line is no event, so a stream on it would wait forever:
                 // every 8th idle poll (2 s) looks whether the job still exists.
-                if self.idle % 8 == 0 {
+                if self.idle.is_multiple_of(8) {
                     if let Err(QueueError::JobNotFound(_)) =
                         self.state.store.job(self.scope, self.id).await
                     {

@@ -109,7 +109,7 @@ pub async fn check(raw: &str, allowed: &[String]) -> Result<Target, Refused> {
             reason: "no address".into(),
         });
     }
-    if !allowed.iter().any(|a| *a == host_port) {
+    if !allowed.contains(&host_port) {
         // Every address, not the first: the client connects to any of them.
         for addr in &addrs {
             if let Some(kind) = not_global(addr.ip()) {
