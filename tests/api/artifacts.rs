@@ -47,6 +47,25 @@ impl Moto {
             endpoint: format!("http://127.0.0.1:{port}"),
         }
     }
+
+    /// Makes the test bucket once moto answers (it accepts unsigned requests), within 60 s.
+    pub(crate) async fn make_bucket(&self, client: &reqwest::Client) {
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            match client
+                .put(format!("{}/{BUCKET}", self.endpoint))
+                .send()
+                .await
+            {
+                Ok(r) if r.status().is_success() => break,
+                other => assert!(
+                    Instant::now() < deadline,
+                    "moto_server did not come up in 60 s: {other:?}"
+                ),
+            }
+            tokio::time::sleep(Duration::from_millis(200)).await;
+        }
+    }
 }
 
 impl Drop for Moto {
@@ -127,22 +146,7 @@ async fn api_and_worker_on_separate_disks_share_songs_and_results_through_a_buck
         .expect("start postgres");
     let moto = Moto::start();
     let client = reqwest::Client::new();
-    let deadline = Instant::now() + Duration::from_secs(60);
-    // moto accepts unsigned requests: make the bucket once it answers.
-    loop {
-        match client
-            .put(format!("{}/{BUCKET}", moto.endpoint))
-            .send()
-            .await
-        {
-            Ok(r) if r.status().is_success() => break,
-            other => assert!(
-                Instant::now() < deadline,
-                "moto_server did not come up in 60 s: {other:?}"
-            ),
-        }
-        tokio::time::sleep(Duration::from_millis(200)).await;
-    }
+    moto.make_bucket(&client).await;
 
     let (api_dir, worker_dir) = (
         tempfile::tempdir().expect("tempdir"),

@@ -535,21 +535,7 @@ async fn deleted_and_expired_files_leave_the_bucket_and_every_disk() {
         .expect("start postgres");
     let moto = Moto::start();
     let client = reqwest::Client::new();
-    let deadline = Instant::now() + Duration::from_secs(60);
-    loop {
-        match client
-            .put(format!("{}/{BUCKET}", moto.endpoint))
-            .send()
-            .await
-        {
-            Ok(r) if r.status().is_success() => break,
-            other => assert!(
-                Instant::now() < deadline,
-                "moto_server did not come up in 60 s: {other:?}"
-            ),
-        }
-        tokio::time::sleep(Duration::from_millis(200)).await;
-    }
+    moto.make_bucket(&client).await;
     let bucket = object_store::aws::AmazonS3Builder::new()
         .with_bucket_name(BUCKET)
         .with_region("us-east-1")

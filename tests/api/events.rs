@@ -6,12 +6,12 @@
 use crate::common_models::models_dir;
 use crate::helpers::{expect_problem, short_song, spawn_app_with, test_config, TestApp};
 use crate::postgres::Postgres;
+use crate::scale::spawn;
 use reqwest::StatusCode;
 use serde_json::{json, Value};
 use std::path::Path;
 use std::process::Stdio;
 use std::time::Duration;
-use tokio::io::{AsyncBufReadExt, BufReader};
 
 /// Longest a test waits for one event (a whole dance-revolution job takes a few seconds).
 const EVENT_WAIT: Duration = Duration::from_secs(120);
@@ -330,19 +330,6 @@ fn choreo(args: &[&str], data_dir: &Path, database_url: &str) -> tokio::process:
         .stdout(Stdio::piped())
         .kill_on_drop(true);
     c
-}
-
-/// Spawns `command` and returns it with its first stdout line (kept draining after).
-async fn spawn(mut command: tokio::process::Command) -> (tokio::process::Child, String) {
-    let mut child = command.spawn().expect("spawn choreo");
-    let mut lines = BufReader::new(child.stdout.take().expect("stdout")).lines();
-    let line = tokio::time::timeout(Duration::from_secs(60), lines.next_line())
-        .await
-        .expect("a first line within 60 s")
-        .expect("read stdout")
-        .expect("a line");
-    tokio::spawn(async move { while let Ok(Some(_)) = lines.next_line().await {} });
-    (child, line)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
