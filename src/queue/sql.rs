@@ -36,9 +36,9 @@ use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 use uuid::Uuid;
 
-mod keys;
 mod delete;
 mod events;
+mod keys;
 mod rigs;
 
 /// Cap on the backoff exponent, so `1 << n` cannot overflow.
@@ -70,6 +70,12 @@ pub trait Dialect: Database {
 
     /// An id as stored.
     fn id(id: Uuid) -> Self::Id;
+
+    /// A [`Scope`] as the parameter of `($n IS NULL OR tenant_id = $n)`: its tenant's id, or
+    /// NULL for every tenant's rows.
+    fn scope_id(scope: Scope) -> Option<Self::Id> {
+        scope.tenant().map(|t| Self::id(t.0))
+    }
 
     /// Rows a statement changed (sqlx has no driver-independent accessor).
     fn rows_affected(done: &Self::QueryResult) -> u64;
@@ -568,7 +574,7 @@ where
             let row = sqlx::query(&sql)
                 .bind(now_ms())
                 .bind(D::id(id.0))
-                .bind(scope.tenant().map(|t| D::id(t.0)))
+                .bind(D::scope_id(scope))
                 .fetch_optional(&mut *tx)
                 .await?;
             Self::commit(tx).await?;
@@ -629,7 +635,7 @@ where
             let sql = format!(
                 "SELECT {JOB_COLUMNS} FROM jobs WHERE id = $1 AND ($2 IS NULL OR tenant_id = $2)"
             );
-            let tenant = scope.tenant().map(|t| D::id(t.0));
+            let tenant = D::scope_id(scope);
             match sqlx::query(&sql)
                 .bind(D::id(id.0))
                 .bind(tenant)
@@ -654,7 +660,7 @@ where
                 .bind(filter.model)
                 .bind(filter.before.map(|id| D::id(id.0)))
                 .bind(i64::from(filter.limit))
-                .bind(scope.tenant().map(|t| D::id(t.0)))
+                .bind(D::scope_id(scope))
                 .fetch_all(&self.pool)
                 .await?;
             rows.iter().map(Self::job_from_row).collect()
@@ -768,7 +774,7 @@ where
             let sql = format!(
                 "SELECT {SONG_COLUMNS} FROM songs WHERE id = $1 AND ($2 IS NULL OR tenant_id = $2)"
             );
-            let tenant = scope.tenant().map(|t| D::id(t.0));
+            let tenant = D::scope_id(scope);
             match sqlx::query(&sql)
                 .bind(D::id(id.0))
                 .bind(tenant)

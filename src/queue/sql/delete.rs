@@ -78,7 +78,7 @@ where
         reason: &str,
         now: i64,
     ) -> Result<Option<(Song, Vec<Job>)>, QueueError> {
-        let tenant = || scope.tenant().map(|t| D::id(t.0));
+        let tenant = || D::scope_id(scope);
         // A song's jobs are its tenant's (`register` refuses another's song).
         let sql = format!(
             "DELETE FROM jobs WHERE song_id = $1 AND ($2 IS NULL OR tenant_id = $2) RETURNING {JOB_COLUMNS}"
@@ -124,7 +124,7 @@ where
         let mut tx = self.begin().await?;
         let row = sqlx::query(&sql)
             .bind(D::id(id.0))
-            .bind(scope.tenant().map(|t| D::id(t.0)))
+            .bind(D::scope_id(scope))
             .fetch_optional(&mut *tx)
             .await?;
         let Some(row) = row else {

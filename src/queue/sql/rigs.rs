@@ -100,7 +100,7 @@ where
             );
             match sqlx::query(&sql)
                 .bind(D::id(id.0))
-                .bind(scope.tenant().map(|t| D::id(t.0)))
+                .bind(D::scope_id(scope))
                 .fetch_optional(&self.pool)
                 .await?
             {
