@@ -198,3 +198,61 @@ fn the_contract_covers_every_served_model() {
         "a new model needs a row in contract! and common/models.rs"
     );
 }
+
+/// `../shared/audio/<name>`, its first `seconds` at `factor` × its tempo (sox, pitch kept), decoded.
+fn stretched_song(name: &str, seconds: f64, factor: f64) -> DecodedAudio {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/audio")
+        .join(name);
+    assert!(path.is_file(), "{} is missing", path.display());
+    let dir = tempfile::tempdir().expect("tempdir");
+    let out = dir.path().join(format!("{factor}.wav"));
+    let status = std::process::Command::new("sox")
+        .arg(&path)
+        .arg(&out)
+        .args([
+            "trim",
+            "0",
+            &seconds.to_string(),
+            "tempo",
+            &factor.to_string(),
+        ])
+        .status()
+        .expect("sox (scripts/setup.sh --test installs it) runs");
+    assert!(status.success(), "sox: {status}");
+    audio::decode_path(&out).expect("the stretched song decodes")
+}
+
+/// dance-revolution runs in beat time (`models::beat_time`): on one song played at 0.85× and at
+/// 1.1× (117 BPM → 99 and 129), the network's own motion (no beat-align stage here: this is the
+/// model alone) steps 1.1 / 0.85 = 1.29× as often on the faster copy. Before beat time its steps
+/// kept one 1.92-s cycle on every song (ratio 0.99–1.00 in the model card's tempo table).
+#[test]
+fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
+    let m = model("dance-revolution");
+    let bt = m
+        .info()
+        .beat_time
+        .expect("dance-revolution is served in beat time");
+    assert!((80.0..100.0).contains(&bt.bpm), "{bt:?}");
+    let step_hz = |factor: f64| {
+        let song = stretched_song("lets_go_fishin.ogg", 40.0, factor);
+        let analysis = audio::analyze(&song).expect("analysis");
+        let mut req = GenerateRequest::plain(&song, 1);
+        req.analysis = Some(&analysis);
+        let motion = dance(m.as_ref(), &req);
+        choreo::metrics::musicality::tempo_lock(
+            motion.positions.view(),
+            motion.fps,
+            &analysis.beat_times,
+        )
+        .expect("a step rate")
+        .step_hz
+    };
+    let (slow, fast) = (step_hz(0.85), step_hz(1.1));
+    let ratio = fast / slow;
+    assert!(
+        (ratio / (1.1 / 0.85) - 1.0).abs() < 0.08,
+        "steps at {slow:.3} Hz (0.85×) and {fast:.3} Hz (1.1×): ratio {ratio:.3}, a follower 1.294"
+    );
+}

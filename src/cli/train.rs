@@ -174,6 +174,10 @@ args_into! {
         /// Weight of the L1 loss on frame-to-frame pose change.
         #[arg(long, default_value_t = train::dance_revolution::Options::default().velocity_weight)]
         velocity_weight: f64,
+        /// Train in beat time (`models::beat_time`): every train dance re-timed to the split's
+        /// median tempo before the drawn tempo factor; the model then serves in beat time.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().beat_time, action = clap::ArgAction::Set)]
+        beat_time: bool,
     }
 }
 
@@ -342,6 +346,10 @@ args_into! {
         stall_reach: f64,
         #[arg(long, default_value_t = train::tsmt::Options::default().seed)]
         seed: u64,
+        /// Train in beat time (`models::beat_time`): every dance re-timed to the split's median
+        /// tempo; the model then serves in beat time.
+        #[arg(long, default_value_t = train::tsmt::Options::default().beat_time, action = clap::ArgAction::Set)]
+        beat_time: bool,
     }
 }
 

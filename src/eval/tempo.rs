@@ -47,6 +47,10 @@ pub struct TempoRow {
     pub step_rate_ratio_median_raw: f64,
     /// What a dancer who follows the tempo gives: fastest / slowest factor.
     pub followed_ratio: f64,
+    /// The reference tempo (BPM) when the network runs in beat time ([`crate::models::beat_time`]):
+    /// its "own" motion is then made on that clock and played back at each song's tempo.
+    #[serde(default)]
+    pub beat_time_bpm: Option<f64>,
 }
 
 /// `song` at `factor` × its tempo (pitch kept), written by sox into `dir` and decoded.
@@ -167,12 +171,13 @@ pub(super) fn tempo_row(
         step_rate_ratio_median_raw: median(&ratios_raw),
         step_rate_ratios_raw: ratios_raw,
         followed_ratio: followed,
+        beat_time_bpm: model.info().beat_time.map(|b| b.bpm),
     })
 }
 
 /// The section's Markdown table: served (beat-aligned) and the network's own, side by side.
 pub fn markdown(rows: &[TempoRow]) -> String {
-    let mut out = String::from("| Model | tempi | n | tempo-locked ↑ served | network's own | step-rate ratio fast/slow (median) served | network's own | a dancer who follows |\n|---|---|---|---|---|---|---|---|\n");
+    let mut out = String::from("| Model | network's clock | tempi | n | tempo-locked ↑ served | network's own | step-rate ratio fast/slow (median) served | network's own | a dancer who follows |\n|---|---|---|---|---|---|---|---|---|\n");
     let share = |locked: usize, measured: usize| {
         if measured == 0 {
             "–".into()
@@ -186,8 +191,10 @@ pub fn markdown(rows: &[TempoRow]) -> String {
     for r in rows {
         let tempi: Vec<String> = r.tempi.iter().map(|t| format!("{t}×")).collect();
         out += &format!(
-            "| {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} |\n",
+            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} |\n",
             r.model,
+            r.beat_time_bpm
+                .map_or("seconds".into(), |b| format!("beats at {b:.0} BPM")),
             tempi.join(", "),
             r.dances,
             share(r.tempo_locked, r.measured),

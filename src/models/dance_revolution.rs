@@ -19,8 +19,10 @@ use tch::{Device, Kind, Tensor};
 
 use std::path::Path;
 
+use super::beat_time;
 use super::folder;
 use super::layers::{sinusoid, Lstm, LstmState};
+use super::train::augment::MusicLayout;
 use super::{
     to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
     InstancePool, ModelError, ModelId, ModelInfo, Progress,
@@ -465,6 +467,7 @@ impl Serving {
         Self {
             stall_guard: Some(StallGuard::SERVED),
             warm_up_frames: WARM_UP_FRAMES,
+            beat_time: None,
         }
     }
 }
@@ -479,6 +482,9 @@ pub struct Serving {
     /// paper), so frame 0 is already mid-dance rather than the mean pose's slow start.
     #[serde(default)]
     pub warm_up_frames: i64,
+    /// The network runs on a clock of beats at this tempo ([`beat_time`]); absent: in seconds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beat_time: Option<beat_time::BeatTimeConfig>,
 }
 
 /// The guard's running state: the last frames' root-relative joints in metres.
@@ -580,6 +586,8 @@ pub type ModelFile = folder::ModelFile<Config, Curriculum, Serving>;
 pub struct Served {
     file: ModelFile,
     pool: InstancePool<DanceRevolution>,
+    /// `model.json`'s `"beat_time"`: the network runs on a clock of beats ([`beat_time`]).
+    beat_time: Option<beat_time::BeatTimeConfig>,
 }
 
 impl Served {
@@ -588,17 +596,28 @@ impl Served {
         let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| {
             DanceRevolution::new(p, f.config.clone())
         })?;
-        Ok(Self { file, pool })
+        let beat_time = file.extra.beat_time;
+        Ok(Self {
+            file,
+            pool,
+            beat_time,
+        })
     }
 
-    /// Music features of a whole song, normalised, as `[1, n, F]`.
-    fn music(&self, audio: &crate::audio::DecodedAudio, n: usize) -> Result<Tensor, ModelError> {
+    /// Music features of a whole song on the network's clock, normalised, as `[1, n, F]`.
+    fn music(
+        &self,
+        audio: &crate::audio::DecodedAudio,
+        clock: &beat_time::BeatTime,
+    ) -> Result<Tensor, ModelError> {
         let features = if self.file.config.beat_clock {
             crate::audio::features::dance_revolution_clock_at
         } else {
             crate::audio::features::dance_revolution_at
         };
-        let feats = features(audio, self.file.fps, 0.0, n)?;
+        let feats = features(audio, self.file.fps, 0.0, clock.song_frames)?;
+        let layout = MusicLayout::dance_revolution(self.file.config.beat_clock);
+        let feats = clock.music(feats.view(), &layout);
         Ok(to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0))
     }
 }
@@ -609,6 +628,7 @@ impl DanceModel for Served {
             id: ModelId(ID.into()),
             paper: "Huang et al., Dance Revolution: Long-Term Dance Generation with Music via Curriculum Learning, ICLR 2021".into(),
             capabilities: Capabilities { key_poses: false, seed_motion: true, ..Default::default() },
+            beat_time: self.beat_time,
         }
     }
 
@@ -621,9 +641,11 @@ impl DanceModel for Served {
         let fps = self.file.fps;
         let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
         progress.report(Stage::Features, 0.0)?;
-        let music = self.music(req.audio, n)?;
+        let clock = beat_time::BeatTime::for_request(self.beat_time, req, n)?;
+        let music = self.music(req.audio, &clock)?;
         progress.report(Stage::Features, 1.0)?;
-        let seed_poses = match req.seed_motion {
+        let seed_motion = req.seed_motion.map(|m| clock.seed_motion(m));
+        let seed_poses = match seed_motion.as_ref() {
             Some(m) => {
                 let root = crate::motion::skeleton::body_centre_track(m.positions.view());
                 let (f, _) = crate::motion::repr::to_features(m.positions.view(), root.view())?;
@@ -666,7 +688,7 @@ impl DanceModel for Served {
             .denormalize(&to_array(&out?.squeeze_dim(0))?)?;
         let (motion, _root) =
             crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
-        Ok(motion.into())
+        Ok(clock.back(motion).into())
     }
 }
 

@@ -648,6 +648,10 @@ pub struct Serving {
     /// positions (`models::smooth_columns`); 0: none.
     #[serde(default)]
     pub smooth_frames: f64,
+    /// The network runs on a clock of beats at this tempo (`models::beat_time`); absent: in
+    /// seconds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beat_time: Option<crate::models::beat_time::BeatTimeConfig>,
 }
 
 /// `model.json`.

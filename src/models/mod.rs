@@ -8,6 +8,7 @@ use crate::motion::{KeyPose, Motion};
 use crate::stage::Stage;
 use serde::{Deserialize, Serialize};
 
+pub mod beat_time;
 pub mod dance_revolution;
 pub mod dancenet;
 pub mod folder;
@@ -161,6 +162,12 @@ pub struct ModelInfo {
     pub id: ModelId,
     pub paper: String,
     pub capabilities: Capabilities,
+    /// Present when the network runs in beat time: it hears every song at this reference tempo
+    /// (its feature frames resampled in time), makes its motion on that clock, and the motion is
+    /// played back at the song's own tempo, so its steps keep the same fraction of the beat on
+    /// any song (the model card says how it was trained).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beat_time: Option<beat_time::BeatTimeConfig>,
 }
 
 /// Everything a model needs for one dance.
@@ -418,6 +425,7 @@ mod tests {
                 id: ModelId("m".into()),
                 paper: String::new(),
                 capabilities: self.0,
+                beat_time: None,
             }
         }
         fn generate(

@@ -392,6 +392,15 @@ export interface components {
          * @enum {string}
          */
         AudioFormat: "mp3" | "wav" | "flac" | "ogg" | "m4a";
+        /** @description `model.json`'s `"beat_time"`: the tempo the network hears every song at. */
+        BeatTimeConfig: {
+            /**
+             * Format: double
+             * @description Reference tempo (beats per minute): the median tempo of the train split's songs as the
+             *     service's own beat tracker hears them, so the train dances move least when re-timed.
+             */
+            bpm: number;
+        };
         /** @description One frame of a BVH file. */
         BvhFrame: {
             /** @description Frame of the file, from 0. */
@@ -693,6 +702,7 @@ export interface components {
         ModelId: string;
         /** @description One model as `GET /v1/models` lists it. */
         ModelInfo: {
+            beat_time?: null | components["schemas"]["BeatTimeConfig"];
             capabilities: components["schemas"]["Capabilities"];
             id: components["schemas"]["ModelId"];
             paper: string;

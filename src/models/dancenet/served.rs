@@ -11,7 +11,9 @@ use tch::Tensor;
 
 use super::style::ServedStyle;
 use super::{DanceNet, ModelFile, Sampling, ID};
+use crate::models::beat_time;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
+use crate::models::train::augment::MusicLayout;
 use crate::models::{
     smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
     InstancePool, ModelError, ModelId, ModelInfo, Progress, StyleChoice,
@@ -28,6 +30,8 @@ pub struct Served {
     clips: SeedClips,
     style: Option<ServedStyle>,
     pool: InstancePool<DanceNet>,
+    /// `model.json`'s `"beat_time"`: the network runs on a clock of beats ([`beat_time`]).
+    beat_time: Option<beat_time::BeatTimeConfig>,
 }
 
 /// What one generation made, before it becomes joint positions.
@@ -59,12 +63,14 @@ impl Served {
         } else {
             None
         };
+        let beat_time = file.extra.beat_time;
         Ok(Self {
             file,
             rig,
             clips,
             style,
             pool,
+            beat_time,
         })
     }
 
@@ -100,14 +106,25 @@ impl Served {
         })
     }
 
-    /// Generates `n` frames of rotation features for `req`. The context is the request's seed
-    /// motion (which then opens the dance), else a real clip drawn by the seed (context only).
-    pub fn generate_features(
+    /// The network's clock for `req` (`n` song frames): beat time when `model.json` asks for it.
+    pub fn clock(
         &self,
         req: &GenerateRequest<'_>,
         n: usize,
+    ) -> Result<beat_time::BeatTime, ModelError> {
+        beat_time::BeatTime::for_request(self.beat_time, req, n)
+    }
+
+    /// Generates `clock.net_frames` frames of rotation features for `req` on the network's clock.
+    /// The context is the request's seed motion (which then opens the dance), else a real clip
+    /// drawn by the seed (context only).
+    pub fn generate_features(
+        &self,
+        req: &GenerateRequest<'_>,
+        clock: &beat_time::BeatTime,
         progress: &mut dyn Progress,
     ) -> Result<Generation, ModelError> {
+        let n = clock.net_frames;
         let fps = self.file.fps;
         let d = self.file.config.pose_dim as usize;
         let sampling = Sampling {
@@ -117,13 +134,16 @@ impl Served {
             ..self.file.extra.sampling
         };
         progress.report(Stage::Features, 0.0)?;
-        let feats = crate::audio::features::dancenet(req.audio, fps, 0.0, n)?;
+        let song = crate::audio::features::dancenet(req.audio, fps, 0.0, clock.song_frames)?;
         progress.report(Stage::Features, 1.0)?;
-        let style = self.style_of(req, &feats)?;
+        // The style is the song's as it sounds; the network hears it on its own clock.
+        let style = self.style_of(req, &song)?;
+        let feats = clock.music(song.view(), &MusicLayout::dancenet());
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0);
         // The context (normalised features and contacts) and how many of its frames open the dance.
         let rf = self.file.config.receptive_field() as usize;
-        let (context, opening, start) = match req.seed_motion {
+        let seed_motion = req.seed_motion.map(|m| clock.seed_motion(m));
+        let (context, opening, start) = match seed_motion.as_ref() {
             Some(m) if m.num_frames() > 0 => {
                 let keep = m.num_frames().min(n);
                 let enc = rotations::encode(&self.rig, m.positions.slice(s![..keep, .., ..]), fps)?;
@@ -209,6 +229,7 @@ impl DanceModel for Served {
             id: ModelId(ID.into()),
             paper: "Zhuang et al., Music2Dance: DanceNet for Music-driven Dance Generation, 2020 (dilated gated convolutions, mixture output, style control)".into(),
             capabilities: Capabilities { key_poses: false, seed_motion: true, style: true, temperature: true, top_k: false },
+            beat_time: self.beat_time,
         }
     }
 
@@ -219,10 +240,11 @@ impl DanceModel for Served {
     ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let n = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
-        let g = self.generate_features(req, n, progress)?;
+        let clock = self.clock(req, n)?;
+        let g = self.generate_features(req, &clock, progress)?;
         let motion = rotations::decode(&self.rig, g.features.view(), g.start, self.file.fps)?;
         Ok(Generated {
-            motion,
+            motion: clock.back(motion),
             style: Some(g.style),
         })
     }

@@ -248,6 +248,7 @@ impl DanceModel for Served {
             id: ModelId(ID.into()),
             paper: "Controllable music-driven dance generation with key-pose constraints (key-pose controllable cross-modal transformer)".into(),
             capabilities: Capabilities { key_poses: true, seed_motion: true, ..Default::default() },
+            beat_time: None,
         }
     }
 

@@ -42,6 +42,31 @@ impl MusicLayout {
             clock: beat_clock.then_some(c::CLOCK.start),
         }
     }
+
+    /// The DanceNet set ([`crate::audio::features::dancenet`]): onset | beat, downbeat | chroma.
+    pub fn dancenet() -> Self {
+        Self {
+            one_hot: vec![1, 2],
+            ..Default::default()
+        }
+    }
+
+    /// The key-pose set ([`crate::audio::features::keypose`]): chroma | beat, downbeat | onset.
+    pub fn keypose() -> Self {
+        Self {
+            one_hot: vec![12, 13],
+            ..Default::default()
+        }
+    }
+
+    /// The TSMT set ([`crate::audio::features::tsmt`]): MFCC | ΔMFCC | beat.
+    pub fn tsmt() -> Self {
+        Self {
+            one_hot: vec![26],
+            rates: vec![13..26],
+            ..Default::default()
+        }
+    }
 }
 
 /// How training windows are varied.

@@ -45,6 +45,8 @@ pub struct Options {
     /// Weight of an L1 loss on frame-to-frame pose change beside the pose loss: a pose loss alone
     /// is met best by the mean pose where a motion is uncertain, which froze the arms (issue 25).
     pub velocity_weight: f64,
+    /// Re-time every train dance to the split's median tempo (`models::beat_time`), and serve so.
+    pub beat_time: bool,
 }
 
 impl Default for Options {
@@ -68,6 +70,7 @@ impl Default for Options {
             max_tempo: 1.0,
             mirror: false,
             velocity_weight: 0.0,
+            beat_time: false,
         }
     }
 }
@@ -96,11 +99,24 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         max_tempo: opts.max_tempo,
         mirror: opts.mirror,
     };
-    let windows = Windows::new(
+    let beat_time = if opts.beat_time {
+        let hz: Vec<f64> = data.train_raw.iter().filter_map(|s| s.beat_hz).collect();
+        let bpm = crate::models::beat_time::reference_bpm(&hz).ok_or_else(|| {
+            TrainError::InvalidOption("beat time: no train song has a tempo".into())
+        })?;
+        tracing::info!(bpm, songs = hz.len(), "beat time: reference tempo");
+        Some(crate::models::beat_time::BeatTimeConfig { bpm })
+    } else {
+        None
+    };
+    let mut windows = Windows::new(
         &data,
         MusicLayout::dance_revolution(opts.beat_clock),
         augment,
     );
+    if let Some(cfg) = beat_time {
+        windows = windows.in_beat_time(cfg);
+    }
     let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
         DanceRevolution::new(p, config.clone())
     })?;
@@ -119,7 +135,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         5,
         |epoch, opt, _| {
             let q = curriculum_q(opts.lambda, epoch).min(opts.q_max);
-            let starts = window_starts(&data.train_raw, augment.source_len(len), opts.stride, opts.seed + epoch as u64);
+            let starts = window_starts(&data.train_raw, windows.source_len(len), opts.stride, opts.seed + epoch as u64);
             if starts.is_empty() {
                 return Err(TrainError::NoWindows(len));
             }
@@ -149,8 +165,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 train_loss: total / batches as f64,
                 test_loss,
                 note: format!(
-                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={}",
-                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight
+                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={} beat_time={:?}",
+                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight, beat_time.map(|c| c.bpm)
                 ),
             })
         },
@@ -160,7 +176,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             pose_norm: data.pose_norm.clone(),
             fps: crate::motion::MOTION_FPS,
             training: t.record(opts.lr, opts.batch, opts.seed, curriculum.clone()),
-            extra: Serving::served(),
+            extra: Serving {
+                beat_time,
+                ..Serving::served()
+            },
         },
     )?;
     Ok(trainer.logs)

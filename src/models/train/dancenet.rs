@@ -195,6 +195,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     id: p.id.clone(),
                     music: music_norm.normalize(&p.music)?,
                     poses,
+                    beat_hz: None,
                 })
             })
             .collect()
@@ -282,6 +283,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 coherence: opts.coherence,
             },
             smooth_frames: opts.smooth_frames,
+            beat_time: None,
         },
     };
     let steps = std::cell::Cell::new(0usize);

@@ -49,6 +49,9 @@ pub struct Options {
     /// over 2 s, temperature × 1.5).
     pub stall_reach: f64,
     pub seed: u64,
+    /// Train in beat time (`models::beat_time`): every dance re-timed to the split's median
+    /// tempo (after the bins are fitted on the dances as danced); the model then serves so.
+    pub beat_time: bool,
 }
 
 impl Default for Options {
@@ -68,6 +71,7 @@ impl Default for Options {
             smooth_height_frames: 4.0,
             stall_reach: 0.22,
             seed: 2020,
+            beat_time: false,
         }
     }
 }
@@ -79,7 +83,7 @@ const SEED_CLIP_FRAMES: usize = 50;
 /// Trains and writes the model folder; returns the per-epoch log.
 pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     // The root height becomes the lowest foot's clearance over each dance's own floor.
-    let data = Data::load(&opts.common.data, crate::audio::features::tsmt, |s| {
+    let mut data = Data::load(&opts.common.data, crate::audio::features::tsmt, |s| {
         let floor = repr::floor_of_features(s.poses.view());
         repr::height_to_clearance(&mut s.poses, floor);
         Ok(())
@@ -98,6 +102,11 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         data.train_raw.iter().map(|s| &s.poses),
         config.n_bins as usize,
     )?;
+    let beat_time = if opts.beat_time {
+        Some(data.retime(&crate::models::train::augment::MusicLayout::tsmt())?)
+    } else {
+        None
+    };
     let tokens = |seqs: &[Sequence]| -> Vec<Array2<i64>> {
         seqs.iter().map(|s| bins.tokens(&s.poses)).collect()
     };
@@ -176,6 +185,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 window_frames: 50,
                 boost: 1.5,
             }),
+            beat_time,
         },
     };
     let steps_cell = std::cell::Cell::new(0usize);

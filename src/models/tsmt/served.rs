@@ -7,7 +7,9 @@ use ndarray::{s, Array2};
 use serde::{Deserialize, Serialize};
 
 use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
+use crate::models::beat_time;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
+use crate::models::train::augment::MusicLayout;
 use crate::models::{
     smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
     InstancePool, ModelError, ModelId, ModelInfo, Progress,
@@ -57,6 +59,10 @@ pub struct Serving {
     /// The stall guard, if any ([`StallGuard`]).
     #[serde(default)]
     pub stall_guard: Option<StallGuard>,
+    /// The network runs on a clock of beats at this tempo (`models::beat_time`); absent: in
+    /// seconds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beat_time: Option<crate::models::beat_time::BeatTimeConfig>,
 }
 
 /// `model.json`.
@@ -67,6 +73,8 @@ pub struct Served {
     file: ModelFile,
     clips: Option<SeedClips>,
     pool: InstancePool<Tsmt>,
+    /// `model.json`'s `"beat_time"`: the network runs on a clock of beats ([`beat_time`]).
+    beat_time: Option<beat_time::BeatTimeConfig>,
 }
 
 /// What one generation made: the feature rows (foot clearance as the height) and the root start.
@@ -86,7 +94,13 @@ impl Served {
         } else {
             None
         };
-        Ok(Self { file, clips, pool })
+        let beat_time = file.extra.beat_time;
+        Ok(Self {
+            file,
+            clips,
+            pool,
+            beat_time,
+        })
     }
 
     /// The model's description file.
@@ -94,14 +108,16 @@ impl Served {
         &self.file
     }
 
-    /// Generates `n` frames of features (clearance heights) for `audio`. The context is the seed
-    /// motion's features (which then open the dance), else a drawn clip (context only).
+    /// Generates `clock.net_frames` frames of features (clearance heights) for `audio` on the
+    /// network's clock. The context is the seed motion's features (which then open the dance),
+    /// else a drawn clip (context only).
     pub fn generate_features(
         &self,
         req: &GenerateRequest<'_>,
-        n: usize,
+        clock: &beat_time::BeatTime,
         progress: &mut dyn Progress,
     ) -> Result<Generation, ModelError> {
+        let n = clock.net_frames;
         let fps = self.file.fps;
         let bins = &self.file.extra.bins;
         let sampling = Sampling {
@@ -114,11 +130,13 @@ impl Served {
                 .unwrap_or(self.file.extra.sampling.top_k),
         };
         progress.report(Stage::Features, 0.0)?;
-        let feats = crate::audio::features::tsmt(req.audio, fps, 0.0, n)?;
+        let song = crate::audio::features::tsmt(req.audio, fps, 0.0, clock.song_frames)?;
+        let feats = clock.music(song.view(), &MusicLayout::tsmt());
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0);
         progress.report(Stage::Features, 1.0)?;
         // The opening: the request's seed motion (kept as the dance's first frames), or a real clip.
-        let (context, opening, start) = match req.seed_motion {
+        let seed_motion = req.seed_motion.map(|m| clock.seed_motion(m));
+        let (context, opening, start) = match seed_motion.as_ref() {
             Some(m) if m.num_frames() > 0 => {
                 let keep = m.num_frames().min(n);
                 let root = crate::motion::skeleton::body_centre_track(m.positions.view());
@@ -190,6 +208,7 @@ impl DanceModel for Served {
             id: ModelId(ID.into()),
             paper: "Li et al., Learning to Generate Diverse Dance Motions with Transformer, 2020 (two-stream motion transformer)".into(),
             capabilities: Capabilities { key_poses: false, seed_motion: true, style: false, temperature: true, top_k: true },
+            beat_time: self.beat_time,
         }
     }
 
@@ -199,13 +218,17 @@ impl DanceModel for Served {
         progress: &mut dyn Progress,
     ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
-        let n = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
-        let mut g = self.generate_features(req, n, progress)?;
+        let song_frames = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
+        let clock = beat_time::BeatTime::for_request(self.beat_time, req, song_frames)?;
+        let n = clock.net_frames;
+        let mut g = self.generate_features(req, &clock, progress)?;
         repr::clearance_to_height(&mut g.features);
         // The root height follows the lowest foot point, which hops between feet and points as
         // their coordinates are drawn; smoothing the height itself (not the clearance) keeps the
         // body from jumping with it. The opening (a request's seed motion) is kept.
-        let keep = req.seed_motion.map_or(0, |m| m.num_frames().min(n));
+        let keep = req
+            .seed_motion
+            .map_or(0, |m| clock.seed_motion(m).num_frames().min(n));
         let mut h = g
             .features
             .column(repr::ROOT_Y)
@@ -214,6 +237,6 @@ impl DanceModel for Served {
         smooth_columns(&mut h, keep, self.file.extra.smooth_height_frames);
         g.features.column_mut(repr::ROOT_Y).assign(&h.column(0));
         let (motion, _root) = repr::from_features(g.features.view(), g.start, self.file.fps)?;
-        Ok(motion.into())
+        Ok(clock.back(motion).into())
     }
 }

@@ -1,0 +1,274 @@
+//! Beat time (issue 25): a network that runs on a clock of beats, not of seconds.
+//!
+//! Every network here learned one step rate per style, because the data's tempi cluster by style
+//! (every waltz near 87 BPM, every cha-cha 115–127) and no figure was ever danced at two tempi.
+//! Teaching the networks tempo through the input (a beat clock, time-stretched windows) did not
+//! move their step rate (dance-revolution's card, runs 1–3). Beat time removes tempo from what a
+//! network must learn instead: the song is heard at one reference tempo — its feature frames
+//! resampled in time, which is what a tempo change does to onset, chroma and MFCC frames
+//! ([`crate::models::train::augment::stretch_music`]) — the network makes its motion on that
+//! clock, and the motion is played back at the song's own tempo. A step the network makes every
+//! k of its frames is then the same fraction of a beat on any song, so the network's own motion
+//! follows the tempo. Training on dances re-timed the same way (`choreo train … --beat-time
+//! true`: [`crate::models::train::Data::retime`], [`crate::models::train::Windows::in_beat_time`])
+//! would make that fraction the data's own; the fine-tunes tried so far made the motion less
+//! regular (the model cards), so the served weights were trained in seconds and run in beat time.
+//!
+//! It is one uniform change of time base per song, not an alignment: where the song's beats
+//! drift, [`crate::motion::beat_align`] is still the stage that follows them.
+use ndarray::{Array2, Array3, ArrayView2};
+use serde::{Deserialize, Serialize};
+
+use super::train::augment::{stretch_music, MusicLayout};
+use super::ModelError;
+use crate::motion::{KeyPose, Motion};
+
+/// `model.json`'s `"beat_time"`: the tempo the network hears every song at.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct BeatTimeConfig {
+    /// Reference tempo (beats per minute): the median tempo of the train split's songs as the
+    /// service's own beat tracker hears them, so the train dances move least when re-timed.
+    pub bpm: f64,
+}
+
+/// The tempo window (BPM) a song's tracked tempo is folded into by octaves: `[FOLD_LO_BPM,
+/// 2 · FOLD_LO_BPM)`. Trackers count many songs in double time: ours reads 8 of the train split's
+/// 15 waltzes at 174 BPM, not 87, and the shared trumpet loop (90 BPM) at 185. Folded, such a
+/// song is heard at its own tempo and a train dance is re-timed like the others of its style; a
+/// dancer, too, dances a song that fast in half time. The window holds every tempo of the data
+/// (waltz 87, rumba 87–96, cha-cha 115–130), so the network hears the data's songs as they are.
+/// The price: a song near an edge and its 0.85× or 1.2× copy can fold to opposite ends (the
+/// shared songs at 153 and 130 BPM do), and the faster copy is then danced in half time.
+pub const FOLD_LO_BPM: f64 = 75.0;
+
+/// The tempo (BPM) of `beat_hz` folded by octaves into the window of [`FOLD_LO_BPM`].
+pub fn folded_bpm(beat_hz: f64) -> Option<f64> {
+    let mut bpm = beat_hz * 60.0;
+    if !(bpm.is_finite() && bpm > 0.0) {
+        return None;
+    }
+    while bpm >= 2.0 * FOLD_LO_BPM {
+        bpm /= 2.0;
+    }
+    while bpm < FOLD_LO_BPM {
+        bpm *= 2.0;
+    }
+    Some(bpm)
+}
+
+/// The factor that plays a song of `beat_hz` beats per second (folded, [`folded_bpm`]) at `bpm`.
+pub fn folded_factor(bpm: f64, beat_hz: f64) -> f64 {
+    folded_bpm(beat_hz).map_or(1.0, |song| bpm / song)
+}
+
+/// The largest factor [`folded_factor`] gives for a reference of `bpm`.
+pub fn max_factor(bpm: f64) -> f64 {
+    bpm / FOLD_LO_BPM
+}
+
+/// The reference tempo of a train split: the median of its songs' folded tempi (BPM).
+pub fn reference_bpm(beat_hz: &[f64]) -> Option<f64> {
+    let mut bpm: Vec<f64> = beat_hz.iter().filter_map(|&h| folded_bpm(h)).collect();
+    if bpm.is_empty() {
+        return None;
+    }
+    bpm.sort_by(f64::total_cmp);
+    Some(bpm[bpm.len() / 2])
+}
+
+/// The time base of one dance: song frames ↔ network frames.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BeatTime {
+    /// Tempo factor: network frame `j` is song frame `j · factor` (> 1: the song is slower than
+    /// the reference, and is heard faster).
+    pub factor: f64,
+    /// Frames of the dance the user gets.
+    pub song_frames: usize,
+    /// Frames the network makes.
+    pub net_frames: usize,
+}
+
+impl BeatTime {
+    /// The identity: the network runs in seconds.
+    pub fn seconds(song_frames: usize) -> Self {
+        Self {
+            factor: 1.0,
+            song_frames,
+            net_frames: song_frames,
+        }
+    }
+
+    /// The time base that plays a song of `beat_times_s` (the analysis's) at `config.bpm`.
+    /// Without a config, or without a tempo to read (fewer than 4 beats), the identity.
+    pub fn plan(
+        config: Option<BeatTimeConfig>,
+        beat_times_s: &[f64],
+        duration_s: f64,
+        song_frames: usize,
+    ) -> Self {
+        let Some(cfg) = config else {
+            return Self::seconds(song_frames);
+        };
+        let Some(beat_hz) = crate::metrics::musicality::beat_rate_hz(beat_times_s, duration_s)
+        else {
+            return Self::seconds(song_frames);
+        };
+        Self::with_factor(folded_factor(cfg.bpm, beat_hz), song_frames)
+    }
+
+    /// [`Self::plan`] for a request of `song_frames` frames (its analysis, or the song analysed
+    /// here when the caller brought none and a config asks for beat time).
+    pub fn for_request(
+        config: Option<BeatTimeConfig>,
+        req: &super::GenerateRequest<'_>,
+        song_frames: usize,
+    ) -> Result<Self, ModelError> {
+        Ok(match config {
+            Some(_) => Self::plan(
+                config,
+                &req.analysis_or_analyze()?.beat_times,
+                req.audio.duration_s,
+                song_frames,
+            ),
+            None => Self::seconds(song_frames),
+        })
+    }
+
+    /// The time base at a given factor.
+    pub fn with_factor(factor: f64, song_frames: usize) -> Self {
+        let net_frames = if song_frames == 0 {
+            0
+        } else {
+            ((song_frames - 1) as f64 / factor + 1e-9).floor() as usize + 1
+        };
+        Self {
+            factor,
+            song_frames,
+            net_frames,
+        }
+    }
+
+    /// True when the network runs in seconds (nothing to resample).
+    pub fn is_identity(&self) -> bool {
+        (self.factor - 1.0).abs() < 1e-12
+    }
+
+    /// The song's feature rows (`song_frames` of them) as the network hears them.
+    pub fn music(&self, song: ArrayView2<'_, f32>, layout: &MusicLayout) -> Array2<f32> {
+        if self.is_identity() {
+            return song.to_owned();
+        }
+        stretch_music(song, 0, self.net_frames, self.factor, layout)
+    }
+
+    /// A seed motion on the network's clock.
+    pub fn seed_motion(&self, m: &Motion) -> Motion {
+        if self.is_identity() {
+            return m.clone();
+        }
+        let n =
+            ((m.positions.shape()[0].saturating_sub(1)) as f64 / self.factor).floor() as usize + 1;
+        Motion {
+            fps: m.fps,
+            positions: resample_positions(&m.positions, n, self.factor),
+        }
+    }
+
+    /// Key poses on the network's clock (each at its song time divided by the factor).
+    pub fn key_poses(&self, keys: &[KeyPose]) -> Vec<KeyPose> {
+        keys.iter()
+            .map(|k| KeyPose {
+                time_s: k.time_s / self.factor,
+                ..k.clone()
+            })
+            .collect()
+    }
+
+    /// The network's motion played back at the song's tempo: `song_frames` frames.
+    pub fn back(&self, m: Motion) -> Motion {
+        if self.is_identity() {
+            return m;
+        }
+        Motion {
+            fps: m.fps,
+            positions: resample_positions(&m.positions, self.song_frames, 1.0 / self.factor),
+        }
+    }
+}
+
+/// `len` frames of `src`: frame `j` is source frame `j · step`, linearly interpolated (the last
+/// source frame held past the end).
+fn resample_positions(src: &Array3<f32>, len: usize, step: f64) -> Array3<f32> {
+    let (n, j, c) = src.dim();
+    let mut out = Array3::<f32>::zeros((len, j, c));
+    if n == 0 {
+        return out;
+    }
+    for t in 0..len {
+        let x = t as f64 * step;
+        let i = (x.floor() as usize).min(n - 1);
+        let k = (i + 1).min(n - 1);
+        let w = (x - i as f64).clamp(0.0, 1.0) as f32;
+        for a in 0..j {
+            for b in 0..c {
+                out[[t, a, b]] = src[[i, a, b]] * (1.0 - w) + src[[k, a, b]] * w;
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_slow_song_is_heard_faster_and_played_back_at_its_length() {
+        // Beats every 0.75 s (80 BPM) against a 100-BPM reference: factor 1.25.
+        let beats: Vec<f64> = (0..40).map(|i| 0.5 + 0.75 * i as f64).collect();
+        let bt = BeatTime::plan(Some(BeatTimeConfig { bpm: 100.0 }), &beats, 30.0, 751);
+        assert!((bt.factor - 1.25).abs() < 1e-9, "{}", bt.factor);
+        assert_eq!(bt.net_frames, 601);
+        // A step every 30 network frames (1.2 s at 25 fps = 2 beats at 100 BPM) comes back every
+        // 37.5 song frames: 1.5 s = 2 beats at 80 BPM.
+        let mut net = Array3::<f32>::zeros((bt.net_frames, 1, 3));
+        for t in 0..bt.net_frames {
+            net[[t, 0, 0]] = (std::f64::consts::TAU * t as f64 / 30.0).sin() as f32;
+        }
+        let out = bt.back(Motion {
+            fps: 25.0,
+            positions: net,
+        });
+        assert_eq!(out.positions.shape()[0], 751);
+        for t in [0usize, 75, 150, 300] {
+            assert!(out.positions[[t, 0, 0]].abs() < 1e-3, "frame {t}");
+        }
+        assert!((out.positions[[75 + 9, 0, 0]] - 1.0).abs() < 0.01);
+    }
+
+    #[test]
+    fn double_time_folds_into_the_window_and_no_config_is_seconds() {
+        let beats: Vec<f64> = (0..80).map(|i| 0.3 * i as f64).collect(); // 200 BPM → 100
+        let bt = BeatTime::plan(Some(BeatTimeConfig { bpm: 100.0 }), &beats, 24.0, 600);
+        assert!((bt.factor - 1.0).abs() < 1e-9, "{}", bt.factor);
+        // 130 BPM (a fast cha-cha) stays; 174 (a waltz counted in double time) is 87; 72 is 144.
+        assert!((folded_factor(87.0, 130.0 / 60.0) - 87.0 / 130.0).abs() < 1e-12);
+        assert!((folded_factor(87.0, 174.0 / 60.0) - 1.0).abs() < 1e-12);
+        assert!((folded_factor(87.0, 72.0 / 60.0) - 87.0 / 144.0).abs() < 1e-12);
+        assert!((reference_bpm(&[1.45, 2.9, 2.1, 1.5, 1.45]).unwrap() - 87.0).abs() < 1e-9);
+        assert!(BeatTime::plan(None, &beats, 24.0, 600).is_identity());
+        assert!(
+            BeatTime::plan(Some(BeatTimeConfig { bpm: 100.0 }), &[1.0], 24.0, 600).is_identity()
+        );
+    }
+
+    #[test]
+    fn key_poses_move_to_the_network_clock() {
+        let bt = BeatTime::with_factor(1.25, 500);
+        let k = KeyPose {
+            time_s: 5.0,
+            joints: vec![[0.0; 3]; 23],
+        };
+        assert!((bt.key_poses(&[k])[0].time_s - 4.0).abs() < 1e-12);
+    }
+}
