@@ -29,6 +29,11 @@ pub struct BeatTimeConfig {
     /// Reference tempo (beats per minute): the median tempo of the train split's songs as the
     /// service's own beat tracker hears them, so the train dances move least when re-timed.
     pub bpm: f64,
+    /// The largest factor a served song is heard at (absent: the fold's own, `bpm / 75`). 1 means
+    /// a song that folds below the reference is danced at the network's own pace, never slowed
+    /// ([`serving_factor`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_factor: Option<f64>,
 }
 
 /// The tempo window (BPM) a song's tracked tempo is folded into by octaves: `[FOLD_LO_BPM,
@@ -59,6 +64,17 @@ pub fn folded_bpm(beat_hz: f64) -> Option<f64> {
 /// The factor that plays a song of `beat_hz` beats per second (folded, [`folded_bpm`]) at `bpm`.
 pub fn folded_factor(bpm: f64, beat_hz: f64) -> f64 {
     folded_bpm(beat_hz).map_or(1.0, |song| bpm / song)
+}
+
+/// The factor a served song is heard at: [`folded_factor`], at most `config.max_factor`. The data
+/// has no dance slower than 87 BPM (its waltzes), so a song that folds below the reference is
+/// heard slower than any the network learned from and its motion is played back slowed: a network
+/// whose motion is barely above the verdict's 0.5-m/s floor in seconds (dance-revolution, 0.51–0.59)
+/// then falls below it (0.44 m/s on the shared 153-BPM song folded to 77), so its model.json caps
+/// the factor at 1.
+pub fn serving_factor(config: BeatTimeConfig, beat_hz: f64) -> f64 {
+    let f = folded_factor(config.bpm, beat_hz);
+    config.max_factor.map_or(f, |m| f.min(m))
 }
 
 /// The largest factor [`folded_factor`] gives for a reference of `bpm`.
@@ -113,7 +129,7 @@ impl BeatTime {
         else {
             return Self::seconds(song_frames);
         };
-        Self::with_factor(folded_factor(cfg.bpm, beat_hz), song_frames)
+        Self::with_factor(serving_factor(cfg, beat_hz), song_frames)
     }
 
     /// [`Self::plan`] for a request of `song_frames` frames (its analysis, or the song analysed
@@ -223,43 +239,86 @@ mod tests {
     use super::*;
 
     #[test]
-    fn a_slow_song_is_heard_faster_and_played_back_at_its_length() {
-        // Beats every 0.75 s (80 BPM) against a 100-BPM reference: factor 1.25.
-        let beats: Vec<f64> = (0..40).map(|i| 0.5 + 0.75 * i as f64).collect();
-        let bt = BeatTime::plan(Some(BeatTimeConfig { bpm: 100.0 }), &beats, 30.0, 751);
-        assert!((bt.factor - 1.25).abs() < 1e-9, "{}", bt.factor);
-        assert_eq!(bt.net_frames, 601);
+    fn a_fast_song_is_heard_slower_and_played_back_at_its_length() {
+        // Beats every 0.5 s (120 BPM) against a 100-BPM reference: factor 5/6.
+        let beats: Vec<f64> = (0..60).map(|i| 0.25 + 0.5 * i as f64).collect();
+        let bt = BeatTime::plan(
+            Some(BeatTimeConfig {
+                bpm: 100.0,
+                max_factor: None,
+            }),
+            &beats,
+            30.0,
+            751,
+        );
+        assert!((bt.factor - 100.0 / 120.0).abs() < 1e-9, "{}", bt.factor);
+        assert_eq!(bt.net_frames, 901);
         // A step every 30 network frames (1.2 s at 25 fps = 2 beats at 100 BPM) comes back every
-        // 37.5 song frames: 1.5 s = 2 beats at 80 BPM.
+        // 25 song frames: 1 s = 2 beats at 120 BPM.
         let mut net = Array3::<f32>::zeros((bt.net_frames, 1, 3));
         for t in 0..bt.net_frames {
-            net[[t, 0, 0]] = (std::f64::consts::TAU * t as f64 / 30.0).sin() as f32;
+            net[[t, 0, 0]] = (std::f64::consts::TAU * t as f64 / 30.0).cos() as f32;
         }
         let out = bt.back(Motion {
             fps: 25.0,
             positions: net,
         });
         assert_eq!(out.positions.shape()[0], 751);
-        for t in [0usize, 75, 150, 300] {
-            assert!(out.positions[[t, 0, 0]].abs() < 1e-3, "frame {t}");
+        for k in 0..30 {
+            assert!(
+                (out.positions[[25 * k, 0, 0]] - 1.0).abs() < 1e-3,
+                "frame {}",
+                25 * k
+            );
+            assert!(
+                out.positions[[25 * k + 12, 0, 0]] < -0.9,
+                "frame {}",
+                25 * k + 12
+            );
         }
-        assert!((out.positions[[75 + 9, 0, 0]] - 1.0).abs() < 0.01);
     }
 
     #[test]
     fn double_time_folds_into_the_window_and_no_config_is_seconds() {
         let beats: Vec<f64> = (0..80).map(|i| 0.3 * i as f64).collect(); // 200 BPM → 100
-        let bt = BeatTime::plan(Some(BeatTimeConfig { bpm: 100.0 }), &beats, 24.0, 600);
+        let bt = BeatTime::plan(
+            Some(BeatTimeConfig {
+                bpm: 100.0,
+                max_factor: None,
+            }),
+            &beats,
+            24.0,
+            600,
+        );
         assert!((bt.factor - 1.0).abs() < 1e-9, "{}", bt.factor);
         // 130 BPM (a fast cha-cha) stays; 174 (a waltz counted in double time) is 87; 72 is 144.
         assert!((folded_factor(87.0, 130.0 / 60.0) - 87.0 / 130.0).abs() < 1e-12);
         assert!((folded_factor(87.0, 174.0 / 60.0) - 1.0).abs() < 1e-12);
         assert!((folded_factor(87.0, 72.0 / 60.0) - 87.0 / 144.0).abs() < 1e-12);
         assert!((reference_bpm(&[1.45, 2.9, 2.1, 1.5, 1.45]).unwrap() - 87.0).abs() < 1e-9);
+        // Capped at 1, a song slower than the reference is danced at the network's own pace.
+        let capped = BeatTimeConfig {
+            bpm: 87.0,
+            max_factor: Some(1.0),
+        };
+        assert_eq!(serving_factor(capped, 80.0 / 60.0), 1.0);
+        assert!((serving_factor(capped, 116.0 / 60.0) - 0.75).abs() < 1e-12);
+        let free = BeatTimeConfig {
+            max_factor: None,
+            ..capped
+        };
+        assert!((serving_factor(free, 80.0 / 60.0) - 87.0 / 80.0).abs() < 1e-12);
         assert!(BeatTime::plan(None, &beats, 24.0, 600).is_identity());
-        assert!(
-            BeatTime::plan(Some(BeatTimeConfig { bpm: 100.0 }), &[1.0], 24.0, 600).is_identity()
-        );
+        assert!(BeatTime::plan(
+            Some(BeatTimeConfig {
+                bpm: 100.0,
+                max_factor: None
+            }),
+            &[1.0],
+            24.0,
+            600
+        )
+        .is_identity());
     }
 
     #[test]

@@ -400,6 +400,13 @@ export interface components {
              *     service's own beat tracker hears them, so the train dances move least when re-timed.
              */
             bpm: number;
+            /**
+             * Format: double
+             * @description The largest factor a served song is heard at (absent: the fold's own, `bpm / 75`). 1 means
+             *     a song that folds below the reference is danced at the network's own pace, never slowed
+             *     ([`serving_factor`]).
+             */
+            max_factor?: number | null;
         };
         /** @description One frame of a BVH file. */
         BvhFrame: {

@@ -214,7 +214,12 @@ impl Served {
             .denormalize(&rows.slice(s![.., ..d]).to_owned())?;
         // σ of 2 frames (0.08 s, served) keeps 60 % of a 2-Hz movement and removes what is faster
         // than 5 Hz.
-        smooth_columns(&mut features, opening, self.file.extra.smooth_frames);
+        // σ is a time in the song, so on the network's clock it is σ / factor frames.
+        smooth_columns(
+            &mut features,
+            opening,
+            self.file.extra.smooth_frames / clock.factor,
+        );
         Ok(Generation {
             features,
             start,

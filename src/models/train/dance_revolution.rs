@@ -105,7 +105,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             TrainError::InvalidOption("beat time: no train song has a tempo".into())
         })?;
         tracing::info!(bpm, songs = hz.len(), "beat time: reference tempo");
-        Some(crate::models::beat_time::BeatTimeConfig { bpm })
+        Some(crate::models::beat_time::BeatTimeConfig {
+            bpm,
+            max_factor: None,
+        })
     } else {
         None
     };

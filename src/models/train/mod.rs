@@ -215,7 +215,10 @@ impl Data {
         let bpm = crate::models::beat_time::reference_bpm(&hz).ok_or_else(|| {
             TrainError::InvalidOption("beat time: no train song has a tempo".into())
         })?;
-        let config = crate::models::beat_time::BeatTimeConfig { bpm };
+        let config = crate::models::beat_time::BeatTimeConfig {
+            bpm,
+            max_factor: None,
+        };
         for s in self.train_raw.iter_mut().chain(self.test_raw.iter_mut()) {
             let Some(hz) = s.beat_hz else { continue };
             let f = crate::models::beat_time::folded_factor(bpm, hz);

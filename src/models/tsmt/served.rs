@@ -192,7 +192,13 @@ impl Served {
             return Err(Cancelled.into());
         };
         let mut sampled = bins.values(&tokens);
-        smooth_columns(&mut sampled, 0, self.file.extra.smooth_frames);
+        // σ is a time in the song (what the jitter of drawn bins is smoothed over before 25-fps
+        // playback), so on the network's clock it is σ / factor frames.
+        smooth_columns(
+            &mut sampled,
+            0,
+            self.file.extra.smooth_frames / clock.factor,
+        );
         let features = match opening {
             Some(o) => ndarray::concatenate(ndarray::Axis(0), &[o.view(), sampled.view()])
                 .map_err(|e| ModelError::Shape(e.to_string()))?,
@@ -234,7 +240,11 @@ impl DanceModel for Served {
             .column(repr::ROOT_Y)
             .to_owned()
             .insert_axis(ndarray::Axis(1));
-        smooth_columns(&mut h, keep, self.file.extra.smooth_height_frames);
+        smooth_columns(
+            &mut h,
+            keep,
+            self.file.extra.smooth_height_frames / clock.factor,
+        );
         g.features.column_mut(repr::ROOT_Y).assign(&h.column(0));
         let (motion, _root) = repr::from_features(g.features.view(), g.start, self.file.fps)?;
         Ok(clock.back(motion).into())
