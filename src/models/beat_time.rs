@@ -178,12 +178,18 @@ impl BeatTime {
     }
 
     /// A seed motion on the network's clock.
+    ///
+    /// It spans the whole seed, its last network frame at or past the seed's last frame (held
+    /// there): played back, every song frame the seed covers then lies between two kept seed
+    /// frames. Rounded down, the seed's last song frame fell between the last kept frame and the
+    /// network's first drawn one, and a given seed motion no longer opened the dance as given.
     pub fn seed_motion(&self, m: &Motion) -> Motion {
         if self.is_identity() {
             return m.clone();
         }
-        let n =
-            ((m.positions.shape()[0].saturating_sub(1)) as f64 / self.factor).floor() as usize + 1;
+        let n = ((m.positions.shape()[0].saturating_sub(1)) as f64 / self.factor - 1e-9).ceil()
+            as usize
+            + 1;
         Motion {
             fps: m.fps,
             positions: resample_positions(&m.positions, n, self.factor),
@@ -319,6 +325,30 @@ mod tests {
             600
         )
         .is_identity());
+    }
+
+    #[test]
+    fn a_seed_motion_covers_its_song_frames_on_the_network_clock() {
+        for factor in [0.8, 1.1, 1.16] {
+            let bt = BeatTime::with_factor(factor, 500);
+            let seed = Motion {
+                fps: 25.0,
+                positions: Array3::from_shape_fn((25, 1, 3), |(t, _, _)| t as f32),
+            };
+            let net = bt.seed_motion(&seed);
+            let last = (net.positions.shape()[0] - 1) as f64;
+            // Song frame 24 reads network time 24 / factor, which must lie within the seed.
+            assert!(last >= 24.0 / factor - 1e-9, "factor {factor}: {last}");
+            // Played back, the seed comes back within a quarter of a frame's motion (the last
+            // network frame holds the seed's end, so the last song frame reads a blend of it).
+            let back = bt.back(net);
+            for t in 0..25 {
+                assert!(
+                    (back.positions[[t, 0, 0]] - t as f32).abs() < 0.25,
+                    "{factor} {t}"
+                );
+            }
+        }
     }
 
     #[test]
