@@ -208,6 +208,7 @@ fn stretched_song(name: &str, seconds: f64, factor: f64) -> DecodedAudio {
     let dir = tempfile::tempdir().expect("tempdir");
     let out = dir.path().join(format!("{factor}.wav"));
     let status = std::process::Command::new("sox")
+        .arg("-D")
         .arg(&path)
         .arg(&out)
         .args([

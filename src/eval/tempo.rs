@@ -60,7 +60,10 @@ fn stretched(song: &Path, factor: f64, dir: &Path) -> Result<Song, EvalError> {
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
     let out = dir.join(format!("{stem}@{factor}x.wav"));
+    // -D: no dither. sox dithers by default when it writes 16 bits, with fresh noise on each
+    // run, so the same command gave dances a beat or two apart from run to run.
     let status = Command::new("sox")
+        .arg("-D")
         .arg(song)
         .arg(&out)
         .args(["tempo", &factor.to_string()])
