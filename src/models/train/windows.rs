@@ -1,0 +1,141 @@
+//! Training windows re-timed: windows drawn at a tempo factor and mirrored ([`Windows`]), and
+//! whole dances re-timed to a reference tempo ([`Data::retime`], beat time).
+use tch::Tensor;
+
+use super::{augment, Data, Sequence, TrainError};
+
+impl Data {
+    /// Re-times every dance of both splits, whole, to `config.bpm` ([`crate::models::beat_time`]:
+    /// each song's tempo folded by octaves, the music's frames resampled as `layout` says, the
+    /// motion with them) and normalises with the statistics already fitted, so a network
+    /// continued from served weights reads its inputs on the same scale. Returns the reference.
+    pub fn retime(
+        &mut self,
+        layout: &augment::MusicLayout,
+    ) -> Result<crate::models::beat_time::BeatTimeConfig, TrainError> {
+        let hz: Vec<f64> = self.train_raw.iter().filter_map(|s| s.beat_hz).collect();
+        let bpm = crate::models::beat_time::reference_bpm(&hz).ok_or_else(|| {
+            TrainError::InvalidOption("beat time: no train song has a tempo".into())
+        })?;
+        let config = crate::models::beat_time::BeatTimeConfig {
+            bpm,
+            max_factor: None,
+        };
+        for s in self.train_raw.iter_mut().chain(self.test_raw.iter_mut()) {
+            let Some(hz) = s.beat_hz else { continue };
+            let f = crate::models::beat_time::folded_factor(bpm, hz);
+            let n = s.poses.nrows();
+            let len = ((n - 1) as f64 / f).floor() as usize + 1;
+            s.music = augment::stretch_music(s.music.view(), 0, len, f, layout);
+            s.poses = augment::stretch_poses(s.poses.view(), 0, len, f);
+            // The dance now beats at the reference tempo.
+            s.beat_hz = Some(hz * f);
+        }
+        let norm = |seqs: &[Sequence]| -> Result<Vec<Sequence>, TrainError> {
+            seqs.iter()
+                .map(|s| {
+                    Ok(Sequence {
+                        music: self.music_norm.normalize(&s.music)?,
+                        poses: self.pose_norm.normalize(&s.poses)?,
+                        id: s.id.clone(),
+                        beat_hz: s.beat_hz,
+                    })
+                })
+                .collect()
+        };
+        self.train = norm(&self.train_raw)?;
+        self.test = norm(&self.test_raw)?;
+        tracing::info!(
+            bpm,
+            songs = hz.len(),
+            "beat time: every dance re-timed to the reference tempo"
+        );
+        Ok(config)
+    }
+}
+
+/// Training windows drawn from the raw train split, varied by [`augment::Augment`] and
+/// normalised with the split's statistics.
+pub struct Windows<'a> {
+    data: &'a Data,
+    layout: augment::MusicLayout,
+    augment: augment::Augment,
+    partner: Vec<usize>,
+    /// Each train dance re-timed to this reference tempo before the drawn factor
+    /// ([`crate::models::beat_time`]); `None`: danced at its own tempo.
+    beat_time: Option<crate::models::beat_time::BeatTimeConfig>,
+}
+
+impl<'a> Windows<'a> {
+    pub fn new(data: &'a Data, layout: augment::MusicLayout, augment: augment::Augment) -> Self {
+        Self {
+            data,
+            layout,
+            augment,
+            partner: augment::mirror_joints(),
+            beat_time: None,
+        }
+    }
+
+    /// Windows in beat time: every train dance played at `config.bpm` (times the drawn factor).
+    pub fn in_beat_time(mut self, config: crate::models::beat_time::BeatTimeConfig) -> Self {
+        self.beat_time = Some(config);
+        self
+    }
+
+    /// The tempo factor that re-times train dance `i` to the reference (1 outside beat time).
+    fn dance_factor(&self, i: usize) -> f64 {
+        match (self.beat_time, self.data.train_raw[i].beat_hz) {
+            (Some(cfg), Some(hz)) => crate::models::beat_time::folded_factor(cfg.bpm, hz),
+            _ => 1.0,
+        }
+    }
+
+    /// Source frames a window of `len` frames may span (the fastest drawn factor, re-timed).
+    pub fn source_len(&self, len: usize) -> usize {
+        let most = self.beat_time.map_or(1.0, |c| {
+            crate::models::beat_time::max_factor(c.bpm).max(1.0)
+        });
+        ((len.saturating_sub(1)) as f64 * most * self.augment.max_tempo.max(1.0)).ceil() as usize
+            + 1
+    }
+
+    /// `[b, len, ·]` normalised music and poses of the windows starting at `starts` (sequence,
+    /// frame) of the raw train split, each at its own drawn tempo and mirroring. The starts must
+    /// leave [`augment::Augment::source_len`] frames.
+    pub fn train_batch(
+        &self,
+        starts: &[(usize, usize)],
+        len: usize,
+        rng: &mut impl rand::Rng,
+    ) -> Result<(Tensor, Tensor), TrainError> {
+        let (mut music, mut poses) = (
+            Vec::with_capacity(starts.len()),
+            Vec::with_capacity(starts.len()),
+        );
+        for &(i, f0) in starts {
+            let seq = &self.data.train_raw[i];
+            let (f, mirror) = self.augment.draw(rng);
+            let f = f * self.dance_factor(i);
+            let m = augment::stretch_music(seq.music.view(), f0, len, f, &self.layout);
+            let mut p = augment::stretch_poses(seq.poses.view(), f0, len, f);
+            if mirror {
+                if p.ncols() != crate::motion::repr::FEATURE_DIM {
+                    return Err(TrainError::InvalidOption(format!(
+                        "mirroring needs the {}-column pose rows, not {}",
+                        crate::motion::repr::FEATURE_DIM,
+                        p.ncols()
+                    )));
+                }
+                augment::mirror_poses(&mut p, &self.partner);
+            }
+            music.push(crate::models::to_tensor(
+                &self.data.music_norm.normalize(&m)?,
+            ));
+            poses.push(crate::models::to_tensor(
+                &self.data.pose_norm.normalize(&p)?,
+            ));
+        }
+        Ok((Tensor::stack(&music, 0), Tensor::stack(&poses, 0)))
+    }
+}
