@@ -16,12 +16,13 @@
 //!
 //! It is one uniform change of time base per song, not an alignment: where the song's beats
 //! drift, [`crate::motion::beat_align`] is still the stage that follows them.
-use ndarray::{Array2, Array3, ArrayView2};
+use ndarray::{Array2, ArrayView2};
 use serde::{Deserialize, Serialize};
 
 use super::train::augment::{stretch_music, MusicLayout};
 use super::ModelError;
-use crate::motion::{KeyPose, Motion};
+use crate::motion::input::lerp_frames;
+use crate::motion::Motion;
 
 /// `model.json`'s `"beat_time"`: the tempo the network hears every song at.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
@@ -177,33 +178,29 @@ impl BeatTime {
         stretch_music(song, 0, self.net_frames, self.factor, layout)
     }
 
-    /// A seed motion on the network's clock.
+    /// Frames a seed motion of `seed_frames` song frames takes on the network's clock.
     ///
     /// It spans the whole seed, its last network frame at or past the seed's last frame (held
     /// there): played back, every song frame the seed covers then lies between two kept seed
     /// frames. Rounded down, the seed's last song frame fell between the last kept frame and the
     /// network's first drawn one, and a given seed motion no longer opened the dance as given.
+    pub fn seed_frames(&self, seed_frames: usize) -> usize {
+        if self.is_identity() {
+            return seed_frames;
+        }
+        (seed_frames.saturating_sub(1) as f64 / self.factor - 1e-9).ceil() as usize + 1
+    }
+
+    /// A seed motion on the network's clock ([`Self::seed_frames`] frames).
     pub fn seed_motion(&self, m: &Motion) -> Motion {
         if self.is_identity() {
             return m.clone();
         }
-        let n = ((m.positions.shape()[0].saturating_sub(1)) as f64 / self.factor - 1e-9).ceil()
-            as usize
-            + 1;
+        let n = self.seed_frames(m.num_frames());
         Motion {
             fps: m.fps,
-            positions: resample_positions(&m.positions, n, self.factor),
+            positions: lerp_frames(m.positions.view(), (0..n).map(|t| t as f64 * self.factor)),
         }
-    }
-
-    /// Key poses on the network's clock (each at its song time divided by the factor).
-    pub fn key_poses(&self, keys: &[KeyPose]) -> Vec<KeyPose> {
-        keys.iter()
-            .map(|k| KeyPose {
-                time_s: k.time_s / self.factor,
-                ..k.clone()
-            })
-            .collect()
     }
 
     /// The network's motion played back at the song's tempo: `song_frames` frames.
@@ -213,36 +210,18 @@ impl BeatTime {
         }
         Motion {
             fps: m.fps,
-            positions: resample_positions(&m.positions, self.song_frames, 1.0 / self.factor),
+            positions: lerp_frames(
+                m.positions.view(),
+                (0..self.song_frames).map(|t| t as f64 / self.factor),
+            ),
         }
     }
-}
-
-/// `len` frames of `src`: frame `j` is source frame `j · step`, linearly interpolated (the last
-/// source frame held past the end).
-fn resample_positions(src: &Array3<f32>, len: usize, step: f64) -> Array3<f32> {
-    let (n, j, c) = src.dim();
-    let mut out = Array3::<f32>::zeros((len, j, c));
-    if n == 0 {
-        return out;
-    }
-    for t in 0..len {
-        let x = t as f64 * step;
-        let i = (x.floor() as usize).min(n - 1);
-        let k = (i + 1).min(n - 1);
-        let w = (x - i as f64).clamp(0.0, 1.0) as f32;
-        for a in 0..j {
-            for b in 0..c {
-                out[[t, a, b]] = src[[i, a, b]] * (1.0 - w) + src[[k, a, b]] * w;
-            }
-        }
-    }
-    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ndarray::Array3;
 
     #[test]
     fn a_fast_song_is_heard_slower_and_played_back_at_its_length() {
@@ -336,6 +315,7 @@ mod tests {
                 positions: Array3::from_shape_fn((25, 1, 3), |(t, _, _)| t as f32),
             };
             let net = bt.seed_motion(&seed);
+            assert_eq!(net.num_frames(), bt.seed_frames(25));
             let last = (net.positions.shape()[0] - 1) as f64;
             // Song frame 24 reads network time 24 / factor, which must lie within the seed.
             assert!(last >= 24.0 / factor - 1e-9, "factor {factor}: {last}");
@@ -349,15 +329,5 @@ mod tests {
                 );
             }
         }
-    }
-
-    #[test]
-    fn key_poses_move_to_the_network_clock() {
-        let bt = BeatTime::with_factor(1.25, 500);
-        let k = KeyPose {
-            time_s: 5.0,
-            joints: vec![[0.0; 3]; 23],
-        };
-        assert!((bt.key_poses(&[k])[0].time_s - 4.0).abs() < 1e-12);
     }
 }

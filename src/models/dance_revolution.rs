@@ -586,8 +586,6 @@ pub type ModelFile = folder::ModelFile<Config, Curriculum, Serving>;
 pub struct Served {
     file: ModelFile,
     pool: InstancePool<DanceRevolution>,
-    /// `model.json`'s `"beat_time"`: the network runs on a clock of beats ([`beat_time`]).
-    beat_time: Option<beat_time::BeatTimeConfig>,
 }
 
 impl Served {
@@ -596,12 +594,7 @@ impl Served {
         let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| {
             DanceRevolution::new(p, f.config.clone())
         })?;
-        let beat_time = file.extra.beat_time;
-        Ok(Self {
-            file,
-            pool,
-            beat_time,
-        })
+        Ok(Self { file, pool })
     }
 
     /// Music features of a whole song on the network's clock, normalised, as `[1, n, F]`.
@@ -628,7 +621,7 @@ impl DanceModel for Served {
             id: ModelId(ID.into()),
             paper: "Huang et al., Dance Revolution: Long-Term Dance Generation with Music via Curriculum Learning, ICLR 2021".into(),
             capabilities: Capabilities { key_poses: false, seed_motion: true, ..Default::default() },
-            beat_time: self.beat_time,
+            beat_time: self.file.extra.beat_time,
         }
     }
 
@@ -641,7 +634,7 @@ impl DanceModel for Served {
         let fps = self.file.fps;
         let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
         progress.report(Stage::Features, 0.0)?;
-        let clock = beat_time::BeatTime::for_request(self.beat_time, req, n)?;
+        let clock = beat_time::BeatTime::for_request(self.file.extra.beat_time, req, n)?;
         let music = self.music(req.audio, &clock)?;
         progress.report(Stage::Features, 1.0)?;
         let seed_motion = req.seed_motion.map(|m| clock.seed_motion(m));

@@ -26,7 +26,7 @@
 //! frame of the dance ([`validate::validate_key_poses`], the same check the models make).
 //! Seed motion: a [`Motion`] of 23 world joints at [`MOTION_FPS`], resampled linearly from its own
 //! frame rate when that differs (the models read it frame by frame).
-use ndarray::{Array3, Axis};
+use ndarray::{Array3, ArrayView3, Axis};
 use serde::{Deserialize, Serialize};
 
 use super::input_error::InputError;
@@ -277,22 +277,39 @@ pub fn resample(motion: &Motion, fps: f64) -> Motion {
     }
     let last_s = (t_in - 1) as f64 / motion.fps;
     let t_out = (last_s * fps + 1e-9).floor() as usize + 1;
-    let mut out = Array3::zeros((t_out, motion.positions.shape()[1], 3));
-    for (k, mut frame) in out.axis_iter_mut(Axis(0)).enumerate() {
-        let x = k as f64 / fps * motion.fps;
-        let a = (x.floor() as usize).min(t_in - 1);
-        let b = (a + 1).min(t_in - 1);
-        let w = (x - a as f64) as f32;
+    Motion {
+        fps,
+        positions: lerp_frames(
+            motion.positions.view(),
+            (0..t_out).map(|k| k as f64 / fps * motion.fps),
+        ),
+    }
+}
+
+/// The positions at fractional source frames, each linearly interpolated between the two frames
+/// around it (the last frame held past the end). [`resample`] and the models' beat time
+/// (`models::beat_time`) read motion this way; `motion::beat_align::resample` is the Catmull-Rom
+/// counterpart for its warp.
+pub fn lerp_frames(
+    positions: ArrayView3<'_, f32>,
+    source_frames: impl ExactSizeIterator<Item = f64>,
+) -> Array3<f32> {
+    let (n, joints, dims) = positions.dim();
+    let mut out = Array3::zeros((source_frames.len(), joints, dims));
+    if n == 0 {
+        return out;
+    }
+    for (mut frame, x) in out.axis_iter_mut(Axis(0)).zip(source_frames) {
+        let a = (x.floor().max(0.0) as usize).min(n - 1);
+        let b = (a + 1).min(n - 1);
+        let w = (x - a as f64).clamp(0.0, 1.0) as f32;
         let (fa, fb) = (
-            motion.positions.index_axis(Axis(0), a),
-            motion.positions.index_axis(Axis(0), b),
+            positions.index_axis(Axis(0), a),
+            positions.index_axis(Axis(0), b),
         );
         frame.assign(&(&fa * (1.0 - w) + &fb * w));
     }
-    Motion {
-        fps,
-        positions: out,
-    }
+    out
 }
 
 #[cfg(test)]

@@ -30,8 +30,6 @@ pub struct Served {
     clips: SeedClips,
     style: Option<ServedStyle>,
     pool: InstancePool<DanceNet>,
-    /// `model.json`'s `"beat_time"`: the network runs on a clock of beats ([`beat_time`]).
-    beat_time: Option<beat_time::BeatTimeConfig>,
 }
 
 /// What one generation made, before it becomes joint positions.
@@ -63,14 +61,12 @@ impl Served {
         } else {
             None
         };
-        let beat_time = file.extra.beat_time;
         Ok(Self {
             file,
             rig,
             clips,
             style,
             pool,
-            beat_time,
         })
     }
 
@@ -104,15 +100,6 @@ impl Served {
             predicted: true,
             probabilities: p.to_vec(),
         })
-    }
-
-    /// The network's clock for `req` (`n` song frames): beat time when `model.json` asks for it.
-    pub fn clock(
-        &self,
-        req: &GenerateRequest<'_>,
-        n: usize,
-    ) -> Result<beat_time::BeatTime, ModelError> {
-        beat_time::BeatTime::for_request(self.beat_time, req, n)
     }
 
     /// Generates `clock.net_frames` frames of rotation features for `req` on the network's clock.
@@ -234,7 +221,7 @@ impl DanceModel for Served {
             id: ModelId(ID.into()),
             paper: "Zhuang et al., Music2Dance: DanceNet for Music-driven Dance Generation, 2020 (dilated gated convolutions, mixture output, style control)".into(),
             capabilities: Capabilities { key_poses: false, seed_motion: true, style: true, temperature: true, top_k: false },
-            beat_time: self.beat_time,
+            beat_time: self.file.extra.beat_time,
         }
     }
 
@@ -245,7 +232,7 @@ impl DanceModel for Served {
     ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let n = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
-        let clock = self.clock(req, n)?;
+        let clock = beat_time::BeatTime::for_request(self.file.extra.beat_time, req, n)?;
         let g = self.generate_features(req, &clock, progress)?;
         let motion = rotations::decode(&self.rig, g.features.view(), g.start, self.file.fps)?;
         Ok(Generated {

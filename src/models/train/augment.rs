@@ -51,14 +51,6 @@ impl MusicLayout {
         }
     }
 
-    /// The key-pose set ([`crate::audio::features::keypose`]): chroma | beat, downbeat | onset.
-    pub fn keypose() -> Self {
-        Self {
-            one_hot: vec![12, 13],
-            ..Default::default()
-        }
-    }
-
     /// The TSMT set ([`crate::audio::features::tsmt`]): MFCC | ΔMFCC | beat.
     pub fn tsmt() -> Self {
         Self {

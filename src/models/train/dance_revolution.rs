@@ -100,15 +100,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         mirror: opts.mirror,
     };
     let beat_time = if opts.beat_time {
-        let hz: Vec<f64> = data.train_raw.iter().filter_map(|s| s.beat_hz).collect();
-        let bpm = crate::models::beat_time::reference_bpm(&hz).ok_or_else(|| {
-            TrainError::InvalidOption("beat time: no train song has a tempo".into())
-        })?;
-        tracing::info!(bpm, songs = hz.len(), "beat time: reference tempo");
-        Some(crate::models::beat_time::BeatTimeConfig {
-            bpm,
-            max_factor: None,
-        })
+        Some(data.reference_tempo()?)
     } else {
         None
     };

@@ -171,18 +171,7 @@ impl Data {
             map(s)?;
         }
         let (music_norm, pose_norm) = fit_normalizers(&train_raw)?;
-        let norm = |seqs: &[Sequence]| -> Result<Vec<Sequence>, TrainError> {
-            seqs.iter()
-                .map(|s| {
-                    Ok(Sequence {
-                        music: music_norm.normalize(&s.music)?,
-                        poses: pose_norm.normalize(&s.poses)?,
-                        id: s.id.clone(),
-                        beat_hz: s.beat_hz,
-                    })
-                })
-                .collect()
-        };
+        let norm = |seqs: &[Sequence]| normalize_all(seqs, &music_norm, &pose_norm);
         let (train, test) = (norm(&train_raw)?, norm(&test_raw)?);
         tracing::info!(
             seconds = started.elapsed().as_secs_f64(),
@@ -200,6 +189,24 @@ impl Data {
             pose_norm,
         })
     }
+}
+
+/// `seqs` with their music and poses normalised by the split's statistics.
+fn normalize_all(
+    seqs: &[Sequence],
+    music_norm: &NormStats,
+    pose_norm: &NormStats,
+) -> Result<Vec<Sequence>, TrainError> {
+    seqs.iter()
+        .map(|s| {
+            Ok(Sequence {
+                music: music_norm.normalize(&s.music)?,
+                poses: pose_norm.normalize(&s.poses)?,
+                id: s.id.clone(),
+                beat_hz: s.beat_hz,
+            })
+        })
+        .collect()
 }
 
 /// When a run must stop (`--max-minutes`), checked between batches and epochs.

@@ -2,52 +2,43 @@
 //! whole dances re-timed to a reference tempo ([`Data::retime`], beat time).
 use tch::Tensor;
 
-use super::{augment, Data, Sequence, TrainError};
+use super::{augment, normalize_all, Data, TrainError};
+use crate::models::beat_time::{self, BeatTime, BeatTimeConfig};
 
 impl Data {
+    /// The beat-time reference of the train split: the median of its songs' folded tempi
+    /// ([`beat_time::reference_bpm`]).
+    pub fn reference_tempo(&self) -> Result<BeatTimeConfig, TrainError> {
+        let hz: Vec<f64> = self.train_raw.iter().filter_map(|s| s.beat_hz).collect();
+        let bpm = beat_time::reference_bpm(&hz).ok_or_else(|| {
+            TrainError::InvalidOption("beat time: no train song has a tempo".into())
+        })?;
+        tracing::info!(bpm, songs = hz.len(), "beat time: reference tempo");
+        Ok(BeatTimeConfig {
+            bpm,
+            max_factor: None,
+        })
+    }
+
     /// Re-times every dance of both splits, whole, to `config.bpm` ([`crate::models::beat_time`]:
     /// each song's tempo folded by octaves, the music's frames resampled as `layout` says, the
     /// motion with them) and normalises with the statistics already fitted, so a network
     /// continued from served weights reads its inputs on the same scale. Returns the reference.
-    pub fn retime(
-        &mut self,
-        layout: &augment::MusicLayout,
-    ) -> Result<crate::models::beat_time::BeatTimeConfig, TrainError> {
-        let hz: Vec<f64> = self.train_raw.iter().filter_map(|s| s.beat_hz).collect();
-        let bpm = crate::models::beat_time::reference_bpm(&hz).ok_or_else(|| {
-            TrainError::InvalidOption("beat time: no train song has a tempo".into())
-        })?;
-        let config = crate::models::beat_time::BeatTimeConfig {
-            bpm,
-            max_factor: None,
-        };
+    pub fn retime(&mut self, layout: &augment::MusicLayout) -> Result<BeatTimeConfig, TrainError> {
+        let config = self.reference_tempo()?;
         for s in self.train_raw.iter_mut().chain(self.test_raw.iter_mut()) {
             let Some(hz) = s.beat_hz else { continue };
-            let f = crate::models::beat_time::folded_factor(bpm, hz);
-            let n = s.poses.nrows();
-            let len = ((n - 1) as f64 / f).floor() as usize + 1;
+            let f = beat_time::folded_factor(config.bpm, hz);
+            let len = BeatTime::with_factor(f, s.poses.nrows()).net_frames;
             s.music = augment::stretch_music(s.music.view(), 0, len, f, layout);
             s.poses = augment::stretch_poses(s.poses.view(), 0, len, f);
             // The dance now beats at the reference tempo.
             s.beat_hz = Some(hz * f);
         }
-        let norm = |seqs: &[Sequence]| -> Result<Vec<Sequence>, TrainError> {
-            seqs.iter()
-                .map(|s| {
-                    Ok(Sequence {
-                        music: self.music_norm.normalize(&s.music)?,
-                        poses: self.pose_norm.normalize(&s.poses)?,
-                        id: s.id.clone(),
-                        beat_hz: s.beat_hz,
-                    })
-                })
-                .collect()
-        };
-        self.train = norm(&self.train_raw)?;
-        self.test = norm(&self.test_raw)?;
+        self.train = normalize_all(&self.train_raw, &self.music_norm, &self.pose_norm)?;
+        self.test = normalize_all(&self.test_raw, &self.music_norm, &self.pose_norm)?;
         tracing::info!(
-            bpm,
-            songs = hz.len(),
+            bpm = config.bpm,
             "beat time: every dance re-timed to the reference tempo"
         );
         Ok(config)
@@ -63,7 +54,7 @@ pub struct Windows<'a> {
     partner: Vec<usize>,
     /// Each train dance re-timed to this reference tempo before the drawn factor
     /// ([`crate::models::beat_time`]); `None`: danced at its own tempo.
-    beat_time: Option<crate::models::beat_time::BeatTimeConfig>,
+    beat_time: Option<BeatTimeConfig>,
 }
 
 impl<'a> Windows<'a> {
@@ -78,7 +69,7 @@ impl<'a> Windows<'a> {
     }
 
     /// Windows in beat time: every train dance played at `config.bpm` (times the drawn factor).
-    pub fn in_beat_time(mut self, config: crate::models::beat_time::BeatTimeConfig) -> Self {
+    pub fn in_beat_time(mut self, config: BeatTimeConfig) -> Self {
         self.beat_time = Some(config);
         self
     }
@@ -86,16 +77,16 @@ impl<'a> Windows<'a> {
     /// The tempo factor that re-times train dance `i` to the reference (1 outside beat time).
     fn dance_factor(&self, i: usize) -> f64 {
         match (self.beat_time, self.data.train_raw[i].beat_hz) {
-            (Some(cfg), Some(hz)) => crate::models::beat_time::folded_factor(cfg.bpm, hz),
+            (Some(cfg), Some(hz)) => beat_time::folded_factor(cfg.bpm, hz),
             _ => 1.0,
         }
     }
 
     /// Source frames a window of `len` frames may span (the fastest drawn factor, re-timed).
     pub fn source_len(&self, len: usize) -> usize {
-        let most = self.beat_time.map_or(1.0, |c| {
-            crate::models::beat_time::max_factor(c.bpm).max(1.0)
-        });
+        let most = self
+            .beat_time
+            .map_or(1.0, |c| beat_time::max_factor(c.bpm).max(1.0));
         ((len.saturating_sub(1)) as f64 * most * self.augment.max_tempo.max(1.0)).ceil() as usize
             + 1
     }

@@ -73,8 +73,6 @@ pub struct Served {
     file: ModelFile,
     clips: Option<SeedClips>,
     pool: InstancePool<Tsmt>,
-    /// `model.json`'s `"beat_time"`: the network runs on a clock of beats ([`beat_time`]).
-    beat_time: Option<beat_time::BeatTimeConfig>,
 }
 
 /// What one generation made: the feature rows (foot clearance as the height) and the root start.
@@ -94,13 +92,7 @@ impl Served {
         } else {
             None
         };
-        let beat_time = file.extra.beat_time;
-        Ok(Self {
-            file,
-            clips,
-            pool,
-            beat_time,
-        })
+        Ok(Self { file, clips, pool })
     }
 
     /// The model's description file.
@@ -214,7 +206,7 @@ impl DanceModel for Served {
             id: ModelId(ID.into()),
             paper: "Li et al., Learning to Generate Diverse Dance Motions with Transformer, 2020 (two-stream motion transformer)".into(),
             capabilities: Capabilities { key_poses: false, seed_motion: true, style: false, temperature: true, top_k: true },
-            beat_time: self.beat_time,
+            beat_time: self.file.extra.beat_time,
         }
     }
 
@@ -225,7 +217,7 @@ impl DanceModel for Served {
     ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let song_frames = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
-        let clock = beat_time::BeatTime::for_request(self.beat_time, req, song_frames)?;
+        let clock = beat_time::BeatTime::for_request(self.file.extra.beat_time, req, song_frames)?;
         let n = clock.net_frames;
         let mut g = self.generate_features(req, &clock, progress)?;
         repr::clearance_to_height(&mut g.features);
@@ -234,7 +226,7 @@ impl DanceModel for Served {
         // body from jumping with it. The opening (a request's seed motion) is kept.
         let keep = req
             .seed_motion
-            .map_or(0, |m| clock.seed_motion(m).num_frames().min(n));
+            .map_or(0, |m| clock.seed_frames(m.num_frames()).min(n));
         let mut h = g
             .features
             .column(repr::ROOT_Y)
