@@ -6,8 +6,8 @@ use rand::SeedableRng;
 
 use super::augment::{Augment, MusicLayout};
 use super::{
-    batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, TrainError, Trainer,
-    Windows,
+    batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Tempo, TrainError,
+    Trainer, Windows,
 };
 use crate::models::dance_revolution::{
     curriculum_q, Config, Curriculum, DanceRevolution, ModelFile, Serving, ID,
@@ -82,7 +82,12 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     } else {
         crate::audio::features::dance_revolution_at
     };
-    let data = Data::load(&opts.common.data, features, |_| Ok(()))?;
+    let tempo = if opts.beat_time {
+        Tempo::Analysed
+    } else {
+        Tempo::Skipped
+    };
+    let data = Data::load(&opts.common.data, features, tempo, |_| Ok(()))?;
     let base = if opts.common.tiny {
         Config::tiny(0, 0)
     } else {

@@ -15,7 +15,7 @@ use tch::{Device, Kind, Tensor};
 
 use super::{
     batch_tensor, load_sequences, window_starts, write_atomic, CommonOptions, Data, EpochLog,
-    EpochResult, Sequence, TrainError, Trainer,
+    EpochResult, Sequence, Tempo, TrainError, Trainer,
 };
 use crate::models::folder;
 use crate::models::keypose_transformer::scaffold::{BankMeta, ClipInfo, PoseBank, POSE_BANK_FILE};
@@ -175,7 +175,12 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     }
     if opts.bank_only {
         let ds = Dataset::open(&opts.common.data)?;
-        let mut train = load_sequences(&ds, ds.train_ids(), crate::audio::features::keypose)?;
+        let mut train = load_sequences(
+            &ds,
+            ds.train_ids(),
+            crate::audio::features::keypose,
+            Tempo::Skipped,
+        )?;
         train.iter_mut().for_each(|s| to_clearance(&mut s.poses));
         std::fs::create_dir_all(&out).map_err(|source| TrainError::Io {
             path: out.clone(),
@@ -186,10 +191,15 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         tracing::info!(clips = opts.bank_clips, out = %out.display(), "pose bank redrawn");
         return Ok(Vec::new());
     }
-    let data = Data::load(&opts.common.data, crate::audio::features::keypose, |seq| {
-        to_clearance(&mut seq.poses);
-        Ok(())
-    })?;
+    let data = Data::load(
+        &opts.common.data,
+        crate::audio::features::keypose,
+        Tempo::Skipped,
+        |seq| {
+            to_clearance(&mut seq.poses);
+            Ok(())
+        },
+    )?;
     let base = if opts.common.tiny {
         Config::tiny(0, 0, 0)
     } else {
@@ -653,6 +663,11 @@ pub fn evaluate_folder(
     let model = KeyposeTransformer::new(&vs.root(), file.config.clone());
     vs.load(dir.join(folder::WEIGHTS_FILE))?;
     let ds = Dataset::open(data)?;
-    let test = load_sequences(&ds, ds.test_ids(), crate::audio::features::keypose)?;
+    let test = load_sequences(
+        &ds,
+        ds.test_ids(),
+        crate::audio::features::keypose,
+        Tempo::Skipped,
+    )?;
     evaluate(&model, &file, &ds, &test, keys, seed)
 }

@@ -69,12 +69,21 @@ pub struct Sequence {
     pub beat_hz: Option<f64>,
 }
 
+/// Whether loading analyses each song's tempo ([`Sequence::beat_hz`]): about a second per dance
+/// on top of the features, which only a run in beat time needs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tempo {
+    Analysed,
+    Skipped,
+}
+
 /// Loads the dances `ids` with their music features, aligned so that motion frame i gets the
 /// music at song time `(start_position + i) / fps`, and poses as `motion::repr` features.
 pub fn load_sequences(
     ds: &Dataset,
     ids: &[String],
     features: FeatureFn,
+    tempo: Tempo,
 ) -> Result<Vec<Sequence>, TrainError> {
     let mut out = Vec::new();
     for id in ids {
@@ -85,13 +94,18 @@ pub fn load_sequences(
         let music = features(&audio, fps, dance.song_time_s(0), t)?;
         let (poses, _) =
             crate::motion::repr::to_features(dance.motion.positions.view(), dance.center.view())?;
-        let t0 = dance.song_time_s(0);
-        let beats: Vec<f64> = crate::audio::analyze(&audio)?
-            .beat_times
-            .iter()
-            .map(|b| b - t0)
-            .collect();
-        let beat_hz = crate::metrics::musicality::beat_rate_hz(&beats, t as f64 / fps);
+        let beat_hz = match tempo {
+            Tempo::Skipped => None,
+            Tempo::Analysed => {
+                let t0 = dance.song_time_s(0);
+                let beats: Vec<f64> = crate::audio::analyze(&audio)?
+                    .beat_times
+                    .iter()
+                    .map(|b| b - t0)
+                    .collect();
+                crate::metrics::musicality::beat_rate_hz(&beats, t as f64 / fps)
+            }
+        };
         tracing::info!(dance = %id, frames = t, ?beat_hz, "loaded");
         out.push(Sequence {
             id: id.clone(),
@@ -156,17 +170,19 @@ pub struct Data {
 }
 
 impl Data {
-    /// Loads both splits with `features` for the music, applies `map` to each loaded sequence
+    /// Loads both splits with `features` for the music (and the songs' tempi where `tempo` asks),
+    /// applies `map` to each loaded sequence
     /// (a model's own pose representation), and normalises.
     pub fn load(
         folder: &Path,
         features: FeatureFn,
+        tempo: Tempo,
         mut map: impl FnMut(&mut Sequence) -> Result<(), TrainError>,
     ) -> Result<Self, TrainError> {
         let started = Instant::now();
         let dataset = Dataset::open(folder)?;
-        let mut train_raw = load_sequences(&dataset, dataset.train_ids(), features)?;
-        let mut test_raw = load_sequences(&dataset, dataset.test_ids(), features)?;
+        let mut train_raw = load_sequences(&dataset, dataset.train_ids(), features, tempo)?;
+        let mut test_raw = load_sequences(&dataset, dataset.test_ids(), features, tempo)?;
         for s in train_raw.iter_mut().chain(test_raw.iter_mut()) {
             map(s)?;
         }

@@ -9,7 +9,8 @@ use tch::{Device, Tensor};
 
 use super::Trainer;
 use super::{
-    batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, TrainError,
+    batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, Tempo,
+    TrainError,
 };
 use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
 use crate::models::tsmt::{
@@ -83,11 +84,21 @@ const SEED_CLIP_FRAMES: usize = 50;
 /// Trains and writes the model folder; returns the per-epoch log.
 pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     // The root height becomes the lowest foot's clearance over each dance's own floor.
-    let mut data = Data::load(&opts.common.data, crate::audio::features::tsmt, |s| {
-        let floor = repr::floor_of_features(s.poses.view());
-        repr::height_to_clearance(&mut s.poses, floor);
-        Ok(())
-    })?;
+    let tempo = if opts.beat_time {
+        Tempo::Analysed
+    } else {
+        Tempo::Skipped
+    };
+    let mut data = Data::load(
+        &opts.common.data,
+        crate::audio::features::tsmt,
+        tempo,
+        |s| {
+            let floor = repr::floor_of_features(s.poses.view());
+            repr::height_to_clearance(&mut s.poses, floor);
+            Ok(())
+        },
+    )?;
     let base = if opts.common.tiny {
         Config::tiny()
     } else {
