@@ -257,3 +257,20 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
         "steps at {slow:.3} Hz (0.85×) and {fast:.3} Hz (1.1×): ratio {ratio:.3}, a follower 1.294"
     );
 }
+
+/// keypose-transformer turns as its scaffold's real clips turn (`scaffold_facing`): on the
+/// Hungarian dance (tracked in 3/4, so waltz clips) its arms move against the spine as fast as
+/// the slowest real dance's (0.43 m/s, issue 25). A waltz holds its arms in a frame; they move
+/// against the spine mostly as the body turns, and with the network's own facing the same
+/// dance turned 25°/s (real waltzers 56–70°/s) and its arms measured 0.26.
+#[test]
+fn keypose_transformer_turns_its_waltz_and_its_arms_with_it() {
+    let m = model("keypose-transformer");
+    let song = stretched_song("hungarian_dance_5.ogg", 30.0, 1.0);
+    let analysis = audio::analyze(&song).expect("analysis");
+    let mut req = GenerateRequest::plain(&song, 1);
+    req.analysis = Some(&analysis);
+    let motion = dance(m.as_ref(), &req);
+    let arms = choreo::metrics::musicality::arm_speed_m_s(motion.positions.view(), motion.fps);
+    assert!(arms >= 0.43, "arms {arms:.3} m/s against the spine");
+}

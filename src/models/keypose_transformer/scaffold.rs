@@ -151,6 +151,9 @@ pub struct Scaffold {
     pub poses: Vec<(usize, Vec<f32>)>,
     /// The bank clip and frame the dance starts from.
     pub start: (usize, usize),
+    /// The clips' turning as the scaffold reads them: yaw velocity (radians per frame) per song
+    /// frame; empty where the scaffold follows no beats ([`PoseBank::scaffold`]).
+    pub facing: Vec<f32>,
 }
 
 fn distance(a: ArrayView1<'_, f32>, b: ArrayView1<'_, f32>) -> f32 {
@@ -302,6 +305,7 @@ impl PoseBank {
                 seed: seed_rows,
                 poses,
                 start: origin,
+                facing: Vec::new(),
             };
         }
         let mut cursor = start + ts - 1;
@@ -324,6 +328,7 @@ impl PoseBank {
             seed: seed_rows,
             poses,
             start: origin,
+            facing: Vec::new(),
         }
     }
 
@@ -457,6 +462,7 @@ impl PoseBank {
             let f = beat_maps[run.clip].as_ref()?.at(q);
             points.push((s, runs.len() - 1, q, f));
         }
+        let facing = self.facing(&points, &runs, &beat_maps, frames);
         // The seed rows: the first clip at the song's pace.
         let first: Vec<(f64, f64)> = points
             .iter()
@@ -518,7 +524,53 @@ impl PoseBank {
             seed: seed_rows,
             poses,
             start,
+            facing,
         })
+    }
+
+    /// The scaffold's turning: per song frame `0..frames`, the yaw velocity (radians per frame)
+    /// of the clip frame the scaffold reads there, scaled by the pace it is read at. `points` are
+    /// (song frame, run, clip beat position, clip frame) per song beat, ascending. Between two
+    /// beats of one run the clip is read linearly; where the next beat starts a run, the stretch
+    /// before it is read from that run's clip, one of its beats back (as the half-beat poses are).
+    fn facing(
+        &self,
+        points: &[(f64, usize, f64, f64)],
+        runs: &[Run],
+        beat_maps: &[Option<TimeMap>],
+        frames: usize,
+    ) -> Vec<f32> {
+        if points.len() < 2 {
+            return Vec::new();
+        }
+        let l = self.clips.dim().1;
+        (0..frames)
+            .map(|t| {
+                let t = t as f64;
+                let i = points
+                    .partition_point(|p| p.0 <= t)
+                    .clamp(1, points.len() - 1)
+                    - 1;
+                let (p, next) = (points[i], points[i + 1]);
+                let span = next.0 - p.0;
+                if span <= 0.0 {
+                    return 0.0;
+                }
+                let (clip, from) = if next.1 == p.1 {
+                    (runs[p.1].clip, p.3)
+                } else {
+                    let r = runs[next.1];
+                    let from = beat_maps[r.clip]
+                        .as_ref()
+                        .map_or(next.3, |m| m.at(next.2 - r.u));
+                    (r.clip, from)
+                };
+                let pace = (next.3 - from) / span;
+                let f = (from + (t - p.0).clamp(0.0, span) * pace).clamp(0.0, (l - 1) as f64);
+                let row = row_at(self.clips.slice(s![clip, .., ..]), f);
+                row.get(repr::YAW_VEL).copied().unwrap_or(0.0) * pace as f32
+            })
+            .collect()
     }
 
     /// Where the scaffold goes on at song frame `at` when clip `from` has run out of beats: among
@@ -739,6 +791,38 @@ mod tests {
                 .collect();
             assert!(steps.iter().all(|d| (d - 1.2).abs() < 1e-3), "{steps:?}");
         }
+    }
+
+    #[test]
+    fn the_scaffold_turns_as_its_clips_turn_at_the_songs_pace() {
+        // Each clip turns at its own constant rate, 0.01·(c + 1) rad a frame, and beats every 12
+        // frames; the song beats every 10, so the clips play 1.2 times as fast and turn so.
+        let mut b = beat_bank(&[12.0; 6]);
+        for c in 0..6 {
+            b.clips
+                .slice_mut(s![c, .., repr::YAW_VEL])
+                .fill(0.01 * (c + 1) as f32);
+        }
+        let sc = b
+            .scaffold_to(2, &song(10.0, 4.0, 400), 400, 25, &[])
+            .unwrap();
+        assert_eq!(sc.facing.len(), 400);
+        for (t, v) in sc.facing.iter().enumerate() {
+            let c = v / (0.01 * 1.2);
+            assert!(
+                (c - c.round()).abs() < 1e-3 && (1.0..=6.0).contains(&c.round()),
+                "frame {t}: {v}"
+            );
+        }
+        // The first stretch turns as the clip the dance opens with.
+        let first = 0.012 * (sc.start.0 + 1) as f32;
+        assert!(
+            (sc.facing[0] - first).abs() < 1e-5,
+            "{} vs {first}",
+            sc.facing[0]
+        );
+        // The legacy scaffold, without beats, gives no turning of its own.
+        assert!(bank().scaffold(1, 200, 5, 10, &[]).facing.is_empty());
     }
 
     #[test]

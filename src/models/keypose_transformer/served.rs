@@ -70,6 +70,12 @@ pub struct Serving {
     /// Frames between scaffold poses when serving ([`super::scaffold`]); 0 turns the scaffold off.
     #[serde(default)]
     pub scaffold_spacing: usize,
+    /// The dance turns as the scaffold's clips turn ([`super::scaffold::Scaffold::facing`])
+    /// instead of as the network turns it: the network makes the poses, the travel and the
+    /// height, the clips give the facing (issue 25: the network turned a waltz 25°/s where real
+    /// waltzers turn 56–70°/s, and a waltz's arms move against the spine mostly by turning).
+    #[serde(default)]
+    pub scaffold_facing: bool,
 }
 
 /// `model.json`: configuration, normalisation, training record and serving fields.
@@ -87,8 +93,10 @@ pub struct Generation {
 /// (in the model's root-height representation) and the root start; `keys` are the user's key
 /// poses (passed exactly); `scaffold` are poses `(frame, 69 local coordinates)` the network is
 /// given as key poses but not held to. `keep_seed`: the seed's frames are kept as they are (a
-/// user's seed motion) rather than rendered by the network (a drawn one). Shared by serving and
-/// the model card's evaluation.
+/// user's seed motion) rather than rendered by the network (a drawn one). `facing`, when not
+/// empty, is the yaw velocity per frame the served motion turns by (the scaffold's,
+/// [`Serving::scaffold_facing`]) in place of the network's (a kept seed keeps its own). Shared by
+/// serving and the model card's evaluation.
 #[allow(clippy::too_many_arguments)]
 pub fn generate_features(
     model: &KeyposeTransformer,
@@ -98,6 +106,7 @@ pub fn generate_features(
     keep_seed: bool,
     keys: &[LocalKey],
     scaffold: &[(usize, Vec<f32>)],
+    facing: &[f32],
     mut on_window: impl FnMut(usize, usize) -> bool,
 ) -> Result<Option<Generation>, ModelError> {
     let ts = file.config.seed_len as usize;
@@ -129,6 +138,10 @@ pub fn generate_features(
     let Some(y) = y else { return Ok(None) };
     let mut network = file.pose_norm.denormalize(&to_array(&y)?)?;
     let mut served = network.clone();
+    let kept = if keep_seed && seed.is_some() { ts } else { 0 };
+    for (t, &v) in facing.iter().enumerate().take(served.nrows()).skip(kept) {
+        served[[t, repr::YAW_VEL]] = v;
+    }
     if file.extra.root_height == RootHeight::FootClearance {
         repr::clearance_to_height(&mut network);
     }
@@ -310,7 +323,11 @@ impl DanceModel for Served {
             plan.as_ref()
                 .map(|p| (p.seed.clone(), RootStart::default()))
         });
-        let scaffold = plan.map(|p| p.poses).unwrap_or_default();
+        let (scaffold, facing) = match plan {
+            Some(p) if self.file.extra.scaffold_facing => (p.poses, p.facing),
+            Some(p) => (p.poses, Vec::new()),
+            None => (Vec::new(), Vec::new()),
+        };
         let out = self.pool.with(|model| {
             generate_features(
                 model,
@@ -320,6 +337,7 @@ impl DanceModel for Served {
                 keep_seed,
                 &keys,
                 &scaffold,
+                &facing,
                 |done, total| {
                     progress
                         .report(Stage::Generate, done as f32 / total as f32)

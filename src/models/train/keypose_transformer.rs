@@ -237,6 +237,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         extra: Serving {
             root_height: RootHeight::FootClearance,
             scaffold_spacing: opts.scaffold_spacing,
+            scaffold_facing: true,
         },
     };
     pose_bank(&data.dataset, &data.train_raw, opts)?
@@ -557,6 +558,7 @@ pub fn evaluate(
                 Some((&seed_rows, start)),
                 true,
                 keys,
+                &[],
                 &[],
                 |_, _| true,
             )
