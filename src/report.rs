@@ -52,6 +52,11 @@ pub struct Report {
     /// --no-beat-align`, reports written before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub beat_align: Option<BeatAlignReport>,
+    /// The clock the network ran on, for a model in beat time (`GET /v1/models` lists each
+    /// model's `beat_time`): the reference tempo and the factor this song was heard at. Absent for
+    /// a model in seconds.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub beat_time: Option<crate::models::beat_time::BeatTimeUsed>,
 }
 
 /// The beat-align stage in report.json: its summary, and the tempo lock of the motion as the
@@ -88,6 +93,7 @@ pub fn build(
         model_key_pose_error_cm: None,
         style: None,
         beat_align: None,
+        beat_time: None,
     })
 }
 

@@ -37,6 +37,18 @@ pub struct BeatTimeConfig {
     pub max_factor: Option<f64>,
 }
 
+/// The clock a job's network ran on, as `report.json` says it (`beat_time`; models in beat
+/// time only).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct BeatTimeUsed {
+    /// The tempo the network hears every song at (`model.json`'s `beat_time.bpm`).
+    pub reference_bpm: f64,
+    /// The factor this song was heard at: network frame `j` is song frame `j · factor` (above 1
+    /// the song was heard faster than it is, below 1 slower; 1 as it is: the song's folded tempo
+    /// is the reference's, or under it where the model's `max_factor` keeps it from being slowed).
+    pub factor: f64,
+}
+
 /// The tempo window (BPM) a song's tracked tempo is folded into by octaves: `[FOLD_LO_BPM,
 /// 2 · FOLD_LO_BPM)`. Trackers count many songs in double time: ours reads 8 of the train split's
 /// 15 waltzes at 174 BPM, not 87, and the shared trumpet loop (90 BPM) at 185. Folded, such a
@@ -163,6 +175,15 @@ impl BeatTime {
             song_frames,
             net_frames,
         }
+    }
+
+    /// What `report.json` says of this clock for a model whose `model.json` has `config`; none
+    /// for a model in seconds.
+    pub fn used(&self, config: Option<BeatTimeConfig>) -> Option<BeatTimeUsed> {
+        config.map(|c| BeatTimeUsed {
+            reference_bpm: c.bpm,
+            factor: self.factor,
+        })
     }
 
     /// True when the network runs in seconds (nothing to resample).

@@ -681,7 +681,8 @@ impl DanceModel for Served {
             .denormalize(&to_array(&out?.squeeze_dim(0))?)?;
         let (motion, _root) =
             crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
-        Ok(clock.back(motion).into())
+        Ok(Generated::from(clock.back(motion))
+            .with_beat_time(clock.used(self.file.extra.beat_time)))
     }
 }
 

@@ -145,6 +145,15 @@ pub struct StyleChoice {
 pub struct Generated {
     pub motion: Motion,
     pub style: Option<StyleChoice>,
+    /// The clock the network ran on, for a model in beat time ([`beat_time`]).
+    pub beat_time: Option<beat_time::BeatTimeUsed>,
+}
+
+impl Generated {
+    /// The same, with the clock it ran on.
+    pub fn with_beat_time(self, beat_time: Option<beat_time::BeatTimeUsed>) -> Self {
+        Self { beat_time, ..self }
+    }
 }
 
 impl From<Motion> for Generated {
@@ -152,6 +161,7 @@ impl From<Motion> for Generated {
         Self {
             motion,
             style: None,
+            beat_time: None,
         }
     }
 }

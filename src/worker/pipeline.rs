@@ -155,14 +155,17 @@ impl Pipeline {
                 beat_align: true,
                 plant_feet: options.plant_feet,
             };
-            after_model(
-                generated.motion,
-                analysis,
-                decoded.duration_s,
-                &options.key_poses,
-                seed_motion.as_ref(),
-                stages,
-            )
+            Finished {
+                beat_time: generated.beat_time,
+                ..after_model(
+                    generated.motion,
+                    analysis,
+                    decoded.duration_s,
+                    &options.key_poses,
+                    seed_motion.as_ref(),
+                    stages,
+                )
+            }
         };
         progress.report(Stage::Export, MODEL_END)?;
         let _timer = StageTimer::start("generate", Stage::Export);
@@ -263,6 +266,8 @@ pub struct Finished {
     /// Whether the feet were planted (and the dance grounded): the export grounds its rigid
     /// skeleton too ([`crate::motion::serve`]).
     pub plant_feet: bool,
+    /// The clock the network ran on (a model in beat time), for the report; the model's to set.
+    pub beat_time: Option<crate::models::beat_time::BeatTimeUsed>,
 }
 
 /// The motion stages after a model ([`crate::motion::after_model`]: beat alignment, then the feet
@@ -299,6 +304,7 @@ pub fn after_model(
             tempo_lock_before,
         }),
         plant_feet: stages.plant_feet,
+        beat_time: None,
     }
 }
 
@@ -333,6 +339,7 @@ pub fn render(
     );
     report.style = caption.style.clone();
     report.beat_align = finished.beat_align.clone();
+    report.beat_time = finished.beat_time;
     report.scores.rotation_flips = Some(crate::metrics::rotation_flips::RotationFlips::of(
         &served.rig,
     ));

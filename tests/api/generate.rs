@@ -111,6 +111,14 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
     assert!(report["music_beat_times"]
         .as_array()
         .is_some_and(|b| !b.is_empty()));
+    // The network ran in beat time: the report says at what tempo and at what factor it heard
+    // this song (never above the model's max_factor of 1: a slower song is not slowed).
+    assert_eq!(
+        report["beat_time"]["reference_bpm"], dr["beat_time"]["bpm"],
+        "{report}"
+    );
+    let factor = report["beat_time"]["factor"].as_f64().expect("factor");
+    assert!(factor > 0.5 && factor <= 1.0, "{factor}");
 
     // The same seed gives the same dance; another seed another one.
     let again = generate(&app, song_id, 7).await;

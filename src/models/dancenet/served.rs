@@ -238,6 +238,7 @@ impl DanceModel for Served {
         Ok(Generated {
             motion: clock.back(motion),
             style: Some(g.style),
+            beat_time: clock.used(self.file.extra.beat_time),
         })
     }
 }

@@ -239,6 +239,7 @@ impl DanceModel for Served {
         );
         g.features.column_mut(repr::ROOT_Y).assign(&h.column(0));
         let (motion, _root) = repr::from_features(g.features.view(), g.start, self.file.fps)?;
-        Ok(clock.back(motion).into())
+        Ok(Generated::from(clock.back(motion))
+            .with_beat_time(clock.used(self.file.extra.beat_time)))
     }
 }
