@@ -3,9 +3,8 @@
 //! separate data dirs, as on two hosts, share PostgreSQL and a bucket. The worker fetches the
 //! song from the bucket, publishes the dance's files there, and the API serves them from it.
 use crate::common_models::models_dir;
-use crate::helpers::short_song;
+use crate::helpers::{listening_base, short_song, spawn_process as spawn, upload_to};
 use crate::postgres::Postgres;
-use crate::scale::spawn;
 use object_store::ObjectStoreExt;
 use reqwest::StatusCode;
 use serde_json::{json, Value};
@@ -159,10 +158,7 @@ async fn api_and_worker_on_separate_disks_share_songs_and_results_through_a_buck
         &moto.endpoint,
     ))
     .await;
-    let base = line
-        .strip_prefix("choreo listening on ")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .to_string();
+    let base = listening_base(&line);
     let (_worker, line) = spawn(choreo(
         &["worker", "--workers", "1"],
         worker_dir.path(),
@@ -173,18 +169,7 @@ async fn api_and_worker_on_separate_disks_share_songs_and_results_through_a_buck
     assert_eq!(line, "choreo worker running 1 workers");
 
     let bytes = std::fs::read(short_song()).expect("song");
-    let form = reqwest::multipart::Form::new().part(
-        "file",
-        reqwest::multipart::Part::bytes(bytes.clone()).file_name("t.ogg"),
-    );
-    let response = client
-        .post(format!("{base}/v1/songs"))
-        .multipart(form)
-        .send()
-        .await
-        .expect("upload");
-    assert_eq!(response.status(), StatusCode::CREATED);
-    let song: Value = response.json().await.expect("song");
+    let song = upload_to(&client, &base, bytes.clone(), "t.ogg").await;
     let song_id = song["id"].as_str().expect("id").to_string();
     // Read back with signed requests of our own (moto refuses anonymous reads of private objects).
     let bucket = object_store::aws::AmazonS3Builder::new()
@@ -278,10 +263,7 @@ async fn api_and_worker_on_separate_disks_share_songs_and_results_through_a_buck
         &moto.endpoint,
     ))
     .await;
-    let second = line
-        .strip_prefix("choreo listening on ")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .to_string();
+    let second = listening_base(&line);
     let audio = client
         .get(format!("{second}/v1/songs/{song_id}/audio"))
         .send()

@@ -1,7 +1,6 @@
 //! Crash recovery: `kill -9` a real `choreo serve` mid-job, restart it on the same data dir,
 //! and every job finishes exactly once.
 use crate::helpers::{short_song, song};
-use reqwest::StatusCode;
 use serde_json::Value;
 use sqlx::sqlite::SqliteConnectOptions;
 use sqlx::Row;
@@ -42,10 +41,7 @@ async fn serve(data_dir: &Path) -> (Child, String) {
         .expect("choreo serve printed its address within 30 s")
         .expect("read stdout")
         .expect("a line");
-    let addr = line
-        .strip_prefix("choreo listening on ")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .to_string();
+    let addr = crate::helpers::listening_base(&line);
     (child, addr)
 }
 
@@ -76,18 +72,8 @@ async fn a_killed_server_resumes_and_every_job_finishes_exactly_once() {
     let mut paths: Vec<_> = names.iter().map(|n| song(n)).collect();
     paths.push(short_song());
     for path in &paths {
-        let form = reqwest::multipart::Form::new().part(
-            "file",
-            reqwest::multipart::Part::bytes(std::fs::read(path).expect("read"))
-                .file_name("song.ogg"),
-        );
-        let response = client
-            .post(format!("{base}/v1/songs"))
-            .multipart(form)
-            .send()
-            .await
-            .expect("upload");
-        assert_eq!(response.status(), StatusCode::CREATED);
+        let bytes = std::fs::read(path).expect("read");
+        crate::helpers::upload_to(&client, &base, bytes, "song.ogg").await;
     }
 
     // Wait for a job to be mid-run, then kill -9.

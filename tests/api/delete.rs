@@ -4,9 +4,11 @@
 //! (two API keys) are 404 and keep their rows.
 use crate::artifacts::{choreo, files_under, wait_job as wait_job_at, Moto, BUCKET, PREFIX};
 use crate::common_models::models_dir;
-use crate::helpers::{expect_problem, short_song, song, spawn_app_with, TestApp};
+use crate::helpers::{
+    expect_problem, listening_base, short_song, song, spawn_app_with, spawn_process as spawn,
+    upload_to, TestApp,
+};
 use crate::postgres::Postgres;
-use crate::scale::spawn;
 use choreo::config::{Config, Secret};
 use choreo::queue::{KeyLimits, NewKey, PgStore, SqliteStore};
 use futures::TryStreamExt;
@@ -562,10 +564,7 @@ async fn deleted_and_expired_files_leave_the_bucket_and_every_disk() {
         &moto.endpoint,
     )))
     .await;
-    let base = line
-        .strip_prefix("choreo listening on ")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .to_string();
+    let base = listening_base(&line);
     let (_worker, line) = spawn(with_retention(choreo(
         &["worker", "--workers", "1"],
         worker_dir.path(),
@@ -575,20 +574,8 @@ async fn deleted_and_expired_files_leave_the_bucket_and_every_disk() {
     .await;
     assert_eq!(line, "choreo worker running 1 workers");
 
-    let form = reqwest::multipart::Form::new().part(
-        "file",
-        reqwest::multipart::Part::bytes(std::fs::read(short_song()).expect("song"))
-            .file_name("t.ogg"),
-    );
-    let song: Value = client
-        .post(format!("{base}/v1/songs"))
-        .multipart(form)
-        .send()
-        .await
-        .expect("upload")
-        .json()
-        .await
-        .expect("song");
+    let bytes = std::fs::read(short_song()).expect("song");
+    let song = upload_to(&client, &base, bytes, "t.ogg").await;
     let song_id = id(&song);
     let mut jobs = Vec::new();
     for seed in [5, 6] {

@@ -4,9 +4,11 @@
 //! server stops; on SQLite in process, and on PostgreSQL with an API-only process and a worker
 //! process apart.
 use crate::common_models::models_dir;
-use crate::helpers::{expect_problem, short_song, spawn_app_with, test_config, TestApp};
+use crate::helpers::{
+    expect_problem, listening_base, short_song, spawn_app_with, spawn_process as spawn,
+    test_config, upload_to, TestApp,
+};
 use crate::postgres::Postgres;
-use crate::scale::spawn;
 use reqwest::StatusCode;
 use serde_json::{json, Value};
 use std::path::Path;
@@ -345,25 +347,10 @@ async fn an_api_only_process_streams_the_stages_a_worker_process_runs_on_postgre
         &url,
     ))
     .await;
-    let base = line
-        .strip_prefix("choreo listening on ")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .to_string();
+    let base = listening_base(&line);
     let client = reqwest::Client::new();
-    let form = reqwest::multipart::Form::new().part(
-        "file",
-        reqwest::multipart::Part::bytes(std::fs::read(short_song()).expect("song"))
-            .file_name("trumpet.ogg"),
-    );
-    let song: Value = client
-        .post(format!("{base}/v1/songs"))
-        .multipart(form)
-        .send()
-        .await
-        .expect("upload")
-        .json()
-        .await
-        .expect("song");
+    let bytes = std::fs::read(short_song()).expect("song");
+    let song = upload_to(&client, &base, bytes, "trumpet.ogg").await;
     let job: Value = client
         .post(format!("{base}/v1/jobs"))
         .json(&json!({"song_id": song["id"], "model": "dance-revolution", "seed": 5}))

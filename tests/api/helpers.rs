@@ -298,3 +298,46 @@ pub async fn expect_problem(response: Response, status: StatusCode, code: &str) 
     );
     body
 }
+
+/// Spawns a separately started `choreo` process (stdout piped) and returns it with its first
+/// stdout line (`choreo listening on …`, `choreo worker running N workers`); the rest of its
+/// stdout is drained so it never blocks on a full pipe.
+pub async fn spawn_process(
+    mut command: tokio::process::Command,
+) -> (tokio::process::Child, String) {
+    use tokio::io::AsyncBufReadExt;
+    let mut child = command.spawn().expect("spawn choreo");
+    let stdout = child.stdout.take().expect("stdout");
+    let mut lines = tokio::io::BufReader::new(stdout).lines();
+    let line = tokio::time::timeout(Duration::from_secs(60), lines.next_line())
+        .await
+        .expect("choreo printed its first line within 60 s")
+        .expect("read stdout")
+        .expect("a line");
+    tokio::spawn(async move { while let Ok(Some(_)) = lines.next_line().await {} });
+    (child, line)
+}
+
+/// The base URL in a `choreo serve` process's first line.
+pub fn listening_base(line: &str) -> String {
+    line.trim()
+        .strip_prefix("choreo listening on ")
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+        .to_string()
+}
+
+/// Uploads `bytes` as `name` to a separately started service at `base`: the song, which is new
+/// (201 Created).
+pub async fn upload_to(client: &reqwest::Client, base: &str, bytes: Vec<u8>, name: &str) -> Value {
+    let form = Form::new().part("file", Part::bytes(bytes).file_name(name.to_string()));
+    let response = client
+        .post(format!("{base}/v1/songs"))
+        .multipart(form)
+        .send()
+        .await
+        .expect("upload");
+    let status = response.status();
+    let body = response.text().await.expect("upload body");
+    assert_eq!(status, StatusCode::CREATED, "{body}");
+    serde_json::from_str(&body).expect("song json")
+}

@@ -40,11 +40,7 @@ impl Serve {
         BufReader::new(stdout)
             .read_line(&mut line)
             .expect("read the listening line");
-        let url = line
-            .trim()
-            .strip_prefix("choreo listening on ")
-            .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-            .to_string();
+        let url = crate::helpers::listening_base(&line);
         Self {
             child,
             url,

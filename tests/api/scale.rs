@@ -2,6 +2,7 @@
 //! (`choreo worker`) share a real PostgreSQL and a data dir. While 120 songs' analyze jobs run,
 //! workers are SIGKILLed at random and started again; from `job_events`, every job succeeded
 //! exactly once and none was lost.
+use crate::helpers::{listening_base, spawn_process as spawn, upload_to};
 use crate::postgres::Postgres;
 use rand::{Rng, SeedableRng};
 use reqwest::StatusCode;
@@ -9,7 +10,6 @@ use sqlx::Row;
 use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
-use tokio::io::{AsyncBufReadExt, BufReader};
 use tokio::process::{Child, Command};
 
 /// Songs uploaded, so analyze jobs run.
@@ -37,21 +37,6 @@ fn choreo(args: &[&str], data_dir: &Path, database_url: &str) -> Command {
         .stdout(Stdio::piped())
         .kill_on_drop(true);
     c
-}
-
-/// Spawns a command and returns it with its first stdout line.
-pub async fn spawn(mut command: Command) -> (Child, String) {
-    let mut child = command.spawn().expect("spawn choreo");
-    let stdout = child.stdout.take().expect("stdout");
-    let mut lines = BufReader::new(stdout).lines();
-    let line = tokio::time::timeout(Duration::from_secs(60), lines.next_line())
-        .await
-        .expect("choreo printed its first line within 60 s")
-        .expect("read stdout")
-        .expect("a line");
-    // Keep reading so the child never blocks on a full pipe.
-    tokio::spawn(async move { while let Ok(Some(_)) = lines.next_line().await {} });
-    (child, line)
 }
 
 async fn worker(data_dir: &Path, url: &str) -> Child {
@@ -103,10 +88,7 @@ async fn workers_killed_at_random_lose_no_job_and_run_each_once() {
         &url,
     ))
     .await;
-    let base = line
-        .strip_prefix("choreo listening on ")
-        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
-        .to_string();
+    let base = listening_base(&line);
     let client = reqwest::Client::new();
     let ready = client
         .get(format!("{base}/readyz"))
@@ -130,22 +112,7 @@ async fn workers_killed_at_random_lose_no_job_and_run_each_once() {
         async move {
             for i in 0..SONGS {
                 let wav = click_track(80.0 + i as f64 * 0.5, i as u64);
-                let form = reqwest::multipart::Form::new().part(
-                    "file",
-                    reqwest::multipart::Part::bytes(wav).file_name(format!("click-{i}.wav")),
-                );
-                let response = client
-                    .post(format!("{base}/v1/songs"))
-                    .multipart(form)
-                    .send()
-                    .await
-                    .expect("upload");
-                assert_eq!(
-                    response.status(),
-                    StatusCode::CREATED,
-                    "{}",
-                    response.text().await.unwrap_or_default()
-                );
+                upload_to(&client, &base, wav, &format!("click-{i}.wav")).await;
             }
         }
     });
