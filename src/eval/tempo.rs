@@ -62,16 +62,44 @@ fn stretched(song: &Path, factor: f64, dir: &Path) -> Result<Song, EvalError> {
     let out = dir.join(format!("{stem}@{factor}x.wav"));
     // -D: no dither. sox dithers by default when it writes 16 bits, with fresh noise on each
     // run, so the same command gave dances a beat or two apart from run to run.
-    let status = Command::new("sox")
-        .arg("-D")
-        .arg(song)
-        .arg(&out)
-        .args(["tempo", &factor.to_string()])
-        .status()
-        .map_err(|source| EvalError::Io {
-            path: "sox (Debian's sox package; scripts/setup.sh --test installs it)".into(),
-            source,
-        })?;
+    let mut sox = Command::new("sox");
+    sox.arg("-D");
+    // Debian's sox reads ogg, flac and wav but has no mp3 or m4a handler: those are decoded by
+    // choreo's own decoder (the one jobs use) and reach sox as raw mono 32-bit floats on stdin.
+    let ext = song
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let raw = match ext.as_deref() {
+        Some("mp3" | "m4a" | "mp4" | "aac") => Some(crate::audio::decode_path(song)?),
+        _ => None,
+    };
+    match &raw {
+        Some(a) => sox
+            .args([
+                "-t",
+                "f32",
+                "-L",
+                "-c",
+                "1",
+                "-r",
+                &a.sample_rate.to_string(),
+                "-",
+            ])
+            .stdin(std::process::Stdio::piped()),
+        None => sox.arg(song),
+    };
+    sox.arg(&out).args(["tempo", &factor.to_string()]);
+    let sox_io = |source| EvalError::Io {
+        path: "sox (Debian's sox package; scripts/setup.sh --test installs it)".into(),
+        source,
+    };
+    let mut child = sox.spawn().map_err(sox_io)?;
+    if let (Some(a), Some(mut stdin)) = (&raw, child.stdin.take()) {
+        use std::io::Write;
+        let bytes: Vec<u8> = a.samples.iter().flat_map(|s| s.to_le_bytes()).collect();
+        stdin.write_all(&bytes).map_err(sox_io)?;
+    }
+    let status = child.wait().map_err(sox_io)?;
     if !status.success() {
         return Err(EvalError::Io {
             path: out,
@@ -208,4 +236,34 @@ pub fn markdown(rows: &[TempoRow]) -> String {
         );
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Debian's sox cannot read an mp3: the eval decodes it itself and hands sox the samples.
+    #[test]
+    fn an_mp3_is_stretched_through_choreos_own_decoder() {
+        let song =
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/audio/trumpet_loop_90bpm.ogg");
+        assert!(song.is_file(), "{} is missing", song.display());
+        let dir = tempfile::tempdir().expect("tempdir");
+        let mp3 = dir.path().join("trumpet.mp3");
+        let made = Command::new("ffmpeg")
+            .args(["-loglevel", "error", "-i"])
+            .arg(&song)
+            .args(["-t", "5"])
+            .arg(&mp3)
+            .status()
+            .expect("ffmpeg (scripts/setup.sh --test installs it) runs");
+        assert!(made.success(), "ffmpeg: {made}");
+        let plain = crate::audio::decode_path(&mp3).expect("decodes").duration_s;
+        let fast = stretched(&mp3, 1.25, dir.path()).expect("sox stretches the mp3");
+        assert!(
+            (fast.audio.duration_s - plain / 1.25).abs() < 0.1,
+            "{plain} s at 1.25× gave {} s",
+            fast.audio.duration_s
+        );
+    }
 }
