@@ -2,25 +2,8 @@
 //! and the windows the feature-based metrics are computed on.
 use ndarray::{s, ArrayView3};
 
-/// Per-frame mean joint speed in m/s over frame steps: `d[t] = fps · mean_j |p[t+1, j] − p[t, j]|`.
-pub fn mean_speed(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
-    let (t, j, _) = positions.dim();
-    (1..t)
-        .map(|f| {
-            let s: f64 = (0..j)
-                .map(|k| {
-                    (0..3)
-                        .map(|c| {
-                            (positions[[f, k, c]] as f64 - positions[[f - 1, k, c]] as f64).powi(2)
-                        })
-                        .sum::<f64>()
-                        .sqrt()
-                })
-                .sum();
-            fps * s / j.max(1) as f64
-        })
-        .collect()
-}
+/// Per-frame mean joint speed (the motion module's, which its beat-align stage reads too).
+pub use crate::motion::skeleton::mean_speed;
 
 /// Smoothness `S_cv`: the coefficient of variation (population sd / |mean|) of the frame-difference
 /// sequence, here the per-frame mean joint speed ([`mean_speed`]). 0 for a motion that never moves.

@@ -175,7 +175,9 @@ pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> War
     let held = fixed_times_s
         .iter()
         .any(|t| t.is_finite() && *t * motion.fps >= 0.5);
-    let speed = mean_joint_speed(motion);
+    // The dance's mean joint speed, as the plausibility verdict takes it.
+    let steps = super::skeleton::mean_speed(motion.positions.view(), motion.fps);
+    let speed = steps.iter().sum::<f64>() / steps.len().max(1) as f64;
     let paces: Vec<f64> = PACES
         .into_iter()
         .filter(|&p| p == 1.0 || (!held && p * speed >= LIVELY_M_S))
@@ -183,21 +185,23 @@ pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> War
     let end_s = frames.saturating_sub(1) as f64 / motion.fps;
     let mut best: Option<(f64, Warp)> = None;
     for pace in paces {
-        let (mut warp, mut cost) = if pace == 1.0 {
-            plan_at(motion, beat_times_s, fixed_times_s, 1.0)
+        let paced;
+        let m = if pace == 1.0 {
+            motion
         } else {
             let at: Vec<f64> = (0..frames).map(|f| f as f64 * pace).collect();
-            plan_at(&resample(motion, &at), beat_times_s, fixed_times_s, pace)
+            paced = resample(motion, &at);
+            &paced
         };
-        if pace != 1.0 {
-            if !warp.summary.applied {
-                continue;
-            }
-            cost += DROPPED_PER_S * (1.0 - pace) * end_s;
-            warp.source_frames.iter_mut().for_each(|s| *s *= pace);
-            warp.summary.step_hz /= pace;
-            warp.summary.pace = pace;
+        let (mut warp, cost) = plan_at(m, beat_times_s, fixed_times_s, pace);
+        // A pace that warps nothing would only drop the tail.
+        if pace != 1.0 && !warp.summary.applied {
+            continue;
         }
+        let cost = cost + DROPPED_PER_S * (1.0 - pace) * end_s;
+        warp.source_frames.iter_mut().for_each(|s| *s *= pace);
+        warp.summary.step_hz /= pace;
+        warp.summary.pace = pace;
         if best.as_ref().is_none_or(|b| cost < b.0) {
             best = Some((cost, warp));
         }
@@ -358,25 +362,6 @@ pub fn resample(motion: &Motion, source_frames: &[f64]) -> Motion {
         fps: motion.fps,
         positions: out,
     }
-}
-
-/// Mean joint speed (m/s) over the whole motion, as the plausibility verdict measures it.
-fn mean_joint_speed(motion: &Motion) -> f64 {
-    let p = motion.positions.view();
-    let (frames, joints, _) = p.dim();
-    if frames < 2 || joints == 0 {
-        return 0.0;
-    }
-    let mut sum = 0.0;
-    for f in 1..frames {
-        for j in 0..joints {
-            sum += (0..3)
-                .map(|c| (f64::from(p[[f, j, c]]) - f64::from(p[[f - 1, j, c]])).powi(2))
-                .sum::<f64>()
-                .sqrt();
-        }
-    }
-    sum * motion.fps / ((frames - 1) * joints) as f64
 }
 
 /// The ankles' summed speed (m/s) between consecutive frames: sample `i` lies at `(i + ½)/fps`.

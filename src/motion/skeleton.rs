@@ -156,6 +156,27 @@ pub fn body_centre(frame: ndarray::ArrayView2<'_, f32>) -> [f32; 3] {
     c.map(|v| v / total)
 }
 
+/// Per-frame mean joint speed in m/s over frame steps: `d[t] = fps · mean_j |p[t+1, j] − p[t, j]|`.
+pub fn mean_speed(positions: ndarray::ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
+    let (t, j, _) = positions.dim();
+    (1..t)
+        .map(|f| {
+            let s: f64 = (0..j)
+                .map(|k| {
+                    (0..3)
+                        .map(|c| {
+                            (f64::from(positions[[f, k, c]]) - f64::from(positions[[f - 1, k, c]]))
+                                .powi(2)
+                        })
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .sum();
+            fps * s / j.max(1) as f64
+        })
+        .collect()
+}
+
 /// The body centre of every frame of `[T, J, 3]` positions, `[T, 3]`.
 pub fn body_centre_track(positions: ndarray::ArrayView3<'_, f32>) -> ndarray::Array2<f32> {
     let mut out = ndarray::Array2::zeros((positions.shape()[0], 3));

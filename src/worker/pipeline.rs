@@ -155,17 +155,15 @@ impl Pipeline {
                 beat_align: true,
                 plant_feet: options.plant_feet,
             };
-            Finished {
-                beat_time: generated.beat_time,
-                ..after_model(
-                    generated.motion,
-                    analysis,
-                    decoded.duration_s,
-                    &options.key_poses,
-                    seed_motion.as_ref(),
-                    stages,
-                )
-            }
+            after_model(
+                generated.motion,
+                generated.beat_time,
+                analysis,
+                decoded.duration_s,
+                &options.key_poses,
+                seed_motion.as_ref(),
+                stages,
+            )
         };
         progress.report(Stage::Export, MODEL_END)?;
         let _timer = StageTimer::start("generate", Stage::Export);
@@ -266,16 +264,18 @@ pub struct Finished {
     /// Whether the feet were planted (and the dance grounded): the export grounds its rigid
     /// skeleton too ([`crate::motion::serve`]).
     pub plant_feet: bool,
-    /// The clock the network ran on (a model in beat time), for the report; the model's to set.
+    /// The clock the network ran on (a model in beat time), for the report.
     pub beat_time: Option<crate::models::beat_time::BeatTimeUsed>,
 }
 
 /// The motion stages after a model ([`crate::motion::after_model`]: beat alignment, then the feet
 /// planted), with the network's own tempo lock measured before them for the report. Jobs and
 /// `choreo generate` both call it, so both serve the same dance.
-/// `seed_motion`: the request's, whose frames open the dance and are kept as they are.
+/// `seed_motion`: the request's, whose frames open the dance and are kept as they are;
+/// `beat_time`: the clock the model ran on, carried to the report.
 pub fn after_model(
     model_motion: Motion,
+    beat_time: Option<crate::models::beat_time::BeatTimeUsed>,
     analysis: Analysis,
     song_duration_s: f64,
     key_poses: &[KeyPose],
@@ -304,7 +304,7 @@ pub fn after_model(
             tempo_lock_before,
         }),
         plant_feet: stages.plant_feet,
-        beat_time: None,
+        beat_time,
     }
 }
 

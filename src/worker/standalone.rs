@@ -144,17 +144,15 @@ pub fn generate_decoded(
     };
     let analysis = analysis.into_owned();
     clock.report(Stage::BeatAlign, 0.0)?;
-    let finished = super::pipeline::Finished {
-        beat_time: generated.beat_time,
-        ..super::pipeline::after_model(
-            generated.motion,
-            analysis,
-            request.audio.duration_s,
-            request.key_poses,
-            request.seed_motion,
-            stages,
-        )
-    };
+    let finished = super::pipeline::after_model(
+        generated.motion,
+        generated.beat_time,
+        analysis,
+        request.audio.duration_s,
+        request.key_poses,
+        request.seed_motion,
+        stages,
+    );
     let files =
         super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| {
             clock.enter(stage)
