@@ -178,6 +178,9 @@ args_into! {
         /// median tempo before the drawn tempo factor; the model then serves in beat time.
         #[arg(long, default_value_t = train::dance_revolution::Options::default().beat_time, action = clap::ArgAction::Set)]
         beat_time: bool,
+        /// Weight of the L1 between predicted and real joint-velocity magnitude spectra.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().spectral_weight)]
+        spectral_weight: f64,
     }
 }
 
@@ -246,6 +249,13 @@ args_into! {
         smooth_frames: f64,
         #[arg(long, default_value_t = train::dancenet::Options::default().seed)]
         seed: u64,
+        /// Weight of the rhythm term: a few windows per batch danced on freely by the decoder, the
+        /// magnitude spectra of their velocities held to the real continuation's (model card).
+        #[arg(long, default_value_t = train::dancenet::Options::default().spectral_weight)]
+        spectral_weight: f64,
+        /// Windows per batch danced on freely for the rhythm term.
+        #[arg(long, default_value_t = train::dancenet::Options::default().rollout_windows)]
+        rollout_windows: usize,
     }
 }
 

@@ -577,6 +577,9 @@ pub struct Curriculum {
     pub p: i64,
     pub lambda: f64,
     pub q_max: i64,
+    /// Weight of the spectral loss of the run's last stage (`train::spectral`); 0: none.
+    #[serde(default)]
+    pub spectral_weight: f64,
 }
 
 /// `model.json`: the configuration, normalisation and training record.

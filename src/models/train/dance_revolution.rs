@@ -47,6 +47,10 @@ pub struct Options {
     pub velocity_weight: f64,
     /// Re-time every train dance to the split's median tempo (`models::beat_time`), and serve so.
     pub beat_time: bool,
+    /// Weight of the spectral loss (`train::spectral`) beside the pose loss: the L1 between the
+    /// magnitude spectra of the predicted and real root-relative joint velocities over each
+    /// window, curriculum frames included.
+    pub spectral_weight: f64,
 }
 
 impl Default for Options {
@@ -71,6 +75,7 @@ impl Default for Options {
             mirror: false,
             velocity_weight: 0.0,
             beat_time: false,
+            spectral_weight: 0.0,
         }
     }
 }
@@ -128,8 +133,19 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         p: opts.p,
         lambda: opts.lambda,
         q_max: opts.q_max,
+        spectral_weight: opts.spectral_weight,
     };
     let epochs = opts.first_epoch..opts.first_epoch + opts.epochs;
+    let weights = LossWeights {
+        velocity: opts.velocity_weight,
+        spectral: opts.spectral_weight,
+        pose_std: Tensor::from_slice(&data.pose_norm.std[..crate::motion::repr::POSE_DIM]),
+    };
+    let pose_only = LossWeights {
+        velocity: 0.0,
+        spectral: 0.0,
+        pose_std: weights.pose_std.shallow_clone(),
+    };
     trainer.run(
         epochs,
         5,
@@ -143,7 +159,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             let (mut total, mut batches) = (0.0, 0);
             for (bi, chunk) in starts.chunks(opts.batch).enumerate() {
                 let (music, poses) = windows.train_batch(chunk, len, &mut rng)?;
-                let loss = window_loss(&model, &music, &poses, opts.p, q, opts.seed ^ ((epoch * 100_003 + bi) as u64), true, opts.random_positions, opts.velocity_weight);
+                let loss = window_loss(&model, &music, &poses, opts.p, q, opts.seed ^ ((epoch * 100_003 + bi) as u64), true, opts.random_positions, &weights);
                 opt.backward_step_clip(&loss, 1.0);
                 total += loss.double_value(&[]);
                 batches += 1;
@@ -156,7 +172,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                         let music = batch_tensor(test, c, len, |s| &s.music, Device::Cpu);
                         let poses = batch_tensor(test, c, len, |s| &s.poses, Device::Cpu);
                         // The test loss stays the pose L1 alone, comparable with earlier runs.
-                        window_loss(&model, &music, &poses, opts.p, q, 7, false, opts.random_positions, 0.0).double_value(&[])
+                        window_loss(&model, &music, &poses, opts.p, q, 7, false, opts.random_positions, &pose_only).double_value(&[])
                     })
                     .collect();
                 (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
@@ -165,8 +181,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 train_loss: total / batches as f64,
                 test_loss,
                 note: format!(
-                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={} beat_time={:?}",
-                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight, beat_time.map(|c| c.bpm)
+                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={} spectral_weight={} beat_time={:?}",
+                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight, opts.spectral_weight, beat_time.map(|c| c.bpm)
                 ),
             })
         },
@@ -185,9 +201,18 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     Ok(trainer.logs)
 }
 
+/// The extra terms of [`window_loss`] beside the pose L1.
+struct LossWeights {
+    /// × the L1 of frame-to-frame changes.
+    velocity: f64,
+    /// × `spectral::spectral_loss` over the root-relative joints.
+    spectral: f64,
+    /// The pose normalisation's std of the root-relative joint block, to read the spectra in m/s.
+    pose_std: Tensor,
+}
+
 /// Mean L1 between the curriculum forward pass and the ground truth over a batch of windows
-/// (`music`, `poses`: `[b, len, ·]`, normalised), plus `velocity_weight` × the L1 of their
-/// frame-to-frame changes.
+/// (`music`, `poses`: `[b, len, ·]`, normalised), plus the weighted extra terms.
 #[allow(clippy::too_many_arguments)]
 fn window_loss(
     model: &DanceRevolution,
@@ -198,7 +223,7 @@ fn window_loss(
     seed: u64,
     train: bool,
     random_positions: bool,
-    velocity_weight: f64,
+    weights: &LossWeights,
 ) -> Tensor {
     let len = poses.size()[1];
     let music = music.narrow(1, 1, len - 1);
@@ -211,11 +236,18 @@ fn window_loss(
     };
     let pred = model.forward_curriculum(&music, poses, start, p, q, seed, train);
     let truth = poses.narrow(1, 1, len - 1);
-    let loss = (&pred - &truth).abs().mean(Kind::Float);
-    if velocity_weight > 0.0 {
+    let mut loss = (&pred - &truth).abs().mean(Kind::Float);
+    if weights.velocity > 0.0 {
         let step = |x: &Tensor| x.narrow(1, 1, len - 2) - x.narrow(1, 0, len - 2);
-        loss + (step(&pred) - step(&truth)).abs().mean(Kind::Float) * velocity_weight
-    } else {
-        loss
+        loss += (step(&pred) - step(&truth)).abs().mean(Kind::Float) * weights.velocity;
     }
+    if weights.spectral > 0.0 {
+        loss += super::spectral::spectral_loss(
+            &pred,
+            &truth,
+            &weights.pose_std,
+            crate::motion::MOTION_FPS,
+        ) * weights.spectral;
+    }
+    loss
 }

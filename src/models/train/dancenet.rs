@@ -66,6 +66,15 @@ pub struct Options {
     /// σ (frames) of the served smoothing written into `model.json` (`dancenet::Serving`).
     pub smooth_frames: f64,
     pub seed: u64,
+    /// Weight of the rhythm term (issue 25): `rollout_windows` windows of each batch are danced on
+    /// by the decoder alone after their first `warmup` real frames, drawing as served (σ ×
+    /// `temperature`, draws of coherence `coherence`, reparameterised so the gradient flows through
+    /// every draw), and the magnitude spectra of that motion's velocities are held to the real
+    /// continuation's (`train::spectral`). Teacher forcing alone never scores the decoder's own
+    /// stepping, which is where it loses the beat. 0: the paper's losses only.
+    pub spectral_weight: f64,
+    /// Windows of each batch danced on freely for the rhythm term.
+    pub rollout_windows: usize,
 }
 
 impl Default for Options {
@@ -90,6 +99,8 @@ impl Default for Options {
             coherence: 0.95,
             smooth_frames: 2.0,
             seed: 2020,
+            spectral_weight: 0.0,
+            rollout_windows: 8,
         }
     }
 }
@@ -217,6 +228,14 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             .clamp(0, d as i64),
         ..base
     };
+    if opts.spectral_weight > 0.0 && config.mixtures != 1 {
+        return Err(TrainError::Model(crate::models::ModelError::Shape(
+            format!(
+                "the rhythm term dances one mixture component; this run has {}",
+                config.mixtures
+            ),
+        )));
+    }
     let warmup = opts
         .warmup
         .unwrap_or(config.receptive_field() as usize)
@@ -288,6 +307,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     };
     let steps = std::cell::Cell::new(0usize);
     let dev = Device::Cpu;
+    let pose_std = Tensor::from_slice(&pose_norm.std);
     trainer.run(
         0..opts.epochs,
         2,
@@ -304,7 +324,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             use rand::seq::SliceRandom;
             let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
             starts.shuffle(&mut rng);
-            let (mut total, mut gmm_sum, mut foot_sum, mut batches) = (0.0, 0.0, 0.0, 0usize);
+            let (mut total, mut gmm_sum, mut foot_sum, mut spectral_sum, mut batches) = (0.0, 0.0, 0.0, 0.0, 0usize);
             for chunk in starts.chunks(opts.batch) {
                 let target = batch_tensor(&train, chunk, len, |s| &s.poses, dev);
                 let music = batch_tensor(&train, chunk, len, |s| &s.music, dev);
@@ -320,7 +340,17 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     target.shallow_clone()
                 };
                 let l = model.losses(&input, &target, &music, &style, warmup as i64);
-                let loss = &l.gmm + opts.lambda_foot * &l.foot;
+                let mut loss = &l.gmm + opts.lambda_foot * &l.foot;
+                if opts.spectral_weight > 0.0 {
+                    let r = (opts.rollout_windows as i64).min(chunk.len() as i64);
+                    let real = target.narrow(0, 0, r);
+                    let code = model.encoder.forward(&music.narrow(0, 0, r));
+                    let danced = rollout(&model, &real, &code, &style.narrow(0, 0, r), warmup as i64, opts.temperature, opts.coherence);
+                    let continuation = real.narrow(1, warmup as i64, len as i64 - warmup as i64);
+                    let spectral = super::spectral::spectral_loss(&danced, &continuation, &pose_std, crate::motion::MOTION_FPS);
+                    spectral_sum += spectral.double_value(&[]);
+                    loss += spectral * opts.spectral_weight;
+                }
                 opt.backward_step_clip(&loss, 1.0);
                 total += loss.double_value(&[]);
                 gmm_sum += l.gmm.double_value(&[]);
@@ -353,10 +383,12 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 train_loss: total / b,
                 test_loss: test_loss.map(|(g, f)| g + opts.lambda_foot * f),
                 note: format!(
-                    "steps={} gmm={:.4} foot={:.4} test_gmm={} test_foot={} (nats per dimension; BCE)",
+                    "steps={} gmm={:.4} foot={:.4} spectral={:.4} (weight {}) test_gmm={} test_foot={} (nats per dimension; BCE; spectral L1 per bin)",
                     steps.get(),
                     gmm_sum / b,
                     foot_sum / b,
+                    spectral_sum / b,
+                    opts.spectral_weight,
                     test_loss.map_or("-".into(), |t| format!("{:.4}", t.0)),
                     test_loss.map_or("-".into(), |t| format!("{:.4}", t.1))
                 ),
@@ -365,6 +397,63 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         |t| file_of(t, steps.get()),
     )?;
     Ok(trainer.logs)
+}
+
+/// The decoder dancing on its own: after the first `context` frames of `real` `[b, n, D + contacts]`
+/// (normalised) it makes frames `context..n` one at a time, each read back as the next input, drawn
+/// as the served sampler draws (σ × `temperature`, AR(1) draws of `coherence`, contacts where
+/// their probability is over one half) but as mean + σ·z, so gradients reach every frame's mean
+/// and σ (not the history it was read from). `code`
+/// `[b, n, d_code]`; returns `[b, n − context, D]`. One mixture component (the served network's);
+/// each step reruns the decoder over its receptive field, which training can afford for a few
+/// windows a batch.
+fn rollout(
+    model: &DanceNet,
+    real: &Tensor,
+    code: &Tensor,
+    style: &Tensor,
+    context: i64,
+    temperature: f64,
+    coherence: f64,
+) -> Tensor {
+    let c = &model.config;
+    let (b, n, width) = real.size3().expect("windows are [b, n, D + contacts]");
+    let (d, rf) = (c.pose_dim, c.receptive_field());
+    let dev = real.device();
+    let mut history: Vec<Tensor> = (0..context).map(|t| real.select(1, t)).collect();
+    let rho = coherence.clamp(0.0, 0.999);
+    let mut z = Tensor::randn([b, d], (Kind::Float, dev));
+    let blank = Tensor::zeros([b, 1, width], (Kind::Float, dev));
+    let mut made = Vec::with_capacity((n - context).max(0) as usize);
+    for t in context..n {
+        let from = (t - rf).max(0);
+        // Frames from..t and a blank for t: the last output predicts frame t.
+        let frames = Tensor::cat(
+            &[
+                Tensor::stack(&history[from as usize..t as usize], 1),
+                blank.shallow_clone(),
+            ],
+            1,
+        );
+        let m = model.forward(&frames, &code.narrow(1, from, t - from + 1), style);
+        let last = t - from - 1;
+        let mean = m.mean.select(1, last).select(1, 0);
+        let sigma = m.log_sigma.select(1, last).select(1, 0).exp();
+        z = &z * rho + Tensor::randn([b, d], (Kind::Float, dev)) * (1.0 - rho * rho).sqrt();
+        let frame = mean + sigma * &z * temperature;
+        let contacts = m
+            .contacts
+            .select(1, last)
+            .sigmoid()
+            .gt(0.5)
+            .to_kind(Kind::Float);
+        // What it reads back is detached: each frame is scored given the history it made, but
+        // the gradient does not run back through 137 steps of its own output (it exploded so:
+        // the mixture loss went 0.7 → 17 within 25 steps at lr 1e-3).
+        history.push(Tensor::cat(&[frame.detach(), contacts], 1));
+        made.push(frame);
+    }
+    Tensor::stack(&made, 1)
 }
 
 /// Standard-normal noise `[b, l, d]` correlated along the frames as an AR(1) process with
@@ -383,4 +472,53 @@ fn ar1_noise(b: i64, l: i64, d: i64, rho: f64, dev: Device) -> Tensor {
         frames.push(z.shallow_clone());
     }
     Tensor::stack(&frames, 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tch::nn::{self, OptimizerConfig};
+
+    #[test]
+    fn the_rhythm_term_moves_the_decoder_from_its_own_dancing() {
+        let config = Config {
+            mixtures: 1,
+            music_dim: 3,
+            ..Config::tiny(6)
+        };
+        let vs = nn::VarStore::new(Device::Cpu);
+        let model = DanceNet::new(&vs.root(), config.clone());
+        let (b, n, width) = (2, 40, 6 + config.contacts);
+        let real = Tensor::randn([b, n, width], (Kind::Float, Device::Cpu));
+        let music = Tensor::randn([b, n, 3], (Kind::Float, Device::Cpu));
+        let style = model.style_one_hot(&[0, 1], Device::Cpu);
+        let context = config.receptive_field();
+        let code = model.encoder.forward(&music);
+        let danced = rollout(&model, &real, &code, &style, context, 0.8, 0.95);
+        assert_eq!(danced.size(), [b, n - context, 6]);
+        let continuation = real.narrow(1, context, n - context).narrow(2, 0, 6);
+        let loss = crate::models::train::spectral::spectral_loss(
+            &danced,
+            &continuation,
+            &Tensor::ones([6], (Kind::Float, Device::Cpu)),
+            25.0,
+        );
+        let mut opt = nn::Adam::default().build(&vs, 1e-3).unwrap();
+        opt.zero_grad();
+        loss.backward();
+        let moved = vs
+            .trainable_variables()
+            .iter()
+            .filter(|v| {
+                v.grad().defined() && v.grad().abs().sum(Kind::Float).double_value(&[]) > 0.0
+            })
+            .count();
+        // The decoder's layers and output head all see the loss; only the contact read-out
+        // (thresholded, fed back detached) may not.
+        assert!(
+            moved * 2 > vs.trainable_variables().len(),
+            "{moved} of {} variables have a gradient",
+            vs.trainable_variables().len()
+        );
+    }
 }

@@ -568,6 +568,7 @@ pub mod dancenet;
 pub mod dancenet_style;
 pub mod keypose_transformer;
 pub mod motion_style;
+pub mod spectral;
 pub mod tsmt;
 
 /// One training run (`choreo train <model>`): one variant per trainable model, with its options.
