@@ -68,8 +68,8 @@ pub struct Options {
     pub seed: u64,
     /// Weight of the rhythm term (issue 25): `rollout_windows` windows of each batch are danced on
     /// by the decoder alone after their first `warmup` real frames, drawing as served (σ ×
-    /// `temperature`, draws of coherence `coherence`, reparameterised so the gradient flows through
-    /// every draw), and the magnitude spectra of that motion's velocities are held to the real
+    /// `temperature`, draws of coherence `coherence`, reparameterised so the gradient reaches each
+    /// draw's mean and σ), and the magnitude spectra of that motion's velocities are held to the real
     /// continuation's (`train::spectral`). Teacher forcing alone never scores the decoder's own
     /// stepping, which is where it loses the beat. 0: the paper's losses only.
     pub spectral_weight: f64,
@@ -403,10 +403,9 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
 /// (normalised) it makes frames `context..n` one at a time, each read back as the next input, drawn
 /// as the served sampler draws (σ × `temperature`, AR(1) draws of `coherence`, contacts where
 /// their probability is over one half) but as mean + σ·z, so gradients reach every frame's mean
-/// and σ (not the history it was read from). `code`
-/// `[b, n, d_code]`; returns `[b, n − context, D]`. One mixture component (the served network's);
-/// each step reruns the decoder over its receptive field, which training can afford for a few
-/// windows a batch.
+/// and σ (not the history it was read from). `code` `[b, n, d_code]`; returns `[b, n − context,
+/// D]`. One mixture component (the served network's); each step reruns the decoder over its
+/// receptive field, which training can afford for a few windows a batch.
 fn rollout(
     model: &DanceNet,
     real: &Tensor,
