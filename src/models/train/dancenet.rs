@@ -152,6 +152,17 @@ fn prepare(dances: &[Dance], rig: &Rig) -> Result<(Vec<Prepared>, f64), TrainErr
 
 /// Trains and writes the model folder; returns the per-epoch log.
 pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
+    // Refused before the minutes of loading: the mixture count does not depend on the data.
+    let mixtures = opts.mixtures.unwrap_or(if opts.common.tiny {
+        Config::tiny(0).mixtures
+    } else {
+        Config::cpu(0).mixtures
+    });
+    if opts.spectral_weight > 0.0 && mixtures != 1 {
+        return Err(TrainError::InvalidOption(format!(
+            "--spectral-weight dances one mixture component; this run has {mixtures} (--mixtures 1)"
+        )));
+    }
     let ds = Dataset::open(&opts.common.data)?;
     // One skeleton for every dance, fitted on the train split: rotations are relative to its
     // rest pose, which must be the same for all.
@@ -228,14 +239,6 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             .clamp(0, d as i64),
         ..base
     };
-    if opts.spectral_weight > 0.0 && config.mixtures != 1 {
-        return Err(TrainError::Model(crate::models::ModelError::Shape(
-            format!(
-                "the rhythm term dances one mixture component; this run has {}",
-                config.mixtures
-            ),
-        )));
-    }
     let warmup = opts
         .warmup
         .unwrap_or(config.receptive_field() as usize)
