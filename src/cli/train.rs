@@ -181,6 +181,9 @@ args_into! {
         /// Weight of the L1 between predicted and real joint-velocity magnitude spectra.
         #[arg(long, default_value_t = train::dance_revolution::Options::default().spectral_weight)]
         spectral_weight: f64,
+        /// Weight of the same L1 over the elbows and wrists relative to the spine alone.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().arm_weight)]
+        arm_weight: f64,
     }
 }
 

@@ -580,6 +580,9 @@ pub struct Curriculum {
     /// Weight of the spectral loss of the run's last stage (`train::spectral`); 0: none.
     #[serde(default)]
     pub spectral_weight: f64,
+    /// Weight of the arms' spectral loss against the spine (`train::spectral`); 0: none.
+    #[serde(default)]
+    pub arm_weight: f64,
 }
 
 /// `model.json`: the configuration, normalisation and training record.

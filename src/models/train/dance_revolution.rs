@@ -51,6 +51,9 @@ pub struct Options {
     /// magnitude spectra of the predicted and real root-relative joint velocities over each
     /// window, curriculum frames included.
     pub spectral_weight: f64,
+    /// Weight of the spectral loss of the elbows and wrists relative to the spine
+    /// (`spectral::relative_spectral_loss`): the whole-body term let seed 1 keep its ballroom hold.
+    pub arm_weight: f64,
 }
 
 impl Default for Options {
@@ -76,6 +79,7 @@ impl Default for Options {
             velocity_weight: 0.0,
             beat_time: false,
             spectral_weight: 0.0,
+            arm_weight: 0.0,
         }
     }
 }
@@ -134,16 +138,19 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         lambda: opts.lambda,
         q_max: opts.q_max,
         spectral_weight: opts.spectral_weight,
+        arm_weight: opts.arm_weight,
     };
     let epochs = opts.first_epoch..opts.first_epoch + opts.epochs;
     let weights = LossWeights {
         velocity: opts.velocity_weight,
         spectral: opts.spectral_weight,
+        arms: opts.arm_weight,
         pose_std: Tensor::from_slice(&data.pose_norm.std[..crate::motion::repr::POSE_DIM]),
     };
     let pose_only = LossWeights {
         velocity: 0.0,
         spectral: 0.0,
+        arms: 0.0,
         pose_std: weights.pose_std.shallow_clone(),
     };
     trainer.run(
@@ -181,8 +188,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 train_loss: total / batches as f64,
                 test_loss,
                 note: format!(
-                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={} spectral_weight={} beat_time={:?}",
-                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight, opts.spectral_weight, beat_time.map(|c| c.bpm)
+                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={} spectral_weight={} arm_weight={} beat_time={:?}",
+                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight, opts.spectral_weight, opts.arm_weight, beat_time.map(|c| c.bpm)
                 ),
             })
         },
@@ -207,6 +214,8 @@ struct LossWeights {
     velocity: f64,
     /// × `spectral::spectral_loss` over the root-relative joints.
     spectral: f64,
+    /// × `spectral::relative_spectral_loss` over the elbows and wrists against the spine.
+    arms: f64,
     /// The pose normalisation's std of the root-relative joint block, to read the spectra in m/s.
     pose_std: Tensor,
 }
@@ -248,6 +257,16 @@ fn window_loss(
             &weights.pose_std,
             crate::motion::MOTION_FPS,
         ) * weights.spectral;
+    }
+    if weights.arms > 0.0 {
+        loss += super::spectral::relative_spectral_loss(
+            &pred,
+            &truth,
+            &weights.pose_std,
+            &crate::metrics::musicality::ARM_JOINTS,
+            crate::motion::skeleton::SPINE,
+            crate::motion::MOTION_FPS,
+        ) * weights.arms;
     }
     loss
 }

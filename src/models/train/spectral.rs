@@ -30,6 +30,36 @@ pub fn spectral_loss(pred: &Tensor, truth: &Tensor, scale: &Tensor, fps: f64) ->
     (spectrum(pred) - spectrum(truth)).abs().mean(Kind::Float)
 }
 
+/// The spectral loss of the arms alone, each joint of `joints` relative to joint `reference`
+/// (`pred`, `truth`: `[b, n, ·]` normalised features whose first columns are root-relative joints,
+/// x y z each; `scale`: their std). The whole-body term averages the arms' 12 columns among 69,
+/// where a held ballroom frame costs little; this one sees only how the arms move against the
+/// trunk, which is what `metrics::musicality::arm_speed_m_s` measures.
+pub fn relative_spectral_loss(
+    pred: &Tensor,
+    truth: &Tensor,
+    scale: &Tensor,
+    joints: &[usize],
+    reference: usize,
+    fps: f64,
+) -> Tensor {
+    let relative = |x: &Tensor| {
+        let columns = |j: usize| {
+            x.narrow(2, 3 * j as i64, 3) * scale.narrow(0, 3 * j as i64, 3).view([1, 1, 3])
+        };
+        let base = columns(reference);
+        Tensor::cat(
+            &joints
+                .iter()
+                .map(|&j| columns(j) - &base)
+                .collect::<Vec<_>>(),
+            2,
+        )
+    };
+    let ones = Tensor::ones([3 * joints.len() as i64], (Kind::Float, pred.device()));
+    spectral_loss(&relative(pred), &relative(truth), &ones, fps)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -58,6 +88,47 @@ mod tests {
         assert!(
             other_rate > 0.5 * held,
             "other rate {other_rate}, held {held}"
+        );
+    }
+
+    #[test]
+    fn arms_swaying_with_the_trunk_cost_their_energy_against_arms_swaying_on_their_own() {
+        // Two joints: 0 is the trunk, 1 an arm. Real: the arm sways, the trunk holds. Prediction:
+        // both sway together, so the arm is held against the trunk.
+        let n = 250;
+        let sway1 = sway(1.0, 0.1, 0.0, n);
+        let zeros = sway1.zeros_like();
+        let joint = |x: &Tensor| {
+            Tensor::cat(
+                &[
+                    x.shallow_clone(),
+                    zeros.shallow_clone(),
+                    zeros.shallow_clone(),
+                ],
+                2,
+            )
+        };
+        let real = Tensor::cat(&[joint(&zeros), joint(&sway1)], 2);
+        let together = Tensor::cat(&[joint(&sway1), joint(&sway1)], 2);
+        let scale = Tensor::ones([6], (Kind::Float, tch::Device::Cpu));
+        let arms =
+            |p: &Tensor| relative_spectral_loss(p, &real, &scale, &[1], 0, 25.0).double_value(&[]);
+        assert!(arms(&real) < 1e-6);
+        // Relative to the trunk, the arm carried along by the trunk is as still as an arm held
+        // with the whole body still.
+        let still = arms(&real.zeros_like());
+        assert!(still > 0.0);
+        assert!(
+            (arms(&together) - still).abs() < 1e-3 * still,
+            "together {} still {still}",
+            arms(&together)
+        );
+        let phase_shifted = Tensor::cat(&[joint(&zeros), joint(&sway(1.0, 0.1, 2.0, n))], 2);
+        assert!(
+            arms(&phase_shifted) < 0.1 * arms(&together),
+            "shifted {} together {}",
+            arms(&phase_shifted),
+            arms(&together)
         );
     }
 }
