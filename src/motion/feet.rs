@@ -110,30 +110,29 @@ pub fn plant_feet(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> usize {
                 [acc[0] + d[0] / n, acc[1] + d[1] / n]
             })
         };
-        // What every touching point slides if this foot is held still.
-        let left_over = |foot: usize| -> f32 {
-            let s = foot_step(foot);
-            slides
-                .iter()
-                .map(|d| (d[0] - s[0]).hypot(d[1] - s[1]))
-                .sum()
-        };
-        let candidates = (0..2).filter(|&k| !points[k].is_empty());
+        // Each touching foot with its own step and what every touching point slides if that
+        // foot is held still, each computed once.
+        let candidates: Vec<(usize, [f32; 2], f32)> = (0..2)
+            .filter(|&k| !points[k].is_empty())
+            .map(|k| {
+                let own = foot_step(k);
+                let left_over = slides
+                    .iter()
+                    .map(|d| (d[0] - own[0]).hypot(d[1] - own[1]))
+                    .sum();
+                (k, own, left_over)
+            })
+            .collect();
         let best = candidates
-            .clone()
-            .min_by(|&a, &b| left_over(a).total_cmp(&left_over(b)))
+            .iter()
+            .min_by(|a, b| a.2.total_cmp(&b.2))
             .expect("a touching foot");
         let margin = (SUPPORT_SWITCH_M_S / fps) as f32 * slides.len() as f32;
-        let foot = match support {
-            Some(held)
-                if !points[held].is_empty() && left_over(held) <= left_over(best) + margin =>
-            {
-                held
-            }
-            _ => best,
-        };
+        let &(foot, own, _) = candidates
+            .iter()
+            .find(|c| Some(c.0) == support && c.2 <= best.2 + margin)
+            .unwrap_or(best);
         support = Some(foot);
-        let own = foot_step(foot);
         step[f] = [-own[0], -own[1]];
         supported += 1;
     }
