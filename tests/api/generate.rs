@@ -183,20 +183,14 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
     }
     // Planting is judged against the same dance grounded and not planted (the stage grounds
     // first, and grounding alone changes which frames touch the floor), both measured by the
-    // report's metric on the dataset's 23 joints (motion.json adds the body centre first).
+    // report's metric on the dataset's 23 joints, read back as the retargeter reads a job's
+    // motion.json.
     let joints = |m: &Value| {
-        let mut a = ndarray::Array3::<f32>::zeros((frames, choreo::motion::NUM_JOINTS, 3));
-        for f in 0..frames {
-            for (j, p) in frame(m, f)[1..=choreo::motion::NUM_JOINTS]
-                .iter()
-                .enumerate()
-            {
-                for c in 0..3 {
-                    a[[f, j, c]] = p[c] as f32;
-                }
-            }
-        }
-        a
+        let json: choreo::motion::export::MotionJson =
+            serde_json::from_value(m.clone()).expect("motion.json");
+        choreo::motion::retarget::from_motion_json(&json)
+            .expect("choreo's rig")
+            .joint_positions()
     };
     let mut grounded = joints(&unplanted);
     choreo::motion::feet::ground(grounded.view_mut(), 25.0);
