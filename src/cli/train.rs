@@ -363,6 +363,15 @@ args_into! {
         /// tempo; the model then serves in beat time.
         #[arg(long, default_value_t = train::tsmt::Options::default().beat_time, action = clap::ArgAction::Set)]
         beat_time: bool,
+        /// Slowest tempo factor a training window is drawn at (music and dance resampled together).
+        #[arg(long, default_value_t = train::tsmt::Options::default().min_tempo)]
+        min_tempo: f64,
+        /// Fastest tempo factor a training window is drawn at.
+        #[arg(long, default_value_t = train::tsmt::Options::default().max_tempo)]
+        max_tempo: f64,
+        /// Mirror half the training windows left ↔ right.
+        #[arg(long, default_value_t = train::tsmt::Options::default().mirror, action = clap::ArgAction::Set)]
+        mirror: bool,
     }
 }
 

@@ -7,11 +7,12 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use tch::{Device, Tensor};
 
-use super::Trainer;
+use super::augment::{Augment, MusicLayout};
 use super::{
     batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, Tempo,
     TrainError,
 };
+use super::{Trainer, Windows};
 use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
 use crate::models::tsmt::{
     Bins, Config, ModelFile, Sampling, Schedule, Serving, StallGuard, Tsmt, ID, MAX_POSITION,
@@ -53,6 +54,11 @@ pub struct Options {
     /// Train in beat time (`models::beat_time`): every dance re-timed to the split's median
     /// tempo (after the bins are fitted on the dances as danced); the model then serves so.
     pub beat_time: bool,
+    /// Windows at tempo factors in `[min_tempo, max_tempo]` and mirrored (`train::augment`; issue
+    /// 25): one figure heard at many tempi. The bins stay those fitted on the dances as danced.
+    pub min_tempo: f64,
+    pub max_tempo: f64,
+    pub mirror: bool,
 }
 
 impl Default for Options {
@@ -73,6 +79,9 @@ impl Default for Options {
             stall_reach: 0.22,
             seed: 2020,
             beat_time: false,
+            min_tempo: 1.0,
+            max_tempo: 1.0,
+            mirror: false,
         }
     }
 }
@@ -114,7 +123,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         config.n_bins as usize,
     )?;
     let beat_time = if opts.beat_time {
-        Some(data.retime(&crate::models::train::augment::MusicLayout::tsmt())?)
+        Some(data.retime(&MusicLayout::tsmt())?)
     } else {
         None
     };
@@ -122,6 +131,14 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         seqs.iter().map(|s| bins.tokens(&s.poses)).collect()
     };
     let (train_tokens, test_tokens) = (tokens(&data.train_raw), tokens(&data.test_raw));
+    let augment = Augment {
+        min_tempo: opts.min_tempo,
+        max_tempo: opts.max_tempo,
+        mirror: opts.mirror,
+    };
+    // Dances already re-timed by `retime` in beat time: the windows draw only the augmentation.
+    let windows =
+        (augment != Augment::NONE).then(|| Windows::new(&data, MusicLayout::tsmt(), augment));
     let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
         Tsmt::new(p, config.clone())
     })?;
@@ -146,8 +163,11 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         speeds[i][f + len - tail..f + len].iter().sum::<f32>() / tail as f32
             >= opts.min_window_speed as f32
     };
-    let all = window_starts(&data.train, len, opts.stride, 0).len();
-    let kept = window_starts(&data.train, len, opts.stride, 0)
+    // An augmented window may span more source frames (the fastest tempo).
+    let source_len = windows.as_ref().map_or(len, |w| w.source_len(len));
+    let moving = |&(i, f): &(usize, usize)| moving(&(i, f + source_len - len));
+    let all = window_starts(&data.train, source_len, opts.stride, 0).len();
+    let kept = window_starts(&data.train, source_len, opts.stride, 0)
         .iter()
         .filter(|w| moving(w))
         .count();
@@ -205,7 +225,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         2,
         |epoch, opt, deadline| {
             let starts: Vec<(usize, usize)> =
-                window_starts(train, len, opts.stride, opts.seed + epoch as u64)
+                window_starts(train, source_len, opts.stride, opts.seed + epoch as u64)
                     .into_iter()
                     .filter(|w| moving(w))
                     .collect();
@@ -216,13 +236,31 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
             let (mut total, mut batches) = (0.0, 0);
             for chunk in starts.chunks(opts.batch) {
-                let target = token_batch(&train_tokens, chunk, len);
+                let (target, music) = match &windows {
+                    None => (
+                        token_batch(&train_tokens, chunk, len),
+                        batch_tensor(train, chunk, len, |s| &s.music, Device::Cpu),
+                    ),
+                    Some(w) => {
+                        let (mut tokens, mut music) = (Vec::new(), Vec::new());
+                        for &(i, f0) in chunk {
+                            let (m, p) = w.raw_window(i, f0, len, &mut rng)?;
+                            tokens.push(bins.tokens(&p));
+                            music.push(crate::models::to_tensor(&data.music_norm.normalize(&m)?));
+                        }
+                        let windows: Vec<(usize, usize)> =
+                            (0..tokens.len()).map(|k| (k, 0)).collect();
+                        (
+                            token_batch(&tokens, &windows, len),
+                            Tensor::stack(&music, 0),
+                        )
+                    }
+                };
                 let input = if opts.input_noise_bins > 0.0 {
-                    noised(&train_tokens, chunk, len, config.n_bins, &noise, &mut rng)
+                    noised(&target, config.n_bins, &noise, &mut rng)
                 } else {
                     target.shallow_clone()
                 };
-                let music = batch_tensor(train, chunk, len, |s| &s.music, Device::Cpu);
                 let start = rng.gen_range(0..MAX_POSITION - len as i64);
                 let loss = if opts.loss_frames < 1.0 {
                     let n = len - 1;
@@ -275,7 +313,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             Ok(EpochResult {
                 train_loss: total / batches.max(1) as f64,
                 test_loss,
-                note: format!("steps={steps} (cross-entropy, nats per coordinate)"),
+                note: format!(
+                    "steps={steps} tempo={}..{} mirror={} (cross-entropy, nats per coordinate)",
+                    opts.min_tempo, opts.max_tempo, opts.mirror
+                ),
             })
         },
         |t| file_of(t, steps_cell.get()),
@@ -316,26 +357,12 @@ fn token_batch(tokens: &[Array2<i64>], starts: &[(usize, usize)], len: usize) ->
     Tensor::stack(&parts, 0)
 }
 
-/// [`token_batch`] with rounded Gaussian noise on every token, clamped to the bins.
-fn noised(
-    tokens: &[Array2<i64>],
-    starts: &[(usize, usize)],
-    len: usize,
-    n_bins: i64,
-    noise: &Normal<f64>,
-    rng: &mut StdRng,
-) -> Tensor {
-    let parts: Vec<Tensor> = starts
-        .iter()
-        .map(|&(i, f)| {
-            let m = tokens[i].slice(s![f..f + len, ..]);
-            let (r, c) = m.dim();
-            let v: Vec<i64> = m
-                .iter()
-                .map(|&b| (b + noise.sample(rng).round() as i64).clamp(0, n_bins - 1))
-                .collect();
-            Tensor::from_slice(&v).view([r as i64, c as i64])
-        })
+/// `tokens` with rounded Gaussian noise on every token, clamped to the bins.
+fn noised(tokens: &Tensor, n_bins: i64, noise: &Normal<f64>, rng: &mut StdRng) -> Tensor {
+    let v: Vec<i64> = Vec::<i64>::try_from(tokens.flatten(0, -1))
+        .expect("int64 tokens")
+        .into_iter()
+        .map(|b| (b + noise.sample(rng).round() as i64).clamp(0, n_bins - 1))
         .collect();
-    Tensor::stack(&parts, 0)
+    Tensor::from_slice(&v).view(tokens.size().as_slice())
 }

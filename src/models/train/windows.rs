@@ -91,9 +91,37 @@ impl<'a> Windows<'a> {
             + 1
     }
 
+    /// One window of `len` frames from frame `f0` of train dance `i`, at a drawn tempo and
+    /// mirroring: its music and pose rows as the split holds them (not normalised). The start
+    /// must leave [`Windows::source_len`] frames.
+    pub fn raw_window(
+        &self,
+        i: usize,
+        f0: usize,
+        len: usize,
+        rng: &mut impl rand::Rng,
+    ) -> Result<(ndarray::Array2<f32>, ndarray::Array2<f32>), TrainError> {
+        let seq = &self.data.train_raw[i];
+        let (f, mirror) = self.augment.draw(rng);
+        let f = f * self.dance_factor(i);
+        let m = augment::stretch_music(seq.music.view(), f0, len, f, &self.layout);
+        let mut p = augment::stretch_poses(seq.poses.view(), f0, len, f);
+        if mirror {
+            if p.ncols() != crate::motion::repr::FEATURE_DIM {
+                return Err(TrainError::InvalidOption(format!(
+                    "mirroring needs the {}-column pose rows, not {}",
+                    crate::motion::repr::FEATURE_DIM,
+                    p.ncols()
+                )));
+            }
+            augment::mirror_poses(&mut p, &self.partner);
+        }
+        Ok((m, p))
+    }
+
     /// `[b, len, ·]` normalised music and poses of the windows starting at `starts` (sequence,
-    /// frame) of the raw train split, each at its own drawn tempo and mirroring. The starts must
-    /// leave [`augment::Augment::source_len`] frames.
+    /// frame) of the raw train split, each at its own drawn tempo and mirroring
+    /// ([`Windows::raw_window`]).
     pub fn train_batch(
         &self,
         starts: &[(usize, usize)],
@@ -105,21 +133,7 @@ impl<'a> Windows<'a> {
             Vec::with_capacity(starts.len()),
         );
         for &(i, f0) in starts {
-            let seq = &self.data.train_raw[i];
-            let (f, mirror) = self.augment.draw(rng);
-            let f = f * self.dance_factor(i);
-            let m = augment::stretch_music(seq.music.view(), f0, len, f, &self.layout);
-            let mut p = augment::stretch_poses(seq.poses.view(), f0, len, f);
-            if mirror {
-                if p.ncols() != crate::motion::repr::FEATURE_DIM {
-                    return Err(TrainError::InvalidOption(format!(
-                        "mirroring needs the {}-column pose rows, not {}",
-                        crate::motion::repr::FEATURE_DIM,
-                        p.ncols()
-                    )));
-                }
-                augment::mirror_poses(&mut p, &self.partner);
-            }
+            let (m, p) = self.raw_window(i, f0, len, rng)?;
             music.push(crate::models::to_tensor(
                 &self.data.music_norm.normalize(&m)?,
             ));
