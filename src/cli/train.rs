@@ -184,6 +184,9 @@ args_into! {
         /// Weight of the same L1 over the elbows and wrists relative to the spine alone.
         #[arg(long, default_value_t = train::dance_revolution::Options::default().arm_weight)]
         arm_weight: f64,
+        /// Train only the read-out's rows of the elbows and wrists, every other weight frozen.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().arm_readout_only, action = clap::ArgAction::Set)]
+        arm_readout_only: bool,
     }
 }
 

@@ -583,6 +583,9 @@ pub struct Curriculum {
     /// Weight of the arms' spectral loss against the spine (`train::spectral`); 0: none.
     #[serde(default)]
     pub arm_weight: f64,
+    /// The run trained only the read-out's arm rows (`choreo train … --arm-readout-only`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub arm_readout_only: bool,
 }
 
 /// `model.json`: the configuration, normalisation and training record.

@@ -54,6 +54,10 @@ pub struct Options {
     /// Weight of the spectral loss of the elbows and wrists relative to the spine
     /// (`spectral::relative_spectral_loss`): the whole-body term let seed 1 keep its ballroom hold.
     pub arm_weight: f64,
+    /// Train only the read-out's rows of the elbows and wrists (every other weight frozen): the
+    /// arms learn to move from the state the LSTM already has, whose timing the tempo test checks
+    /// (a whole-network arm fine-tune moved the steps onto other harmonics of the beat).
+    pub arm_readout_only: bool,
 }
 
 impl Default for Options {
@@ -80,6 +84,7 @@ impl Default for Options {
             beat_time: false,
             spectral_weight: 0.0,
             arm_weight: 0.0,
+            arm_readout_only: false,
         }
     }
 }
@@ -129,6 +134,13 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
         DanceRevolution::new(p, config.clone())
     })?;
+    // Gradient masks (1 where a weight trains), applied after each backward pass; Adam's moments
+    // of a masked weight stay 0, so it never moves.
+    let masks = if opts.arm_readout_only {
+        arm_readout_masks(&trainer.vs, config.pose_dim)?
+    } else {
+        Vec::new()
+    };
     let test = &data.test;
     // Windows hold window + 1 frames: frame 0 is only the decoder's first input.
     let len = opts.window + 1;
@@ -139,6 +151,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         q_max: opts.q_max,
         spectral_weight: opts.spectral_weight,
         arm_weight: opts.arm_weight,
+        arm_readout_only: opts.arm_readout_only,
     };
     let epochs = opts.first_epoch..opts.first_epoch + opts.epochs;
     let weights = LossWeights {
@@ -167,7 +180,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             for (bi, chunk) in starts.chunks(opts.batch).enumerate() {
                 let (music, poses) = windows.train_batch(chunk, len, &mut rng)?;
                 let loss = window_loss(&model, &music, &poses, opts.p, q, opts.seed ^ ((epoch * 100_003 + bi) as u64), true, opts.random_positions, &weights);
-                opt.backward_step_clip(&loss, 1.0);
+                masked_step(opt, &loss, &masks);
                 total += loss.double_value(&[]);
                 batches += 1;
             }
@@ -188,8 +201,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 train_loss: total / batches as f64,
                 test_loss,
                 note: format!(
-                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={} spectral_weight={} arm_weight={} beat_time={:?}",
-                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight, opts.spectral_weight, opts.arm_weight, beat_time.map(|c| c.bpm)
+                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={} spectral_weight={} arm_weight={} arm_readout_only={} beat_time={:?}",
+                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight, opts.spectral_weight, opts.arm_weight, opts.arm_readout_only, beat_time.map(|c| c.bpm)
                 ),
             })
         },
@@ -269,4 +282,110 @@ fn window_loss(
         ) * weights.arms;
     }
     loss
+}
+
+/// One optimiser step on `loss`, its gradients multiplied by `masks` first (none: every weight
+/// trains), clipped to norm 1 after masking.
+fn masked_step(opt: &mut tch::nn::Optimizer, loss: &Tensor, masks: &[(Tensor, Tensor)]) {
+    if masks.is_empty() {
+        opt.backward_step_clip(loss, 1.0);
+        return;
+    }
+    opt.zero_grad();
+    loss.backward();
+    tch::no_grad(|| {
+        for (var, mask) in masks {
+            let _ = var.grad().g_mul_(mask);
+        }
+    });
+    opt.clip_grad_norm(1.0);
+    opt.step();
+}
+
+/// Every variable with its gradient mask for `--arm-readout-only`: ones on the read-out's rows (and
+/// bias entries) of the columns of `metrics::musicality::ARM_JOINTS`, zeros everywhere else.
+fn arm_readout_masks(
+    vs: &tch::nn::VarStore,
+    pose_dim: i64,
+) -> Result<Vec<(Tensor, Tensor)>, TrainError> {
+    let mut rows = vec![0f32; pose_dim as usize];
+    for &j in &crate::metrics::musicality::ARM_JOINTS {
+        rows[3 * j..3 * j + 3].fill(1.0);
+    }
+    let rows = Tensor::from_slice(&rows);
+    let mut found = 0;
+    let masks = vs
+        .variables()
+        .into_iter()
+        .map(|(name, var)| {
+            let mask = match name.as_str() {
+                "decoder.readout.weight" => {
+                    found += 1;
+                    rows.view([pose_dim, 1])
+                        .expand(var.size(), false)
+                        .contiguous()
+                }
+                "decoder.readout.bias" => {
+                    found += 1;
+                    rows.shallow_clone()
+                }
+                _ => var.zeros_like(),
+            };
+            (var, mask)
+        })
+        .collect();
+    if found != 2 {
+        return Err(TrainError::InvalidOption(
+            "--arm-readout-only: the decoder's read-out was not found".into(),
+        ));
+    }
+    Ok(masks)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use tch::nn::OptimizerConfig;
+
+    #[test]
+    fn arm_readout_only_moves_the_arms_rows_of_the_readout_and_nothing_else() {
+        let vs = tch::nn::VarStore::new(Device::Cpu);
+        let _model = DanceRevolution::new(&vs.root(), Config::tiny(8, 73));
+        let before: std::collections::HashMap<String, Tensor> = vs
+            .variables()
+            .into_iter()
+            .map(|(k, v)| (k, v.copy()))
+            .collect();
+        let masks = arm_readout_masks(&vs, 73).unwrap();
+        let mut opt = tch::nn::Adam::default().build(&vs, 1e-2).unwrap();
+        // A loss with a gradient on every weight.
+        let loss = vs
+            .variables()
+            .values()
+            .map(|v| (v - 0.5).square().sum(Kind::Float))
+            .fold(Tensor::zeros([], (Kind::Float, Device::Cpu)), |a, b| a + b);
+        masked_step(&mut opt, &loss, &masks);
+        let arm_rows: Vec<i64> = crate::metrics::musicality::ARM_JOINTS
+            .iter()
+            .flat_map(|&j| (3 * j as i64)..(3 * j as i64 + 3))
+            .collect();
+        for (name, v) in vs.variables() {
+            let moved = (&v - &before[&name]).abs().gt(0.0);
+            let moved_rows: Vec<i64> = if v.dim() == 2 {
+                Vec::<bool>::try_from(moved.any_dim(1, false)).unwrap()
+            } else {
+                Vec::<bool>::try_from(moved.flatten(0, -1)).unwrap()
+            }
+            .iter()
+            .enumerate()
+            .filter(|(_, &m)| m)
+            .map(|(i, _)| i as i64)
+            .collect();
+            if name.starts_with("decoder.readout.") {
+                assert_eq!(moved_rows, arm_rows, "{name}");
+            } else {
+                assert!(moved_rows.is_empty(), "{name} moved");
+            }
+        }
+    }
 }
