@@ -274,3 +274,49 @@ fn keypose_transformer_turns_its_waltz_and_its_arms_with_it() {
     let arms = choreo::metrics::musicality::arm_speed_m_s(motion.positions.view(), motion.fps);
     assert!(arms >= 0.43, "arms {arms:.3} m/s against the spine");
 }
+
+/// `choreo train tsmt --min-tempo … --max-tempo … --mirror true` (issue 25) trains on windows
+/// re-timed and mirrored from the real train split: one tiny epoch gives finite losses, and the
+/// folder it writes is served and dances the song.
+#[test]
+fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
+    use choreo::models::train::{tsmt, CommonOptions};
+    let data =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/dance-with-melody");
+    assert!(
+        data.is_dir(),
+        "{} is missing: the trainer reads the real train split (CI={})",
+        data.display(),
+        std::env::var("CI").unwrap_or_default()
+    );
+    let out = tempfile::tempdir().unwrap();
+    let opts = tsmt::Options {
+        common: CommonOptions {
+            data,
+            out: Some(out.path().to_path_buf()),
+            threads: 1,
+            tiny: true,
+            ..CommonOptions::default()
+        },
+        epochs: 1,
+        min_tempo: 0.8,
+        max_tempo: 1.25,
+        mirror: true,
+        ..tsmt::Options::default()
+    };
+    let logs = tsmt::train(&opts).expect("training runs");
+    assert_eq!(logs.len(), 1);
+    let log = &logs[0];
+    assert!(
+        log.train_loss.is_finite() && log.test_loss.is_some_and(f64::is_finite),
+        "{log:?}"
+    );
+    assert!(
+        log.note.contains("tempo=0.8..1.25 mirror=true"),
+        "{}",
+        log.note
+    );
+    let served = choreo::models::tsmt::Served::load(out.path()).expect("the folder loads");
+    let motion = dance(&served, &GenerateRequest::plain(song(), 1));
+    assert!(motion.positions.iter().all(|v| v.is_finite()));
+}
