@@ -1,7 +1,7 @@
 //! `choreo train tsmt`: cross-entropy over the discretised poses of every step of a window in
 //! parallel (paper §3.3), Adam, on the train split of dance-with-melody. Writes the bins (fitted
 //! on the train split) into `model.json` and a few real seed clips beside the weights.
-use ndarray::{s, Array2};
+use ndarray::{s, Array2, ArrayView2};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -245,15 +245,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                         let (mut tokens, mut music) = (Vec::new(), Vec::new());
                         for &(i, f0) in chunk {
                             let (m, p) = w.raw_window(i, f0, len, &mut rng)?;
-                            tokens.push(bins.tokens(&p));
+                            tokens.push(token_tensor(bins.tokens(&p).view()));
                             music.push(crate::models::to_tensor(&data.music_norm.normalize(&m)?));
                         }
-                        let windows: Vec<(usize, usize)> =
-                            (0..tokens.len()).map(|k| (k, 0)).collect();
-                        (
-                            token_batch(&tokens, &windows, len),
-                            Tensor::stack(&music, 0),
-                        )
+                        (Tensor::stack(&tokens, 0), Tensor::stack(&music, 0))
                     }
                 };
                 let input = if opts.input_noise_bins > 0.0 {
@@ -348,13 +343,15 @@ fn local_speed(poses: &Array2<f32>, fps: f32) -> Vec<f32> {
 fn token_batch(tokens: &[Array2<i64>], starts: &[(usize, usize)], len: usize) -> Tensor {
     let parts: Vec<Tensor> = starts
         .iter()
-        .map(|&(i, f)| {
-            let m = tokens[i].slice(s![f..f + len, ..]);
-            let (r, c) = m.dim();
-            Tensor::from_slice(&m.iter().copied().collect::<Vec<i64>>()).view([r as i64, c as i64])
-        })
+        .map(|&(i, f)| token_tensor(tokens[i].slice(s![f..f + len, ..])))
         .collect();
     Tensor::stack(&parts, 0)
+}
+
+/// One token window `[len, coords]` (int64).
+fn token_tensor(m: ArrayView2<'_, i64>) -> Tensor {
+    let (r, c) = m.dim();
+    Tensor::from_slice(&m.iter().copied().collect::<Vec<i64>>()).view([r as i64, c as i64])
 }
 
 /// `tokens` with rounded Gaussian noise on every token, clamped to the bins.
