@@ -187,6 +187,17 @@ args_into! {
         /// Train only the read-out's rows of the elbows and wrists, every other weight frozen.
         #[arg(long, default_value_t = train::dance_revolution::Options::default().arm_readout_only, action = clap::ArgAction::Set)]
         arm_readout_only: bool,
+        /// Hidden width of an arm head: the elbows and wrists read out beside the paper's read-out
+        /// and never fed back to the LSTM (0: none). Its last layer starts at zero.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().arm_head)]
+        arm_head: i64,
+        /// Train only the arm head, every other weight frozen (with `--init`: the network's own
+        /// motion stays exactly the earlier weights').
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().arm_head_only, action = clap::ArgAction::Set)]
+        arm_head_only: bool,
+        /// With `--arm-head-only`: how many seeds (101, 102, …) each train song is danced from.
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().rollout_seeds)]
+        rollout_seeds: u64,
     }
 }
 

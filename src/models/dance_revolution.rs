@@ -58,6 +58,14 @@ pub struct Config {
     /// trained before it read the paper's 438 columns only.
     #[serde(default)]
     pub beat_clock: bool,
+    /// Hidden width of the arm head ([`ArmHead`], issue 25; not in the paper); 0: none, as every
+    /// run before it.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub arm_head: i64,
+}
+
+fn is_zero(v: &i64) -> bool {
+    *v == 0
 }
 
 impl Config {
@@ -75,6 +83,7 @@ impl Config {
             lstm_layers: 3,
             dropout: 0.1,
             beat_clock: false,
+            arm_head: 0,
         }
     }
 
@@ -92,6 +101,7 @@ impl Config {
             lstm_layers: 2,
             dropout: 0.0,
             beat_clock: false,
+            arm_head: 0,
         }
     }
 }
@@ -263,6 +273,63 @@ impl MusicEncoder {
 pub struct DanceDecoder {
     lstm: Lstm,
     readout: nn::Linear,
+    arm_head: Option<ArmHead>,
+}
+
+/// Not in the paper (issue 25): a second read-out of the elbows and wrists from `[h_i; z_i]`, added
+/// to the paper's read-out in what the decoder emits but never fed back, so the LSTM steps exactly
+/// as it does without it: the legs and their timing (what the tempo test checks) stay the trained
+/// network's own. Its last layer starts at zero, so a head added to trained weights changes
+/// nothing until it trains. Training only the paper's read-out rows of the arms could not lift the
+/// ballroom hold (0.32–0.35 m/s on the test waltzes, where the slowest real dance moves 0.43), and
+/// its outputs, fed back, moved the other dances' timing.
+#[derive(Debug)]
+pub struct ArmHead {
+    hidden: nn::Linear,
+    out: nn::Linear,
+    /// `[arm columns, pose_dim]`: one-hot, places the head's columns in the pose vector.
+    place: Tensor,
+}
+
+impl ArmHead {
+    fn new(p: nn::Path, c: &Config) -> Self {
+        let columns: Vec<i64> = crate::metrics::musicality::ARM_JOINTS
+            .iter()
+            .flat_map(|&j| (3 * j as i64)..(3 * j as i64 + 3))
+            .collect();
+        assert!(
+            columns.iter().all(|&k| k < c.pose_dim),
+            "the arm head needs the full pose vector"
+        );
+        let n = columns.len() as i64;
+        let place = Tensor::zeros([n, c.pose_dim], (Kind::Float, p.device()));
+        for (i, &k) in columns.iter().enumerate() {
+            let _ = place.get(i as i64).get(k).fill_(1.0);
+        }
+        let zero = nn::LinearConfig {
+            ws_init: nn::Init::Const(0.0),
+            bs_init: Some(nn::Init::Const(0.0)),
+            bias: true,
+        };
+        Self {
+            hidden: nn::linear(
+                &p / "hidden",
+                c.hidden + c.d_z,
+                c.arm_head,
+                Default::default(),
+            ),
+            out: nn::linear(&p / "out", c.arm_head, n, zero),
+            place,
+        }
+    }
+
+    /// `[b, t, pose_dim]`: the head's offsets in the arm columns, zero elsewhere.
+    fn forward(&self, hz: &Tensor) -> Tensor {
+        hz.apply(&self.hidden)
+            .tanh()
+            .apply(&self.out)
+            .matmul(&self.place)
+    }
 }
 
 impl DanceDecoder {
@@ -275,6 +342,7 @@ impl DanceDecoder {
                 c.pose_dim,
                 Default::default(),
             ),
+            arm_head: (c.arm_head > 0).then(|| ArmHead::new(&p / "arm_head", c)),
         }
     }
 
@@ -285,12 +353,37 @@ impl DanceDecoder {
     }
 
     /// Runs `inputs` `[b, t, pose]` (the poses *before* each output frame) against `z` `[b, t, d_z]`.
-    fn run(&self, inputs: &Tensor, z: &Tensor, state: &mut LstmState) -> Tensor {
+    /// Returns the paper's read-out, which the next step is fed, and the pose emitted (the same
+    /// plus the [`ArmHead`]'s offsets where there is one).
+    fn run(&self, inputs: &Tensor, z: &Tensor, state: &mut LstmState) -> (Tensor, Tensor) {
+        let (fed, emitted, _) = self.run_with_input(inputs, z, state);
+        (fed, emitted)
+    }
+
+    /// [`Self::run`], also returning `[h; z]`, what the read-outs read.
+    fn run_with_input(
+        &self,
+        inputs: &Tensor,
+        z: &Tensor,
+        state: &mut LstmState,
+    ) -> (Tensor, Tensor, Tensor) {
         let t = inputs.size()[1];
         let hs: Vec<Tensor> = (0..t)
             .map(|i| self.lstm.step(&inputs.select(1, i), state))
             .collect();
-        Tensor::cat(&[Tensor::stack(&hs, 1), z.shallow_clone()], 2).apply(&self.readout)
+        let hz = Tensor::cat(&[Tensor::stack(&hs, 1), z.shallow_clone()], 2);
+        let fed = hz.apply(&self.readout);
+        let emitted = match self.arm_offsets(&hz) {
+            Some(offsets) => &fed + offsets,
+            None => fed.shallow_clone(),
+        };
+        (fed, emitted, hz)
+    }
+
+    /// The [`ArmHead`]'s offsets `[b, t, pose]` for read-out inputs `hz` `[b, t, hidden + d_z]`;
+    /// `None` without a head.
+    pub fn arm_offsets(&self, hz: &Tensor) -> Option<Tensor> {
+        self.arm_head.as_ref().map(|head| head.forward(hz))
     }
 }
 
@@ -335,27 +428,30 @@ impl DanceRevolution {
         let (b, t, _) = music.size3().expect("music is [b, t, music_dim]");
         let z = self.encoder.forward(music, start, train);
         let mut state = self.decoder.initial_state(b, seed, music.device());
-        let mut outputs: Vec<Tensor> = Vec::new();
+        // What the decoder emitted, and what it was fed next (they differ by the arm head).
+        let (mut outputs, mut fed): (Vec<Tensor>, Vec<Tensor>) = (Vec::new(), Vec::new());
         let mut i = 0;
         while i < t {
             // Ground-truth segment: inputs are the true poses before frames i..i+p.
             let len = p.min(t - i);
             if len > 0 {
-                outputs.push(self.decoder.run(
-                    &poses.narrow(1, i, len),
-                    &z.narrow(1, i, len),
-                    &mut state,
-                ));
+                let (f, e) =
+                    self.decoder
+                        .run(&poses.narrow(1, i, len), &z.narrow(1, i, len), &mut state);
+                fed.push(f);
+                outputs.push(e);
                 i += len;
             }
             // Auto-conditioned segment: each input is the previous prediction.
             let free = if p == 0 { t - i } else { q.min(t - i) };
             for _ in 0..free {
-                let prev = match outputs.last() {
+                let prev = match fed.last() {
                     Some(y) => y.narrow(1, -1, 1),
                     None => poses.narrow(1, 0, 1),
                 };
-                outputs.push(self.decoder.run(&prev, &z.narrow(1, i, 1), &mut state));
+                let (f, e) = self.decoder.run(&prev, &z.narrow(1, i, 1), &mut state);
+                fed.push(f);
+                outputs.push(e);
                 i += 1;
             }
         }
@@ -379,7 +475,48 @@ impl DanceRevolution {
         guard: Option<(&StallGuard, &NormStats)>,
         warm_up: i64,
         report_every: i64,
+        on_step: impl FnMut(f32) -> bool,
+    ) -> Option<Tensor> {
+        self.decode_inner(
+            z,
+            seed,
+            seed_poses,
+            guard,
+            warm_up,
+            report_every,
+            on_step,
+            None,
+        )
+    }
+
+    /// The network dancing alone as served (no seed poses): the read-out it fed itself `[1, n,
+    /// pose]` and what the read-outs read at each frame, `[h; z]` `[1, n, hidden + d_z]`. What
+    /// the arm head trains on (`choreo train dance-revolution --arm-head-only true`): the states
+    /// a served dance is in, which windows of the curriculum never reach.
+    pub fn rollout(
+        &self,
+        z: &Tensor,
+        seed: u64,
+        guard: Option<(&StallGuard, &NormStats)>,
+        warm_up: i64,
+    ) -> (Tensor, Tensor) {
+        let mut steps = Vec::new();
+        let _ = self.decode_inner(z, seed, None, guard, warm_up, 0, |_| true, Some(&mut steps));
+        let (fed, hz): (Vec<Tensor>, Vec<Tensor>) = steps.into_iter().unzip();
+        (Tensor::cat(&fed, 1), Tensor::cat(&hz, 1))
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn decode_inner(
+        &self,
+        z: &Tensor,
+        seed: u64,
+        seed_poses: Option<&Tensor>,
+        guard: Option<(&StallGuard, &NormStats)>,
+        warm_up: i64,
+        report_every: i64,
         mut on_step: impl FnMut(f32) -> bool,
+        mut sink: Option<&mut Vec<(Tensor, Tensor)>>,
     ) -> Option<Tensor> {
         let n = z.size()[1];
         let device = z.device();
@@ -393,7 +530,7 @@ impl DanceRevolution {
             // Warm-up: the decoder starts from the mean pose, a standing stance it leaves only
             // slowly; run it over the song's opening and keep only its state and last pose.
             for i in 0..warm_up.min(n) {
-                let y = self.decoder.run(&prev, &z.narrow(1, i, 1), &mut state);
+                let (y, _) = self.decoder.run(&prev, &z.narrow(1, i, 1), &mut state);
                 if let Some(w) = watch.as_mut() {
                     w.observe(&y, &mut state);
                 }
@@ -411,12 +548,17 @@ impl DanceRevolution {
             out.push(seg);
         }
         for i in seeded..n {
-            let y = self.decoder.run(&prev, &z.narrow(1, i, 1), &mut state);
+            let (y, emitted, hz) =
+                self.decoder
+                    .run_with_input(&prev, &z.narrow(1, i, 1), &mut state);
+            if let Some(sink) = sink.as_mut() {
+                sink.push((y.shallow_clone(), hz));
+            }
             if let Some(w) = watch.as_mut() {
                 w.observe(&y, &mut state);
             }
-            prev = y.shallow_clone();
-            out.push(y);
+            prev = y;
+            out.push(emitted);
             if report_every > 0
                 && (i + 1) % report_every == 0
                 && !on_step((i + 1) as f32 / n as f32)
@@ -586,6 +728,9 @@ pub struct Curriculum {
     /// The run trained only the read-out's arm rows (`choreo train … --arm-readout-only`).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub arm_readout_only: bool,
+    /// The run trained only the arm head (`choreo train … --arm-head-only`).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub arm_head_only: bool,
 }
 
 /// `model.json`: the configuration, normalisation and training record.
@@ -710,6 +855,63 @@ mod tests {
         let vs = nn::VarStore::new(Device::Cpu);
         let m = DanceRevolution::new(&vs.root(), Config::tiny(6, 5));
         (vs, m)
+    }
+
+    /// The arm head is never fed back: a trained head changes the emitted elbows and wrists and no
+    /// other column of any frame (a head fed back would move the legs of every later frame). And
+    /// weights saved without a head (`--init`) load into a network with one that dances exactly as
+    /// before, the head's last layer being zero.
+    #[test]
+    fn arm_head_moves_the_arms_alone_and_starts_at_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("plain.safetensors");
+        tch::manual_seed(3);
+        let plain_vs = nn::VarStore::new(Device::Cpu);
+        let plain = DanceRevolution::new(&plain_vs.root(), Config::tiny(6, 73));
+        plain_vs.save(&path).unwrap();
+        let headed_vs = nn::VarStore::new(Device::Cpu);
+        let headed = DanceRevolution::new(
+            &headed_vs.root(),
+            Config {
+                arm_head: 8,
+                ..Config::tiny(6, 73)
+            },
+        );
+        super::super::train::load_widened(&headed_vs, &path).unwrap();
+        let x = Tensor::randn([1, 40, 6], (Kind::Float, Device::Cpu));
+        let dance = |m: &DanceRevolution| {
+            let z = m.encoder.forward(&x, 0, false);
+            m.decode(&z, 5, None, None, 4, 0, |_| true).unwrap()
+        };
+        let before = dance(&plain);
+        let d = (dance(&headed) - &before).abs().max().double_value(&[]);
+        assert_eq!(d, 0.0, "an untrained head moved the dance by {d}");
+        tch::no_grad(|| {
+            for (name, mut v) in headed_vs.variables() {
+                if name.starts_with("decoder.arm_head.") {
+                    let _ = v.copy_(&(v.randn_like() * 0.5));
+                }
+            }
+        });
+        let after = dance(&headed);
+        let arm_columns: Vec<i64> = crate::metrics::musicality::ARM_JOINTS
+            .iter()
+            .flat_map(|&j| (3 * j as i64)..(3 * j as i64 + 3))
+            .collect();
+        let moved: Vec<i64> = Vec::<bool>::try_from(
+            (after - &before)
+                .abs()
+                .gt(0.0)
+                .any_dim(1, false)
+                .squeeze_dim(0),
+        )
+        .unwrap()
+        .iter()
+        .enumerate()
+        .filter(|(_, &m)| m)
+        .map(|(i, _)| i as i64)
+        .collect();
+        assert_eq!(moved, arm_columns);
     }
 
     #[test]

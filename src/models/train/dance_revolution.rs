@@ -58,6 +58,14 @@ pub struct Options {
     /// arms learn to move from the state the LSTM already has, whose timing the tempo test checks
     /// (a whole-network arm fine-tune moved the steps onto other harmonics of the beat).
     pub arm_readout_only: bool,
+    /// Hidden width of the decoder's arm head (`dance_revolution::ArmHead`: elbows and wrists read
+    /// out beside the paper's read-out, never fed back); 0: none.
+    pub arm_head: i64,
+    /// Train only the arm head, every other weight frozen: the network's own motion, timing and
+    /// legs stay exactly those of `--init`.
+    pub arm_head_only: bool,
+    /// With `--arm-head-only`: how many seeds each train song is danced from.
+    pub rollout_seeds: u64,
 }
 
 impl Default for Options {
@@ -85,6 +93,9 @@ impl Default for Options {
             spectral_weight: 0.0,
             arm_weight: 0.0,
             arm_readout_only: false,
+            arm_head: 0,
+            arm_head_only: false,
+            rollout_seeds: 3,
         }
     }
 }
@@ -111,8 +122,14 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         music_dim: data.music_norm.dim() as i64,
         pose_dim: data.pose_norm.dim() as i64,
         beat_clock: opts.beat_clock,
+        arm_head: opts.arm_head,
         ..base
     };
+    if opts.arm_head_only && (opts.arm_head == 0 || opts.arm_readout_only) {
+        return Err(TrainError::InvalidOption(
+            "--arm-head-only needs --arm-head N (N > 0) and not --arm-readout-only".into(),
+        ));
+    }
     let augment = Augment {
         min_tempo: opts.min_tempo,
         max_tempo: opts.max_tempo,
@@ -138,8 +155,22 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     // of a masked weight stay 0, so it never moves.
     let masks = if opts.arm_readout_only {
         arm_readout_masks(&trainer.vs, config.pose_dim)?
+    } else if opts.arm_head_only {
+        arm_head_masks(&trainer.vs)?
     } else {
         Vec::new()
+    };
+    // The arm head trains on the frozen network's own whole-song dances (`train::arm_head`).
+    let head_data = if opts.arm_head_only {
+        Some(super::arm_head::HeadData::collect(
+            &model,
+            &data.train,
+            &data.test,
+            &data.pose_norm,
+            opts.rollout_seeds,
+        )?)
+    } else {
+        None
     };
     let test = &data.test;
     // Windows hold window + 1 frames: frame 0 is only the decoder's first input.
@@ -152,6 +183,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         spectral_weight: opts.spectral_weight,
         arm_weight: opts.arm_weight,
         arm_readout_only: opts.arm_readout_only,
+        arm_head_only: opts.arm_head_only,
     };
     let epochs = opts.first_epoch..opts.first_epoch + opts.epochs;
     let weights = LossWeights {
@@ -170,6 +202,14 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         epochs,
         5,
         |epoch, opt, _| {
+            if let Some(h) = &head_data {
+                let (train_loss, test_loss, arms) = h.epoch(&model, opt, &masks, opts.batch, opts.seed ^ epoch as u64, &weights.pose_std, opts.arm_weight);
+                return Ok(EpochResult {
+                    train_loss,
+                    test_loss,
+                    note: format!("arm head on the network's own dances: arm_weight={} arm_head={}; {arms}", opts.arm_weight, opts.arm_head),
+                });
+            }
             let q = curriculum_q(opts.lambda, epoch).min(opts.q_max);
             let starts = window_starts(&data.train_raw, windows.source_len(len), opts.stride, opts.seed + epoch as u64);
             if starts.is_empty() {
@@ -201,8 +241,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 train_loss: total / batches as f64,
                 test_loss,
                 note: format!(
-                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={} spectral_weight={} arm_weight={} arm_readout_only={} beat_time={:?}",
-                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight, opts.spectral_weight, opts.arm_weight, opts.arm_readout_only, beat_time.map(|c| c.bpm)
+                    "p={} q={q} random_positions={} beat_clock={} tempo={}..{} mirror={} velocity_weight={} spectral_weight={} arm_weight={} arm_readout_only={} arm_head={} arm_head_only={} beat_time={:?}",
+                    opts.p, opts.random_positions, opts.beat_clock, opts.min_tempo, opts.max_tempo, opts.mirror, opts.velocity_weight, opts.spectral_weight, opts.arm_weight, opts.arm_readout_only, opts.arm_head, opts.arm_head_only, beat_time.map(|c| c.bpm)
                 ),
             })
         },
@@ -286,7 +326,7 @@ fn window_loss(
 
 /// One optimiser step on `loss`, its gradients multiplied by `masks` first (none: every weight
 /// trains), clipped to norm 1 after masking.
-fn masked_step(opt: &mut tch::nn::Optimizer, loss: &Tensor, masks: &[(Tensor, Tensor)]) {
+pub(super) fn masked_step(opt: &mut tch::nn::Optimizer, loss: &Tensor, masks: &[(Tensor, Tensor)]) {
     if masks.is_empty() {
         opt.backward_step_clip(loss, 1.0);
         return;
@@ -295,7 +335,12 @@ fn masked_step(opt: &mut tch::nn::Optimizer, loss: &Tensor, masks: &[(Tensor, Te
     loss.backward();
     tch::no_grad(|| {
         for (var, mask) in masks {
-            let _ = var.grad().g_mul_(mask);
+            // A weight the loss never reached has no gradient (the arm head's loss reads only
+            // the head).
+            let mut grad = var.grad();
+            if grad.defined() {
+                let _ = grad.g_mul_(mask);
+            }
         }
     });
     opt.clip_grad_norm(1.0);
@@ -342,10 +387,70 @@ fn arm_readout_masks(
     Ok(masks)
 }
 
+/// Every variable with its gradient mask for `--arm-head-only`: ones on the arm head's weights,
+/// zeros everywhere else.
+pub(super) fn arm_head_masks(vs: &tch::nn::VarStore) -> Result<Vec<(Tensor, Tensor)>, TrainError> {
+    let masks: Vec<(Tensor, Tensor)> = vs
+        .variables()
+        .into_iter()
+        .map(|(name, var)| {
+            let mask = if name.starts_with("decoder.arm_head.") {
+                var.ones_like()
+            } else {
+                var.zeros_like()
+            };
+            (var, mask)
+        })
+        .collect();
+    if !vs
+        .variables()
+        .keys()
+        .any(|k| k.starts_with("decoder.arm_head."))
+    {
+        return Err(TrainError::InvalidOption(
+            "--arm-head-only: the network has no arm head".into(),
+        ));
+    }
+    Ok(masks)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use tch::nn::OptimizerConfig;
+
+    #[test]
+    fn arm_head_only_moves_the_arm_head_and_nothing_else() {
+        let vs = tch::nn::VarStore::new(Device::Cpu);
+        let _model = DanceRevolution::new(
+            &vs.root(),
+            Config {
+                arm_head: 8,
+                ..Config::tiny(8, 73)
+            },
+        );
+        let before: std::collections::HashMap<String, Tensor> = vs
+            .variables()
+            .into_iter()
+            .map(|(k, v)| (k, v.copy()))
+            .collect();
+        let masks = arm_head_masks(&vs).unwrap();
+        let mut opt = tch::nn::Adam::default().build(&vs, 1e-2).unwrap();
+        let loss = vs
+            .variables()
+            .values()
+            .map(|v| (v - 0.5).square().sum(Kind::Float))
+            .fold(Tensor::zeros([], (Kind::Float, Device::Cpu)), |a, b| a + b);
+        masked_step(&mut opt, &loss, &masks);
+        for (name, v) in vs.variables() {
+            let moved = (&v - &before[&name]).abs().max().double_value(&[]) > 0.0;
+            assert_eq!(moved, name.starts_with("decoder.arm_head."), "{name}");
+        }
+        // A network without a head has nothing to train.
+        let plain = tch::nn::VarStore::new(Device::Cpu);
+        let _ = DanceRevolution::new(&plain.root(), Config::tiny(8, 73));
+        assert!(arm_head_masks(&plain).is_err());
+    }
 
     #[test]
     fn arm_readout_only_moves_the_arms_rows_of_the_readout_and_nothing_else() {

@@ -394,10 +394,17 @@ impl Trainer {
     }
 }
 
+/// Modules added to a network after earlier weights were saved, each built so that it adds
+/// nothing until trained (dance-revolution's arm head: its last layer starts at zero).
+pub const ADDED_MODULES: [&str; 1] = ["decoder.arm_head."];
+
 /// Loads earlier weights into `vs`, where a variable may be wider than the saved one along one
 /// axis (a network given new input columns, e.g. the beat clock): the saved values fill the
 /// leading slice and the rest start at zero, so the widened network computes exactly what the
 /// earlier one did until training moves the new weights. Returns the widened variables' names.
+///
+/// A variable of a module in [`ADDED_MODULES`] that the saved weights lack keeps its own
+/// initialisation: each such module is built to add nothing until it trains.
 pub fn load_widened(vs: &nn::VarStore, path: &Path) -> Result<Vec<String>, TrainError> {
     let saved: std::collections::HashMap<String, Tensor> =
         Tensor::read_safetensors(path)?.into_iter().collect();
@@ -406,6 +413,9 @@ pub fn load_widened(vs: &nn::VarStore, path: &Path) -> Result<Vec<String>, Train
     vars.sort_by(|a, b| a.0.cmp(&b.0));
     tch::no_grad(|| -> Result<(), TrainError> {
         for (name, mut var) in vars {
+            if !saved.contains_key(&name) && ADDED_MODULES.iter().any(|m| name.starts_with(m)) {
+                continue;
+            }
             let src = saved.get(&name).ok_or_else(|| {
                 TrainError::InvalidOption(format!("--init {}: no variable {name}", path.display()))
             })?;
@@ -559,6 +569,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
     tmp.persist(path).map_err(|e| io(e.error))?;
     Ok(())
 }
+pub mod arm_head;
 pub mod augment;
 mod windows;
 pub use windows::Windows;
