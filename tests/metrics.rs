@@ -674,7 +674,27 @@ mod real_data {
         a.models = vec!["dance-revolution".into()];
         a.models_dir = crate::common_models::models_dir();
         a.songs = vec![dir.path().to_path_buf()];
+        let previews = tempfile::tempdir().expect("tempdir");
+        a.previews = Some(previews.path().to_path_buf());
         let r = evaluate(&a).expect("eval");
+        // A contact sheet for every dance, the tempo section's copies too.
+        let mut sheets: Vec<String> = std::fs::read_dir(previews.path())
+            .expect("previews")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+            .filter(|n| n.contains("trumpet_loop"))
+            .collect();
+        sheets.sort();
+        assert_eq!(
+            sheets,
+            [
+                "dance-revolution_trumpet_loop_90bpm_0.85x_seed0.png",
+                "dance-revolution_trumpet_loop_90bpm_0.85x_seed1.png",
+                "dance-revolution_trumpet_loop_90bpm_1.2x_seed0.png",
+                "dance-revolution_trumpet_loop_90bpm_1.2x_seed1.png",
+                "dance-revolution_trumpet_loop_90bpm_seed0.png",
+                "dance-revolution_trumpet_loop_90bpm_seed1.png",
+            ]
+        );
         let names: Vec<&str> = r.rows.iter().map(|x| x.name.as_str()).collect();
         assert_eq!(
             names,

@@ -49,7 +49,8 @@ pub struct EvalArgs {
     #[arg(long, default_value_t = defaults().key_poses)]
     pub key_poses: usize,
     /// Write each generated dance's contact sheet (as served) here as
-    /// `<model>_<song>_seed<seed>.png` (the picture jobs serve as preview.png).
+    /// `<model>_<song>_seed<seed>.png` (the picture jobs serve as preview.png); the tempo
+    /// section's copies as `<model>_<song>_<factor>x_seed<seed>.png`.
     #[arg(long, value_name = "DIR")]
     pub previews: Option<PathBuf>,
     /// Train dances paired with each test song in the Mismatched-real row.

@@ -268,7 +268,7 @@ pub(super) fn model_rows(
 }
 
 /// Writes the contact sheet of `model`'s dance to `song` with `seed` into `dir`.
-fn write_preview(
+pub(super) fn write_preview(
     dir: &Path,
     model: &str,
     song: &Song,

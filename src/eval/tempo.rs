@@ -152,6 +152,11 @@ pub(super) fn tempo_row(
                         source,
                     })?;
                 let lock = Musicality::of(&served, &song.beats).tempo_lock;
+                // The same contact sheet as the whole songs': how the stepping changes with the
+                // tempo is what the issue asks to be looked at.
+                if let Some(dir) = &args.previews {
+                    super::rows::write_preview(dir, id, &song, seed, &served, &[])?;
+                }
                 dances += 1;
                 for (n, lock) in [lock, own].into_iter().enumerate() {
                     if let Some(lock) = lock {
