@@ -17,19 +17,13 @@ use serde::{Deserialize, Serialize};
 use tch::nn;
 use tch::{Device, Kind, Tensor};
 
-use std::path::Path;
-
-use super::beat_time;
 use super::folder;
 use super::layers::{sinusoid, Lstm, LstmState};
-use super::train::augment::MusicLayout;
-use super::{
-    to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
-    InstancePool, ModelError, ModelId, ModelInfo, Progress,
-};
 use crate::motion::dataset::NormStats;
-use crate::motion::repr::RootStart;
-use crate::stage::Stage;
+
+mod served;
+use served::StallWatch;
+pub use served::{Served, Serving, StallGuard, WARM_UP_FRAMES};
 
 /// Hyper-parameters, with the paper's symbols.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -577,138 +571,6 @@ impl DanceRevolution {
     }
 }
 
-/// A served guard against stalls (not in the paper): the decoder is deterministic once `h_0` is
-/// drawn, and some draws settle into a held pose for tens of seconds (seed 0 on sugar_plum_fairy
-/// stood at 0.18 m/s for its first 25 s). While no pose of the last `window_frames` frames is
-/// more than `min_reach_m` (mean over joints, root-relative) from the newest, every layer's `h`
-/// takes Gaussian noise of standard deviation `kick` per frame, a random walk small enough per
-/// frame not to jump, until the dancer moves again.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-pub struct StallGuard {
-    pub min_reach_m: f32,
-    pub window_frames: usize,
-    pub kick: f64,
-}
-
-impl StallGuard {
-    /// What is served: 2-s windows, 0.10 m (below the 5th percentile of most served dances'
-    /// reach), kick 0.3 per frame (h_0 itself is N(0, 1)).
-    pub const SERVED: StallGuard = StallGuard {
-        min_reach_m: 0.10,
-        window_frames: 50,
-        kick: 0.3,
-    };
-}
-
-/// Warm-up frames served: 3 s.
-pub const WARM_UP_FRAMES: i64 = 75;
-
-impl Serving {
-    /// What `choreo train` writes: the served guard and warm-up.
-    pub fn served() -> Self {
-        Self {
-            stall_guard: Some(StallGuard::SERVED),
-            warm_up_frames: WARM_UP_FRAMES,
-            beat_time: None,
-        }
-    }
-}
-
-/// `model.json` fields of DanceRevolution's own.
-#[derive(Clone, Debug, Default, Serialize, Deserialize, PartialEq)]
-pub struct Serving {
-    /// The stall guard, if any ([`StallGuard`]).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub stall_guard: Option<StallGuard>,
-    /// Frames decoded over the song's opening and dropped before the dance starts (not in the
-    /// paper), so frame 0 is already mid-dance rather than the mean pose's slow start.
-    #[serde(default)]
-    pub warm_up_frames: i64,
-    /// The network runs on a clock of beats at this tempo ([`beat_time`]); absent: in seconds.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub beat_time: Option<beat_time::BeatTimeConfig>,
-}
-
-/// The guard's running state: the last frames' root-relative joints in metres.
-struct StallWatch<'a> {
-    guard: StallGuard,
-    norm: &'a NormStats,
-    history: std::collections::VecDeque<Vec<f32>>,
-    rng: rand::rngs::StdRng,
-    kicked: usize,
-}
-
-impl<'a> StallWatch<'a> {
-    fn new(guard: StallGuard, norm: &'a NormStats, seed: u64) -> Self {
-        use rand::SeedableRng;
-        let rng = rand::rngs::StdRng::seed_from_u64(seed ^ 0x5354_414c_4c00_0000);
-        Self {
-            guard,
-            norm,
-            history: std::collections::VecDeque::with_capacity(guard.window_frames + 1),
-            rng,
-            kicked: 0,
-        }
-    }
-
-    /// Records output `y` `[1, 1, pose]` (normalised) and kicks `state` if the dance has stalled.
-    fn observe(&mut self, y: &Tensor, state: &mut LstmState) {
-        // The root-relative joints lead the pose vector ([`crate::motion::repr`]).
-        let width =
-            (y.size().last().copied().unwrap_or(0) as usize).min(crate::motion::repr::POSE_DIM) / 3
-                * 3;
-        let v: Vec<f32> =
-            Vec::<f32>::try_from(y.flatten(0, -1).narrow(0, 0, width as i64)).unwrap_or_default();
-        let metres: Vec<f32> = v
-            .iter()
-            .enumerate()
-            .map(|(k, x)| x * self.norm.std[k] + self.norm.mean[k])
-            .collect();
-        self.history.push_back(metres);
-        if self.history.len() > self.guard.window_frames {
-            self.history.pop_front();
-        }
-        if self.history.len() < self.guard.window_frames
-            || reach_m(&self.history) >= self.guard.min_reach_m
-        {
-            return;
-        }
-        use rand_distr::{Distribution, StandardNormal};
-        self.kicked += 1;
-        for (h, _) in state.iter_mut() {
-            let noise: Vec<f32> = (0..h.numel())
-                .map(|_| StandardNormal.sample(&mut self.rng))
-                .collect();
-            let noise = Tensor::from_slice(&noise)
-                .view(h.size().as_slice())
-                .to_device(h.device());
-            *h = &*h + noise * self.guard.kick;
-        }
-    }
-}
-
-/// The largest distance (mean over joints, metres) of any pose in `history` from the newest.
-fn reach_m(history: &std::collections::VecDeque<Vec<f32>>) -> f32 {
-    let Some(last) = history.back() else {
-        return 0.0;
-    };
-    let joints = last.len() / 3;
-    history
-        .iter()
-        .map(|f| {
-            let sum: f32 = (0..joints)
-                .map(|j| {
-                    (0..3)
-                        .map(|c| (last[3 * j + c] - f[3 * j + c]).powi(2))
-                        .sum::<f32>()
-                        .sqrt()
-                })
-                .sum();
-            sum / joints.max(1) as f32
-        })
-        .fold(0.0, f32::max)
-}
-
 /// The API id.
 pub const ID: &str = "dance-revolution";
 
@@ -736,110 +598,6 @@ pub struct Curriculum {
 /// `model.json`: the configuration, normalisation and training record.
 pub type ModelFile = folder::ModelFile<Config, Curriculum, Serving>;
 
-/// A trained DanceRevolution, ready to serve.
-pub struct Served {
-    file: ModelFile,
-    pool: InstancePool<DanceRevolution>,
-}
-
-impl Served {
-    /// Loads `dir/model.json` and `dir/weights.safetensors`.
-    pub fn load(dir: &Path) -> Result<Self, ModelError> {
-        let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| {
-            DanceRevolution::new(p, f.config.clone())
-        })?;
-        Ok(Self { file, pool })
-    }
-
-    /// Music features of a whole song on the network's clock, normalised, as `[1, n, F]`.
-    fn music(
-        &self,
-        audio: &crate::audio::DecodedAudio,
-        clock: &beat_time::BeatTime,
-    ) -> Result<Tensor, ModelError> {
-        let features = if self.file.config.beat_clock {
-            crate::audio::features::dance_revolution_clock_at
-        } else {
-            crate::audio::features::dance_revolution_at
-        };
-        let feats = features(audio, self.file.fps, 0.0, clock.song_frames)?;
-        let layout = MusicLayout::dance_revolution(self.file.config.beat_clock);
-        let feats = clock.music(feats.view(), &layout);
-        Ok(to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0))
-    }
-}
-
-impl DanceModel for Served {
-    fn info(&self) -> ModelInfo {
-        ModelInfo {
-            id: ModelId(ID.into()),
-            paper: "Huang et al., Dance Revolution: Long-Term Dance Generation with Music via Curriculum Learning, ICLR 2021".into(),
-            capabilities: Capabilities { key_poses: false, seed_motion: true, ..Default::default() },
-            beat_time: self.file.extra.beat_time,
-        }
-    }
-
-    fn generate(
-        &self,
-        req: &GenerateRequest<'_>,
-        progress: &mut dyn Progress,
-    ) -> Result<Generated, ModelError> {
-        self.refuse_unsupported(req)?;
-        let fps = self.file.fps;
-        let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
-        progress.report(Stage::Features, 0.0)?;
-        let clock = beat_time::BeatTime::for_request(self.file.extra.beat_time, req, n)?;
-        let music = self.music(req.audio, &clock)?;
-        progress.report(Stage::Features, 1.0)?;
-        let seed_motion = req.seed_motion.map(|m| clock.seed_motion(m));
-        let seed_poses = match seed_motion.as_ref() {
-            Some(m) => {
-                let root = crate::motion::skeleton::body_centre_track(m.positions.view());
-                let (f, _) = crate::motion::repr::to_features(m.positions.view(), root.view())?;
-                Some(to_tensor(&self.file.pose_norm.normalize(&f)?).unsqueeze(0))
-            }
-            None => None,
-        };
-        let out = self.pool.with(|model| {
-            tch::no_grad(|| -> Result<Tensor, ModelError> {
-                let mut cancelled = false;
-                let z = model.encoder.forward_chunked(&music, 1000, |f| {
-                    cancelled = progress.report(Stage::Encode, f).is_err();
-                    !cancelled
-                });
-                let z = z.ok_or(Cancelled)?;
-                let guard = self
-                    .file
-                    .extra
-                    .stall_guard
-                    .as_ref()
-                    .map(|g| (g, &self.file.pose_norm));
-                let y = model.decode(
-                    &z,
-                    req.seed,
-                    seed_poses.as_ref(),
-                    guard,
-                    self.file.extra.warm_up_frames,
-                    250,
-                    |f| {
-                        cancelled = progress.report(Stage::Generate, f).is_err();
-                        !cancelled
-                    },
-                );
-                y.ok_or(ModelError::Cancelled(Cancelled))
-            })
-        })?;
-        let poses = self
-            .file
-            .pose_norm
-            .denormalize(&to_array(&out?.squeeze_dim(0))?)?;
-        let (motion, _root) =
-            crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
-        Ok(Generated::from(clock.back(motion))
-            .with_beat_time(clock.used(self.file.extra.beat_time)))
-    }
-}
-
 /// `q = ⌊λ·epoch⌋`, the linear schedule of §3.3.
 pub fn curriculum_q(lambda: f64, epoch: usize) -> i64 {
     (lambda * epoch as f64).floor() as i64
@@ -847,6 +605,7 @@ pub fn curriculum_q(lambda: f64, epoch: usize) -> i64 {
 
 #[cfg(test)]
 mod tests {
+    use super::served::reach_m;
     use super::*;
     use tch::nn::OptimizerConfig;
 
