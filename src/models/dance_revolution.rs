@@ -270,6 +270,15 @@ pub struct DanceDecoder {
     arm_head: Option<ArmHead>,
 }
 
+/// The pose vector's columns of the elbows and wrists (`metrics::musicality::ARM_JOINTS`, x y z
+/// each): what the [`ArmHead`] and `choreo train … --arm-readout-only` move.
+pub fn arm_columns() -> Vec<i64> {
+    crate::metrics::musicality::ARM_JOINTS
+        .iter()
+        .flat_map(|&j| (3 * j as i64)..(3 * j as i64 + 3))
+        .collect()
+}
+
 /// Not in the paper (issue 25): a second read-out of the elbows and wrists from `[h_i; z_i]`, added
 /// to the paper's read-out in what the decoder emits but never fed back, so the LSTM steps exactly
 /// as it does without it: the legs and their timing (what the tempo test checks) stay the trained
@@ -287,10 +296,7 @@ pub struct ArmHead {
 
 impl ArmHead {
     fn new(p: nn::Path, c: &Config) -> Self {
-        let columns: Vec<i64> = crate::metrics::musicality::ARM_JOINTS
-            .iter()
-            .flat_map(|&j| (3 * j as i64)..(3 * j as i64 + 3))
-            .collect();
+        let columns = arm_columns();
         assert!(
             columns.iter().all(|&k| k < c.pose_dim),
             "the arm head needs the full pose vector"
@@ -653,10 +659,6 @@ mod tests {
             }
         });
         let after = dance(&headed);
-        let arm_columns: Vec<i64> = crate::metrics::musicality::ARM_JOINTS
-            .iter()
-            .flat_map(|&j| (3 * j as i64)..(3 * j as i64 + 3))
-            .collect();
         let moved: Vec<i64> = Vec::<bool>::try_from(
             (after - &before)
                 .abs()
@@ -670,7 +672,7 @@ mod tests {
         .filter(|(_, &m)| m)
         .map(|(i, _)| i as i64)
         .collect();
-        assert_eq!(moved, arm_columns);
+        assert_eq!(moved, arm_columns());
     }
 
     #[test]

@@ -144,7 +144,7 @@ impl Rollouts {
             crate::motion::skeleton::SPINE,
             crate::motion::MOTION_FPS,
         );
-        let columns = (crate::metrics::musicality::ARM_JOINTS.len() * 3) as f64;
+        let columns = crate::models::dance_revolution::arm_columns().len() as f64;
         // Offsets are zero outside the arm columns: the sum over columns / 12 is their mean.
         let offset = offsets
             .mean_dim(1, false, Kind::Float)
@@ -172,26 +172,7 @@ impl Rollouts {
     /// head's offsets (what `metrics::musicality::arm_speed_m_s` reads) and without.
     /// Without a head, both are the network's own.
     fn arm_speeds(&self, model: &DanceRevolution, pose_std: &Tensor) -> Vec<(f64, f64)> {
-        let speed = |x: &Tensor| {
-            let column =
-                |j: usize| x.narrow(1, 3 * j as i64, 3) * pose_std.narrow(0, 3 * j as i64, 3);
-            let spine = column(crate::motion::skeleton::SPINE);
-            let joints = crate::metrics::musicality::ARM_JOINTS;
-            let total: f64 = joints
-                .iter()
-                .map(|&j| {
-                    let rel = column(j) - &spine;
-                    let n = rel.size()[0];
-                    (rel.narrow(0, 1, n - 1) - rel.narrow(0, 0, n - 1))
-                        .square()
-                        .sum_dim_intlist(1, false, Kind::Float)
-                        .sqrt()
-                        .mean(Kind::Float)
-                        .double_value(&[])
-                })
-                .sum();
-            total / joints.len() as f64 * crate::motion::MOTION_FPS
-        };
+        let speed = |x: &Tensor| window_arm_speed(&x.unsqueeze(0), pose_std).double_value(&[0]);
         tch::no_grad(|| {
             self.dances
                 .iter()
@@ -210,26 +191,19 @@ impl Rollouts {
 /// `[b]`: each window's mean speed (m/s) of the elbows and wrists relative to the spine (`x`:
 /// `[b, t, pose]` normalised; `pose_std`: the joint columns' std).
 fn window_arm_speed(x: &Tensor, pose_std: &Tensor) -> Tensor {
-    let column = |j: usize| {
-        x.narrow(2, 3 * j as i64, 3) * pose_std.narrow(0, 3 * j as i64, 3).view([1, 1, 3])
-    };
-    let spine = column(crate::motion::skeleton::SPINE);
-    let t = x.size()[1];
     let joints = crate::metrics::musicality::ARM_JOINTS;
-    let speeds: Vec<Tensor> = joints
-        .iter()
-        .map(|&j| {
-            let rel = column(j) - &spine;
-            // + ε: the norm's gradient at a joint that did not move at all.
-            ((rel.narrow(1, 1, t - 1) - rel.narrow(1, 0, t - 1))
-                .square()
-                .sum_dim_intlist(2, false, Kind::Float)
-                + 1e-10)
-                .sqrt()
-                .mean_dim(1, false, Kind::Float)
-        })
-        .collect();
-    Tensor::stack(&speeds, 1).mean_dim(1, false, Kind::Float) * crate::motion::MOTION_FPS
+    let rel =
+        super::spectral::relative_joints(x, pose_std, &joints, crate::motion::skeleton::SPINE);
+    let (b, t, _) = rel.size3().expect("[b, t, 3·joints]");
+    let rel = rel.view([b, t, joints.len() as i64, 3]);
+    // + ε: the norm's gradient at a joint that did not move at all.
+    ((rel.narrow(1, 1, t - 1) - rel.narrow(1, 0, t - 1))
+        .square()
+        .sum_dim_intlist(3, false, Kind::Float)
+        + 1e-10)
+        .sqrt()
+        .mean_dim([1i64, 2].as_slice(), false, Kind::Float)
+        * crate::motion::MOTION_FPS
 }
 
 /// The train and test splits danced by the frozen network.

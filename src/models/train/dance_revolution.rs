@@ -354,8 +354,8 @@ fn arm_readout_masks(
     pose_dim: i64,
 ) -> Result<Vec<(Tensor, Tensor)>, TrainError> {
     let mut rows = vec![0f32; pose_dim as usize];
-    for &j in &crate::metrics::musicality::ARM_JOINTS {
-        rows[3 * j..3 * j + 3].fill(1.0);
+    for k in crate::models::dance_revolution::arm_columns() {
+        rows[k as usize] = 1.0;
     }
     let rows = Tensor::from_slice(&rows);
     let mut found = 0;
@@ -390,11 +390,13 @@ fn arm_readout_masks(
 /// Every variable with its gradient mask for `--arm-head-only`: ones on the arm head's weights,
 /// zeros everywhere else.
 pub(super) fn arm_head_masks(vs: &tch::nn::VarStore) -> Result<Vec<(Tensor, Tensor)>, TrainError> {
+    let mut found = 0;
     let masks: Vec<(Tensor, Tensor)> = vs
         .variables()
         .into_iter()
         .map(|(name, var)| {
             let mask = if name.starts_with("decoder.arm_head.") {
+                found += 1;
                 var.ones_like()
             } else {
                 var.zeros_like()
@@ -402,11 +404,7 @@ pub(super) fn arm_head_masks(vs: &tch::nn::VarStore) -> Result<Vec<(Tensor, Tens
             (var, mask)
         })
         .collect();
-    if !vs
-        .variables()
-        .keys()
-        .any(|k| k.starts_with("decoder.arm_head."))
-    {
+    if found == 0 {
         return Err(TrainError::InvalidOption(
             "--arm-head-only: the network has no arm head".into(),
         ));
@@ -419,6 +417,27 @@ mod tests {
     use super::*;
     use tch::nn::OptimizerConfig;
 
+    /// One Adam step on a loss with a gradient on every weight, through `masks`; returns every
+    /// weight as it was before.
+    fn one_masked_step(
+        vs: &tch::nn::VarStore,
+        masks: &[(Tensor, Tensor)],
+    ) -> std::collections::HashMap<String, Tensor> {
+        let before = vs
+            .variables()
+            .into_iter()
+            .map(|(k, v)| (k, v.copy()))
+            .collect();
+        let mut opt = tch::nn::Adam::default().build(vs, 1e-2).unwrap();
+        let loss = vs
+            .variables()
+            .values()
+            .map(|v| (v - 0.5).square().sum(Kind::Float))
+            .fold(Tensor::zeros([], (Kind::Float, Device::Cpu)), |a, b| a + b);
+        masked_step(&mut opt, &loss, masks);
+        before
+    }
+
     #[test]
     fn arm_head_only_moves_the_arm_head_and_nothing_else() {
         let vs = tch::nn::VarStore::new(Device::Cpu);
@@ -429,19 +448,7 @@ mod tests {
                 ..Config::tiny(8, 73)
             },
         );
-        let before: std::collections::HashMap<String, Tensor> = vs
-            .variables()
-            .into_iter()
-            .map(|(k, v)| (k, v.copy()))
-            .collect();
-        let masks = arm_head_masks(&vs).unwrap();
-        let mut opt = tch::nn::Adam::default().build(&vs, 1e-2).unwrap();
-        let loss = vs
-            .variables()
-            .values()
-            .map(|v| (v - 0.5).square().sum(Kind::Float))
-            .fold(Tensor::zeros([], (Kind::Float, Device::Cpu)), |a, b| a + b);
-        masked_step(&mut opt, &loss, &masks);
+        let before = one_masked_step(&vs, &arm_head_masks(&vs).unwrap());
         for (name, v) in vs.variables() {
             let moved = (&v - &before[&name]).abs().max().double_value(&[]) > 0.0;
             assert_eq!(moved, name.starts_with("decoder.arm_head."), "{name}");
@@ -456,24 +463,8 @@ mod tests {
     fn arm_readout_only_moves_the_arms_rows_of_the_readout_and_nothing_else() {
         let vs = tch::nn::VarStore::new(Device::Cpu);
         let _model = DanceRevolution::new(&vs.root(), Config::tiny(8, 73));
-        let before: std::collections::HashMap<String, Tensor> = vs
-            .variables()
-            .into_iter()
-            .map(|(k, v)| (k, v.copy()))
-            .collect();
-        let masks = arm_readout_masks(&vs, 73).unwrap();
-        let mut opt = tch::nn::Adam::default().build(&vs, 1e-2).unwrap();
-        // A loss with a gradient on every weight.
-        let loss = vs
-            .variables()
-            .values()
-            .map(|v| (v - 0.5).square().sum(Kind::Float))
-            .fold(Tensor::zeros([], (Kind::Float, Device::Cpu)), |a, b| a + b);
-        masked_step(&mut opt, &loss, &masks);
-        let arm_rows: Vec<i64> = crate::metrics::musicality::ARM_JOINTS
-            .iter()
-            .flat_map(|&j| (3 * j as i64)..(3 * j as i64 + 3))
-            .collect();
+        let before = one_masked_step(&vs, &arm_readout_masks(&vs, 73).unwrap());
+        let arm_rows = crate::models::dance_revolution::arm_columns();
         for (name, v) in vs.variables() {
             let moved = (&v - &before[&name]).abs().gt(0.0);
             let moved_rows: Vec<i64> = if v.dim() == 2 {

@@ -30,11 +30,26 @@ pub fn spectral_loss(pred: &Tensor, truth: &Tensor, scale: &Tensor, fps: f64) ->
     (spectrum(pred) - spectrum(truth)).abs().mean(Kind::Float)
 }
 
+/// `[b, n, 3·joints]`: each joint of `joints` relative to joint `reference`, in the features' own
+/// units (`x`: `[b, n, ·]` normalised features whose first columns are root-relative joints, x y z
+/// each; `scale`: their std).
+pub fn relative_joints(x: &Tensor, scale: &Tensor, joints: &[usize], reference: usize) -> Tensor {
+    let columns =
+        |j: usize| x.narrow(2, 3 * j as i64, 3) * scale.narrow(0, 3 * j as i64, 3).view([1, 1, 3]);
+    let base = columns(reference);
+    Tensor::cat(
+        &joints
+            .iter()
+            .map(|&j| columns(j) - &base)
+            .collect::<Vec<_>>(),
+        2,
+    )
+}
+
 /// The spectral loss of the arms alone, each joint of `joints` relative to joint `reference`
-/// (`pred`, `truth`: `[b, n, ·]` normalised features whose first columns are root-relative joints,
-/// x y z each; `scale`: their std). The whole-body term averages the arms' 12 columns among 69,
-/// where a held ballroom frame costs little; this one sees only how the arms move against the
-/// trunk, which is what `metrics::musicality::arm_speed_m_s` measures.
+/// ([`relative_joints`] of `pred` and `truth`). The whole-body term averages the arms' 12 columns
+/// among 69, where a held ballroom frame costs little; this one sees only how the arms move
+/// against the trunk, which is what `metrics::musicality::arm_speed_m_s` measures.
 pub fn relative_spectral_loss(
     pred: &Tensor,
     truth: &Tensor,
@@ -43,19 +58,7 @@ pub fn relative_spectral_loss(
     reference: usize,
     fps: f64,
 ) -> Tensor {
-    let relative = |x: &Tensor| {
-        let columns = |j: usize| {
-            x.narrow(2, 3 * j as i64, 3) * scale.narrow(0, 3 * j as i64, 3).view([1, 1, 3])
-        };
-        let base = columns(reference);
-        Tensor::cat(
-            &joints
-                .iter()
-                .map(|&j| columns(j) - &base)
-                .collect::<Vec<_>>(),
-            2,
-        )
-    };
+    let relative = |x: &Tensor| relative_joints(x, scale, joints, reference);
     let ones = Tensor::ones([3 * joints.len() as i64], (Kind::Float, pred.device()));
     spectral_loss(&relative(pred), &relative(truth), &ones, fps)
 }
