@@ -273,10 +273,6 @@ args_into! {
         /// Windows per batch danced on freely for the rhythm term.
         #[arg(long, default_value_t = train::dancenet::Options::default().rollout_windows)]
         rollout_windows: usize,
-        /// Do not train: draw the seed clips with their sources (dance, style, song tempo) into
-        /// `--out` (`seed_clips.safetensors`, `seed_clips.json`), as training draws them for `--seed`.
-        #[arg(long)]
-        clips_only: bool,
     }
 }
 

@@ -2,10 +2,12 @@
 //! weights expect (configuration, train-split normalisation, frame rate) and how they were trained;
 //! `weights.safetensors` holds the network; `train_log.jsonl` one line per epoch; `README.md` is
 //! the model card. A model adds its own fields to `model.json` through the `X` parameters, and may
-//! keep real seed clips beside the weights ([`SeedClips`], `models::seed_clips`).
+//! keep real seed clips beside the weights ([`SeedClips`]).
 use std::path::Path;
 
-use ndarray::Array3;
+use ndarray::{s, Array2, Array3};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use tch::Tensor;
@@ -17,7 +19,8 @@ use crate::motion::dataset::NormStats;
 pub const MODEL_FILE: &str = "model.json";
 /// The folder's weights (safetensors).
 pub const WEIGHTS_FILE: &str = "weights.safetensors";
-pub use super::seed_clips::{SeedClips, SEED_CLIPS_FILE};
+/// Real seed clips (`[clips, frames, width]` feature rows), for models that start from one.
+pub const SEED_CLIPS_FILE: &str = "seed_clips.safetensors";
 /// One JSON line per training epoch.
 pub const TRAIN_LOG_FILE: &str = "train_log.jsonl";
 
@@ -73,6 +76,67 @@ where
     let for_build = file.clone();
     let pool = InstancePool::new(dir.join(WEIGHTS_FILE), move |p| build(p, &for_build))?;
     Ok((file, pool))
+}
+
+/// Real clips of the train split in a model's own feature rows, one drawn by a job's seed when
+/// the request brings no seed motion: a dance started from one fixed pose would begin every song
+/// the same way.
+#[derive(Clone, Debug)]
+pub struct SeedClips {
+    /// `[clips, frames, width]`.
+    pub clips: Array3<f32>,
+}
+
+impl SeedClips {
+    /// `count` clips of `frames` frames at seeded starts over `seqs` (each a dance's features).
+    pub fn draw(
+        seqs: &[&Array2<f32>],
+        count: usize,
+        frames: usize,
+        seed: u64,
+    ) -> Result<Self, ModelError> {
+        let usable: Vec<&&Array2<f32>> = seqs.iter().filter(|s| s.nrows() > frames + 50).collect();
+        if usable.is_empty() || count == 0 {
+            return Err(ModelError::Input(format!(
+                "no dance longer than {frames} frames for seed clips"
+            )));
+        }
+        let mut rng = StdRng::seed_from_u64(seed);
+        let width = usable[0].ncols();
+        let mut clips = Array3::<f32>::zeros((count, frames, width));
+        for k in 0..count {
+            let s = usable[k % usable.len()];
+            let start = rng.gen_range(25..s.nrows() - frames - 25);
+            clips
+                .slice_mut(s![k, .., ..])
+                .assign(&s.slice(s![start..start + frames, ..]));
+        }
+        Ok(Self { clips })
+    }
+
+    /// Writes the clips as safetensors.
+    pub fn save(&self, path: &Path) -> Result<(), ModelError> {
+        write_clips(&self.clips, path)
+    }
+
+    /// Reads clips written by [`Self::save`], `width` numbers a frame.
+    pub fn load(path: &Path, width: usize) -> Result<Self, ModelError> {
+        let clips = read_clips(path)?;
+        let (k, f, d) = clips.dim();
+        if d != width || k == 0 || f == 0 {
+            return Err(ModelError::BadModelFile(format!(
+                "{}: clips are {k}×{f}×{d}",
+                path.display()
+            )));
+        }
+        Ok(Self { clips })
+    }
+
+    /// The clip a job's seed picks.
+    pub fn pick(&self, seed: u64) -> Array2<f32> {
+        let k = StdRng::seed_from_u64(seed ^ 0x5EED_C11F).gen_range(0..self.clips.dim().0);
+        self.clips.slice(s![k, .., ..]).to_owned()
+    }
 }
 
 /// The tensor name of a clips file ([`SeedClips`], keypose-transformer's pose bank).

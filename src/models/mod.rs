@@ -15,7 +15,6 @@ pub mod folder;
 pub mod keypose_transformer;
 pub mod layers;
 pub mod motion_style;
-pub mod seed_clips;
 pub mod train;
 pub mod tsmt;
 

@@ -13,7 +13,6 @@ use super::style::ServedStyle;
 use super::{DanceNet, ModelFile, Sampling, ID};
 use crate::models::beat_time;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
-use crate::models::seed_clips::SongCue;
 use crate::models::train::augment::MusicLayout;
 use crate::models::{
     smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
@@ -105,8 +104,7 @@ impl Served {
 
     /// Generates `clock.net_frames` frames of rotation features for `req` on the network's clock.
     /// The context is the request's seed motion (which then opens the dance), else a real clip
-    /// of the style danced and near the song's tempo, drawn by the seed and the song (context
-    /// only; `models::seed_clips`).
+    /// drawn by the seed (context only).
     pub fn generate_features(
         &self,
         req: &GenerateRequest<'_>,
@@ -141,15 +139,7 @@ impl Served {
                     .map_err(|e| ModelError::Shape(e.to_string()))?;
                 (rows, keep, enc.start)
             }
-            _ => {
-                // The clip suits the song: its style and tempo, and the seed's draw with the song's.
-                let cue = SongCue::of(req.analysis_or_analyze()?.as_ref(), Some(style.style));
-                (
-                    self.clips.pick_for(req.seed, &cue).1,
-                    0,
-                    RootStart::default(),
-                )
-            }
+            _ => (self.clips.pick(req.seed), 0, RootStart::default()),
         };
         let m = context.nrows();
         let out = self.pool.with(|model| {

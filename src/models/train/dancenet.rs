@@ -14,7 +14,7 @@ use super::{
 };
 use crate::metrics::physical::seed_distance_m;
 use crate::models::dancenet::{Config, DanceNet, ModelFile, Sampling, Schedule, Serving, ID};
-use crate::models::seed_clips::{SeedClipSource, SeedClips, SeedClipsMeta, SEED_CLIPS_FILE};
+use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
 use crate::models::DanceStyle;
 use crate::motion::dataset::{Dance, Dataset, NormStats};
 use crate::motion::rig::Rig;
@@ -75,9 +75,6 @@ pub struct Options {
     pub spectral_weight: f64,
     /// Windows of each batch danced on freely for the rhythm term.
     pub rollout_windows: usize,
-    /// Do not train: draw the seed clips with their sources into the output folder
-    /// (`seed_clips.safetensors`, `seed_clips.json`), the clips training draws for the same seed.
-    pub clips_only: bool,
 }
 
 impl Default for Options {
@@ -104,7 +101,6 @@ impl Default for Options {
             seed: 2020,
             spectral_weight: 0.0,
             rollout_windows: 8,
-            clips_only: false,
         }
     }
 }
@@ -116,8 +112,6 @@ const SEED_CLIPS: usize = 32;
 struct Prepared {
     id: String,
     style: DanceStyle,
-    /// The tempo of the dance's whole song (`audio::analyze`), kept with the seed clips.
-    tempo_bpm: f64,
     music: Array2<f32>,
     /// Rotation features then contacts, `[T, D + 4]`.
     frames: Array2<f32>,
@@ -135,7 +129,6 @@ fn prepare(dances: &[Dance], rig: &Rig) -> Result<(Vec<Prepared>, f64), TrainErr
             TrainError::Motion(crate::motion::MotionError::UnknownDance { id: id.clone() })
         })?;
         let audio = crate::audio::decode_path(&dance.audio_path)?;
-        let tempo_bpm = crate::audio::analyze(&audio)?.tempo_bpm;
         let t = dance.motion.num_frames();
         let music =
             crate::audio::features::dancenet(&audio, dance.motion.fps, dance.song_time_s(0), t)?;
@@ -150,7 +143,6 @@ fn prepare(dances: &[Dance], rig: &Rig) -> Result<(Vec<Prepared>, f64), TrainErr
         out.push(Prepared {
             id: id.clone(),
             style,
-            tempo_bpm,
             music,
             frames,
         });
@@ -251,8 +243,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         .warmup
         .unwrap_or(config.receptive_field() as usize)
         .min(opts.window.saturating_sub(2));
-    // Seed clips: normalised rows (features and contacts), long enough to fill the receptive
-    // field, with their sources so the served model chooses them by the song (`models::seed_clips`).
+    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
+        DanceNet::new(p, config.clone())
+    })?;
+    // Seed clips: normalised rows (features and contacts), long enough to fill the receptive field.
     let clip_frames = config.receptive_field() as usize + 1;
     let clips = SeedClips::draw(
         &train.iter().map(|s| &s.poses).collect::<Vec<_>>(),
@@ -260,36 +254,6 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         clip_frames,
         opts.seed,
     )?;
-    let sources = clips
-        .drawn
-        .iter()
-        .map(|&(i, start)| SeedClipSource {
-            dance: train_raw[i].id.clone(),
-            start,
-            style: train_raw[i].style,
-            tempo_bpm: train_raw[i].tempo_bpm,
-        })
-        .collect();
-    let clips = clips.with_meta(SeedClipsMeta {
-        made_by: format!(
-            "choreo train dancenet --clips-only --seed {}: {SEED_CLIPS} clips of {clip_frames} frames (the receptive field and one), one per train dance in split order, at starts drawn by the seed (the clips training writes for the same seed); tempo from audio::analyze of each dance's whole song",
-            opts.seed
-        ),
-        clips: sources,
-    })?;
-    if opts.clips_only {
-        let out = opts.common.out_dir(ID);
-        std::fs::create_dir_all(&out).map_err(|source| TrainError::Io {
-            path: out.clone(),
-            source,
-        })?;
-        clips.save(&out.join(SEED_CLIPS_FILE))?;
-        tracing::info!(clips = SEED_CLIPS, out = %out.display(), "seed clips drawn");
-        return Ok(Vec::new());
-    }
-    let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
-        DanceNet::new(p, config.clone())
-    })?;
     clips.save(&trainer.out.join(SEED_CLIPS_FILE))?;
     // How often each style's windows repeat in an epoch.
     let mut style_frames = [0usize; 4];

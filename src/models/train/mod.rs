@@ -615,12 +615,11 @@ impl Training {
             }
             Self::Dancenet(o) => {
                 let logs = dancenet::train(o)?;
-                let out = o.common.out_dir(crate::models::dancenet::ID);
-                Ok(if o.clips_only {
-                    format!("drew the seed clips into {}", out.display())
-                } else {
-                    format!("trained {} epochs into {}", logs.len(), out.display())
-                })
+                Ok(format!(
+                    "trained {} epochs into {}",
+                    logs.len(),
+                    o.common.out_dir(crate::models::dancenet::ID).display()
+                ))
             }
             Self::KeyposeTransformer(o) => {
                 let logs = keypose_transformer::train(o)?;
