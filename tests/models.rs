@@ -320,3 +320,54 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
     let motion = dance(&served, &GenerateRequest::plain(song(), 1));
     assert!(motion.positions.iter().all(|v| v.is_finite()));
 }
+
+/// DanceNet's trainer draws each window at its own tempo (`train::augment`: the rotation rows
+/// and the music resampled together, the root and yaw velocities scaled): a tiny epoch on the
+/// real train split runs, logs its tempi, records them in `model.json`, and serves.
+#[test]
+fn dancenet_trains_on_windows_at_other_tempi() {
+    use choreo::models::train::{dancenet, CommonOptions};
+    let data =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/dance-with-melody");
+    assert!(
+        data.is_dir(),
+        "{} is missing: the trainer reads the real train split (CI={})",
+        data.display(),
+        std::env::var("CI").unwrap_or_default()
+    );
+    let out = tempfile::tempdir().unwrap();
+    let opts = dancenet::Options {
+        common: CommonOptions {
+            data,
+            out: Some(out.path().to_path_buf()),
+            threads: 1,
+            tiny: true,
+            ..CommonOptions::default()
+        },
+        epochs: 1,
+        min_tempo: 0.8,
+        max_tempo: 1.25,
+        ..dancenet::Options::default()
+    };
+    let logs = dancenet::train(&opts).expect("training runs");
+    assert_eq!(logs.len(), 1);
+    let log = &logs[0];
+    assert!(
+        log.train_loss.is_finite() && log.test_loss.is_some_and(f64::is_finite),
+        "{log:?}"
+    );
+    assert!(log.note.contains("tempo=0.8..1.25"), "{}", log.note);
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.path().join("model.json")).unwrap())
+            .unwrap();
+    assert_eq!(file["training"]["min_tempo"], 0.8);
+    assert_eq!(file["training"]["max_tempo"], 1.25);
+    let served = choreo::models::dancenet::Served::load(out.path()).expect("the folder loads");
+    // The style classifier is trained on its own (`choreo train dancenet-style`): ask for a style.
+    let req = GenerateRequest {
+        style: Some(DanceStyle::Waltz),
+        ..GenerateRequest::plain(song(), 1)
+    };
+    let motion = dance(&served, &req);
+    assert!(motion.positions.iter().all(|v| v.is_finite()));
+}

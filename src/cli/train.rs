@@ -273,6 +273,12 @@ args_into! {
         /// Windows per batch danced on freely for the rhythm term.
         #[arg(long, default_value_t = train::dancenet::Options::default().rollout_windows)]
         rollout_windows: usize,
+        /// Slowest tempo factor a training window is drawn at (music and dance resampled together).
+        #[arg(long, default_value_t = train::dancenet::Options::default().min_tempo)]
+        min_tempo: f64,
+        /// Fastest tempo factor a training window is drawn at.
+        #[arg(long, default_value_t = train::dancenet::Options::default().max_tempo)]
+        max_tempo: f64,
     }
 }
 

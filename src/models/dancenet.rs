@@ -634,6 +634,15 @@ pub struct Schedule {
     /// Mean per-joint distance (cm, root-relative) between the train split and its rigid
     /// rotation features decoded back.
     pub rigid_fit_error_cm: f64,
+    /// Tempo factors the windows were drawn at (`train::augment`; 1 and 1: as danced).
+    #[serde(default = "unit_tempo")]
+    pub min_tempo: f64,
+    #[serde(default = "unit_tempo")]
+    pub max_tempo: f64,
+}
+
+fn unit_tempo() -> f64 {
+    1.0
 }
 
 /// How the committed weights are served.

@@ -200,6 +200,27 @@ pub fn stretch_poses(src: ArrayView2<'_, f32>, start: usize, len: usize, f: f64)
     out
 }
 
+/// Rotation-feature rows (`motion::rotations`, DanceNet's, de-normalised) at tempo `f`: every
+/// column interpolated (6-D rotations between neighbouring frames stay near-orthonormal, and the
+/// decoder orthonormalises them), the anchor's velocity and the yaw velocity (per frame) scaled
+/// by `f`. Columns past the features (contacts) are interpolated too: a contact that starts
+/// between two frames becomes a soft target there.
+pub fn stretch_rotation_rows(
+    src: ArrayView2<'_, f32>,
+    start: usize,
+    len: usize,
+    f: f64,
+) -> Array2<f32> {
+    use crate::motion::rotations::{ROOT_VX, ROOT_VZ, YAW_VEL};
+    let mut out = resample(src, start, len, f);
+    if (f - 1.0).abs() > 1e-12 {
+        for c in [ROOT_VX, ROOT_VZ, YAW_VEL] {
+            out.column_mut(c).mapv_inplace(|v| v * f as f32);
+        }
+    }
+    out
+}
+
 /// The joint each joint becomes in the mirror image (`right_*` ↔ `left_*`, `head_right` ↔ `head_left`).
 pub fn mirror_joints() -> Vec<usize> {
     let swap = |n: &str| -> String {
@@ -267,6 +288,44 @@ mod tests {
         assert!(out.column(0).iter().all(|&v| v == 0.0 || v == 1.0));
         assert!((out[[7, 1]] - 14.0).abs() < 1e-5);
         assert!((out[[7, 2]] - 2.0).abs() < 1e-6);
+    }
+
+    /// A dance turning and travelling steadily, its joint angles ramping: played 1.25× faster,
+    /// it covers 1.25× the ground and turns 1.25× as far per frame, and each frame shows the pose
+    /// of source time 1.25 j; the contacts follow their frames.
+    #[test]
+    fn rotation_rows_play_faster_with_their_velocities_scaled() {
+        use crate::motion::rotations::{CLEARANCE, ROOT_VX, ROOT_VZ, YAW_VEL};
+        let n = 60;
+        let mut rows = Array2::<f32>::zeros((n, 8));
+        for t in 0..n {
+            rows[[t, ROOT_VX]] = 0.02;
+            rows[[t, ROOT_VZ]] = -0.01;
+            rows[[t, CLEARANCE]] = 0.05;
+            rows[[t, YAW_VEL]] = 0.03;
+            rows[[t, 4]] = 0.01 * t as f32;
+            rows[[t, 7]] = if (t / 10) % 2 == 0 { 1.0 } else { 0.0 };
+        }
+        let out = stretch_rotation_rows(rows.view(), 4, 40, 1.25);
+        assert_eq!(out.dim(), (40, 8));
+        for j in 0..40 {
+            assert!((out[[j, ROOT_VX]] - 0.025).abs() < 1e-6);
+            assert!((out[[j, ROOT_VZ]] + 0.0125).abs() < 1e-6);
+            assert!((out[[j, YAW_VEL]] - 0.0375).abs() < 1e-6);
+            assert!(
+                (out[[j, CLEARANCE]] - 0.05).abs() < 1e-6,
+                "heights do not scale"
+            );
+            let src = 4.0 + 1.25 * j as f32;
+            assert!((out[[j, 4]] - 0.01 * src).abs() < 1e-5, "row {j}");
+        }
+        // Frame 8 is source time 14 (in a contact), frame 12 source 19 (none): contacts move
+        // with their frames.
+        assert_eq!((out[[8, 7]], out[[12, 7]]), (0.0, 0.0));
+        assert_eq!(out[[13, 7]], 1.0);
+        // At tempo 1 the rows are the source's.
+        let same = stretch_rotation_rows(rows.view(), 4, 40, 1.0);
+        assert_eq!(same, rows.slice(ndarray::s![4..44, ..]));
     }
 
     #[test]

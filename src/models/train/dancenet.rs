@@ -8,6 +8,7 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use tch::{Device, Kind, Tensor};
 
+use super::augment::{stretch_music, stretch_rotation_rows, Augment, MusicLayout};
 use super::{
     batch_tensor, window_starts, CommonOptions, EpochLog, EpochResult, Sequence, TrainError,
     Trainer,
@@ -75,6 +76,10 @@ pub struct Options {
     pub spectral_weight: f64,
     /// Windows of each batch danced on freely for the rhythm term.
     pub rollout_windows: usize,
+    /// Windows drawn at tempo factors in `[min_tempo, max_tempo]` (log-uniform): music and dance
+    /// resampled together (`train::augment`, issue 25), so one figure is seen at many tempi.
+    pub min_tempo: f64,
+    pub max_tempo: f64,
 }
 
 impl Default for Options {
@@ -101,6 +106,8 @@ impl Default for Options {
             seed: 2020,
             spectral_weight: 0.0,
             rollout_windows: 8,
+            min_tempo: 1.0,
+            max_tempo: 1.0,
         }
     }
 }
@@ -163,6 +170,17 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             "--spectral-weight dances one mixture component; this run has {mixtures} (--mixtures 1)"
         )));
     }
+    if !(opts.min_tempo > 0.0 && opts.min_tempo <= opts.max_tempo) {
+        return Err(TrainError::InvalidOption(format!(
+            "--min-tempo {} and --max-tempo {}: want 0 < min ≤ max",
+            opts.min_tempo, opts.max_tempo
+        )));
+    }
+    let augment = Augment {
+        min_tempo: opts.min_tempo,
+        max_tempo: opts.max_tempo,
+        mirror: false,
+    };
     let ds = Dataset::open(&opts.common.data)?;
     // One skeleton for every dance, fitted on the train split: rotations are relative to its
     // rest pose, which must be the same for all.
@@ -291,6 +309,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         style_balance: opts.style_balance,
         steps,
         rigid_fit_error_cm: 100.0 * fit_err,
+        min_tempo: opts.min_tempo,
+        max_tempo: opts.max_tempo,
     };
     let file_of = |t: &Trainer, steps: usize| ModelFile {
         config: config.clone(),
@@ -327,10 +347,15 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             use rand::seq::SliceRandom;
             let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
             starts.shuffle(&mut rng);
+            // Its own stream, so a run without tempi draws what it drew before.
+            let mut tempo_rng = StdRng::seed_from_u64(opts.seed ^ 0x7E_3B0 ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
             let (mut total, mut gmm_sum, mut foot_sum, mut spectral_sum, mut batches) = (0.0, 0.0, 0.0, 0.0, 0usize);
             for chunk in starts.chunks(opts.batch) {
-                let target = batch_tensor(&train, chunk, len, |s| &s.poses, dev);
-                let music = batch_tensor(&train, chunk, len, |s| &s.music, dev);
+                let (target, music) = if augment == Augment::NONE {
+                    (batch_tensor(&train, chunk, len, |s| &s.poses, dev), batch_tensor(&train, chunk, len, |s| &s.music, dev))
+                } else {
+                    stretched_batch(&train_raw, chunk, len, &augment, &mut tempo_rng, &pose_norm, &music_norm, d)?
+                };
                 let style = model.style_one_hot(&chunk.iter().map(|&(i, _)| train_style[i]).collect::<Vec<_>>(), dev);
                 let input = if opts.input_noise > 0.0 || opts.input_offset > 0.0 || opts.input_walk > 0.0 {
                     let (b, l) = (chunk.len() as i64, len as i64);
@@ -386,8 +411,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 train_loss: total / b,
                 test_loss: test_loss.map(|(g, f)| g + opts.lambda_foot * f),
                 note: format!(
-                    "steps={} gmm={:.4} foot={:.4} spectral={:.4} (weight {}) test_gmm={} test_foot={} (nats per dimension; BCE; spectral L1 per bin)",
+                    "steps={} tempo={}..{} gmm={:.4} foot={:.4} spectral={:.4} (weight {}) test_gmm={} test_foot={} (nats per dimension; BCE; spectral L1 per bin)",
                     steps.get(),
+                    opts.min_tempo,
+                    opts.max_tempo,
                     gmm_sum / b,
                     foot_sum / b,
                     spectral_sum / b,
@@ -400,6 +427,49 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         |t| file_of(t, steps.get()),
     )?;
     Ok(trainer.logs)
+}
+
+/// A batch of windows each drawn at its own tempo factor (`augment`): the raw rows and music of
+/// `dances` resampled together from each window's start, then normalised as the network reads
+/// them. A window too near its dance's end for a factor plays at the fastest factor that fits.
+/// Returns (poses `[b, len, D + contacts]`, music `[b, len, music]`).
+#[allow(clippy::too_many_arguments)]
+fn stretched_batch(
+    dances: &[Prepared],
+    chunk: &[(usize, usize)],
+    len: usize,
+    augment: &Augment,
+    rng: &mut StdRng,
+    pose_norm: &NormStats,
+    music_norm: &NormStats,
+    d: usize,
+) -> Result<(Tensor, Tensor), TrainError> {
+    let layout = MusicLayout::dancenet();
+    let as_tensor = |m: Array2<f32>| {
+        let (r, c) = m.dim();
+        Tensor::from_slice(&m.into_iter().collect::<Vec<f32>>()).view([r as i64, c as i64])
+    };
+    let (mut poses, mut music) = (Vec::new(), Vec::new());
+    for &(i, start) in chunk {
+        let p = &dances[i];
+        let (f, _) = augment.draw(rng);
+        let room =
+            (p.frames.nrows().min(p.music.nrows()) - 1 - start) as f64 / (len - 1).max(1) as f64;
+        let f = f.min(room);
+        let rows = stretch_rotation_rows(p.frames.view(), start, len, f);
+        let feats = pose_norm.normalize(&rows.slice(ndarray::s![.., ..d]).to_owned())?;
+        let rows = concatenate(Axis(1), &[feats.view(), rows.slice(ndarray::s![.., d..])])
+            .map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
+        poses.push(as_tensor(rows));
+        music.push(as_tensor(music_norm.normalize(&stretch_music(
+            p.music.view(),
+            start,
+            len,
+            f,
+            &layout,
+        ))?));
+    }
+    Ok((Tensor::stack(&poses, 0), Tensor::stack(&music, 0)))
 }
 
 /// The decoder dancing on its own: after the first `context` frames of `real` `[b, n, D + contacts]`
