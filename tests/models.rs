@@ -322,8 +322,9 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
 }
 
 /// DanceNet's trainer draws each window at its own tempo (`train::augment`: the rotation rows
-/// and the music resampled together, the root and yaw velocities scaled): a tiny epoch on the
-/// real train split runs, logs its tempi, records them in `model.json`, and serves.
+/// and the music resampled together, the root and yaw velocities scaled) and, with
+/// `style_dropout`, leaves the style input out of a share of them: a tiny epoch on the real train
+/// split runs, logs both, records them in `model.json`, and serves.
 #[test]
 fn dancenet_trains_on_windows_at_other_tempi() {
     use choreo::models::train::{dancenet, CommonOptions};
@@ -347,6 +348,7 @@ fn dancenet_trains_on_windows_at_other_tempi() {
         epochs: 1,
         min_tempo: 0.8,
         max_tempo: 1.25,
+        style_dropout: 0.5,
         ..dancenet::Options::default()
     };
     let logs = dancenet::train(&opts).expect("training runs");
@@ -356,12 +358,17 @@ fn dancenet_trains_on_windows_at_other_tempi() {
         log.train_loss.is_finite() && log.test_loss.is_some_and(f64::is_finite),
         "{log:?}"
     );
-    assert!(log.note.contains("tempo=0.8..1.25"), "{}", log.note);
+    assert!(
+        log.note.contains("tempo=0.8..1.25 style_dropout=0.5"),
+        "{}",
+        log.note
+    );
     let file: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.path().join("model.json")).unwrap())
             .unwrap();
     assert_eq!(file["training"]["min_tempo"], 0.8);
     assert_eq!(file["training"]["max_tempo"], 1.25);
+    assert_eq!(file["training"]["style_dropout"], 0.5);
     let served = choreo::models::dancenet::Served::load(out.path()).expect("the folder loads");
     // The style classifier is trained on its own (`choreo train dancenet-style`): ask for a style.
     let req = GenerateRequest {

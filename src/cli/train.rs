@@ -279,6 +279,10 @@ args_into! {
         /// Fastest tempo factor a training window is drawn at.
         #[arg(long, default_value_t = train::dancenet::Options::default().max_tempo)]
         max_tempo: f64,
+        /// Share of training windows whose style input is zeroed, so the decoder learns what the
+        /// style implies from the music code too.
+        #[arg(long, default_value_t = train::dancenet::Options::default().style_dropout)]
+        style_dropout: f64,
     }
 }
 

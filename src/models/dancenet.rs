@@ -639,6 +639,9 @@ pub struct Schedule {
     pub min_tempo: f64,
     #[serde(default = "unit_tempo")]
     pub max_tempo: f64,
+    /// Share of windows trained without their style input.
+    #[serde(default)]
+    pub style_dropout: f64,
 }
 
 fn unit_tempo() -> f64 {

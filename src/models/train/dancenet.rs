@@ -5,7 +5,7 @@
 //! clips beside the weights.
 use ndarray::{concatenate, Array2, Axis};
 use rand::rngs::StdRng;
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use tch::{Device, Kind, Tensor};
 
 use super::augment::{stretch_music, stretch_rotation_rows, Augment, MusicLayout};
@@ -80,6 +80,9 @@ pub struct Options {
     /// resampled together (`train::augment`, issue 25), so one figure is seen at many tempi.
     pub min_tempo: f64,
     pub max_tempo: f64,
+    /// Share of training windows whose style input is zeroed, so the decoder learns what the
+    /// style implies from the music code too (0: every window has its style).
+    pub style_dropout: f64,
 }
 
 impl Default for Options {
@@ -108,6 +111,7 @@ impl Default for Options {
             rollout_windows: 8,
             min_tempo: 1.0,
             max_tempo: 1.0,
+            style_dropout: 0.0,
         }
     }
 }
@@ -174,6 +178,12 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         return Err(TrainError::InvalidOption(format!(
             "--min-tempo {} and --max-tempo {}: want 0 < min ≤ max",
             opts.min_tempo, opts.max_tempo
+        )));
+    }
+    if !(0.0..=1.0).contains(&opts.style_dropout) {
+        return Err(TrainError::InvalidOption(format!(
+            "--style-dropout {}: want a share in 0..=1",
+            opts.style_dropout
         )));
     }
     let augment = Augment {
@@ -311,6 +321,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         rigid_fit_error_cm: 100.0 * fit_err,
         min_tempo: opts.min_tempo,
         max_tempo: opts.max_tempo,
+        style_dropout: opts.style_dropout,
     };
     let file_of = |t: &Trainer, steps: usize| ModelFile {
         config: config.clone(),
@@ -349,6 +360,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             starts.shuffle(&mut rng);
             // Its own stream, so a run without tempi draws what it drew before.
             let mut tempo_rng = StdRng::seed_from_u64(opts.seed ^ 0x7E_3B0 ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
+            let mut style_rng = StdRng::seed_from_u64(opts.seed ^ 0x57_11E ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
             let (mut total, mut gmm_sum, mut foot_sum, mut spectral_sum, mut batches) = (0.0, 0.0, 0.0, 0.0, 0usize);
             for chunk in starts.chunks(opts.batch) {
                 let (target, music) = if augment == Augment::NONE {
@@ -357,6 +369,12 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     stretched_batch(&train_raw, chunk, len, &augment, &mut tempo_rng, &pose_norm, &music_norm, d)?
                 };
                 let style = model.style_one_hot(&chunk.iter().map(|&(i, _)| train_style[i]).collect::<Vec<_>>(), dev);
+                let style = if opts.style_dropout > 0.0 {
+                    let keep: Vec<f32> = chunk.iter().map(|_| if style_rng.gen_bool(opts.style_dropout) { 0.0 } else { 1.0 }).collect();
+                    style * Tensor::from_slice(&keep).view([-1, 1, 1]).to_device(dev)
+                } else {
+                    style
+                };
                 let input = if opts.input_noise > 0.0 || opts.input_offset > 0.0 || opts.input_walk > 0.0 {
                     let (b, l) = (chunk.len() as i64, len as i64);
                     let noise = ar1_noise(b, l, d as i64, opts.input_coherence, dev) * opts.input_noise
@@ -411,10 +429,11 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 train_loss: total / b,
                 test_loss: test_loss.map(|(g, f)| g + opts.lambda_foot * f),
                 note: format!(
-                    "steps={} tempo={}..{} gmm={:.4} foot={:.4} spectral={:.4} (weight {}) test_gmm={} test_foot={} (nats per dimension; BCE; spectral L1 per bin)",
+                    "steps={} tempo={}..{} style_dropout={} gmm={:.4} foot={:.4} spectral={:.4} (weight {}) test_gmm={} test_foot={} (nats per dimension; BCE; spectral L1 per bin)",
                     steps.get(),
                     opts.min_tempo,
                     opts.max_tempo,
+                    opts.style_dropout,
                     gmm_sum / b,
                     foot_sum / b,
                     spectral_sum / b,
