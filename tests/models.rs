@@ -258,6 +258,30 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
     );
 }
 
+/// DanceNet's opening was its seed's and its style's: seed 1 danced the 5-s trumpet loop and
+/// vibe_ace (both heard as rumba) 0.026 m apart over the loop's frames (root-relative; two real
+/// dances are 0.34 m apart), because the music takes a few seconds to move the decoder. Served
+/// with a warm-up (the network dances the song's first 10 s, then the dance continues from how
+/// it ended), the two openings are the network's answers to two songs: 0.14 m apart when
+/// measured (model card). This is the network's own output, before any served stage.
+#[test]
+fn dancenet_opens_a_different_dance_to_a_different_song() {
+    let m = model("dancenet");
+    let other = {
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/audio/vibe_ace.ogg");
+        assert!(path.is_file(), "{} is missing", path.display());
+        audio::decode_path(&path).expect("the song decodes")
+    };
+    let looped = dance(m.as_ref(), &GenerateRequest::plain(song(), 1));
+    let other = dance(m.as_ref(), &GenerateRequest::plain(&other, 1));
+    let apart = choreo::metrics::physical::seed_distance_m(&looped, &other);
+    assert!(
+        apart > 0.10,
+        "seed 1 on two songs: {apart:.3} m apart over the loop's frames"
+    );
+}
+
 /// keypose-transformer turns as its scaffold's real clips turn (`scaffold_facing`): on the
 /// Hungarian dance (tracked in 3/4, so waltz clips) its arms move against the spine as fast as
 /// the slowest real dance's (0.43 m/s, issue 25). A waltz holds its arms in a frame; they move

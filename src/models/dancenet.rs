@@ -664,7 +664,16 @@ pub struct Serving {
     /// seconds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub beat_time: Option<crate::models::beat_time::BeatTimeConfig>,
+    /// Frames danced over the song's music before the dance starts and dropped, when the job
+    /// brings no seed motion (`dancenet::served`); 0: none.
+    #[serde(default)]
+    pub warm_up_frames: usize,
 }
+
+/// The served warm-up: 10 s. The music moves the decoder only after a few seconds (pink noise
+/// and a song, one seed and style: 0.03 m apart over the first 5 s, 0.27 m over the next 15),
+/// so without it one seed opened every song of a style alike (model card).
+pub const WARM_UP_FRAMES: usize = 250;
 
 /// `model.json`.
 pub type ModelFile = super::folder::ModelFile<Config, Schedule, Serving>;

@@ -172,6 +172,37 @@ impl Served {
                 };
                 let total = (n - opening).max(1);
                 let mut rng = StdRng::seed_from_u64(req.seed ^ 0xDA_2CE_2E7);
+                // The warm-up (not in the paper): from a drawn clip, the network first dances
+                // `warm_up_frames` over the song's own music (from its start, cycled when the
+                // song is shorter) and the dance continues from how it ended, so its opening
+                // is the network's answer to this song rather than the seed's and the style's.
+                let warm = self.file.extra.warm_up_frames;
+                let ctx = if opening == 0 && warm > 0 {
+                    let idx: Vec<i64> = (0..warm).map(|t| (t % n) as i64).collect();
+                    let warm_rows = Tensor::cat(
+                        &[
+                            code.narrow(0, 0, 1).repeat([(tail - 1) as i64, 1]),
+                            code.index_select(
+                                0,
+                                &Tensor::from_slice(&idx).to_device(code.device()),
+                            ),
+                        ],
+                        0,
+                    );
+                    let Some(danced) = model.sample(
+                        &ctx,
+                        &warm_rows,
+                        style.style.index(),
+                        sampling,
+                        &mut rng,
+                        |_| progress.report(Stage::Generate, 0.0).is_ok(),
+                    ) else {
+                        return Ok(None);
+                    };
+                    danced.slice(s![warm - tail.., ..]).to_owned()
+                } else {
+                    ctx
+                };
                 Ok(model.sample(
                     &ctx,
                     &rows,
