@@ -24,15 +24,15 @@
 //!
 //! Sizes differ from the paper to train in an hour on two CPU cores, and so does what keeps the
 //! sampled dance bounded and smooth; the model card says where, why, and what each change measured.
-use ndarray::Array2;
-use rand::rngs::StdRng;
-use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 use tch::nn::{self, RNN};
 use tch::{Device, Kind, Tensor};
 
+mod sampling;
 pub mod served;
 pub mod style;
+
+pub use sampling::{Draws, Sampling};
 
 pub use served::Served;
 
@@ -461,152 +461,6 @@ impl DanceNet {
         );
         Losses { gmm, foot }
     }
-
-    /// Samples frames after the context `prefix` `[m ≥ 1, D + contacts]` (normalised). `code`
-    /// `[m − 1 + n, d_code]` is the music code of every frame after the first of the prefix: the
-    /// prefix's own frames 1..m, then the `n` frames to make. Each step runs the gated layers on
-    /// one frame against queues of their past inputs (the dilated convolution needs only the
-    /// input `d` frames back), so a frame costs the same however long the song.
-    /// `on_step(done)` is called before the first frame and every 250 frames, and may stop it.
-    pub fn sample(
-        &self,
-        prefix: &Array2<f32>,
-        code: &Tensor,
-        style: usize,
-        sampling: Sampling,
-        rng: &mut StdRng,
-        mut on_step: impl FnMut(usize) -> bool,
-    ) -> Option<Array2<f32>> {
-        let c = &self.config;
-        let (d, width) = (c.pose_dim as usize, (c.pose_dim + c.contacts) as usize);
-        let m = prefix.nrows();
-        if m == 0 || prefix.ncols() != width {
-            return None;
-        }
-        let n = (code.size()[0] as usize).checked_sub(m - 1)?;
-        let dev = code.device();
-        let style = self.style_one_hot(&[style], dev); // [1, styles, 1]
-        let code_t = code.transpose(0, 1).unsqueeze(0); // [1, d_code, m − 1 + n]
-        let conds: Vec<Tensor> = self
-            .decoder
-            .layers
-            .iter()
-            .map(|l| l.conditioning(&code_t, &style))
-            .collect(); // [1, 2C, m − 1 + n]
-                        // The context but its last frame, as one teacher-forced pass; each layer keeps the inputs
-                        // of its last `dilation` positions.
-        let mut queues: Vec<std::collections::VecDeque<Tensor>> = self
-            .decoder
-            .layers
-            .iter()
-            .map(|_| std::collections::VecDeque::new())
-            .collect();
-        if m > 1 {
-            let x = super::to_tensor(&prefix.slice(ndarray::s![..m - 1, ..]).to_owned())
-                .to_device(dev)
-                .transpose(0, 1)
-                .unsqueeze(0);
-            let mut h = x.apply(&self.decoder.input); // [1, C, m − 1]
-            for ((l, cond), q) in self
-                .decoder
-                .layers
-                .iter()
-                .zip(&conds)
-                .zip(queues.iter_mut())
-            {
-                let keep = (m - 1).min(l.dilation as usize);
-                for t in m - 1 - keep..m - 1 {
-                    q.push_back(h.get(0).select(1, t as i64));
-                }
-                h = l.forward(&h, &cond.narrow(2, 0, (m - 1) as i64)).0;
-            }
-        }
-        // Per layer: taps at t − d and t `[2C, C]`, conditioning rows `[m − 1 + n, 2C]`, and the
-        // 1×1 convolutions as matrices.
-        let mat = |conv: &nn::Conv1D| {
-            let b = conv
-                .bs
-                .as_ref()
-                .map(|b| b.shallow_clone())
-                .unwrap_or_else(|| Tensor::zeros([conv.ws.size()[0]], (Kind::Float, dev)));
-            (conv.ws.squeeze_dim(-1), b)
-        };
-        let layers: Vec<_> = self
-            .decoder
-            .layers
-            .iter()
-            .zip(&conds)
-            .map(|(l, cond)| {
-                (
-                    l.conv.ws.select(2, 0),
-                    l.conv.ws.select(2, 1),
-                    cond.squeeze_dim(0).transpose(0, 1).contiguous(),
-                    mat(&l.res),
-                    mat(&l.skip),
-                    l.dilation as usize,
-                )
-            })
-            .collect();
-        let (w_in, b_in) = mat(&self.decoder.input);
-        let (w_head, b_head) = mat(&self.decoder.head);
-        let (w_out, b_out) = mat(&self.decoder.out);
-        let zeros = Tensor::zeros([c.residual], (Kind::Float, dev));
-        let mut out = Array2::<f32>::zeros((n, width));
-        let mut frame: Vec<f32> = prefix.row(m - 1).to_vec();
-        if !on_step(0) {
-            return None;
-        }
-        let k = c.mixtures as usize;
-        let mut probs = vec![0f32; k];
-        let mut draws = Draws::new(d, rng);
-        for t in 0..n {
-            let row = (m - 1 + t) as i64;
-            let mut h = w_in.mv(&Tensor::from_slice(&frame).to_device(dev)) + &b_in;
-            let mut skip: Option<Tensor> = None;
-            for ((w_past, w_now, cond, (w_res, b_res), (w_skip, b_skip), dilation), q) in
-                layers.iter().zip(queues.iter_mut())
-            {
-                let past = if q.len() >= *dilation {
-                    q[q.len() - dilation].shallow_clone()
-                } else {
-                    zeros.shallow_clone()
-                };
-                let z = w_past.mv(&past) + w_now.mv(&h) + cond.get(row);
-                let zs = z.chunk(2, 0);
-                let g = zs[0].tanh() * zs[1].sigmoid();
-                let sk = w_skip.mv(&g) + b_skip;
-                skip = Some(match skip {
-                    Some(a) => a + sk,
-                    None => sk,
-                });
-                q.push_back(h.shallow_clone());
-                while q.len() > *dilation {
-                    q.pop_front();
-                }
-                h = h + w_res.mv(&g) + b_res;
-            }
-            let raw = w_out.mv(&(w_head.mv(&skip?.relu()) + &b_head).relu()) + &b_out;
-            let raw: Vec<f32> = Vec::<f32>::try_from(raw).ok()?;
-            let mut base = frame[..d].to_vec();
-            base[..c.absolute_dims as usize].fill(0.0);
-            let next = sampling.draw(
-                &raw,
-                &base,
-                k,
-                d,
-                c.contacts as usize,
-                &mut probs,
-                &mut draws,
-                rng,
-            );
-            out.row_mut(t).assign(&ndarray::ArrayView1::from(&next));
-            frame = next;
-            if (t + 1) % 250 == 0 && !on_step(t + 1) {
-                return None;
-            }
-        }
-        Some(out)
-    }
 }
 
 /// The run behind the committed weights, beside the common record.
@@ -678,116 +532,11 @@ pub const WARM_UP_FRAMES: usize = 250;
 /// `model.json`.
 pub type ModelFile = super::folder::ModelFile<Config, Schedule, Serving>;
 
-/// How the mixture becomes a frame (§3.4): a component drawn by its weight, then each
-/// dimension from its Gaussian with σ × `temperature`; contacts where their probability is over
-/// one half. With `coherence` ρ > 0 the standard-normal draws behind each frame are an AR(1)
-/// process, `z_t = ρ z_{t−1} + √(1 − ρ²) n_t` (the component's uniform through `z`'s CDF): every
-/// frame is still a draw from its own mixture, but neighbouring frames' draws move together, so
-/// the dance does not shiver at 25 fps with independent noise (not in the paper; the model card
-/// shows both).
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-pub struct Sampling {
-    pub temperature: f64,
-    #[serde(default)]
-    pub coherence: f64,
-}
-
-impl Default for Sampling {
-    fn default() -> Self {
-        Self {
-            temperature: 1.0,
-            coherence: 0.0,
-        }
-    }
-}
-
-/// The random state [`Sampling::draw`] carries from frame to frame: one normal per dimension and
-/// one for the component.
-pub struct Draws {
-    z: Vec<f32>,
-    pick: f32,
-}
-
-impl Draws {
-    /// Fresh standard normals for `d` dimensions.
-    pub fn new(d: usize, rng: &mut StdRng) -> Self {
-        Self {
-            z: (0..d).map(|_| StandardNormal.sample(rng)).collect(),
-            pick: StandardNormal.sample(rng),
-        }
-    }
-}
-
-/// Standard normal CDF, logistic approximation (within 0.01; it only turns a normal into a
-/// uniform for the component draw).
-fn phi(z: f32) -> f32 {
-    1.0 / (1.0 + (-1.702 * z).exp())
-}
-
-impl Sampling {
-    /// The next frame `[D + contacts]` from the decoder's raw output for one frame, whose means are
-    /// relative to `base` `[D]` (the current frame, zero where means are absolute); `probs` is
-    /// scratch of `k` entries.
-    #[allow(clippy::too_many_arguments)]
-    pub fn draw(
-        &self,
-        raw: &[f32],
-        base: &[f32],
-        k: usize,
-        d: usize,
-        contacts: usize,
-        probs: &mut [f32],
-        draws: &mut Draws,
-        rng: &mut StdRng,
-    ) -> Vec<f32> {
-        let rho = self.coherence.clamp(0.0, 0.999) as f32;
-        let fresh = (1.0 - rho * rho).sqrt();
-        let mut step = |z: &mut f32| {
-            let n: f32 = StandardNormal.sample(rng);
-            *z = rho * *z + fresh * n;
-        };
-        step(&mut draws.pick);
-        for z in draws.z.iter_mut() {
-            step(z);
-        }
-        let logits = &raw[..k];
-        let max = logits.iter().copied().fold(f32::NEG_INFINITY, f32::max);
-        let mut total = 0f32;
-        for (p, &l) in probs.iter_mut().zip(logits) {
-            *p = (l - max).exp();
-            total += *p;
-        }
-        let mut u = phi(draws.pick) * total;
-        let mut pick = k - 1;
-        for (i, &p) in probs.iter().enumerate() {
-            if u < p {
-                pick = i;
-                break;
-            }
-            u -= p;
-        }
-        let mean = &raw[k + pick * d..k + (pick + 1) * d];
-        let log_sigma = &raw[k + k * d + pick * d..k + k * d + (pick + 1) * d];
-        let t = self.temperature.max(0.0) as f32;
-        let mut next: Vec<f32> = (0..d)
-            .map(|i| {
-                let ls = log_sigma[i].clamp(LOG_SIGMA.0 as f32, LOG_SIGMA.1 as f32);
-                base[i] + mean[i] + t * ls.exp() * draws.z[i]
-            })
-            .collect();
-        let c0 = k * (1 + 2 * d);
-        next.extend(
-            raw[c0..c0 + contacts]
-                .iter()
-                .map(|&l| if l > 0.0 { 1.0 } else { 0.0 }),
-        );
-        next
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use ndarray::Array2;
+    use rand::rngs::StdRng;
     use rand::SeedableRng;
     use tch::nn::OptimizerConfig;
 
