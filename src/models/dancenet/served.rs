@@ -152,9 +152,16 @@ impl Served {
                     return Ok(None);
                 };
                 // Conditioning rows: a seed motion is danced over the song's opening, so its frames
-                // have the song's code; a clip from another dance gets the opening's first code.
+                // have the song's code; a context from elsewhere (a clip from another dance, or
+                // the warm-up's last frames) gets the opening's first code, then `codes` follow.
                 let tail = m.min(rf + 1);
                 let ctx = context.slice(s![m - tail.., ..]).to_owned();
+                let after_context = |codes: Tensor| {
+                    Tensor::cat(
+                        &[code.narrow(0, 0, 1).repeat([(tail - 1) as i64, 1]), codes],
+                        0,
+                    )
+                };
                 let rows = if opening > 0 {
                     code.narrow(
                         0,
@@ -162,13 +169,7 @@ impl Served {
                         (n - opening + tail - 1) as i64,
                     )
                 } else {
-                    Tensor::cat(
-                        &[
-                            code.narrow(0, 0, 1).repeat([(tail - 1) as i64, 1]),
-                            code.shallow_clone(),
-                        ],
-                        0,
-                    )
+                    after_context(code.shallow_clone())
                 };
                 let total = (n - opening).max(1);
                 let mut rng = StdRng::seed_from_u64(req.seed ^ 0xDA_2CE_2E7);
@@ -176,18 +177,15 @@ impl Served {
                 // `warm_up_frames` over the song's own music (from its start, cycled when the
                 // song is shorter) and the dance continues from how it ended, so its opening
                 // is the network's answer to this song rather than the seed's and the style's.
-                let warm = self.file.extra.warm_up_frames;
+                // At least the context's length, so its last `tail` frames are all danced.
+                let warm = match self.file.extra.warm_up_frames {
+                    0 => 0,
+                    w => w.max(tail),
+                };
                 let ctx = if opening == 0 && warm > 0 {
                     let idx: Vec<i64> = (0..warm).map(|t| (t % n) as i64).collect();
-                    let warm_rows = Tensor::cat(
-                        &[
-                            code.narrow(0, 0, 1).repeat([(tail - 1) as i64, 1]),
-                            code.index_select(
-                                0,
-                                &Tensor::from_slice(&idx).to_device(code.device()),
-                            ),
-                        ],
-                        0,
+                    let warm_rows = after_context(
+                        code.index_select(0, &Tensor::from_slice(&idx).to_device(code.device())),
                     );
                     let Some(danced) = model.sample(
                         &ctx,

@@ -80,6 +80,25 @@ impl Augment {
         mirror: false,
     };
 
+    /// The tempo range asked for, refused unless `0 < min_tempo ≤ max_tempo` (a factor is drawn
+    /// log-uniform between them).
+    pub fn checked(
+        min_tempo: f64,
+        max_tempo: f64,
+        mirror: bool,
+    ) -> Result<Self, super::TrainError> {
+        if !(min_tempo > 0.0 && min_tempo <= max_tempo) {
+            return Err(super::TrainError::InvalidOption(format!(
+                "--min-tempo {min_tempo} and --max-tempo {max_tempo}: want 0 < min ≤ max"
+            )));
+        }
+        Ok(Self {
+            min_tempo,
+            max_tempo,
+            mirror,
+        })
+    }
+
     /// Source frames a window of `len` output frames may span at the fastest tempo.
     pub fn source_len(&self, len: usize) -> usize {
         ((len.saturating_sub(1)) as f64 * self.max_tempo.max(1.0)).ceil() as usize + 1
@@ -188,16 +207,28 @@ pub fn stretch_music(
     out
 }
 
-/// Pose window (the `motion::repr` 73-column rows) at tempo `f`: local joints and root height
-/// interpolated, per-frame root and yaw velocities scaled by `f`.
-pub fn stretch_poses(src: ArrayView2<'_, f32>, start: usize, len: usize, f: f64) -> Array2<f32> {
+/// `len` rows of `src` from `start` at tempo `f`, the per-frame rate columns `rates` scaled by
+/// `f` (a velocity per frame covers `f` times the ground when the frames come `f` times faster).
+fn stretch_rows(
+    src: ArrayView2<'_, f32>,
+    start: usize,
+    len: usize,
+    f: f64,
+    rates: &[usize],
+) -> Array2<f32> {
     let mut out = resample(src, start, len, f);
     if (f - 1.0).abs() > 1e-12 {
-        for c in [ROOT_VX, ROOT_VX + 1, YAW_VEL] {
+        for &c in rates {
             out.column_mut(c).mapv_inplace(|v| v * f as f32);
         }
     }
     out
+}
+
+/// Pose window (the `motion::repr` 73-column rows) at tempo `f`: local joints and root height
+/// interpolated, per-frame root and yaw velocities scaled by `f`.
+pub fn stretch_poses(src: ArrayView2<'_, f32>, start: usize, len: usize, f: f64) -> Array2<f32> {
+    stretch_rows(src, start, len, f, &[ROOT_VX, ROOT_VX + 1, YAW_VEL])
 }
 
 /// Rotation-feature rows (`motion::rotations`, DanceNet's, de-normalised) at tempo `f`: every
@@ -212,13 +243,7 @@ pub fn stretch_rotation_rows(
     f: f64,
 ) -> Array2<f32> {
     use crate::motion::rotations::{ROOT_VX, ROOT_VZ, YAW_VEL};
-    let mut out = resample(src, start, len, f);
-    if (f - 1.0).abs() > 1e-12 {
-        for c in [ROOT_VX, ROOT_VZ, YAW_VEL] {
-            out.column_mut(c).mapv_inplace(|v| v * f as f32);
-        }
-    }
-    out
+    stretch_rows(src, start, len, f, &[ROOT_VX, ROOT_VZ, YAW_VEL])
 }
 
 /// The joint each joint becomes in the mirror image (`right_*` ↔ `left_*`, `head_right` ↔ `head_left`).

@@ -3,7 +3,7 @@
 //! the decoder's input frames, Adam, on the train split of dance-with-melody. Fits the rig every
 //! dance is expressed on (train split), and writes it, the normalisation and a few real seed
 //! clips beside the weights.
-use ndarray::{concatenate, Array2, Axis};
+use ndarray::{concatenate, Array2, ArrayView2, Axis};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use tch::{Device, Kind, Tensor};
@@ -16,6 +16,7 @@ use super::{
 use crate::metrics::physical::seed_distance_m;
 use crate::models::dancenet::{Config, DanceNet, ModelFile, Sampling, Schedule, Serving, ID};
 use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
+use crate::models::to_tensor;
 use crate::models::DanceStyle;
 use crate::motion::dataset::{Dance, Dataset, NormStats};
 use crate::motion::rig::Rig;
@@ -177,23 +178,13 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             "--spectral-weight dances one mixture component; this run has {mixtures} (--mixtures 1)"
         )));
     }
-    if !(opts.min_tempo > 0.0 && opts.min_tempo <= opts.max_tempo) {
-        return Err(TrainError::InvalidOption(format!(
-            "--min-tempo {} and --max-tempo {}: want 0 < min ≤ max",
-            opts.min_tempo, opts.max_tempo
-        )));
-    }
+    let augment = Augment::checked(opts.min_tempo, opts.max_tempo, false)?;
     if !(0.0..=1.0).contains(&opts.style_dropout) {
         return Err(TrainError::InvalidOption(format!(
             "--style-dropout {}: want a share in 0..=1",
             opts.style_dropout
         )));
     }
-    let augment = Augment {
-        min_tempo: opts.min_tempo,
-        max_tempo: opts.max_tempo,
-        mirror: false,
-    };
     let ds = Dataset::open(&opts.common.data)?;
     // One skeleton for every dance, fitted on the train split: rotations are relative to its
     // rest pose, which must be the same for all.
@@ -237,17 +228,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     let normalise = |seqs: &[Prepared]| -> Result<Vec<Sequence>, TrainError> {
         seqs.iter()
             .map(|p| {
-                let feats =
-                    pose_norm.normalize(&p.frames.slice(ndarray::s![.., ..d]).to_owned())?;
-                let poses = concatenate(
-                    Axis(1),
-                    &[feats.view(), p.frames.slice(ndarray::s![.., d..])],
-                )
-                .map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
                 Ok(Sequence {
                     id: p.id.clone(),
                     music: music_norm.normalize(&p.music)?,
-                    poses,
+                    poses: normalised_rows(p.frames.view(), &pose_norm, d)?,
                     beat_hz: None,
                 })
             })
@@ -360,11 +344,13 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 return Err(TrainError::NoWindows(len));
             }
             use rand::seq::SliceRandom;
-            let mut rng = StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
+            // The epoch's random streams, one per use, so a run without tempi or style dropout
+            // draws what it drew before they existed.
+            let epoch_rng = |salt: u64| StdRng::seed_from_u64(opts.seed ^ salt ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
+            let mut rng = epoch_rng(0);
             starts.shuffle(&mut rng);
-            // Its own stream, so a run without tempi draws what it drew before.
-            let mut tempo_rng = StdRng::seed_from_u64(opts.seed ^ 0x7E_3B0 ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
-            let mut style_rng = StdRng::seed_from_u64(opts.seed ^ 0x57_11E ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
+            let mut tempo_rng = epoch_rng(0x7E_3B0);
+            let mut style_rng = epoch_rng(0x57_11E);
             let (mut total, mut gmm_sum, mut foot_sum, mut spectral_sum, mut batches) = (0.0, 0.0, 0.0, 0.0, 0usize);
             for chunk in starts.chunks(opts.batch) {
                 let (target, music) = if augment == Augment::NONE {
@@ -452,6 +438,18 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     Ok(trainer.logs)
 }
 
+/// Rotation-feature rows as the network reads them: the first `d` columns (the features)
+/// normalised, the contacts after them as they are.
+fn normalised_rows(
+    rows: ArrayView2<'_, f32>,
+    pose_norm: &NormStats,
+    d: usize,
+) -> Result<Array2<f32>, TrainError> {
+    let feats = pose_norm.normalize(&rows.slice(ndarray::s![.., ..d]).to_owned())?;
+    concatenate(Axis(1), &[feats.view(), rows.slice(ndarray::s![.., d..])])
+        .map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))
+}
+
 /// A batch of windows each drawn at its own tempo factor (`augment`): the raw rows and music of
 /// `dances` resampled together from each window's start, then normalised as the network reads
 /// them. A window too near its dance's end for a factor plays at the fastest factor that fits.
@@ -468,10 +466,6 @@ fn stretched_batch(
     d: usize,
 ) -> Result<(Tensor, Tensor), TrainError> {
     let layout = MusicLayout::dancenet();
-    let as_tensor = |m: Array2<f32>| {
-        let (r, c) = m.dim();
-        Tensor::from_slice(&m.into_iter().collect::<Vec<f32>>()).view([r as i64, c as i64])
-    };
     let (mut poses, mut music) = (Vec::new(), Vec::new());
     for &(i, start) in chunk {
         let p = &dances[i];
@@ -480,11 +474,8 @@ fn stretched_batch(
             (p.frames.nrows().min(p.music.nrows()) - 1 - start) as f64 / (len - 1).max(1) as f64;
         let f = f.min(room);
         let rows = stretch_rotation_rows(p.frames.view(), start, len, f);
-        let feats = pose_norm.normalize(&rows.slice(ndarray::s![.., ..d]).to_owned())?;
-        let rows = concatenate(Axis(1), &[feats.view(), rows.slice(ndarray::s![.., d..])])
-            .map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
-        poses.push(as_tensor(rows));
-        music.push(as_tensor(music_norm.normalize(&stretch_music(
+        poses.push(to_tensor(&normalised_rows(rows.view(), pose_norm, d)?));
+        music.push(to_tensor(&music_norm.normalize(&stretch_music(
             p.music.view(),
             start,
             len,
