@@ -30,19 +30,45 @@ fn registry() -> &'static Registry {
     })
 }
 
+/// `../shared/audio/<name>`, failing loudly when it is missing: the models dance real songs.
+fn shared_song_path(name: &str) -> std::path::PathBuf {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/audio")
+        .join(name);
+    assert!(
+        path.is_file(),
+        "{} is missing: the model contract dances a real song (CI={})",
+        path.display(),
+        std::env::var("CI").unwrap_or_default()
+    );
+    path
+}
+
 fn song() -> &'static DecodedAudio {
     static SONG: OnceLock<DecodedAudio> = OnceLock::new();
     SONG.get_or_init(|| {
-        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-            .join("../shared/audio/trumpet_loop_90bpm.ogg");
-        assert!(
-            path.is_file(),
-            "{} is missing: the model contract dances a real song (CI={})",
-            path.display(),
-            std::env::var("CI").unwrap_or_default()
-        );
-        audio::decode_path(&path).expect("the song decodes")
+        audio::decode_path(&shared_song_path("trumpet_loop_90bpm.ogg")).expect("the song decodes")
     })
+}
+
+/// The common options of a tiny one-thread training run on the real split into `out`, failing
+/// loudly when the data is missing.
+fn tiny_training(out: &std::path::Path) -> choreo::models::train::CommonOptions {
+    let data =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/dance-with-melody");
+    assert!(
+        data.is_dir(),
+        "{} is missing: the trainer reads the real train split (CI={})",
+        data.display(),
+        std::env::var("CI").unwrap_or_default()
+    );
+    choreo::models::train::CommonOptions {
+        data,
+        out: Some(out.to_path_buf()),
+        threads: 1,
+        tiny: true,
+        ..Default::default()
+    }
 }
 
 fn model(id: &str) -> Arc<dyn DanceModel> {
@@ -201,10 +227,7 @@ fn the_contract_covers_every_served_model() {
 
 /// `../shared/audio/<name>`, its first `seconds` at `factor` × its tempo (sox, pitch kept), decoded.
 fn stretched_song(name: &str, seconds: f64, factor: f64) -> DecodedAudio {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/audio")
-        .join(name);
-    assert!(path.is_file(), "{} is missing", path.display());
+    let path = shared_song_path(name);
     let dir = tempfile::tempdir().expect("tempdir");
     let out = dir.path().join(format!("{factor}.wav"));
     let status = std::process::Command::new("sox")
@@ -267,12 +290,7 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
 #[test]
 fn dancenet_opens_a_different_dance_to_a_different_song() {
     let m = model("dancenet");
-    let other = {
-        let path =
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/audio/vibe_ace.ogg");
-        assert!(path.is_file(), "{} is missing", path.display());
-        audio::decode_path(&path).expect("the song decodes")
-    };
+    let other = audio::decode_path(&shared_song_path("vibe_ace.ogg")).expect("the song decodes");
     let looped = dance(m.as_ref(), &GenerateRequest::plain(song(), 1));
     let other = dance(m.as_ref(), &GenerateRequest::plain(&other, 1));
     let apart = choreo::metrics::physical::seed_distance_m(&looped, &other);
@@ -304,24 +322,10 @@ fn keypose_transformer_turns_its_waltz_and_its_arms_with_it() {
 /// folder it writes is served and dances the song.
 #[test]
 fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
-    use choreo::models::train::{tsmt, CommonOptions};
-    let data =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/dance-with-melody");
-    assert!(
-        data.is_dir(),
-        "{} is missing: the trainer reads the real train split (CI={})",
-        data.display(),
-        std::env::var("CI").unwrap_or_default()
-    );
+    use choreo::models::train::tsmt;
     let out = tempfile::tempdir().unwrap();
     let opts = tsmt::Options {
-        common: CommonOptions {
-            data,
-            out: Some(out.path().to_path_buf()),
-            threads: 1,
-            tiny: true,
-            ..CommonOptions::default()
-        },
+        common: tiny_training(out.path()),
         epochs: 1,
         min_tempo: 0.8,
         max_tempo: 1.25,
@@ -351,24 +355,10 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
 /// split runs, logs both, records them in `model.json`, and serves.
 #[test]
 fn dancenet_trains_on_windows_at_other_tempi() {
-    use choreo::models::train::{dancenet, CommonOptions};
-    let data =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/dance-with-melody");
-    assert!(
-        data.is_dir(),
-        "{} is missing: the trainer reads the real train split (CI={})",
-        data.display(),
-        std::env::var("CI").unwrap_or_default()
-    );
+    use choreo::models::train::dancenet;
     let out = tempfile::tempdir().unwrap();
     let opts = dancenet::Options {
-        common: CommonOptions {
-            data,
-            out: Some(out.path().to_path_buf()),
-            threads: 1,
-            tiny: true,
-            ..CommonOptions::default()
-        },
+        common: tiny_training(out.path()),
         epochs: 1,
         min_tempo: 0.8,
         max_tempo: 1.25,
