@@ -317,6 +317,17 @@ fn keypose_transformer_turns_its_waltz_and_its_arms_with_it() {
     assert!(arms >= 0.43, "arms {arms:.3} m/s against the spine");
 }
 
+/// A tiny run's log: one epoch, finite train and test losses, and `note` in its line.
+fn one_finite_epoch(logs: &[choreo::models::train::EpochLog], note: &str) {
+    assert_eq!(logs.len(), 1);
+    let log = &logs[0];
+    assert!(
+        log.train_loss.is_finite() && log.test_loss.is_some_and(f64::is_finite),
+        "{log:?}"
+    );
+    assert!(log.note.contains(note), "{}", log.note);
+}
+
 /// `choreo train tsmt --min-tempo … --max-tempo … --mirror true` (issue 25) trains on windows
 /// re-timed and mirrored from the real train split: one tiny epoch gives finite losses, and the
 /// folder it writes is served and dances the song.
@@ -332,17 +343,9 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
         mirror: true,
         ..tsmt::Options::default()
     };
-    let logs = tsmt::train(&opts).expect("training runs");
-    assert_eq!(logs.len(), 1);
-    let log = &logs[0];
-    assert!(
-        log.train_loss.is_finite() && log.test_loss.is_some_and(f64::is_finite),
-        "{log:?}"
-    );
-    assert!(
-        log.note.contains("tempo=0.8..1.25 mirror=true"),
-        "{}",
-        log.note
+    one_finite_epoch(
+        &tsmt::train(&opts).expect("training runs"),
+        "tempo=0.8..1.25 mirror=true",
     );
     let served = choreo::models::tsmt::Served::load(out.path()).expect("the folder loads");
     let motion = dance(&served, &GenerateRequest::plain(song(), 1));
@@ -365,17 +368,9 @@ fn dancenet_trains_on_windows_at_other_tempi() {
         style_dropout: 0.5,
         ..dancenet::Options::default()
     };
-    let logs = dancenet::train(&opts).expect("training runs");
-    assert_eq!(logs.len(), 1);
-    let log = &logs[0];
-    assert!(
-        log.train_loss.is_finite() && log.test_loss.is_some_and(f64::is_finite),
-        "{log:?}"
-    );
-    assert!(
-        log.note.contains("tempo=0.8..1.25 style_dropout=0.5"),
-        "{}",
-        log.note
+    one_finite_epoch(
+        &dancenet::train(&opts).expect("training runs"),
+        "tempo=0.8..1.25 style_dropout=0.5",
     );
     let file: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.path().join("model.json")).unwrap())
