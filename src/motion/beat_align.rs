@@ -126,6 +126,35 @@ pub struct BeatAlignSummary {
     /// motion's own steps were a little faster than the grid; its last `1 − pace` is not shown.
     #[serde(default = "one")]
     pub pace: f64,
+    /// Which motion the warp's rhythm was read from: the network's, or the same motion with its
+    /// feet planted ([`align_served`] plans on both).
+    #[serde(default)]
+    pub rhythm_from: RhythmFrom,
+    /// Whether the served dance (warped, then its feet planted) steps at a fraction of the beat:
+    /// the ankles' spectral peak within 3 % of one of [`GRID_FRACTIONS`] × the beat rate.
+    #[serde(default)]
+    pub steps_on_beat: bool,
+}
+
+/// The motion a warp's rhythm (step rate and kinematic beats) was read from.
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    Default,
+    PartialEq,
+    Eq,
+    serde::Serialize,
+    serde::Deserialize,
+    utoipa::ToSchema,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum RhythmFrom {
+    /// The network's motion as it came.
+    #[default]
+    Network,
+    /// The network's motion after the feet are planted (what is served, untimed).
+    Planted,
 }
 
 fn one() -> f64 {
@@ -167,10 +196,85 @@ pub fn align(
     (out, warp.summary)
 }
 
+/// The stage as jobs serve it, with the stage after it (`finish`: the feet planted) applied to
+/// what it returns. Planting changes the rhythm the ankles show: it holds a foot still through a
+/// contact and so sharpens some steps and drops others, and a slow sway of the network's can
+/// give way to the steps (dancenet on hungarian_dance_5, seed 1: 0.26 Hz before planting, 0.61
+/// after; eval 2026-11-27). A warp planned on the network's rhythm alone then locks a rhythm the
+/// served dance does not show, and one planned on the planted rhythm alone misses where
+/// planting hides the rhythm that would have locked (keypose-transformer on the same song, seed
+/// 2). So the warp is planned on both (`plant`: false plans on the network's only), each served
+/// warp is finished and checked (its ankles' spectral peak within 3 % of a fraction of the beat
+/// rate: the served dance steps on the beat, which on a dance of a few cycles can be a grid other
+/// than the one planned), and of those that do, the one with the larger locked share is served;
+/// when neither does, the larger locked share still. Without a warp the finished motion
+/// is served as it came. Cost: `finish` three times instead of once (tens of milliseconds for a
+/// 3-minute song).
+pub fn align_served(
+    motion: Motion,
+    beat_times_s: &[f64],
+    fixed_times_s: &[f64],
+    plant: bool,
+    finish: impl Fn(Motion) -> Motion,
+) -> (Motion, BeatAlignSummary) {
+    let planted = finish(motion.clone());
+    let mut views = vec![(RhythmFrom::Network, &motion)];
+    if plant {
+        views.push((RhythmFrom::Planted, &planted));
+    }
+    let mut best: Option<(Motion, BeatAlignSummary)> = None;
+    let mut skipped = None;
+    for (from, view) in views {
+        let warp = plan_from(&motion, view, beat_times_s, fixed_times_s);
+        if !warp.summary.applied {
+            skipped.get_or_insert(warp.summary);
+            continue;
+        }
+        let served = finish(resample(&motion, &warp.source_frames));
+        let mut summary = warp.summary;
+        summary.rhythm_from = from;
+        summary.steps_on_beat = steps_on_beat(&served, beat_times_s);
+        let rank = |s: &BeatAlignSummary| (s.steps_on_beat, s.locked_share);
+        if best.as_ref().is_none_or(|(_, b)| {
+            rank(&summary).partial_cmp(&rank(b)) == Some(std::cmp::Ordering::Greater)
+        }) {
+            best = Some((served, summary));
+        }
+    }
+    match best {
+        Some(chosen) => chosen,
+        None => (
+            planted,
+            skipped.unwrap_or_else(|| BeatAlignSummary::skipped("nothing to align")),
+        ),
+    }
+}
+
+/// Whether `motion` steps at a fraction of the song's beat rate: the ankles' spectral peak (as
+/// [`rhythm`] reads it, the metric's) within the lock tolerance of one of [`GRID_FRACTIONS`] × it.
+fn steps_on_beat(motion: &Motion, beat_times_s: &[f64]) -> bool {
+    let fps = motion.fps;
+    let Some(clock) = BeatClock::new(beat_times_s, motion.num_frames() as f64 / fps) else {
+        return false;
+    };
+    let speed = ankle_speed(motion.positions.view(), fps);
+    rhythm(&speed, fps).is_some_and(|(step_hz, _)| {
+        GRID_FRACTIONS
+            .iter()
+            .any(|q| (step_hz / (q * clock.rate_hz) - 1.0).abs() <= LOCK_TOLERANCE)
+    })
+}
+
 /// The warp [`align`] applies, without applying it: of the motion at each of [`PACES`] (only
 /// 1 where a fixed time lies after the first frame: a key pose or a seed motion's frames hold
 /// their places), the warp of least cost, a pace's dropped tail counted.
 pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> Warp {
+    plan_from(motion, motion, beat_times_s, fixed_times_s)
+}
+
+/// [`plan`] with the rhythm read from `view` (the same frames as `motion`, e.g. with the feet
+/// planted), the warp applying to `motion`.
+fn plan_from(motion: &Motion, view: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> Warp {
     let frames = motion.num_frames();
     let held = fixed_times_s
         .iter()
@@ -187,10 +291,10 @@ pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> War
     for pace in paces {
         let paced;
         let m = if pace == 1.0 {
-            motion
+            view
         } else {
             let at: Vec<f64> = (0..frames).map(|f| f as f64 * pace).collect();
-            paced = resample(motion, &at);
+            paced = resample(view, &at);
             &paced
         };
         let (mut warp, cost) = plan_at(m, beat_times_s, fixed_times_s, pace);
@@ -785,6 +889,40 @@ mod tests {
         let (aligned, summary) = align(&motion, &faster, &[]);
         let after = tempo_lock(aligned.positions.view(), FPS, &faster).expect("measured");
         assert!(after.locked, "{after:?} {summary:?}");
+    }
+
+    #[test]
+    fn a_rhythm_only_the_planted_dance_shows_is_the_one_locked() {
+        // Steps at 0.93 Hz under a wide sway (sideways, in z) that the stage after it removes,
+        // as planting removes a slow drift of a network's feet. The sway's speed peaks twice a
+        // cycle, at 0.28 Hz: at 180 bpm out of every grid's reach (1/6 of the beat is 0.5 Hz).
+        let beats = beats_for(60.0, 1.0 / 3.0);
+        let mut motion = periodic(60.0, 0.93);
+        for t in 0..motion.num_frames() {
+            let s = t as f64 / FPS;
+            for &j in &ANKLES {
+                motion.positions[[t, j, 2]] += 3.0 * (std::f64::consts::TAU * 0.14 * s).sin() as f32;
+            }
+        }
+        let unsway = |mut m: Motion| {
+            for t in 0..m.num_frames() {
+                for (side, &j) in ANKLES.iter().enumerate() {
+                    m.positions[[t, j, 2]] = side as f32 * 0.3;
+                }
+            }
+            m
+        };
+        let (_, network_only) = align(&motion, &beats, &[]);
+        assert!(!network_only.applied, "{network_only:?}");
+        let (served, summary) = align_served(motion.clone(), &beats, &[], true, unsway);
+        assert!(summary.applied, "{summary:?}");
+        assert_eq!(summary.rhythm_from, RhythmFrom::Planted);
+        assert!(summary.steps_on_beat, "{summary:?}");
+        let after = tempo_lock(served.positions.view(), FPS, &beats).expect("measured");
+        assert!(after.locked, "{after:?} {summary:?}");
+        // What is served went through the stage after it: no sway left.
+        assert!(served.positions.iter().all(|v| v.is_finite()));
+        assert!((0..served.num_frames()).all(|t| served.positions[[t, ANKLES[0], 2]] == 0.0));
     }
 
     fn beats_for(seconds: f64, period: f64) -> Vec<f64> {

@@ -76,9 +76,9 @@ impl Default for MotionStages {
     }
 }
 
-/// The motion stages after any model, in order: [`beat_align::align`] (timing first, so the feet
-/// are planted on the motion that is served; the key poses' frames map to themselves), then
-/// [`finish`]. `beat_times_s` are the song's beats on the dance's clock. Jobs, `choreo generate`
+/// The motion stages after any model: [`beat_align::align_served`] (the timing, planned on the
+/// network's rhythm and on the planted one, the key poses' frames mapped to themselves), with
+/// [`finish`] applied to the warped motion, so the feet are planted on the motion that is served. `beat_times_s` are the song's beats on the dance's clock. Jobs, `choreo generate`
 /// and `choreo eval` all go through it. `seed_s`: the length of the seed motion the request
 /// brought (0 without), whose frames open the dance as they are: every frame of that span is
 /// fixed, so the warp is the identity there. The summary is `None` when alignment was not asked for.
@@ -89,16 +89,16 @@ pub fn after_model(
     seed_s: f64,
     stages: MotionStages,
 ) -> (Motion, Option<beat_align::BeatAlignSummary>) {
-    let (motion, summary) = if stages.beat_align {
-        let seed_frames = (seed_s * motion.fps).ceil().max(0.0) as usize;
-        let mut fixed: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
-        fixed.extend((0..=seed_frames.min(motion.num_frames())).map(|f| f as f64 / motion.fps));
-        let (aligned, summary) = beat_align::align(&motion, beat_times_s, &fixed);
-        (aligned, Some(summary))
-    } else {
-        (motion, None)
-    };
-    (finish(motion, stages.plant_feet), summary)
+    if !stages.beat_align {
+        return (finish(motion, stages.plant_feet), None);
+    }
+    let seed_frames = (seed_s * motion.fps).ceil().max(0.0) as usize;
+    let mut fixed: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
+    fixed.extend((0..=seed_frames.min(motion.num_frames())).map(|f| f as f64 / motion.fps));
+    let plant = stages.plant_feet;
+    let (aligned, summary) =
+        beat_align::align_served(motion, beat_times_s, &fixed, plant, |m| finish(m, plant));
+    (aligned, Some(summary))
 }
 
 /// A finished dance as a user downloads it: the export's rigid skeleton ([`rig::RigMotion`], what
