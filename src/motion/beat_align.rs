@@ -203,13 +203,13 @@ pub fn align(
 /// after; eval 2026-11-27). A warp planned on the network's rhythm alone then locks a rhythm the
 /// served dance does not show, and one planned on the planted rhythm alone misses where
 /// planting hides the rhythm that would have locked (keypose-transformer on the same song, seed
-/// 2). So the warp is planned on both (`plant`: false plans on the network's only), each served
-/// warp is finished and checked (its ankles' spectral peak within 3 % of a fraction of the beat
-/// rate: the served dance steps on the beat, which on a dance of a few cycles can be a grid other
-/// than the one planned), and of those that do, the one with the larger locked share is served;
-/// when neither does, the larger locked share still. Without a warp the finished motion
-/// is served as it came. Cost: `finish` three times instead of once (tens of milliseconds for a
-/// 3-minute song).
+/// 2). So the warps are planned on both (`plant`: false plans on the network's only), one per
+/// grid fraction within reach of each rhythm, each warped dance is finished and checked (its
+/// ankles' spectral peak within 3 % of a fraction of the beat rate: the served dance steps on
+/// the beat; on a dance of a few cycles the peak can land on a grid other than the one planned,
+/// or on none), and of those that do, the one of least cost is served; when none does, the one
+/// of least cost still. Without a warp the finished motion is served as it came. Cost: `finish`
+/// once per candidate, at most 13 times (about 5 ms each for a 3-minute song).
 pub fn align_served(
     motion: Motion,
     beat_times_s: &[f64],
@@ -222,30 +222,35 @@ pub fn align_served(
     if plant {
         views.push((RhythmFrom::Planted, &planted));
     }
-    let mut best: Option<(Motion, BeatAlignSummary)> = None;
+    // (served motion, summary, cost)
+    let mut best: Option<(Motion, BeatAlignSummary, f64)> = None;
     let mut skipped = None;
     for (from, view) in views {
-        let warp = plan_from(&motion, view, beat_times_s, fixed_times_s);
-        if !warp.summary.applied {
-            skipped.get_or_insert(warp.summary);
-            continue;
-        }
-        let served = finish(resample(&motion, &warp.source_frames));
-        let mut summary = warp.summary;
-        summary.rhythm_from = from;
-        summary.steps_on_beat = steps_on_beat(&served, beat_times_s);
-        let rank = |s: &BeatAlignSummary| (s.steps_on_beat, s.locked_share);
-        if best.as_ref().is_none_or(|(_, b)| {
-            rank(&summary).partial_cmp(&rank(b)) == Some(std::cmp::Ordering::Greater)
-        }) {
-            best = Some((served, summary));
+        let candidates = match plan_from(&motion, view, beat_times_s, fixed_times_s) {
+            Ok(c) => c,
+            Err(why) => {
+                skipped.get_or_insert(why);
+                continue;
+            }
+        };
+        for (warp, cost) in candidates {
+            let served = finish(resample(&motion, &warp.source_frames));
+            let mut summary = warp.summary;
+            summary.rhythm_from = from;
+            summary.steps_on_beat = steps_on_beat(&served, beat_times_s);
+            let better = best.as_ref().is_none_or(|(_, b, b_cost)| {
+                (summary.steps_on_beat, -cost) > (b.steps_on_beat, -b_cost)
+            });
+            if better {
+                best = Some((served, summary, cost));
+            }
         }
     }
     match best {
-        Some(chosen) => chosen,
+        Some((served, summary, _)) => (served, summary),
         None => (
             planted,
-            skipped.unwrap_or_else(|| BeatAlignSummary::skipped("nothing to align")),
+            BeatAlignSummary::skipped(skipped.unwrap_or("nothing to align")),
         ),
     }
 }
@@ -269,12 +274,35 @@ fn steps_on_beat(motion: &Motion, beat_times_s: &[f64]) -> bool {
 /// 1 where a fixed time lies after the first frame: a key pose or a seed motion's frames hold
 /// their places), the warp of least cost, a pace's dropped tail counted.
 pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> Warp {
-    plan_from(motion, motion, beat_times_s, fixed_times_s)
+    match plan_from(motion, motion, beat_times_s, fixed_times_s) {
+        Ok(candidates) => {
+            let Some((warp, _)) = candidates.into_iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
+                unreachable!("plan_from returns at least one candidate")
+            };
+            warp
+        }
+        Err(why) => identity(motion.num_frames(), why),
+    }
 }
 
-/// [`plan`] with the rhythm read from `view` (the same frames as `motion`, e.g. with the feet
-/// planted), the warp applying to `motion`.
-fn plan_from(motion: &Motion, view: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> Warp {
+/// The warp that changes nothing, and why.
+fn identity(frames: usize, why: &str) -> Warp {
+    Warp {
+        source_frames: (0..frames).map(|f| f as f64).collect(),
+        summary: BeatAlignSummary::skipped(why),
+    }
+}
+
+/// The candidates [`plan`] chooses from, one per grid fraction within reach (the least cost of
+/// its phases and [`PACES`]), with their costs; the rhythm read from `view` (the same frames as
+/// `motion`, e.g. with the feet planted), the warps applying to `motion`. `Err`: why there is
+/// none.
+fn plan_from(
+    motion: &Motion,
+    view: &Motion,
+    beat_times_s: &[f64],
+    fixed_times_s: &[f64],
+) -> Result<Vec<(Warp, f64)>, &'static str> {
     let frames = motion.num_frames();
     let held = fixed_times_s
         .iter()
@@ -287,7 +315,9 @@ fn plan_from(motion: &Motion, view: &Motion, beat_times_s: &[f64], fixed_times_s
         .filter(|&p| p == 1.0 || (!held && p * speed >= LIVELY_M_S))
         .collect();
     let end_s = frames.saturating_sub(1) as f64 / motion.fps;
-    let mut best: Option<(f64, Warp)> = None;
+    // Per grid fraction: (q, cost, warp).
+    let mut best: Vec<(f64, f64, Warp)> = Vec::new();
+    let mut why = None;
     for pace in paces {
         let paced;
         let m = if pace == 1.0 {
@@ -297,65 +327,71 @@ fn plan_from(motion: &Motion, view: &Motion, beat_times_s: &[f64], fixed_times_s
             paced = resample(view, &at);
             &paced
         };
-        let (mut warp, cost) = plan_at(m, beat_times_s, fixed_times_s, pace);
-        // A pace that warps nothing would only drop the tail.
-        if pace != 1.0 && !warp.summary.applied {
-            continue;
-        }
-        let cost = cost + DROPPED_PER_S * (1.0 - pace) * end_s;
-        warp.source_frames.iter_mut().for_each(|s| *s *= pace);
-        warp.summary.step_hz /= pace;
-        warp.summary.pace = pace;
-        if best.as_ref().is_none_or(|b| cost < b.0) {
-            best = Some((cost, warp));
+        // A pace that warps nothing would only drop the tail: it has no candidates.
+        let candidates = match plan_at(m, beat_times_s, fixed_times_s, pace) {
+            Ok(c) => c,
+            Err(w) => {
+                why.get_or_insert(w);
+                continue;
+            }
+        };
+        for (q, mut warp, cost) in candidates {
+            let cost = cost + DROPPED_PER_S * (1.0 - pace) * end_s;
+            warp.source_frames.iter_mut().for_each(|s| *s *= pace);
+            warp.summary.step_hz /= pace;
+            warp.summary.pace = pace;
+            match best.iter_mut().find(|b| b.0 == q) {
+                Some(b) if cost < b.1 => *b = (q, cost, warp),
+                Some(_) => {}
+                None => best.push((q, cost, warp)),
+            }
         }
     }
-    let Some((_, mut warp)) = best else {
-        unreachable!("pace 1 is always planned")
-    };
-    if warp.summary.applied {
-        let fps = motion.fps;
-        let slopes: Vec<f64> = warp.source_frames.windows(2).map(|w| w[1] - w[0]).collect();
-        let shifts: Vec<f64> = warp
-            .source_frames
-            .iter()
-            .enumerate()
-            .map(|(f, &s)| (s - f as f64).abs() / fps)
-            .collect();
-        let s = &mut warp.summary;
-        s.mean_shift_s = shifts.iter().sum::<f64>() / shifts.len() as f64;
-        s.max_shift_s = shifts.iter().copied().fold(0.0, f64::max);
-        s.slope_min = slopes.iter().copied().fold(f64::INFINITY, f64::min);
-        s.slope_max = slopes.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    if best.is_empty() {
+        return Err(why.unwrap_or("no grid of the beat is within the warp's reach"));
     }
-    warp
+    let fps = motion.fps;
+    Ok(best
+        .into_iter()
+        .map(|(_, cost, mut warp)| {
+            let slopes: Vec<f64> = warp.source_frames.windows(2).map(|w| w[1] - w[0]).collect();
+            let shifts: Vec<f64> = warp
+                .source_frames
+                .iter()
+                .enumerate()
+                .map(|(f, &s)| (s - f as f64).abs() / fps)
+                .collect();
+            let s = &mut warp.summary;
+            s.mean_shift_s = shifts.iter().sum::<f64>() / shifts.len() as f64;
+            s.max_shift_s = shifts.iter().copied().fold(0.0, f64::max);
+            s.slope_min = slopes.iter().copied().fold(f64::INFINITY, f64::min);
+            s.slope_max = slopes.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            (warp, cost)
+        })
+        .collect())
 }
 
-/// The warp of `motion` (the network's played at `pace`) and its cost; its slopes are kept
-/// within [`SLOPE_RANGE`] once `pace` is applied.
-fn plan_at(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64], pace: f64) -> (Warp, f64) {
+/// The warps of `motion` (the network's played at `pace`), one per grid fraction within reach
+/// (its phase of least cost), as (fraction, warp, cost); their slopes are kept within
+/// [`SLOPE_RANGE`] once `pace` is applied. `Err`: why there is none.
+fn plan_at(
+    motion: &Motion,
+    beat_times_s: &[f64],
+    fixed_times_s: &[f64],
+    pace: f64,
+) -> Result<Vec<(f64, Warp, f64)>, &'static str> {
     let frames = motion.num_frames();
     let fps = motion.fps;
-    let leave = UNLOCKED_PER_S * frames.saturating_sub(1) as f64 / fps.max(1e-9);
-    let identity = |why: &str| {
-        (
-            Warp {
-                source_frames: (0..frames).map(|f| f as f64).collect(),
-                summary: BeatAlignSummary::skipped(why),
-            },
-            leave,
-        )
-    };
     if frames < MIN_FRAMES || fps <= 0.0 || !fps.is_finite() {
-        return identity("the dance is too short");
+        return Err("the dance is too short");
     }
     let end_s = (frames - 1) as f64 / fps;
     let Some(clock) = BeatClock::new(beat_times_s, frames as f64 / fps) else {
-        return identity("fewer than 4 beats within the dance");
+        return Err("fewer than 4 beats within the dance");
     };
     let speed = ankle_speed(motion.positions.view(), fps);
     let Some((step_hz, filtered)) = rhythm(&speed, fps) else {
-        return identity("no step rate: the ankles do not move");
+        return Err("no step rate: the ankles do not move");
     };
     let kin = kinematic_beats(&filtered, fps, step_hz);
     // Fixed frames: the start, the end, and each key pose's frame (as `serve` anchors them).
@@ -370,7 +406,7 @@ fn plan_at(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64], pace: f
     let anchors: Vec<f64> = fixed.iter().map(|&f| f as f64 / fps).collect();
 
     // Every grid within reach: its spacing over the motion's cycle is the slope of a lock.
-    let mut best: Option<(f64, f64, Vec<Pair>, f64, usize)> = None; // (cost, q, pairs, locked s, grid points)
+    let mut out = Vec::new();
     for &q in &GRID_FRACTIONS {
         let slope = pace * q * clock.rate_hz / step_hz;
         // A grid outside the band the step rate is read in (with the lock's tolerance) cannot be
@@ -382,6 +418,7 @@ fn plan_at(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64], pace: f
         if !in_band || !(SLOPE_RANGE.0..=SLOPE_RANGE.1).contains(&slope) {
             continue;
         }
+        let mut best: Option<(f64, Vec<Pair>, f64)> = None; // (cost, pairs, locked s)
         for start in grid_phases(q) {
             let grid = clock.grid(q, start, end_s);
             let (mut cost, mut pairs, mut locked) = (0.0, Vec::new(), 0.0);
@@ -395,44 +432,47 @@ fn plan_at(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64], pace: f
                 pairs.extend(p.pairs);
             }
             if best.as_ref().is_none_or(|b| cost < b.0) {
-                best = Some((cost, q, pairs, locked, grid.len()));
+                best = Some((cost, pairs, locked));
             }
         }
+        let Some((cost, pairs, locked_s)) = best else {
+            continue;
+        };
+        // Knots (served s, source s): the fixed frames and the matched beats, in time order.
+        let mut knots: Vec<Pair> = anchors
+            .iter()
+            .map(|&a| Pair { out: a, src: a })
+            .chain(pairs.iter().copied())
+            .collect();
+        knots.sort_by(|x, y| x.out.total_cmp(&y.out));
+        let source_frames = smooth_warp(&knots, &fixed, frames, fps);
+        // Shifts and slopes are measured by `plan_from`, on the warp of the network's own frames.
+        let summary = BeatAlignSummary {
+            applied: true,
+            skipped: None,
+            step_hz,
+            beat_hz: clock.rate_hz,
+            grid_fraction: q,
+            grid_spacing_s: 1.0 / (q * clock.rate_hz),
+            kinematic_beats: kin.len(),
+            matched_beats: pairs.len(),
+            locked_share: locked_s / end_s,
+            pace: 1.0,
+            ..BeatAlignSummary::default()
+        };
+        out.push((
+            q,
+            Warp {
+                source_frames,
+                summary,
+            },
+            cost,
+        ));
     }
-    let Some((cost, q, pairs, locked_s, _)) = best else {
-        return identity(
-            "no grid of the beat is within the warp's reach of the motion's step rate",
-        );
-    };
-    // Knots (served s, source s): the fixed frames and the matched beats, in time order.
-    let mut knots: Vec<Pair> = anchors
-        .iter()
-        .map(|&a| Pair { out: a, src: a })
-        .chain(pairs.iter().copied())
-        .collect();
-    knots.sort_by(|x, y| x.out.total_cmp(&y.out));
-    let source_frames = smooth_warp(&knots, &fixed, frames, fps);
-    // Shifts and slopes are measured by `plan`, on the warp of the network's own frames.
-    let summary = BeatAlignSummary {
-        applied: true,
-        skipped: None,
-        step_hz,
-        beat_hz: clock.rate_hz,
-        grid_fraction: q,
-        grid_spacing_s: 1.0 / (q * clock.rate_hz),
-        kinematic_beats: kin.len(),
-        matched_beats: pairs.len(),
-        locked_share: locked_s / end_s,
-        pace: 1.0,
-        ..BeatAlignSummary::default()
-    };
-    (
-        Warp {
-            source_frames,
-            summary,
-        },
-        cost,
-    )
+    if out.is_empty() {
+        return Err("no grid of the beat is within the warp's reach of the motion's step rate");
+    }
+    Ok(out)
 }
 
 /// The motion shown at the warp's source frames: Catmull-Rom between frames, exact on them.
@@ -901,7 +941,8 @@ mod tests {
         for t in 0..motion.num_frames() {
             let s = t as f64 / FPS;
             for &j in &ANKLES {
-                motion.positions[[t, j, 2]] += 3.0 * (std::f64::consts::TAU * 0.14 * s).sin() as f32;
+                motion.positions[[t, j, 2]] +=
+                    3.0 * (std::f64::consts::TAU * 0.14 * s).sin() as f32;
             }
         }
         let unsway = |mut m: Motion| {
