@@ -209,7 +209,7 @@ pub fn align(
 /// the beat; on a dance of a few cycles the peak can land on a grid other than the one planned,
 /// or on none), and of those that do, the one of least cost is served; when none does, the one
 /// of least cost still. Without a warp the finished motion is served as it came. Cost: `finish`
-/// once per candidate, at most 13 times (about 5 ms each for a 3-minute song).
+/// once per candidate, at most 13 times (the stage took 15–78 ms on a 133-s song, 5–31 ms before).
 pub fn align_served(
     motion: Motion,
     beat_times_s: &[f64],
