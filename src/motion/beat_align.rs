@@ -196,14 +196,14 @@ pub fn align(
     (out, warp.summary)
 }
 
-/// The stage as jobs serve it, with the stage after it (`finish`: the feet planted) applied to
-/// what it returns. Planting changes the rhythm the ankles show: it holds a foot still through a
+/// The stage as jobs serve it, with the stage after it (`finish`: the feet planted; `None` where
+/// the caller keeps the feet as they came) applied to what it returns. Planting changes the rhythm the ankles show: it holds a foot still through a
 /// contact and so sharpens some steps and drops others, and a slow sway of the network's can
 /// give way to the steps (dancenet on hungarian_dance_5, seed 1: 0.26 Hz before planting, 0.61
 /// after; eval 2026-11-27). A warp planned on the network's rhythm alone then locks a rhythm the
 /// served dance does not show, and one planned on the planted rhythm alone misses where
 /// planting hides the rhythm that would have locked (keypose-transformer on the same song, seed
-/// 2). So the warps are planned on both (`plant`: false plans on the network's only), one per
+/// 2). So the warps are planned on both (without `finish`, on the network's only), one per
 /// grid fraction within reach of each rhythm, each warped dance is finished and checked (its
 /// ankles' spectral peak within 3 % of a fraction of the beat rate: the served dance steps on
 /// the beat; on a dance of a few cycles the peak can land on a grid other than the one planned,
@@ -214,14 +214,11 @@ pub fn align_served(
     motion: Motion,
     beat_times_s: &[f64],
     fixed_times_s: &[f64],
-    plant: bool,
-    finish: impl Fn(Motion) -> Motion,
+    finish: Option<impl Fn(Motion) -> Motion>,
 ) -> (Motion, BeatAlignSummary) {
-    let planted = finish(motion.clone());
+    let planted = finish.as_ref().map(|f| f(motion.clone()));
     let mut views = vec![(RhythmFrom::Network, &motion)];
-    if plant {
-        views.push((RhythmFrom::Planted, &planted));
-    }
+    views.extend(planted.as_ref().map(|p| (RhythmFrom::Planted, p)));
     // (served motion, summary, cost)
     let mut best: Option<(Motion, BeatAlignSummary, f64)> = None;
     let mut skipped = None;
@@ -234,7 +231,11 @@ pub fn align_served(
             }
         };
         for (warp, cost) in candidates {
-            let served = finish(resample(&motion, &warp.source_frames));
+            let warped = resample(&motion, &warp.source_frames);
+            let served = match &finish {
+                Some(f) => f(warped),
+                None => warped,
+            };
             let mut summary = warp.summary;
             summary.rhythm_from = from;
             summary.steps_on_beat = steps_on_beat(&served, beat_times_s);
@@ -249,7 +250,7 @@ pub fn align_served(
     match best {
         Some((served, summary, _)) => (served, summary),
         None => (
-            planted,
+            planted.unwrap_or(motion),
             BeatAlignSummary::skipped(skipped.unwrap_or("nothing to align")),
         ),
     }
@@ -281,15 +282,10 @@ pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> War
             };
             warp
         }
-        Err(why) => identity(motion.num_frames(), why),
-    }
-}
-
-/// The warp that changes nothing, and why.
-fn identity(frames: usize, why: &str) -> Warp {
-    Warp {
-        source_frames: (0..frames).map(|f| f as f64).collect(),
-        summary: BeatAlignSummary::skipped(why),
+        Err(why) => Warp {
+            source_frames: (0..motion.num_frames()).map(|f| f as f64).collect(),
+            summary: BeatAlignSummary::skipped(why),
+        },
     }
 }
 
@@ -955,7 +951,7 @@ mod tests {
         };
         let (_, network_only) = align(&motion, &beats, &[]);
         assert!(!network_only.applied, "{network_only:?}");
-        let (served, summary) = align_served(motion.clone(), &beats, &[], true, unsway);
+        let (served, summary) = align_served(motion.clone(), &beats, &[], Some(unsway));
         assert!(summary.applied, "{summary:?}");
         assert_eq!(summary.rhythm_from, RhythmFrom::Planted);
         assert!(summary.steps_on_beat, "{summary:?}");

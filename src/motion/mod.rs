@@ -61,7 +61,7 @@ pub fn finish(mut motion: Motion, plant_feet: bool) -> Motion {
 /// `--no-plant-feet` leave one out (to see what a stage does).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct MotionStages {
-    /// [`beat_align::align`]: the network's steps onto the song's beats.
+    /// [`beat_align::align_served`]: the network's steps onto the song's beats.
     pub beat_align: bool,
     /// [`finish`]: the dance kept on the floor and its feet planted.
     pub plant_feet: bool,
@@ -78,7 +78,8 @@ impl Default for MotionStages {
 
 /// The motion stages after any model: [`beat_align::align_served`] (the timing, planned on the
 /// network's rhythm and on the planted one, the key poses' frames mapped to themselves), with
-/// [`finish`] applied to the warped motion, so the feet are planted on the motion that is served. `beat_times_s` are the song's beats on the dance's clock. Jobs, `choreo generate`
+/// [`finish`] applied to the warped motion, so the feet are planted on the motion that is
+/// served. `beat_times_s` are the song's beats on the dance's clock. Jobs, `choreo generate`
 /// and `choreo eval` all go through it. `seed_s`: the length of the seed motion the request
 /// brought (0 without), whose frames open the dance as they are: every frame of that span is
 /// fixed, so the warp is the identity there. The summary is `None` when alignment was not asked for.
@@ -95,9 +96,9 @@ pub fn after_model(
     let seed_frames = (seed_s * motion.fps).ceil().max(0.0) as usize;
     let mut fixed: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
     fixed.extend((0..=seed_frames.min(motion.num_frames())).map(|f| f as f64 / motion.fps));
-    let plant = stages.plant_feet;
-    let (aligned, summary) =
-        beat_align::align_served(motion, beat_times_s, &fixed, plant, |m| finish(m, plant));
+    // `finish` without planting changes nothing, so then the stage reads the network's rhythm only.
+    let plant = stages.plant_feet.then_some(|m| finish(m, true));
+    let (aligned, summary) = beat_align::align_served(motion, beat_times_s, &fixed, plant);
     (aligned, Some(summary))
 }
 
