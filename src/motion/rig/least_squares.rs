@@ -174,19 +174,44 @@ pub fn solve_least_squares(
 ) -> Result<RigMotion, MotionError> {
     let tg = targets(positions, root)?;
     let chain = solve(rig, positions, root, fps)?;
-    let (root_translation, mut rotations): (Vec<_>, Vec<_>) = tg
-        .iter()
-        .enumerate()
-        .map(|(t, frame)| fit_frame(rig, &chain.root_translation[t], &chain.rotations[t], frame))
-        .unzip();
     // The fit follows the data where its bones jump (the chain's start did not); the turns are
     // limited again, as the chain limits them.
     let max = max_turn(fps);
-    for t in 1..rotations.len() {
-        let (prev, cur) = rotations.split_at_mut(t);
-        for (p, c) in prev[t - 1].iter().zip(cur[0].iter_mut()) {
-            *c = limit_turn(*p, *c, max);
-        }
+    let limited = |prev: &[UnitQuaternion<f64>], fit: Vec<UnitQuaternion<f64>>| -> Vec<_> {
+        prev.iter()
+            .zip(fit)
+            .map(|(p, c)| limit_turn(*p, c, max))
+            .collect()
+    };
+    let mut root_translation = Vec::with_capacity(tg.len());
+    let mut rotations: Vec<Vec<UnitQuaternion<f64>>> = Vec::with_capacity(tg.len());
+    for (t, frame) in tg.iter().enumerate() {
+        let (chain_root, chain_local) = (&chain.root_translation[t], &chain.rotations[t]);
+        let (root, fit) = fit_frame(rig, chain_root, chain_local, frame);
+        let (root, fit) = match rotations.last() {
+            Some(prev) if prev.iter().zip(&fit).any(|(p, c)| p.angle_to(c) > max) => {
+                // Caught by the turn limit. The fit can turn a joint about a direction its
+                // targets leave nearly free (the pelvis about the hips' line, its thighs turning
+                // back) for a few millimetres closer: keypose-transformer, DANCE_R_9 seed 1, the
+                // pelvis 127° from the frame before, caught half-way, the legs 15–20 cm off (96
+                // m/s²). So the frame is fitted again held closer to the chain's rotations (which
+                // turned it 1°), and the closer of the two, turn-limited, is kept.
+                let first = limited(prev, fit);
+                let (held_root, held) =
+                    fit_frame_held(rig, chain_root, chain_local, frame, HELD_PRIOR_M);
+                let held = limited(prev, held);
+                if position_error(rig, &held_root, &held, frame)
+                    < position_error(rig, &root, &first, frame)
+                {
+                    (held_root, held)
+                } else {
+                    (root, first)
+                }
+            }
+            _ => (root, fit),
+        };
+        root_translation.push(root);
+        rotations.push(fit);
     }
     Ok(RigMotion {
         rig: rig.clone(),
@@ -195,6 +220,25 @@ pub fn solve_least_squares(
         rotations,
     })
 }
+
+/// Sum of squared distances (m²) of the 23 dataset joints of `rig` posed by `root`, `local` from
+/// their targets `target` (rig-indexed).
+fn position_error(
+    rig: &Rig,
+    root: &Vector3<f64>,
+    local: &[UnitQuaternion<f64>],
+    target: &[Vector3<f64>],
+) -> f64 {
+    let (pos, _) = fk_frame(rig, root, local);
+    (0..NUM_JOINTS)
+        .map(rig_index)
+        .map(|j| (pos[j] - target[j]).norm_squared())
+        .sum()
+}
+
+/// The pull towards the chain's rotations of a frame fitted again where the turn limit caught its
+/// first fit (10 cm per radian).
+const HELD_PRIOR_M: f64 = 0.1;
 
 /// Most Levenberg–Marquardt steps of [`fit_frame`]; 200 change no key error on the test dances.
 const FIT_ITERATIONS: usize = 50;
@@ -226,6 +270,17 @@ pub fn fit_frame(
     root: &Vector3<f64>,
     local: &[UnitQuaternion<f64>],
     target: &[Vector3<f64>],
+) -> (Vector3<f64>, Vec<UnitQuaternion<f64>>) {
+    fit_frame_held(rig, root, local, target, ROTATION_PRIOR_M)
+}
+
+/// [`fit_frame`] with the pull towards `local` of `prior_m` metres per radian.
+fn fit_frame_held(
+    rig: &Rig,
+    root: &Vector3<f64>,
+    local: &[UnitQuaternion<f64>],
+    target: &[Vector3<f64>],
+    prior_m: f64,
 ) -> (Vector3<f64>, Vec<UnitQuaternion<f64>>) {
     let measured: Vec<usize> = (0..NUM_JOINTS).map(rig_index).collect();
     let movers: Vec<usize> = (0..rig.names.len())
@@ -266,7 +321,7 @@ pub fn fit_frame(
             .sum::<f64>()
             + movers
                 .iter()
-                .map(|&k| (turn(k, local, &world) * ROTATION_PRIOR_M).norm_squared())
+                .map(|&k| (turn(k, local, &world) * prior_m).norm_squared())
                 .sum::<f64>();
         (c, pos, world)
     };
@@ -297,10 +352,10 @@ pub fn fit_frame(
         }
         for (m, &k) in movers.iter().enumerate() {
             let row = 3 * measured.len() + 3 * m;
-            let r = turn(k, &local, &world) * ROTATION_PRIOR_M;
+            let r = turn(k, &local, &world) * prior_m;
             for c in 0..3 {
                 res[row + c] = r[c];
-                jac[(row + c, 3 + 3 * m + c)] = ROTATION_PRIOR_M;
+                jac[(row + c, 3 + 3 * m + c)] = prior_m;
             }
         }
         let jtj = jac.transpose() * &jac;

@@ -448,3 +448,46 @@ fn six_d_round_trips() {
     let back = rotation_from_6d(&v).expect("valid");
     assert!(back.angle_to(&q) < 1e-5);
 }
+
+/// keypose-transformer's planted dance up to just after its first key pose on DANCE_R_9 (seed 1),
+/// fitted with its four key frames as anchors: the first fit of frame 182 turned the pelvis 127°
+/// about the hips' line from the frame before (its thighs turning back), which the turn limit
+/// caught half-way, the legs 15–20 cm off for one frame: 95 m/s², where its targets reach 20.
+#[test]
+fn a_fit_caught_by_the_turn_limit_is_not_left_off_its_targets() {
+    let doc: serde_json::Value = serde_json::from_str(include_str!(
+        "../../../tests/fixtures/motion/keypose_r9_pelvis_flip.json"
+    ))
+    .expect("fixture");
+    let frames = doc["positions"].as_array().expect("positions");
+    let values: Vec<f32> = frames
+        .iter()
+        .flat_map(|f| f.as_array().expect("frame").iter())
+        .flat_map(|j| j.as_array().expect("joint").iter())
+        .map(|v| v.as_f64().expect("number") as f32)
+        .collect();
+    let pos = Array3::from_shape_vec((frames.len(), NUM_JOINTS, 3), values).expect("shape");
+    let anchors: Vec<usize> = doc["anchors"]
+        .as_array()
+        .expect("anchors")
+        .iter()
+        .map(|a| a.as_u64().expect("frame") as usize)
+        .collect();
+    let root = crate::motion::skeleton::body_centre_track(pos.view());
+    let m = fit_and_solve(pos.view(), root.view(), 25.0, &anchors).expect("solve");
+    let world = m.joint_positions();
+    // The clip's own frames (the last three are the other key poses, not a motion).
+    let clip = anchors[1];
+    let peak = |p: ndarray::ArrayView3<'_, f32>| {
+        crate::metrics::physical::joint_acceleration(p.slice(ndarray::s![..clip, .., ..]), 25.0)
+            .into_iter()
+            .fold(0f64, f64::max)
+    };
+    let (fitted, targets) = (peak(world.view()), peak(pos.view()));
+    eprintln!("largest acceleration: fitted {fitted:.1} m/s², its targets {targets:.1}");
+    // Before: 96 m/s² two frames after the key, where the targets' largest is 20.
+    assert!(
+        fitted < 2.0 * targets,
+        "the fit pops: {fitted:.1} m/s² where its targets reach {targets:.1}"
+    );
+}
