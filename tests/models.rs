@@ -328,9 +328,10 @@ fn one_finite_epoch(logs: &[choreo::models::train::EpochLog], note: &str) {
     assert!(log.note.contains(note), "{}", log.note);
 }
 
-/// `choreo train tsmt --min-tempo … --max-tempo … --mirror true` (issue 25) trains on windows
-/// re-timed and mirrored from the real train split: one tiny epoch gives finite losses, and the
-/// folder it writes is served and dances the song.
+/// `choreo train tsmt --min-tempo … --max-tempo … --mirror true --self-condition …` (issue 25)
+/// trains on windows re-timed and mirrored from the real train split, half of each window's input
+/// frames drawn by the model itself: one tiny epoch gives finite losses, `model.json` records the
+/// self-conditioning, and the folder it writes is served and dances the song.
 #[test]
 fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
     use choreo::models::train::tsmt;
@@ -341,12 +342,19 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
         min_tempo: 0.8,
         max_tempo: 1.25,
         mirror: true,
+        self_condition: 0.5,
+        self_run: 4,
         ..tsmt::Options::default()
     };
     one_finite_epoch(
         &tsmt::train(&opts).expect("training runs"),
-        "tempo=0.8..1.25 mirror=true",
+        "tempo=0.8..1.25 mirror=true self=0.5x4/2",
     );
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.path().join("model.json")).unwrap())
+            .unwrap();
+    assert_eq!(file["training"]["self_condition"], 0.5);
+    assert_eq!(file["training"]["self_run"], 4);
     let served = choreo::models::tsmt::Served::load(out.path()).expect("the folder loads");
     let motion = dance(&served, &GenerateRequest::plain(song(), 1));
     assert!(motion.positions.iter().all(|v| v.is_finite()));

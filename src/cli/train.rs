@@ -396,6 +396,16 @@ args_into! {
         /// Mirror half the training windows left ↔ right.
         #[arg(long, default_value_t = train::tsmt::Options::default().mirror, action = clap::ArgAction::Set)]
         mirror: bool,
+        /// Share of each window's input frames replaced by the model's own draws (0: off; the
+        /// auto-conditioned training against freezing, see `train::tsmt::Options`).
+        #[arg(long, default_value_t = train::tsmt::Options::default().self_condition)]
+        self_condition: f64,
+        /// Length, in frames, of each run of the model's own draws.
+        #[arg(long, default_value_t = train::tsmt::Options::default().self_run)]
+        self_run: usize,
+        /// Teacher-forced passes that draw the own frames (each from the last pass's input).
+        #[arg(long, default_value_t = train::tsmt::Options::default().self_passes)]
+        self_passes: usize,
     }
 }
 

@@ -31,6 +31,14 @@ pub struct Schedule {
     /// (0: none).
     #[serde(default)]
     pub min_window_speed: f64,
+    /// Share of input frames replaced by the model's own draws, their run length and passes
+    /// (`train::tsmt::Options::self_condition`; 0: off).
+    #[serde(default)]
+    pub self_condition: f64,
+    #[serde(default)]
+    pub self_run: usize,
+    #[serde(default)]
+    pub self_passes: usize,
     pub steps: usize,
 }
 
