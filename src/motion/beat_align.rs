@@ -180,27 +180,27 @@ pub struct Warp {
     pub summary: BeatAlignSummary,
 }
 
-/// The stage: `motion` warped onto the grid of `beat_times_s` (on the dance's clock), with
-/// `fixed_times_s` (the key poses' times) mapped to themselves, and what was done.
+/// The stage without a stage after it: `motion` warped onto the grid of `beat_times_s` (on the
+/// dance's clock), with `fixed_times_s` (the key poses' times) mapped to themselves, and what was
+/// done; [`align_served`] with the feet kept as they came.
 pub fn align(
     motion: &Motion,
     beat_times_s: &[f64],
     fixed_times_s: &[f64],
 ) -> (Motion, BeatAlignSummary) {
-    let warp = plan(motion, beat_times_s, fixed_times_s);
-    let out = if warp.summary.applied {
-        resample(motion, &warp.source_frames)
-    } else {
-        motion.clone()
-    };
-    (out, warp.summary)
+    align_served(
+        motion.clone(),
+        beat_times_s,
+        fixed_times_s,
+        None::<fn(Motion) -> Motion>,
+    )
 }
 
 /// The stage as jobs serve it, with the stage after it (`finish`: the feet planted; `None` where
-/// the caller keeps the feet as they came) applied to what it returns. Planting changes the rhythm the ankles show: it holds a foot still through a
-/// contact and so sharpens some steps and drops others, and a slow sway of the network's can
-/// give way to the steps (dancenet on hungarian_dance_5, seed 1: 0.26 Hz before planting, 0.61
-/// after; eval 2026-11-27). A warp planned on the network's rhythm alone then locks a rhythm the
+/// the caller keeps the feet as they came) applied to what it returns. Planting changes the
+/// rhythm the ankles show: it holds a foot still through a contact and so sharpens some steps
+/// and drops others, and a slow sway of the network's can give way to the steps (dancenet on
+/// hungarian_dance_5, seed 1: 0.26 Hz before planting, 0.61 after; eval 2026-11-27). A warp planned on the network's rhythm alone then locks a rhythm the
 /// served dance does not show, and one planned on the planted rhythm alone misses where
 /// planting hides the rhythm that would have locked (keypose-transformer on the same song, seed
 /// 2). So the warps are planned on both (without `finish`, on the network's only), one per
@@ -271,26 +271,9 @@ fn steps_on_beat(motion: &Motion, beat_times_s: &[f64]) -> bool {
     })
 }
 
-/// The warp [`align`] applies, without applying it: of the motion at each of [`PACES`] (only
-/// 1 where a fixed time lies after the first frame: a key pose or a seed motion's frames hold
-/// their places), the warp of least cost, a pace's dropped tail counted.
-pub fn plan(motion: &Motion, beat_times_s: &[f64], fixed_times_s: &[f64]) -> Warp {
-    match plan_from(motion, motion, beat_times_s, fixed_times_s) {
-        Ok(candidates) => {
-            let Some((warp, _)) = candidates.into_iter().min_by(|a, b| a.1.total_cmp(&b.1)) else {
-                unreachable!("plan_from returns at least one candidate")
-            };
-            warp
-        }
-        Err(why) => Warp {
-            source_frames: (0..motion.num_frames()).map(|f| f as f64).collect(),
-            summary: BeatAlignSummary::skipped(why),
-        },
-    }
-}
-
-/// The candidates [`plan`] chooses from, one per grid fraction within reach (the least cost of
-/// its phases and [`PACES`]), with their costs; the rhythm read from `view` (the same frames as
+/// The warps [`align_served`] chooses from, one per grid fraction within reach (the least cost
+/// of its phases and, where no fixed time lies after the first frame, of [`PACES`], a pace's
+/// dropped tail counted), with their costs; the rhythm read from `view` (the same frames as
 /// `motion`, e.g. with the feet planted), the warps applying to `motion`. `Err`: why there is
 /// none.
 fn plan_from(
@@ -985,11 +968,12 @@ mod tests {
     fn fixed_times_start_and_end_map_to_themselves() {
         let (motion, beats) = (periodic(40.0, 1.07), beats(40.0, 0.5, 0.3));
         let keys = [7.0, 19.52, 31.0];
-        let warp = plan(&motion, &beats, &keys);
-        assert!(warp.summary.applied, "{:?}", warp.summary);
         let last = motion.num_frames() - 1;
-        for f in [0, 175, 488, 775, last] {
-            assert_eq!(warp.source_frames[f], f as f64, "frame {f}");
+        for (warp, _) in plan_from(&motion, &motion, &beats, &keys).expect("a warp") {
+            assert!(warp.summary.applied, "{:?}", warp.summary);
+            for f in [0, 175, 488, 775, last] {
+                assert_eq!(warp.source_frames[f], f as f64, "frame {f}");
+            }
         }
         let (aligned, _) = align(&motion, &beats, &keys);
         for f in [0, 175, 488, 775, last] {
@@ -1007,20 +991,23 @@ mod tests {
             let (motion, beats) = (periodic(45.0, f), beats(45.0, period, 0.05));
             // With a key pose (pace 1) and without (the paces: the slope counts the pace's).
             for keys in [&[20.0][..], &[]] {
-                let warp = plan(&motion, &beats, keys);
-                for w in warp.source_frames.windows(2) {
-                    let s = w[1] - w[0];
+                // No warp within reach: the motion is served as it came (slope 1).
+                let warps = plan_from(&motion, &motion, &beats, keys).unwrap_or_default();
+                for (warp, _) in warps {
+                    for w in warp.source_frames.windows(2) {
+                        let s = w[1] - w[0];
+                        assert!(
+                            s >= SLOPE_RANGE.0 * 0.97 && s <= SLOPE_RANGE.1 * 1.03,
+                            "slope {s} ({f} Hz, {period} s): {:?}",
+                            warp.summary
+                        );
+                    }
+                    let s = &warp.summary;
                     assert!(
-                        s >= SLOPE_RANGE.0 * 0.97 && s <= SLOPE_RANGE.1 * 1.03,
-                        "slope {s} ({f} Hz, {period} s): {:?}",
-                        warp.summary
+                        s.slope_min >= SLOPE_RANGE.0 * 0.97 && s.slope_max <= SLOPE_RANGE.1 * 1.03,
+                        "{s:?}"
                     );
                 }
-                let s = &warp.summary;
-                assert!(
-                    s.slope_min >= SLOPE_RANGE.0 * 0.97 && s.slope_max <= SLOPE_RANGE.1 * 1.03,
-                    "{s:?}"
-                );
             }
         }
     }
