@@ -229,7 +229,12 @@ fn position_error(
     local: &[UnitQuaternion<f64>],
     target: &[Vector3<f64>],
 ) -> f64 {
-    let (pos, _) = fk_frame(rig, root, local);
+    squared_distance(&fk_frame(rig, root, local).0, target)
+}
+
+/// Sum of squared distances (m²) of the 23 dataset joints of rig-indexed positions `pos` from
+/// their targets `target`.
+fn squared_distance(pos: &[Vector3<f64>], target: &[Vector3<f64>]) -> f64 {
     (0..NUM_JOINTS)
         .map(rig_index)
         .map(|j| (pos[j] - target[j]).norm_squared())
@@ -315,10 +320,7 @@ fn fit_frame_held(
         };
     let cost_of = |root: &Vector3<f64>, local: &[UnitQuaternion<f64>]| {
         let (pos, world) = fk_frame(rig, root, local);
-        let c = measured
-            .iter()
-            .map(|&j| (pos[j] - target[j]).norm_squared())
-            .sum::<f64>()
+        let c = squared_distance(&pos, target)
             + movers
                 .iter()
                 .map(|&k| (turn(k, local, &world) * prior_m).norm_squared())
