@@ -317,6 +317,11 @@ fn keypose_transformer_turns_its_waltz_and_its_arms_with_it() {
     assert!(arms >= 0.43, "arms {arms:.3} m/s against the spine");
 }
 
+/// The `model.json` a training run wrote into `dir`.
+fn written_model_file(dir: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(dir.join("model.json")).unwrap()).unwrap()
+}
+
 /// A tiny run's log: one epoch, finite train and test losses, and `note` in its line.
 fn one_finite_epoch(logs: &[choreo::models::train::EpochLog], note: &str) {
     assert_eq!(logs.len(), 1);
@@ -350,9 +355,7 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
         &tsmt::train(&opts).expect("training runs"),
         "tempo=0.8..1.25 mirror=true self=0.5x4/2",
     );
-    let file: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.path().join("model.json")).unwrap())
-            .unwrap();
+    let file = written_model_file(out.path());
     assert_eq!(file["training"]["self_condition"], 0.5);
     assert_eq!(file["training"]["self_run"], 4);
     let served = choreo::models::tsmt::Served::load(out.path()).expect("the folder loads");
@@ -380,9 +383,7 @@ fn dancenet_trains_on_windows_at_other_tempi() {
         &dancenet::train(&opts).expect("training runs"),
         "tempo=0.8..1.25 style_dropout=0.5",
     );
-    let file: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.path().join("model.json")).unwrap())
-            .unwrap();
+    let file = written_model_file(out.path());
     assert_eq!(file["training"]["min_tempo"], 0.8);
     assert_eq!(file["training"]["max_tempo"], 1.25);
     assert_eq!(file["training"]["style_dropout"], 0.5);

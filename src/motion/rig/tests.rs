@@ -455,24 +455,18 @@ fn six_d_round_trips() {
 /// caught half-way, the legs 15–20 cm off for one frame: 95 m/s², where its targets reach 20.
 #[test]
 fn a_fit_caught_by_the_turn_limit_is_not_left_off_its_targets() {
-    let doc: serde_json::Value = serde_json::from_str(include_str!(
+    #[derive(serde::Deserialize)]
+    struct Fixture {
+        anchors: Vec<usize>,
+        positions: Vec<[[f32; 3]; NUM_JOINTS]>,
+    }
+    let doc: Fixture = serde_json::from_str(include_str!(
         "../../../tests/fixtures/motion/keypose_r9_pelvis_flip.json"
     ))
     .expect("fixture");
-    let frames = doc["positions"].as_array().expect("positions");
-    let values: Vec<f32> = frames
-        .iter()
-        .flat_map(|f| f.as_array().expect("frame").iter())
-        .flat_map(|j| j.as_array().expect("joint").iter())
-        .map(|v| v.as_f64().expect("number") as f32)
-        .collect();
-    let pos = Array3::from_shape_vec((frames.len(), NUM_JOINTS, 3), values).expect("shape");
-    let anchors: Vec<usize> = doc["anchors"]
-        .as_array()
-        .expect("anchors")
-        .iter()
-        .map(|a| a.as_u64().expect("frame") as usize)
-        .collect();
+    let values: Vec<f32> = doc.positions.iter().flatten().flatten().copied().collect();
+    let pos = Array3::from_shape_vec((doc.positions.len(), NUM_JOINTS, 3), values).expect("shape");
+    let anchors = doc.anchors;
     let root = crate::motion::skeleton::body_centre_track(pos.view());
     let m = fit_and_solve(pos.view(), root.view(), 25.0, &anchors).expect("solve");
     let world = m.joint_positions();
