@@ -300,6 +300,41 @@ fn dancenet_opens_a_different_dance_to_a_different_song() {
     );
 }
 
+/// TSMT continues from a real clip when the job brings no seed motion, and that clip decides how
+/// it opens. Drawn by the seed alone, seed 6 opened the 5-s trumpet loop (90 BPM) and
+/// lets_go_fishin (117 BPM) 0.05 m apart over the loop's frames (two real dances: 0.34 m). Chosen
+/// by the song (`models::clip_choice`: the clip's own beat period against the song's, and the
+/// meter) and replayed at its pace, the two songs open from different clips. This is the network's
+/// own output, before any served stage.
+#[test]
+fn tsmt_opens_a_different_dance_to_a_different_song() {
+    let m = model("tsmt");
+    let other = stretched_song("lets_go_fishin.ogg", 6.0, 1.0);
+    let looped = dance(m.as_ref(), &GenerateRequest::plain(song(), 6));
+    let other = dance(m.as_ref(), &GenerateRequest::plain(&other, 6));
+    let apart = choreo::metrics::physical::seed_distance_m(&looped, &other);
+    assert!(
+        apart > 0.15,
+        "seed 6 on two songs: {apart:.3} m apart over the loop's frames"
+    );
+}
+
+/// TSMT freezes from some openings: seed 8 on sugar_plum_fairy, continued from the clip its seed
+/// draws among the song's candidates, held its legs mid-stride from 5 s to the end (0.35 m/s; the
+/// slowest real dance moves 0.63). An opening that freezes within the song's first 20 s is passed
+/// over for the next candidate clip (`tsmt::StallGuard::reopen_reach_m`), and the dance moves.
+/// This is the network's own output, before any served stage.
+#[test]
+fn tsmt_opens_again_from_another_clip_where_it_would_freeze() {
+    let m = model("tsmt");
+    let song = audio::decode_path(&shared_song_path("sugar_plum_fairy.ogg")).expect("decodes");
+    let motion = dance(m.as_ref(), &GenerateRequest::plain(&song, 8));
+    let speed = choreo::metrics::physical::physical_series(&motion, &[])
+        .scores(1.0)
+        .mean_speed_m_s;
+    assert!(speed >= 0.5, "seed 8: {speed:.3} m/s");
+}
+
 /// keypose-transformer turns as its scaffold's real clips turn (`scaffold_facing`): on the
 /// Hungarian dance (tracked in 3/4, so waltz clips) its arms move against the spine as fast as
 /// the slowest real dance's (0.43 m/s, issue 25). A waltz holds its arms in a frame; they move

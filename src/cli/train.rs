@@ -381,6 +381,11 @@ args_into! {
         /// over 2 s, temperature × 1.5).
         #[arg(long, default_value_t = train::tsmt::Options::default().stall_reach)]
         stall_reach: f64,
+        /// The stall guard's reopen reach (m) written into `model.json`: an opening whose last 2 s
+        /// reach less is a freeze, and the dance opens from the next candidate clip (0: never;
+        /// `tsmt::StallGuard`).
+        #[arg(long, default_value_t = train::tsmt::Options::default().reopen_reach)]
+        reopen_reach: f64,
         #[arg(long, default_value_t = train::tsmt::Options::default().seed)]
         seed: u64,
         /// Train in beat time (`models::beat_time`): every dance re-timed to the split's median
@@ -406,6 +411,11 @@ args_into! {
         /// Teacher-forced passes that draw the own frames (each from the last pass's input).
         #[arg(long, default_value_t = train::tsmt::Options::default().self_passes)]
         self_passes: usize,
+        /// Do not train: redraw the seed clips (the same clips for the same `--seed`) with each
+        /// one's source and its song's beats into `--out` (`seed_clips.safetensors`,
+        /// `seed_clips.json`; with it the song chooses the opening clip).
+        #[arg(long)]
+        clips_only: bool,
     }
 }
 

@@ -12,6 +12,7 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use tch::Tensor;
 
+use super::clip_choice::{self, BankMeta};
 use super::{InstancePool, ModelError};
 use crate::motion::dataset::NormStats;
 
@@ -21,6 +22,9 @@ pub const MODEL_FILE: &str = "model.json";
 pub const WEIGHTS_FILE: &str = "weights.safetensors";
 /// Real seed clips (`[clips, frames, width]` feature rows), for models that start from one.
 pub const SEED_CLIPS_FILE: &str = "seed_clips.safetensors";
+/// Where each seed clip came from and what its song did under it (a [`BankMeta`]), beside
+/// [`SEED_CLIPS_FILE`]; with it the song chooses among the clips ([`SeedClips::chosen`]).
+pub const SEED_CLIPS_META_FILE: &str = "seed_clips.json";
 /// One JSON line per training epoch.
 pub const TRAIN_LOG_FILE: &str = "train_log.jsonl";
 
@@ -80,11 +84,14 @@ where
 
 /// Real clips of the train split in a model's own feature rows, one drawn by a job's seed when
 /// the request brings no seed motion: a dance started from one fixed pose would begin every song
-/// the same way.
+/// the same way. With their [`BankMeta`] the song chooses which clips the seed draws among
+/// ([`Self::chosen`]).
 #[derive(Clone, Debug)]
 pub struct SeedClips {
     /// `[clips, frames, width]`.
     pub clips: Array3<f32>,
+    /// Each clip's source and its song's beats ([`SEED_CLIPS_META_FILE`]), when kept.
+    pub meta: Option<BankMeta>,
 }
 
 impl SeedClips {
@@ -95,31 +102,60 @@ impl SeedClips {
         frames: usize,
         seed: u64,
     ) -> Result<Self, ModelError> {
-        let usable: Vec<&&Array2<f32>> = seqs.iter().filter(|s| s.nrows() > frames + 50).collect();
+        Ok(Self::draw_with_sources(seqs, count, frames, seed)?.0)
+    }
+
+    /// [`Self::draw`], and where each clip came from: `(index into seqs, first frame)`.
+    pub fn draw_with_sources(
+        seqs: &[&Array2<f32>],
+        count: usize,
+        frames: usize,
+        seed: u64,
+    ) -> Result<(Self, Vec<(usize, usize)>), ModelError> {
+        let usable: Vec<usize> = (0..seqs.len())
+            .filter(|&i| seqs[i].nrows() > frames + 50)
+            .collect();
         if usable.is_empty() || count == 0 {
             return Err(ModelError::Input(format!(
                 "no dance longer than {frames} frames for seed clips"
             )));
         }
         let mut rng = StdRng::seed_from_u64(seed);
-        let width = usable[0].ncols();
+        let width = seqs[usable[0]].ncols();
         let mut clips = Array3::<f32>::zeros((count, frames, width));
+        let mut sources = Vec::with_capacity(count);
         for k in 0..count {
-            let s = usable[k % usable.len()];
+            let i = usable[k % usable.len()];
+            let s = seqs[i];
             let start = rng.gen_range(25..s.nrows() - frames - 25);
             clips
                 .slice_mut(s![k, .., ..])
                 .assign(&s.slice(s![start..start + frames, ..]));
+            sources.push((i, start));
         }
-        Ok(Self { clips })
+        Ok((Self { clips, meta: None }, sources))
     }
 
-    /// Writes the clips as safetensors.
+    /// The clips with each one's source and beats (checked against the clips).
+    pub fn with_meta(mut self, meta: BankMeta) -> Result<Self, ModelError> {
+        let (k, l, _) = self.clips.dim();
+        meta.check(k, l)
+            .map_err(|e| ModelError::BadModelFile(format!("{SEED_CLIPS_META_FILE}: {e}")))?;
+        self.meta = Some(meta);
+        Ok(self)
+    }
+
+    /// Writes the clips as safetensors, and their [`BankMeta`] beside them when they have one.
     pub fn save(&self, path: &Path) -> Result<(), ModelError> {
-        write_clips(&self.clips, path)
+        write_clips(&self.clips, path)?;
+        match &self.meta {
+            Some(meta) => meta.write_beside(path, SEED_CLIPS_META_FILE),
+            None => Ok(()),
+        }
     }
 
-    /// Reads clips written by [`Self::save`], `width` numbers a frame.
+    /// Reads clips written by [`Self::save`], `width` numbers a frame, with their
+    /// [`SEED_CLIPS_META_FILE`] when it lies beside.
     pub fn load(path: &Path, width: usize) -> Result<Self, ModelError> {
         let clips = read_clips(path)?;
         let (k, f, d) = clips.dim();
@@ -129,13 +165,48 @@ impl SeedClips {
                 path.display()
             )));
         }
-        Ok(Self { clips })
+        let bare = Self { clips, meta: None };
+        match BankMeta::read_beside(path, SEED_CLIPS_META_FILE)? {
+            Some(meta) => bare.with_meta(meta),
+            None => Ok(bare),
+        }
     }
 
-    /// The clip a job's seed picks.
+    /// The clip a job's seed picks, by the seed alone.
     pub fn pick(&self, seed: u64) -> Array2<f32> {
-        let k = StdRng::seed_from_u64(seed ^ 0x5EED_C11F).gen_range(0..self.clips.dim().0);
-        self.clips.slice(s![k, .., ..]).to_owned()
+        self.clips
+            .slice(s![self.seeded(seed, self.clips.dim().0), .., ..])
+            .to_owned()
+    }
+
+    /// The clips a job's seed draws for a song whose beat period is `period` frames (on the clock
+    /// the clips are played on) with `bar` beats a bar: the seed draws among the clips that suit it
+    /// best ([`clip_choice::ranked`], [`clip_choice::good`]). Returns the seed's draw first, then
+    /// the other good candidates best first (for a caller that passes over a clip), each with the
+    /// rate (clip frames per song frame) that puts its own beats at the song's pace; empty without
+    /// [`BankMeta`] or a clip of two beats.
+    pub fn chosen(&self, seed: u64, period: f64, bar: usize) -> Vec<(usize, f64)> {
+        let Some(meta) = self.meta.as_ref() else {
+            return Vec::new();
+        };
+        if !(period.is_finite() && period > 0.0) {
+            return Vec::new();
+        }
+        // No energy term: the song's would cost a second onset analysis per job.
+        let mut good = clip_choice::good(&clip_choice::ranked(&meta.clips, period, bar, 0.0));
+        if good.is_empty() {
+            return Vec::new();
+        }
+        let first = good.remove(self.seeded(seed, good.len()));
+        std::iter::once(first)
+            .chain(good)
+            .filter_map(|(c, u)| Some((c, u * meta.clips[c].period()? / period)))
+            .collect()
+    }
+
+    /// The seed's draw among `n` (the same draw [`Self::pick`] always made).
+    fn seeded(&self, seed: u64, n: usize) -> usize {
+        StdRng::seed_from_u64(seed ^ 0x5EED_C11F).gen_range(0..n)
     }
 }
 
@@ -220,5 +291,67 @@ mod tests {
                 weight: 0.0
             }
         );
+    }
+
+    /// Seed clips keep their description beside them, and with it the song chooses the clips the
+    /// seed draws among: a cha-cha's pace draws the cha-cha clips, a waltz's the waltz clips, and
+    /// each is replayed so that its own beats come at the song's pace. Without the description
+    /// the seed alone draws, as before.
+    #[test]
+    fn seed_clips_chosen_by_the_song_round_trip_with_their_description() {
+        use crate::models::clip_choice::ClipInfo;
+        use crate::motion::dataset::Style;
+        let info = |style: Style, period: f64| ClipInfo {
+            dance: "DANCE_X_1".into(),
+            start: 30,
+            style,
+            beats: vec![2.0, 2.0 + period, 2.0 + 2.0 * period],
+            bar: if style == Style::Waltz { 3 } else { 4 },
+            energy: 1.0,
+        };
+        let styles = [Style::ChaCha, Style::Waltz];
+        let meta = BankMeta {
+            made_by: "test".into(),
+            fps: 25.0,
+            clips: (0..10)
+                .map(|c| {
+                    let style = styles[c % 2];
+                    let period = if style == Style::Waltz { 17.5 } else { 12.25 };
+                    info(style, period + c as f64 * 0.25)
+                })
+                .collect(),
+        };
+        let clips = SeedClips {
+            clips: Array3::from_shape_fn((10, 50, 3), |(c, f, d)| (c * 100 + f + d) as f32),
+            meta: None,
+        }
+        .with_meta(meta.clone())
+        .unwrap();
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(SEED_CLIPS_FILE);
+        clips.save(&path).unwrap();
+        let read = SeedClips::load(&path, 3).unwrap();
+        assert_eq!(read.meta.as_ref(), Some(&meta));
+        for seed in 0..20 {
+            let chacha = read.chosen(seed, 12.0, 4);
+            assert!(chacha.len() >= 4, "{chacha:?}");
+            for &(c, rate) in &chacha {
+                assert_eq!(c % 2, 0, "seed {seed}: a cha-cha song drew clip {c}");
+                let own = meta.clips[c].period().unwrap();
+                assert!((rate * 12.0 - own).abs() < 1e-9, "rate {rate}");
+            }
+            let waltz = read.chosen(seed, 17.0, 3);
+            assert!(waltz.iter().all(|w| w.0 % 2 == 1), "seed {seed}: {waltz:?}");
+        }
+        // The seed draws which good candidate comes first.
+        let firsts: std::collections::BTreeSet<usize> = (0..20)
+            .map(|seed| read.chosen(seed, 12.0, 4)[0].0)
+            .collect();
+        assert!(firsts.len() >= 3, "{firsts:?}");
+        assert!(read.chosen(1, f64::NAN, 4).is_empty());
+        std::fs::remove_file(dir.path().join(SEED_CLIPS_META_FILE)).unwrap();
+        let bare = SeedClips::load(&path, 3).unwrap();
+        assert!(bare.meta.is_none() && bare.chosen(1, 12.0, 4).is_empty());
+        assert_eq!(bare.pick(7), read.pick(7));
     }
 }

@@ -9,6 +9,7 @@ use crate::stage::Stage;
 use serde::{Deserialize, Serialize};
 
 pub mod beat_time;
+pub mod clip_choice;
 pub mod dance_revolution;
 pub mod dancenet;
 pub mod folder;

@@ -662,11 +662,13 @@ mod tests {
             min_reach_m: 0.0,
             window_frames: 5,
             boost: 10.0,
+            reopen_reach_m: 0.0,
         };
         let always = StallGuard {
             min_reach_m: 1e9,
             window_frames: 5,
             boost: 10.0,
+            reopen_reach_m: 0.0,
         };
         let plain = m.sample(&prefix, &av, s, 3, |_| true).unwrap();
         assert_eq!(

@@ -37,10 +37,10 @@ use rand::rngs::StdRng;
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 
-use serde::{Deserialize, Serialize};
-
-use super::beats::{median_step, row_at, SongCues, TimeMap};
+use super::beats::{row_at, SongCues, TimeMap};
 use super::keys::LocalKey;
+use crate::models::clip_choice;
+pub use crate::models::clip_choice::{BankMeta, ClipInfo};
 use crate::models::ModelError;
 use crate::motion::repr::{self, FEATURE_DIM, POSE_DIM};
 
@@ -66,61 +66,8 @@ pub const MIN_SPACING: f64 = 8.0;
 /// (17 frames at 87 BPM) got a pose each and a test dance moved 0.48 m/s as served, under the
 /// verdict's 0.5.
 pub const MAX_SPACING: f64 = 14.0;
-/// Good candidates the seed chooses among, at least (when the bank holds that many).
-pub const MIN_CANDIDATES: usize = 4;
-/// Good candidates the seed chooses among, at most.
-pub const MAX_CANDIDATES: usize = 8;
-/// Candidates within this score of the best are all good.
-const SCORE_MARGIN: f64 = 0.15;
-/// Score added for a clip danced in another meter than the song's.
-const METER_PENALTY: f64 = 0.2;
-/// Weight of the energy term (|ln| of the song's local energy over the clip's music's).
-const ENERGY_WEIGHT: f64 = 0.1;
 /// A clip entered by a continuation has at least this many song beats left in it.
 const MIN_RUN_BEATS: f64 = 4.0;
-
-/// One bank clip's source: the train dance, its first frame there, the dance's style, and the
-/// beats of the dance's song on the clip's frames.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct ClipInfo {
-    /// Train dance id (`DANCE_W_3`).
-    pub dance: String,
-    /// The dance's motion frame of the clip's frame 0.
-    pub start: usize,
-    pub style: crate::motion::dataset::Style,
-    /// Beats of the song (`audio::analyze`) on the clip's frames (fractional, ascending, within it).
-    pub beats: Vec<f64>,
-    /// Beats per bar of the song's analysis (3 or 4).
-    pub bar: usize,
-    /// Mean onset strength of the music under the clip (`audio::features::keypose`'s onset column).
-    pub energy: f64,
-}
-
-impl ClipInfo {
-    /// Median beat period, frames; none with fewer than two beats.
-    pub fn period(&self) -> Option<f64> {
-        median_step(&self.beats)
-    }
-
-    /// Beats per bar of the style: a waltz has three, the other styles four. The style is the
-    /// dataset's own label; the song's analysis misreads 3 of 30 waltzes as 4/4.
-    pub fn meter(&self) -> usize {
-        if self.style == crate::motion::dataset::Style::Waltz {
-            3
-        } else {
-            4
-        }
-    }
-}
-
-/// `pose_bank.json`: how the bank was made, and every clip's [`ClipInfo`] (in the bank's order).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct BankMeta {
-    /// The command and settings that drew the bank.
-    pub made_by: String,
-    pub fps: f64,
-    pub clips: Vec<ClipInfo>,
-}
 
 /// Real clips the seed draws from.
 #[derive(Clone, Debug)]
@@ -193,22 +140,8 @@ impl PoseBank {
     /// The bank with each clip's source and beats (one [`ClipInfo`] per clip, beats within it).
     pub fn with_meta(mut self, meta: BankMeta) -> Result<Self, ModelError> {
         let (k, l, _) = self.clips.dim();
-        if meta.clips.len() != k {
-            return Err(ModelError::BadModelFile(format!(
-                "{POSE_BANK_META_FILE} describes {} clips, the bank holds {k}",
-                meta.clips.len()
-            )));
-        }
-        let bad = meta.clips.iter().any(|c| {
-            c.beats
-                .iter()
-                .any(|b| !b.is_finite() || *b < 0.0 || *b > (l - 1) as f64)
-                || c.beats.windows(2).any(|p| p[1] <= p[0])
-                || !c.energy.is_finite()
-        });
-        if bad {
-            return Err(ModelError::BadModelFile(format!("{POSE_BANK_META_FILE}: beats outside their clip, out of order, or a non-finite energy")));
-        }
+        meta.check(k, l)
+            .map_err(|e| ModelError::BadModelFile(format!("{POSE_BANK_META_FILE}: {e}")))?;
         self.meta = Some(meta);
         Ok(self)
     }
@@ -246,27 +179,19 @@ impl PoseBank {
     /// Reads a bank written by [`PoseBank::save`], with [`POSE_BANK_META_FILE`] when it lies beside.
     pub fn load(path: &Path) -> Result<Self, ModelError> {
         let bank = Self::new(crate::models::folder::read_clips(path)?)?;
-        let meta_path = path.with_file_name(POSE_BANK_META_FILE);
-        if !meta_path.exists() {
-            return Ok(bank);
+        match BankMeta::read_beside(path, POSE_BANK_META_FILE)? {
+            Some(meta) => bank.with_meta(meta),
+            None => Ok(bank),
         }
-        let text = std::fs::read_to_string(&meta_path)
-            .map_err(|e| ModelError::BadModelFile(format!("{}: {e}", meta_path.display())))?;
-        let meta: BankMeta = serde_json::from_str(&text)
-            .map_err(|e| ModelError::BadModelFile(format!("{}: {e}", meta_path.display())))?;
-        bank.with_meta(meta)
     }
 
     /// Writes the bank as safetensors, and its [`BankMeta`] beside it when it has one.
     pub fn save(&self, path: &Path) -> Result<(), ModelError> {
         crate::models::folder::write_clips(&self.clips, path)?;
-        if let Some(meta) = &self.meta {
-            let text = serde_json::to_string_pretty(meta)
-                .map_err(|e| ModelError::BadModelFile(e.to_string()))?;
-            std::fs::write(path.with_file_name(POSE_BANK_META_FILE), text + "\n")
-                .map_err(|e| ModelError::BadModelFile(e.to_string()))?;
+        match &self.meta {
+            Some(meta) => meta.write_beside(path, POSE_BANK_META_FILE),
+            None => Ok(()),
         }
-        Ok(())
     }
 
     /// `[clips, frames, features]`.
@@ -332,53 +257,15 @@ impl PoseBank {
         }
     }
 
-    /// Clips ranked by how well they suit the song around song frame `at`, best first:
-    /// `(clip, u, score)`, `u` the clip beats per song beat it would dance at (½, 1 or 2: the one
-    /// that plays it nearest its own pace). The score adds the pace error `|log₂ rate|`, a
-    /// [`METER_PENALTY`] for another meter and the energy term. Clips with fewer than two beats
-    /// are left out.
+    /// Clips ranked by how well they suit the song around song frame `at`, best first
+    /// ([`clip_choice::ranked`] with the song's period, meter and energy there).
     fn ranked(meta: &BankMeta, cues: &SongCues, at: f64) -> Vec<(usize, f64, f64)> {
-        let e_song = cues.energy_at(at);
-        let mut out: Vec<(usize, f64, f64)> = meta
-            .clips
-            .iter()
-            .enumerate()
-            .filter_map(|(c, info)| {
-                let pc = info.period()?;
-                // The clip plays at rate u·pc/period (clip frames per song frame).
-                let (u, pace) = [0.5, 1.0, 2.0]
-                    .map(|u| (u, (u * pc / cues.period).log2().abs()))
-                    .into_iter()
-                    .min_by(|a, b| a.1.total_cmp(&b.1))?;
-                let meter = if info.meter() == cues.bar {
-                    0.0
-                } else {
-                    METER_PENALTY
-                };
-                let energy = if e_song > 0.0 && info.energy > 0.0 {
-                    ENERGY_WEIGHT * (e_song / info.energy).ln().abs()
-                } else {
-                    0.0
-                };
-                Some((c, u, pace + meter + energy))
-            })
-            .collect();
-        out.sort_by(|a, b| a.2.total_cmp(&b.2).then(a.0.cmp(&b.0)));
-        out
+        clip_choice::ranked(&meta.clips, cues.period, cues.bar, cues.energy_at(at))
     }
 
-    /// The good candidates of a ranking: those within [`SCORE_MARGIN`] of the best, at least
-    /// [`MIN_CANDIDATES`] and at most [`MAX_CANDIDATES`].
+    /// The good candidates of a ranking ([`clip_choice::good`]).
     fn good(ranked: &[(usize, f64, f64)]) -> Vec<(usize, f64)> {
-        let Some(best) = ranked.first().map(|r| r.2) else {
-            return Vec::new();
-        };
-        let within = ranked.iter().filter(|r| r.2 <= best + SCORE_MARGIN).count();
-        ranked
-            .iter()
-            .take(within.clamp(MIN_CANDIDATES, MAX_CANDIDATES))
-            .map(|r| (r.0, r.1))
-            .collect()
+        clip_choice::good(ranked)
     }
 
     /// What `seed` draws for a dance of `frames` frames to the song of `cues` with seed length

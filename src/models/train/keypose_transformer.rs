@@ -391,35 +391,22 @@ fn pose_bank(ds: &Dataset, train: &[Sequence], opts: &Options) -> Result<PoseBan
         };
         let fps = dance.motion.fps;
         let first = dance.song_time_s(at);
-        let on_clip = |times: &[f64]| -> Vec<f64> {
-            times
-                .iter()
-                .map(|t| (t - first) * fps)
-                .filter(|f| *f >= 0.0 && *f <= (frames - 1) as f64)
-                .collect()
-        };
-        let beats = on_clip(&analysis.beat_times);
-        let bar = crate::models::keypose_transformer::beats::median_step(&analysis.downbeat_times)
-            .zip(crate::models::keypose_transformer::beats::median_step(
-                &analysis.beat_times,
-            ))
-            .map_or(
-                4,
-                |(d, b)| if (d / b).round() as usize == 3 { 3 } else { 4 },
-            );
         let onset = seq
             .music
             .slice(s![at..at + frames, crate::audio::features::KEYPOSE_DIM - 1]);
         let energy = onset.iter().map(|v| f64::from(*v)).sum::<f64>() / frames as f64;
-        tracing::info!(clip = c, dance = %seq.id, start = at, beats = beats.len(), tempo = analysis.tempo_bpm, bar, energy, "bank clip");
-        infos.push(ClipInfo {
-            dance: seq.id.clone(),
-            start: at,
-            style: dance.style,
-            beats,
-            bar,
+        let info = ClipInfo::of_song(
+            seq.id.clone(),
+            at,
+            dance.style,
+            analysis,
+            first,
+            fps,
+            frames,
             energy,
-        });
+        );
+        tracing::info!(clip = c, dance = %seq.id, start = at, beats = info.beats.len(), tempo = analysis.tempo_bpm, bar = info.bar, energy, "bank clip");
+        infos.push(info);
     }
     let meta = BankMeta {
         made_by: format!(

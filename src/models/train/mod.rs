@@ -632,6 +632,13 @@ impl Training {
                     format!("trained {} epochs into {}", logs.len(), out.display())
                 })
             }
+            Self::Tsmt(o) if o.clips_only => {
+                tsmt::train(o)?;
+                Ok(format!(
+                    "redrew the seed clips in {}",
+                    o.common.out_dir(crate::models::tsmt::ID).display()
+                ))
+            }
             Self::Tsmt(o) => {
                 let logs = tsmt::train(o)?;
                 Ok(format!(

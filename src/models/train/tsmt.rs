@@ -50,6 +50,9 @@ pub struct Options {
     /// The stall guard's reach (m) written into `model.json` (0: no guard; `tsmt::StallGuard`,
     /// over 2 s, temperature × 1.5).
     pub stall_reach: f64,
+    /// The stall guard's reopen reach (m) written into `model.json` (0: never;
+    /// `tsmt::StallGuard::reopen_reach_m`).
+    pub reopen_reach: f64,
     pub seed: u64,
     /// Train in beat time (`models::beat_time`): every dance re-timed to the split's median
     /// tempo (after the bins are fitted on the dances as danced); the model then serves so.
@@ -68,6 +71,9 @@ pub struct Options {
     pub self_condition: f64,
     pub self_run: usize,
     pub self_passes: usize,
+    /// Do not train: redraw the seed clips (the same clips for the same `seed`) with each one's
+    /// source and its song's beats (`seed_clips.json`) into the output folder.
+    pub clips_only: bool,
 }
 
 impl Default for Options {
@@ -86,6 +92,7 @@ impl Default for Options {
             smooth_frames: 1.0,
             smooth_height_frames: 4.0,
             stall_reach: 0.22,
+            reopen_reach: 0.1,
             seed: 2020,
             beat_time: false,
             min_tempo: 1.0,
@@ -94,6 +101,7 @@ impl Default for Options {
             self_condition: 0.0,
             self_run: 10,
             self_passes: 2,
+            clips_only: false,
         }
     }
 }
@@ -101,6 +109,58 @@ impl Default for Options {
 /// Seed clips kept in the folder, and their length in frames.
 const SEED_CLIPS: usize = 32;
 const SEED_CLIP_FRAMES: usize = 50;
+
+/// The seed clips ([`SEED_CLIPS`] of [`SEED_CLIP_FRAMES`] frames at `opts.seed`'s starts over
+/// the train dances as danced) with each clip's source and its song under it
+/// ([`crate::models::clip_choice::ClipInfo`]): every source dance's song is analysed
+/// (`audio::analyze`) and its beats put on the clip's frames; the energy is the mean onset
+/// strength (`audio::features::keypose`'s column, as the pose bank's) of the music under the clip.
+fn seed_clips(data: &Data, opts: &Options) -> Result<SeedClips, TrainError> {
+    use crate::models::clip_choice::{BankMeta, ClipInfo};
+    let (clips, sources) = SeedClips::draw_with_sources(
+        &data.train_raw.iter().map(|s| &s.poses).collect::<Vec<_>>(),
+        SEED_CLIPS,
+        SEED_CLIP_FRAMES,
+        opts.seed,
+    )?;
+    let ds = crate::motion::dataset::Dataset::open(&opts.common.data)?;
+    let mut infos = Vec::with_capacity(sources.len());
+    for (k, &(i, start)) in sources.iter().enumerate() {
+        let dance = ds.load(&data.train_raw[i].id)?;
+        let audio = crate::audio::decode_path(&dance.audio_path)?;
+        let analysis = crate::audio::analyze(&audio)?;
+        let fps = dance.motion.fps;
+        let first = dance.song_time_s(start);
+        let onset = crate::audio::features::keypose(&audio, fps, first, SEED_CLIP_FRAMES)?;
+        let energy = onset
+            .column(crate::audio::features::KEYPOSE_DIM - 1)
+            .iter()
+            .map(|v| f64::from(*v))
+            .sum::<f64>()
+            / SEED_CLIP_FRAMES as f64;
+        let info = ClipInfo::of_song(
+            data.train_raw[i].id.clone(),
+            start,
+            dance.style,
+            &analysis,
+            first,
+            fps,
+            SEED_CLIP_FRAMES,
+            energy,
+        );
+        tracing::info!(clip = k, dance = %dance.id, start, beats = info.beats.len(), bar = info.bar, energy, "seed clip");
+        infos.push(info);
+    }
+    let meta = BankMeta {
+        made_by: format!(
+            "choreo train tsmt --clips-only --seed {}: {SEED_CLIPS} clips of {SEED_CLIP_FRAMES} frames at seeded starts, one per train dance in order (the clips training writes for the same seed); beats from audio::analyze of each dance's whole song, put on the clip's frames with Dance::song_time_s; energy = mean onset strength (audio::features::keypose column 14) of the music under the clip",
+            opts.seed
+        ),
+        fps: crate::motion::MOTION_FPS,
+        clips: infos,
+    };
+    Ok(clips.with_meta(meta)?)
+}
 
 /// Trains and writes the model folder; returns the per-epoch log.
 pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
@@ -120,6 +180,16 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             Ok(())
         },
     )?;
+    if opts.clips_only {
+        let out = opts.common.out_dir(ID);
+        std::fs::create_dir_all(&out).map_err(|source| TrainError::Io {
+            path: out.clone(),
+            source,
+        })?;
+        seed_clips(&data, opts)?.save(&out.join(SEED_CLIPS_FILE))?;
+        tracing::info!(clips = SEED_CLIPS, out = %out.display(), "seed clips redrawn");
+        return Ok(Vec::new());
+    }
     let base = if opts.common.tiny {
         Config::tiny()
     } else {
@@ -154,13 +224,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
         Tsmt::new(p, config.clone())
     })?;
-    let clips = SeedClips::draw(
-        &data.train_raw.iter().map(|s| &s.poses).collect::<Vec<_>>(),
-        SEED_CLIPS,
-        SEED_CLIP_FRAMES,
-        opts.seed,
-    )?;
-    clips.save(&trainer.out.join(SEED_CLIPS_FILE))?;
+    seed_clips(&data, opts)?.save(&trainer.out.join(SEED_CLIPS_FILE))?;
     let len = config.window as usize + 1;
     // Windows where the dancer stands still (mostly the closing hold of a dance) are left out:
     // a held pose is an attractor for a sampled model, which once in it repeats it for minutes.
@@ -230,6 +294,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 min_reach_m: opts.stall_reach as f32,
                 window_frames: 50,
                 boost: 1.5,
+                reopen_reach_m: opts.reopen_reach as f32,
             }),
             beat_time,
         },

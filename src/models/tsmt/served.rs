@@ -108,6 +108,42 @@ impl Served {
         &self.file
     }
 
+    /// The real clips the dance may continue from when the job brings no seed motion (context
+    /// only, not danced), the seed's draw first. With the clips' [`folder::SEED_CLIPS_META_FILE`]
+    /// the song chooses the clips the seed draws among (`clip_choice`: the clip's own beat period
+    /// against the song's, and the meter), each replayed at the song's pace, so the network starts
+    /// from a real dance stepping at this song's tempo: the context decides how TSMT opens (the
+    /// same seed and draws continued from four other clips opened the 5-s trumpet loop 0.15–0.31
+    /// m away from where the seed's own clip took it), and a draw by the seed alone opened every
+    /// song alike. The other good candidates follow, best first, for an opening that freezes.
+    /// Without the description, or without two beats in the song, the seed alone draws one.
+    fn opening_clips(
+        clips: &SeedClips,
+        req: &GenerateRequest<'_>,
+        clock: &beat_time::BeatTime,
+        fps: f64,
+    ) -> Result<Vec<Array2<f32>>, ModelError> {
+        if clips.meta.is_none() {
+            return Ok(vec![clips.pick(req.seed)]);
+        }
+        let analysis = req.analysis_or_analyze()?;
+        // The song's beat period on the network's clock (network frame j is song frame j·factor).
+        let chosen = crate::models::clip_choice::song_pace(&analysis, fps)
+            .map(|(period, bar)| clips.chosen(req.seed, period / clock.factor, bar))
+            .unwrap_or_default();
+        if chosen.is_empty() {
+            return Ok(vec![clips.pick(req.seed)]);
+        }
+        Ok(chosen
+            .into_iter()
+            .map(|(c, rate)| {
+                let clip = clips.clips.slice(s![c, .., ..]);
+                let len = ((clip.nrows() - 1) as f64 / rate).floor() as usize + 1;
+                crate::models::train::augment::stretch_poses(clip, 0, len, rate)
+            })
+            .collect())
+    }
+
     /// Generates `clock.net_frames` frames of features (clearance heights) for `audio` on the
     /// network's clock. The context is the seed motion's features (which then open the dance),
     /// else a drawn clip (context only).
@@ -136,7 +172,7 @@ impl Served {
         progress.report(Stage::Features, 1.0)?;
         // The opening: the request's seed motion (kept as the dance's first frames), or a real clip.
         let seed_motion = req.seed_motion.map(|m| clock.seed_motion(m));
-        let (context, opening, start) = match seed_motion.as_ref() {
+        let (contexts, opening, start) = match seed_motion.as_ref() {
             Some(m) if m.num_frames() > 0 => {
                 let keep = m.num_frames().min(n);
                 let root = crate::motion::skeleton::body_centre_track(m.positions.view());
@@ -144,18 +180,17 @@ impl Served {
                 let floor = repr::floor_of_features(f.view());
                 repr::height_to_clearance(&mut f, floor);
                 let f = f.slice(s![..keep, ..]).to_owned();
-                (bins.tokens(&f), Some(f), start)
+                (vec![bins.tokens(&f)], Some(f), start)
             }
             _ => {
-                let clip = match &self.clips {
-                    Some(c) => c.pick(req.seed),
-                    None => {
-                        return Err(ModelError::BadModelFile(format!(
-                            "{ID}: no seed motion and no {SEED_CLIPS_FILE}"
-                        )))
-                    }
+                let Some(clips) = &self.clips else {
+                    return Err(ModelError::BadModelFile(format!(
+                        "{ID}: no seed motion and no {SEED_CLIPS_FILE}"
+                    )));
                 };
-                (bins.tokens(&clip), None, RootStart::default())
+                let candidates = Self::opening_clips(clips, req, clock, fps)?;
+                let tokens = candidates.iter().map(|c| bins.tokens(c)).collect();
+                (tokens, None, RootStart::default())
             }
         };
         let opened = opening.as_ref().map_or(0, |o| o.nrows());
@@ -179,8 +214,32 @@ impl Served {
                     .stall_guard
                     .as_ref()
                     .map(|g| (g, widths.as_slice()));
+                // A clip the network freezes from within the song's first 20 s is passed over for
+                // the next candidate ([`Self::opening_clips`]); the last is taken as it is. The
+                // one kept is drawn again whole, the same draws from the same seed.
+                let check = self.file.extra.stall_guard.as_ref().and_then(|g| {
+                    (g.reopen_reach_m > 0.0 && contexts.len() > 1)
+                        .then(|| (g.reopen_reach_m, OPENING_CHECK_FRAMES.min(n - opened)))
+                });
+                let mut context = &contexts[0];
+                if let (Some((reach, frames)), Some(guard)) = (check, guard) {
+                    let head = rest.narrow(0, 0, frames as i64);
+                    for c in &contexts {
+                        context = c;
+                        let Some(tokens) =
+                            model.sample_guarded(c, &head, sampling, Some(guard), req.seed, |_| {
+                                true
+                            })
+                        else {
+                            return Ok(None);
+                        };
+                        if !opening_frozen(&tokens, guard.0.window_frames, guard.1, reach) {
+                            break;
+                        }
+                    }
+                }
                 Ok(
-                    model.sample_guarded(&context, &rest, sampling, guard, req.seed, |done| {
+                    model.sample_guarded(context, &rest, sampling, guard, req.seed, |done| {
                         progress
                             .report(Stage::Generate, done as f32 / total as f32)
                             .is_ok()
@@ -206,6 +265,42 @@ impl Served {
         };
         Ok(Generation { features, start })
     }
+}
+
+/// Frames of the opening drawn to see whether a candidate clip freezes (20 s at 25 fps).
+const OPENING_CHECK_FRAMES: usize = 500;
+/// A freeze holds this long (frames, 10 s): lively dances dip under the reach for a few
+/// seconds and come back (the card's calibration: at most 7 windows in a row, 6.5 s), frozen ones
+/// stay under it to the end of the song.
+const FREEZE_FRAMES: usize = 250;
+/// Windows of the reach measured every this many frames.
+const REACH_STRIDE: usize = 25;
+
+/// Whether an opening's tokens freeze: every `window`-frame window, one every [`REACH_STRIDE`]
+/// frames, for [`FREEZE_FRAMES`] in a row has reached less than `reach` m
+/// ([`super::sampling::reach_m`]).
+fn opening_frozen(tokens: &Array2<i64>, window: usize, widths: &[f32], reach: f32) -> bool {
+    let need = 1 + FREEZE_FRAMES.saturating_sub(window) / REACH_STRIDE;
+    let mut run = 0;
+    let mut end = window;
+    while end <= tokens.nrows() {
+        let frames: std::collections::VecDeque<Vec<i64>> = tokens
+            .outer_iter()
+            .skip(end - window)
+            .take(window)
+            .map(|r| r.to_vec())
+            .collect();
+        run = if super::sampling::reach_m(&frames, widths) < reach {
+            run + 1
+        } else {
+            0
+        };
+        if run >= need {
+            return true;
+        }
+        end += REACH_STRIDE;
+    }
+    false
 }
 
 impl DanceModel for Served {
@@ -249,5 +344,35 @@ impl DanceModel for Served {
         let (motion, _root) = repr::from_features(g.features.view(), g.start, self.file.fps)?;
         Ok(Generated::from(clock.back(motion))
             .with_beat_time(clock.used(self.file.extra.beat_time)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Tokens of 2 joints (6 coordinates, 1 cm a bin) over `frames` frames: moving `step` bins a
+    /// frame back and forth over 40 frames, plus a bin of jitter.
+    fn tokens(frames: usize, step: impl Fn(usize) -> i64) -> Array2<i64> {
+        Array2::from_shape_fn((frames, 6), |(t, c)| {
+            let phase = (t % 80) as i64;
+            let swing = if phase < 40 { phase } else { 80 - phase };
+            100 + swing * step(t) + ((t * 7 + c) % 2) as i64
+        })
+    }
+
+    /// A freeze is 10 s under the reach; a lively dance that holds still for 6 s and moves on is
+    /// not one (the card's calibration: lively openings dipped for at most 6.5 s).
+    #[test]
+    fn an_opening_is_frozen_only_when_it_stays_still_for_ten_seconds() {
+        let widths = [0.01f32; 6];
+        let moving = tokens(500, |_| 2);
+        assert!(!opening_frozen(&moving, 50, &widths, 0.1));
+        let frozen = tokens(500, |t| i64::from(t < 150));
+        assert!(opening_frozen(&frozen, 50, &widths, 0.1));
+        let dip = tokens(500, |t| i64::from(!(150..300).contains(&t)) * 2);
+        assert!(!opening_frozen(&dip, 50, &widths, 0.1));
+        // Too short to tell.
+        assert!(!opening_frozen(&tokens(200, |_| 0), 50, &widths, 0.1));
     }
 }
