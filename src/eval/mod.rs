@@ -313,7 +313,7 @@ pub(super) fn as_served_measured(
         0.0,
         crate::motion::MotionStages::default(),
     );
-    let served = crate::motion::serve(&finished, keys, true)?;
+    let served = crate::motion::serve(&finished, keys, true, 0)?;
     Ok((
         served.motion,
         summary.unwrap_or_default(),

@@ -69,8 +69,19 @@ pub fn prepare(motion: &Motion) -> Result<RigMotion, MotionError> {
 /// As [`prepare`], with the skeleton fitted to the `anchors` frames (the user's key poses) when
 /// there are any, and then every frame solved in least squares; see [`fit_and_solve`].
 pub fn prepare_anchored(motion: &Motion, anchors: &[usize]) -> Result<RigMotion, MotionError> {
+    prepare_seeded(motion, anchors, 0)
+}
+
+/// [`prepare_anchored`] for a dance whose first `seed_frames` frames are the request's seed
+/// motion: without key poses the skeleton is fitted on those frames alone, so the seed motion
+/// comes back on its own body ([`fit_and_solve`]).
+pub fn prepare_seeded(
+    motion: &Motion,
+    anchors: &[usize],
+    seed_frames: usize,
+) -> Result<RigMotion, MotionError> {
     let root = body_centre_track(motion.positions.view());
-    prepare_root_anchored(motion, root.view(), anchors)
+    prepare_root_anchored(motion, root.view(), anchors, seed_frames)
 }
 
 /// Fits the rigid skeleton of a motion around a known root track `[T, 3]` (carried exactly).
@@ -78,13 +89,14 @@ pub fn prepare_with_root(
     motion: &Motion,
     root: ArrayView2<'_, f32>,
 ) -> Result<RigMotion, MotionError> {
-    prepare_root_anchored(motion, root, &[])
+    prepare_root_anchored(motion, root, &[], 0)
 }
 
 fn prepare_root_anchored(
     motion: &Motion,
     root: ArrayView2<'_, f32>,
     anchors: &[usize],
+    seed_frames: usize,
 ) -> Result<RigMotion, MotionError> {
     if motion.num_frames() == 0 {
         return Err(MotionError::Shape("motion has no frames".into()));
@@ -92,7 +104,13 @@ fn prepare_root_anchored(
     if !(motion.fps > 0.0 && motion.fps.is_finite()) {
         return Err(MotionError::Invalid(format!("invalid fps {}", motion.fps)));
     }
-    let mut m = fit_and_solve(motion.positions.view(), root, motion.fps, anchors)?;
+    let mut m = fit_and_solve(
+        motion.positions.view(),
+        root,
+        motion.fps,
+        anchors,
+        seed_frames,
+    )?;
     make_continuous(&mut m);
     Ok(m)
 }

@@ -90,16 +90,50 @@ pub fn after_model(
     seed_s: f64,
     stages: MotionStages,
 ) -> (Motion, Option<beat_align::BeatAlignSummary>) {
-    if !stages.beat_align {
-        return (finish(motion, stages.plant_feet), None);
-    }
     let seed_frames = (seed_s * motion.fps).ceil().max(0.0) as usize;
+    let seed = motion
+        .positions
+        .slice(ndarray::s![..seed_frames.min(motion.num_frames()), .., ..])
+        .to_owned();
+    if !stages.beat_align {
+        let mut done = finish(motion, stages.plant_feet);
+        keep_seed(&mut done, seed.view());
+        return (done, None);
+    }
     let mut fixed: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
     fixed.extend((0..=seed_frames.min(motion.num_frames())).map(|f| f as f64 / motion.fps));
     // `finish` without planting changes nothing, so then the stage reads the network's rhythm only.
     let plant = stages.plant_feet.then_some(|m| finish(m, true));
-    let (aligned, summary) = beat_align::align_served(motion, beat_times_s, &fixed, plant);
+    let (mut aligned, summary) = beat_align::align_served(motion, beat_times_s, &fixed, plant);
+    keep_seed(&mut aligned, seed.view());
     (aligned, Some(summary))
+}
+
+/// Puts the request's seed motion (`seed`, the dance's first frames as the model returned them)
+/// back as it came after the stages, which would otherwise ground, plant and re-bend it: it is a
+/// dance the user already has (often choreo's own, already planted), and it opens this one as
+/// it is. What the stages did to the seed's last frame is handed over to the frames after it,
+/// fading out over the planting's own spread (3 × [`feet::PLANT_BLEND_S`], 0.12 s), so nothing
+/// jumps where the seed ends: that spread reached into the last seed frames and moved them up to
+/// 6.5 cm.
+fn keep_seed(motion: &mut Motion, seed: ndarray::ArrayView3<'_, f32>) {
+    let n = seed.dim().0.min(motion.num_frames());
+    if n == 0 {
+        return;
+    }
+    let last = n - 1;
+    let handover =
+        &seed.slice(ndarray::s![last, .., ..]) - &motion.positions.slice(ndarray::s![last, .., ..]);
+    motion
+        .positions
+        .slice_mut(ndarray::s![..n, .., ..])
+        .assign(&seed.slice(ndarray::s![..n, .., ..]));
+    let fade = ((3.0 * feet::PLANT_BLEND_S * motion.fps).ceil() as usize).max(1);
+    for k in 0..fade.min(motion.num_frames() - n) {
+        let w = 1.0 - (k + 1) as f32 / (fade + 1) as f32;
+        let mut row = motion.positions.slice_mut(ndarray::s![n + k, .., ..]);
+        row.scaled_add(w, &handover);
+    }
 }
 
 /// A finished dance as a user downloads it: the export's rigid skeleton ([`rig::RigMotion`], what
@@ -114,17 +148,19 @@ pub struct Served {
 /// frames as anchors ([`export::prepare_anchored`]). Jobs, `choreo generate` and `choreo eval`
 /// all go through it, so what is scored is what is served. `ground`: the fitted skeleton is put
 /// back on the floor ([`ground_rig`]) where [`finish`] grounded the motion (not where the caller
-/// asked for the model's motion as it came).
+/// asked for the model's motion as it came). `seed_frames`: the request's seed motion opens the
+/// dance on this many frames, and the skeleton is theirs ([`export::prepare_seeded`]).
 pub fn serve(
     finished: &Motion,
     key_poses: &[KeyPose],
     ground: bool,
+    seed_frames: usize,
 ) -> Result<Served, MotionError> {
     let anchors: Vec<usize> = key_poses
         .iter()
         .map(|k| (k.time_s * finished.fps).round() as usize)
         .collect();
-    let mut rig = export::prepare_anchored(finished, &anchors)?;
+    let mut rig = export::prepare_seeded(finished, &anchors, seed_frames)?;
     if ground {
         ground_rig(&mut rig);
     }

@@ -266,6 +266,9 @@ pub struct Finished {
     pub plant_feet: bool,
     /// The clock the network ran on (a model in beat time), for the report.
     pub beat_time: Option<crate::models::beat_time::BeatTimeUsed>,
+    /// Frames the request's seed motion opens the dance on (0 without): the export fits its
+    /// skeleton on them ([`crate::motion::serve`]).
+    pub seed_frames: usize,
 }
 
 /// The motion stages after a model ([`crate::motion::after_model`]: beat alignment, then the feet
@@ -288,6 +291,7 @@ pub fn after_model(
         &analysis.beat_times,
     );
     let seed_s = seed_motion.map_or(0.0, Motion::duration_s);
+    let seed_frames = (seed_s * model_motion.fps).round() as usize;
     let (motion, summary) = crate::motion::after_model(
         model_motion,
         &analysis.beat_times,
@@ -305,6 +309,7 @@ pub fn after_model(
         }),
         plant_feet: stages.plant_feet,
         beat_time,
+        seed_frames,
     }
 }
 
@@ -325,7 +330,12 @@ pub fn render(
     std::fs::create_dir_all(dir)?;
     on_stage(Stage::Export);
     let model_motion = &finished.motion;
-    let served = crate::motion::serve(model_motion, key_poses, finished.plant_feet)?;
+    let served = crate::motion::serve(
+        model_motion,
+        key_poses,
+        finished.plant_feet,
+        finished.seed_frames,
+    )?;
     write_all_rig(&served.rig, dir)?;
     // The report and the preview judge what the user downloads: the rigid skeleton's motion.
     let motion = &served.motion;

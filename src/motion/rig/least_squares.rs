@@ -21,6 +21,7 @@ pub fn fit_and_solve(
     root: ArrayView2<'_, f32>,
     fps: f64,
     anchors: &[usize],
+    skeleton_frames: usize,
 ) -> Result<RigMotion, MotionError> {
     let mut keep: Vec<usize> = anchors
         .iter()
@@ -30,7 +31,19 @@ pub fn fit_and_solve(
     keep.sort_unstable();
     keep.dedup();
     if keep.is_empty() {
-        let rig = Rig::fit(positions, root)?;
+        // A seed motion's frames are the body the dance goes on with: fitted on them alone, the
+        // skeleton is theirs, and they come back as they were (a dance's own first second fed
+        // back came back up to 8.6 cm off when the skeleton was fitted on the whole new dance,
+        // whose network-drawn bones have other median lengths and rest directions).
+        let t = positions.dim().0;
+        let rig = if (2..t).contains(&skeleton_frames) {
+            Rig::fit(
+                positions.slice(ndarray::s![..skeleton_frames, .., ..]),
+                root.slice(ndarray::s![..skeleton_frames, ..]),
+            )?
+        } else {
+            Rig::fit(positions, root)?
+        };
         return solve(&rig, positions, root, fps);
     }
     let (key_positions, key_root) = (
