@@ -16,7 +16,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
-use super::rig::{fit_and_solve, RigMotion};
+use super::rig::{fit_and_solve_seeded, RigMotion};
 use super::skeleton::body_centre_track;
 use super::{Motion, MotionError};
 
@@ -67,14 +67,14 @@ pub fn prepare(motion: &Motion) -> Result<RigMotion, MotionError> {
 }
 
 /// As [`prepare`], with the skeleton fitted to the `anchors` frames (the user's key poses) when
-/// there are any, and then every frame solved in least squares; see [`fit_and_solve`].
+/// there are any, and then every frame solved in least squares; see [`super::rig::fit_and_solve`].
 pub fn prepare_anchored(motion: &Motion, anchors: &[usize]) -> Result<RigMotion, MotionError> {
     prepare_seeded(motion, anchors, 0)
 }
 
 /// [`prepare_anchored`] for a dance whose first `seed_frames` frames are the request's seed
 /// motion: without key poses the skeleton is fitted on those frames alone, so the seed motion
-/// comes back on its own body ([`fit_and_solve`]).
+/// comes back on its own body ([`fit_and_solve_seeded`]).
 pub fn prepare_seeded(
     motion: &Motion,
     anchors: &[usize],
@@ -104,7 +104,7 @@ fn prepare_root_anchored(
     if !(motion.fps > 0.0 && motion.fps.is_finite()) {
         return Err(MotionError::Invalid(format!("invalid fps {}", motion.fps)));
     }
-    let mut m = fit_and_solve(
+    let mut m = fit_and_solve_seeded(
         motion.positions.view(),
         root,
         motion.fps,

@@ -424,7 +424,7 @@ fn wahba(rest: &[Vector3<f64>], target: &[Vector3<f64>]) -> Option<UnitQuaternio
 }
 
 pub use chain::solve;
-pub use least_squares::{fit_and_solve, fit_frame, solve_least_squares};
+pub use least_squares::{fit_and_solve, fit_and_solve_seeded, fit_frame, solve_least_squares};
 
 /// Local rotations in the continuous 6-D representation (Zhou et al. 2019): the first two
 /// columns of each rotation matrix, `[T, RIG_JOINTS, 6]`.

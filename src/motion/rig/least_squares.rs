@@ -21,6 +21,17 @@ pub fn fit_and_solve(
     root: ArrayView2<'_, f32>,
     fps: f64,
     anchors: &[usize],
+) -> Result<RigMotion, MotionError> {
+    fit_and_solve_seeded(positions, root, fps, anchors, 0)
+}
+
+/// [`fit_and_solve`] for a dance whose first `skeleton_frames` frames are a request's seed
+/// motion: without anchors the skeleton is fitted on those frames alone (below).
+pub fn fit_and_solve_seeded(
+    positions: ArrayView3<'_, f32>,
+    root: ArrayView2<'_, f32>,
+    fps: f64,
+    anchors: &[usize],
     skeleton_frames: usize,
 ) -> Result<RigMotion, MotionError> {
     let mut keep: Vec<usize> = anchors

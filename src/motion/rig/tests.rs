@@ -258,8 +258,7 @@ fn a_thigh_the_key_frames_disagree_on_is_spread_over_the_body() {
         .expect("solve"),
     );
     // Two key poses, not a motion (no frame rate): each solved on its own.
-    let fitted =
-        worst(&fit_and_solve(pos.view(), root.view(), f64::NAN, &[0, 1], 0).expect("solve"));
+    let fitted = worst(&fit_and_solve(pos.view(), root.view(), f64::NAN, &[0, 1]).expect("solve"));
     eprintln!("worst key frame error: chain on median lengths {chain:.2} cm, least squares {fitted:.2} cm");
     assert!(
         chain > 1.0,
@@ -357,7 +356,7 @@ fn without_anchors_the_chain_solution_is_kept() {
         })
         .collect();
     let (pos, root) = arrays(&rig, &roots, &locals);
-    let a = fit_and_solve(pos.view(), root.view(), 25.0, &[], 0).expect("solve");
+    let a = fit_and_solve(pos.view(), root.view(), 25.0, &[]).expect("solve");
     let b = solve(
         &Rig::fit(pos.view(), root.view()).expect("fit"),
         pos.view(),
@@ -469,7 +468,7 @@ fn a_fit_caught_by_the_turn_limit_is_not_left_off_its_targets() {
     let pos = Array3::from_shape_vec((doc.positions.len(), NUM_JOINTS, 3), values).expect("shape");
     let anchors = doc.anchors;
     let root = crate::motion::skeleton::body_centre_track(pos.view());
-    let m = fit_and_solve(pos.view(), root.view(), 25.0, &anchors, 0).expect("solve");
+    let m = fit_and_solve(pos.view(), root.view(), 25.0, &anchors).expect("solve");
     let world = m.joint_positions();
     // The clip's own frames (the last three are the other key poses, not a motion).
     let clip = anchors[1];
