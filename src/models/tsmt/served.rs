@@ -270,7 +270,7 @@ impl Served {
 /// Frames of the opening drawn to see whether a candidate clip freezes (20 s at 25 fps).
 const OPENING_CHECK_FRAMES: usize = 500;
 /// A freeze holds this long (frames, 10 s): lively dances dip under the reach for a few
-/// seconds and come back (the card's calibration: at most 7 windows in a row, 6.5 s), frozen ones
+/// seconds and come back (the card's calibration: at most 6 windows in a row, 7 s), frozen ones
 /// stay under it to the end of the song.
 const FREEZE_FRAMES: usize = 250;
 /// Windows of the reach measured every this many frames.
@@ -362,7 +362,7 @@ mod tests {
     }
 
     /// A freeze is 10 s under the reach; a lively dance that holds still for 6 s and moves on is
-    /// not one (the card's calibration: lively openings dipped for at most 6.5 s).
+    /// not one (the card's calibration: lively openings dipped for at most 7 s).
     #[test]
     fn an_opening_is_frozen_only_when_it_stays_still_for_ten_seconds() {
         let widths = [0.01f32; 6];
