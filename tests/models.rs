@@ -281,6 +281,15 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
     );
 }
 
+/// How far apart (m, root-relative, over the loop's frames) model `id` dances the trumpet loop and
+/// `other` with the same `seed`: the network's own output, before any served stage.
+fn apart_from_the_loop(id: &str, other: &DecodedAudio, seed: u64) -> f64 {
+    let m = model(id);
+    let looped = dance(m.as_ref(), &GenerateRequest::plain(song(), seed));
+    let other = dance(m.as_ref(), &GenerateRequest::plain(other, seed));
+    choreo::metrics::physical::seed_distance_m(&looped, &other)
+}
+
 /// DanceNet's opening was its seed's and its style's: seed 1 danced the 5-s trumpet loop and
 /// vibe_ace (both heard as rumba) 0.026 m apart over the loop's frames (root-relative; two real
 /// dances are 0.34 m apart), because the music takes a few seconds to move the decoder. Served
@@ -289,11 +298,8 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
 /// measured (model card). This is the network's own output, before any served stage.
 #[test]
 fn dancenet_opens_a_different_dance_to_a_different_song() {
-    let m = model("dancenet");
     let other = audio::decode_path(&shared_song_path("vibe_ace.ogg")).expect("the song decodes");
-    let looped = dance(m.as_ref(), &GenerateRequest::plain(song(), 1));
-    let other = dance(m.as_ref(), &GenerateRequest::plain(&other, 1));
-    let apart = choreo::metrics::physical::seed_distance_m(&looped, &other);
+    let apart = apart_from_the_loop("dancenet", &other, 1);
     assert!(
         apart > 0.10,
         "seed 1 on two songs: {apart:.3} m apart over the loop's frames"
@@ -308,11 +314,8 @@ fn dancenet_opens_a_different_dance_to_a_different_song() {
 /// own output, before any served stage.
 #[test]
 fn tsmt_opens_a_different_dance_to_a_different_song() {
-    let m = model("tsmt");
     let other = stretched_song("lets_go_fishin.ogg", 6.0, 1.0);
-    let looped = dance(m.as_ref(), &GenerateRequest::plain(song(), 6));
-    let other = dance(m.as_ref(), &GenerateRequest::plain(&other, 6));
-    let apart = choreo::metrics::physical::seed_distance_m(&looped, &other);
+    let apart = apart_from_the_loop("tsmt", &other, 6);
     assert!(
         apart > 0.15,
         "seed 6 on two songs: {apart:.3} m apart over the loop's frames"

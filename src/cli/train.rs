@@ -381,9 +381,9 @@ args_into! {
         /// over 2 s, temperature × 1.5).
         #[arg(long, default_value_t = train::tsmt::Options::default().stall_reach)]
         stall_reach: f64,
-        /// The stall guard's reopen reach (m) written into `model.json`: an opening whose last 2 s
-        /// reach less is a freeze, and the dance opens from the next candidate clip (0: never;
-        /// `tsmt::StallGuard`).
+        /// The stall guard's reopen reach (m) written into `model.json`: an opening whose 2-s
+        /// windows all reach less for 10 s in a row within the song's first 20 s is a freeze, and
+        /// the dance opens from the next candidate clip (0: never; `tsmt::StallGuard`).
         #[arg(long, default_value_t = train::tsmt::Options::default().reopen_reach)]
         reopen_reach: f64,
         #[arg(long, default_value_t = train::tsmt::Options::default().seed)]

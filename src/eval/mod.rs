@@ -306,13 +306,8 @@ pub(super) fn as_served_measured(
     keys: &[KeyPose],
     beats: &[f64],
 ) -> Result<(Motion, BeatAlignSummary, RotationFlips), MotionError> {
-    let (finished, summary) = crate::motion::after_model(
-        raw,
-        beats,
-        keys,
-        0.0,
-        crate::motion::MotionStages::default(),
-    );
+    let (finished, summary) =
+        crate::motion::after_model(raw, beats, keys, 0, crate::motion::MotionStages::default());
     let served = crate::motion::serve(&finished, keys, true, 0)?;
     Ok((
         served.motion,

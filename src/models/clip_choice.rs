@@ -54,18 +54,7 @@ impl ClipInfo {
             4
         }
     }
-}
 
-/// `pose_bank.json`: how the bank was made, and every clip's [`ClipInfo`] (in the bank's order).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-pub struct BankMeta {
-    /// The command and settings that drew the bank.
-    pub made_by: String,
-    pub fps: f64,
-    pub clips: Vec<ClipInfo>,
-}
-
-impl ClipInfo {
     /// The clip of `frames` frames from `start` of train dance `dance` (its `style`), its first
     /// frame `first_s` seconds into the dance's song: the song's beats ([`crate::audio::analyze`])
     /// put on the clip's frames at `fps`, its bar ([`bar_of`]) and the music's `energy` under it.
@@ -97,6 +86,15 @@ impl ClipInfo {
     }
 }
 
+/// `pose_bank.json`: how the bank was made, and every clip's [`ClipInfo`] (in the bank's order).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BankMeta {
+    /// The command and settings that drew the bank.
+    pub made_by: String,
+    pub fps: f64,
+    pub clips: Vec<ClipInfo>,
+}
+
 impl BankMeta {
     /// The description in `file` beside the clips file `path`, if there is one.
     pub fn read_beside(
@@ -125,6 +123,19 @@ impl BankMeta {
         let bad = |e: String| crate::models::ModelError::BadModelFile(e);
         let text = serde_json::to_string_pretty(self).map_err(|e| bad(e.to_string()))?;
         std::fs::write(path.with_file_name(file), text + "\n").map_err(|e| bad(e.to_string()))
+    }
+
+    /// The description, checked against a bank of `clips` clips of `frames` frames read from
+    /// `file` ([`Self::check`]).
+    pub fn checked(
+        self,
+        clips: usize,
+        frames: usize,
+        file: &str,
+    ) -> Result<Self, crate::models::ModelError> {
+        self.check(clips, frames)
+            .map_err(|e| crate::models::ModelError::BadModelFile(format!("{file}: {e}")))?;
+        Ok(self)
     }
 
     /// Checks the description against a bank of `clips` clips of `frames` frames: one
@@ -202,13 +213,9 @@ pub fn good(ranked: &[(usize, f64, f64)]) -> Vec<(usize, f64)> {
 /// Beats a bar of a song's analysis: 3 where the downbeats come every three beats (median
 /// steps), else 4. The banks' clips were described with this rule, so a song is heard by it too.
 pub fn bar_of(analysis: &crate::audio::Analysis) -> usize {
-    use crate::models::keypose_transformer::beats::median_step;
-    median_step(&analysis.downbeat_times)
-        .zip(median_step(&analysis.beat_times))
-        .map_or(
-            4,
-            |(d, b)| if (d / b).round() as usize == 3 { 3 } else { 4 },
-        )
+    use crate::models::keypose_transformer::beats::{beats_a_bar, median_step};
+    median_step(&analysis.beat_times)
+        .map_or(4, |b| beats_a_bar(median_step(&analysis.downbeat_times), b))
 }
 
 /// A song's median beat period in frames at `fps` and its beats a bar ([`bar_of`]); none with

@@ -139,9 +139,7 @@ impl SeedClips {
     /// The clips with each one's source and beats (checked against the clips).
     pub fn with_meta(mut self, meta: BankMeta) -> Result<Self, ModelError> {
         let (k, l, _) = self.clips.dim();
-        meta.check(k, l)
-            .map_err(|e| ModelError::BadModelFile(format!("{SEED_CLIPS_META_FILE}: {e}")))?;
-        self.meta = Some(meta);
+        self.meta = Some(meta.checked(k, l, SEED_CLIPS_META_FILE)?);
         Ok(self)
     }
 
@@ -175,7 +173,7 @@ impl SeedClips {
     /// The clip a job's seed picks, by the seed alone.
     pub fn pick(&self, seed: u64) -> Array2<f32> {
         self.clips
-            .slice(s![self.seeded(seed, self.clips.dim().0), .., ..])
+            .slice(s![Self::seeded(seed, self.clips.dim().0), .., ..])
             .to_owned()
     }
 
@@ -197,7 +195,7 @@ impl SeedClips {
         if good.is_empty() {
             return Vec::new();
         }
-        let first = good.remove(self.seeded(seed, good.len()));
+        let first = good.remove(Self::seeded(seed, good.len()));
         std::iter::once(first)
             .chain(good)
             .filter_map(|(c, u)| Some((c, u * meta.clips[c].period()? / period)))
@@ -205,7 +203,7 @@ impl SeedClips {
     }
 
     /// The seed's draw among `n` (the same draw [`Self::pick`] always made).
-    fn seeded(&self, seed: u64, n: usize) -> usize {
+    fn seeded(seed: u64, n: usize) -> usize {
         StdRng::seed_from_u64(seed ^ 0x5EED_C11F).gen_range(0..n)
     }
 }

@@ -80,17 +80,16 @@ impl Default for MotionStages {
 /// network's rhythm and on the planted one, the key poses' frames mapped to themselves), with
 /// [`finish`] applied to the warped motion, so the feet are planted on the motion that is
 /// served. `beat_times_s` are the song's beats on the dance's clock. Jobs, `choreo generate`
-/// and `choreo eval` all go through it. `seed_s`: the length of the seed motion the request
-/// brought (0 without), whose frames open the dance as they are: every frame of that span is
-/// fixed, so the warp is the identity there. The summary is `None` when alignment was not asked for.
+/// and `choreo eval` all go through it. `seed_frames`: the frames of the seed motion the request
+/// brought (0 without), which open the dance as they are: every frame of that span is fixed, so
+/// the warp is the identity there, and they are put back after the stages ([`keep_seed`]). The summary is `None` when alignment was not asked for.
 pub fn after_model(
     motion: Motion,
     beat_times_s: &[f64],
     key_poses: &[KeyPose],
-    seed_s: f64,
+    seed_frames: usize,
     stages: MotionStages,
 ) -> (Motion, Option<beat_align::BeatAlignSummary>) {
-    let seed_frames = (seed_s * motion.fps).ceil().max(0.0) as usize;
     let seed = motion
         .positions
         .slice(ndarray::s![..seed_frames.min(motion.num_frames()), .., ..])

@@ -290,13 +290,14 @@ pub fn after_model(
         model_motion.fps,
         &analysis.beat_times,
     );
-    let seed_s = seed_motion.map_or(0.0, Motion::duration_s);
-    let seed_frames = (seed_s * model_motion.fps).round() as usize;
+    // The seed motion is on the dance's clock: its frames are the dance's first.
+    let seed_frames =
+        seed_motion.map_or(0, |m| (m.duration_s() * model_motion.fps).round() as usize);
     let (motion, summary) = crate::motion::after_model(
         model_motion,
         &analysis.beat_times,
         key_poses,
-        seed_s,
+        seed_frames,
         stages,
     );
     Finished {

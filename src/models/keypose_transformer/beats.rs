@@ -84,13 +84,7 @@ impl SongCues {
             beats.push(beats[0] + period);
         }
         let down: Vec<f64> = downbeat_times_s.iter().map(|t| t * fps).collect();
-        let bar = median_step(&down).map_or(4, |d| {
-            if (d / period).round() as usize == 3 {
-                3
-            } else {
-                4
-            }
-        });
+        let bar = beats_a_bar(median_step(&down), period);
         let mut energy = Vec::with_capacity(onset.len() + 1);
         energy.push(0.0);
         for &v in onset {
@@ -123,6 +117,18 @@ impl SongCues {
 }
 
 /// Median of the steps of an ascending sequence; none with fewer than two values.
+/// Beats a bar from the median downbeat step and the beat period (the same unit): 3 where the
+/// downbeats come every three beats, else 4 (also when there are no downbeats to tell).
+pub fn beats_a_bar(downbeat_step: Option<f64>, beat_period: f64) -> usize {
+    downbeat_step.map_or(4, |d| {
+        if (d / beat_period).round() as usize == 3 {
+            3
+        } else {
+            4
+        }
+    })
+}
+
 pub fn median_step(x: &[f64]) -> Option<f64> {
     let mut d: Vec<f64> = x
         .windows(2)

@@ -140,9 +140,7 @@ impl PoseBank {
     /// The bank with each clip's source and beats (one [`ClipInfo`] per clip, beats within it).
     pub fn with_meta(mut self, meta: BankMeta) -> Result<Self, ModelError> {
         let (k, l, _) = self.clips.dim();
-        meta.check(k, l)
-            .map_err(|e| ModelError::BadModelFile(format!("{POSE_BANK_META_FILE}: {e}")))?;
-        self.meta = Some(meta);
+        self.meta = Some(meta.checked(k, l, POSE_BANK_META_FILE)?);
         Ok(self)
     }
 
@@ -263,11 +261,6 @@ impl PoseBank {
         clip_choice::ranked(&meta.clips, cues.period, cues.bar, cues.energy_at(at))
     }
 
-    /// The good candidates of a ranking ([`clip_choice::good`]).
-    fn good(ranked: &[(usize, f64, f64)]) -> Vec<(usize, f64)> {
-        clip_choice::good(ranked)
-    }
-
     /// What `seed` draws for a dance of `frames` frames to the song of `cues` with seed length
     /// `ts`, kept away from the user's `keys` (module doc); none for a bank without
     /// [`BankMeta`] or without a clip of two beats.
@@ -291,10 +284,11 @@ impl PoseBank {
         let last_beat = |c: usize| meta.clips[c].beats.len().saturating_sub(1) as f64;
         let mut rng = StdRng::seed_from_u64(seed ^ 0x5CAF_F01D);
         let need = frames.clamp(ts, START_STRETCH);
-        let good: Vec<(usize, f64)> = Self::good(&Self::ranked(meta, cues, need as f64 / 2.0))
-            .into_iter()
-            .filter(|g| beat_maps[g.0].is_some())
-            .collect();
+        let good: Vec<(usize, f64)> =
+            clip_choice::good(&Self::ranked(meta, cues, need as f64 / 2.0))
+                .into_iter()
+                .filter(|g| beat_maps[g.0].is_some())
+                .collect();
         if good.is_empty() {
             return None;
         }
@@ -480,7 +474,7 @@ impl PoseBank {
             .into_iter()
             .filter(|r| (r.0 != from || k == 1) && beat_maps[r.0].is_some())
             .collect();
-        let mut good = Self::good(&ranked);
+        let mut good = clip_choice::good(&ranked);
         good.shuffle(rng);
         good.truncate((2 * good.len()).div_ceil(3).max(1));
         let here = ndarray::ArrayView1::from(here);

@@ -129,9 +129,9 @@ pub struct StallGuard {
     pub boost: f64,
     /// An opening whose `window_frames` windows all reach less than this (m) for 10 s in a row
     /// within the song's first 20 s is a freeze, and the dance opens again from the next
-    /// candidate clip (`tsmt::served`; 0, or absent in older `model.json` files: never). A boost does not free a true freeze (its
-    /// reach stays at 0.04–0.06 m: the likeliest next pose is the last), nor does drawing the same
-    /// opening again from the same clip; another clip does.
+    /// candidate clip (`tsmt::served`; 0, or absent in older `model.json` files: never). A boost
+    /// does not free a true freeze (its reach stays at 0.04–0.06 m: the likeliest next pose is
+    /// the last), nor does drawing the same opening again from the same clip; another clip does.
     #[serde(default)]
     pub reopen_reach_m: f32,
 }
