@@ -281,6 +281,26 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
     );
 }
 
+/// dance-revolution's decoder is deterministic once `h_0` is drawn, and the draw sets the dance's
+/// character for the whole song. On lets_go_fishin's first 40 s the seeds' own draws danced seed 3
+/// with the arms at 2.50 m/s against the spine (real dances: 0.43–1.44) and seed 4 at 0.53 m/s
+/// (the slowest real dance: 0.63). The served opening check (`dance_revolution::OpeningCheck`)
+/// dances each draw's first 20 s and passes over one out of the real ranges: 0.77 m/s arms and
+/// 0.85 m/s when measured. The network's own output, before any served stage.
+#[test]
+fn dance_revolution_passes_over_a_draw_that_flails_or_shuffles() {
+    let m = model("dance-revolution");
+    let song = stretched_song("lets_go_fishin.ogg", 40.0, 1.0);
+    let flailing = dance(m.as_ref(), &GenerateRequest::plain(&song, 3));
+    let arms = choreo::metrics::musicality::arm_speed_m_s(flailing.positions.view(), flailing.fps);
+    assert!((0.43..=1.44).contains(&arms), "seed 3: arms {arms:.3} m/s");
+    let shuffling = dance(m.as_ref(), &GenerateRequest::plain(&song, 4));
+    let speed = choreo::metrics::physical::physical_series(&shuffling, &[])
+        .scores(1.0)
+        .mean_speed_m_s;
+    assert!(speed >= 0.63, "seed 4: {speed:.3} m/s");
+}
+
 /// How far apart (m, root-relative, over the loop's frames) model `id` dances the trumpet loop and
 /// `other` with the same `seed`: the network's own output, before any served stage.
 fn apart_from_the_loop(id: &str, other: &DecodedAudio, seed: u64) -> f64 {

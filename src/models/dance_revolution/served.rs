@@ -41,6 +41,50 @@ impl StallGuard {
     };
 }
 
+/// A served check of the decoder's initial state (not in the paper). The decoder is deterministic
+/// once `h_0` is drawn, and the draw sets the dance's character for the whole song: on the test
+/// split seed 3 stepped a 2-m/s metronome with the arms at 1.4–2.6 m/s against the spine on every
+/// song (real dances: 0.43–1.44) and seed 4 shuffled at 0.44–0.63 m/s (real: 0.63–1.80). So the
+/// seed's draw first dances the song's opening (`frames` frames on the network's clock, after the
+/// warm-up, the stall guard on), and the second half of it is measured, where the draw has settled
+/// (seed 3 on DANCE_C_8 opens at 0.5–1 m/s and steps its metronome from 5 s on). Where its mean
+/// joint speed or its arms' speed against the spine falls outside the ranges, the next of `draws`
+/// draws (derived from the seed) is tried; where none passes, the draw nearest the ranges is
+/// danced. The kept draw's frames are decoded again in the full run (the decoder cannot resume),
+/// so the check costs at most `draws × frames` decoded frames. A job's seed motion skips it.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct OpeningCheck {
+    pub frames: usize,
+    pub draws: usize,
+    pub speed_m_s: [f64; 2],
+    pub arms_m_s: [f64; 2],
+}
+
+impl OpeningCheck {
+    /// What is served: 20 s, 6 draws, inside the real dances' ranges with a margin (the opening
+    /// measures a little slower than the whole dance it leads into).
+    pub const SERVED: OpeningCheck = OpeningCheck {
+        frames: 500,
+        draws: 6,
+        speed_m_s: [0.6, 1.6],
+        arms_m_s: [0.5, 1.3],
+    };
+
+    /// How far (summed log ratios) `speed` and `arms` (m/s) lie outside the ranges; 0 inside both.
+    fn miss(&self, speed: f64, arms: f64) -> f64 {
+        let out = |v: f64, [lo, hi]: [f64; 2]| {
+            let v = v.max(1e-6);
+            (lo / v).ln().max(0.0) + (v / hi).ln().max(0.0)
+        };
+        out(speed, self.speed_m_s) + out(arms, self.arms_m_s)
+    }
+}
+
+/// The `k`-th draw a job's seed may dance from ([`OpeningCheck`]): the seed itself first.
+fn draw_seed(seed: u64, k: usize) -> u64 {
+    seed.wrapping_add((k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+}
+
 /// Warm-up frames served: 3 s.
 pub const WARM_UP_FRAMES: i64 = 75;
 
@@ -51,6 +95,7 @@ impl Serving {
             stall_guard: Some(StallGuard::SERVED),
             warm_up_frames: WARM_UP_FRAMES,
             beat_time: None,
+            opening_check: Some(OpeningCheck::SERVED),
         }
     }
 }
@@ -68,6 +113,9 @@ pub struct Serving {
     /// The network runs on a clock of beats at this tempo ([`beat_time`]); absent: in seconds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub beat_time: Option<beat_time::BeatTimeConfig>,
+    /// The check of `h_0`'s draw, if any ([`OpeningCheck`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub opening_check: Option<OpeningCheck>,
 }
 
 /// The guard's running state: the last frames' root-relative joints in metres.
@@ -165,6 +213,56 @@ impl Served {
         Ok(Self { file, pool })
     }
 
+    /// The draw a job without a seed motion dances from ([`OpeningCheck`]): `seed` itself where
+    /// there is no check.
+    fn checked_seed(
+        &self,
+        model: &DanceRevolution,
+        z: &Tensor,
+        seed: u64,
+        guard: Option<(&StallGuard, &NormStats)>,
+    ) -> Result<u64, ModelError> {
+        let Some(check) = self.file.extra.opening_check else {
+            return Ok(seed);
+        };
+        let warm = self.file.extra.warm_up_frames;
+        let n = z.size()[1];
+        let m = (check.frames as i64).min(n);
+        let head = z.narrow(1, 0, m);
+        let mut best = (f64::INFINITY, seed);
+        for k in 0..check.draws.max(1) {
+            let s = draw_seed(seed, k);
+            let Some(y) = model.decode(&head, s, None, guard, warm, 0, |_| true) else {
+                return Err(Cancelled.into());
+            };
+            let poses = self
+                .file
+                .pose_norm
+                .denormalize(&to_array(&y.squeeze_dim(0))?)?;
+            let (motion, _) = crate::motion::repr::from_features(
+                poses.view(),
+                RootStart::default(),
+                self.file.fps,
+            )?;
+            // The second half: where the draw has settled into its character (seed 3 on
+            // DANCE_C_8 opens at 0.5–1 m/s and steps a 2-m/s metronome from 5 s on).
+            let settled = motion
+                .positions
+                .slice(ndarray::s![motion.num_frames() / 2.., .., ..]);
+            let speeds = crate::motion::skeleton::mean_speed(settled, motion.fps);
+            let speed = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64;
+            let arms = crate::metrics::musicality::arm_speed_m_s(settled, motion.fps);
+            let miss = check.miss(speed, arms);
+            if miss < best.0 {
+                best = (miss, s);
+            }
+            if miss == 0.0 {
+                break;
+            }
+        }
+        Ok(best.1)
+    }
+
     /// Music features of a whole song on the network's clock, normalised, as `[1, n, F]`.
     fn music(
         &self,
@@ -228,9 +326,13 @@ impl DanceModel for Served {
                     .stall_guard
                     .as_ref()
                     .map(|g| (g, &self.file.pose_norm));
+                let seed = match seed_poses {
+                    Some(_) => req.seed,
+                    None => self.checked_seed(model, &z, req.seed, guard)?,
+                };
                 let y = model.decode(
                     &z,
-                    req.seed,
+                    seed,
                     seed_poses.as_ref(),
                     guard,
                     self.file.extra.warm_up_frames,
@@ -251,5 +353,21 @@ impl DanceModel for Served {
             crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
         Ok(Generated::from(clock.back(motion))
             .with_beat_time(clock.used(self.file.extra.beat_time)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_draw_inside_both_ranges_misses_nothing_and_a_further_one_misses_more() {
+        let c = OpeningCheck::SERVED;
+        assert_eq!(c.miss(0.8, 0.7), 0.0);
+        assert!(c.miss(0.5, 0.7) > 0.0);
+        assert!(c.miss(0.8, 2.5) > c.miss(0.8, 1.5));
+        assert!(c.miss(0.4, 0.7) > c.miss(0.5, 0.7));
+        assert_eq!(draw_seed(7, 0), 7);
+        assert_ne!(draw_seed(7, 1), draw_seed(8, 1));
     }
 }
