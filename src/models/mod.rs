@@ -16,6 +16,7 @@ pub mod folder;
 pub mod keypose_transformer;
 pub mod layers;
 pub mod motion_style;
+pub mod opening_check;
 pub mod train;
 pub mod tsmt;
 

@@ -9,6 +9,7 @@ use super::{DanceRevolution, ModelFile, ID};
 use crate::models::beat_time;
 use crate::models::folder;
 use crate::models::layers::LstmState;
+use crate::models::opening_check::{draw_seed, OpeningCheck};
 use crate::models::train::augment::MusicLayout;
 use crate::models::{
     to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
@@ -41,49 +42,18 @@ impl StallGuard {
     };
 }
 
-/// A served check of the decoder's initial state (not in the paper). The decoder is deterministic
-/// once `h_0` is drawn, and the draw sets the dance's character for the whole song: on the test
-/// split seed 3 stepped a 2-m/s metronome with the arms at 1.4–2.6 m/s against the spine on every
-/// song (real dances: 0.43–1.44) and seed 4 shuffled at 0.44–0.63 m/s (real: 0.63–1.80). So the
-/// seed's draw first dances the song's opening (`frames` frames on the network's clock, after the
-/// warm-up, the stall guard on), and the second half of it is measured, where the draw has settled
-/// (seed 3 on DANCE_C_8 opens at 0.5–1 m/s and steps its metronome from 5 s on). Where its mean
-/// joint speed or its arms' speed against the spine falls outside the ranges, the next of `draws`
-/// draws (derived from the seed) is tried; where none passes, the draw nearest the ranges is
-/// danced. The kept draw's frames are decoded again in the full run (the decoder cannot resume),
-/// so the check costs at most `draws × frames` decoded frames. A job's seed motion skips it.
-#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
-pub struct OpeningCheck {
-    pub frames: usize,
-    pub draws: usize,
-    pub speed_m_s: [f64; 2],
-    pub arms_m_s: [f64; 2],
-}
-
-impl OpeningCheck {
-    /// What is served: 20 s, 6 draws, inside the real dances' ranges with a margin (the opening
-    /// measures a little slower than the whole dance it leads into).
-    pub const SERVED: OpeningCheck = OpeningCheck {
-        frames: 500,
-        draws: 6,
-        speed_m_s: [0.6, 1.6],
-        arms_m_s: [0.5, 1.3],
-    };
-
-    /// How far (summed log ratios) `speed` and `arms` (m/s) lie outside the ranges; 0 inside both.
-    fn miss(&self, speed: f64, arms: f64) -> f64 {
-        let out = |v: f64, [lo, hi]: [f64; 2]| {
-            let v = v.max(1e-6);
-            (lo / v).ln().max(0.0) + (v / hi).ln().max(0.0)
-        };
-        out(speed, self.speed_m_s) + out(arms, self.arms_m_s)
-    }
-}
-
-/// The `k`-th draw a job's seed may dance from ([`OpeningCheck`]): the seed itself first.
-fn draw_seed(seed: u64, k: usize) -> u64 {
-    seed.wrapping_add((k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
-}
+/// What is served: `h_0`'s draw checked ([`OpeningCheck`]) over the song's first 20 s, 6 draws,
+/// inside the real dances' ranges with a margin (the opening measures a little slower than the
+/// whole dance it leads into). The decoder is deterministic once `h_0` is drawn, and the draw sets
+/// the dance's character for the whole song: on the test split seed 3 stepped a 2-m/s metronome
+/// with the arms at 1.4–2.6 m/s against the spine on every song (real dances: 0.43–1.44) and seed
+/// 4 shuffled at 0.44–0.63 m/s (real: 0.63–1.80).
+pub const OPENING_CHECK: OpeningCheck = OpeningCheck {
+    frames: 500,
+    draws: 6,
+    speed_m_s: [0.6, 1.6],
+    arms_m_s: [0.5, 1.3],
+};
 
 /// Warm-up frames served: 3 s.
 pub const WARM_UP_FRAMES: i64 = 75;
@@ -95,7 +65,7 @@ impl Serving {
             stall_guard: Some(StallGuard::SERVED),
             warm_up_frames: WARM_UP_FRAMES,
             beat_time: None,
-            opening_check: Some(OpeningCheck::SERVED),
+            opening_check: Some(OPENING_CHECK),
         }
     }
 }
@@ -244,15 +214,7 @@ impl Served {
                 RootStart::default(),
                 self.file.fps,
             )?;
-            // The second half: where the draw has settled into its character (seed 3 on
-            // DANCE_C_8 opens at 0.5–1 m/s and steps a 2-m/s metronome from 5 s on).
-            let settled = motion
-                .positions
-                .slice(ndarray::s![motion.num_frames() / 2.., .., ..]);
-            let speeds = crate::motion::skeleton::mean_speed(settled, motion.fps);
-            let speed = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64;
-            let arms = crate::metrics::musicality::arm_speed_m_s(settled, motion.fps);
-            let miss = check.miss(speed, arms);
+            let miss = check.miss(&motion);
             if miss < best.0 {
                 best = (miss, s);
             }
@@ -353,21 +315,5 @@ impl DanceModel for Served {
             crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
         Ok(Generated::from(clock.back(motion))
             .with_beat_time(clock.used(self.file.extra.beat_time)))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_draw_inside_both_ranges_misses_nothing_and_a_further_one_misses_more() {
-        let c = OpeningCheck::SERVED;
-        assert_eq!(c.miss(0.8, 0.7), 0.0);
-        assert!(c.miss(0.5, 0.7) > 0.0);
-        assert!(c.miss(0.8, 2.5) > c.miss(0.8, 1.5));
-        assert!(c.miss(0.4, 0.7) > c.miss(0.5, 0.7));
-        assert_eq!(draw_seed(7, 0), 7);
-        assert_ne!(draw_seed(7, 1), draw_seed(8, 1));
     }
 }

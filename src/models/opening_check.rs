@@ -1,0 +1,88 @@
+//! A served check of a sampled dance's opening (not in any of the papers): where a model's draw
+//! (dance-revolution's `h_0`, DanceNet's sampling stream and context clip) sets the dance's
+//! character for the whole song, the draw first dances the song's opening, and one that shuffles
+//! or flails is passed over for the next draw derived from the job's seed. Each model's serving
+//! decides what a draw is; this module holds the rule and the measure.
+use serde::{Deserialize, Serialize};
+
+use crate::motion::Motion;
+
+/// `model.json`'s check. The draw dances `frames` frames (on the network's clock, after any
+/// warm-up), and the second half of them is measured, where the draw has settled
+/// (dance-revolution's seed 3 on DANCE_C_8 opens at 0.5–1 m/s and steps a 2-m/s metronome from
+/// 5 s on). Where its mean joint speed or its arms' speed against the spine falls outside the
+/// ranges (m/s), the next of `draws` draws is tried; where none passes, the draw nearest the
+/// ranges is danced. The kept draw is danced again in the full run (a sampler cannot resume a
+/// draw), so the check costs at most `draws × frames` frames. A job's seed motion skips it.
+#[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
+pub struct OpeningCheck {
+    pub frames: usize,
+    pub draws: usize,
+    pub speed_m_s: [f64; 2],
+    pub arms_m_s: [f64; 2],
+}
+
+impl OpeningCheck {
+    /// How far the settled half of `opening` lies outside the ranges (summed log ratios of its
+    /// mean joint speed and its arms' speed against the spine); 0 inside both.
+    pub fn miss(&self, opening: &Motion) -> f64 {
+        let settled = opening
+            .positions
+            .slice(ndarray::s![opening.num_frames() / 2.., .., ..]);
+        let speeds = crate::motion::skeleton::mean_speed(settled, opening.fps);
+        let speed = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64;
+        let arms = crate::metrics::musicality::arm_speed_m_s(settled, opening.fps);
+        self.miss_of(speed, arms)
+    }
+
+    /// How far (summed log ratios) `speed` and `arms` lie outside the ranges; 0 inside both.
+    fn miss_of(&self, speed: f64, arms: f64) -> f64 {
+        let out = |v: f64, [lo, hi]: [f64; 2]| {
+            let v = v.max(1e-6);
+            (lo / v).ln().max(0.0) + (v / hi).ln().max(0.0)
+        };
+        out(speed, self.speed_m_s) + out(arms, self.arms_m_s)
+    }
+}
+
+/// The `k`-th draw a job's seed may dance from: the seed itself first.
+pub fn draw_seed(seed: u64, k: usize) -> u64 {
+    seed.wrapping_add((k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const CHECK: OpeningCheck = OpeningCheck {
+        frames: 500,
+        draws: 6,
+        speed_m_s: [0.6, 1.6],
+        arms_m_s: [0.5, 1.3],
+    };
+
+    #[test]
+    fn a_draw_inside_both_ranges_misses_nothing_and_a_further_one_misses_more() {
+        assert_eq!(CHECK.miss_of(0.8, 0.7), 0.0);
+        assert!(CHECK.miss_of(0.5, 0.7) > 0.0);
+        assert!(CHECK.miss_of(0.8, 2.5) > CHECK.miss_of(0.8, 1.5));
+        assert!(CHECK.miss_of(0.4, 0.7) > CHECK.miss_of(0.5, 0.7));
+        assert_eq!(draw_seed(7, 0), 7);
+        assert_ne!(draw_seed(7, 1), draw_seed(8, 1));
+    }
+
+    #[test]
+    fn only_the_settled_half_is_measured() {
+        // Still for the first half, then every joint moving 1 m/s along x: the settled half
+        // measures 1 m/s, inside the speed range (arms still against the spine: below it).
+        let (frames, fps) = (100, 25.0);
+        let mut p = ndarray::Array3::<f32>::zeros((frames, crate::motion::NUM_JOINTS, 3));
+        for f in frames / 2..frames {
+            p.slice_mut(ndarray::s![f, .., 0])
+                .fill((f - frames / 2) as f32 / fps as f32);
+        }
+        let motion = Motion { fps, positions: p };
+        let arms_only = (0.5f64 / 1e-6).ln();
+        assert!((CHECK.miss(&motion) - arms_only).abs() < 1e-6);
+    }
+}
