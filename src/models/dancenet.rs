@@ -522,12 +522,26 @@ pub struct Serving {
     /// brings no seed motion (`dancenet::served`); 0: none.
     #[serde(default)]
     pub warm_up_frames: usize,
+    /// The check of a draw's opening, if any ([`crate::models::opening_check::OpeningCheck`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub opening_check: Option<crate::models::opening_check::OpeningCheck>,
 }
 
 /// The served warm-up: 10 s. The music moves the decoder only after a few seconds (pink noise
 /// and a song, one seed and style: 0.03 m apart over the first 5 s, 0.27 m over the next 15),
 /// so without it one seed opened every song of a style alike (model card).
 pub const WARM_UP_FRAMES: usize = 250;
+
+/// The served check of a draw's opening ([`crate::models::opening_check::OpeningCheck`]): the
+/// first 20 s after the warm-up, 6 draws (the seed's stream and clip, then others derived from
+/// it), inside the real dances' ranges with a margin.
+pub const OPENING_CHECK: crate::models::opening_check::OpeningCheck =
+    crate::models::opening_check::OpeningCheck {
+        frames: 500,
+        draws: 6,
+        speed_m_s: [0.6, 1.6],
+        arms_m_s: [0.5, 1.3],
+    };
 
 /// `model.json`.
 pub type ModelFile = super::folder::ModelFile<Config, Schedule, Serving>;

@@ -325,6 +325,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             smooth_frames: opts.smooth_frames,
             beat_time: None,
             warm_up_frames: crate::models::dancenet::WARM_UP_FRAMES,
+            opening_check: Some(crate::models::dancenet::OPENING_CHECK),
         },
     };
     let steps = std::cell::Cell::new(0usize);
