@@ -47,6 +47,15 @@ use crate::motion::repr::{self, FEATURE_DIM, POSE_DIM};
 /// A dance's first stretch moves at least this fast (m/s, mean joint speed): the slowest real
 /// train dance (`metrics/reference_train.json`, `physical.mean_speed_range_m_s`).
 pub const LIVELY_M_S: f64 = 0.63;
+/// A clip whose arms move slower than this against the spine (m/s, over the whole clip) is
+/// ranked [`HELD_ARMS_PENALTY`] lower: the slowest real dance's arms, as a whole dance
+/// (`metrics::musicality`, issue 25). Three of the bank's 18 waltz clips hold their arms slower
+/// (0.37, 0.42, 0.43 m/s), and a waltz drawn from them danced DANCE_W_8 (seed 6) with its arms at
+/// 0.42.
+pub const HELD_ARMS_M_S: f64 = 0.43;
+/// How much lower such a clip ranks: as much as the wrong meter, more than
+/// [`clip_choice::SCORE_MARGIN`], so it is drawn only where the song has too few other candidates.
+pub const HELD_ARMS_PENALTY: f64 = clip_choice::METER_PENALTY;
 /// Frames of a dance's first stretch: 5 s (the metrics' window), or the whole dance if shorter.
 pub const START_STRETCH: usize = 125;
 /// Draws of clip and start the seed tries for a lively first stretch before taking one as it is.
@@ -76,6 +85,9 @@ pub struct PoseBank {
     /// `[clips, frames − 1]` mean joint speed of each frame step (m/s at 25 fps, the root height
     /// aside); empty for a bank without root columns.
     speeds: Array2<f64>,
+    /// Each clip's arm speed against the spine over the whole clip (m/s,
+    /// `metrics::musicality::arm_speed_m_s`); empty for a bank without root columns.
+    arms: Vec<f64>,
     /// Each clip's source and beats; none for a bank written before they were kept.
     meta: Option<BankMeta>,
 }
@@ -125,14 +137,15 @@ impl PoseBank {
                 "pose bank has non-finite values".into(),
             ));
         }
-        let speeds = if d == FEATURE_DIM {
+        let (speeds, arms) = if d == FEATURE_DIM {
             Self::step_speeds(&clips)?
         } else {
-            Array2::zeros((0, 0))
+            (Array2::zeros((0, 0)), Vec::new())
         };
         Ok(Self {
             clips,
             speeds,
+            arms,
             meta: None,
         })
     }
@@ -149,10 +162,12 @@ impl PoseBank {
         self.meta.as_ref()
     }
 
-    /// Mean joint speed of every frame step of every clip, decoded with the root at height 0.
-    fn step_speeds(clips: &Array3<f32>) -> Result<Array2<f64>, ModelError> {
+    /// Mean joint speed of every frame step of every clip, decoded with the root at height 0, and
+    /// each clip's arm speed against the spine.
+    fn step_speeds(clips: &Array3<f32>) -> Result<(Array2<f64>, Vec<f64>), ModelError> {
         let (k, l, _) = clips.dim();
         let mut out = Array2::zeros((k, l - 1));
+        let mut arms = Vec::with_capacity(k);
         for (c, clip) in clips.outer_iter().enumerate() {
             let mut f = clip.to_owned();
             f.column_mut(repr::ROOT_Y).fill(0.0);
@@ -161,8 +176,12 @@ impl PoseBank {
                 .map_err(|e| ModelError::BadModelFile(e.to_string()))?;
             let v = crate::metrics::kinematics::mean_speed(motion.positions.view(), fps);
             out.row_mut(c).assign(&ndarray::Array1::from(v));
+            arms.push(crate::metrics::musicality::arm_speed_m_s(
+                motion.positions.view(),
+                fps,
+            ));
         }
-        Ok(out)
+        Ok((out, arms))
     }
 
     /// Mean joint speed (m/s) of clip `c` over frames `[start, start + len)`; 0 without speeds.
@@ -257,8 +276,17 @@ impl PoseBank {
 
     /// Clips ranked by how well they suit the song around song frame `at`, best first
     /// ([`clip_choice::ranked`] with the song's period, meter and energy there).
-    fn ranked(meta: &BankMeta, cues: &SongCues, at: f64) -> Vec<(usize, f64, f64)> {
-        clip_choice::ranked(&meta.clips, cues.period, cues.bar, cues.energy_at(at))
+    /// The clips ranked for the song at frame `at` ([`clip_choice::ranked`]), those that hold
+    /// their arms ([`HELD_ARMS_M_S`]) [`HELD_ARMS_PENALTY`] lower.
+    fn ranked(&self, meta: &BankMeta, cues: &SongCues, at: f64) -> Vec<(usize, f64, f64)> {
+        let mut out = clip_choice::ranked(&meta.clips, cues.period, cues.bar, cues.energy_at(at));
+        for r in out.iter_mut() {
+            if self.arms.get(r.0).is_some_and(|&a| a < HELD_ARMS_M_S) {
+                r.2 += HELD_ARMS_PENALTY;
+            }
+        }
+        out.sort_by(|a, b| a.2.total_cmp(&b.2).then(a.0.cmp(&b.0)));
+        out
     }
 
     /// What `seed` draws for a dance of `frames` frames to the song of `cues` with seed length
@@ -285,7 +313,7 @@ impl PoseBank {
         let mut rng = StdRng::seed_from_u64(seed ^ 0x5CAF_F01D);
         let need = frames.clamp(ts, START_STRETCH);
         let good: Vec<(usize, f64)> =
-            clip_choice::good(&Self::ranked(meta, cues, need as f64 / 2.0))
+            clip_choice::good(&self.ranked(meta, cues, need as f64 / 2.0))
                 .into_iter()
                 .filter(|g| beat_maps[g.0].is_some())
                 .collect();
@@ -470,7 +498,8 @@ impl PoseBank {
         rng: &mut StdRng,
     ) -> Option<(usize, f64, f64)> {
         let k = meta.clips.len();
-        let ranked: Vec<(usize, f64, f64)> = Self::ranked(meta, cues, at)
+        let ranked: Vec<(usize, f64, f64)> = self
+            .ranked(meta, cues, at)
             .into_iter()
             .filter(|r| (r.0 != from || k == 1) && beat_maps[r.0].is_some())
             .collect();
@@ -746,6 +775,30 @@ mod tests {
             b.scaffold_to(3, &fast, 300, 25, &[]).unwrap().poses,
             b.scaffold_to(3, &fast, 300, 25, &[]).unwrap().poses
         );
+    }
+
+    #[test]
+    fn a_clip_that_holds_its_arms_is_drawn_only_where_too_few_others_suit() {
+        // Eight clips suit the song alike; clip 0 holds its arms (0.3 m/s against the spine).
+        let mut b = beat_bank(&[10.0; 8]);
+        let used = |b: &PoseBank| -> std::collections::BTreeSet<usize> {
+            (0..16)
+                .flat_map(|seed| {
+                    let sc = b
+                        .scaffold_to(seed, &song(10.0, 0.0, 600), 600, 25, &[])
+                        .unwrap();
+                    sc.poses
+                        .iter()
+                        .map(|p| (p.1[0] / 1000.0).floor() as usize)
+                        .chain([sc.start.0])
+                        .collect::<Vec<_>>()
+                })
+                .collect()
+        };
+        b.arms = vec![1.0; 8];
+        assert!(used(&b).contains(&0), "all lively: clip 0 is drawn too");
+        b.arms[0] = 0.3;
+        assert!(!used(&b).contains(&0), "{:?}", used(&b));
     }
 
     #[test]
