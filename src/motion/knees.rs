@@ -315,7 +315,6 @@ mod tests {
         let (mut frames, mut moved, mut max_move, mut dances_moved) =
             (0usize, 0usize, 0f32, 0usize);
         let (mut beyond_5cm, mut far) = (0usize, 0usize);
-        let mut mid = 0usize;
         for id in ds.all_ids() {
             let Ok(d) = ds.load(&id) else { continue };
             let mut p = d.motion.positions.clone();
