@@ -45,8 +45,47 @@ impl OpeningCheck {
     }
 }
 
+impl OpeningCheck {
+    /// The draw `seed` dances: each of [`Self::draws`] in turn ([`draw_seed`], the seed's own
+    /// first) dances its opening through `opening` (the first `frames` frames, or fewer for a
+    /// shorter song), until one lies inside the ranges; else the nearest. `model` names the
+    /// model in the log line. `None` where `opening` is stopped (the job was cancelled).
+    pub fn choose<E>(
+        &self,
+        model: &str,
+        seed: u64,
+        mut opening: impl FnMut(u64) -> Result<Option<Motion>, E>,
+    ) -> Result<Option<u64>, E> {
+        let mut best = (f64::INFINITY, seed, 0);
+        let mut tried = 0;
+        for k in 0..self.draws.max(1) {
+            let s = draw_seed(seed, k);
+            let Some(motion) = opening(s)? else {
+                return Ok(None);
+            };
+            tried += 1;
+            let miss = self.miss(&motion);
+            if miss < best.0 {
+                best = (miss, s, k);
+            }
+            if miss == 0.0 {
+                break;
+            }
+        }
+        tracing::info!(
+            model,
+            seed,
+            tried,
+            kept = best.2,
+            miss = best.0,
+            "opening check"
+        );
+        Ok(Some(best.1))
+    }
+}
+
 /// The `k`-th draw a job's seed may dance from: the seed itself first.
-pub fn draw_seed(seed: u64, k: usize) -> u64 {
+fn draw_seed(seed: u64, k: usize) -> u64 {
     seed.wrapping_add((k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
 }
 

@@ -9,7 +9,7 @@ use super::{DanceRevolution, ModelFile, ID};
 use crate::models::beat_time;
 use crate::models::folder;
 use crate::models::layers::LstmState;
-use crate::models::opening_check::{draw_seed, OpeningCheck};
+use crate::models::opening_check::OpeningCheck;
 use crate::models::train::augment::MusicLayout;
 use crate::models::{
     to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
@@ -199,11 +199,9 @@ impl Served {
         let n = z.size()[1];
         let m = (check.frames as i64).min(n);
         let head = z.narrow(1, 0, m);
-        let mut best = (f64::INFINITY, seed);
-        for k in 0..check.draws.max(1) {
-            let s = draw_seed(seed, k);
+        let chosen = check.choose(ID, seed, |s| -> Result<_, ModelError> {
             let Some(y) = model.decode(&head, s, None, guard, warm, 0, |_| true) else {
-                return Err(Cancelled.into());
+                return Ok(None);
             };
             let poses = self
                 .file
@@ -214,15 +212,9 @@ impl Served {
                 RootStart::default(),
                 self.file.fps,
             )?;
-            let miss = check.miss(&motion);
-            if miss < best.0 {
-                best = (miss, s);
-            }
-            if miss == 0.0 {
-                break;
-            }
-        }
-        Ok(best.1)
+            Ok(Some(motion))
+        })?;
+        chosen.ok_or_else(|| Cancelled.into())
     }
 
     /// Music features of a whole song on the network's clock, normalised, as `[1, n, F]`.

@@ -13,7 +13,6 @@ use super::style::ServedStyle;
 use super::{DanceNet, ModelFile, Sampling, ID};
 use crate::models::beat_time;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
-use crate::models::opening_check::draw_seed;
 use crate::models::train::augment::MusicLayout;
 use crate::models::{
     smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
@@ -197,22 +196,17 @@ impl Served {
                 let mut seed = req.seed;
                 if let Some(check) = check {
                     let frames = check.frames.min(n);
-                    let mut best = (f64::INFINITY, seed);
-                    for k in 0..check.draws.max(1) {
-                        let s = draw_seed(req.seed, k);
+                    let chosen = check.choose(ID, req.seed, |s| -> Result<_, ModelError> {
                         let ctx = self.clips.pick(s);
-                        let Some(rows) = draw.dance(&ctx, s, Some(frames), &mut |_| true) else {
-                            return Ok(None);
-                        };
-                        let miss = check.miss(&self.motion_of(&rows, clock)?);
-                        if miss < best.0 {
-                            best = (miss, s);
+                        match draw.dance(&ctx, s, Some(frames), &mut |_| true) {
+                            Some(rows) => Ok(Some(self.motion_of(&rows, clock)?)),
+                            None => Ok(None),
                         }
-                        if miss == 0.0 {
-                            break;
-                        }
-                    }
-                    seed = best.1;
+                    })?;
+                    let Some(chosen) = chosen else {
+                        return Ok(None);
+                    };
+                    seed = chosen;
                 }
                 let ctx = match opening {
                     0 => self.clips.pick(seed),
