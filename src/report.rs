@@ -57,6 +57,12 @@ pub struct Report {
     /// a model in seconds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub beat_time: Option<crate::models::beat_time::BeatTimeUsed>,
+    /// Which draw of the seed was danced, for a model with an opening check
+    /// (`models::opening_check`: dance-revolution and dancenet without a seed motion): each draw
+    /// dances the song's first 20 s, and one that shuffles or flails gives way to the next. Absent
+    /// where no check ran.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub opening_check: Option<crate::models::opening_check::OpeningChosen>,
 }
 
 /// The beat-align stage in report.json: its summary, and the tempo lock of the motion as the
@@ -94,6 +100,7 @@ pub fn build(
         style: None,
         beat_align: None,
         beat_time: None,
+        opening_check: None,
     })
 }
 

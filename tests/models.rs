@@ -291,9 +291,15 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
 fn dance_revolution_passes_over_a_draw_that_flails_or_shuffles() {
     let m = model("dance-revolution");
     let song = stretched_song("lets_go_fishin.ogg", 40.0, 1.0);
-    let flailing = dance(m.as_ref(), &GenerateRequest::plain(&song, 3));
+    let g = m
+        .generate(&GenerateRequest::plain(&song, 3), &mut Quiet)
+        .expect("dances");
+    let flailing = g.motion;
     let arms = choreo::metrics::musicality::arm_speed_m_s(flailing.positions.view(), flailing.fps);
     assert!((0.43..=1.44).contains(&arms), "seed 3: arms {arms:.3} m/s");
+    // What report.json will say: the seed's own draw was passed over.
+    let seen = g.opening.expect("the check ran");
+    assert!(seen.kept >= 1 && seen.kept < seen.tried, "{seen:?}");
     let shuffling = dance(m.as_ref(), &GenerateRequest::plain(&song, 4));
     let speed = choreo::metrics::physical::physical_series(&shuffling, &[])
         .scores(1.0)

@@ -149,12 +149,19 @@ pub struct Generated {
     pub style: Option<StyleChoice>,
     /// The clock the network ran on, for a model in beat time ([`beat_time`]).
     pub beat_time: Option<beat_time::BeatTimeUsed>,
+    /// What the model's opening check chose, for a model that has one ([`opening_check`]).
+    pub opening: Option<opening_check::OpeningChosen>,
 }
 
 impl Generated {
     /// The same, with the clock it ran on.
     pub fn with_beat_time(self, beat_time: Option<beat_time::BeatTimeUsed>) -> Self {
         Self { beat_time, ..self }
+    }
+
+    /// The same, with what its opening check chose.
+    pub fn with_opening(self, opening: Option<opening_check::OpeningChosen>) -> Self {
+        Self { opening, ..self }
     }
 }
 
@@ -164,6 +171,7 @@ impl From<Motion> for Generated {
             motion,
             style: None,
             beat_time: None,
+            opening: None,
         }
     }
 }

@@ -23,15 +23,22 @@ pub struct OpeningCheck {
 }
 
 impl OpeningCheck {
-    /// How far the settled half of `opening` lies outside the ranges (summed log ratios of its
-    /// mean joint speed and its arms' speed against the spine); 0 inside both.
-    pub fn miss(&self, opening: &Motion) -> f64 {
+    /// The settled half of `opening`: its mean joint speed and its arms' speed against the
+    /// spine (m/s).
+    pub fn measure(opening: &Motion) -> (f64, f64) {
         let settled = opening
             .positions
             .slice(ndarray::s![opening.num_frames() / 2.., .., ..]);
         let speeds = crate::motion::skeleton::mean_speed(settled, opening.fps);
         let speed = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64;
         let arms = crate::metrics::musicality::arm_speed_m_s(settled, opening.fps);
+        (speed, arms)
+    }
+
+    /// How far the settled half of `opening` lies outside the ranges (summed log ratios of its
+    /// mean joint speed and its arms' speed against the spine); 0 inside both.
+    pub fn miss(&self, opening: &Motion) -> f64 {
+        let (speed, arms) = Self::measure(opening);
         self.miss_of(speed, arms)
     }
 
@@ -48,40 +55,71 @@ impl OpeningCheck {
 impl OpeningCheck {
     /// The draw `seed` dances: each of [`Self::draws`] in turn ([`draw_seed`], the seed's own
     /// first) dances its opening through `opening` (the first `frames` frames, or fewer for a
-    /// shorter song), until one lies inside the ranges; else the nearest. `model` names the
-    /// model in the log line. `None` where `opening` is stopped (the job was cancelled).
+    /// shorter song), until one lies inside the ranges; else the nearest. Returns that draw's
+    /// seed and what the check saw (for report.json); `model` names the model in the log line.
+    /// `None` where `opening` is stopped (the job was cancelled).
     pub fn choose<E>(
         &self,
         model: &str,
         seed: u64,
         mut opening: impl FnMut(u64) -> Result<Option<Motion>, E>,
-    ) -> Result<Option<u64>, E> {
-        let mut best = (f64::INFINITY, seed, 0);
-        let mut tried = 0;
+    ) -> Result<Option<(u64, OpeningChosen)>, E> {
+        let mut best: Option<(f64, u64, OpeningChosen)> = None;
         for k in 0..self.draws.max(1) {
             let s = draw_seed(seed, k);
             let Some(motion) = opening(s)? else {
                 return Ok(None);
             };
-            tried += 1;
-            let miss = self.miss(&motion);
-            if miss < best.0 {
-                best = (miss, s, k);
+            let (speed, arms) = Self::measure(&motion);
+            let miss = self.miss_of(speed, arms);
+            if best.as_ref().is_none_or(|b| miss < b.0) {
+                best = Some((
+                    miss,
+                    s,
+                    OpeningChosen {
+                        tried: 0,
+                        kept: k,
+                        speed_m_s: speed,
+                        arms_m_s: arms,
+                        inside: miss == 0.0,
+                    },
+                ));
+            }
+            if let Some(b) = best.as_mut() {
+                b.2.tried = k + 1;
             }
             if miss == 0.0 {
                 break;
             }
         }
-        tracing::info!(
-            model,
-            seed,
-            tried,
-            kept = best.2,
-            miss = best.0,
-            "opening check"
-        );
-        Ok(Some(best.1))
+        Ok(best.map(|(miss, s, chosen)| {
+            tracing::info!(
+                model,
+                seed,
+                tried = chosen.tried,
+                kept = chosen.kept,
+                miss,
+                "opening check"
+            );
+            (s, chosen)
+        }))
     }
+}
+
+/// What a model's opening check did for one job ([`OpeningCheck::choose`]), in report.json.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct OpeningChosen {
+    /// Draws danced through their opening, the seed's own first.
+    pub tried: usize,
+    /// The draw danced: 0 is the seed's own; another where the seed's own opening shuffled or
+    /// flailed.
+    pub kept: usize,
+    /// The kept draw's opening, its settled second half: mean joint speed (m/s).
+    pub speed_m_s: f64,
+    /// The same, the arms' speed against the spine (m/s).
+    pub arms_m_s: f64,
+    /// Whether both lie inside the check's ranges; where no draw did, the nearest was danced.
+    pub inside: bool,
 }
 
 /// The `k`-th draw a job's seed may dance from: the seed itself first.

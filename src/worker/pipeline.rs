@@ -158,6 +158,7 @@ impl Pipeline {
             after_model(
                 generated.motion,
                 generated.beat_time,
+                generated.opening,
                 analysis,
                 decoded.duration_s,
                 &options.key_poses,
@@ -266,6 +267,8 @@ pub struct Finished {
     pub plant_feet: bool,
     /// The clock the network ran on (a model in beat time), for the report.
     pub beat_time: Option<crate::models::beat_time::BeatTimeUsed>,
+    /// What the model's opening check chose, for the report.
+    pub opening: Option<crate::models::opening_check::OpeningChosen>,
     /// Frames the request's seed motion opens the dance on (0 without): the export fits its
     /// skeleton on them ([`crate::motion::serve`]).
     pub seed_frames: usize,
@@ -275,10 +278,13 @@ pub struct Finished {
 /// planted), with the network's own tempo lock measured before them for the report. Jobs and
 /// `choreo generate` both call it, so both serve the same dance.
 /// `seed_motion`: the request's, whose frames open the dance and are kept as they are;
-/// `beat_time`: the clock the model ran on, carried to the report.
+/// `beat_time` (the clock the model ran on) and `opening` (what its opening check chose) are
+/// carried to the report.
+#[allow(clippy::too_many_arguments)]
 pub fn after_model(
     model_motion: Motion,
     beat_time: Option<crate::models::beat_time::BeatTimeUsed>,
+    opening: Option<crate::models::opening_check::OpeningChosen>,
     analysis: Analysis,
     song_duration_s: f64,
     key_poses: &[KeyPose],
@@ -310,6 +316,7 @@ pub fn after_model(
         }),
         plant_feet: stages.plant_feet,
         beat_time,
+        opening,
         seed_frames,
     }
 }
@@ -351,6 +358,7 @@ pub fn render(
     report.style = caption.style.clone();
     report.beat_align = finished.beat_align.clone();
     report.beat_time = finished.beat_time;
+    report.opening_check = finished.opening.clone();
     report.scores.rotation_flips = Some(crate::metrics::rotation_flips::RotationFlips::of(
         &served.rig,
     ));

@@ -147,6 +147,7 @@ pub fn generate_decoded(
     let finished = super::pipeline::after_model(
         generated.motion,
         generated.beat_time,
+        generated.opening,
         analysis,
         request.audio.duration_s,
         request.key_poses,

@@ -84,6 +84,17 @@ async fn dancenet_dances_a_real_song_in_the_style_asked_for_or_the_one_it_hears(
     assert_eq!(report["style"], view["style"]);
     // dancenet runs in seconds: no clock to report.
     assert!(report.get("beat_time").is_none(), "{report}");
+    // Without a seed motion its opening check ran: the draws tried, the one kept, what it saw.
+    let check = &report["opening_check"];
+    let (tried, kept) = (check["tried"].as_u64(), check["kept"].as_u64());
+    assert!(
+        matches!((tried, kept), (Some(t), Some(k)) if k < t && t <= 6),
+        "{report}"
+    );
+    assert!(
+        check["arms_m_s"].as_f64().is_some_and(|a| a > 0.0),
+        "{report}"
+    );
     assert_eq!(report["frames"], frames);
     let speed = report["scores"]["physical"]["mean_speed_m_s"]
         .as_f64()

@@ -9,7 +9,7 @@ use super::{DanceRevolution, ModelFile, ID};
 use crate::models::beat_time;
 use crate::models::folder;
 use crate::models::layers::LstmState;
-use crate::models::opening_check::OpeningCheck;
+use crate::models::opening_check::{OpeningCheck, OpeningChosen};
 use crate::models::train::augment::MusicLayout;
 use crate::models::{
     to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
@@ -183,17 +183,17 @@ impl Served {
         Ok(Self { file, pool })
     }
 
-    /// The draw a job without a seed motion dances from ([`OpeningCheck`]): `seed` itself where
-    /// there is no check.
+    /// The draw a job without a seed motion dances from ([`OpeningCheck`]) and what the check
+    /// saw: `seed` itself, and nothing, where there is no check.
     fn checked_seed(
         &self,
         model: &DanceRevolution,
         z: &Tensor,
         seed: u64,
         guard: Option<(&StallGuard, &NormStats)>,
-    ) -> Result<u64, ModelError> {
+    ) -> Result<(u64, Option<OpeningChosen>), ModelError> {
         let Some(check) = self.file.extra.opening_check else {
-            return Ok(seed);
+            return Ok((seed, None));
         };
         let warm = self.file.extra.warm_up_frames;
         let n = z.size()[1];
@@ -214,7 +214,8 @@ impl Served {
             )?;
             Ok(Some(motion))
         })?;
-        chosen.ok_or_else(|| Cancelled.into())
+        let (seed, seen) = chosen.ok_or(Cancelled)?;
+        Ok((seed, Some(seen)))
     }
 
     /// Music features of a whole song on the network's clock, normalised, as `[1, n, F]`.
@@ -266,6 +267,7 @@ impl DanceModel for Served {
             }
             None => None,
         };
+        let mut opening = None;
         let out = self.pool.with(|model| {
             tch::no_grad(|| -> Result<Tensor, ModelError> {
                 let mut cancelled = false;
@@ -282,7 +284,11 @@ impl DanceModel for Served {
                     .map(|g| (g, &self.file.pose_norm));
                 let seed = match seed_poses {
                     Some(_) => req.seed,
-                    None => self.checked_seed(model, &z, req.seed, guard)?,
+                    None => {
+                        let (seed, seen) = self.checked_seed(model, &z, req.seed, guard)?;
+                        opening = seen;
+                        seed
+                    }
                 };
                 let y = model.decode(
                     &z,
@@ -306,6 +312,7 @@ impl DanceModel for Served {
         let (motion, _root) =
             crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
         Ok(Generated::from(clock.back(motion))
-            .with_beat_time(clock.used(self.file.extra.beat_time)))
+            .with_beat_time(clock.used(self.file.extra.beat_time))
+            .with_opening(opening))
     }
 }

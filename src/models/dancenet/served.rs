@@ -39,6 +39,8 @@ pub struct Generation {
     pub features: Array2<f32>,
     pub start: RootStart,
     pub style: StyleChoice,
+    /// What the opening check chose, where it ran.
+    pub opening: Option<crate::models::opening_check::OpeningChosen>,
 }
 
 impl Served {
@@ -172,6 +174,7 @@ impl Served {
             0 => self.file.extra.opening_check,
             _ => None,
         };
+        let mut opened = None;
         let out = self.pool.with(|model| {
             tch::no_grad(|| -> Result<Option<Array2<f32>>, ModelError> {
                 let mut cancelled = false;
@@ -203,10 +206,11 @@ impl Served {
                             None => Ok(None),
                         }
                     })?;
-                    let Some(chosen) = chosen else {
+                    let Some((chosen, seen)) = chosen else {
                         return Ok(None);
                     };
                     seed = chosen;
+                    opened = Some(seen);
                 }
                 let ctx = match opening {
                     0 => self.clips.pick(seed),
@@ -245,6 +249,7 @@ impl Served {
             features,
             start,
             style,
+            opening: opened,
         })
     }
 }
@@ -356,6 +361,7 @@ impl DanceModel for Served {
             motion: clock.back(motion),
             style: Some(g.style),
             beat_time: clock.used(self.file.extra.beat_time),
+            opening: g.opening,
         })
     }
 }
