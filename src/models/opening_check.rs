@@ -5,10 +5,11 @@
 //! decides what a draw is; this module holds the rule and the measure.
 use serde::{Deserialize, Serialize};
 
+use crate::models::beat_time::BeatTime;
 use crate::motion::Motion;
 
-/// `model.json`'s check. The draw dances `frames` frames (on the network's clock, after any
-/// warm-up), and the second half of them is measured, where the draw has settled
+/// `model.json`'s check. The draw dances the song's first `frames` frames (after any warm-up;
+/// [`OpeningCheck::window`]), and the second half of them is measured, where the draw has settled
 /// (dance-revolution's seed 3 on DANCE_C_8 opens at 0.5–1 m/s and steps a 2-m/s metronome from
 /// 5 s on). Where its mean joint speed or its arms' speed against the spine falls outside the
 /// ranges (m/s), the next of `draws` draws is tried; where none passes, the draw nearest the
@@ -53,15 +54,25 @@ impl OpeningCheck {
 }
 
 impl OpeningCheck {
+    /// The span the check dances for a song on `clock`: its first [`Self::frames`] song frames
+    /// (or the whole song when shorter), and how many network frames make them. The ranges are
+    /// the served dance's, so a network in beat time is judged at the song's pace: on a fast song
+    /// heard slower (dance-revolution heard vibe_ace at 0.67×) 500 network frames are 13 s of the
+    /// song and its motion plays back 1.5× as fast.
+    pub fn window(&self, clock: &BeatTime) -> BeatTime {
+        BeatTime::with_factor(clock.factor, self.frames.min(clock.song_frames))
+    }
+
     /// The draw `seed` dances: each of [`Self::draws`] in turn ([`draw_seed`], the seed's own
-    /// first) dances its opening through `opening` (the first `frames` frames, or fewer for a
-    /// shorter song), until one lies inside the ranges; else the nearest. Returns that draw's
-    /// seed and what the check saw (for report.json); `model` names the model in the log line.
-    /// `None` where `opening` is stopped (the job was cancelled).
+    /// first) dances `window.net_frames` network frames through `opening`, played back at the
+    /// song's pace ([`Self::window`]), until one lies inside the ranges; else the nearest. Returns
+    /// that draw's seed and what the check saw (for report.json); `model` names the model in the
+    /// log line. `None` where `opening` is stopped (the job was cancelled).
     pub fn choose<E>(
         &self,
         model: &str,
         seed: u64,
+        window: &BeatTime,
         mut opening: impl FnMut(u64) -> Result<Option<Motion>, E>,
     ) -> Result<Option<(u64, OpeningChosen)>, E> {
         let mut best: Option<(f64, u64, OpeningChosen)> = None;
@@ -70,7 +81,7 @@ impl OpeningCheck {
             let Some(motion) = opening(s)? else {
                 return Ok(None);
             };
-            let (speed, arms) = Self::measure(&motion);
+            let (speed, arms) = Self::measure(&window.back(motion));
             let miss = self.miss_of(speed, arms);
             if best.as_ref().is_none_or(|b| miss < b.0) {
                 best = Some((
@@ -146,6 +157,18 @@ mod tests {
         assert!(CHECK.miss_of(0.4, 0.7) > CHECK.miss_of(0.5, 0.7));
         assert_eq!(draw_seed(7, 0), 7);
         assert_ne!(draw_seed(7, 1), draw_seed(8, 1));
+    }
+
+    #[test]
+    fn the_window_is_the_songs_first_frames_on_the_networks_clock() {
+        let seconds = CHECK.window(&BeatTime::seconds(4000));
+        assert_eq!((seconds.song_frames, seconds.net_frames), (500, 500));
+        // A fast song heard at 0.67×: 500 song frames take 746 network frames.
+        let fast = CHECK.window(&BeatTime::with_factor(0.67, 4000));
+        assert_eq!((fast.song_frames, fast.net_frames), (500, 745));
+        // A song shorter than the window: all of it.
+        let short = CHECK.window(&BeatTime::with_factor(1.2, 133));
+        assert_eq!((short.song_frames, short.net_frames), (133, 111));
     }
 
     #[test]

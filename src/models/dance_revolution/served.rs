@@ -191,15 +191,16 @@ impl Served {
         z: &Tensor,
         seed: u64,
         guard: Option<(&StallGuard, &NormStats)>,
+        clock: &beat_time::BeatTime,
     ) -> Result<(u64, Option<OpeningChosen>), ModelError> {
         let Some(check) = self.file.extra.opening_check else {
             return Ok((seed, None));
         };
         let warm = self.file.extra.warm_up_frames;
-        let n = z.size()[1];
-        let m = (check.frames as i64).min(n);
+        let window = check.window(clock);
+        let m = (window.net_frames as i64).min(z.size()[1]);
         let head = z.narrow(1, 0, m);
-        let chosen = check.choose(ID, seed, |s| -> Result<_, ModelError> {
+        let chosen = check.choose(ID, seed, &window, |s| -> Result<_, ModelError> {
             let Some(y) = model.decode(&head, s, None, guard, warm, 0, |_| true) else {
                 return Ok(None);
             };
@@ -285,7 +286,7 @@ impl DanceModel for Served {
                 let seed = match seed_poses {
                     Some(_) => req.seed,
                     None => {
-                        let (seed, seen) = self.checked_seed(model, &z, req.seed, guard)?;
+                        let (seed, seen) = self.checked_seed(model, &z, req.seed, guard, &clock)?;
                         opening = seen;
                         seed
                     }

@@ -198,14 +198,16 @@ impl Served {
                 // or flails and another of the check's draws does not.
                 let mut seed = req.seed;
                 if let Some(check) = check {
-                    let frames = check.frames.min(n);
-                    let chosen = check.choose(ID, req.seed, |s| -> Result<_, ModelError> {
-                        let ctx = self.clips.pick(s);
-                        match draw.dance(&ctx, s, Some(frames), &mut |_| true) {
-                            Some(rows) => Ok(Some(self.motion_of(&rows, clock)?)),
-                            None => Ok(None),
-                        }
-                    })?;
+                    let window = check.window(clock);
+                    let frames = window.net_frames.min(n);
+                    let chosen =
+                        check.choose(ID, req.seed, &window, |s| -> Result<_, ModelError> {
+                            let ctx = self.clips.pick(s);
+                            match draw.dance(&ctx, s, Some(frames), &mut |_| true) {
+                                Some(rows) => Ok(Some(self.motion_of(&rows, clock)?)),
+                                None => Ok(None),
+                            }
+                        })?;
                     let Some((chosen, seen)) = chosen else {
                         return Ok(None);
                     };
