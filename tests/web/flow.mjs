@@ -233,6 +233,15 @@ async function run(context) {
   const firstJob = await waitJob(page);
   await waitOpened(page, 'a', firstJob);
   log('first dance', firstJob);
+  // A model with an opening check (no seed motion here): its report says what the check did,
+  // and the page's scores list it.
+  if (['dance-revolution', 'dancenet'].includes(plainModel.id)) {
+    const firstReport = await apiJson(`/v1/jobs/${firstJob}/report.json`);
+    check(firstReport.opening_check && firstReport.opening_check.tried >= 1, `the report has the opening check: ${JSON.stringify(firstReport.opening_check)}`);
+    const names = await page.$$eval('#report-a table.scores tr td:first-child', (tds) => tds.map((td) => td.textContent));
+    check(names.includes('opening_check.kept'), `the page lists the opening check: ${names.slice(-6)}`);
+    summary.opening_check = firstReport.opening_check;
+  }
 
   // 4. Key poses for the key-pose model: one from the library, one from a frame of the first dance.
   await page.selectOption('#model', keyModel.id);

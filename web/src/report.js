@@ -60,7 +60,14 @@ export class ReportView {
     this.duration = motion.num_frames / motion.fps;
     const title = document.createElement('h3');
     const style = report.style ? ` · ${report.style.style}${report.style.predicted ? ' (from the music)' : ''}` : '';
-    title.textContent = `${job.model} · seed ${job.seed}${style} · ${job.id.slice(0, 8)}…`;
+    // The opening check (dance-revolution, dancenet): where the seed's own draw shuffled or
+    // flailed in the song's first 20 s, another draw of the seed was danced; say so.
+    const check = report.opening_check;
+    const opening = check && check.kept > 0 ? ` · draw ${check.kept}` : '';
+    title.textContent = `${job.model} · seed ${job.seed}${opening}${style} · ${job.id.slice(0, 8)}…`;
+    if (opening) {
+      title.title = `The seed's own draw shuffled or flailed in the song's first 20 s; draw ${check.kept} of ${check.tried} tried was danced (report.json: opening_check).`;
+    }
     container.append(title);
 
     this.beats = canvas(container, 'beats', 'Beats: music (top; downbeats thick) against the dance\'s motion beats (bottom)');
@@ -105,7 +112,8 @@ export class ReportView {
 
     const table = document.createElement('table');
     table.className = 'scores';
-    const rows = [...leaves(report.scores ?? {}, 'scores'), ...leaves(report.physical ?? {}, 'physical')]
+    const rows = [...leaves(report.scores ?? {}, 'scores'), ...leaves(report.physical ?? {}, 'physical'),
+      ...(report.opening_check ? leaves(report.opening_check, 'opening_check') : [])]
       .filter(([, v]) => typeof v === 'number' || typeof v === 'boolean' || v === null);
     for (const [name, value] of rows) {
       const tr = table.insertRow();
