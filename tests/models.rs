@@ -83,6 +83,18 @@ fn dance(m: &dyn DanceModel, req: &GenerateRequest<'_>) -> Motion {
         .motion
 }
 
+/// Mean joint speed of a dance (m/s), as the plausibility verdict reads it.
+fn mean_speed(motion: &Motion) -> f64 {
+    choreo::metrics::physical::physical_series(motion, &[])
+        .scores(1.0)
+        .mean_speed_m_s
+}
+
+/// Elbows' and wrists' speed against the spine (m/s), issue 25's arm liveliness.
+fn arm_speed(motion: &Motion) -> f64 {
+    choreo::metrics::musicality::arm_speed_m_s(motion.positions.view(), motion.fps)
+}
+
 fn dances_every_frame_of_the_song(id: &str) {
     let m = model(id);
     let motion = dance(m.as_ref(), &GenerateRequest::plain(song(), 1));
@@ -295,15 +307,13 @@ fn dance_revolution_passes_over_a_draw_that_flails_or_shuffles() {
         .generate(&GenerateRequest::plain(&song, 3), &mut Quiet)
         .expect("dances");
     let flailing = g.motion;
-    let arms = choreo::metrics::musicality::arm_speed_m_s(flailing.positions.view(), flailing.fps);
+    let arms = arm_speed(&flailing);
     assert!((0.43..=1.44).contains(&arms), "seed 3: arms {arms:.3} m/s");
     // What report.json will say: the seed's own draw was passed over.
     let seen = g.opening.expect("the check ran");
     assert!(seen.kept >= 1 && seen.kept < seen.tried, "{seen:?}");
     let shuffling = dance(m.as_ref(), &GenerateRequest::plain(&song, 4));
-    let speed = choreo::metrics::physical::physical_series(&shuffling, &[])
-        .scores(1.0)
-        .mean_speed_m_s;
+    let speed = mean_speed(&shuffling);
     assert!(speed >= 0.63, "seed 4: {speed:.3} m/s");
 }
 
@@ -316,7 +326,7 @@ fn dance_revolution_passes_over_a_draw_that_flails_or_shuffles() {
 fn dancenet_passes_over_a_draw_that_holds_its_arms() {
     let m = model("dancenet");
     let motion = dance(m.as_ref(), &GenerateRequest::plain(song(), 4));
-    let arms = choreo::metrics::musicality::arm_speed_m_s(motion.positions.view(), motion.fps);
+    let arms = arm_speed(&motion);
     assert!(arms >= 0.43, "seed 4: arms {arms:.3} m/s");
 }
 
@@ -371,9 +381,7 @@ fn tsmt_opens_again_from_another_clip_where_it_would_freeze() {
     let m = model("tsmt");
     let song = audio::decode_path(&shared_song_path("sugar_plum_fairy.ogg")).expect("decodes");
     let motion = dance(m.as_ref(), &GenerateRequest::plain(&song, 8));
-    let speed = choreo::metrics::physical::physical_series(&motion, &[])
-        .scores(1.0)
-        .mean_speed_m_s;
+    let speed = mean_speed(&motion);
     assert!(speed >= 0.5, "seed 8: {speed:.3} m/s");
 }
 
@@ -390,7 +398,7 @@ fn keypose_transformer_turns_its_waltz_and_its_arms_with_it() {
     let mut req = GenerateRequest::plain(&song, 1);
     req.analysis = Some(&analysis);
     let motion = dance(m.as_ref(), &req);
-    let arms = choreo::metrics::musicality::arm_speed_m_s(motion.positions.view(), motion.fps);
+    let arms = arm_speed(&motion);
     assert!(arms >= 0.43, "arms {arms:.3} m/s against the spine");
 }
 

@@ -51,9 +51,7 @@ impl OpeningCheck {
         };
         out(speed, self.speed_m_s) + out(arms, self.arms_m_s)
     }
-}
 
-impl OpeningCheck {
     /// The span the check dances for a song on `clock`: its first [`Self::frames`] song frames
     /// (or the whole song when shorter), and how many network frames make them. The ranges are
     /// the served dance's, so a network in beat time is judged at the song's pace: on a fast song
@@ -163,7 +161,7 @@ mod tests {
     fn the_window_is_the_songs_first_frames_on_the_networks_clock() {
         let seconds = CHECK.window(&BeatTime::seconds(4000));
         assert_eq!((seconds.song_frames, seconds.net_frames), (500, 500));
-        // A fast song heard at 0.67×: 500 song frames take 746 network frames.
+        // A fast song heard at 0.67×: 500 song frames take 745 network frames.
         let fast = CHECK.window(&BeatTime::with_factor(0.67, 4000));
         assert_eq!((fast.song_frames, fast.net_frames), (500, 745));
         // A song shorter than the window: all of it.

@@ -201,22 +201,24 @@ impl Served {
         let m = (window.net_frames as i64).min(z.size()[1]);
         let head = z.narrow(1, 0, m);
         let chosen = check.choose(ID, seed, &window, |s| -> Result<_, ModelError> {
-            let Some(y) = model.decode(&head, s, None, guard, warm, 0, |_| true) else {
-                return Ok(None);
-            };
-            let poses = self
-                .file
-                .pose_norm
-                .denormalize(&to_array(&y.squeeze_dim(0))?)?;
-            let (motion, _) = crate::motion::repr::from_features(
-                poses.view(),
-                RootStart::default(),
-                self.file.fps,
-            )?;
-            Ok(Some(motion))
+            model
+                .decode(&head, s, None, guard, warm, 0, |_| true)
+                .map(|y| self.motion_of(&y))
+                .transpose()
         })?;
         let (seed, seen) = chosen.ok_or(Cancelled)?;
         Ok((seed, Some(seen)))
+    }
+
+    /// The decoder's output `[1, n, pose]` (normalised) as a dance on the network's clock.
+    fn motion_of(&self, y: &Tensor) -> Result<crate::motion::Motion, ModelError> {
+        let poses = self
+            .file
+            .pose_norm
+            .denormalize(&to_array(&y.squeeze_dim(0))?)?;
+        let (motion, _root) =
+            crate::motion::repr::from_features(poses.view(), RootStart::default(), self.file.fps)?;
+        Ok(motion)
     }
 
     /// Music features of a whole song on the network's clock, normalised, as `[1, n, F]`.
@@ -306,12 +308,7 @@ impl DanceModel for Served {
                 y.ok_or(ModelError::Cancelled(Cancelled))
             })
         })?;
-        let poses = self
-            .file
-            .pose_norm
-            .denormalize(&to_array(&out?.squeeze_dim(0))?)?;
-        let (motion, _root) =
-            crate::motion::repr::from_features(poses.view(), RootStart::default(), fps)?;
+        let motion = self.motion_of(&out?)?;
         Ok(Generated::from(clock.back(motion))
             .with_beat_time(clock.used(self.file.extra.beat_time))
             .with_opening(opening))

@@ -104,13 +104,17 @@ impl Served {
         })
     }
 
-    /// Sampled rows (normalised features and contacts) as joint positions on the model's rig, on
-    /// the network's clock, for the [`crate::models::opening_check::OpeningCheck`].
-    fn motion_of(
+    /// Sampled rows (normalised features and contacts) as de-normalised rotation features, the
+    /// contacts dropped, smoothed over time from row `from` on (the rows before it, a seed
+    /// motion, stay as they came). σ of 2 frames (0.08 s, served) keeps 60 % of a 2-Hz movement
+    /// and removes what is faster than 5 Hz; σ is a time in the song, so on the network's clock
+    /// it is σ / factor frames.
+    fn features_of(
         &self,
         rows: &Array2<f32>,
+        from: usize,
         clock: &beat_time::BeatTime,
-    ) -> Result<crate::motion::Motion, ModelError> {
+    ) -> Result<Array2<f32>, ModelError> {
         let d = self.file.config.pose_dim as usize;
         let mut features = self
             .file
@@ -118,9 +122,20 @@ impl Served {
             .denormalize(&rows.slice(s![.., ..d]).to_owned())?;
         smooth_columns(
             &mut features,
-            0,
+            from,
             self.file.extra.smooth_frames / clock.factor,
         );
+        Ok(features)
+    }
+
+    /// Sampled rows as joint positions on the model's rig, on the network's clock, for the
+    /// [`crate::models::opening_check::OpeningCheck`].
+    fn motion_of(
+        &self,
+        rows: &Array2<f32>,
+        clock: &beat_time::BeatTime,
+    ) -> Result<crate::motion::Motion, ModelError> {
+        let features = self.features_of(rows, 0, clock)?;
         Ok(rotations::decode(
             &self.rig,
             features.view(),
@@ -140,7 +155,6 @@ impl Served {
     ) -> Result<Generation, ModelError> {
         let n = clock.net_frames;
         let fps = self.file.fps;
-        let d = self.file.config.pose_dim as usize;
         let sampling = Sampling {
             temperature: req
                 .temperature
@@ -194,8 +208,8 @@ impl Served {
                     style: style.style.index(),
                     sampling,
                 };
-                // Which draw dances ([`crate::models::opening_check::OpeningCheck`]): the seed's own, unless its opening shuffles
-                // or flails and another of the check's draws does not.
+                // Which draw dances (`models::opening_check`): the seed's own, unless its
+                // opening shuffles or flails and another of the check's draws does not.
                 let mut seed = req.seed;
                 if let Some(check) = check {
                     let window = check.window(clock);
@@ -214,12 +228,12 @@ impl Served {
                     seed = chosen;
                     opened = Some(seen);
                 }
-                let ctx = match opening {
-                    0 => self.clips.pick(seed),
-                    _ => context.clone(),
-                };
+                // The context already drawn is the seed's own (or the seed motion); another
+                // draw brings its own clip.
+                let redrawn = (seed != req.seed).then(|| self.clips.pick(seed));
+                let ctx = redrawn.as_ref().unwrap_or(&context);
                 let total = (n - opening).max(1);
-                Ok(draw.dance(&ctx, seed, None, &mut |done| {
+                Ok(draw.dance(ctx, seed, None, &mut |done| {
                     progress
                         .report(Stage::Generate, done as f32 / total as f32)
                         .is_ok()
@@ -235,18 +249,7 @@ impl Served {
         } else {
             sampled
         };
-        let mut features = self
-            .file
-            .pose_norm
-            .denormalize(&rows.slice(s![.., ..d]).to_owned())?;
-        // σ of 2 frames (0.08 s, served) keeps 60 % of a 2-Hz movement and removes what is faster
-        // than 5 Hz.
-        // σ is a time in the song, so on the network's clock it is σ / factor frames.
-        smooth_columns(
-            &mut features,
-            opening,
-            self.file.extra.smooth_frames / clock.factor,
-        );
+        let features = self.features_of(&rows, opening, clock)?;
         Ok(Generation {
             features,
             start,
