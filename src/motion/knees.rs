@@ -69,22 +69,22 @@ pub fn bend_forward(mut positions: ArrayViewMut3<'_, f32>) -> usize {
     }
     let mut moved = 0;
     for f in 0..frames {
+        let at = |p: &ArrayViewMut3<'_, f32>, j: usize| {
+            Vector3::new(
+                f64::from(p[[f, j, 0]]),
+                f64::from(p[[f, j, 1]]),
+                f64::from(p[[f, j, 2]]),
+            )
+        };
+        // up × (right hip − left hip): where the pelvis faces (the step moves knees only).
+        let right = at(&positions, HIPS[0]) - at(&positions, HIPS[1]);
+        let pelvis = Vector3::new(right.z, 0.0, -right.x);
         for leg in 0..2 {
-            let at = |p: &ArrayViewMut3<'_, f32>, j: usize| {
-                Vector3::new(
-                    f64::from(p[[f, j, 0]]),
-                    f64::from(p[[f, j, 1]]),
-                    f64::from(p[[f, j, 2]]),
-                )
-            };
             let (hip, knee, ankle) = (
                 at(&positions, HIPS[leg]),
                 at(&positions, KNEES[leg]),
                 at(&positions, ANKLES[leg]),
             );
-            // up × (right hip − left hip): where the pelvis faces.
-            let right = at(&positions, HIPS[0]) - at(&positions, HIPS[1]);
-            let pelvis = Vector3::new(right.z, 0.0, -right.x);
             let Some(turned) = forward_knee(
                 hip,
                 knee,
