@@ -17,6 +17,7 @@ use std::path::PathBuf;
 use ndarray::Array3;
 
 pub mod beat_align;
+pub mod bursts;
 pub mod bvh;
 pub mod dataset;
 pub mod export;
@@ -145,9 +146,10 @@ pub struct Served {
 
 /// The export step after [`finish`]: fits the rigid skeleton to `finished` with the key poses'
 /// frames as anchors ([`export::prepare_anchored`]). Jobs, `choreo generate` and `choreo eval`
-/// all go through it, so what is scored is what is served. `ground`: the fitted skeleton is put
-/// back on the floor ([`ground_rig`]) where [`finish`] grounded the motion (not where the caller
-/// asked for the model's motion as it came). `seed_frames`: the request's seed motion opens the
+/// all go through it, so what is scored is what is served. `ground`: where [`finish`] ran (not
+/// where the caller asked for the model's motion as it came), the fitted skeleton's pops are
+/// calmed ([`bursts::calm`], the key poses' and the seed's frames kept as they are) and it is
+/// put back on the floor ([`ground_rig`]). `seed_frames`: the request's seed motion opens the
 /// dance on this many frames, and the skeleton is theirs ([`export::prepare_seeded`]).
 pub fn serve(
     finished: &Motion,
@@ -161,6 +163,8 @@ pub fn serve(
         .collect();
     let mut rig = export::prepare_seeded(finished, &anchors, seed_frames)?;
     if ground {
+        let fixed: Vec<usize> = anchors.iter().copied().chain(0..seed_frames).collect();
+        bursts::calm(&mut rig, &fixed);
         ground_rig(&mut rig);
     }
     let motion = export::served_motion(&rig);

@@ -219,6 +219,34 @@ pub fn bones() -> Vec<(usize, usize)> {
         .collect()
 }
 
+/// A person standing upright facing +z with the feet on y = 0, for tests: (x, y, z) of the right
+/// side and centre, the left side mirrored in x; heights from this module's measured means.
+#[cfg(test)]
+pub(crate) fn standing_pose() -> [[f32; 3]; NUM_JOINTS] {
+    let right: [(usize, [f32; 3]); 10] = [
+        (0, [-0.05, 1.65, 0.0]),
+        (3, [-0.2, 1.45, 0.0]),
+        (4, [-0.25, 1.15, 0.0]),
+        (5, [-0.27, 1.0, 0.0]),
+        (6, [-0.28, 0.85, 0.0]),
+        (7, [-0.1, 0.95, 0.0]),
+        (8, [-0.1, 0.5, 0.0]),
+        (9, [-0.1, 0.1, 0.0]),
+        (10, [-0.1, 0.03, -0.05]),
+        (11, [-0.1, 0.02, 0.15]),
+    ];
+    let mut pose = [[0.0f32; 3]; NUM_JOINTS];
+    for (j, p) in right {
+        pose[j] = p;
+        let m = MIRROR[j];
+        pose[m] = [-p[0], p[1], p[2]];
+    }
+    pose[2] = [0.0, 1.2, 0.0];
+    pose[21] = [0.26, 1.05, 0.0];
+    pose[22] = [-0.29, 0.8, 0.0];
+    pose
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

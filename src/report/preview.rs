@@ -692,29 +692,7 @@ mod tests {
 
     /// A person standing upright facing +z, feet on y = `lift`, swaying a little.
     fn standing(lift: f32, frames: usize) -> Motion {
-        // (x, y, z) of the right side and centre; the left side mirrors x. Heights from the
-        // skeleton module's measured means.
-        let right: [(usize, [f32; 3]); 10] = [
-            (0, [-0.05, 1.65, 0.0]),
-            (3, [-0.2, 1.45, 0.0]),
-            (4, [-0.25, 1.15, 0.0]),
-            (5, [-0.27, 1.0, 0.0]),
-            (6, [-0.28, 0.85, 0.0]),
-            (7, [-0.1, 0.95, 0.0]),
-            (8, [-0.1, 0.5, 0.0]),
-            (9, [-0.1, 0.1, 0.0]),
-            (10, [-0.1, 0.03, -0.05]),
-            (11, [-0.1, 0.02, 0.15]),
-        ];
-        let mut pose = [[0.0f32; 3]; NUM_JOINTS];
-        for (j, p) in right {
-            pose[j] = p;
-            let m = crate::motion::skeleton::MIRROR[j];
-            pose[m] = [-p[0], p[1], p[2]];
-        }
-        pose[2] = [0.0, 1.2, 0.0];
-        pose[21] = [0.26, 1.05, 0.0];
-        pose[22] = [-0.29, 0.8, 0.0];
+        let pose = crate::motion::skeleton::standing_pose();
         let mut positions = Array3::zeros((frames, NUM_JOINTS, 3));
         for f in 0..frames {
             let sway = 0.05 * (f as f32 * 0.3).sin();
