@@ -283,6 +283,10 @@ args_into! {
         /// style implies from the music code too.
         #[arg(long, default_value_t = train::dancenet::Options::default().style_dropout)]
         style_dropout: f64,
+        /// The control signals (onset, beat, downbeat, chroma) join the music code in every gated
+        /// layer's conditioning; with `--init` their new weights start at zero.
+        #[arg(long)]
+        music_direct: bool,
     }
 }
 

@@ -80,6 +80,12 @@ pub struct Config {
     /// drifted, with all absolute it stays within the train split's range for whole songs.
     #[serde(default)]
     pub absolute_dims: i64,
+    /// The control signals themselves (onset, beat, downbeat, chroma) join the music code in
+    /// every gated layer's conditioning, so a beat reaches the decoder on its frame rather than
+    /// only through the 8-s encoder (issue 25: the network heard the music seconds late). Absent
+    /// in older `model.json` files: no.
+    #[serde(default)]
+    pub music_direct: bool,
 }
 
 impl Config {
@@ -102,6 +108,7 @@ impl Config {
             dilations: [1, 2, 4, 8, 16].repeat(2),
             mixtures: 1,
             absolute_dims: pose_dim,
+            music_direct: false,
         }
     }
 
@@ -122,6 +129,12 @@ impl Config {
         }
     }
 
+    /// Width of the conditioning each gated layer reads: the music code, and with
+    /// [`Self::music_direct`] the control signals after it.
+    pub fn code_width(&self) -> i64 {
+        self.d_code + if self.music_direct { self.music_dim } else { 0 }
+    }
+
     /// Frames of history each prediction sees: `1 + Σ dilations` (kernel 2).
     pub fn receptive_field(&self) -> i64 {
         1 + self.dilations.iter().sum::<i64>()
@@ -134,9 +147,11 @@ impl Config {
 }
 
 /// §3.2 musical context-aware encoder: control signals `[b, n, music_dim]` → music code
-/// `[b, n, d_code]`.
+/// `[b, n, code_width]` (the code, then with [`Config::music_direct`] the signals themselves).
 #[derive(Debug)]
 pub struct ContextEncoder {
+    /// [`Config::music_direct`].
+    direct: bool,
     convs: Vec<nn::Conv1D>,
     lstm: nn::LSTM,
     out: nn::Linear,
@@ -160,6 +175,7 @@ impl ContextEncoder {
             )
         };
         Self {
+            direct: c.music_direct,
             convs: (0..c.enc_convs).map(conv).collect(),
             lstm: nn::lstm(
                 &p / "lstm",
@@ -176,14 +192,19 @@ impl ContextEncoder {
         }
     }
 
-    /// One window (any length): `[b, n, music_dim]` → `[b, n, d_code]`.
+    /// One window (any length): `[b, n, music_dim]` → `[b, n, code_width]`.
     pub fn forward(&self, music: &Tensor) -> Tensor {
         let mut x = music.transpose(1, 2); // [b, music_dim, n]
         for conv in &self.convs {
             x = x.apply(conv).relu();
         }
         let (h, _) = self.lstm.seq(&x.transpose(1, 2).contiguous()); // [b, n, 2 · enc_hidden]
-        h.apply(&self.out)
+        let code = h.apply(&self.out);
+        if self.direct {
+            Tensor::cat(&[code, music.shallow_clone()], -1)
+        } else {
+            code
+        }
     }
 
     /// A whole song `[1, n, music_dim]` → `[n, d_code]`: windows of `enc_window` frames every
@@ -196,7 +217,7 @@ impl ContextEncoder {
         mut on_window: impl FnMut(f32) -> bool,
     ) -> Option<Tensor> {
         let n = music.size()[1];
-        let d = self.out.ws.size()[0];
+        let d = self.out.ws.size()[0] + if self.direct { music.size()[2] } else { 0 };
         let w = self.window.min(n).max(1);
         let mut starts: Vec<i64> = (0..)
             .map(|k| k * self.hop)
@@ -264,7 +285,7 @@ impl GatedLayer {
                     ..Default::default()
                 },
             ),
-            cond: one("cond", c.d_code, 2 * c.residual, true),
+            cond: one("cond", c.code_width(), 2 * c.residual, true),
             style: one("style", c.styles, 2 * c.residual, false),
             res: one("res", c.residual, c.residual, true),
             skip: one("skip", c.residual, c.skip, true),

@@ -200,3 +200,42 @@ fn coherent_draws_keep_each_frames_spread_and_move_together() {
         "lag-1 correlations {lag0} {lag9}"
     );
 }
+
+#[test]
+fn with_music_direct_a_beat_reaches_the_decoder_on_its_own_frame() {
+    tch::manual_seed(6);
+    let vs = nn::VarStore::new(Device::Cpu);
+    let m = DanceNet::new(
+        &vs.root(),
+        Config {
+            music_dim: 3,
+            music_direct: true,
+            ..Config::tiny(D)
+        },
+    );
+    assert_eq!(m.config.code_width(), 4 + 3);
+    let music = Tensor::zeros([1, 40, 3], (Kind::Float, Device::Cpu));
+    let code = m.encoder.forward(&music);
+    assert_eq!(code.size(), vec![1, 40, 7]);
+    // The signals ride along unchanged after the code, in the song encoding too.
+    let song = m.encoder.encode_song(&music, |_| true).expect("encoded");
+    assert_eq!(song.size(), vec![40, 7]);
+    // A beat at frame 20 alone, its code held fixed: the prediction of frame 20 (position 19)
+    // changes, through the signal's own columns; the ones before it do not.
+    let beat = code.copy();
+    let _ = beat.narrow(1, 20, 1).narrow(2, 4, 1).fill_(1.0);
+    let x = frames(1, 40);
+    let s = m.style_one_hot(&[0], Device::Cpu);
+    let (a, b) = (m.forward(&x, &code, &s), m.forward(&x, &beat, &s));
+    let moved = |t: i64| {
+        (a.mean.narrow(1, t, 1) - b.mean.narrow(1, t, 1))
+            .abs()
+            .max()
+            .double_value(&[])
+    };
+    assert!(
+        moved(19) > 1e-6,
+        "frame 20's beat did not reach its prediction"
+    );
+    assert!(moved(18) < 1e-9);
+}

@@ -87,6 +87,9 @@ pub struct Options {
     /// Share of training windows whose style input is zeroed, so the decoder learns what the
     /// style implies from the music code too (0: every window has its style).
     pub style_dropout: f64,
+    /// [`Config::music_direct`]: the control signals join the music code in every gated layer
+    /// (with `--init` from weights without them, their columns start at zero).
+    pub music_direct: bool,
 }
 
 impl Default for Options {
@@ -116,6 +119,7 @@ impl Default for Options {
             min_tempo: 1.0,
             max_tempo: 1.0,
             style_dropout: 0.0,
+            music_direct: false,
         }
     }
 }
@@ -252,6 +256,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             .absolute_dims
             .unwrap_or(base.absolute_dims)
             .clamp(0, d as i64),
+        music_direct: opts.music_direct,
         ..base
     };
     let warmup = opts
