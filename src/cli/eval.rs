@@ -20,8 +20,8 @@ pub struct EvalArgs {
     /// Dataset split whose songs are evaluated.
     #[arg(long, default_value_t = defaults().split)]
     pub split: String,
-    /// More folders of songs (every audio file in each), danced whole by each model beside
-    /// ../shared/audio.
+    /// More songs, danced whole by each model beside ../shared/audio: audio files, or folders
+    /// (every audio file in each). Files of one name in several folders are named by their folder.
     #[arg(long)]
     pub songs: Vec<PathBuf>,
     /// Leave out ../shared/audio (the test split and --songs only).

@@ -51,7 +51,7 @@ use crate::motion::dataset::{Dance, Dataset};
 use crate::motion::{KeyPose, Motion, MotionError};
 use crate::report::preview::PreviewError;
 use rows::{crop, model_rows, row, Quiet};
-use songs::{song_segment, songs_in, whole_song, Song};
+use songs::{name_apart, song_segment, songs_in, whole_song, Song};
 pub use tables::markdown;
 
 /// Where [`write_reference`] writes the committed, compiled-in statistics (`choreo eval
@@ -412,6 +412,7 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
                 extra_paths.push(p);
             }
         }
+        name_apart(&mut extra, &extra_paths);
         extra_names = extra.iter().map(|s| s.name.clone()).collect();
         let ids: Vec<String> = if args.models.is_empty() {
             registry.list().into_iter().map(|m| m.id.0).collect()
@@ -451,7 +452,13 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
                 extra_rows.extend(e);
             }
             if !args.tempi.is_empty() && !extra_paths.is_empty() {
-                tempo_rows.push(tempo::tempo_row(model.as_ref(), id, &extra_paths, args)?);
+                tempo_rows.push(tempo::tempo_row(
+                    model.as_ref(),
+                    id,
+                    &extra_paths,
+                    &extra_names,
+                    args,
+                )?);
             }
             if model.info().capabilities.style {
                 let all: Vec<style_control::StyleSong<'_>> = songs

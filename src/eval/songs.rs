@@ -45,6 +45,18 @@ pub(super) fn song_segment(d: &Dance) -> Result<Song, EvalError> {
     })
 }
 
+/// Songs of one file name from several folders (the dataset's `audio.mp3`) are told apart by
+/// their folder's name: `DANCE_C_8_audio.mp3`. Others keep their file name.
+pub(super) fn name_apart(songs: &mut [Song], paths: &[PathBuf]) {
+    let names: Vec<String> = songs.iter().map(|s| s.name.clone()).collect();
+    for (song, path) in songs.iter_mut().zip(paths) {
+        let shared = names.iter().filter(|n| **n == song.name).count() > 1;
+        if let Some(folder) = path.parent().and_then(|d| d.file_name()).filter(|_| shared) {
+            song.name = format!("{}_{}", folder.to_string_lossy(), song.name);
+        }
+    }
+}
+
 /// An extra song, whole.
 pub(super) fn whole_song(path: &Path) -> Result<Song, EvalError> {
     let audio = audio::decode_path(path)?;
@@ -59,8 +71,11 @@ pub(super) fn whole_song(path: &Path) -> Result<Song, EvalError> {
         beats: analysis.beat_times,
     })
 }
-/// The audio files of a folder, sorted by name.
+/// The audio files of a folder, sorted by name; a file given itself is that one song.
 pub(super) fn songs_in(dir: &Path) -> Result<Vec<PathBuf>, EvalError> {
+    if dir.is_file() {
+        return Ok(vec![dir.to_path_buf()]);
+    }
     let mut paths: Vec<PathBuf> = std::fs::read_dir(dir)
         .map_err(|source| EvalError::Io {
             path: dir.to_path_buf(),
@@ -92,4 +107,46 @@ pub(super) fn key_poses_of(d: &Dance, n: usize, seed: u64) -> Vec<KeyPose> {
                 .collect(),
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn song(name: &str) -> Song {
+        Song {
+            name: name.into(),
+            audio: DecodedAudio {
+                format: audio::AudioFormat::Wav,
+                sample_rate: 22050,
+                channels: 1,
+                duration_s: 0.0,
+                samples: Vec::new(),
+            },
+            beats: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn songs_of_one_file_name_are_named_by_their_folder() {
+        let mut songs = vec![song("audio.mp3"), song("audio.mp3"), song("vibe_ace.ogg")];
+        let paths = [
+            "data/DANCE_C_8/audio.mp3",
+            "data/DANCE_W_3/audio.mp3",
+            "audio/vibe_ace.ogg",
+        ]
+        .map(PathBuf::from);
+        name_apart(&mut songs, &paths);
+        let names: Vec<&str> = songs.iter().map(|s| s.name.as_str()).collect();
+        assert_eq!(
+            names,
+            ["DANCE_C_8_audio.mp3", "DANCE_W_3_audio.mp3", "vibe_ace.ogg"]
+        );
+    }
+
+    #[test]
+    fn a_file_given_itself_is_one_song() {
+        let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("Cargo.toml");
+        assert_eq!(songs_in(&file).unwrap(), vec![file]);
+    }
 }

@@ -53,9 +53,10 @@ pub struct TempoRow {
     pub beat_time_bpm: Option<f64>,
 }
 
-/// `song` at `factor` × its tempo (pitch kept), written by sox into `dir` and decoded.
-fn stretched(song: &Path, factor: f64, dir: &Path) -> Result<Song, EvalError> {
-    let stem = song
+/// `song` (called `name` in the eval) at `factor` × its tempo (pitch kept), written by sox into
+/// `dir` and decoded.
+fn stretched(song: &Path, name: &str, factor: f64, dir: &Path) -> Result<Song, EvalError> {
+    let stem = Path::new(name)
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())
         .unwrap_or_default();
@@ -109,12 +110,13 @@ fn stretched(song: &Path, factor: f64, dir: &Path) -> Result<Song, EvalError> {
     whole_song(&out)
 }
 
-/// Every song of `paths` at every factor of `args.tempi`, danced by `model` with the eval's
-/// seeds, as served and as the network made it.
+/// Every song of `paths` (called `names`) at every factor of `args.tempi`, danced by `model`
+/// with the eval's seeds, as served and as the network made it.
 pub(super) fn tempo_row(
     model: &dyn DanceModel,
     id: &str,
     paths: &[std::path::PathBuf],
+    names: &[String],
     args: &EvalOptions,
 ) -> Result<TempoRow, EvalError> {
     let dir = tempfile::tempdir().map_err(|source| EvalError::Io {
@@ -126,11 +128,11 @@ pub(super) fn tempo_row(
     // [served, the network's own] for each count.
     let (mut dances, mut measured, mut locked, mut ratios) =
         (0, [0; 2], [0; 2], [Vec::new(), Vec::new()]);
-    for path in paths {
+    for (path, name) in paths.iter().zip(names) {
         // step rate per (tempo, seed), served and the network's own
         let mut steps: Vec<Vec<[Option<f64>; 2]>> = Vec::new();
         for &factor in &tempi {
-            let song = stretched(path, factor, dir.path())?;
+            let song = stretched(path, name, factor, dir.path())?;
             let mut per_seed = Vec::new();
             for seed in args.seed..args.seed + args.seeds.max(1) {
                 let raw = model
@@ -264,7 +266,7 @@ mod tests {
             .expect("ffmpeg (scripts/setup.sh --test installs it) runs");
         assert!(made.success(), "ffmpeg: {made}");
         let plain = crate::audio::decode_path(&mp3).expect("decodes").duration_s;
-        let fast = stretched(&mp3, 1.25, dir.path()).expect("sox stretches the mp3");
+        let fast = stretched(&mp3, "trumpet.mp3", 1.25, dir.path()).expect("sox stretches the mp3");
         assert!(
             (fast.audio.duration_s - plain / 1.25).abs() < 0.1,
             "{plain} s at 1.25× gave {} s",
