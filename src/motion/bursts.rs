@@ -8,17 +8,18 @@
 //! enough frames that its p99.9 is 88 where the verdict allows 84 (real dances: 56).
 //!
 //! [`calm`] reads what the metric reads (`metrics::physical::joint_acceleration` of the served
-//! joints) and, on every
-//! frame over [`BURST_M_S2`] (the verdict's line for a pop) and within [`REACH_S`] either side, blends
-//! the dance towards a copy smoothed over time (a Gaussian of σ [`SIGMA_FRAMES`]); the blend fades
-//! out over the same reach, so it adds no corner of its own. Where a burst survives one pass, a
-//! wider σ follows; a pass that leaves more acceleration over the line than it found is taken
-//! back. What smoothing cannot calm is left: a fine-tune not served (dancenet's `--music-direct`,
-//! DANCE_R_9 seed 5) spun its dancer at 70° a frame for half a second (p99.9 115 m/s²); σ 1.5
-//! took its excess over the line from 422 to 390 m/s², and σ 2.5, 4, 6 and 9, each tried from
-//! there, left 495–682. The frames the request fixed (key poses, the seed motion) stay as they are, the blend
-//! fading in away from them. A dance without bursts is unchanged to the bit; the move is still
-//! made, only not in one frame.
+//! joints). On every frame over [`BURST_M_S2`] (the verdict's line for a pop), and within
+//! [`REACH_S`] either side, it blends the dance towards a copy smoothed over time (a Gaussian of
+//! σ [`SIGMA_FRAMES`]); the blend fades out over the same reach, so it adds no corner of its own.
+//! Where a burst survives one pass, a wider σ follows. A pass that leaves more acceleration over
+//! the line than it found is taken back, and the stage stops there. The frames the request fixed
+//! (key poses, the seed motion) stay as they are, the blend fading in away from them. A dance
+//! without bursts is unchanged to the bit; the move is still made, only not in one frame.
+//!
+//! What smoothing cannot calm is left. A fine-tune not served (dancenet's `--music-direct`,
+//! DANCE_R_9 seed 5) spun its dancer at 70° a frame for half a second (p99.9 115 m/s²). σ 1.5
+//! took its excess over the line from 422 to 390 m/s²; σ 2.5, 4, 6 and 9, each tried from there
+//! in a trial build that did not stop, left 495–682.
 //!
 //! It works on the fitted skeleton (`motion::serve`: its root track and rotations, judged by the
 //! joints it draws), since that is where the pops are: the same rule on the joint positions
@@ -71,8 +72,8 @@ fn neighbour(f: usize, k: usize, len: usize, frames: usize) -> usize {
     (f + k).saturating_sub(len / 2).min(frames - 1)
 }
 
-/// Calms the bursts of a fitted dance in place (see the module doc). `fixed`: frames that stay exactly
-/// as they are. Returns the number of frames changed.
+/// Calms the bursts of a fitted dance in place (see the module doc). `fixed`: frames that stay
+/// exactly as they are. Returns the number of frames changed.
 pub fn calm(m: &mut RigMotion, fixed: &[usize]) -> usize {
     let (t, fps) = (m.num_frames(), m.fps);
     if t < 3 || !(fps.is_finite() && fps > 0.0) {
@@ -112,8 +113,8 @@ pub fn calm(m: &mut RigMotion, fixed: &[usize]) -> usize {
         blend_smoothed(m, &weight, &gaussian(sigma));
         let after = excess_of(m);
         // A pass that leaves more acceleration over the line than it found is taken back, and
-        // the wider ones are not tried: on the one dance where this happened (below), each wider
-        // pass left more than the one before.
+        // the wider ones are not tried: on the one dance where this happened (the module doc),
+        // each wider pass left more than the one before.
         if after.1 >= excess.1 {
             *m = before;
             break;
