@@ -385,6 +385,31 @@ fn tsmt_opens_again_from_another_clip_where_it_would_freeze() {
     assert!(speed >= 0.5, "seed 8: {speed:.3} m/s");
 }
 
+/// TSMT can also freeze later in a song: seed 3 on DANCE_C_8's whole song (the test split's
+/// cha-cha, 3 minutes) stood in one pose from about 60 s to the end, 0.35 m/s from there on (the
+/// network's own output). A freeze after the opening's first 20 s is drawn again from the next
+/// candidate clip, from where it starts, faded in over a second; from 60 s the dance moves
+/// 0.68 m/s.
+#[test]
+fn tsmt_draws_again_where_it_would_freeze_mid_song() {
+    let m = model("tsmt");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/dance-with-melody/DANCE_C_8/audio.mp3");
+    assert!(path.is_file(), "{} is missing", path.display());
+    let song = audio::decode_path(&path).expect("decodes");
+    let motion = dance(m.as_ref(), &GenerateRequest::plain(&song, 3));
+    let from = (60.0 * motion.fps) as usize;
+    let rest = Motion {
+        fps: motion.fps,
+        positions: motion
+            .positions
+            .slice(ndarray::s![from.., .., ..])
+            .to_owned(),
+    };
+    let speed = mean_speed(&rest);
+    assert!(speed >= 0.5, "seed 3 from 60 s: {speed:.3} m/s");
+}
+
 /// keypose-transformer turns as its scaffold's real clips turn (`scaffold_facing`): on the
 /// Hungarian dance (tracked in 3/4, so waltz clips) its arms move against the spine as fast as
 /// the slowest real dance's (0.43 m/s, issue 25). A waltz holds its arms in a frame; they move

@@ -195,7 +195,7 @@ impl Served {
         };
         let opened = opening.as_ref().map_or(0, |o| o.nrows());
         let out = self.pool.with(|model| {
-            tch::no_grad(|| -> Result<Option<Array2<i64>>, ModelError> {
+            tch::no_grad(|| -> Result<Option<Joined>, ModelError> {
                 let mut cancelled = false;
                 let Some(vectors) = model.audio_logit_vectors(&music, |f| {
                     cancelled = progress.report(Stage::Encode, f).is_err();
@@ -221,11 +221,11 @@ impl Served {
                     (g.reopen_reach_m > 0.0 && contexts.len() > 1)
                         .then(|| (g.reopen_reach_m, OPENING_CHECK_FRAMES.min(n - opened)))
                 });
-                let mut context = &contexts[0];
+                let mut kept = 0;
                 if let (Some((reach, frames)), Some(guard)) = (check, guard) {
                     let head = rest.narrow(0, 0, frames as i64);
-                    for c in &contexts {
-                        context = c;
+                    for (i, c) in contexts.iter().enumerate() {
+                        kept = i;
                         let Some(tokens) =
                             model.sample_guarded(c, &head, sampling, Some(guard), req.seed, |_| {
                                 true
@@ -238,19 +238,64 @@ impl Served {
                         }
                     }
                 }
-                Ok(
-                    model.sample_guarded(context, &rest, sampling, guard, req.seed, |done| {
+                let Some(mut tokens) = model.sample_guarded(
+                    &contexts[kept],
+                    &rest,
+                    sampling,
+                    guard,
+                    req.seed,
+                    |done| {
                         progress
                             .report(Stage::Generate, done as f32 / total as f32)
                             .is_ok()
-                    }),
-                )
+                    },
+                ) else {
+                    return Ok(None);
+                };
+                // A freeze later in the song: from where it starts, the rest is drawn again from
+                // the next candidate clip, joined to the frozen frames over JOIN_FRAMES (below).
+                let mut joins = Vec::new();
+                if let (Some((reach, _)), Some(guard)) = (check, guard) {
+                    let mut after = frames_checked(check);
+                    for c in &contexts[kept + 1..] {
+                        let Some(from) =
+                            frozen_from(&tokens, guard.0.window_frames, guard.1, reach, after)
+                        else {
+                            break;
+                        };
+                        let tail = rest.narrow(0, from as i64, (n - opened - from) as i64);
+                        let Some(again) =
+                            model.sample_guarded(c, &tail, sampling, Some(guard), req.seed, |_| {
+                                true
+                            })
+                        else {
+                            return Ok(None);
+                        };
+                        let old = tokens.slice(s![from.., ..]).to_owned();
+                        tokens.slice_mut(s![from.., ..]).assign(&again);
+                        joins.push((from, old));
+                        after = from + FREEZE_FRAMES;
+                    }
+                }
+                Ok(Some((tokens, joins)))
             })
         })??;
-        let Some(tokens) = out else {
+        let Some((tokens, joins)) = out else {
             return Err(Cancelled.into());
         };
         let mut sampled = bins.values(&tokens);
+        // Each redrawn rest fades in over the frozen frames it replaces, so the join is a turn
+        // of the body over a second, not a jump.
+        for (from, old) in &joins {
+            let old = bins.values(old);
+            for k in 0..JOIN_FRAMES.min(old.nrows()) {
+                let x = (k + 1) as f32 / (JOIN_FRAMES + 1) as f32;
+                let w = x * x * (3.0 - 2.0 * x);
+                let mut row = sampled.row_mut(from + k);
+                row *= w;
+                row.scaled_add(1.0 - w, &old.row(k));
+            }
+        }
         // σ is a time in the song (what the jitter of drawn bins is smoothed over before 25-fps
         // playback), so on the network's clock it is σ / factor frames.
         smooth_columns(
@@ -276,13 +321,36 @@ const FREEZE_FRAMES: usize = 250;
 /// Windows of the reach measured every this many frames.
 const REACH_STRIDE: usize = 25;
 
-/// Whether an opening's tokens freeze: every `window`-frame window, one every [`REACH_STRIDE`]
-/// frames, for [`FREEZE_FRAMES`] in a row has reached less than `reach` m
-/// ([`super::sampling::reach_m`]).
+/// The sampled tokens and, for each rest drawn again after a freeze, where it starts and the
+/// frozen tokens it replaced.
+type Joined = (Array2<i64>, Vec<(usize, Array2<i64>)>);
+
+/// A rest drawn again after a freeze fades in over this many frames (1 s at 25 fps).
+const JOIN_FRAMES: usize = 25;
+
+/// Frames of the song the opening check has already seen (none without the check).
+fn frames_checked(check: Option<(f32, usize)>) -> usize {
+    check.map_or(0, |(_, frames)| frames)
+}
+
+/// Whether an opening's tokens freeze ([`frozen_from`] from the first frame).
 fn opening_frozen(tokens: &Array2<i64>, window: usize, widths: &[f32], reach: f32) -> bool {
+    frozen_from(tokens, window, widths, reach, 0).is_some()
+}
+
+/// Where the tokens freeze, from frame `after` on: the start of the first of [`FREEZE_FRAMES`]
+/// in a row over which every `window`-frame window, one every [`REACH_STRIDE`] frames, has
+/// reached less than `reach` m ([`super::sampling::reach_m`]).
+fn frozen_from(
+    tokens: &Array2<i64>,
+    window: usize,
+    widths: &[f32],
+    reach: f32,
+    after: usize,
+) -> Option<usize> {
     let need = 1 + FREEZE_FRAMES.saturating_sub(window) / REACH_STRIDE;
     let mut run = 0;
-    let mut end = window;
+    let mut end = after + window;
     while end <= tokens.nrows() {
         let frames: std::collections::VecDeque<Vec<i64>> = tokens
             .outer_iter()
@@ -296,11 +364,11 @@ fn opening_frozen(tokens: &Array2<i64>, window: usize, widths: &[f32], reach: f3
             0
         };
         if run >= need {
-            return true;
+            return Some(end - window - (need - 1) * REACH_STRIDE);
         }
         end += REACH_STRIDE;
     }
-    false
+    None
 }
 
 impl DanceModel for Served {
@@ -374,5 +442,19 @@ mod tests {
         assert!(!opening_frozen(&dip, 50, &widths, 0.1));
         // Too short to tell.
         assert!(!opening_frozen(&tokens(200, |_| 0), 50, &widths, 0.1));
+    }
+
+    /// A dance that freezes mid-song is found where its freeze starts, and only after `after`.
+    #[test]
+    fn a_freeze_later_in_the_song_is_found_where_it_starts() {
+        let widths = [0.01f32; 6];
+        // Lively for 700 frames, then still to the end (1,200 frames).
+        let late = tokens(1200, |t| i64::from(t < 700) * 2);
+        let from = frozen_from(&late, 50, &widths, 0.1, 500).expect("a freeze");
+        assert!((650..=760).contains(&from), "found at {from}");
+        assert_eq!(frozen_from(&late, 50, &widths, 0.1, 0), Some(from));
+        // Nothing after the end of the freeze's search.
+        assert_eq!(frozen_from(&late, 50, &widths, 0.1, 1000), None);
+        assert_eq!(frozen_from(&tokens(1200, |_| 2), 50, &widths, 0.1, 0), None);
     }
 }
