@@ -40,6 +40,7 @@ use tch::{Kind, Tensor};
 
 use super::layers::{position_encoding, sinusoid_of, Dims, Stack};
 use crate::motion::repr::{self, POSE_DIM};
+use crate::motion::smoothstep;
 
 /// Hyper-parameters, with the paper's symbols.
 #[derive(Clone, Debug, Serialize, Deserialize, PartialEq)]
@@ -332,12 +333,6 @@ pub fn join_frames(n: usize, config: &Config) -> Vec<usize> {
         .collect()
 }
 
-/// `3u² − 2u³`: a C¹ ramp from 0 to 1 on `[0, 1]`.
-fn smoothstep(u: f64) -> f64 {
-    let u = u.clamp(0.0, 1.0);
-    u * u * (3.0 - 2.0 * u)
-}
-
 /// The whole model.
 #[derive(Debug)]
 pub struct KeyposeTransformer {
@@ -472,7 +467,7 @@ impl KeyposeTransformer {
                 let (b0, l) = (s + ts, written - s - ts);
                 if l > 0 {
                     let ramp: Vec<f32> = (1..=l)
-                        .map(|k| smoothstep(k as f64 / (l + 1) as f64) as f32)
+                        .map(|k| smoothstep(0.0, 1.0, k as f64 / (l + 1) as f64) as f32)
                         .collect();
                     let ramp = Tensor::from_slice(&ramp).view([l, 1]).to_device(dev);
                     let blended = out.narrow(0, b0, l) * (1.0 - &ramp) + y.narrow(0, ts, l) * &ramp;

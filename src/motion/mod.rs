@@ -45,6 +45,13 @@ pub struct Motion {
     pub positions: Array3<f32>,
 }
 
+/// `3t² − 2t³` of `t` = `x` from `lo` to `hi`, clamped to `[0, 1]`: a ramp with no corner, the
+/// one every stage (and the key-pose bridges) fades with.
+pub fn smoothstep(lo: f64, hi: f64, x: f64) -> f64 {
+    let t = ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
 /// The motion stage after any model, before export: the dance kept on the floor ([`feet::ground`]),
 /// the feet planted ([`feet::plant_feet`]) and backward knees turned forward
 /// ([`knees::bend_forward`]), unless the caller asked for the model's motion as it came. Jobs,

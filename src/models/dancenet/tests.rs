@@ -7,13 +7,18 @@ use tch::nn::OptimizerConfig;
 const D: i64 = 6;
 
 fn model(seed: i64) -> (nn::VarStore, DanceNet) {
+    model_with(seed, Config::tiny(D))
+}
+
+/// A model of `config` with 3 music columns, its weights drawn from `seed`.
+fn model_with(seed: i64, config: Config) -> (nn::VarStore, DanceNet) {
     tch::manual_seed(seed);
     let vs = nn::VarStore::new(Device::Cpu);
     let m = DanceNet::new(
         &vs.root(),
         Config {
             music_dim: 3,
-            ..Config::tiny(D)
+            ..config
         },
     );
     (vs, m)
@@ -73,12 +78,9 @@ fn the_receptive_field_is_one_plus_the_dilations() {
 fn stepwise_sampling_follows_the_parallel_pass() {
     // With temperature 0 and one component the sample is the mean: feeding it back through the
     // teacher-forced pass must reproduce every step.
-    tch::manual_seed(2);
-    let vs = nn::VarStore::new(Device::Cpu);
-    let m = DanceNet::new(
-        &vs.root(),
+    let (_vs, m) = model_with(
+        2,
         Config {
-            music_dim: 3,
             mixtures: 1,
             ..Config::tiny(D)
         },
@@ -203,12 +205,9 @@ fn coherent_draws_keep_each_frames_spread_and_move_together() {
 
 #[test]
 fn with_music_direct_a_beat_reaches_the_decoder_on_its_own_frame() {
-    tch::manual_seed(6);
-    let vs = nn::VarStore::new(Device::Cpu);
-    let m = DanceNet::new(
-        &vs.root(),
+    let (_vs, m) = model_with(
+        6,
         Config {
-            music_dim: 3,
             music_direct: true,
             ..Config::tiny(D)
         },

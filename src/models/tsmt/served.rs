@@ -255,8 +255,9 @@ impl Served {
                 // A freeze later in the song: from where it starts, the rest is drawn again from
                 // the next candidate clip, joined to the frozen frames over JOIN_FRAMES (below).
                 let mut joins = Vec::new();
-                if let (Some((reach, _)), Some(guard)) = (check, guard) {
-                    let mut after = frames_checked(check);
+                if let (Some((reach, checked)), Some(guard)) = (check, guard) {
+                    // The opening check has seen the first `checked` frames already.
+                    let mut after = checked;
                     for c in &contexts[kept + 1..] {
                         let Some(from) =
                             frozen_from(&tokens, guard.0.window_frames, guard.1, reach, after)
@@ -327,11 +328,6 @@ type Joined = (Array2<i64>, Vec<(usize, Array2<i64>)>);
 
 /// A rest drawn again after a freeze fades in over this many frames (1 s at 25 fps).
 const JOIN_FRAMES: usize = 25;
-
-/// Frames of the song the opening check has already seen (none without the check).
-fn frames_checked(check: Option<(f32, usize)>) -> usize {
-    check.map_or(0, |(_, frames)| frames)
-}
 
 /// Whether an opening's tokens freeze ([`frozen_from`] from the first frame).
 fn opening_frozen(tokens: &Array2<i64>, window: usize, widths: &[f32], reach: f32) -> bool {
