@@ -55,8 +55,13 @@ pub const OPENING_CHECK: OpeningCheck = OpeningCheck {
     arms_m_s: [0.5, 1.3],
 };
 
-/// Warm-up frames served: 3 s.
-pub const WARM_UP_FRAMES: i64 = 75;
+/// Warm-up frames served: 10 s (the song's first 10 s, or the whole song when shorter). With 3 s
+/// the opening was still `h_0`'s more than the song's: seed 0 danced the 5-s trumpet loop and the
+/// first 5 s of sugar_plum_fairy 0.11 m apart (root-relative; two real dances are 0.34 m apart),
+/// and its calm draw played back under the verdict's 0.5 m/s on the loop and on DANCE_W_8. After
+/// 10 s of the song the state is the song's: 0.30 m apart, 0.63 m/s and more (model card). Longer
+/// is not better: the calm draws of two seeds can then forget `h_0` altogether (model card).
+pub const WARM_UP_FRAMES: i64 = 250;
 
 impl Serving {
     /// What `choreo train` writes: the served guard and warm-up.
