@@ -553,6 +553,12 @@ pub struct Serving {
 /// so without it one seed opened every song of a style alike (model card).
 pub const WARM_UP_FRAMES: usize = 250;
 
+/// The served music guidance ([`Sampling::music_guidance`]): 3. The network hears the song
+/// weakly (the same seed on two songs of one style opened 0.11 m apart, where two real dances are
+/// 0.34 apart); with each frame's music amplified three times against the song's average, 0.16 at
+/// the closest over seeds 0–2 on eight songs (model card).
+pub const MUSIC_GUIDANCE: f64 = 3.0;
+
 /// The served check of a draw's opening ([`crate::models::opening_check::OpeningCheck`]): the
 /// first 20 s after the warm-up, 6 draws (the seed's stream and clip, then others derived from
 /// it), inside the real dances' ranges with a margin.

@@ -36,38 +36,52 @@ impl DanceNet {
         let dev = code.device();
         let style = self.style_one_hot(&[style], dev); // [1, styles, 1]
         let code_t = code.transpose(0, 1).unsqueeze(0); // [1, d_code, m − 1 + n]
-        let conds: Vec<Tensor> = self
-            .decoder
-            .layers
+
+        // Branch 0 hears the song; with music guidance (`Sampling::music_guidance` ≠ 1) branch 1
+        // hears the song's average code on every frame, and the mixture's weights and means are
+        // pushed from branch 1's along the difference, so what a frame's music adds to the song's
+        // average is amplified.
+        let guidance = sampling.music_guidance as f32;
+        let mut codes = vec![code_t.shallow_clone()];
+        if guidance != 1.0 {
+            codes.push(code_t.mean_dim(2, true, Kind::Float).expand_as(&code_t));
+        }
+        let branches: Vec<Vec<Tensor>> = codes
             .iter()
-            .map(|l| l.conditioning(&code_t, &style))
-            .collect(); // [1, 2C, m − 1 + n]
-                        // The context but its last frame, as one teacher-forced pass; each layer keeps the inputs
-                        // of its last `dilation` positions.
-        let mut queues: Vec<std::collections::VecDeque<Tensor>> = self
-            .decoder
-            .layers
+            .map(|code_t| {
+                self.decoder
+                    .layers
+                    .iter()
+                    .map(|l| l.conditioning(code_t, &style))
+                    .collect() // [1, 2C, m − 1 + n]
+            })
+            .collect();
+        // The context but its last frame, as one teacher-forced pass per branch; each layer keeps
+        // the inputs of its last `dilation` positions.
+        let mut queues: Vec<Vec<std::collections::VecDeque<Tensor>>> = branches
             .iter()
-            .map(|_| std::collections::VecDeque::new())
+            .map(|_| {
+                self.decoder
+                    .layers
+                    .iter()
+                    .map(|_| std::collections::VecDeque::new())
+                    .collect()
+            })
             .collect();
         if m > 1 {
             let x = crate::models::to_tensor(&prefix.slice(ndarray::s![..m - 1, ..]).to_owned())
                 .to_device(dev)
                 .transpose(0, 1)
                 .unsqueeze(0);
-            let mut h = x.apply(&self.decoder.input); // [1, C, m − 1]
-            for ((l, cond), q) in self
-                .decoder
-                .layers
-                .iter()
-                .zip(&conds)
-                .zip(queues.iter_mut())
-            {
-                let keep = (m - 1).min(l.dilation as usize);
-                for t in m - 1 - keep..m - 1 {
-                    q.push_back(h.get(0).select(1, t as i64));
+            for (conds, queues) in branches.iter().zip(queues.iter_mut()) {
+                let mut h = x.apply(&self.decoder.input); // [1, C, m − 1]
+                for ((l, cond), q) in self.decoder.layers.iter().zip(conds).zip(queues.iter_mut()) {
+                    let keep = (m - 1).min(l.dilation as usize);
+                    for t in m - 1 - keep..m - 1 {
+                        q.push_back(h.get(0).select(1, t as i64));
+                    }
+                    h = l.forward(&h, &cond.narrow(2, 0, (m - 1) as i64)).0;
                 }
-                h = l.forward(&h, &cond.narrow(2, 0, (m - 1) as i64)).0;
             }
         }
         // Per layer: taps at t − d and t `[2C, C]`, conditioning rows `[m − 1 + n, 2C]`, and the
@@ -80,20 +94,27 @@ impl DanceNet {
                 .unwrap_or_else(|| Tensor::zeros([conv.ws.size()[0]], (Kind::Float, dev)));
             (conv.ws.squeeze_dim(-1), b)
         };
-        let layers: Vec<_> = self
+        let taps: Vec<_> = self
             .decoder
             .layers
             .iter()
-            .zip(&conds)
-            .map(|(l, cond)| {
+            .map(|l| {
                 (
                     l.conv.ws.select(2, 0),
                     l.conv.ws.select(2, 1),
-                    cond.squeeze_dim(0).transpose(0, 1).contiguous(),
                     mat(&l.res),
                     mat(&l.skip),
                     l.dilation as usize,
                 )
+            })
+            .collect();
+        let rows: Vec<Vec<Tensor>> = branches
+            .iter()
+            .map(|conds| {
+                conds
+                    .iter()
+                    .map(|cond| cond.squeeze_dim(0).transpose(0, 1).contiguous())
+                    .collect()
             })
             .collect();
         let (w_in, b_in) = mat(&self.decoder.input);
@@ -110,32 +131,44 @@ impl DanceNet {
         let mut draws = Draws::new(d, rng);
         for t in 0..n {
             let row = (m - 1 + t) as i64;
-            let mut h = w_in.mv(&Tensor::from_slice(&frame).to_device(dev)) + &b_in;
-            let mut skip: Option<Tensor> = None;
-            for ((w_past, w_now, cond, (w_res, b_res), (w_skip, b_skip), dilation), q) in
-                layers.iter().zip(queues.iter_mut())
-            {
-                let past = if q.len() >= *dilation {
-                    q[q.len() - dilation].shallow_clone()
-                } else {
-                    zeros.shallow_clone()
-                };
-                let z = w_past.mv(&past) + w_now.mv(&h) + cond.get(row);
-                let zs = z.chunk(2, 0);
-                let g = zs[0].tanh() * zs[1].sigmoid();
-                let sk = w_skip.mv(&g) + b_skip;
-                skip = Some(match skip {
-                    Some(a) => a + sk,
-                    None => sk,
-                });
-                q.push_back(h.shallow_clone());
-                while q.len() > *dilation {
-                    q.pop_front();
+            let input = w_in.mv(&Tensor::from_slice(&frame).to_device(dev)) + &b_in;
+            let mut raws = Vec::with_capacity(rows.len());
+            for (conds, queues) in rows.iter().zip(queues.iter_mut()) {
+                let mut h = input.shallow_clone();
+                let mut skip: Option<Tensor> = None;
+                for (((w_past, w_now, (w_res, b_res), (w_skip, b_skip), dilation), cond), q) in
+                    taps.iter().zip(conds).zip(queues.iter_mut())
+                {
+                    let past = if q.len() >= *dilation {
+                        q[q.len() - dilation].shallow_clone()
+                    } else {
+                        zeros.shallow_clone()
+                    };
+                    let z = w_past.mv(&past) + w_now.mv(&h) + cond.get(row);
+                    let zs = z.chunk(2, 0);
+                    let g = zs[0].tanh() * zs[1].sigmoid();
+                    let sk = w_skip.mv(&g) + b_skip;
+                    skip = Some(match skip {
+                        Some(a) => a + sk,
+                        None => sk,
+                    });
+                    q.push_back(h.shallow_clone());
+                    while q.len() > *dilation {
+                        q.pop_front();
+                    }
+                    h = h + w_res.mv(&g) + b_res;
                 }
-                h = h + w_res.mv(&g) + b_res;
+                let raw = w_out.mv(&(w_head.mv(&skip?.relu()) + &b_head).relu()) + &b_out;
+                raws.push(Vec::<f32>::try_from(raw).ok()?);
             }
-            let raw = w_out.mv(&(w_head.mv(&skip?.relu()) + &b_head).relu()) + &b_out;
-            let raw: Vec<f32> = Vec::<f32>::try_from(raw).ok()?;
+            let mut raw = raws.swap_remove(0);
+            if let Some(average) = raws.first() {
+                // The mixture's weights and means guided; the spreads stay the song's branch's.
+                let (w, mu) = (k, k + k * d);
+                for i in (0..w).chain(w..mu) {
+                    raw[i] = average[i] + guidance * (raw[i] - average[i]);
+                }
+            }
             let mut base = frame[..d].to_vec();
             base[..c.absolute_dims as usize].fill(0.0);
             let next = sampling.draw(
@@ -165,11 +198,26 @@ impl DanceNet {
 /// frame is still a draw from its own mixture, but neighbouring frames' draws move together, so
 /// the dance does not shiver at 25 fps with independent noise (not in the paper; the model card
 /// shows both).
+///
+/// `music_guidance` g (not in the paper): each frame's mixture weights and means are those of
+/// the song's average music plus g times what this frame's music changes in them (guidance as
+/// in classifier-free guidance, with the song's mean code in place of no music). 1: the
+/// network as trained.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 pub struct Sampling {
     pub temperature: f64,
     #[serde(default)]
     pub coherence: f64,
+    #[serde(default = "no_guidance", skip_serializing_if = "is_no_guidance")]
+    pub music_guidance: f64,
+}
+
+fn no_guidance() -> f64 {
+    1.0
+}
+
+fn is_no_guidance(g: &f64) -> bool {
+    *g == 1.0
 }
 
 impl Default for Sampling {
@@ -177,6 +225,7 @@ impl Default for Sampling {
         Self {
             temperature: 1.0,
             coherence: 0.0,
+            music_guidance: 1.0,
         }
     }
 }

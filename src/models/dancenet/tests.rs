@@ -99,6 +99,7 @@ fn stepwise_sampling_follows_the_parallel_pass() {
             Sampling {
                 temperature: 0.0,
                 coherence: 0.0,
+                music_guidance: 1.0,
             },
             &mut rng,
             |_| true,
@@ -114,6 +115,66 @@ fn stepwise_sampling_follows_the_parallel_pass() {
         let d = (want - got).abs().max().double_value(&[]);
         assert!(d < 1e-4, "step {t} differs by {d}");
     }
+}
+
+/// Music guidance: a frame's mean is the song's average music's plus g times what this frame's
+/// music changes in it, on the first frame exactly; and a song whose code never changes is
+/// danced as without guidance.
+#[test]
+fn music_guidance_amplifies_what_each_frames_music_changes() {
+    let (_vs, m) = model_with(
+        4,
+        Config {
+            mixtures: 1,
+            ..Config::tiny(D)
+        },
+    );
+    let prefix = Array2::from_shape_fn((10, (D + 4) as usize), |(t, c)| {
+        ((t * 5 + c * 2) % 7) as f32 * 0.2 - 0.6
+    });
+    let n = 8;
+    let plain = Sampling {
+        temperature: 0.0,
+        coherence: 0.0,
+        music_guidance: 1.0,
+    };
+    let guided = Sampling {
+        music_guidance: 3.0,
+        ..plain
+    };
+    let sample = |code: &Tensor, s: Sampling| {
+        let mut rng = StdRng::seed_from_u64(0);
+        m.sample(&prefix, &code.narrow(0, 1, 9 + n), 1, s, &mut rng, |_| true)
+            .expect("sampled")
+    };
+    // A song that never changes: the average is every frame's code.
+    let still = Tensor::randn([1, 4], (Kind::Float, Device::Cpu)).repeat([10 + n, 1]);
+    let (a, b) = (sample(&still, plain), sample(&still, guided));
+    let d = (&a - &b).mapv(f32::abs).fold(0.0f32, |x, &y| x.max(y));
+    assert!(d < 1e-5, "an unchanging song moved by {d}");
+    // A changing song: the first made frame's mean, from the two teacher-forced passes (the
+    // tiny configuration's means are absolute, and position 9 sees the prefix only).
+    let code = Tensor::randn([10 + n, 4], (Kind::Float, Device::Cpu));
+    let out = sample(&code, guided);
+    let all = ndarray::concatenate(ndarray::Axis(0), &[prefix.view(), out.view()]).unwrap();
+    let x = crate::models::to_tensor(&all).unsqueeze(0);
+    let style = m.style_one_hot(&[1], Device::Cpu);
+    let average = code
+        .narrow(0, 1, 9 + n)
+        .mean_dim(0, true, Kind::Float)
+        .repeat([10 + n, 1]);
+    let mean = |c: &Tensor| {
+        m.forward(&x, &c.unsqueeze(0), &style)
+            .mean
+            .get(0)
+            .get(9)
+            .get(0)
+    };
+    let (with, without) = (mean(&code), mean(&average));
+    let want = &without + (&with - &without) * 3.0;
+    let got = Tensor::from_slice(&out.row(0).to_vec()[..D as usize]);
+    let d = (want - got).abs().max().double_value(&[]);
+    assert!(d < 1e-4, "the first guided frame differs by {d}");
 }
 
 #[test]
@@ -180,6 +241,7 @@ fn coherent_draws_keep_each_frames_spread_and_move_together() {
         let s = Sampling {
             temperature: 2.0,
             coherence: rho,
+            music_guidance: 1.0,
         };
         let mut rng = StdRng::seed_from_u64(1);
         let mut draws = Draws::new(1, &mut rng);

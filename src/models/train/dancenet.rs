@@ -326,6 +326,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             sampling: Sampling {
                 temperature: opts.temperature,
                 coherence: opts.coherence,
+                music_guidance: crate::models::dancenet::MUSIC_GUIDANCE,
             },
             smooth_frames: opts.smooth_frames,
             beat_time: None,
