@@ -247,7 +247,13 @@ async fn a_real_jobs_glb_carries_a_mannequin_blender_follows_and_uploads_as_a_ri
         for (joint, v) in r["joints"].as_object().expect("joints") {
             let rest = v["rest_distance_m"].as_f64().expect("rest");
             let worst = v["max_distance_m"].as_f64().expect("max");
-            assert!(rest < 0.04, "{joint}: nearest vertex {rest} m away at rest");
+            // At rest the nearest vertex is on the round end of a capsule that meets the joint,
+            // one radius away: 0.2 of the bone's length, at most 0.055 m (`motion::mannequin`).
+            // The bone lengths are the dance's own (seed 3's forearm gives the left wrist 0.041).
+            assert!(
+                rest <= 0.055,
+                "{joint}: nearest vertex {rest} m away at rest"
+            );
             // The skin follows the joint within 2 cm of where it sat at rest, on every sampled frame.
             assert!(
                 worst < rest + 0.02,
