@@ -163,9 +163,9 @@ impl DanceNet {
             }
             let mut raw = raws.swap_remove(0);
             if let Some(average) = raws.first() {
-                // The mixture's weights and means guided; the spreads stay the song's branch's.
-                let (w, mu) = (k, k + k * d);
-                for i in (0..w).chain(w..mu) {
+                // The mixture's weights and means (its first k + k·d outputs) guided; the
+                // spreads after them stay the song's branch's.
+                for i in 0..k + k * d {
                     raw[i] = average[i] + guidance * (raw[i] - average[i]);
                 }
             }
