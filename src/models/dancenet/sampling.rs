@@ -17,10 +17,17 @@ impl DanceNet {
     /// one frame against queues of their past inputs (the dilated convolution needs only the
     /// input `d` frames back), so a frame costs the same however long the song.
     /// `on_step(done)` is called before the first frame and every 250 frames, and may stop it.
+    ///
+    /// `average` (`[1, d_code]`, or `code`'s shape for one per row) is what music guidance's
+    /// second branch hears: the serving passes the average of the whole dance's rows when it
+    /// draws only the dance's first frames (the opening check), so they are guided as the whole
+    /// dance's are. `None`: the mean of `code`.
+    #[allow(clippy::too_many_arguments)]
     pub fn sample(
         &self,
         prefix: &Array2<f32>,
         code: &Tensor,
+        average: Option<&Tensor>,
         style: usize,
         sampling: Sampling,
         rng: &mut StdRng,
@@ -44,7 +51,14 @@ impl DanceNet {
         let guidance = sampling.music_guidance as f32;
         let mut codes = vec![code_t.shallow_clone()];
         if guidance != 1.0 {
-            codes.push(code_t.mean_dim(2, true, Kind::Float).expand_as(&code_t));
+            codes.push(match average {
+                Some(a) => a
+                    .to_device(dev)
+                    .transpose(0, 1)
+                    .unsqueeze(0)
+                    .expand_as(&code_t),
+                None => code_t.mean_dim(2, true, Kind::Float).expand_as(&code_t),
+            });
         }
         let branches: Vec<Vec<Tensor>> = codes
             .iter()

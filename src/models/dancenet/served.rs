@@ -7,7 +7,7 @@ use std::path::Path;
 use ndarray::{concatenate, s, Array2, Axis};
 use rand::rngs::StdRng;
 use rand::SeedableRng;
-use tch::Tensor;
+use tch::{Kind, Tensor};
 
 use super::style::ServedStyle;
 use super::{DanceNet, ModelFile, Sampling, ID};
@@ -292,23 +292,20 @@ impl Draw<'_> {
         let ctx = context.slice(s![m - tail.., ..]).to_owned();
         // Conditioning rows: a seed motion is danced over the song's opening, so its frames
         // have the song's code; a context from elsewhere (a clip from another dance, or
-        // the warm-up's last frames) gets the opening's first code, then `codes` follow.
-        let after_context = |codes: Tensor| {
-            Tensor::cat(
-                &[
-                    self.code.narrow(0, 0, 1).repeat([(tail - 1) as i64, 1]),
-                    codes,
-                ],
-                0,
-            )
+        // the warm-up's last frames) gets the opening's first code, then the song's follow.
+        let all = n - opening;
+        let rows_of = |made: usize| {
+            if opening > 0 {
+                self.code
+                    .narrow(0, (opening - tail + 1) as i64, (made + tail - 1) as i64)
+            } else {
+                after_context(self.code, self.code.narrow(0, 0, made as i64), tail)
+            }
         };
-        let made = limit.unwrap_or(n - opening).min(n - opening);
-        let rows = if opening > 0 {
-            self.code
-                .narrow(0, (opening - tail + 1) as i64, (made + tail - 1) as i64)
-        } else {
-            after_context(self.code.narrow(0, 0, made as i64))
-        };
+        let rows = rows_of(limit.unwrap_or(all).min(all));
+        // Music guidance guides against the whole dance's average even when only its first
+        // `limit` frames are drawn, so the opening check judges the opening the dance dances.
+        let average = rows_of(all).mean_dim(0, true, Kind::Float); // [1, d_code]
         let mut rng = StdRng::seed_from_u64(seed ^ 0xDA_2CE_2E7);
         // The warm-up (not in the paper): from a drawn clip, the network first dances
         // `warm` frames over the song's own music (from its start, cycled when the
@@ -321,13 +318,13 @@ impl Draw<'_> {
         };
         let ctx = if opening == 0 && warm > 0 {
             let idx: Vec<i64> = (0..warm).map(|t| (t % n) as i64).collect();
-            let warm_rows = after_context(
-                self.code
-                    .index_select(0, &Tensor::from_slice(&idx).to_device(self.code.device())),
-            );
+            let idx = Tensor::from_slice(&idx).to_device(self.code.device());
+            let warm_rows = after_context(self.code, self.code.index_select(0, &idx), tail);
+            // The warm-up is guided against its own rows' average (`None`).
             let danced = self.model.sample(
                 &ctx,
                 &warm_rows,
+                None,
                 self.style,
                 self.sampling,
                 &mut rng,
@@ -337,9 +334,26 @@ impl Draw<'_> {
         } else {
             ctx
         };
-        self.model
-            .sample(&ctx, &rows, self.style, self.sampling, &mut rng, on_step)
+        self.model.sample(
+            &ctx,
+            &rows,
+            Some(&average),
+            self.style,
+            self.sampling,
+            &mut rng,
+            on_step,
+        )
     }
+}
+
+/// Conditioning after a context of `tail` frames from elsewhere (a clip from another dance, or
+/// the warm-up's last frames): the context's frames after its first get the song's first code,
+/// then `rows` follow.
+fn after_context(code: &Tensor, rows: Tensor, tail: usize) -> Tensor {
+    Tensor::cat(
+        &[code.narrow(0, 0, 1).repeat([(tail - 1) as i64, 1]), rows],
+        0,
+    )
 }
 
 impl DanceModel for Served {
@@ -368,5 +382,51 @@ impl DanceModel for Served {
             beat_time: clock.used(self.file.extra.beat_time),
             opening: g.opening,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::models::dancenet::Config;
+    use tch::{nn, Device};
+
+    /// The opening check draws only a dance's first frames and judges them: with music guidance
+    /// they must be the first frames of the whole dance, drawn against the same average.
+    #[test]
+    fn a_draw_of_the_first_frames_is_the_opening_of_the_whole_draw() {
+        tch::manual_seed(3);
+        let vs = nn::VarStore::new(Device::Cpu);
+        let d = 6;
+        let config = Config {
+            music_dim: 3,
+            ..Config::tiny(d)
+        };
+        let model = DanceNet::new(&vs.root(), config.clone());
+        let n = 60;
+        let code = Tensor::randn([n, config.d_code], (Kind::Float, Device::Cpu));
+        let context = Array2::from_shape_fn((12, (d + 4) as usize), |(t, c)| {
+            ((t * 3 + c) % 5) as f32 * 0.3 - 0.6
+        });
+        let draw = Draw {
+            model: &model,
+            code: &code,
+            tail: config.receptive_field() as usize + 1,
+            n: n as usize,
+            opening: 0,
+            warm: 20,
+            style: 1,
+            sampling: Sampling {
+                temperature: 1.0,
+                coherence: 0.5,
+                music_guidance: 3.0,
+            },
+        };
+        let whole = draw.dance(&context, 7, None, &mut |_| true).expect("drawn");
+        let first = draw
+            .dance(&context, 7, Some(25), &mut |_| true)
+            .expect("drawn");
+        assert_eq!(whole.nrows(), n as usize);
+        assert_eq!(first, whole.slice(s![..25, ..]).to_owned());
     }
 }

@@ -95,6 +95,7 @@ fn stepwise_sampling_follows_the_parallel_pass() {
         .sample(
             &prefix,
             &code.narrow(0, 1, 9 + n),
+            None,
             1,
             Sampling {
                 temperature: 0.0,
@@ -142,27 +143,36 @@ fn music_guidance_amplifies_what_each_frames_music_changes() {
         music_guidance: 3.0,
         ..plain
     };
-    let sample = |code: &Tensor, s: Sampling| {
+    let sample = |code: &Tensor, average: Option<&Tensor>, s: Sampling| {
         let mut rng = StdRng::seed_from_u64(0);
-        m.sample(&prefix, &code.narrow(0, 1, 9 + n), 1, s, &mut rng, |_| true)
-            .expect("sampled")
+        m.sample(
+            &prefix,
+            &code.narrow(0, 1, 9 + n),
+            average,
+            1,
+            s,
+            &mut rng,
+            |_| true,
+        )
+        .expect("sampled")
     };
     // A song that never changes: the average is every frame's code.
     let still = Tensor::randn([1, 4], (Kind::Float, Device::Cpu)).repeat([10 + n, 1]);
-    let (a, b) = (sample(&still, plain), sample(&still, guided));
+    let (a, b) = (sample(&still, None, plain), sample(&still, None, guided));
     let d = (&a - &b).mapv(f32::abs).fold(0.0f32, |x, &y| x.max(y));
     assert!(d < 1e-5, "an unchanging song moved by {d}");
-    // A changing song: the first made frame's mean, from the two teacher-forced passes (the
-    // tiny configuration's means are absolute, and position 9 sees the prefix only).
+    // A changing song, guided against an average handed in (the whole song's, as served, where
+    // the sampled span is only part of it): the first made frame's mean, from the two
+    // teacher-forced passes (the tiny configuration's means are absolute, and position 9 sees
+    // the prefix only).
     let code = Tensor::randn([10 + n, 4], (Kind::Float, Device::Cpu));
-    let out = sample(&code, guided);
+    let song = Tensor::randn([60, 4], (Kind::Float, Device::Cpu));
+    let song_average = song.mean_dim(0, true, Kind::Float).repeat([9 + n, 1]);
+    let out = sample(&code, Some(&song_average), guided);
     let all = ndarray::concatenate(ndarray::Axis(0), &[prefix.view(), out.view()]).unwrap();
     let x = crate::models::to_tensor(&all).unsqueeze(0);
     let style = m.style_one_hot(&[1], Device::Cpu);
-    let average = code
-        .narrow(0, 1, 9 + n)
-        .mean_dim(0, true, Kind::Float)
-        .repeat([10 + n, 1]);
+    let average = song.mean_dim(0, true, Kind::Float).repeat([10 + n, 1]);
     let mean = |c: &Tensor| {
         m.forward(&x, &c.unsqueeze(0), &style)
             .mean
@@ -187,6 +197,7 @@ fn same_seed_same_dance_other_seed_other_dance() {
         m.sample(
             &prefix,
             &code,
+            None,
             3,
             s,
             &mut StdRng::seed_from_u64(seed),
