@@ -405,21 +405,11 @@ fn tsmt_opens_again_from_another_clip_where_it_would_freeze() {
 /// The longest stretch (s) within the first `within_s` seconds over which the mean joint speed,
 /// averaged over each second, stays under `under` m/s: a held pose.
 fn longest_hold_s(motion: &Motion, within_s: f64, under: f64) -> f64 {
-    let p = &motion.positions;
-    let frames = p.shape()[0].min((within_s * motion.fps) as usize);
-    let speed: Vec<f64> = (1..frames)
-        .map(|t| {
-            let moved: f64 = (0..p.shape()[1])
-                .map(|j| {
-                    (0..3)
-                        .map(|c| f64::from(p[[t, j, c]] - p[[t - 1, j, c]]).powi(2))
-                        .sum::<f64>()
-                        .sqrt()
-                })
-                .sum();
-            moved / p.shape()[1] as f64 * motion.fps
-        })
-        .collect();
+    let frames = motion.positions.shape()[0].min((within_s * motion.fps) as usize);
+    let speed = choreo::motion::skeleton::mean_speed(
+        motion.positions.slice(ndarray::s![..frames, .., ..]),
+        motion.fps,
+    );
     let w = motion.fps as usize;
     let (mut run, mut longest) = (0usize, 0usize);
     for end in w..=speed.len() {

@@ -294,18 +294,17 @@ impl Draw<'_> {
         // have the song's code; a context from elsewhere (a clip from another dance, or
         // the warm-up's last frames) gets the opening's first code, then the song's follow.
         let all = n - opening;
-        let rows_of = |made: usize| {
-            if opening > 0 {
-                self.code
-                    .narrow(0, (opening - tail + 1) as i64, (made + tail - 1) as i64)
-            } else {
-                after_context(self.code, self.code.narrow(0, 0, made as i64), tail)
-            }
+        let whole = if opening > 0 {
+            self.code
+                .narrow(0, (opening - tail + 1) as i64, (all + tail - 1) as i64)
+        } else {
+            after_context(self.code, self.code.narrow(0, 0, all as i64), tail)
         };
-        let rows = rows_of(limit.unwrap_or(all).min(all));
+        let made = limit.unwrap_or(all).min(all);
+        let rows = whole.narrow(0, 0, (made + tail - 1) as i64);
         // Music guidance guides against the whole dance's average even when only its first
         // `limit` frames are drawn, so the opening check judges the opening the dance dances.
-        let average = rows_of(all).mean_dim(0, true, Kind::Float); // [1, d_code]
+        let average = whole.mean_dim(0, true, Kind::Float); // [1, d_code]
         let mut rng = StdRng::seed_from_u64(seed ^ 0xDA_2CE_2E7);
         // The warm-up (not in the paper): from a drawn clip, the network first dances
         // `warm` frames over the song's own music (from its start, cycled when the

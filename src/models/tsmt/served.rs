@@ -227,7 +227,6 @@ impl Served {
                 if let (Some((reach, frames)), Some(guard)) = (check, guard) {
                     let head = rest.narrow(0, 0, frames as i64);
                     let mut unfrozen = None;
-                    kept = contexts.len() - 1;
                     for (i, c) in contexts.iter().enumerate() {
                         let Some(tokens) =
                             model.sample_guarded(c, &head, sampling, Some(guard), req.seed, |_| {
@@ -246,7 +245,7 @@ impl Served {
                             unfrozen = Some(i);
                         }
                     }
-                    kept = unfrozen.unwrap_or(kept);
+                    kept = unfrozen.unwrap_or(contexts.len() - 1);
                 }
                 let Some(mut tokens) = model.sample_guarded(
                     &contexts[kept],
