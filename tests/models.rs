@@ -10,7 +10,7 @@ use choreo::models::{
     Cancelled, DanceModel, DanceStyle, GenerateRequest, ModelError, ModelId, Progress, Registry,
 };
 use choreo::motion::validate::song_frames;
-use choreo::motion::{KeyPose, Motion, MOTION_FPS, NUM_JOINTS};
+use choreo::motion::{KeyPose, Motion, MotionStages, MOTION_FPS, NUM_JOINTS};
 use choreo::stage::Stage;
 use std::sync::{Arc, OnceLock};
 
@@ -291,6 +291,33 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
         (ratio / (1.1 / 0.85) - 1.0).abs() < 0.08,
         "steps at {slow:.3} Hz (0.85×) and {fast:.3} Hz (1.1×): ratio {ratio:.3}, a follower 1.294"
     );
+}
+
+/// The beat-align stage serves a dance that steps on the beat as it came where every warp of it
+/// would take it off. dancenet on hungarian_dance_5 at 1.2×, seed 1, planted but not warped,
+/// steps at 0.507 of the beat rate; the warps did not step on the beat, and the one of least cost
+/// (onto every other beat) was served at 0.087, a sway (eval 2026-11-28: 13/20 of the shared
+/// songs at 0.85× and 1.2× tempo-locked, one of the seven misses). The whole chain a job runs:
+/// the model, the stages, the rigid fit.
+#[test]
+fn dancenet_is_served_on_the_beat_where_every_warp_would_take_it_off() {
+    let m = model("dancenet");
+    let song = stretched_song("hungarian_dance_5.ogg", 60.0, 1.2);
+    let analysis = audio::analyze(&song).expect("analysis");
+    let mut req = GenerateRequest::plain(&song, 1);
+    req.analysis = Some(&analysis);
+    let motion = dance(m.as_ref(), &req);
+    let beats = &analysis.beat_times;
+    let (finished, summary) =
+        choreo::motion::after_model(motion, beats, &[], 0, MotionStages::default());
+    let served = choreo::motion::serve(&finished, &[], true, 0)
+        .expect("served")
+        .motion;
+    let lock = choreo::metrics::musicality::tempo_lock(served.positions.view(), served.fps, beats)
+        .expect("a step rate");
+    let summary = summary.expect("the stage ran");
+    assert!(lock.locked, "{lock:?} {summary:?}");
+    assert!(summary.steps_on_beat && !summary.applied, "{summary:?}");
 }
 
 /// dance-revolution's decoder is deterministic once `h_0` is drawn, and the draw sets the dance's

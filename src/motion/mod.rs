@@ -111,7 +111,17 @@ pub fn after_model(
     fixed.extend((0..=seed_frames.min(motion.num_frames())).map(|f| f as f64 / motion.fps));
     // `finish` without planting changes nothing, so then the stage reads the network's rhythm only.
     let plant = stages.plant_feet.then_some(|m| finish(m, true));
-    let (mut aligned, summary) = beat_align::align_served(motion, beat_times_s, &fixed, plant);
+    // What a candidate becomes when served: its seed put back and the rigid skeleton fitted, as
+    // the caller's [`serve`] does after this.
+    let judge = |m: &Motion| {
+        let mut m = m.clone();
+        keep_seed(&mut m, seed.view());
+        serve(&m, key_poses, stages.plant_feet, seed_frames)
+            .ok()
+            .map(|s| s.motion)
+    };
+    let (mut aligned, summary) =
+        beat_align::align_served(motion, beat_times_s, &fixed, plant, Some(judge));
     keep_seed(&mut aligned, seed.view());
     (aligned, Some(summary))
 }
