@@ -338,11 +338,11 @@ struct OnBeat {
 }
 
 /// Whether `motion` steps at a fraction of the song's beat rate: the ankles' spectral peak (as
-/// [`rhythm`] reads it, the metric's) within the lock tolerance of one of [`GRID_FRACTIONS`] × it.
+/// [`step_rate`] reads it at [`CHECK_ZERO_PAD`], the metric's) within the lock tolerance of one of [`GRID_FRACTIONS`] × it.
 fn on_beat(motion: &Motion, beat_times_s: &[f64]) -> Option<OnBeat> {
     let fps = motion.fps;
     let clock = BeatClock::new(beat_times_s, motion.num_frames() as f64 / fps)?;
-    let (step_hz, _) = rhythm(
+    let (step_hz, _) = step_rate(
         &ankle_speed(motion.positions.view(), fps),
         fps,
         CHECK_ZERO_PAD,
@@ -459,7 +459,7 @@ fn plan_at(
         return Err("fewer than 4 beats within the dance");
     };
     let speed = ankle_speed(motion.positions.view(), fps);
-    let Some((step_hz, filtered)) = rhythm(&speed, fps, PLAN_ZERO_PAD) else {
+    let Some((step_hz, filtered)) = rhythm(&speed, fps) else {
         return Err("no step rate: the ankles do not move");
     };
     let kin = kinematic_beats(&filtered, fps, step_hz);
@@ -606,23 +606,22 @@ const PLAN_ZERO_PAD: usize = 8;
 const CHECK_ZERO_PAD: usize = 16;
 
 /// The step rate (Hz: the peak within [`STEP_BAND_HZ`] of the Hann-windowed spectrum
-/// zero-padded to `zero_pad` × its length, as the metric finds it) and the speed band-passed
-/// around it.
-fn rhythm(speed: &[f64], fps: f64, zero_pad: usize) -> Option<(f64, Vec<f64>)> {
+/// zero-padded to `zero_pad` × its length, as the metric finds it), with the speed centred on
+/// its mean; `None` where the speed does not change.
+fn step_rate(speed: &[f64], fps: f64, zero_pad: usize) -> Option<(f64, Vec<f64>)> {
     let n = speed.len();
     let mean = speed.iter().sum::<f64>() / n.max(1) as f64;
     let centred: Vec<f64> = speed.iter().map(|v| v - mean).collect();
     if n < 2 || centred.iter().all(|v| v.abs() < 1e-9) {
         return None;
     }
-    let mut planner = RealFftPlanner::<f64>::new();
-    // The peak: Hann window (symmetric, numpy's), zero-padded to interpolate between bins.
+    // Hann window (symmetric, numpy's), zero-padded to interpolate between bins.
     let padded = zero_pad * n;
     let mut input = vec![0.0; padded];
     for (i, v) in centred.iter().enumerate() {
         input[i] = v * (0.5 - 0.5 * (std::f64::consts::TAU * i as f64 / (n - 1) as f64).cos());
     }
-    let fft = planner.plan_fft_forward(padded);
+    let fft = RealFftPlanner::<f64>::new().plan_fft_forward(padded);
     let mut spectrum = fft.make_output_vec();
     fft.process(&mut input, &mut spectrum).ok()?;
     let bin_hz = fps / padded as f64;
@@ -633,6 +632,14 @@ fn rhythm(speed: &[f64], fps: f64, zero_pad: usize) -> Option<(f64, Vec<f64>)> {
         .filter(|(f, _)| (STEP_BAND_HZ.0..=STEP_BAND_HZ.1).contains(f))
         .max_by(|a, b| a.1.total_cmp(&b.1))
         .map(|(f, _)| f)?;
+    Some((step_hz, centred))
+}
+
+/// The step rate ([`step_rate`] at [`PLAN_ZERO_PAD`]) and the speed band-passed around it.
+fn rhythm(speed: &[f64], fps: f64) -> Option<(f64, Vec<f64>)> {
+    let (step_hz, centred) = step_rate(speed, fps, PLAN_ZERO_PAD)?;
+    let n = centred.len();
+    let mut planner = RealFftPlanner::<f64>::new();
     // The band-pass: no window (the whole series keeps its weight), padded 2× so the circular
     // convolution's wrap falls in the padding.
     let padded = 2 * n;
