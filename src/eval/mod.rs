@@ -201,6 +201,9 @@ pub struct EvalRow {
     pub seed_distance_m: Option<f64>,
     /// The smallest seed distance of any song pair (the verdict's value).
     pub seed_distance_min_m: Option<f64>,
+    /// The two dances (`song motion`) of the smallest seed distance, to find the pair.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub seed_distance_min_between: Option<[String; 2]>,
     /// Song sensitivity: the root-relative distance (m) between dances of the same seed on two
     /// different songs, per song pair and seed, averaged (model rows only).
     #[serde(default)]
@@ -208,6 +211,9 @@ pub struct EvalRow {
     /// The smallest such distance (issue 25's bar: ≥ 0.15 m; two real dances are 0.34 apart).
     #[serde(default)]
     pub song_distance_min_m: Option<f64>,
+    /// The two dances (`song motion`) of the smallest song distance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub song_distance_min_between: Option<[String; 2]>,
     /// The tempo lock, arms and knees of the network's own motion, before the beat-align stage
     /// and the feet (model rows only; `scores.musicality` is the row's motion's).
     #[serde(default, skip_serializing_if = "Option::is_none")]

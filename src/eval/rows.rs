@@ -29,15 +29,19 @@ pub(super) fn crop(m: &Motion, frames: usize) -> Motion {
     }
 }
 
-/// Mean and smallest of the distances that are numbers (none without any).
-fn mean_and_min(mut distances: Vec<f64>) -> (Option<f64>, Option<f64>) {
-    distances.retain(|x| !x.is_nan());
-    if distances.is_empty() {
-        return (None, None);
-    }
+/// Mean and smallest of the distances that are numbers (none without any), and the two dances
+/// (indices into the row's dances) that are the smallest apart.
+fn mean_and_min(
+    mut distances: Vec<(f64, usize, usize)>,
+) -> (Option<f64>, Option<f64>, Option<(usize, usize)>) {
+    distances.retain(|x| !x.0.is_nan());
+    let Some(&(min, a, b)) = distances.iter().min_by(|x, y| x.0.total_cmp(&y.0)) else {
+        return (None, None, None);
+    };
     (
-        Some(distances.iter().sum::<f64>() / distances.len() as f64),
-        distances.iter().copied().reduce(f64::min),
+        Some(distances.iter().map(|x| x.0).sum::<f64>() / distances.len() as f64),
+        Some(min),
+        Some((a, b)),
     )
 }
 
@@ -76,43 +80,49 @@ pub(super) fn row(
     let diversity_v = diversity(&by_song);
     let (mut multimodality_v, mut seed_mean, mut seed_min) = (None, None, None);
     let (mut song_mean, mut song_min) = (None, None);
+    let (mut seed_pair, mut song_pair) = (None, None);
     if let Some(groups) = per_song {
         // The same seed (the same place in each song's group) on every pair of songs.
         let mut per_song_pair = Vec::new();
         for a in 0..groups.len() {
             for b in a + 1..groups.len() {
                 for (x, y) in groups[a].iter().zip(&groups[b]) {
-                    per_song_pair.push(seed_distance_m(&x.1, &y.1));
+                    per_song_pair.push((seed_distance_m(&x.1, &y.1), x.0, y.0));
                 }
             }
         }
-        (song_mean, song_min) = mean_and_min(per_song_pair);
+        (song_mean, song_min, song_pair) = mean_and_min(per_song_pair);
         let g: Vec<Vec<&ScoredDance>> = groups
             .iter()
             .map(|ix| ix.iter().map(|(i, _)| &dances[*i]).collect())
             .collect();
         multimodality_v = multimodality(&g, reference);
-        let per_pair: Vec<f64> = groups
+        let per_pair: Vec<(f64, usize, usize)> = groups
             .iter()
             .flat_map(|grp| {
                 let mut d = Vec::new();
                 for a in 0..grp.len() {
                     for b in a + 1..grp.len() {
-                        d.push(seed_distance_m(&grp[a].1, &grp[b].1));
+                        d.push((seed_distance_m(&grp[a].1, &grp[b].1), grp[a].0, grp[b].0));
                     }
                 }
                 d
             })
             .collect();
-        (seed_mean, seed_min) = mean_and_min(per_pair);
+        (seed_mean, seed_min, seed_pair) = mean_and_min(per_pair);
         scores.mean.verdict = scores.mean.verdict.clone().with_seed_distance(seed_min);
     }
     let raw: Option<Vec<&crate::metrics::musicality::Musicality>> = scored
         .iter()
         .map(|(e, _)| e.musicality_raw.as_ref())
         .collect();
+    let named = |pair: Option<(usize, usize)>| {
+        pair.map(|(a, b)| [a, b].map(|i| format!("{} {}", scored[i].0.song, scored[i].0.motion)))
+    };
     EvalRow {
         name: name.into(),
+        seed_distance_min_between: named(seed_pair),
+        song_distance_min_between: named(song_pair),
         musicality_raw: raw
             .filter(|r| !r.is_empty())
             .map(crate::metrics::musicality::MusicalitySummary::of),
