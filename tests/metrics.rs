@@ -524,7 +524,17 @@ fn report_of_a_synthetic_dance_round_trips_through_json() {
         "{ph:?}"
     );
     assert!(ph.acceleration_m_s2.max.is_finite() && ph.key_pose_pops_m_s2.is_empty());
-    assert_eq!(report.scores.verdict.criteria.len(), 7);
+    assert_eq!(report.scores.verdict.criteria.len(), 8);
+    // A body bobbing 0.10 m from top to bottom never holds its feet over 0.10 m up: no hang.
+    assert!(
+        report
+            .scores
+            .verdict
+            .get("hang")
+            .is_some_and(|c| c.pass == Some(true))
+            && ph.hang_s == 0.0,
+        "{ph:?}"
+    );
     assert!(
         report
             .scores

@@ -16,6 +16,8 @@
 //!   over 23 joints: a single joint jumping `d` metres for one frame adds `2d·fps²/23`
 //!   (54 m/s² per metre at 25 fps), so the measure sees whole-body snaps, not one stray marker;
 //! - **liveliness**: mean joint speed (m/s) over the dance and its ratio to the real train mean;
+//! - **hang** ([`super::hang`]): the longest span with the lowest foot over 0.10 m above its
+//!   lowest within ±1 s, and that lift's largest value;
 //! - **freeze**: [`super::kinematics::freezing`], already in every score;
 //! - **seed sensitivity** ([`seed_distance_m`]): mean distance between the root-relative poses
 //!   of two dances, so two seeds that give the same dance are seen.
@@ -28,6 +30,7 @@
 use crate::motion::feet::lowest_foot;
 use ndarray::ArrayView3;
 
+use super::hang;
 use super::kinematics::{mean_speed, percentile};
 use crate::motion::{skeleton as sk, KeyPose, Motion};
 
@@ -57,6 +60,8 @@ pub mod thresholds {
     pub const KEY_POP_M_S2: f64 = 84.0;
     /// Mean joint speed (m/s): the slowest real dance moves at 0.63.
     pub const MIN_SPEED_M_S: f64 = 0.5;
+    /// The longest hang (s, [`super::super::hang`]): real dances at most 0.72, about 1.4× that.
+    pub const HANG_S: f64 = 1.0;
     /// Two seeds' dances differ by at least this root-relative distance (m).
     pub const MIN_SEED_DISTANCE_M: f64 = 0.05;
     /// Every key pose is hit within this (cm, centroid-aligned mean joint error).
@@ -127,6 +132,12 @@ pub struct PhysicalScores {
     pub mean_speed_m_s: f64,
     /// `mean_speed_m_s` over the real train mean.
     pub speed_ratio: f64,
+    /// The lowest foot's largest height above its lowest within ±1 s (m; [`super::hang`]).
+    #[serde(default)]
+    pub lift_max_m: f64,
+    /// The longest span (s) with that lift over [`super::hang::HANG_LIFT_M`] (both feet up).
+    #[serde(default)]
+    pub hang_s: f64,
 }
 
 /// The per-frame series the scores summarise, kept so a set of dances can be pooled.
@@ -140,6 +151,10 @@ pub struct PhysicalSeries {
     pub speed: Vec<f64>,
     /// Largest acceleration near each key pose.
     pub key_pose_pops: Vec<f64>,
+    /// The lowest foot's height above its lowest within ±1 s, per frame (m; [`super::hang`]).
+    pub lift: Vec<f64>,
+    /// The longest hang (s): of a pooled set, its longest dance's.
+    pub hang_s: f64,
 }
 
 /// Per-frame mean joint acceleration `mean_j |p[t+1] − 2p[t] + p[t−1]|·fps²` for `t = 1..T−1`
@@ -203,8 +218,12 @@ pub fn physical_series(motion: &Motion, key_poses: &[KeyPose]) -> PhysicalSeries
     let p = motion.positions.view();
     let acceleration = joint_acceleration(p, motion.fps);
     let key_pose_pops = key_pose_pops(&acceleration, motion.fps, p.dim().0, key_poses);
+    let lowest_foot = lowest_foot(p, &FOOT_JOINTS);
+    let lift = hang::lift(&lowest_foot, motion.fps);
     PhysicalSeries {
-        lowest_foot: lowest_foot(p, &FOOT_JOINTS),
+        hang_s: hang::longest_hang_s(&lift, motion.fps),
+        lift,
+        lowest_foot,
         acceleration,
         speed: mean_speed(p, motion.fps),
         key_pose_pops,
@@ -228,6 +247,8 @@ impl PhysicalSeries {
             out.acceleration.extend_from_slice(&s.acceleration);
             out.speed.extend_from_slice(&s.speed);
             out.key_pose_pops.extend_from_slice(&s.key_pose_pops);
+            out.lift.extend_from_slice(&s.lift);
+            out.hang_s = out.hang_s.max(s.hang_s);
         }
         out
     }
@@ -252,6 +273,8 @@ impl PhysicalSeries {
             key_pose_pops_m_s2: self.key_pose_pops.clone(),
             mean_speed_m_s: speed,
             speed_ratio: speed / real_mean_speed_m_s,
+            lift_max_m: self.lift.iter().copied().fold(f64::NAN, f64::max),
+            hang_s: self.hang_s,
         }
     }
 }
@@ -435,6 +458,7 @@ pub mod names {
     pub const POP_P999: &str = "acceleration-p99.9";
     pub const KEY_POPS: &str = "key-pose-pops";
     pub const SPEED: &str = "mean-speed";
+    pub const HANG: &str = "hang";
     pub const SEEDS: &str = "seed-distance";
     pub const KEY_POSES: &str = "key-pose-error";
 }
@@ -476,6 +500,7 @@ pub fn verdict(
             Some(t::MIN_SPEED_M_S),
             None,
         ),
+        Criterion::new(names::HANG, Some(s.hang_s), None, Some(t::HANG_S)),
         Criterion::new(
             names::SEEDS,
             seed_distance_m,

@@ -52,14 +52,15 @@ pub fn smoothstep(lo: f64, hi: f64, x: f64) -> f64 {
     t * t * (3.0 - 2.0 * t)
 }
 
-/// The motion stage after any model, before export: the dance kept on the floor ([`feet::ground`]),
-/// the feet planted ([`feet::plant_feet`]) and backward knees turned forward
+/// The motion stage after any model, before export: the dance kept on the floor
+/// ([`feet::keep_on_floor`]: grounded, and brought down where both feet stay up longer than a
+/// hop), the feet planted ([`feet::plant_feet`]) and backward knees turned forward
 /// ([`knees::bend_forward`]), unless the caller asked for the model's motion as it came. Jobs,
 /// `choreo generate` and `choreo eval` all go through it.
 pub fn finish(mut motion: Motion, plant_feet: bool) -> Motion {
     if plant_feet {
         knees::bend_forward(motion.positions.view_mut());
-        feet::ground(motion.positions.view_mut(), motion.fps);
+        feet::keep_on_floor(motion.positions.view_mut(), motion.fps);
         feet::plant_feet(motion.positions.view_mut(), motion.fps);
     }
     motion
@@ -188,14 +189,15 @@ pub fn serve(
     Ok(Served { rig, motion })
 }
 
-/// Grounds the fitted skeleton as [`feet::ground`] grounds joint positions, moving the root only.
+/// Keeps the fitted skeleton on the floor as [`feet::keep_on_floor`] keeps joint positions,
+/// moving the root only.
 /// The rigid fit keeps every bone at its median length, so where a network draws its legs longer
 /// than that for a while the fitted feet leave the floor: tsmt on lets_go_fishin (seed 2), lowest
 /// foot 0.002 m before the fit and 0.17 m after it at 130 s, 0.09–0.17 m over the last 30 s.
 fn ground_rig(rig: &mut rig::RigMotion) {
     let before = rig.joint_positions();
     let mut after = before.clone();
-    feet::ground(after.view_mut(), rig.fps);
+    feet::keep_on_floor(after.view_mut(), rig.fps);
     for (t, root) in rig.root_translation.iter_mut().enumerate() {
         root.y += f64::from(after[[t, 0, 1]] - before[[t, 0, 1]]);
     }

@@ -205,9 +205,9 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
         }
         moved = moved.max((p[0][0] - r[0][0]).abs().max((p[0][2] - r[0][2]).abs()));
     }
-    // Planting is judged against the same dance grounded and not planted (the stage grounds
-    // first, and grounding alone changes which frames touch the floor), both measured by the
-    // report's metric on the dataset's 23 joints, read back as the retargeter reads a job's
+    // Planting is judged against the same dance kept on the floor and not planted (the stage
+    // grounds first, and grounding alone changes which frames touch the floor), both measured by
+    // the report's metric on the dataset's 23 joints, read back as the retargeter reads a job's
     // motion.json.
     let joints = |m: &Value| {
         let json: choreo::motion::export::MotionJson =
@@ -217,7 +217,7 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
             .joint_positions()
     };
     let mut grounded = joints(&unplanted);
-    choreo::motion::feet::ground(grounded.view_mut(), 25.0);
+    choreo::motion::feet::keep_on_floor(grounded.view_mut(), 25.0);
     let skating = |a: &ndarray::Array3<f32>| {
         choreo::metrics::kinematics::foot_skating(
             a.view(),
