@@ -15,7 +15,7 @@
 //! Over the 43 real dances (`real_dances_lift_and_hang`): the lift is at most 0.14 m, and stays
 //! above 0.10 m for at most 0.72 s (DANCE_C_7); the verdict allows a hang of
 //! [`super::physical::thresholds::HANG_S`].
-use crate::motion::feet::GROUND_WINDOW_S;
+use crate::motion::feet::{window_min, GROUND_WINDOW_S};
 
 /// A lift above this (m) is off the floor for the hang.
 pub const HANG_LIFT_M: f64 = 0.10;
@@ -23,17 +23,9 @@ pub const HANG_LIFT_M: f64 = 0.10;
 /// Per frame of `lowest` (the lowest foot point's height, m), its height above its lowest within
 /// ±[`GROUND_WINDOW_S`].
 pub fn lift(lowest: &[f64], fps: f64) -> Vec<f64> {
-    let t = lowest.len();
     let w = (GROUND_WINDOW_S * fps).round().max(1.0) as usize;
-    (0..t)
-        .map(|f| {
-            let floor = lowest[f.saturating_sub(w)..(f + w + 1).min(t)]
-                .iter()
-                .copied()
-                .fold(f64::INFINITY, f64::min);
-            lowest[f] - floor
-        })
-        .collect()
+    let floor = window_min(lowest, w);
+    lowest.iter().zip(&floor).map(|(l, f)| l - f).collect()
 }
 
 /// The longest span (s) in which `lift` (from [`lift`]) stays above [`HANG_LIFT_M`].

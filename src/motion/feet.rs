@@ -245,7 +245,7 @@ pub fn land_hangs(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> f64 {
 }
 
 /// Per index, the smallest of `v` within ±`w` (cut at the ends).
-fn window_min(v: &[f64], w: usize) -> Vec<f64> {
+pub(crate) fn window_min(v: &[f64], w: usize) -> Vec<f64> {
     (0..v.len())
         .map(|f| {
             v[f.saturating_sub(w)..(f + w + 1).min(v.len())]
