@@ -16,8 +16,8 @@
 //!   over 23 joints: a single joint jumping `d` metres for one frame adds `2d·fps²/23`
 //!   (54 m/s² per metre at 25 fps), so the measure sees whole-body snaps, not one stray marker;
 //! - **liveliness**: mean joint speed (m/s) over the dance and its ratio to the real train mean;
-//! - **hang** ([`super::hang`]): the longest span with the lowest foot over 0.10 m above its
-//!   lowest within ±1 s, and that lift's largest value;
+//! - **hang** ([`super::hang`]): the longest span with the lowest heel or toe over 0.10 m above
+//!   its lowest within ±1 s, and that lift's largest value;
 //! - **freeze**: [`super::kinematics::freezing`], already in every score;
 //! - **seed sensitivity** ([`seed_distance_m`]): mean distance between the root-relative poses
 //!   of two dances, so two seeds that give the same dance are seen.
@@ -132,7 +132,7 @@ pub struct PhysicalScores {
     pub mean_speed_m_s: f64,
     /// `mean_speed_m_s` over the real train mean.
     pub speed_ratio: f64,
-    /// The lowest foot's largest height above its lowest within ±1 s (m; [`super::hang`]).
+    /// The lowest heel or toe's largest height above its lowest within ±1 s (m; [`super::hang`]).
     #[serde(default)]
     pub lift_max_m: f64,
     /// The longest span (s) with that lift over [`super::hang::HANG_LIFT_M`] (both feet up).
@@ -151,7 +151,7 @@ pub struct PhysicalSeries {
     pub speed: Vec<f64>,
     /// Largest acceleration near each key pose.
     pub key_pose_pops: Vec<f64>,
-    /// The lowest foot's height above its lowest within ±1 s, per frame (m; [`super::hang`]).
+    /// The lowest heel or toe's height above its lowest within ±1 s, per frame (m; [`super::hang`]).
     pub lift: Vec<f64>,
     /// The longest hang (s): of a pooled set, its longest dance's.
     pub hang_s: f64,
@@ -218,12 +218,11 @@ pub fn physical_series(motion: &Motion, key_poses: &[KeyPose]) -> PhysicalSeries
     let p = motion.positions.view();
     let acceleration = joint_acceleration(p, motion.fps);
     let key_pose_pops = key_pose_pops(&acceleration, motion.fps, p.dim().0, key_poses);
-    let lowest_foot = lowest_foot(p, &FOOT_JOINTS);
-    let lift = hang::lift(&lowest_foot, motion.fps);
+    let lift = hang::contact_lift(p, motion.fps);
     PhysicalSeries {
         hang_s: hang::longest_hang_s(&lift, motion.fps),
         lift,
-        lowest_foot,
+        lowest_foot: lowest_foot(p, &FOOT_JOINTS),
         acceleration,
         speed: mean_speed(p, motion.fps),
         key_pose_pops,

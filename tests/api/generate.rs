@@ -105,7 +105,7 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
         report["scores"]["verdict"]["criteria"]
             .as_array()
             .map(Vec::len),
-        Some(7),
+        Some(8),
         "{report}"
     );
     assert!(report["music_beat_times"]
