@@ -298,7 +298,11 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
 /// steps at 0.507 of the beat rate; the warps did not step on the beat, and the one of least cost
 /// (onto every other beat) was served at 0.087, a sway (eval 2026-11-28: 13/20 of the shared
 /// songs at 0.85× and 1.2× tempo-locked, one of the seven misses). The whole chain a job runs:
-/// the model, the stages, the rigid fit.
+/// the model, the stages, the rigid fit. Since hangs are brought down (`feet::land_hangs`) the
+/// planted rhythm differs and a warp of this dance stays on the beat once served, so the stage
+/// serves that warp; the dance as it came is served in the unit test
+/// `a_dance_on_the_beat_as_it_came_is_served_as_it_came_where_no_warp_is`. What this test holds
+/// is the served dance's lock, and that the stage says so.
 #[test]
 fn dancenet_is_served_on_the_beat_where_every_warp_would_take_it_off() {
     let m = model("dancenet");
@@ -317,7 +321,7 @@ fn dancenet_is_served_on_the_beat_where_every_warp_would_take_it_off() {
         .expect("a step rate");
     let summary = summary.expect("the stage ran");
     assert!(lock.locked, "{lock:?} {summary:?}");
-    assert!(summary.steps_on_beat && !summary.applied, "{summary:?}");
+    assert!(summary.steps_on_beat, "{summary:?}");
 }
 
 /// dance-revolution's decoder is deterministic once `h_0` is drawn, and the draw sets the dance's
