@@ -6,8 +6,8 @@
 //! `choice_drum_bass`, seed 1, at 19–20 s). A dancer cannot: a 1.2-s flight is a 1.8-m jump.
 //!
 //! - **lift** ([`contact_lift`]): per frame, the lowest heel or toe's height above its own lowest
-//!   within ±1 s ([`crate::motion::feet::GROUND_WINDOW_S`], the span in which a dancer's feet
-//!   touch the floor at least once). It is measured against that local floor, not `y = 0`,
+//!   within ±1 s ([`crate::motion::feet::lift`], the grounding stage's own window, the span in
+//!   which a dancer's feet touch the floor at least once). It is measured against that local floor, not `y = 0`,
 //!   because the capture's floor drifts by tens of centimetres over some real dances
 //!   (DANCE_W_31's lowest foot has a median 0.35 m above its first percentile). Heels and toes,
 //!   the points grounding stands a dance on, not the ankles too: the fitted skeleton can drop an
@@ -20,19 +20,11 @@
 //! [`super::physical::thresholds::HANG_S`].
 use ndarray::ArrayView3;
 
-use crate::motion::feet::{lowest_foot, window_min, GROUND_WINDOW_S};
+use crate::motion::feet::{lift, lowest_foot};
 use crate::motion::skeleton::FOOT_POINTS;
 
 /// A lift above this (m) is off the floor for the hang.
 pub const HANG_LIFT_M: f64 = 0.10;
-
-/// Per frame of `lowest` (the lowest foot point's height, m), its height above its lowest within
-/// ±[`GROUND_WINDOW_S`].
-pub fn lift(lowest: &[f64], fps: f64) -> Vec<f64> {
-    let w = (GROUND_WINDOW_S * fps).round().max(1.0) as usize;
-    let floor = window_min(lowest, w);
-    lowest.iter().zip(&floor).map(|(l, f)| l - f).collect()
-}
 
 /// [`lift`] of the lowest heel or toe ([`FOOT_POINTS`]) of world positions `[T, J, 3]`.
 pub fn contact_lift(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {

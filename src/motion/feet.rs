@@ -231,12 +231,9 @@ pub fn land_hangs(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> f64 {
     if positions.dim().0 == 0 || !(fps.is_finite() && fps > 0.0) {
         return 0.0;
     }
-    let lowest = lowest_foot(positions.view(), &FOOT_POINTS);
-    let floor = window_min(&lowest, (GROUND_WINDOW_S * fps).round().max(1.0) as usize);
-    let excess: Vec<f64> = lowest
+    let excess: Vec<f64> = lift(&lowest_foot(positions.view(), &FOOT_POINTS), fps)
         .iter()
-        .zip(&floor)
-        .map(|(l, f)| (l - f - AIRBORNE_M).max(0.0))
+        .map(|l| (l - AIRBORNE_M).max(0.0))
         .collect();
     let w = (AIRBORNE_HALF_S * fps).round().max(1.0) as usize;
     let shift = window_mean(&window_min(&excess, w), w);
@@ -244,8 +241,16 @@ pub fn land_hangs(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> f64 {
     shift.iter().copied().fold(0.0, f64::max)
 }
 
+/// Per frame of `lowest` (the lowest foot point's height, m), its height above its own lowest
+/// within ±[`GROUND_WINDOW_S`]: what [`land_hangs`] brings down and `metrics::hang` measures, one
+/// definition so the stage and the verdict agree on the floor.
+pub fn lift(lowest: &[f64], fps: f64) -> Vec<f64> {
+    let floor = window_min(lowest, (GROUND_WINDOW_S * fps).round().max(1.0) as usize);
+    lowest.iter().zip(&floor).map(|(l, f)| l - f).collect()
+}
+
 /// Per index, the smallest of `v` within ±`w` (cut at the ends).
-pub(crate) fn window_min(v: &[f64], w: usize) -> Vec<f64> {
+fn window_min(v: &[f64], w: usize) -> Vec<f64> {
     (0..v.len())
         .map(|f| {
             v[f.saturating_sub(w)..(f + w + 1).min(v.len())]
