@@ -270,7 +270,11 @@ args_into! {
         /// magnitude spectra of their velocities held to the real continuation's (model card).
         #[arg(long, default_value_t = train::dancenet::Options::default().spectral_weight)]
         spectral_weight: f64,
-        /// Windows per batch danced on freely for the rhythm term.
+        /// Weight of the lock term: the same free-running windows, scored by how much of the
+        /// toes' speed swings at the style's fraction of the song's beats (model card, issue 25).
+        #[arg(long, default_value_t = train::dancenet::Options::default().lock_weight)]
+        lock_weight: f64,
+        /// Windows per batch danced on freely for the rhythm and lock terms.
         #[arg(long, default_value_t = train::dancenet::Options::default().rollout_windows)]
         rollout_windows: usize,
         /// Slowest tempo factor a training window is drawn at (music and dance resampled together).

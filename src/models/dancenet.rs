@@ -28,6 +28,7 @@ use serde::{Deserialize, Serialize};
 use tch::nn::{self, RNN};
 use tch::{Device, Kind, Tensor};
 
+mod free_run;
 mod sampling;
 pub mod served;
 pub mod style;
@@ -517,6 +518,9 @@ pub struct Schedule {
     /// Share of windows trained without their style input.
     #[serde(default)]
     pub style_dropout: f64,
+    /// Weight of the lock term (`train::dancenet::lock`; 0: without it).
+    #[serde(default)]
+    pub lock_weight: f64,
 }
 
 fn unit_tempo() -> f64 {

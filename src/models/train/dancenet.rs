@@ -22,6 +22,7 @@ use crate::motion::dataset::{Dance, Dataset, NormStats};
 use crate::motion::rig::Rig;
 use crate::motion::rotations;
 
+mod lock;
 mod rollout;
 use rollout::rollout;
 
@@ -78,7 +79,10 @@ pub struct Options {
     /// continuation's (`train::spectral`). Teacher forcing alone never scores the decoder's own
     /// stepping, which is where it loses the beat. 0: the paper's losses only.
     pub spectral_weight: f64,
-    /// Windows of each batch danced on freely for the rhythm term.
+    /// Weight of the lock term (issue 25 item 4; [`lock`]): the same free-running windows, scored
+    /// by how much of the toes' speed swings at the style's fraction of the song's beats. 0: off.
+    pub lock_weight: f64,
+    /// Windows of each batch danced on freely for the rhythm and lock terms.
     pub rollout_windows: usize,
     /// Windows drawn at tempo factors in `[min_tempo, max_tempo]` (log-uniform): music and dance
     /// resampled together (`train::augment`, issue 25), so one figure is seen at many tempi.
@@ -115,6 +119,7 @@ impl Default for Options {
             smooth_frames: 2.0,
             seed: 2020,
             spectral_weight: 0.0,
+            lock_weight: 0.0,
             rollout_windows: 8,
             min_tempo: 1.0,
             max_tempo: 1.0,
@@ -177,11 +182,23 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     } else {
         Config::cpu(0).mixtures
     });
-    if opts.spectral_weight > 0.0 && mixtures != 1 {
+    if (opts.spectral_weight > 0.0 || opts.lock_weight > 0.0) && mixtures != 1 {
         return Err(TrainError::InvalidOption(format!(
-            "--spectral-weight dances one mixture component; this run has {mixtures} (--mixtures 1)"
+            "--spectral-weight and --lock-weight dance one mixture component; this run has {mixtures} (--mixtures 1)"
         )));
     }
+    // A run continued from a model folder's weights keeps that folder's rig and normalisation:
+    // refitted today they differ a little (the features changed since), and the first epochs of
+    // every fine-tune then went to re-learning the input scale, which no control could separate
+    // from what the run was for.
+    let inherited: Option<ModelFile> = match opts.common.init.as_deref().and_then(|w| w.parent()) {
+        Some(dir) if dir.join(crate::models::folder::MODEL_FILE).exists() => {
+            let file: ModelFile = crate::models::folder::read(dir, ID)?;
+            tracing::info!(from = %dir.display(), "the rig and normalisation of the --init folder");
+            Some(file)
+        }
+        _ => None,
+    };
     let augment = Augment::checked(opts.min_tempo, opts.max_tempo, false)?;
     if !(0.0..=1.0).contains(&opts.style_dropout) {
         return Err(TrainError::InvalidOption(format!(
@@ -209,7 +226,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             .collect::<Vec<_>>(),
     )
     .map_err(|e| TrainError::Model(crate::models::ModelError::Shape(e.to_string())))?;
-    let rig = Rig::fit(all_pos.view(), all_root.view())?;
+    let rig = match &inherited {
+        Some(file) => Rig::from_offsets(&file.extra.rig)?,
+        None => Rig::fit(all_pos.view(), all_root.view())?,
+    };
     drop((all_pos, all_root));
     let (train_raw, fit_err) = prepare(&train_dances, &rig)?;
     drop(train_dances);
@@ -221,14 +241,25 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     );
     let layout = rotations::Layout::of(&rig);
     let d = layout.dim();
-    let music_norm = NormStats::fit(train_raw.iter().map(|p| &p.music))?;
-    let pose_norm = NormStats::fit(
-        train_raw
-            .iter()
-            .map(|p| p.frames.slice(ndarray::s![.., ..d]).to_owned())
-            .collect::<Vec<_>>()
-            .iter(),
-    )?;
+    let (music_norm, pose_norm) = match &inherited {
+        Some(file) => (file.music_norm.clone(), file.pose_norm.clone()),
+        None => (
+            NormStats::fit(train_raw.iter().map(|p| &p.music))?,
+            NormStats::fit(
+                train_raw
+                    .iter()
+                    .map(|p| p.frames.slice(ndarray::s![.., ..d]).to_owned())
+                    .collect::<Vec<_>>()
+                    .iter(),
+            )?,
+        ),
+    };
+    if pose_norm.dim() != d {
+        return Err(TrainError::InvalidOption(format!(
+            "--init: its folder's pose normalisation is {} wide, the rig's features {d}",
+            pose_norm.dim()
+        )));
+    }
     let normalise = |seqs: &[Prepared]| -> Result<Vec<Sequence>, TrainError> {
         seqs.iter()
             .map(|p| {
@@ -314,6 +345,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         min_tempo: opts.min_tempo,
         max_tempo: opts.max_tempo,
         style_dropout: opts.style_dropout,
+        lock_weight: opts.lock_weight,
     };
     let file_of = |t: &Trainer, steps: usize| ModelFile {
         config: config.clone(),
@@ -359,6 +391,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             let mut tempo_rng = epoch_rng(0x7E_3B0);
             let mut style_rng = epoch_rng(0x57_11E);
             let (mut total, mut gmm_sum, mut foot_sum, mut spectral_sum, mut batches) = (0.0, 0.0, 0.0, 0.0, 0usize);
+            let (mut lock_own, mut lock_real, mut lock_batches) = (0.0, 0.0, 0usize);
             for chunk in starts.chunks(opts.batch) {
                 let (target, music) = if augment == Augment::NONE {
                     (batch_tensor(&train, chunk, len, |s| &s.poses, dev), batch_tensor(&train, chunk, len, |s| &s.music, dev))
@@ -394,6 +427,20 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     spectral_sum += spectral.double_value(&[]);
                     loss += spectral * opts.spectral_weight;
                 }
+                if opts.lock_weight > 0.0 {
+                    let r = (opts.rollout_windows as i64).min(chunk.len() as i64);
+                    let real = target.narrow(0, 0, r);
+                    let window_music = music.narrow(0, 0, r);
+                    let code = model.encoder.forward(&window_music);
+                    let danced = model.free_run(&real, &code, &style.narrow(0, 0, r), warmup as i64, opts.temperature, opts.coherence);
+                    let styles: Vec<DanceStyle> = chunk[..r as usize].iter().map(|&(i, _)| train_raw[i].style).collect();
+                    if let Some(l) = lock::term(&danced, &real, &window_music, &styles, warmup as i64, &pose_norm, &music_norm, &layout) {
+                        lock_own += l.danced;
+                        lock_real += l.real;
+                        lock_batches += 1;
+                        loss += l.loss * opts.lock_weight;
+                    }
+                }
                 opt.backward_step_clip(&loss, 1.0);
                 total += loss.double_value(&[]);
                 gmm_sum += l.gmm.double_value(&[]);
@@ -426,7 +473,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 train_loss: total / b,
                 test_loss: test_loss.map(|(g, f)| g + opts.lambda_foot * f),
                 note: format!(
-                    "steps={} tempo={}..{} style_dropout={} gmm={:.4} foot={:.4} spectral={:.4} (weight {}) test_gmm={} test_foot={} (nats per dimension; BCE; spectral L1 per bin)",
+                    "steps={} tempo={}..{} style_dropout={} gmm={:.4} foot={:.4} spectral={:.4} (weight {}) lock danced={:.4} real={:.4} (weight {}) test_gmm={} test_foot={} (nats per dimension; BCE; spectral L1 per bin; lock: toes' speed projected on the style's fraction of the beats, free-running windows / the real continuation)",
                     steps.get(),
                     opts.min_tempo,
                     opts.max_tempo,
@@ -435,6 +482,9 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     foot_sum / b,
                     spectral_sum / b,
                     opts.spectral_weight,
+                    lock_own / lock_batches.max(1) as f64,
+                    lock_real / lock_batches.max(1) as f64,
+                    opts.lock_weight,
                     test_loss.map_or("-".into(), |t| format!("{:.4}", t.0)),
                     test_loss.map_or("-".into(), |t| format!("{:.4}", t.1))
                 ),
