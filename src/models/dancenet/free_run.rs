@@ -2,8 +2,9 @@
 //! continued frame by frame from a real context, as §3.4's sampler does, but batched and with
 //! the autograd tape kept, so a loss on the danced frames reaches the network.
 //!
-//! The trainer's first free-running decoder re-ran the whole dilated stack over its receptive
-//! field for every frame (6.5 s a batch for 137 frames); here each gated layer runs on one frame
+//! It serves both of the trainer's free-running terms (`--spectral-weight`, `--lock-weight`).
+//! The first free run re-ran the whole dilated stack over its receptive field for every frame
+//! (6.5 s a batch for 137 frames); here each gated layer runs on one frame
 //! against queues of its past inputs, as served ([`super::sampling`]), so a frame costs one
 //! pass of ten 1×1 layers and windows of ten seconds are affordable.
 use tch::{Kind, Tensor};
@@ -124,7 +125,7 @@ impl DanceNet {
 mod tests {
     use super::super::Config;
     use super::*;
-    use tch::nn;
+    use tch::nn::{self, OptimizerConfig};
     use tch::Device;
 
     /// With σ → 0 the free run is the teacher-forced pass fed its own means: each frame it makes
@@ -165,6 +166,50 @@ mod tests {
                 1,
             );
         }
+    }
+
+    /// The rhythm term (`train::spectral`) on a free run reaches the decoder's weights.
+    #[test]
+    fn the_rhythm_term_moves_the_decoder_from_its_own_dancing() {
+        let config = Config {
+            mixtures: 1,
+            music_dim: 3,
+            ..Config::tiny(6)
+        };
+        let vs = nn::VarStore::new(Device::Cpu);
+        let model = DanceNet::new(&vs.root(), config.clone());
+        let (b, n, width) = (2, 40, 6 + config.contacts);
+        let real = Tensor::randn([b, n, width], (Kind::Float, Device::Cpu));
+        let music = Tensor::randn([b, n, 3], (Kind::Float, Device::Cpu));
+        let style = model.style_one_hot(&[0, 1], Device::Cpu);
+        let context = config.receptive_field();
+        let code = model.encoder.forward(&music);
+        let danced = model.free_run(&real, &code, &style, context, 0.8, 0.95);
+        assert_eq!(danced.size(), [b, n - context, 6]);
+        let continuation = real.narrow(1, context, n - context).narrow(2, 0, 6);
+        let loss = crate::models::train::spectral::spectral_loss(
+            &danced,
+            &continuation,
+            &Tensor::ones([6], (Kind::Float, Device::Cpu)),
+            25.0,
+        );
+        let mut opt = tch::nn::Adam::default().build(&vs, 1e-3).unwrap();
+        opt.zero_grad();
+        loss.backward();
+        let moved = vs
+            .trainable_variables()
+            .iter()
+            .filter(|v| {
+                v.grad().defined() && v.grad().abs().sum(Kind::Float).double_value(&[]) > 0.0
+            })
+            .count();
+        // The decoder's layers and output head all see the loss; only the contact read-out
+        // (thresholded, fed back detached) may not.
+        assert!(
+            moved * 2 > vs.trainable_variables().len(),
+            "{moved} of {} variables have a gradient",
+            vs.trainable_variables().len()
+        );
     }
 
     trait PadEnd {

@@ -23,8 +23,6 @@ use crate::motion::rig::Rig;
 use crate::motion::rotations;
 
 mod lock;
-mod rollout;
-use rollout::rollout;
 
 /// Options of one training run (the card gives the run behind the committed weights).
 #[derive(Clone, Debug)]
@@ -417,28 +415,27 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 };
                 let l = model.losses(&input, &target, &music, &style, warmup as i64);
                 let mut loss = &l.gmm + opts.lambda_foot * &l.foot;
-                if opts.spectral_weight > 0.0 {
-                    let r = (opts.rollout_windows as i64).min(chunk.len() as i64);
-                    let real = target.narrow(0, 0, r);
-                    let code = model.encoder.forward(&music.narrow(0, 0, r));
-                    let danced = rollout(&model, &real, &code, &style.narrow(0, 0, r), warmup as i64, opts.temperature, opts.coherence);
-                    let continuation = real.narrow(1, warmup as i64, len as i64 - warmup as i64);
-                    let spectral = super::spectral::spectral_loss(&danced, &continuation, &pose_std, crate::motion::MOTION_FPS);
-                    spectral_sum += spectral.double_value(&[]);
-                    loss += spectral * opts.spectral_weight;
-                }
-                if opts.lock_weight > 0.0 {
+                // The rhythm and lock terms score one free run of the same windows.
+                if opts.spectral_weight > 0.0 || opts.lock_weight > 0.0 {
                     let r = (opts.rollout_windows as i64).min(chunk.len() as i64);
                     let real = target.narrow(0, 0, r);
                     let window_music = music.narrow(0, 0, r);
                     let code = model.encoder.forward(&window_music);
                     let danced = model.free_run(&real, &code, &style.narrow(0, 0, r), warmup as i64, opts.temperature, opts.coherence);
+                    if opts.spectral_weight > 0.0 {
+                        let continuation = real.narrow(1, warmup as i64, len as i64 - warmup as i64);
+                        let spectral = super::spectral::spectral_loss(&danced, &continuation, &pose_std, crate::motion::MOTION_FPS);
+                        spectral_sum += spectral.double_value(&[]);
+                        loss += spectral * opts.spectral_weight;
+                    }
                     let styles: Vec<DanceStyle> = chunk[..r as usize].iter().map(|&(i, _)| train_raw[i].style).collect();
-                    if let Some(l) = lock::term(&danced, &real, &window_music, &styles, warmup as i64, &pose_norm, &music_norm, &layout) {
-                        lock_own += l.danced;
-                        lock_real += l.real;
-                        lock_batches += 1;
-                        loss += l.loss * opts.lock_weight;
+                    if opts.lock_weight > 0.0 {
+                        if let Some(l) = lock::term(&danced, &real, &window_music, &styles, warmup as i64, &pose_norm, &music_norm, &layout) {
+                            lock_own += l.danced;
+                            lock_real += l.real;
+                            lock_batches += 1;
+                            loss += l.loss * opts.lock_weight;
+                        }
                     }
                 }
                 opt.backward_step_clip(&loss, 1.0);
