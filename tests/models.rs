@@ -567,8 +567,17 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
 /// train split runs, logs all three (the real continuations' lock well above zero), records them
 /// in `model.json`, and serves. A run continued from that folder (`--init`) keeps its rig and
 /// normalisation.
+/// The real continuations' lock logged in a dancenet epoch's note.
+fn real_lock(note: &str) -> f64 {
+    note.split("real=")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|r| r.parse().ok())
+        .unwrap_or_else(|| panic!("no real lock in {note}"))
+}
+
 #[test]
-fn dancenet_trains_on_windows_at_other_tempi_with_the_lock_term() {
+fn dancenet_trains_on_windows_at_other_tempi_with_the_lock_term_and_the_step_clock() {
     use choreo::models::train::dancenet;
     let out = tempfile::tempdir().unwrap();
     let opts = dancenet::Options {
@@ -584,13 +593,7 @@ fn dancenet_trains_on_windows_at_other_tempi_with_the_lock_term() {
     };
     let logs = dancenet::train(&opts).expect("training runs");
     one_finite_epoch(&logs, "tempo=0.8..1.25 style_dropout=0.5");
-    let real: f64 = logs[0]
-        .note
-        .split("real=")
-        .nth(1)
-        .and_then(|r| r.split_whitespace().next())
-        .and_then(|r| r.parse().ok())
-        .unwrap_or_else(|| panic!("no real lock in {}", logs[0].note));
+    let real = real_lock(&logs[0].note);
     assert!(real > 0.1 && real <= 1.0, "{}", logs[0].note);
     let file = written_model_file(out.path());
     assert_eq!(file["training"]["min_tempo"], 0.8);
@@ -605,14 +608,29 @@ fn dancenet_trains_on_windows_at_other_tempi_with_the_lock_term() {
         },
         epochs: 1,
         mixtures: Some(1),
+        // Continued with the step clock: its columns are new to the weights (widened from zero).
+        // The lock term then scores the danced toes on the clock's phase, whose zero is fitted
+        // to the real dancer's speed: the real continuation must score well above zero.
+        step_clock: true,
+        lock_weight: 1.0,
+        rollout_windows: 2,
         ..dancenet::Options::default()
     };
-    dancenet::train(&continued).expect("the continued run trains");
+    let logs = dancenet::train(&continued).expect("the continued run trains");
+    let real = real_lock(&logs[0].note);
+    assert!(real > 0.1 && real <= 1.0, "{}", logs[0].note);
+    assert!(
+        logs[0].note.contains("test_gmm_clock_late="),
+        "{}",
+        logs[0].note
+    );
     let second = written_model_file(again.path());
     for key in ["music_norm", "pose_norm", "rig"] {
         assert_eq!(second[key], file[key], "{key}");
     }
-    let served = choreo::models::dancenet::Served::load(out.path()).expect("the folder loads");
+    assert_eq!(second["config"]["step_clock"], true);
+    // The clock's folder serves: the song's beats make its clock.
+    let served = choreo::models::dancenet::Served::load(again.path()).expect("the folder loads");
     // The style classifier is trained on its own (`choreo train dancenet-style`): ask for a style.
     let req = GenerateRequest {
         style: Some(DanceStyle::Waltz),

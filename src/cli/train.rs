@@ -291,6 +291,11 @@ args_into! {
         /// layer's conditioning; with `--init` their new weights start at zero.
         #[arg(long)]
         music_direct: bool,
+        /// A phase turning once per step of the song's beats joins every gated layer's
+        /// conditioning (in training at the real dancer's own step rate and zero); with `--init`
+        /// its new weights start at zero.
+        #[arg(long)]
+        step_clock: bool,
     }
 }
 

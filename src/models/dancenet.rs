@@ -31,6 +31,7 @@ use tch::{Device, Kind, Tensor};
 mod free_run;
 mod sampling;
 pub mod served;
+pub mod step_clock;
 pub mod style;
 
 pub use sampling::{Draws, Sampling};
@@ -87,6 +88,11 @@ pub struct Config {
     /// in older `model.json` files: no.
     #[serde(default)]
     pub music_direct: bool,
+    /// The step clock ([`step_clock`]) joins every gated layer's conditioning, after the rest:
+    /// a phase that turns once per step of the song's beats. Absent in older `model.json`
+    /// files: no.
+    #[serde(default)]
+    pub step_clock: bool,
 }
 
 impl Config {
@@ -110,6 +116,7 @@ impl Config {
             mixtures: 1,
             absolute_dims: pose_dim,
             music_direct: false,
+            step_clock: false,
         }
     }
 
@@ -130,10 +137,17 @@ impl Config {
         }
     }
 
-    /// Width of the conditioning each gated layer reads: the music code, and with
-    /// [`Self::music_direct`] the control signals after it.
+    /// Width of the conditioning each gated layer reads: the music code, with
+    /// [`Self::music_direct`] the control signals after it, and with [`Self::step_clock`] the
+    /// clock last.
     pub fn code_width(&self) -> i64 {
-        self.d_code + if self.music_direct { self.music_dim } else { 0 }
+        self.d_code
+            + if self.music_direct { self.music_dim } else { 0 }
+            + if self.step_clock {
+                step_clock::WIDTH
+            } else {
+                0
+            }
     }
 
     /// Frames of history each prediction sees: `1 + Σ dilations` (kernel 2).
@@ -450,18 +464,35 @@ impl DanceNet {
         self.mixture(&raw, &current)
     }
 
+    /// The conditioning of a window: the encoder's code of `music` `[b, n, music_dim]`, and with
+    /// [`Config::step_clock`] the clock `[b, n, step_clock::WIDTH]` after it (zeros when `None`).
+    pub fn code(&self, music: &Tensor, clock: Option<&Tensor>) -> Tensor {
+        let code = self.encoder.forward(music);
+        if !self.config.step_clock {
+            return code;
+        }
+        let (b, n, _) = music.size3().expect("music [b, n, d]");
+        let clock = match clock {
+            Some(c) => c.shallow_clone(),
+            None => Tensor::zeros([b, n, step_clock::WIDTH], (Kind::Float, music.device())),
+        };
+        Tensor::cat(&[code, clock], -1)
+    }
+
     /// Training losses on a window: `input` the frames the decoder reads (noised), `target` the
-    /// clean frames `[b, n, D + contacts]`, `music` `[b, n, music_dim]`; frames before `warmup`
-    /// are context only (they would see zero padding instead of history).
+    /// clean frames `[b, n, D + contacts]`, `music` `[b, n, music_dim]` and its step clock
+    /// ([`Self::code`]); frames before `warmup` are context only (they would see zero padding
+    /// instead of history).
     pub fn losses(
         &self,
         input: &Tensor,
         target: &Tensor,
         music: &Tensor,
+        clock: Option<&Tensor>,
         style: &Tensor,
         warmup: i64,
     ) -> Losses {
-        let code = self.encoder.forward(music);
+        let code = self.code(music, clock);
         let m = self.forward(input, &code, style);
         let n = target.size()[1] - 1;
         let from = warmup.clamp(0, n - 1);

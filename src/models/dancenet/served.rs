@@ -198,6 +198,18 @@ impl Served {
                 }) else {
                     return Ok(None);
                 };
+                // The step clock of the song's beats (column 1 of the control signals, on the
+                // network's clock) at the style's fraction.
+                let code = if model.config.step_clock {
+                    let beats: Vec<bool> = feats.column(1).iter().map(|&v| v > 0.5).collect();
+                    let clock = super::step_clock::of_song(&beats, style.style, fps);
+                    {
+                        let clock = to_tensor(&clock).to_device(code.device());
+                        Tensor::cat(&[code, clock], 1)
+                    }
+                } else {
+                    code
+                };
                 let draw = Draw {
                     model,
                     code: &code,
@@ -319,11 +331,13 @@ impl Draw<'_> {
             let idx: Vec<i64> = (0..warm).map(|t| (t % n) as i64).collect();
             let idx = Tensor::from_slice(&idx).to_device(self.code.device());
             let warm_rows = after_context(self.code, self.code.index_select(0, &idx), tail);
-            // The warm-up is guided against its own rows' average (`None`).
+            // The warm-up is guided against its own rows' average.
+            let warm_average =
+                self.guided_against(&warm_rows.mean_dim(0, true, Kind::Float), &warm_rows);
             let danced = self.model.sample(
                 &ctx,
                 &warm_rows,
-                None,
+                Some(&warm_average),
                 self.style,
                 self.sampling,
                 &mut rng,
@@ -336,11 +350,33 @@ impl Draw<'_> {
         self.model.sample(
             &ctx,
             &rows,
-            Some(&average),
+            Some(&self.guided_against(&average, &rows)),
             self.style,
             self.sampling,
             &mut rng,
             on_step,
+        )
+    }
+}
+
+impl Draw<'_> {
+    /// What music guidance's second branch hears beside `rows`: the `average` code, with each
+    /// row's own step clock where the model has one. The clock is the song's time, not its
+    /// sound: amplified it would turn three times as hard as anything the decoder was trained on.
+    fn guided_against(&self, average: &Tensor, rows: &Tensor) -> Tensor {
+        if !self.model.config.step_clock {
+            return average.shallow_clone();
+        }
+        let (n, width) = (rows.size()[0], rows.size()[1]);
+        let w = super::step_clock::WIDTH;
+        Tensor::cat(
+            &[
+                average
+                    .narrow(1, 0, width - w)
+                    .expand([n, width - w], false),
+                rows.narrow(1, width - w, w),
+            ],
+            1,
         )
     }
 }

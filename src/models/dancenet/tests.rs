@@ -233,7 +233,7 @@ fn loss_falls_on_a_few_batches() {
     let music = Tensor::randn([4, 24, 3], (Kind::Float, Device::Cpu));
     let s = m.style_one_hot(&[0, 1, 2, 3], Device::Cpu);
     let loss = |m: &DanceNet| {
-        let l = m.losses(&x, &x, &music, &s, 4);
+        let l = m.losses(&x, &x, &music, None, &s, 4);
         l.gmm + l.foot
     };
     let first = loss(&m).double_value(&[]);
@@ -310,4 +310,47 @@ fn with_music_direct_a_beat_reaches_the_decoder_on_its_own_frame() {
         "frame 20's beat did not reach its prediction"
     );
     assert!(moved(18) < 1e-9);
+}
+
+/// The step clock rides after the code in every gated layer's conditioning: a window's clock
+/// turned by half a step moves the decoder's predictions, frame by frame, and a model without
+/// it reads the same code as before.
+#[test]
+fn with_the_step_clock_the_phase_reaches_every_frame() {
+    let (_vs, m) = model_with(
+        6,
+        Config {
+            step_clock: true,
+            ..Config::tiny(D)
+        },
+    );
+    assert_eq!(m.config.code_width(), 4 + super::step_clock::WIDTH);
+    let n = 40;
+    let music = Tensor::zeros([1, n, 3], (Kind::Float, Device::Cpu));
+    let phase: Vec<f64> = (0..n).map(|t| t as f64 * 0.3).collect();
+    let half: Vec<f64> = phase.iter().map(|p| p + std::f64::consts::PI).collect();
+    let clock = |p: &[f64]| crate::models::to_tensor(&super::step_clock::columns(p)).unsqueeze(0);
+    let (a, b) = (
+        m.code(&music, Some(&clock(&phase))),
+        m.code(&music, Some(&clock(&half))),
+    );
+    assert_eq!(a.size(), vec![1, n, 4 + 4]);
+    // Before training the clock's weights are random (from `--init` they start at zero).
+    let x = frames(1, n);
+    let s = m.style_one_hot(&[0], Device::Cpu);
+    let (pa, pb) = (m.forward(&x, &a, &s), m.forward(&x, &b, &s));
+    let moved = (pa.mean - pb.mean).abs().amax([-1, -2], false); // [1, n − 1]
+    let moved: Vec<f32> = Vec::try_from(moved.view([-1])).unwrap();
+    assert!(moved.iter().all(|&v| v > 1e-6), "{moved:?}");
+    // No clock given: zeros after the code.
+    let none = m.code(&music, None);
+    assert_eq!(
+        none.narrow(2, 4, 4)
+            .abs()
+            .sum(Kind::Float)
+            .double_value(&[]),
+        0.0
+    );
+    let (_vs, plain) = model_with(6, Config::tiny(D));
+    assert_eq!(plain.code(&music, None).size(), vec![1, n, 4]);
 }

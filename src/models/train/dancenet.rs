@@ -23,6 +23,7 @@ use crate::motion::rig::Rig;
 use crate::motion::rotations;
 
 mod lock;
+mod phase;
 
 /// Options of one training run (the card gives the run behind the committed weights).
 #[derive(Clone, Debug)]
@@ -92,6 +93,10 @@ pub struct Options {
     /// [`Config::music_direct`]: the control signals join the music code in every gated layer
     /// (with `--init` from weights without them, their columns start at zero).
     pub music_direct: bool,
+    /// [`Config::step_clock`]: a phase turning once per step of the song's beats joins every
+    /// gated layer's conditioning; in training, at the real dancer's own fraction and zero
+    /// ([`phase`]); with `--init` from weights without it, its columns start at zero.
+    pub step_clock: bool,
 }
 
 impl Default for Options {
@@ -123,6 +128,7 @@ impl Default for Options {
             max_tempo: 1.0,
             style_dropout: 0.0,
             music_direct: false,
+            step_clock: false,
         }
     }
 }
@@ -286,6 +292,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             .unwrap_or(base.absolute_dims)
             .clamp(0, d as i64),
         music_direct: opts.music_direct,
+        step_clock: opts.step_clock,
         ..base
     };
     let warmup = opts
@@ -413,14 +420,17 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 } else {
                     target.shallow_clone()
                 };
-                let l = model.losses(&input, &target, &music, &style, warmup as i64);
+                let clock = config
+                    .step_clock
+                    .then(|| phase::window_clock(&target, &music, &pose_norm, &music_norm, &layout));
+                let l = model.losses(&input, &target, &music, clock.as_ref(), &style, warmup as i64);
                 let mut loss = &l.gmm + opts.lambda_foot * &l.foot;
                 // The rhythm and lock terms score one free run of the same windows.
                 if opts.spectral_weight > 0.0 || opts.lock_weight > 0.0 {
                     let r = (opts.rollout_windows as i64).min(chunk.len() as i64);
                     let real = target.narrow(0, 0, r);
                     let window_music = music.narrow(0, 0, r);
-                    let code = model.encoder.forward(&window_music);
+                    let code = model.code(&window_music, clock.as_ref().map(|c| c.narrow(0, 0, r)).as_ref());
                     let danced = model.free_run(&real, &code, &style.narrow(0, 0, r), warmup as i64, opts.temperature, opts.coherence);
                     if opts.spectral_weight > 0.0 {
                         let continuation = real.narrow(1, warmup as i64, len as i64 - warmup as i64);
@@ -430,7 +440,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     }
                     let styles: Vec<DanceStyle> = chunk[..r as usize].iter().map(|&(i, _)| train_raw[i].style).collect();
                     if opts.lock_weight > 0.0 {
-                        if let Some(l) = lock::term(&danced, &real, &window_music, &styles, warmup as i64, &pose_norm, &music_norm, &layout) {
+                        if let Some(l) = lock::term(&danced, &real, &window_music, clock.as_ref().map(|c| c.narrow(0, 0, r)).as_ref(), &styles, warmup as i64, &pose_norm, &music_norm, &layout) {
                             lock_own += l.danced;
                             lock_real += l.real;
                             lock_batches += 1;
@@ -450,27 +460,39 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             }
             let test_loss = tch::no_grad(|| {
                 let starts = window_starts(&test, len, len, 0);
-                let losses: Vec<(f64, f64)> = starts
+                let losses: Vec<(f64, f64, f64)> = starts
                     .chunks(opts.batch)
                     .map(|c| {
                         let t = batch_tensor(&test, c, len, |s| &s.poses, dev);
                         let m = batch_tensor(&test, c, len, |s| &s.music, dev);
                         let s = model.style_one_hot(&c.iter().map(|&(i, _)| test_style[i]).collect::<Vec<_>>(), dev);
-                        let l = model.losses(&t, &t, &m, &s, warmup as i64);
-                        (l.gmm.double_value(&[]), l.foot.double_value(&[]))
+                        let clock = config
+                            .step_clock
+                            .then(|| phase::window_clock(&t, &m, &pose_norm, &music_norm, &layout));
+                        let l = model.losses(&t, &t, &m, clock.as_ref(), &s, warmup as i64);
+                        // How much the decoder listens to the clock: the same windows with it a
+                        // quarter of a step late.
+                        let late = clock.as_ref().map_or(f64::NAN, |k| {
+                            model.losses(&t, &t, &m, Some(&phase::quarter_turn(k)), &s, warmup as i64).gmm.double_value(&[])
+                        });
+                        (l.gmm.double_value(&[]), l.foot.double_value(&[]), late)
                     })
                     .collect();
                 (!losses.is_empty()).then(|| {
                     let n = losses.len() as f64;
-                    (losses.iter().map(|l| l.0).sum::<f64>() / n, losses.iter().map(|l| l.1).sum::<f64>() / n)
+                    (
+                        losses.iter().map(|l| l.0).sum::<f64>() / n,
+                        losses.iter().map(|l| l.1).sum::<f64>() / n,
+                        losses.iter().map(|l| l.2).sum::<f64>() / n,
+                    )
                 })
             });
             let b = batches.max(1) as f64;
             Ok(EpochResult {
                 train_loss: total / b,
-                test_loss: test_loss.map(|(g, f)| g + opts.lambda_foot * f),
+                test_loss: test_loss.map(|(g, f, _)| g + opts.lambda_foot * f),
                 note: format!(
-                    "steps={} tempo={}..{} style_dropout={} gmm={:.4} foot={:.4} spectral={:.4} (weight {}) lock danced={:.4} real={:.4} (weight {}) test_gmm={} test_foot={} (nats per dimension; BCE; spectral L1 per bin; lock: toes' speed projected on the style's fraction of the beats, free-running windows / the real continuation)",
+                    "steps={} tempo={}..{} style_dropout={} gmm={:.4} foot={:.4} spectral={:.4} (weight {}) lock danced={:.4} real={:.4} (weight {}) test_gmm={} test_foot={} test_gmm_clock_late={} (nats per dimension; BCE; the clock a quarter step late; spectral L1 per bin; lock: toes' speed projected on the style's fraction of the beats, free-running windows / the real continuation)",
                     steps.get(),
                     opts.min_tempo,
                     opts.max_tempo,
@@ -483,7 +505,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     lock_real / lock_batches.max(1) as f64,
                     opts.lock_weight,
                     test_loss.map_or("-".into(), |t| format!("{:.4}", t.0)),
-                    test_loss.map_or("-".into(), |t| format!("{:.4}", t.1))
+                    test_loss.map_or("-".into(), |t| format!("{:.4}", t.1)),
+                    test_loss.map_or("-".into(), |t| format!("{:.4}", t.2))
                 ),
             })
         },

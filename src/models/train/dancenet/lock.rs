@@ -16,41 +16,10 @@
 use ndarray::Array2;
 use tch::{Kind, Tensor};
 
+use crate::models::dancenet::step_clock::{beat_count, step_fraction};
 use crate::models::DanceStyle;
 use crate::motion::dataset::NormStats;
 use crate::motion::rotations::{self, Layout};
-
-/// Steps per beat of a style's dancers (the README's tempo lock on the real dances).
-pub(super) fn step_fraction(style: DanceStyle) -> f64 {
-    match style {
-        DanceStyle::Waltz => 1.0 / 3.0,
-        DanceStyle::ChaCha | DanceStyle::Rumba | DanceStyle::Tango => 0.5,
-    }
-}
-
-/// Beat count at each of `n` frames from a beat column (one where a beat falls): linear between
-/// beats, the nearest interval carried on beyond the first and last. `None` under two beats.
-pub(super) fn beat_count(is_beat: &[bool]) -> Option<Vec<f64>> {
-    let beats: Vec<f64> = is_beat
-        .iter()
-        .enumerate()
-        .filter(|(_, &b)| b)
-        .map(|(t, _)| t as f64)
-        .collect();
-    if beats.len() < 2 {
-        return None;
-    }
-    Some(
-        (0..is_beat.len())
-            .map(|t| {
-                let t = t as f64;
-                let k = beats.partition_point(|&b| b <= t).clamp(1, beats.len() - 1);
-                let (a, b) = (beats[k - 1], beats[k]);
-                (k - 1) as f64 + (t - a) / (b - a)
-            })
-            .collect(),
-    )
-}
 
 /// Toes' summed speed (m/frame) of feature rows `[b, n, D]` (denormalised): each toe's motion
 /// relative to the anchor plus the anchor's own (yaw's turn left out). `[b, n − 1]`.
@@ -91,6 +60,21 @@ pub(super) fn projection(speed: &Tensor, theta: &Tensor) -> Tensor {
     (re.square() + im.square() + 1e-12).sqrt() / norm
 }
 
+/// The signed projection of `speed` `[b, n]` on phases `phase` `[b, n]`: how much of it peaks
+/// where the phase is zero (1 for a speed that swings with the phase and peaks at its zero, −1
+/// for one that peaks half a turn off). The step clock's term ([`term`] with a clock): a score
+/// blind to the phase rewards stepping at the clock's rate at whatever phase the free run
+/// happens to dance, so its pull on the clock's weights points every way and cancels over a
+/// batch; this one points them all one way.
+pub(super) fn signed_projection(speed: &Tensor, phase: &Tensor) -> Tensor {
+    let n = speed.size()[1];
+    let w = Tensor::hann_window_periodic(n, false, (Kind::Float, speed.device())).unsqueeze(0);
+    let mean = (speed * &w).sum_dim_intlist(1, true, Kind::Float) / w.sum(Kind::Float);
+    let s = (speed - mean) * &w;
+    let norm = s.abs().sum_dim_intlist(1, false, Kind::Float) + 1e-8;
+    (&s * phase.cos()).sum_dim_intlist(1, false, Kind::Float) / norm
+}
+
 /// What one batch's lock term gives: the loss (the shortfall), and the mean projection of the danced and of
 /// the real continuation (the same frames as the real dancer made them), for the log.
 pub(super) struct Lock {
@@ -102,12 +86,15 @@ pub(super) struct Lock {
 /// The term for `danced` `[r, n − context, D]` (normalised features the decoder made after
 /// `context` real frames of `real` `[r, n, D + contacts]`), with `music` `[r, n, ·]` (normalised;
 /// its column 1 the beat one-hot) and each window's style. Windows without two beats are left
-/// out; `None` when none is left.
+/// out; `None` when none is left. With the windows' step clock `clock` `[r, n, WIDTH]`
+/// (`phase::window_clock`: the real dancer's rate and zero) the score is [`signed_projection`]
+/// on the clock's phase: the danced toes are held to peak where the real dancer's do.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn term(
     danced: &Tensor,
     real: &Tensor,
     music: &Tensor,
+    clock: Option<&Tensor>,
     styles: &[DanceStyle],
     context: i64,
     pose_norm: &NormStats,
@@ -115,6 +102,40 @@ pub(super) fn term(
     layout: &Layout,
 ) -> Option<Lock> {
     let (r, n, _) = real.size3().ok()?;
+    if let Some(clock) = clock {
+        let d = danced.size()[2];
+        let std = Tensor::from_slice(&pose_norm.std).view([1, 1, -1]);
+        let mean = Tensor::from_slice(&pose_norm.mean).view([1, 1, -1]);
+        let denorm = |x: &Tensor| x * &std + &mean;
+        let last = real.narrow(1, context - 1, 1).narrow(2, 0, d);
+        let own = toe_speed(
+            &denorm(&Tensor::cat(&[last, danced.shallow_clone()], 1)),
+            layout,
+        );
+        let truth = toe_speed(
+            &denorm(&real.narrow(1, context - 1, n - context + 1).narrow(2, 0, d)),
+            layout,
+        );
+        let k = clock.narrow(1, context, n - context);
+        let phase = k.select(2, 0).atan2(&k.select(2, 1));
+        // Windows without two beats have a zero clock: left out.
+        let keep = k
+            .abs()
+            .sum_dim_intlist([1, 2].as_slice(), false, Kind::Float)
+            .gt(0.0);
+        let idx = keep.nonzero().squeeze_dim(1);
+        if idx.size()[0] == 0 {
+            return None;
+        }
+        let pick = |t: &Tensor| t.index_select(0, &idx);
+        let own = signed_projection(&pick(&own), &pick(&phase));
+        let truth = signed_projection(&pick(&truth), &pick(&phase));
+        return Some(Lock {
+            loss: (&truth - &own).relu().mean(Kind::Float),
+            danced: own.mean(Kind::Float).double_value(&[]),
+            real: truth.mean(Kind::Float).double_value(&[]),
+        });
+    }
     let d = danced.size()[2];
     let std = Tensor::from_slice(&pose_norm.std).view([1, 1, -1]);
     let mean = Tensor::from_slice(&pose_norm.mean).view([1, 1, -1]);
@@ -172,19 +193,6 @@ pub(super) fn term(
 mod tests {
     use super::*;
 
-    #[test]
-    fn the_beat_count_runs_on_between_and_beyond_the_beats() {
-        let mut beats = vec![false; 30];
-        beats[5] = true;
-        beats[15] = true;
-        beats[23] = true;
-        let b = beat_count(&beats).unwrap();
-        assert!((b[5] - 0.0).abs() < 1e-9 && (b[10] - 0.5).abs() < 1e-9);
-        assert!((b[19] - 1.5).abs() < 1e-9 && (b[27] - 2.5).abs() < 1e-9);
-        assert!((b[0] + 0.5).abs() < 1e-9, "before the first beat: {}", b[0]);
-        assert!(beat_count(&beats[..10]).is_none());
-    }
-
     /// A speed swinging once every 2 beats scores near 1 on the half-beat phase and near 0 on
     /// the third-beat one, whatever its own phase.
     #[test]
@@ -206,5 +214,28 @@ mod tests {
         };
         assert!(on(0.5) > 0.6, "{}", on(0.5));
         assert!(on(1.0 / 3.0) < 0.2, "{}", on(1.0 / 3.0));
+    }
+
+    /// The clock's score is signed: a speed peaking where the phase is zero scores near π/4
+    /// (the most a mean-free cosine can), the same speed half a step late as much below zero.
+    #[test]
+    fn the_signed_projection_hears_the_phase_too() {
+        let n = 300;
+        let phase: Vec<f32> = (0..n).map(|t| t as f32 * 0.12).collect();
+        let at = |shift: f32| {
+            let s: Vec<f32> = phase.iter().map(|p| 1.0 + (p + shift).cos()).collect();
+            signed_projection(
+                &Tensor::from_slice(&s).view([1, -1]),
+                &Tensor::from_slice(&phase).view([1, -1]),
+            )
+            .double_value(&[0])
+        };
+        assert!(
+            (at(0.0) - std::f64::consts::FRAC_PI_4).abs() < 0.05,
+            "{}",
+            at(0.0)
+        );
+        assert!((at(std::f32::consts::PI) + std::f64::consts::FRAC_PI_4).abs() < 0.05);
+        assert!(at(std::f32::consts::FRAC_PI_2).abs() < 0.1);
     }
 }

@@ -1,0 +1,161 @@
+//! The step clock ([`super::Config::step_clock`], issue 25 item 4): a phase that turns once per
+//! step of the song's beats, in every gated layer's conditioning.
+//!
+//! Real dancers step at a fixed fraction of the beat (1/2 in rumba and cha-cha, 1/3 in waltz),
+//! and the decoder, taught by teacher forcing, learned to continue the step rate of its own
+//! history: the beat one-hot, a beat clock at the beat's own rate and a lock term on free runs all
+//! left its own lock at chance (model card). The history already says when the next step comes,
+//! so nothing made the decoder read it from the music. Here the decoder is given a phase φ that
+//! names where in the step cycle each frame lies. In training φ comes from the song's beats,
+//! shifted and at the fraction that the real dancer's toes swing with in that window
+//! (`train::dancenet::phase`): it then says more than the history does (when the *next* step
+//! comes), so the decoder learns to step with it. Served, φ is `2π · f · B(t)` of the song's
+//! beat count B and the style's fraction f, so the steps the decoder makes follow the song's
+//! beats, and its tempo.
+//!
+//! The columns: `sin φ, cos φ, sin 2φ, cos 2φ` (the second harmonic lets a step's two halves,
+//! lift and plant, differ); all zero where the song has under two beats.
+use ndarray::Array2;
+
+use crate::models::DanceStyle;
+
+/// Columns the clock adds to the conditioning.
+pub const WIDTH: i64 = 4;
+
+/// A style's step rate (Hz) on the real dances: its fraction of the beat at the data's tempi
+/// (waltz 1/3 of 87 BPM, rumba 1/2 of 87–96, cha-cha 1/2 of 115–127; tango: rumba's). A served
+/// clock's fraction is halved while its steps would come over 1.5 times this fast, so a song the
+/// tracker hears in double time (174 BPM for an 87-BPM waltz) is danced at a waltz's rate.
+pub fn step_hz(style: DanceStyle) -> f64 {
+    match style {
+        DanceStyle::Waltz => 0.49,
+        DanceStyle::Rumba | DanceStyle::Tango => 0.76,
+        DanceStyle::ChaCha => 1.0,
+    }
+}
+
+/// Steps per beat of a style's dancers (the README's tempo lock on the real dances).
+pub fn step_fraction(style: DanceStyle) -> f64 {
+    match style {
+        DanceStyle::Waltz => 1.0 / 3.0,
+        DanceStyle::ChaCha | DanceStyle::Rumba | DanceStyle::Tango => 0.5,
+    }
+}
+
+/// Beat count at each of `n` frames from a beat column (one where a beat falls): linear between
+/// beats, the nearest interval carried on beyond the first and last. `None` under two beats.
+pub fn beat_count(is_beat: &[bool]) -> Option<Vec<f64>> {
+    let beats: Vec<f64> = is_beat
+        .iter()
+        .enumerate()
+        .filter(|(_, &b)| b)
+        .map(|(t, _)| t as f64)
+        .collect();
+    if beats.len() < 2 {
+        return None;
+    }
+    Some(
+        (0..is_beat.len())
+            .map(|t| {
+                let t = t as f64;
+                let k = beats.partition_point(|&b| b <= t).clamp(1, beats.len() - 1);
+                let (a, b) = (beats[k - 1], beats[k]);
+                (k - 1) as f64 + (t - a) / (b - a)
+            })
+            .collect(),
+    )
+}
+
+/// The clock's columns `[n, WIDTH]` of phases `φ` (radians).
+pub fn columns(phase: &[f64]) -> Array2<f32> {
+    Array2::from_shape_fn((phase.len(), WIDTH as usize), |(t, c)| {
+        let p = phase[t] * if c < 2 { 1.0 } else { 2.0 };
+        (if c % 2 == 0 { p.sin() } else { p.cos() }) as f32
+    })
+}
+
+/// The served clock of a song: `is_beat` its beat column on the network's frames (`fps`), the
+/// style's fraction, halved while the steps would come over 1.5 × [`step_hz`]. Zeros where
+/// the song has under two beats (the decoder then dances on its history, as it did before).
+pub fn of_song(is_beat: &[bool], style: DanceStyle, fps: f64) -> Array2<f32> {
+    let Some(count) = beat_count(is_beat) else {
+        return Array2::zeros((is_beat.len(), WIDTH as usize));
+    };
+    let n = count.len();
+    let beats_per_s = (count[n - 1] - count[0]) / ((n - 1).max(1) as f64 / fps);
+    let mut f = step_fraction(style);
+    while f * beats_per_s > 1.5 * step_hz(style) && f > 1.0 / 12.0 {
+        f /= 2.0;
+    }
+    let phase: Vec<f64> = count
+        .iter()
+        .map(|&b| std::f64::consts::TAU * f * b)
+        .collect();
+    columns(&phase)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_beat_count_runs_on_between_and_beyond_the_beats() {
+        let mut beats = vec![false; 30];
+        beats[5] = true;
+        beats[15] = true;
+        beats[23] = true;
+        let b = beat_count(&beats).unwrap();
+        assert!((b[5] - 0.0).abs() < 1e-9 && (b[10] - 0.5).abs() < 1e-9);
+        assert!((b[19] - 1.5).abs() < 1e-9 && (b[27] - 2.5).abs() < 1e-9);
+        assert!((b[0] + 0.5).abs() < 1e-9, "before the first beat: {}", b[0]);
+        assert!(beat_count(&beats[..10]).is_none());
+    }
+
+    /// A waltz at 87 BPM turns the clock once every 3 beats; the same style on a song tracked
+    /// at 174 BPM once every 6, so the step rate stays a waltz's.
+    #[test]
+    fn the_served_clock_turns_once_a_step_and_folds_double_time() {
+        let fps = 25.0;
+        let beats = |bpm: f64| -> Vec<bool> {
+            let period = fps * 60.0 / bpm;
+            let mut b = vec![false; 1000];
+            let mut t: f64 = 3.0;
+            while (t as usize) < b.len() {
+                b[t.round() as usize] = true;
+                t += period;
+            }
+            b
+        };
+        // Frames between zero crossings upwards of sin φ: one turn.
+        let turn = |c: &Array2<f32>| -> f64 {
+            let ups: Vec<usize> = (1..c.nrows())
+                .filter(|&t| c[[t - 1, 0]] < 0.0 && c[[t, 0]] >= 0.0)
+                .collect();
+            (ups[ups.len() - 1] - ups[0]) as f64 / (ups.len() - 1) as f64
+        };
+        let slow = of_song(&beats(87.0), DanceStyle::Waltz, fps);
+        let beat = fps * 60.0 / 87.0;
+        assert!(
+            (turn(&slow) / beat - 3.0).abs() < 0.05,
+            "{}",
+            turn(&slow) / beat
+        );
+        let fast = of_song(&beats(174.0), DanceStyle::Waltz, fps);
+        assert!(
+            (turn(&fast) / beat - 3.0).abs() < 0.05,
+            "{}",
+            turn(&fast) / beat
+        );
+        let rumba = of_song(&beats(90.0), DanceStyle::Rumba, fps);
+        assert!((turn(&rumba) / (fps * 60.0 / 90.0) - 2.0).abs() < 0.05);
+        // Sin and cos of one phase, and of twice it.
+        for t in [0usize, 100, 500] {
+            let r = slow.row(t);
+            assert!((r[0] * r[0] + r[1] * r[1] - 1.0).abs() < 1e-5);
+            assert!((r[2] - 2.0 * r[0] * r[1]).abs() < 1e-5);
+        }
+        assert!(of_song(&[false; 50], DanceStyle::Waltz, fps)
+            .iter()
+            .all(|&v| v == 0.0));
+    }
+}
