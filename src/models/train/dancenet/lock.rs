@@ -102,20 +102,28 @@ pub(super) fn term(
     layout: &Layout,
 ) -> Option<Lock> {
     let (r, n, _) = real.size3().ok()?;
+    let d = danced.size()[2];
+    let std = Tensor::from_slice(&pose_norm.std).view([1, 1, -1]);
+    let mean = Tensor::from_slice(&pose_norm.mean).view([1, 1, -1]);
+    let denorm = |x: &Tensor| x * &std + &mean;
+    // The last real frame before the free run, so its first frame has a speed too.
+    let last = real.narrow(1, context - 1, 1).narrow(2, 0, d);
+    let own = toe_speed(
+        &denorm(&Tensor::cat(&[last, danced.shallow_clone()], 1)),
+        layout,
+    );
+    let truth = toe_speed(
+        &denorm(&real.narrow(1, context - 1, n - context + 1).narrow(2, 0, d)),
+        layout,
+    );
+    // Held to at least the real dancer's score over the same frames, not past it: a decoder
+    // pushed further swings its feet harder than anyone danced.
+    let shortfall = |own: Tensor, truth: Tensor| Lock {
+        loss: (&truth - &own).relu().mean(Kind::Float),
+        danced: own.mean(Kind::Float).double_value(&[]),
+        real: truth.mean(Kind::Float).double_value(&[]),
+    };
     if let Some(clock) = clock {
-        let d = danced.size()[2];
-        let std = Tensor::from_slice(&pose_norm.std).view([1, 1, -1]);
-        let mean = Tensor::from_slice(&pose_norm.mean).view([1, 1, -1]);
-        let denorm = |x: &Tensor| x * &std + &mean;
-        let last = real.narrow(1, context - 1, 1).narrow(2, 0, d);
-        let own = toe_speed(
-            &denorm(&Tensor::cat(&[last, danced.shallow_clone()], 1)),
-            layout,
-        );
-        let truth = toe_speed(
-            &denorm(&real.narrow(1, context - 1, n - context + 1).narrow(2, 0, d)),
-            layout,
-        );
         let k = clock.narrow(1, context, n - context);
         let phase = k.select(2, 0).atan2(&k.select(2, 1));
         // Windows without two beats have a zero clock: left out.
@@ -128,31 +136,11 @@ pub(super) fn term(
             return None;
         }
         let pick = |t: &Tensor| t.index_select(0, &idx);
-        let own = signed_projection(&pick(&own), &pick(&phase));
-        let truth = signed_projection(&pick(&truth), &pick(&phase));
-        return Some(Lock {
-            loss: (&truth - &own).relu().mean(Kind::Float),
-            danced: own.mean(Kind::Float).double_value(&[]),
-            real: truth.mean(Kind::Float).double_value(&[]),
-        });
+        return Some(shortfall(
+            signed_projection(&pick(&own), &pick(&phase)),
+            signed_projection(&pick(&truth), &pick(&phase)),
+        ));
     }
-    let d = danced.size()[2];
-    let std = Tensor::from_slice(&pose_norm.std).view([1, 1, -1]);
-    let mean = Tensor::from_slice(&pose_norm.mean).view([1, 1, -1]);
-    let denorm = |x: &Tensor| x * &std + &mean;
-    // The last real frame before the free run, so its first frame has a speed too.
-    let last = real.narrow(1, context - 1, 1).narrow(2, 0, d);
-    let own = toe_speed(
-        &denorm(&Tensor::cat(
-            &[last.shallow_clone(), danced.shallow_clone()],
-            1,
-        )),
-        layout,
-    );
-    let truth = toe_speed(
-        &denorm(&real.narrow(1, context - 1, n - context + 1).narrow(2, 0, d)),
-        layout,
-    );
     // Beat frames: the beat column over its midpoint between "no beat" and "beat".
     let cut = (0.5 - music_norm.mean[1]) / music_norm.std[1].max(NormStats::MIN_STD);
     let col: Array2<f32> = Array2::from_shape_vec(
@@ -178,15 +166,10 @@ pub(super) fn term(
     }
     let idx = Tensor::from_slice(&keep);
     let theta = Tensor::from_slice(&theta).view([keep.len() as i64, n - context]);
-    let own = projection(&own.index_select(0, &idx), &theta);
-    let truth = projection(&truth.index_select(0, &idx), &theta);
-    Some(Lock {
-        // Held to at least the real dancer's lock over the same frames, not past it: a decoder
-        // pushed further swings its feet harder than anyone danced.
-        loss: (&truth - &own).relu().mean(Kind::Float),
-        danced: own.mean(Kind::Float).double_value(&[]),
-        real: truth.mean(Kind::Float).double_value(&[]),
-    })
+    Some(shortfall(
+        projection(&own.index_select(0, &idx), &theta),
+        projection(&truth.index_select(0, &idx), &theta),
+    ))
 }
 
 #[cfg(test)]
