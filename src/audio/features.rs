@@ -55,6 +55,8 @@ pub mod dance_revolution_cols {
 
 /// Width of the DanceNet set.
 pub const DANCENET_DIM: usize = 15;
+/// The DanceNet set's beat one-hot column (the downbeat's follows it).
+pub const DANCENET_BEAT: usize = 1;
 /// Width of the key-pose transformer set.
 pub const KEYPOSE_DIM: usize = 15;
 /// Width of the TSMT set.
@@ -281,8 +283,8 @@ pub fn dancenet(
     let (chroma, onset, beats, down, rows) = rhythm_and_chroma(audio, fps, start_s, n_frames)?;
     let mut out = Array2::<f32>::zeros((n_frames, DANCENET_DIM));
     put_col(out.column_mut(0), &onset, &rows);
-    put_col(out.column_mut(1), &beats, &rows);
-    put_col(out.column_mut(2), &down, &rows);
+    put_col(out.column_mut(DANCENET_BEAT), &beats, &rows);
+    put_col(out.column_mut(DANCENET_BEAT + 1), &down, &rows);
     put(&mut out, 3..15, &chroma, &rows);
     Ok(out)
 }

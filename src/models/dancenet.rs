@@ -464,17 +464,27 @@ impl DanceNet {
         self.mixture(&raw, &current)
     }
 
-    /// The conditioning of a window: the encoder's code of `music` `[b, n, music_dim]`, and with
-    /// [`Config::step_clock`] the clock `[b, n, step_clock::WIDTH]` after it (zeros when `None`).
+    /// The conditioning of a window: the encoder's code of `music` `[b, n, music_dim]` and its
+    /// clock ([`Self::with_clock`]).
     pub fn code(&self, music: &Tensor, clock: Option<&Tensor>) -> Tensor {
-        let code = self.encoder.forward(music);
+        self.with_clock(self.encoder.forward(music), clock)
+    }
+
+    /// `code` `[.., code columns]` as every gated layer reads it: with [`Config::step_clock`]
+    /// the clock `[.., step_clock::WIDTH]` after it (zeros when `None`), else as it is.
+    pub fn with_clock(&self, code: Tensor, clock: Option<&Tensor>) -> Tensor {
         if !self.config.step_clock {
             return code;
         }
-        let (b, n, _) = music.size3().expect("music [b, n, d]");
         let clock = match clock {
-            Some(c) => c.shallow_clone(),
-            None => Tensor::zeros([b, n, step_clock::WIDTH], (Kind::Float, music.device())),
+            Some(c) => c.to_device(code.device()),
+            None => {
+                let mut shape = code.size();
+                if let Some(last) = shape.last_mut() {
+                    *last = step_clock::WIDTH;
+                }
+                Tensor::zeros(shape, (Kind::Float, code.device()))
+            }
         };
         Tensor::cat(&[code, clock], -1)
     }

@@ -128,10 +128,9 @@ mod tests {
     use tch::nn::{self, OptimizerConfig};
     use tch::Device;
 
-    /// With σ → 0 the free run is the teacher-forced pass fed its own means: each frame it makes
-    /// equals the mean `forward` predicts from the frames made before it.
-    #[test]
-    fn a_free_run_makes_what_the_teacher_forced_pass_predicts_from_its_own_frames() {
+    /// A tiny one-component model (6 features, music 3 wide) and `b` random real windows of
+    /// `n` frames (features and contacts).
+    fn tiny(b: i64, n: i64) -> (nn::VarStore, DanceNet, Tensor) {
         let config = Config {
             mixtures: 1,
             music_dim: 3,
@@ -139,8 +138,17 @@ mod tests {
         };
         let vs = nn::VarStore::new(Device::Cpu);
         let model = DanceNet::new(&vs.root(), config.clone());
-        let (b, n, width) = (2, 20, 6 + config.contacts);
-        let real = Tensor::randn([b, n, width], (Kind::Float, Device::Cpu));
+        let real = Tensor::randn([b, n, 6 + config.contacts], (Kind::Float, Device::Cpu));
+        (vs, model, real)
+    }
+
+    /// With σ → 0 the free run is the teacher-forced pass fed its own means: each frame it makes
+    /// equals the mean `forward` predicts from the frames made before it.
+    #[test]
+    fn a_free_run_makes_what_the_teacher_forced_pass_predicts_from_its_own_frames() {
+        let (b, n) = (2, 20);
+        let (_vs, model, real) = tiny(b, n);
+        let config = model.config.clone();
         let code = Tensor::randn([b, n, config.code_width()], (Kind::Float, Device::Cpu));
         let style = model.style_one_hot(&[0, 3], Device::Cpu);
         let context = config.receptive_field();
@@ -171,15 +179,9 @@ mod tests {
     /// The rhythm term (`train::spectral`) on a free run reaches the decoder's weights.
     #[test]
     fn the_rhythm_term_moves_the_decoder_from_its_own_dancing() {
-        let config = Config {
-            mixtures: 1,
-            music_dim: 3,
-            ..Config::tiny(6)
-        };
-        let vs = nn::VarStore::new(Device::Cpu);
-        let model = DanceNet::new(&vs.root(), config.clone());
-        let (b, n, width) = (2, 40, 6 + config.contacts);
-        let real = Tensor::randn([b, n, width], (Kind::Float, Device::Cpu));
+        let (b, n) = (2, 40);
+        let (vs, model, real) = tiny(b, n);
+        let config = model.config.clone();
         let music = Tensor::randn([b, n, 3], (Kind::Float, Device::Cpu));
         let style = model.style_one_hot(&[0, 1], Device::Cpu);
         let context = config.receptive_field();

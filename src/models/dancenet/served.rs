@@ -198,18 +198,17 @@ impl Served {
                 }) else {
                     return Ok(None);
                 };
-                // The step clock of the song's beats (column 1 of the control signals, on the
-                // network's clock) at the style's fraction.
-                let code = if model.config.step_clock {
-                    let beats: Vec<bool> = feats.column(1).iter().map(|&v| v > 0.5).collect();
-                    let clock = super::step_clock::of_song(&beats, style.style, fps);
-                    {
-                        let clock = to_tensor(&clock).to_device(code.device());
-                        Tensor::cat(&[code, clock], 1)
-                    }
-                } else {
-                    code
-                };
+                // The step clock of the song's beats (on the network's clock) at the style's
+                // fraction.
+                let steps = model.config.step_clock.then(|| {
+                    let beats: Vec<bool> = feats
+                        .column(crate::audio::features::DANCENET_BEAT)
+                        .iter()
+                        .map(|&v| v > 0.5)
+                        .collect();
+                    to_tensor(&super::step_clock::of_song(&beats, style.style, fps))
+                });
+                let code = model.with_clock(code, steps.as_ref());
                 let draw = Draw {
                     model,
                     code: &code,

@@ -46,7 +46,10 @@ impl MusicLayout {
     /// The DanceNet set ([`crate::audio::features::dancenet`]): onset | beat, downbeat | chroma.
     pub fn dancenet() -> Self {
         Self {
-            one_hot: vec![1, 2],
+            one_hot: vec![
+                crate::audio::features::DANCENET_BEAT,
+                crate::audio::features::DANCENET_BEAT + 1,
+            ],
             ..Default::default()
         }
     }

@@ -430,7 +430,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     let r = (opts.rollout_windows as i64).min(chunk.len() as i64);
                     let real = target.narrow(0, 0, r);
                     let window_music = music.narrow(0, 0, r);
-                    let code = model.code(&window_music, clock.as_ref().map(|c| c.narrow(0, 0, r)).as_ref());
+                    let window_clock = clock.as_ref().map(|c| c.narrow(0, 0, r));
+                    let code = model.code(&window_music, window_clock.as_ref());
                     let danced = model.free_run(&real, &code, &style.narrow(0, 0, r), warmup as i64, opts.temperature, opts.coherence);
                     if opts.spectral_weight > 0.0 {
                         let continuation = real.narrow(1, warmup as i64, len as i64 - warmup as i64);
@@ -440,7 +441,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     }
                     let styles: Vec<DanceStyle> = chunk[..r as usize].iter().map(|&(i, _)| train_raw[i].style).collect();
                     if opts.lock_weight > 0.0 {
-                        if let Some(l) = lock::term(&danced, &real, &window_music, clock.as_ref().map(|c| c.narrow(0, 0, r)).as_ref(), &styles, warmup as i64, &pose_norm, &music_norm, &layout) {
+                        if let Some(l) = lock::term(&danced, &real, &window_music, window_clock.as_ref(), &styles, warmup as i64, &pose_norm, &music_norm, &layout) {
                             lock_own += l.danced;
                             lock_real += l.real;
                             lock_batches += 1;

@@ -13,9 +13,9 @@
 //! a speed that swings once per f-th of a beat, whatever its phase, and near 0 for stepping at
 //! any other rate or for jitter. The loss is how far the danced window falls short of the real
 //! dancer's projection over the same frames.
-use ndarray::Array2;
 use tch::{Kind, Tensor};
 
+use crate::audio::features::DANCENET_BEAT;
 use crate::models::dancenet::step_clock::{beat_count, step_fraction};
 use crate::models::DanceStyle;
 use crate::motion::dataset::NormStats;
@@ -47,17 +47,38 @@ pub(super) fn toe_speed(rows: &Tensor, layout: &Layout) -> Tensor {
         .expect("two toes")
 }
 
-/// The normalised projection of `speed` `[b, n]` on phases `theta` `[b, n]` (radians), per window
-/// `[b]`: 1 for a speed that swings with the phase, near 0 otherwise.
-pub(super) fn projection(speed: &Tensor, theta: &Tensor) -> Tensor {
+/// `speed` `[b, n]` less its Hann-weighted mean, times the Hann window, and the sum of its
+/// magnitude per window `[b]`: what both projections divide by.
+fn windowed(speed: &Tensor) -> (Tensor, Tensor) {
     let n = speed.size()[1];
     let w = Tensor::hann_window_periodic(n, false, (Kind::Float, speed.device())).unsqueeze(0);
     let mean = (speed * &w).sum_dim_intlist(1, true, Kind::Float) / w.sum(Kind::Float);
     let s = (speed - mean) * &w;
+    let norm = s.abs().sum_dim_intlist(1, false, Kind::Float) + 1e-8;
+    (s, norm)
+}
+
+/// The normalised projection of `speed` `[b, n]` on phases `theta` `[b, n]` (radians), per window
+/// `[b]`: 1 for a speed that swings with the phase, near 0 otherwise.
+pub(super) fn projection(speed: &Tensor, theta: &Tensor) -> Tensor {
+    let (s, norm) = windowed(speed);
     let re = (&s * theta.cos()).sum_dim_intlist(1, false, Kind::Float);
     let im = (&s * theta.sin()).sum_dim_intlist(1, false, Kind::Float);
-    let norm = s.abs().sum_dim_intlist(1, false, Kind::Float) + 1e-8;
     (re.square() + im.square() + 1e-12).sqrt() / norm
+}
+
+/// Each window's beat frames from normalised music `[b, n, ·]`: the beat column over its
+/// midpoint between "no beat" and "beat".
+pub(super) fn window_beats(music: &Tensor, music_norm: &NormStats) -> Vec<Vec<bool>> {
+    let col = DANCENET_BEAT;
+    let cut = (0.5 - music_norm.mean[col]) / music_norm.std[col].max(NormStats::MIN_STD);
+    let n = music.size()[1].max(1) as usize;
+    let values: Vec<f32> =
+        Vec::try_from(music.select(2, col as i64).contiguous().view([-1])).expect("f32 music");
+    values
+        .chunks(n)
+        .map(|w| w.iter().map(|&v| v > cut).collect())
+        .collect()
 }
 
 /// The signed projection of `speed` `[b, n]` on phases `phase` `[b, n]`: how much of it peaks
@@ -67,11 +88,7 @@ pub(super) fn projection(speed: &Tensor, theta: &Tensor) -> Tensor {
 /// happens to dance, so its pull on the clock's weights points every way and cancels over a
 /// batch; this one points them all one way.
 pub(super) fn signed_projection(speed: &Tensor, phase: &Tensor) -> Tensor {
-    let n = speed.size()[1];
-    let w = Tensor::hann_window_periodic(n, false, (Kind::Float, speed.device())).unsqueeze(0);
-    let mean = (speed * &w).sum_dim_intlist(1, true, Kind::Float) / w.sum(Kind::Float);
-    let s = (speed - mean) * &w;
-    let norm = s.abs().sum_dim_intlist(1, false, Kind::Float) + 1e-8;
+    let (s, norm) = windowed(speed);
     (&s * phase.cos()).sum_dim_intlist(1, false, Kind::Float) / norm
 }
 
@@ -141,17 +158,10 @@ pub(super) fn term(
             signed_projection(&pick(&truth), &pick(&phase)),
         ));
     }
-    // Beat frames: the beat column over its midpoint between "no beat" and "beat".
-    let cut = (0.5 - music_norm.mean[1]) / music_norm.std[1].max(NormStats::MIN_STD);
-    let col: Array2<f32> = Array2::from_shape_vec(
-        (r as usize, n as usize),
-        Vec::<f32>::try_from(music.select(2, 1).contiguous().view([-1])).ok()?,
-    )
-    .ok()?;
+    let beats = window_beats(music, music_norm);
     let (mut keep, mut theta) = (Vec::new(), Vec::new());
-    for (i, style) in styles.iter().enumerate().take(r as usize) {
-        let beats: Vec<bool> = col.row(i).iter().map(|&v| v > cut).collect();
-        if let Some(count) = beat_count(&beats) {
+    for (i, (style, beats)) in styles.iter().zip(&beats).enumerate().take(r as usize) {
+        if let Some(count) = beat_count(beats) {
             let f = step_fraction(*style);
             keep.push(i as i64);
             theta.extend(

@@ -13,7 +13,7 @@
 use ndarray::Array2;
 use tch::Tensor;
 
-use super::lock::toe_speed;
+use super::lock::{toe_speed, window_beats};
 use crate::models::dancenet::step_clock::{self, beat_count};
 use crate::motion::dataset::NormStats;
 use crate::motion::rotations::Layout;
@@ -38,14 +38,10 @@ pub(super) fn window_clock(
     let mean = Tensor::from_slice(&pose_norm.mean).view([1, 1, -1]);
     let speed = toe_speed(&(real.narrow(2, 0, d) * std + mean), layout); // [b, n − 1]
     let speed: Vec<f32> = Vec::try_from(speed.contiguous().view([-1])).expect("f32 speed");
-    let col: Vec<f32> =
-        Vec::try_from(music.select(2, 1).contiguous().view([-1])).expect("f32 beat column");
-    let cut = (0.5 - music_norm.mean[1]) / music_norm.std[1].max(NormStats::MIN_STD);
     let (b, n) = (b as usize, n as usize);
     let mut out = Array2::<f32>::zeros((b * n, step_clock::WIDTH as usize));
-    for i in 0..b {
-        let beats: Vec<bool> = col[i * n..(i + 1) * n].iter().map(|&v| v > cut).collect();
-        let Some(count) = beat_count(&beats) else {
+    for (i, beats) in window_beats(music, music_norm).iter().enumerate() {
+        let Some(count) = beat_count(beats) else {
             continue;
         };
         // Frame t's speed is the step from t − 1 to t; the first frame borrows the second's.
