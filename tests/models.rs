@@ -560,13 +560,50 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
     assert!(motion.positions.iter().all(|v| v.is_finite()));
 }
 
-/// DanceNet's trainer draws each window at its own tempo (`train::augment`: the rotation rows
-/// and the music resampled together, the root and yaw velocities scaled), with `style_dropout`
-/// leaves the style input out of a share of them, and with `lock_weight` dances a few windows on
-/// its own and scores their toes' speed against the beats (issue 25): a tiny epoch on the real
-/// train split runs, logs all three (the real continuations' lock well above zero), records them
-/// in `model.json`, and serves. A run continued from that folder (`--init`) keeps its rig and
-/// normalisation.
+/// `choreo train tsmt --init … --step-clock --lock-weight …` (issue 25 item 4): a run continued
+/// from a folder without the clock gives the network the clock (its new weights from zero), fits
+/// each window's clock to the real dancer's step, and scores what the network means to draw after
+/// its own draws against it: the real continuation is scored, the test loss is logged with the
+/// clock a quarter step late too, and the folder serves with the song's clock.
+#[test]
+fn tsmt_continues_with_the_step_clock_and_the_lock_term() {
+    use choreo::models::train::tsmt;
+    let first = tempfile::tempdir().unwrap();
+    let opts = tsmt::Options {
+        common: tiny_training(first.path()),
+        epochs: 1,
+        ..tsmt::Options::default()
+    };
+    tsmt::train(&opts).expect("training runs");
+    let out = tempfile::tempdir().unwrap();
+    let continued = tsmt::Options {
+        common: choreo::models::train::CommonOptions {
+            init: Some(first.path().join("weights.safetensors")),
+            ..tiny_training(out.path())
+        },
+        epochs: 1,
+        min_tempo: 0.8,
+        max_tempo: 1.25,
+        self_condition: 0.5,
+        self_run: 4,
+        step_clock: true,
+        lock_weight: 1.0,
+        ..tsmt::Options::default()
+    };
+    let logs = tsmt::train(&continued).expect("the continued run trains");
+    one_finite_epoch(&logs, "test_clock_late=");
+    // The tiny network's window is 16 frames, under one step: the real score is near zero there
+    // (the served window, 80 frames, scores the real dancer well above it), but it is scored.
+    let real = real_lock(&logs[0].note);
+    assert!(real != 0.0 && real.abs() <= 1.0, "{}", logs[0].note);
+    let file = written_model_file(out.path());
+    assert_eq!(file["config"]["step_clock"], true);
+    assert_eq!(file["training"]["lock_weight"], 1.0);
+    let served = choreo::models::tsmt::Served::load(out.path()).expect("the folder loads");
+    let motion = dance(&served, &GenerateRequest::plain(song(), 1));
+    assert!(motion.positions.iter().all(|v| v.is_finite()));
+}
+
 /// The real continuations' lock logged in a dancenet epoch's note.
 fn real_lock(note: &str) -> f64 {
     note.split("real=")
@@ -576,6 +613,13 @@ fn real_lock(note: &str) -> f64 {
         .unwrap_or_else(|| panic!("no real lock in {note}"))
 }
 
+/// DanceNet's trainer draws each window at its own tempo (`train::augment`: the rotation rows
+/// and the music resampled together, the root and yaw velocities scaled), with `style_dropout`
+/// leaves the style input out of a share of them, and with `lock_weight` dances a few windows on
+/// its own and scores their toes' speed against the beats (issue 25): a tiny epoch on the real
+/// train split runs, logs all three (the real continuations' lock well above zero), records them
+/// in `model.json`, and serves. A run continued from that folder (`--init`) keeps its rig and
+/// normalisation.
 #[test]
 fn dancenet_trains_on_windows_at_other_tempi_with_the_lock_term_and_the_step_clock() {
     use choreo::models::train::dancenet;

@@ -61,6 +61,8 @@ pub const DANCENET_BEAT: usize = 1;
 pub const KEYPOSE_DIM: usize = 15;
 /// Width of the TSMT set.
 pub const TSMT_DIM: usize = 27;
+/// The beat one-hot's column in TSMT's features (after MFCC 13 and its Δ).
+pub const TSMT_BEAT: usize = 26;
 
 /// The sample grid of a feature set: `sr = fps · hop`.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -348,7 +350,11 @@ pub fn tsmt(
     let mut out = Array2::<f32>::zeros((n_frames, TSMT_DIM));
     put(&mut out, 0..13, &mfcc, &p.rows);
     put(&mut out, 13..26, &delta(&mfcc, 9), &p.rows);
-    put_col(out.column_mut(26), &one_hot(&beats, mel.nrows()), &p.rows);
+    put_col(
+        out.column_mut(TSMT_BEAT),
+        &one_hot(&beats, mel.nrows()),
+        &p.rows,
+    );
     Ok(out)
 }
 

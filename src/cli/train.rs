@@ -424,6 +424,23 @@ args_into! {
         /// Teacher-forced passes that draw the own frames (each from the last pass's input).
         #[arg(long, default_value_t = train::tsmt::Options::default().self_passes)]
         self_passes: usize,
+        /// A phase turning once per step of the song's beats joins the pose stream's input and the
+        /// fusion (in training at the real dancer's own step rate and zero over the 10 s up to
+        /// each window's end; served, the song's beats at its metre's fraction); with `--init`
+        /// its new weights start at zero.
+        #[arg(long)]
+        step_clock: bool,
+        /// Weight of the lock term (with `--step-clock`): the toes' speed the network means to
+        /// draw next, after its own draws and the dance, held to peak where the clock says the
+        /// real dancer's does (model card, issue 25).
+        #[arg(long, default_value_t = train::tsmt::Options::default().lock_weight)]
+        lock_weight: f64,
+        /// Warped histories (with `--step-clock`): each window's first 40 frames are the same
+        /// dance replayed at a pace drawn in [1/R, R], ending on the pose the window continues
+        /// from, and only the frames after them are scored, so the continuation's pace is heard
+        /// from the clock and the beats, not the history (0: off).
+        #[arg(long, default_value_t = train::tsmt::Options::default().history_warp)]
+        history_warp: f64,
         /// Do not train: redraw the seed clips (the same clips for the same `--seed`) with each
         /// one's source and its song's beats into `--out` (`seed_clips.safetensors`,
         /// `seed_clips.json`; with it the song chooses the opening clip).

@@ -31,8 +31,9 @@ use tch::{Device, Kind, Tensor};
 mod free_run;
 mod sampling;
 pub mod served;
-pub mod step_clock;
 pub mod style;
+
+use super::step_clock;
 
 pub use sampling::{Draws, Sampling};
 

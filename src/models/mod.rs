@@ -17,6 +17,7 @@ pub mod keypose_transformer;
 pub mod layers;
 pub mod motion_style;
 pub mod opening_check;
+pub mod step_clock;
 pub mod train;
 pub mod tsmt;
 

@@ -87,6 +87,11 @@ pub struct Config {
     /// Context window of the pose stream, frames (training window length and the cache kept).
     pub window: i64,
     pub dropout: f64,
+    /// The step clock (issue 25 item 4, `models::step_clock`): a phase that turns once per step
+    /// of the song's beats, added to the pose stream's input frames and to the fusion
+    /// ([`StepClockIn`]). Absent in older `model.json` files: off.
+    #[serde(default)]
+    pub step_clock: bool,
 }
 
 impl Config {
@@ -109,6 +114,7 @@ impl Config {
             head_hidden: 64,
             window: 80,
             dropout: 0.1,
+            step_clock: false,
         }
     }
 
@@ -330,6 +336,40 @@ pub struct Tsmt {
     bin_out: Tensor,
     /// Per-coordinate logit bias `[coords, n_bins]`.
     bias: Tensor,
+    /// The step clock's two maps, when [`Config::step_clock`].
+    clock: Option<StepClockIn>,
+}
+
+/// Where the step clock enters TSMT: each input frame's clock is added to the pose stream's
+/// merged frame (so `z^X_{t−1}` knows where in the step the dancer was), and frame t's clock to
+/// the fusion beside `W^A z^A_t` (so the read-out knows where the next frame lies). Both start at
+/// zero (`train::ADDED_MODULES`): a network given the clock computes what it did without it
+/// until training moves them. Late fusion keeps the clock out of the audio stream, whose band
+/// attention would smear a phase that must be exact per frame.
+#[derive(Debug)]
+pub struct StepClockIn {
+    pose: nn::Linear,
+    fusion: nn::Linear,
+}
+
+impl StepClockIn {
+    /// Variables under `step_clock.` (`pose`, `fusion`), zero.
+    fn new(p: nn::Path, c: &Config) -> Self {
+        let zero = nn::LinearConfig {
+            ws_init: nn::Init::Const(0.0),
+            bias: false,
+            ..Default::default()
+        };
+        Self {
+            pose: nn::linear(&p / "pose", crate::models::step_clock::WIDTH, c.d_x, zero),
+            fusion: nn::linear(
+                &p / "fusion",
+                crate::models::step_clock::WIDTH,
+                c.coords * c.e_out,
+                zero,
+            ),
+        }
+    }
 }
 
 impl Tsmt {
@@ -369,6 +409,7 @@ impl Tsmt {
                 )
             },
             bias: p.var("bias", &[c.coords, c.n_bins], nn::Init::Const(0.0)),
+            clock: c.step_clock.then(|| StepClockIn::new(p / "step_clock", c)),
             config,
         }
     }
@@ -386,100 +427,127 @@ impl Tsmt {
         h.matmul(&self.bin_out.tr()) + &self.bias
     }
 
+    /// The fused vectors `[b, n, coords * e_out]` of frames 1..=n of a window (the pose stream
+    /// over `input` frames 0..n−1, causal; the audio stream's frame t), before the read-out;
+    /// `clock` `[b, n + 1, WIDTH]` the window's step clock where the network has one.
+    pub fn fused(
+        &self,
+        input: &Tensor,
+        music: &Tensor,
+        clock: Option<&Tensor>,
+        start: i64,
+        train: bool,
+    ) -> Tensor {
+        let n = input.size()[1] - 1;
+        let emb = input.narrow(1, 0, n).apply(&self.bin_embed); // [b, n, coords, e_bin]
+        let mut x = self.pose.merge(&emb, start);
+        let step = self.clock.as_ref().zip(clock);
+        if let Some((k, c)) = step {
+            x = x + c.narrow(1, 0, n).apply(&k.pose);
+        }
+        let x = x.dropout(self.config.dropout, train);
+        let mask = super::layers::causal_mask(n, input.device());
+        let z_x = self.pose.stack.forward(&x, Some(&mask), train); // [b, n, d_x]
+        let z_a = self.audio.forward(music, start, train).narrow(1, 1, n); // [b, n, d_a]
+        let fused = z_x.apply(&self.w_x) + z_a.apply(&self.w_a);
+        match step {
+            Some((k, c)) => fused + c.narrow(1, 1, n).apply(&k.fusion),
+            None => fused,
+        }
+    }
+
     /// Training pass (§3.3): `tokens` `[b, n + 1, coords]` (int64), `music` `[b, n + 1, music_dim]`,
     /// the window's first frame at song position `start`. Returns logits `[b, n, coords, n_bins]`
     /// for frames 1..=n: frame t from `z^X_{t−1}` (poses up to t − 1) and `z^A_t`.
-    pub fn forward(&self, tokens: &Tensor, music: &Tensor, start: i64, train: bool) -> Tensor {
-        let n = tokens.size()[1] - 1;
-        let emb = tokens.narrow(1, 0, n).apply(&self.bin_embed); // [b, n, coords, e_bin]
-        let x = self
-            .pose
-            .merge(&emb, start)
-            .dropout(self.config.dropout, train);
-        let mask = super::layers::causal_mask(n, tokens.device());
-        let z_x = self.pose.stack.forward(&x, Some(&mask), train); // [b, n, d_x]
-        let z_a = self.audio.forward(music, start, train).narrow(1, 1, n); // [b, n, d_a]
-        self.logits(&(z_x.apply(&self.w_x) + z_a.apply(&self.w_a)))
+    pub fn forward(
+        &self,
+        tokens: &Tensor,
+        music: &Tensor,
+        clock: Option<&Tensor>,
+        start: i64,
+        train: bool,
+    ) -> Tensor {
+        self.logits(&self.fused(tokens, music, clock, start, train))
     }
 
     /// Mean cross-entropy of [`Self::forward`] against frames 1..=n of `tokens`.
-    pub fn loss(&self, tokens: &Tensor, music: &Tensor, start: i64, train: bool) -> Tensor {
-        self.loss_with_input(tokens, tokens, music, start, train)
-    }
-
-    /// As [`Self::loss`], with the pose stream reading `input` (e.g. noised tokens) while the
-    /// targets are `tokens`.
-    pub fn loss_with_input(
+    pub fn loss(
         &self,
-        input: &Tensor,
         tokens: &Tensor,
         music: &Tensor,
+        clock: Option<&Tensor>,
         start: i64,
         train: bool,
     ) -> Tensor {
         let n = tokens.size()[1] - 1;
-        let logits = self.forward(input, music, start, train);
-        let target = tokens.narrow(1, 1, n).reshape([-1]);
-        logits
-            .reshape([-1, self.config.n_bins])
-            .cross_entropy_for_logits(&target)
+        let all = Tensor::arange(n, (Kind::Int64, tokens.device()));
+        let fused = self.fused(tokens, music, clock, start, train);
+        self.loss_on_frames(&fused, tokens, &all)
     }
 
-    /// As [`Self::loss_with_input`], scoring only the predicted frames listed in `frames`
-    /// (indices into 1..=n, minus one). Both streams still run over the whole window (every
-    /// scored frame sees its full causal context); only the read-out, which is three quarters of
-    /// a step's arithmetic (`coords × n_bins` logits per frame), runs on the chosen frames. An
-    /// unbiased estimate of the full loss at a fraction of the cost.
-    pub fn loss_on_frames(
-        &self,
-        input: &Tensor,
-        tokens: &Tensor,
-        music: &Tensor,
-        start: i64,
-        frames: &Tensor,
-        train: bool,
-    ) -> Tensor {
+    /// The cross-entropy of the fused vectors `fused` ([`Self::fused`]) against frames 1..=n of
+    /// `tokens`, scoring only the predicted frames listed in `frames` (indices into 1..=n,
+    /// minus one): the read-out, which is most of a step's arithmetic (`coords × n_bins` logits
+    /// per frame), runs on the chosen frames only. An unbiased estimate of the full loss at a
+    /// fraction of the cost.
+    pub fn loss_on_frames(&self, fused: &Tensor, tokens: &Tensor, frames: &Tensor) -> Tensor {
         let n = tokens.size()[1] - 1;
-        let emb = input.narrow(1, 0, n).apply(&self.bin_embed);
-        let x = self
-            .pose
-            .merge(&emb, start)
-            .dropout(self.config.dropout, train);
-        let mask = super::layers::causal_mask(n, tokens.device());
-        let z_x = self
-            .pose
-            .stack
-            .forward(&x, Some(&mask), train)
-            .index_select(1, frames);
-        let z_a = self
-            .audio
-            .forward(music, start, train)
-            .narrow(1, 1, n)
-            .index_select(1, frames);
-        let logits = self.logits(&(z_x.apply(&self.w_x) + z_a.apply(&self.w_a)));
+        let logits = self.logits(&fused.index_select(1, frames));
         let target = tokens.narrow(1, 1, n).index_select(1, frames).reshape([-1]);
         logits
             .reshape([-1, self.config.n_bins])
             .cross_entropy_for_logits(&target)
     }
 
-    /// Encodes a whole song `[1, n, music_dim]`: `W^A z^A` `[n, coords * e_out]`.
+    /// The expected value `[b, n, k]` of the coordinates `coords` (`k` of them) under the
+    /// read-out of `fused` ([`Self::fused`]), with `centres` `[k, n_bins]` their bin centres:
+    /// what the network means to draw, differentiable (the step clock's lock term).
+    pub fn expected(&self, fused: &Tensor, coords: &Tensor, centres: &Tensor) -> Tensor {
+        let (b, n, _) = fused.size3().expect("fused is [b, n, coords * e_out]");
+        let h = fused
+            .view([b, n, self.config.coords, -1])
+            .index_select(2, coords);
+        let h = match &self.head {
+            Some(l) => h.apply(l).gelu("none"),
+            None => h,
+        };
+        let logits = h.matmul(&self.bin_out.tr()) + self.bias.index_select(0, coords);
+        (logits.softmax(-1, Kind::Float) * centres).sum_dim_intlist(-1, false, Kind::Float)
+    }
+
+    /// Encodes a whole song `[1, n, music_dim]`: `W^A z^A` `[n, coords * e_out]`, plus the step
+    /// clock's part of the fusion where the network has one and `clock` `[n, WIDTH]` is given.
     pub fn audio_logit_vectors(
         &self,
         music: &Tensor,
+        clock: Option<&Tensor>,
         mut on_chunk: impl FnMut(f32) -> bool,
     ) -> Option<Tensor> {
         let z = self
             .audio
             .forward_chunked(music, self.config.a_kernel, 0, 1000, &mut on_chunk)?;
-        Some(z.squeeze_dim(0).apply(&self.w_a))
+        let v = z.squeeze_dim(0).apply(&self.w_a);
+        Some(match self.clock.as_ref().zip(clock) {
+            Some((k, c)) => v + c.apply(&k.fusion),
+            None => v,
+        })
     }
 
-    /// One pose-stream step: the frame at position `pos` (tokens `[coords]`) against the caches;
-    /// returns `W^X z^X` `[coords * e_out]` for the next frame.
-    fn step(&self, tokens: &Tensor, pos: i64, caches: &mut [KvCache]) -> Tensor {
+    /// One pose-stream step: the frame at position `pos` (tokens `[coords]`, its step clock
+    /// `clock` `[WIDTH]` where the network has one) against the caches; returns `W^X z^X`
+    /// `[coords * e_out]` for the next frame.
+    fn step(
+        &self,
+        tokens: &Tensor,
+        clock: Option<&Tensor>,
+        pos: i64,
+        caches: &mut [KvCache],
+    ) -> Tensor {
         let emb = tokens.view([1, 1, -1]).apply(&self.bin_embed); // [1, 1, coords, e_bin]
-        let x = self.pose.merge(&emb, pos);
+        let mut x = self.pose.merge(&emb, pos);
+        if let Some((k, c)) = self.clock.as_ref().zip(clock) {
+            x = x + c.view([1, 1, -1]).apply(&k.pose);
+        }
         let z = self.pose.stack.forward_cached(&x, caches);
         for c in caches.iter_mut() {
             c.keep_last(self.config.window - 1);
@@ -489,252 +557,4 @@ impl Tsmt {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::sampling::reach_m;
-    use super::*;
-    use crate::models::smooth_columns;
-    use ndarray::s;
-    use rand::rngs::StdRng;
-    use rand::{Rng, SeedableRng};
-    use tch::nn::OptimizerConfig;
-
-    fn model(seed: i64) -> (nn::VarStore, Tsmt) {
-        tch::manual_seed(seed);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let m = Tsmt::new(
-            &vs.root(),
-            Config {
-                coords: 5,
-                n_bins: 12,
-                music_dim: 3,
-                ..Config::tiny()
-            },
-        );
-        (vs, m)
-    }
-
-    fn tokens(b: i64, n: i64) -> Tensor {
-        Tensor::randint(12, [b, n, 5], (Kind::Int64, Device::Cpu))
-    }
-
-    #[test]
-    fn bins_round_trip_within_half_a_bin() {
-        let x = Array2::from_shape_fn((400, 2), |(t, c)| ((t as f32) * 0.01 + c as f32).sin());
-        let b = Bins::fit([&x], 300).unwrap();
-        let back = b.values(&b.tokens(&x));
-        for c in 0..2 {
-            let width = (b.hi[c] - b.lo[c]) / 300.0;
-            let err = (&back.column(c) - &x.column(c))
-                .mapv(f32::abs)
-                .fold(0f32, |a, &v| a.max(v));
-            assert!(
-                err <= 0.5 * width + 1e-6,
-                "column {c}: error {err}, bin {width}"
-            );
-        }
-        assert_eq!(b.index(0, -100.0), 0);
-        assert_eq!(b.index(0, 100.0), 299);
-    }
-
-    #[test]
-    fn dequantising_removes_bin_jitter_and_keeps_the_opening() {
-        // A slow ramp drawn one bin off at random every frame, after 5 given frames.
-        let mut rng = StdRng::seed_from_u64(1);
-        let clean = Array2::from_shape_fn((200, 1), |(t, _)| t as f32 * 0.004);
-        let mut x = clean.mapv(|v| v)
-            + Array2::from_shape_fn((200, 1), |_| 0.004 * rng.gen_range(-1..=1) as f32);
-        let given = x.slice(s![..5, ..]).to_owned();
-        let accel = |a: &Array2<f32>| {
-            (6..194)
-                .map(|t| (a[[t + 1, 0]] - 2.0 * a[[t, 0]] + a[[t - 1, 0]]).abs())
-                .fold(0f32, f32::max)
-        };
-        let before = accel(&x);
-        smooth_columns(&mut x, 5, 1.5);
-        assert_eq!(x.slice(s![..5, ..]), given);
-        let after = accel(&x);
-        assert!(
-            after < 0.25 * before,
-            "second difference {before} -> {after}"
-        );
-        // The ramp itself is kept (away from the ends).
-        let off = (20..180)
-            .map(|t| (x[[t, 0]] - clean[[t, 0]]).abs())
-            .fold(0f32, f32::max);
-        assert!(off < 0.004, "smoothing moved the ramp by {off}");
-    }
-
-    #[test]
-    fn logits_do_not_see_the_future_pose() {
-        let (_vs, m) = model(0);
-        let x = tokens(1, 11);
-        let music = Tensor::randn([1, 11, 3], (Kind::Float, Device::Cpu));
-        let a = m.forward(&x, &music, 0, false);
-        assert_eq!(a.size(), vec![1, 10, 5, 12]);
-        // Changing pose frame 6 may change logits of frames 7.. (index 6..), never frames ≤ 6.
-        let x2 = x.copy();
-        let _ = x2.narrow(1, 6, 1).fill_(3);
-        let b = m.forward(&x2, &music, 0, false);
-        let early = (a.narrow(1, 0, 6) - b.narrow(1, 0, 6))
-            .abs()
-            .max()
-            .double_value(&[]);
-        assert!(early < 1e-6, "frames ≤ 6 moved by {early}");
-    }
-
-    #[test]
-    fn chunked_audio_equals_one_pass() {
-        let (_vs, m) = model(1);
-        let music = Tensor::randn([1, 70, 3], (Kind::Float, Device::Cpu));
-        let whole = m.audio.forward(&music, 0, false);
-        let chunked = m
-            .audio
-            .forward_chunked(&music, m.config.a_kernel, 0, 9, |_| true)
-            .unwrap();
-        let d = (whole - chunked).abs().max().double_value(&[]);
-        assert!(d < 1e-5, "chunked audio differs by {d}");
-    }
-
-    #[test]
-    fn cached_steps_equal_the_training_pass() {
-        let (_vs, m) = model(2);
-        let x = tokens(1, 9);
-        let music = Tensor::randn([1, 9, 3], (Kind::Float, Device::Cpu));
-        let logits = m.forward(&x, &music, 0, false); // [1, 8, 5, 12]
-        let av = m
-            .audio
-            .forward(&music, 0, false)
-            .squeeze_dim(0)
-            .apply(&m.w_a);
-        let mut caches = m.pose.stack.new_caches();
-        for t in 0..8 {
-            let wx = m.step(&x.get(0).get(t), t, &mut caches);
-            let l = m.logits(&(wx + av.get(t + 1)));
-            let d = (l - logits.get(0).get(t)).abs().max().double_value(&[]);
-            assert!(d < 1e-4, "step {t} differs by {d}");
-        }
-    }
-
-    #[test]
-    fn same_seed_same_dance_other_seed_other_dance() {
-        let (_vs, m) = model(3);
-        let music = Tensor::randn([1, 40, 3], (Kind::Float, Device::Cpu));
-        let av = m.audio_logit_vectors(&music, |_| true).unwrap();
-        let prefix = Array2::from_shape_fn((20, 5), |(t, c)| ((t + c) % 12) as i64);
-        let s = Sampling::default();
-        let a = m.sample(&prefix, &av, s, 7, |_| true).unwrap();
-        let b = m.sample(&prefix, &av, s, 7, |_| true).unwrap();
-        let c = m.sample(&prefix, &av, s, 8, |_| true).unwrap();
-        assert_eq!(a.dim(), (40, 5));
-        assert_eq!(a, b);
-        assert_ne!(a, c);
-        // top_k = 1 is greedy: the same whatever the seed.
-        let g = Sampling {
-            temperature: 1.0,
-            top_k: 1,
-        };
-        assert_eq!(
-            m.sample(&prefix, &av, g, 1, |_| true).unwrap(),
-            m.sample(&prefix, &av, g, 2, |_| true).unwrap()
-        );
-    }
-
-    #[test]
-    fn reach_measures_how_far_the_pose_came_and_the_guard_only_acts_on_a_stall() {
-        // Two joints, 1 cm per bin: a held pose reaches 0; a joint 30 bins away 0.15 m on the mean.
-        let widths = vec![0.01f32; 6];
-        let held: std::collections::VecDeque<Vec<i64>> = (0..10).map(|_| vec![5i64; 6]).collect();
-        assert_eq!(reach_m(&held, &widths), 0.0);
-        let mut moved = held.clone();
-        moved.push_front(vec![35, 5, 5, 5, 5, 5]);
-        assert!((reach_m(&moved, &widths) - 0.15).abs() < 1e-6);
-        // A guard that never fires leaves the draws as they were; one that always fires changes them.
-        let (_vs, m) = model(6);
-        let music = Tensor::randn([1, 30, 3], (Kind::Float, Device::Cpu));
-        let av = m.audio_logit_vectors(&music, |_| true).unwrap();
-        let prefix = Array2::from_shape_fn((10, 5), |(t, c)| ((t + c) % 12) as i64);
-        let s = Sampling {
-            temperature: 0.3,
-            top_k: 3,
-        };
-        let w = vec![0.01f32; 3];
-        let never = StallGuard {
-            min_reach_m: 0.0,
-            window_frames: 5,
-            boost: 10.0,
-            reopen_reach_m: 0.0,
-        };
-        let always = StallGuard {
-            min_reach_m: 1e9,
-            window_frames: 5,
-            boost: 10.0,
-            reopen_reach_m: 0.0,
-        };
-        let plain = m.sample(&prefix, &av, s, 3, |_| true).unwrap();
-        assert_eq!(
-            m.sample_guarded(&prefix, &av, s, Some((&never, &w)), 3, |_| true)
-                .unwrap(),
-            plain
-        );
-        assert_ne!(
-            m.sample_guarded(&prefix, &av, s, Some((&always, &w)), 3, |_| true)
-                .unwrap(),
-            plain
-        );
-    }
-
-    #[test]
-    fn top_k_and_temperature_shape_the_draws() {
-        let logits = [0.0f32, 1.0, 2.0, 3.0];
-        let mut probs = [0f32; 4];
-        let mut rng = StdRng::seed_from_u64(0);
-        let k2 = Sampling {
-            temperature: 1.0,
-            top_k: 2,
-        };
-        assert!((0..200).all(|_| k2.draw(&logits, &mut probs, &mut rng) >= 2));
-        let cold = Sampling {
-            temperature: 0.05,
-            top_k: 0,
-        };
-        assert!((0..200).all(|_| cold.draw(&logits, &mut probs, &mut rng) == 3));
-        let hot = Sampling {
-            temperature: 5.0,
-            top_k: 0,
-        };
-        let zeros = (0..400)
-            .filter(|_| hot.draw(&logits, &mut probs, &mut rng) == 0)
-            .count();
-        assert!(
-            zeros > 40,
-            "a hot draw picked bin 0 only {zeros} of 400 times"
-        );
-    }
-
-    #[test]
-    fn loss_on_every_frame_equals_the_full_loss() {
-        let (_vs, m) = model(5);
-        let x = tokens(2, 9);
-        let music = Tensor::randn([2, 9, 3], (Kind::Float, Device::Cpu));
-        let all = Tensor::arange(8, (Kind::Int64, Device::Cpu));
-        let full = m.loss(&x, &music, 3, false).double_value(&[]);
-        let picked = m
-            .loss_on_frames(&x, &x, &music, 3, &all, false)
-            .double_value(&[]);
-        assert!((full - picked).abs() < 1e-5, "{full} vs {picked}");
-    }
-
-    #[test]
-    fn loss_falls_on_a_few_batches() {
-        let (vs, m) = model(4);
-        let mut opt = nn::Adam::default().build(&vs, 3e-3).unwrap();
-        let x = tokens(4, 13);
-        let music = Tensor::randn([4, 13, 3], (Kind::Float, Device::Cpu));
-        let first = m.loss(&x, &music, 0, true).double_value(&[]);
-        for _ in 0..40 {
-            opt.backward_step(&m.loss(&x, &music, 0, true));
-        }
-        let last = m.loss(&x, &music, 0, true).double_value(&[]);
-        assert!(last < 0.8 * first, "loss {first} -> {last}");
-    }
-}
+mod tests;

@@ -57,7 +57,7 @@ impl MusicLayout {
     /// The TSMT set ([`crate::audio::features::tsmt`]): MFCC | ΔMFCC | beat.
     pub fn tsmt() -> Self {
         Self {
-            one_hot: vec![26],
+            one_hot: vec![crate::audio::features::TSMT_BEAT],
             rates: vec![13..26],
             ..Default::default()
         }

@@ -474,7 +474,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                         // How much the decoder listens to the clock: the same windows with it a
                         // quarter of a step late.
                         let late = clock.as_ref().map_or(f64::NAN, |k| {
-                            model.losses(&t, &t, &m, Some(&phase::quarter_turn(k)), &s, warmup as i64).gmm.double_value(&[])
+                            model.losses(&t, &t, &m, Some(&super::step_lock::quarter_turn(k)), &s, warmup as i64).gmm.double_value(&[])
                         });
                         (l.gmm.double_value(&[]), l.foot.double_value(&[]), late)
                     })

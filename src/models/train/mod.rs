@@ -395,8 +395,9 @@ impl Trainer {
 }
 
 /// Modules added to a network after earlier weights were saved, each built so that it adds
-/// nothing until trained (dance-revolution's arm head: its last layer starts at zero).
-pub const ADDED_MODULES: [&str; 1] = ["decoder.arm_head."];
+/// nothing until trained (dance-revolution's arm head: its last layer starts at zero; tsmt's
+/// step clock: both its maps start at zero).
+pub const ADDED_MODULES: [&str; 2] = ["decoder.arm_head.", "step_clock."];
 
 /// Loads earlier weights into `vs`, where a variable may be wider than the saved one along one
 /// axis (a network given new input columns, e.g. the beat clock): the saved values fill the
@@ -580,6 +581,7 @@ pub mod dancenet_style;
 pub mod keypose_transformer;
 pub mod motion_style;
 pub mod spectral;
+pub mod step_lock;
 pub mod tsmt;
 
 /// One training run (`choreo train <model>`): one variant per trainable model, with its options.

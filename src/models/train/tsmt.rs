@@ -19,6 +19,12 @@ use crate::models::tsmt::{
 };
 use crate::motion::repr;
 
+mod lock;
+mod self_condition;
+mod warp;
+
+use self_condition::{runs_mask, self_conditioned};
+
 /// Options of one training run (the card gives the run behind the committed weights).
 #[derive(Clone, Debug)]
 pub struct Options {
@@ -71,6 +77,15 @@ pub struct Options {
     pub self_condition: f64,
     pub self_run: usize,
     pub self_passes: usize,
+    /// The step clock (`tsmt::Config::step_clock`): each window's clock is the real dancer's own
+    /// step over the [`lock::CLOCK_CONTEXT`] frames up to its end.
+    pub step_clock: bool,
+    /// Weight of the lock term (`train::tsmt::lock`; with `step_clock`). 0: off.
+    pub lock_weight: f64,
+    /// Warped histories (`train::tsmt::warp`; with `step_clock`): each window's first
+    /// [`HISTORY_FRAMES`] frames replayed at a pace drawn log-uniformly in `[1/R, R]`, and only
+    /// the frames after them scored. 0 (or 1): off.
+    pub history_warp: f64,
     /// Do not train: redraw the seed clips (the same clips for the same `seed`) with each one's
     /// source and its song's beats (`seed_clips.json`) into the output folder.
     pub clips_only: bool,
@@ -101,10 +116,17 @@ impl Default for Options {
             self_condition: 0.0,
             self_run: 10,
             self_passes: 2,
+            step_clock: false,
+            lock_weight: 0.0,
+            history_warp: 0.0,
             clips_only: false,
         }
     }
 }
+
+/// Frames of a window's history that `history_warp` replays at another pace (1.6 s at 25 fps:
+/// half the served window, so the frames scored after it still see 40 frames of it).
+const HISTORY_FRAMES: usize = 40;
 
 /// Seed clips kept in the folder, and their length in frames.
 const SEED_CLIPS: usize = 32;
@@ -198,8 +220,25 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     let config = Config {
         music_dim: data.music_norm.dim() as i64,
         coords: data.pose_norm.dim() as i64,
+        step_clock: opts.step_clock,
         ..base
     };
+    if opts.lock_weight > 0.0 && !opts.step_clock {
+        return Err(TrainError::InvalidOption(
+            "--lock-weight needs --step-clock: the term scores the toes against the clock".into(),
+        ));
+    }
+    let warping = opts.history_warp > 1.0;
+    if warping && (!opts.step_clock || HISTORY_FRAMES + 2 > len_of(&config)) {
+        return Err(TrainError::InvalidOption(format!(
+            "--history-warp needs --step-clock and a window over {HISTORY_FRAMES} frames"
+        )));
+    }
+    if opts.step_clock && opts.beat_time {
+        return Err(TrainError::InvalidOption(
+            "--step-clock with --beat-time: the clock reads the dances as danced".into(),
+        ));
+    }
     let bins = Bins::fit(
         data.train_raw.iter().map(|s| &s.poses),
         config.n_bins as usize,
@@ -219,13 +258,19 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         mirror: opts.mirror,
     };
     // Dances already re-timed by `retime` in beat time: the windows draw only the augmentation.
-    let windows =
-        (augment != Augment::NONE).then(|| Windows::new(&data, MusicLayout::tsmt(), augment));
+    // With the step clock every window is drawn through them, with the clock's context before it.
+    let windows = (augment != Augment::NONE || opts.step_clock)
+        .then(|| Windows::new(&data, MusicLayout::tsmt(), augment));
+    let drawn_len = if opts.step_clock {
+        lock::CLOCK_CONTEXT.max(len_of(&config))
+    } else {
+        len_of(&config)
+    };
     let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
         Tsmt::new(p, config.clone())
     })?;
     seed_clips(&data, opts)?.save(&trainer.out.join(SEED_CLIPS_FILE))?;
-    let len = config.window as usize + 1;
+    let len = len_of(&config);
     // Windows where the dancer stands still (mostly the closing hold of a dance) are left out:
     // a held pose is an attractor for a sampled model, which once in it repeats it for minutes.
     let speeds: Vec<Vec<f32>> = data
@@ -240,7 +285,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             >= opts.min_window_speed as f32
     };
     // An augmented window may span more source frames (the fastest tempo).
-    let source_len = windows.as_ref().map_or(len, |w| w.source_len(len));
+    let source_len = windows.as_ref().map_or(len, |w| w.source_len(drawn_len));
     let moving = |&(i, f): &(usize, usize)| moving(&(i, f + source_len - len));
     let all = window_starts(&data.train, source_len, opts.stride, 0).len();
     let kept = window_starts(&data.train, source_len, opts.stride, 0)
@@ -279,6 +324,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 self_condition: opts.self_condition,
                 self_run: opts.self_run,
                 self_passes: opts.self_passes,
+                lock_weight: opts.lock_weight,
                 steps,
             },
         ),
@@ -315,20 +361,38 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             let mut rng =
                 StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
             let (mut total, mut batches) = (0.0, 0);
+            let (mut lock_danced, mut lock_real, mut locked) = (0.0, 0.0, 0);
             for chunk in starts.chunks(opts.batch) {
-                let (target, music) = match &windows {
+                let (target, music, clock) = match &windows {
                     None => (
                         token_batch(&train_tokens, chunk, len),
                         batch_tensor(train, chunk, len, |s| &s.music, Device::Cpu),
+                        None,
                     ),
                     Some(w) => {
-                        let (mut tokens, mut music) = (Vec::new(), Vec::new());
+                        let (mut tokens, mut music, mut clocks) = (Vec::new(), Vec::new(), Vec::new());
                         for &(i, f0) in chunk {
-                            let (m, p) = w.raw_window(i, f0, len, &mut rng)?;
+                            let (m, p) = w.raw_window(i, f0, drawn_len, &mut rng)?;
+                            // The window is the drawn rows' last `len`; the clock hears them all.
+                            if opts.step_clock {
+                                let k = lock::window_clock(p.view(), m.view(), len);
+                                clocks.push(crate::models::to_tensor(&k));
+                            }
+                            let p = if warping {
+                                let r = opts.history_warp.ln();
+                                let r = rng.gen_range(-r..r).exp();
+                                warp::warped(p.view(), len, HISTORY_FRAMES, r)
+                            } else {
+                                p.slice(s![drawn_len - len.., ..]).to_owned()
+                            };
+                            let m = m.slice(s![drawn_len - len.., ..]);
                             tokens.push(token_tensor(bins.tokens(&p).view()));
-                            music.push(crate::models::to_tensor(&data.music_norm.normalize(&m)?));
+                            music.push(crate::models::to_tensor(
+                                &data.music_norm.normalize(&m.to_owned())?,
+                            ));
                         }
-                        (Tensor::stack(&tokens, 0), Tensor::stack(&music, 0))
+                        let clock = (!clocks.is_empty()).then(|| Tensor::stack(&clocks, 0));
+                        (Tensor::stack(&tokens, 0), Tensor::stack(&music, 0), clock)
                     }
                 };
                 let input = if opts.input_noise_bins > 0.0 {
@@ -337,31 +401,34 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     target.shallow_clone()
                 };
                 let start = rng.gen_range(0..MAX_POSITION - len as i64);
-                let input = if opts.self_condition > 0.0 {
-                    let own = runs_mask(chunk.len(), len, opts, &mut rng);
-                    self_conditioned(&model, &input, &music, start, &own, opts)
-                } else {
-                    input
+                let own = (opts.self_condition > 0.0)
+                    .then(|| runs_mask(chunk.len(), len, opts, &mut rng));
+                let input = match &own {
+                    Some(own) => {
+                        self_conditioned(&model, &input, &music, clock.as_ref(), start, own, opts)
+                    }
+                    None => input,
                 };
-                let loss = if opts.loss_frames < 1.0 {
-                    let n = len - 1;
-                    let m = ((n as f64 * opts.loss_frames).ceil() as usize).clamp(1, n);
-                    let mut idx: Vec<i64> = rand::seq::index::sample(&mut rng, n, m)
-                        .into_iter()
-                        .map(|i| i as i64)
-                        .collect();
-                    idx.sort_unstable();
-                    model.loss_on_frames(
-                        &input,
-                        &target,
-                        &music,
-                        start,
-                        &Tensor::from_slice(&idx),
-                        true,
-                    )
-                } else {
-                    model.loss_with_input(&input, &target, &music, start, true)
-                };
+                let fused = model.fused(&input, &music, clock.as_ref(), start, true);
+                // Predicted frames 1..=n are indices 0..n; with warped histories only those after
+                // the history are scored (the history's own pace is not the clock's).
+                let n = len - 1;
+                let skip = if warping { HISTORY_FRAMES - 1 } else { 0 };
+                let scored = (((n - skip) as f64 * opts.loss_frames).ceil() as usize).clamp(1, n - skip);
+                let mut idx: Vec<i64> = rand::seq::index::sample(&mut rng, n - skip, scored)
+                    .into_iter()
+                    .map(|i| (i + skip) as i64)
+                    .collect();
+                idx.sort_unstable();
+                let mut loss = model.loss_on_frames(&fused, &target, &Tensor::from_slice(&idx));
+                if let (Some(k), true) = (&clock, opts.lock_weight > 0.0) {
+                    if let Some(l) = lock::term(&model, &fused, &input, own.as_ref(), &target, k, &bins, skip as i64) {
+                        loss = loss + l.loss * opts.lock_weight;
+                        lock_danced += l.danced;
+                        lock_real += l.real;
+                        locked += 1;
+                    }
+                }
                 opt.backward_step_clip(&loss, 1.0);
                 total += loss.double_value(&[]);
                 batches += 1;
@@ -371,33 +438,41 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 }
             }
             steps_cell.set(steps);
-            let test_loss = tch::no_grad(|| {
+            // With the clock, the test loss also with every clock a quarter step late: how much
+            // the network listens to it.
+            let (test_loss, test_late) = tch::no_grad(|| {
                 let starts = window_starts(test, len, config.window as usize, 0);
-                let losses: Vec<f64> = starts
-                    .chunks(opts.batch)
-                    .enumerate()
-                    .map(|(i, c)| {
-                        let t = token_batch(&test_tokens, c, len);
-                        let m = batch_tensor(test, c, len, |s| &s.music, Device::Cpu);
-                        model
-                            .loss(
-                                &t,
-                                &m,
-                                (i as i64 * 997) % (MAX_POSITION - len as i64),
-                                false,
-                            )
-                            .double_value(&[])
-                    })
-                    .collect();
-                (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
+                let (mut on, mut late) = (Vec::new(), Vec::new());
+                for (i, c) in starts.chunks(opts.batch).enumerate() {
+                    let t = token_batch(&test_tokens, c, len);
+                    let m = batch_tensor(test, c, len, |s| &s.music, Device::Cpu);
+                    let k = opts.step_clock.then(|| test_clock(&data.test_raw, c, len));
+                    let pos = (i as i64 * 997) % (MAX_POSITION - len as i64);
+                    on.push(model.loss(&t, &m, k.as_ref(), pos, false).double_value(&[]));
+                    if let Some(k) = &k {
+                        let q = crate::models::train::step_lock::quarter_turn(k);
+                        late.push(model.loss(&t, &m, Some(&q), pos, false).double_value(&[]));
+                    }
+                }
+                let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+                (mean(&on), mean(&late))
             });
+            let clock_note = match test_late {
+                Some(late) => format!(
+                    " test_clock_late={late:.4} lock_danced={:.3} lock_real={:.3} lock_weight={}",
+                    lock_danced / locked.max(1) as f64,
+                    lock_real / locked.max(1) as f64,
+                    opts.lock_weight
+                ),
+                None => String::new(),
+            };
             Ok(EpochResult {
                 train_loss: total / batches.max(1) as f64,
                 test_loss,
                 note: format!(
-                    "steps={steps} tempo={}..{} mirror={} self={}x{}/{} (cross-entropy, nats per coordinate)",
+                    "steps={steps} tempo={}..{} mirror={} self={}x{}/{}{clock_note} history_warp={} (cross-entropy, nats per coordinate)",
                     opts.min_tempo, opts.max_tempo, opts.mirror, opts.self_condition, opts.self_run,
-                    opts.self_passes
+                    opts.self_passes, opts.history_warp
                 ),
             })
         },
@@ -426,6 +501,31 @@ fn local_speed(poses: &Array2<f32>, fps: f32) -> Vec<f32> {
     out
 }
 
+/// Frames of a training window: the pose stream's context and the frame it predicts last.
+fn len_of(config: &Config) -> usize {
+    config.window as usize + 1
+}
+
+/// The clocks `[b, len, WIDTH]` of test windows `starts` (sequence, frame) of the raw test
+/// split, each fitted over the [`lock::CLOCK_CONTEXT`] frames up to its end (fewer at a
+/// dance's start), as in training.
+fn test_clock(test_raw: &[Sequence], starts: &[(usize, usize)], len: usize) -> Tensor {
+    let parts: Vec<Tensor> = starts
+        .iter()
+        .map(|&(i, f)| {
+            let end = f + len;
+            let from = end.saturating_sub(lock::CLOCK_CONTEXT.max(len));
+            let (p, m) = (&test_raw[i].poses, &test_raw[i].music);
+            crate::models::to_tensor(&lock::window_clock(
+                p.slice(s![from..end, ..]),
+                m.slice(s![from..end, ..]),
+                len,
+            ))
+        })
+        .collect();
+    Tensor::stack(&parts, 0)
+}
+
 /// Token windows `[b, len, coords]` (int64).
 fn token_batch(tokens: &[Array2<i64>], starts: &[(usize, usize)], len: usize) -> Tensor {
     let parts: Vec<Tensor> = starts
@@ -441,61 +541,6 @@ fn token_tensor(m: ArrayView2<'_, i64>) -> Tensor {
     Tensor::from_slice(&m.iter().copied().collect::<Vec<i64>>()).view([r as i64, c as i64])
 }
 
-/// `[b, len]` booleans: the input frames to replace by the model's own draws. Runs of
-/// `self_run` own frames alternate with runs of the dance whose length gives the share
-/// `self_condition` on average; each window starts at a random phase. Frame 0 is always the dance.
-fn runs_mask(b: usize, len: usize, opts: &Options, rng: &mut StdRng) -> Tensor {
-    let own = opts.self_run.max(1);
-    let share = opts.self_condition.clamp(0.01, 0.99);
-    let truth = ((own as f64 * (1.0 - share) / share).round() as usize).max(1);
-    let period = own + truth;
-    let mut mask = vec![false; b * len];
-    for w in 0..b {
-        let phase = rng.gen_range(0..period);
-        for t in 1..len {
-            mask[w * len + t] = (t + phase) % period < own;
-        }
-    }
-    Tensor::from_slice(&mask).reshape([b as i64, len as i64])
-}
-
-/// `input` with the frames of `own` replaced by the model's draws (temperature and top-k of the
-/// served sampling), each pass drawing from the last pass's mixed input; no gradient flows
-/// through the draws.
-fn self_conditioned(
-    model: &Tsmt,
-    input: &Tensor,
-    music: &Tensor,
-    start: i64,
-    own: &Tensor,
-    opts: &Options,
-) -> Tensor {
-    tch::no_grad(|| {
-        let own = own.unsqueeze(-1); // [b, len, 1]
-        let mut mixed = input.shallow_clone();
-        for _ in 0..opts.self_passes.max(1) {
-            // Logits for frames 1..=n from frames 0..n−1; the draw for frame 0 is the dance.
-            let logits = model.forward(&mixed, music, start, false) / opts.temperature.max(1e-3);
-            let (b, n, c, bins) = logits.size4().expect("[b, n, coords, bins]");
-            let flat = logits.reshape([-1, bins]);
-            let flat = if opts.top_k > 0 && (opts.top_k as i64) < bins {
-                let (top, _) = flat.topk(opts.top_k as i64, -1, true, true);
-                let floor = top.narrow(1, opts.top_k as i64 - 1, 1);
-                flat.masked_fill(&flat.lt_tensor(&floor), f64::NEG_INFINITY)
-            } else {
-                flat
-            };
-            let drawn = flat
-                .softmax(-1, tch::Kind::Float)
-                .multinomial(1, true)
-                .reshape([b, n, c]);
-            let drawn = Tensor::cat(&[input.narrow(1, 0, 1), drawn], 1);
-            mixed = drawn.where_self(&own, input);
-        }
-        mixed
-    })
-}
-
 /// `tokens` with rounded Gaussian noise on every token, clamped to the bins.
 fn noised(tokens: &Tensor, n_bins: i64, noise: &Normal<f64>, rng: &mut StdRng) -> Tensor {
     let v: Vec<i64> = Vec::<i64>::try_from(tokens.flatten(0, -1))
@@ -504,62 +549,4 @@ fn noised(tokens: &Tensor, n_bins: i64, noise: &Normal<f64>, rng: &mut StdRng) -
         .map(|b| (b + noise.sample(rng).round() as i64).clamp(0, n_bins - 1))
         .collect();
     Tensor::from_slice(&v).view(tokens.size().as_slice())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use tch::{nn, Kind};
-
-    #[test]
-    fn self_conditioning_replaces_only_the_own_runs_with_draws_of_the_model() {
-        tch::manual_seed(3);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let config = Config {
-            coords: 5,
-            n_bins: 12,
-            music_dim: 3,
-            ..Config::tiny()
-        };
-        let model = Tsmt::new(&vs.root(), config);
-        let opts = Options {
-            self_condition: 0.5,
-            self_run: 4,
-            self_passes: 2,
-            top_k: 3,
-            ..Options::default()
-        };
-        let mut rng = StdRng::seed_from_u64(7);
-        let (b, len) = (6usize, 17usize);
-        let own = runs_mask(b, len, &opts, &mut rng);
-        let own_v: Vec<bool> = Vec::try_from(own.reshape([-1])).expect("bools");
-        // Runs of 4 own frames between runs of 4 of the dance; frame 0 always the dance.
-        let share = own_v.iter().filter(|&&o| o).count() as f64 / (b * (len - 1)) as f64;
-        assert!((0.35..0.65).contains(&share), "share {share}");
-        for w in 0..b {
-            let row = &own_v[w * len..(w + 1) * len];
-            assert!(!row[0]);
-            let starts = (1..len).filter(|&t| row[t] && !row[t - 1]).count();
-            let frames = row.iter().filter(|&&o| o).count();
-            assert!(frames <= 4 * starts, "runs longer than 4: {row:?}");
-        }
-        // Tokens far from anything the model would draw at random: the dance's are 11, so a
-        // drawn token shows as another value wherever the model did not happen to draw 11.
-        let input = Tensor::full([b as i64, len as i64, 5], 11, (Kind::Int64, Device::Cpu));
-        let music = Tensor::randn([b as i64, len as i64, 3], (Kind::Float, Device::Cpu));
-        let mixed = self_conditioned(&model, &input, &music, 0, &own, &opts);
-        assert_eq!(mixed.size(), input.size());
-        let changed = mixed.ne_tensor(&input).any_dim(-1, false);
-        // Nothing outside the own runs changes, and the own runs were drawn (some differ).
-        assert_eq!(
-            changed
-                .logical_and(&own.logical_not())
-                .sum(Kind::Int64)
-                .int64_value(&[]),
-            0
-        );
-        assert!(changed.sum(Kind::Int64).int64_value(&[]) > 0);
-        let (lo, hi) = (mixed.min().int64_value(&[]), mixed.max().int64_value(&[]));
-        assert!(lo >= 0 && hi < 12, "tokens {lo}..{hi}");
-    }
 }

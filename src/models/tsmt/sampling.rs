@@ -11,24 +11,29 @@ use super::Tsmt;
 impl Tsmt {
     /// Generates `n` frames of tokens after the context `prefix` `[m ≥ 1, coords]`, frame t
     /// from the last frames and row t of `audio_vectors` ([`Self::audio_logit_vectors`]).
+    /// `clock` `[m + n, WIDTH]`, where the network has a step clock: the clock of every frame
+    /// the pose stream reads, the context's then the drawn ones'.
     /// `on_step(done)` is called before the first frame and every 250 frames, and may stop it.
     pub fn sample(
         &self,
         prefix: &Array2<i64>,
         audio_vectors: &Tensor,
+        clock: Option<&Tensor>,
         sampling: Sampling,
         seed: u64,
         on_step: impl FnMut(usize) -> bool,
     ) -> Option<Array2<i64>> {
-        self.sample_guarded(prefix, audio_vectors, sampling, None, seed, on_step)
+        self.sample_guarded(prefix, audio_vectors, clock, sampling, None, seed, on_step)
     }
 
     /// [`Self::sample`] with an optional [`StallGuard`] and the metres per bin of each joint
     /// coordinate (the first `POSE_DIM` coordinates) it measures motion with.
+    #[allow(clippy::too_many_arguments)]
     pub fn sample_guarded(
         &self,
         prefix: &Array2<i64>,
         audio_vectors: &Tensor,
+        clock: Option<&Tensor>,
         sampling: Sampling,
         guard: Option<(&StallGuard, &[f32])>,
         seed: u64,
@@ -45,8 +50,14 @@ impl Tsmt {
         let keep = (m as i64).min(self.config.window) as usize;
         let first = m - keep;
         let mut wx = Tensor::zeros([1], (Kind::Float, Device::Cpu));
+        let clock_at = |row: usize| clock.map(|c| c.get(row as i64));
         for (k, t) in (first..m).enumerate() {
-            wx = self.step(&tensor_of(prefix.row(t)), k as i64, &mut caches);
+            wx = self.step(
+                &tensor_of(prefix.row(t)),
+                clock_at(t).as_ref(),
+                k as i64,
+                &mut caches,
+            );
         }
         let mut pos = keep as i64;
         let mut probs = vec![0f32; self.config.n_bins as usize];
@@ -77,7 +88,12 @@ impl Tsmt {
                     recent.pop_front();
                 }
             }
-            wx = self.step(&tensor_of(out.row(t)), pos, &mut caches);
+            wx = self.step(
+                &tensor_of(out.row(t)),
+                clock_at(m + t).as_ref(),
+                pos,
+                &mut caches,
+            );
             pos += 1;
             if (t + 1) % 250 == 0 && !on_step(t + 1) {
                 return None;

@@ -9,6 +9,7 @@ use serde::{Deserialize, Serialize};
 use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
 use crate::models::beat_time;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
+use crate::models::step_clock;
 use crate::models::train::augment::MusicLayout;
 use crate::models::{
     smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
@@ -39,6 +40,9 @@ pub struct Schedule {
     pub self_run: usize,
     #[serde(default)]
     pub self_passes: usize,
+    /// Weight of the step clock's lock term (`train::tsmt::Options::lock_weight`; 0: off).
+    #[serde(default)]
+    pub lock_weight: f64,
     pub steps: usize,
 }
 
@@ -169,6 +173,31 @@ impl Served {
         let song = crate::audio::features::tsmt(req.audio, fps, 0.0, clock.song_frames)?;
         let feats = clock.music(song.view(), &MusicLayout::tsmt());
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0);
+        // The step clock's phase on every network frame (`models::step_clock`): the song's beats
+        // at the fraction of its metre's steps.
+        let song_phase = if self.file.config.step_clock {
+            let is_beat: Vec<bool> = feats
+                .column(crate::audio::features::TSMT_BEAT)
+                .iter()
+                .map(|&v| v > 0.5)
+                .collect();
+            let bar = crate::models::clip_choice::bar_of(&*req.analysis_or_analyze()?);
+            // On the network's clock a frame lasts `factor` song frames.
+            step_clock::phase_of_song(
+                &is_beat,
+                step_clock::style_of_metre(bar),
+                fps / clock.factor,
+            )
+        } else {
+            None
+        };
+        // The clock of `m` context frames read before song frame `s0` and the `rows` drawn from it.
+        let clock_from = |m: usize, s0: usize, rows: usize| {
+            song_phase.as_ref().map(|p| {
+                let span = step_clock::phase_span(p, s0 as i64 - m as i64, m + rows);
+                to_tensor(&step_clock::columns(&span))
+            })
+        };
         progress.report(Stage::Features, 1.0)?;
         // The opening: the request's seed motion (kept as the dance's first frames), or a real clip.
         let seed_motion = req.seed_motion.map(|m| clock.seed_motion(m));
@@ -197,7 +226,8 @@ impl Served {
         let out = self.pool.with(|model| {
             tch::no_grad(|| -> Result<Option<Joined>, ModelError> {
                 let mut cancelled = false;
-                let Some(vectors) = model.audio_logit_vectors(&music, |f| {
+                let song_clock = clock_from(0, 0, n);
+                let Some(vectors) = model.audio_logit_vectors(&music, song_clock.as_ref(), |f| {
                     cancelled = progress.report(Stage::Encode, f).is_err();
                     !cancelled
                 }) else {
@@ -228,11 +258,16 @@ impl Served {
                     let head = rest.narrow(0, 0, frames as i64);
                     let mut unfrozen = None;
                     for (i, c) in contexts.iter().enumerate() {
-                        let Some(tokens) =
-                            model.sample_guarded(c, &head, sampling, Some(guard), req.seed, |_| {
-                                true
-                            })
-                        else {
+                        let k = clock_from(c.nrows(), opened, frames);
+                        let Some(tokens) = model.sample_guarded(
+                            c,
+                            &head,
+                            k.as_ref(),
+                            sampling,
+                            Some(guard),
+                            req.seed,
+                            |_| true,
+                        ) else {
                             return Ok(None);
                         };
                         let window = guard.0.window_frames;
@@ -247,9 +282,11 @@ impl Served {
                     }
                     kept = unfrozen.unwrap_or(contexts.len() - 1);
                 }
+                let k = clock_from(contexts[kept].nrows(), opened, n - opened);
                 let Some(mut tokens) = model.sample_guarded(
                     &contexts[kept],
                     &rest,
+                    k.as_ref(),
                     sampling,
                     guard,
                     req.seed,
@@ -274,11 +311,16 @@ impl Served {
                             break;
                         };
                         let tail = rest.narrow(0, from as i64, (n - opened - from) as i64);
-                        let Some(again) =
-                            model.sample_guarded(c, &tail, sampling, Some(guard), req.seed, |_| {
-                                true
-                            })
-                        else {
+                        let k = clock_from(c.nrows(), opened + from, n - opened - from);
+                        let Some(again) = model.sample_guarded(
+                            c,
+                            &tail,
+                            k.as_ref(),
+                            sampling,
+                            Some(guard),
+                            req.seed,
+                            |_| true,
+                        ) else {
                             return Ok(None);
                         };
                         let old = tokens.slice(s![from.., ..]).to_owned();

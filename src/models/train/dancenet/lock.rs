@@ -16,7 +16,8 @@
 use tch::{Kind, Tensor};
 
 use crate::audio::features::DANCENET_BEAT;
-use crate::models::dancenet::step_clock::{beat_count, step_fraction};
+use crate::models::step_clock::{beat_count, step_fraction};
+use crate::models::train::step_lock::{projection, signed_projection};
 use crate::models::DanceStyle;
 use crate::motion::dataset::NormStats;
 use crate::motion::rotations::{self, Layout};
@@ -47,26 +48,6 @@ pub(super) fn toe_speed(rows: &Tensor, layout: &Layout) -> Tensor {
         .expect("two toes")
 }
 
-/// `speed` `[b, n]` less its Hann-weighted mean, times the Hann window, and the sum of its
-/// magnitude per window `[b]`: what both projections divide by.
-fn windowed(speed: &Tensor) -> (Tensor, Tensor) {
-    let n = speed.size()[1];
-    let w = Tensor::hann_window_periodic(n, false, (Kind::Float, speed.device())).unsqueeze(0);
-    let mean = (speed * &w).sum_dim_intlist(1, true, Kind::Float) / w.sum(Kind::Float);
-    let s = (speed - mean) * &w;
-    let norm = s.abs().sum_dim_intlist(1, false, Kind::Float) + 1e-8;
-    (s, norm)
-}
-
-/// The normalised projection of `speed` `[b, n]` on phases `theta` `[b, n]` (radians), per window
-/// `[b]`: 1 for a speed that swings with the phase, near 0 otherwise.
-pub(super) fn projection(speed: &Tensor, theta: &Tensor) -> Tensor {
-    let (s, norm) = windowed(speed);
-    let re = (&s * theta.cos()).sum_dim_intlist(1, false, Kind::Float);
-    let im = (&s * theta.sin()).sum_dim_intlist(1, false, Kind::Float);
-    (re.square() + im.square() + 1e-12).sqrt() / norm
-}
-
 /// Each window's beat frames from normalised music `[b, n, ·]`: the beat column over its
 /// midpoint between "no beat" and "beat".
 pub(super) fn window_beats(music: &Tensor, music_norm: &NormStats) -> Vec<Vec<bool>> {
@@ -79,17 +60,6 @@ pub(super) fn window_beats(music: &Tensor, music_norm: &NormStats) -> Vec<Vec<bo
         .chunks(n)
         .map(|w| w.iter().map(|&v| v > cut).collect())
         .collect()
-}
-
-/// The signed projection of `speed` `[b, n]` on phases `phase` `[b, n]`: how much of it peaks
-/// where the phase is zero (1 for a speed that swings with the phase and peaks at its zero, −1
-/// for one that peaks half a turn off). The step clock's term ([`term`] with a clock): a score
-/// blind to the phase rewards stepping at the clock's rate at whatever phase the free run
-/// happens to dance, so its pull on the clock's weights points every way and cancels over a
-/// batch; this one points them all one way.
-pub(super) fn signed_projection(speed: &Tensor, phase: &Tensor) -> Tensor {
-    let (s, norm) = windowed(speed);
-    (&s * phase.cos()).sum_dim_intlist(1, false, Kind::Float) / norm
 }
 
 /// What one batch's lock term gives: the loss (the shortfall), and the mean projection of the danced and of
@@ -180,55 +150,4 @@ pub(super) fn term(
         projection(&own.index_select(0, &idx), &theta),
         projection(&truth.index_select(0, &idx), &theta),
     ))
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A speed swinging once every 2 beats scores near 1 on the half-beat phase and near 0 on
-    /// the third-beat one, whatever its own phase.
-    #[test]
-    fn the_projection_hears_the_step_rate_not_the_phase() {
-        let n = 250;
-        let beat_frames = 17.0; // 88 BPM at 25 fps
-        let b: Vec<f64> = (0..n).map(|t| t as f64 / beat_frames).collect();
-        let speed: Vec<f32> = b
-            .iter()
-            .map(|&x| (1.0 + (std::f64::consts::TAU * 0.5 * x + 1.3).cos()) as f32)
-            .collect();
-        let s = Tensor::from_slice(&speed).view([1, -1]);
-        let on = |f: f64| {
-            let th: Vec<f32> = b
-                .iter()
-                .map(|&x| (std::f64::consts::TAU * f * x) as f32)
-                .collect();
-            projection(&s, &Tensor::from_slice(&th).view([1, -1])).double_value(&[0])
-        };
-        assert!(on(0.5) > 0.6, "{}", on(0.5));
-        assert!(on(1.0 / 3.0) < 0.2, "{}", on(1.0 / 3.0));
-    }
-
-    /// The clock's score is signed: a speed peaking where the phase is zero scores near π/4
-    /// (the most a mean-free cosine can), the same speed half a step late as much below zero.
-    #[test]
-    fn the_signed_projection_hears_the_phase_too() {
-        let n = 300;
-        let phase: Vec<f32> = (0..n).map(|t| t as f32 * 0.12).collect();
-        let at = |shift: f32| {
-            let s: Vec<f32> = phase.iter().map(|p| 1.0 + (p + shift).cos()).collect();
-            signed_projection(
-                &Tensor::from_slice(&s).view([1, -1]),
-                &Tensor::from_slice(&phase).view([1, -1]),
-            )
-            .double_value(&[0])
-        };
-        assert!(
-            (at(0.0) - std::f64::consts::FRAC_PI_4).abs() < 0.05,
-            "{}",
-            at(0.0)
-        );
-        assert!((at(std::f32::consts::PI) + std::f64::consts::FRAC_PI_4).abs() < 0.05);
-        assert!(at(std::f32::consts::FRAC_PI_2).abs() < 0.1);
-    }
 }

@@ -1,5 +1,7 @@
-//! The step clock ([`super::Config::step_clock`], issue 25 item 4): a phase that turns once per
-//! step of the song's beats, in every gated layer's conditioning.
+//! The step clock (issue 25 item 4): a phase that turns once per step of the song's beats,
+//! given to a network beside the music (dancenet: every gated layer's conditioning,
+//! `dancenet::Config::step_clock`; tsmt: the pose stream's input and the fusion,
+//! `tsmt::Config::step_clock`). Written for dancenet first; the text below tells its story.
 //!
 //! Real dancers step at a fixed fraction of the beat (1/2 in rumba and cha-cha, 1/3 in waltz),
 //! and the decoder, taught by teacher forcing, learned to continue the step rate of its own
@@ -78,20 +80,59 @@ pub fn columns(phase: &[f64]) -> Array2<f32> {
 /// style's fraction, halved while the steps would come over 1.5 × [`step_hz`]. Zeros where
 /// the song has under two beats (the decoder then dances on its history, as it did before).
 pub fn of_song(is_beat: &[bool], style: DanceStyle, fps: f64) -> Array2<f32> {
-    let Some(count) = beat_count(is_beat) else {
-        return Array2::zeros((is_beat.len(), WIDTH as usize));
-    };
+    match phase_of_song(is_beat, style, fps) {
+        Some(phase) => columns(&phase),
+        None => Array2::zeros((is_beat.len(), WIDTH as usize)),
+    }
+}
+
+/// The phases (radians) behind [`of_song`]; `None` under two beats.
+pub fn phase_of_song(is_beat: &[bool], style: DanceStyle, fps: f64) -> Option<Vec<f64>> {
+    let count = beat_count(is_beat)?;
     let n = count.len();
     let beats_per_s = (count[n - 1] - count[0]) / ((n - 1).max(1) as f64 / fps);
     let mut f = step_fraction(style);
     while f * beats_per_s > 1.5 * step_hz(style) && f > 1.0 / 12.0 {
         f /= 2.0;
     }
-    let phase: Vec<f64> = count
-        .iter()
-        .map(|&b| std::f64::consts::TAU * f * b)
-        .collect();
-    columns(&phase)
+    Some(
+        count
+            .iter()
+            .map(|&b| std::f64::consts::TAU * f * b)
+            .collect(),
+    )
+}
+
+/// The style whose step rule a song of `bar` beats a bar is danced by where the model is not
+/// told a style (tsmt): three beats a bar steps as a waltz does (1/3 of the beat), any other
+/// metre as a rumba (1/2). The tempo lock accepts either on any song; the metre picks the one a
+/// dancer would.
+pub fn style_of_metre(bar: usize) -> DanceStyle {
+    if bar == 3 {
+        DanceStyle::Waltz
+    } else {
+        DanceStyle::Rumba
+    }
+}
+
+/// `phase` (rows `first..first + len` of a song whose phases are `phase`, `first` may be
+/// negative and the end past the song): the song's phase, carried on at its first and last
+/// step's rate outside it. A context clip danced before the song's first frame hears the clock
+/// run on backwards.
+pub fn phase_span(phase: &[f64], first: i64, len: usize) -> Vec<f64> {
+    let n = phase.len() as i64;
+    (first..first + len as i64)
+        .map(|t| match n {
+            0 => 0.0,
+            1 => phase[0],
+            _ if t < 0 => phase[0] + t as f64 * (phase[1] - phase[0]),
+            _ if t >= n => {
+                phase[(n - 1) as usize]
+                    + (t - n + 1) as f64 * (phase[(n - 1) as usize] - phase[(n - 2) as usize])
+            }
+            _ => phase[t as usize],
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -157,5 +198,17 @@ mod tests {
         assert!(of_song(&[false; 50], DanceStyle::Waltz, fps)
             .iter()
             .all(|&v| v == 0.0));
+    }
+
+    #[test]
+    fn a_span_runs_the_clock_on_before_and_after_the_song() {
+        let phase: Vec<f64> = (0..10).map(|t| 0.3 * t as f64 + 1.0).collect();
+        let span = phase_span(&phase, -3, 16);
+        let want: Vec<f64> = (-3..13).map(|t| 0.3 * t as f64 + 1.0).collect();
+        for (a, b) in span.iter().zip(&want) {
+            assert!((a - b).abs() < 1e-9, "{span:?}");
+        }
+        assert_eq!(style_of_metre(3), DanceStyle::Waltz);
+        assert_eq!(style_of_metre(4), DanceStyle::Rumba);
     }
 }
