@@ -441,6 +441,10 @@ args_into! {
         /// from the clock and the beats, not the history (0: off).
         #[arg(long, default_value_t = train::tsmt::Options::default().history_warp)]
         history_warp: f64,
+        /// The lock term raises the toes' score on the clock itself, not only up to the real
+        /// continuation's.
+        #[arg(long)]
+        lock_uncapped: bool,
         /// Do not train: redraw the seed clips (the same clips for the same `--seed`) with each
         /// one's source and its song's beats into `--out` (`seed_clips.safetensors`,
         /// `seed_clips.json`; with it the song chooses the opening clip).

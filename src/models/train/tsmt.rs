@@ -86,6 +86,9 @@ pub struct Options {
     /// [`HISTORY_FRAMES`] frames replayed at a pace drawn log-uniformly in `[1/R, R]`, and only
     /// the frames after them scored. 0 (or 1): off.
     pub history_warp: f64,
+    /// The lock term raises the score itself rather than its shortfall against the real
+    /// continuation's (`train::tsmt::lock::term`).
+    pub lock_uncapped: bool,
     /// Do not train: redraw the seed clips (the same clips for the same `seed`) with each one's
     /// source and its song's beats (`seed_clips.json`) into the output folder.
     pub clips_only: bool,
@@ -119,6 +122,7 @@ impl Default for Options {
             step_clock: false,
             lock_weight: 0.0,
             history_warp: 0.0,
+            lock_uncapped: false,
             clips_only: false,
         }
     }
@@ -422,7 +426,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 idx.sort_unstable();
                 let mut loss = model.loss_on_frames(&fused, &target, &Tensor::from_slice(&idx));
                 if let (Some(k), true) = (&clock, opts.lock_weight > 0.0) {
-                    if let Some(l) = lock::term(&model, &fused, &input, own.as_ref(), &target, k, &bins, skip as i64) {
+                    if let Some(l) = lock::term(&model, &fused, &input, own.as_ref(), &target, k, &bins, skip as i64, !opts.lock_uncapped) {
                         loss = loss + l.loss * opts.lock_weight;
                         lock_danced += l.danced;
                         lock_real += l.real;
@@ -470,9 +474,9 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 train_loss: total / batches.max(1) as f64,
                 test_loss,
                 note: format!(
-                    "steps={steps} tempo={}..{} mirror={} self={}x{}/{}{clock_note} history_warp={} (cross-entropy, nats per coordinate)",
+                    "steps={steps} tempo={}..{} mirror={} self={}x{}/{}{clock_note} history_warp={} lock_uncapped={} (cross-entropy, nats per coordinate)",
                     opts.min_tempo, opts.max_tempo, opts.mirror, opts.self_condition, opts.self_run,
-                    opts.self_passes, opts.history_warp
+                    opts.self_passes, opts.history_warp, opts.lock_uncapped
                 ),
             })
         },

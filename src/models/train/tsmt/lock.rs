@@ -109,7 +109,8 @@ pub(super) struct Lock {
 /// `input` that are the network's own draws (the rest are the dance, noised), `target` the
 /// dance's tokens and `clock` `[b, n + 1, WIDTH]` the windows' clocks. Each frame's speed is
 /// from the frame before it as the network would have it without the noise (its own draw, or
-/// the dance) to the expected next frame. Only frames `skip + 1..=n` are scored (after a warped
+/// the dance) to the expected next frame. `capped`: the loss is the shortfall against the real
+/// continuation's score, else the score's negative. Only frames `skip + 1..=n` are scored (after a warped
 /// history, `train::tsmt::warp`). Windows without two beats are left out; `None` when
 /// none is left.
 pub(super) fn term(
@@ -121,6 +122,7 @@ pub(super) fn term(
     clock: &Tensor,
     bins: &Bins,
     skip: i64,
+    capped: bool,
 ) -> Option<Lock> {
     let n = target.size()[1] - 1;
     let coords = toe_coords();
@@ -161,9 +163,15 @@ pub(super) fn term(
     let danced = signed_projection(&pick(&own_speed), &pick(&phase));
     let real = signed_projection(&pick(&real_speed), &pick(&phase));
     // Held to at least the real dancer's score over the same frames, not past it: pushed
-    // further, the feet would swing harder than anyone danced.
+    // further, the feet would swing harder than anyone danced. Uncapped, the score itself is
+    // raised (it is at most 1): a capped term the history already meets pulls on nothing.
+    let loss = if capped {
+        (&real - &danced).relu().mean(Kind::Float)
+    } else {
+        -danced.mean(Kind::Float)
+    };
     Some(Lock {
-        loss: (&real - &danced).relu().mean(Kind::Float),
+        loss,
         danced: danced.mean(Kind::Float).double_value(&[]),
         real: real.mean(Kind::Float).double_value(&[]),
     })
