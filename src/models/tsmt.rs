@@ -419,12 +419,17 @@ impl Tsmt {
         let mut shape = fused.size();
         let last = shape.pop().unwrap_or(0);
         shape.extend([self.config.coords, last / self.config.coords]);
-        let h = fused.view(shape.as_slice());
+        self.read_out(&fused.view(shape.as_slice()), &self.bias)
+    }
+
+    /// The shared read-out: per-coordinate vectors `[.., k, e_out]` through the head (when there
+    /// is one) onto the bin table, plus `bias` `[k, n_bins]` (those coordinates' rows).
+    fn read_out(&self, h: &Tensor, bias: &Tensor) -> Tensor {
         let h = match &self.head {
             Some(l) => h.apply(l).gelu("none"),
-            None => h,
+            None => h.shallow_clone(),
         };
-        h.matmul(&self.bin_out.tr()) + &self.bias
+        h.matmul(&self.bin_out.tr()) + bias
     }
 
     /// The fused vectors `[b, n, coords * e_out]` of frames 1..=n of a window (the pose stream
@@ -507,11 +512,7 @@ impl Tsmt {
         let h = fused
             .view([b, n, self.config.coords, -1])
             .index_select(2, coords);
-        let h = match &self.head {
-            Some(l) => h.apply(l).gelu("none"),
-            None => h,
-        };
-        let logits = h.matmul(&self.bin_out.tr()) + self.bias.index_select(0, coords);
+        let logits = self.read_out(&h, &self.bias.index_select(0, coords));
         (logits.softmax(-1, Kind::Float) * centres).sum_dim_intlist(-1, false, Kind::Float)
     }
 

@@ -47,6 +47,19 @@ pub fn quarter_turn(clock: &Tensor) -> Tensor {
     Tensor::cat(&[c(1), -c(0), -c(2), -c(3)], -1)
 }
 
+/// The dancer's phase ([`dancer_phase`]) of a window's frames from its toes' `steps` (one fewer
+/// than the frames: step t − 1 → t). Frame t's speed is the step from t − 1 to t; the first frame
+/// borrows the second's.
+pub fn step_phase(steps: &[f32], count: &[f64]) -> Vec<f64> {
+    let speed: Vec<f64> = steps
+        .first()
+        .into_iter()
+        .chain(steps)
+        .map(|&v| f64::from(v))
+        .collect();
+    dancer_phase(&speed, count)
+}
+
 /// The phase of a window's steps: `2π f B(t) − θ` for the fraction f whose Hann-windowed
 /// projection of `speed` (its mean removed) on `2π f B` is largest, θ that projection's angle.
 pub fn dancer_phase(speed: &[f64], count: &[f64]) -> Vec<f64> {

@@ -265,16 +265,16 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     // With the step clock every window is drawn through them, with the clock's context before it.
     let windows = (augment != Augment::NONE || opts.step_clock)
         .then(|| Windows::new(&data, MusicLayout::tsmt(), augment));
+    let len = len_of(&config);
     let drawn_len = if opts.step_clock {
-        lock::CLOCK_CONTEXT.max(len_of(&config))
+        lock::CLOCK_CONTEXT.max(len)
     } else {
-        len_of(&config)
+        len
     };
     let (mut trainer, model) = Trainer::new(&opts.common, ID, opts.lr, opts.seed, |p| {
         Tsmt::new(p, config.clone())
     })?;
     seed_clips(&data, opts)?.save(&trainer.out.join(SEED_CLIPS_FILE))?;
-    let len = len_of(&config);
     // Windows where the dancer stands still (mostly the closing hold of a dance) are left out:
     // a held pose is an attractor for a sampled model, which once in it repeats it for minutes.
     let speeds: Vec<Vec<f32>> = data
@@ -308,6 +308,12 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             "--input-noise-bins: {e}"
         )))
     })?;
+    // The test windows and, with the clock, their clocks: the same every epoch.
+    let test_starts = window_starts(&data.test, len, config.window as usize, 0);
+    let test_clocks: Vec<Option<Tensor>> = test_starts
+        .chunks(opts.batch)
+        .map(|c| opts.step_clock.then(|| test_clock(&data.test_raw, c, len)))
+        .collect();
     let epochs = 0..opts.epochs;
     let (train, test) = (&data.train, &data.test);
     let file_of = |t: &Trainer, steps: usize| ModelFile {
@@ -426,7 +432,11 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 idx.sort_unstable();
                 let mut loss = model.loss_on_frames(&fused, &target, &Tensor::from_slice(&idx));
                 if let (Some(k), true) = (&clock, opts.lock_weight > 0.0) {
-                    if let Some(l) = lock::term(&model, &fused, &input, own.as_ref(), &target, k, &bins, skip as i64, !opts.lock_uncapped) {
+                    let capped = !opts.lock_uncapped;
+                    let l = lock::term(
+                        &model, &fused, &input, own.as_ref(), &target, k, &bins, skip as i64, capped,
+                    );
+                    if let Some(l) = l {
                         loss = loss + l.loss * opts.lock_weight;
                         lock_danced += l.danced;
                         lock_real += l.real;
@@ -445,12 +455,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             // With the clock, the test loss also with every clock a quarter step late: how much
             // the network listens to it.
             let (test_loss, test_late) = tch::no_grad(|| {
-                let starts = window_starts(test, len, config.window as usize, 0);
                 let (mut on, mut late) = (Vec::new(), Vec::new());
-                for (i, c) in starts.chunks(opts.batch).enumerate() {
+                for (i, (c, k)) in test_starts.chunks(opts.batch).zip(&test_clocks).enumerate() {
                     let t = token_batch(&test_tokens, c, len);
                     let m = batch_tensor(test, c, len, |s| &s.music, Device::Cpu);
-                    let k = opts.step_clock.then(|| test_clock(&data.test_raw, c, len));
                     let pos = (i as i64 * 997) % (MAX_POSITION - len as i64);
                     on.push(model.loss(&t, &m, k.as_ref(), pos, false).double_value(&[]));
                     if let Some(k) = &k {

@@ -249,25 +249,26 @@ impl Served {
                 // ([`Self::opening_clips`]). When every candidate's opening holds, the first
                 // that does not freeze (FREEZE_FRAMES) is kept, else the last. The one kept is
                 // drawn again whole, the same draws from the same seed.
+                // `rows` frames drawn from song frame `opened + from` on after the context `c`,
+                // with the clock of exactly those frames.
+                let draw = |c: &Array2<i64>,
+                            from: usize,
+                            rows: usize,
+                            guard: Option<(&StallGuard, &[f32])>,
+                            on_step: &mut dyn FnMut(usize) -> bool| {
+                    let k = clock_from(c.nrows(), opened + from, rows);
+                    let audio = rest.narrow(0, from as i64, rows as i64);
+                    model.sample_guarded(c, &audio, k.as_ref(), sampling, guard, req.seed, on_step)
+                };
                 let check = self.file.extra.stall_guard.as_ref().and_then(|g| {
                     (g.reopen_reach_m > 0.0 && contexts.len() > 1)
                         .then(|| (g.reopen_reach_m, OPENING_CHECK_FRAMES.min(n - opened)))
                 });
                 let mut kept = 0;
                 if let (Some((reach, frames)), Some(guard)) = (check, guard) {
-                    let head = rest.narrow(0, 0, frames as i64);
                     let mut unfrozen = None;
                     for (i, c) in contexts.iter().enumerate() {
-                        let k = clock_from(c.nrows(), opened, frames);
-                        let Some(tokens) = model.sample_guarded(
-                            c,
-                            &head,
-                            k.as_ref(),
-                            sampling,
-                            Some(guard),
-                            req.seed,
-                            |_| true,
-                        ) else {
+                        let Some(tokens) = draw(c, 0, frames, Some(guard), &mut |_| true) else {
                             return Ok(None);
                         };
                         let window = guard.0.window_frames;
@@ -282,20 +283,11 @@ impl Served {
                     }
                     kept = unfrozen.unwrap_or(contexts.len() - 1);
                 }
-                let k = clock_from(contexts[kept].nrows(), opened, n - opened);
-                let Some(mut tokens) = model.sample_guarded(
-                    &contexts[kept],
-                    &rest,
-                    k.as_ref(),
-                    sampling,
-                    guard,
-                    req.seed,
-                    |done| {
-                        progress
-                            .report(Stage::Generate, done as f32 / total as f32)
-                            .is_ok()
-                    },
-                ) else {
+                let Some(mut tokens) = draw(&contexts[kept], 0, n - opened, guard, &mut |done| {
+                    progress
+                        .report(Stage::Generate, done as f32 / total as f32)
+                        .is_ok()
+                }) else {
                     return Ok(None);
                 };
                 // A freeze later in the song: from where it starts, the rest is drawn again from
@@ -310,17 +302,9 @@ impl Served {
                         else {
                             break;
                         };
-                        let tail = rest.narrow(0, from as i64, (n - opened - from) as i64);
-                        let k = clock_from(c.nrows(), opened + from, n - opened - from);
-                        let Some(again) = model.sample_guarded(
-                            c,
-                            &tail,
-                            k.as_ref(),
-                            sampling,
-                            Some(guard),
-                            req.seed,
-                            |_| true,
-                        ) else {
+                        let Some(again) =
+                            draw(c, from, n - opened - from, Some(guard), &mut |_| true)
+                        else {
                             return Ok(None);
                         };
                         let old = tokens.slice(s![from.., ..]).to_owned();

@@ -9,6 +9,11 @@ use rand::{Rng, SeedableRng};
 use tch::nn::OptimizerConfig;
 
 fn model(seed: i64) -> (nn::VarStore, Tsmt) {
+    model_with(seed, false)
+}
+
+/// A tiny network (5 coordinates, 12 bins), with the step clock where `step_clock`.
+fn model_with(seed: i64, step_clock: bool) -> (nn::VarStore, Tsmt) {
     tch::manual_seed(seed);
     let vs = nn::VarStore::new(Device::Cpu);
     let m = Tsmt::new(
@@ -17,6 +22,7 @@ fn model(seed: i64) -> (nn::VarStore, Tsmt) {
             coords: 5,
             n_bins: 12,
             music_dim: 3,
+            step_clock,
             ..Config::tiny()
         },
     );
@@ -253,22 +259,7 @@ fn loss_falls_on_a_few_batches() {
 /// clock included, and the clock changes the logits.
 #[test]
 fn the_step_clock_starts_silent_and_the_cached_steps_hear_it() {
-    let clocked = |seed| {
-        tch::manual_seed(seed);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let m = Tsmt::new(
-            &vs.root(),
-            Config {
-                coords: 5,
-                n_bins: 12,
-                music_dim: 3,
-                step_clock: true,
-                ..Config::tiny()
-            },
-        );
-        (vs, m)
-    };
-    let (vs, m) = clocked(7);
+    let (vs, m) = model_with(7, true);
     let (_plain_vs, plain) = model(7);
     let x = tokens(1, 9);
     let music = Tensor::randn([1, 9, 3], (Kind::Float, Device::Cpu));

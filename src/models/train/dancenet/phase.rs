@@ -15,7 +15,7 @@ use tch::Tensor;
 
 use super::lock::{toe_speed, window_beats};
 use crate::models::step_clock::{self, beat_count};
-use crate::models::train::step_lock::dancer_phase;
+use crate::models::train::step_lock::step_phase;
 use crate::motion::dataset::NormStats;
 use crate::motion::rotations::Layout;
 
@@ -41,12 +41,7 @@ pub(super) fn window_clock(
         let Some(count) = beat_count(beats) else {
             continue;
         };
-        // Frame t's speed is the step from t − 1 to t; the first frame borrows the second's.
-        let s: Vec<f64> = std::iter::once(speed[i * (n - 1)])
-            .chain(speed[i * (n - 1)..(i + 1) * (n - 1)].iter().copied())
-            .map(f64::from)
-            .collect();
-        let phase = dancer_phase(&s, &count);
+        let phase = step_phase(&speed[i * (n - 1)..(i + 1) * (n - 1)], &count);
         out.slice_mut(ndarray::s![i * n..(i + 1) * n, ..])
             .assign(&step_clock::columns(&phase));
     }

@@ -21,7 +21,7 @@ use tch::{Kind, Tensor};
 
 use crate::audio::features::TSMT_BEAT;
 use crate::models::step_clock::{self, beat_count};
-use crate::models::train::step_lock::{dancer_phase, signed_projection};
+use crate::models::train::step_lock::{signed_projection, step_phase};
 use crate::models::tsmt::{Bins, Tsmt};
 use crate::motion::repr;
 use crate::motion::skeleton::TOES;
@@ -85,12 +85,7 @@ pub(super) fn window_clock(
     let t = crate::models::to_tensor(&rows);
     let speed = toe_speed(&t.narrow(0, 0, m as i64 - 1), &t.narrow(0, 1, m as i64 - 1));
     let speed: Vec<f32> = Vec::try_from(speed.contiguous()).expect("f32 speed");
-    // Frame t's speed is the step from t − 1 to t; the first frame borrows the second's.
-    let speed: Vec<f64> = std::iter::once(speed[0])
-        .chain(speed.iter().copied())
-        .map(f64::from)
-        .collect();
-    let phase = dancer_phase(&speed, &count);
+    let phase = step_phase(&speed, &count);
     step_clock::columns(&phase)
         .slice(s![m - n.min(m).., ..])
         .to_owned()
@@ -109,10 +104,10 @@ pub(super) struct Lock {
 /// `input` that are the network's own draws (the rest are the dance, noised), `target` the
 /// dance's tokens and `clock` `[b, n + 1, WIDTH]` the windows' clocks. Each frame's speed is
 /// from the frame before it as the network would have it without the noise (its own draw, or
-/// the dance) to the expected next frame. `capped`: the loss is the shortfall against the real
-/// continuation's score, else the score's negative. Only frames `skip + 1..=n` are scored (after a warped
-/// history, `train::tsmt::warp`). Windows without two beats are left out; `None` when
-/// none is left.
+/// the dance) to the expected next frame. Only frames `skip + 1..=n` are scored (after a warped
+/// history, `train::tsmt::warp`). `capped`: the loss is the shortfall against the real
+/// continuation's score, else the score's negative (`--lock-uncapped`). Windows without two
+/// beats are left out; `None` when none is left.
 pub(super) fn term(
     model: &Tsmt,
     fused: &Tensor,
