@@ -563,10 +563,11 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
 /// `choreo train tsmt --init … --step-clock --lock-weight …` (issue 25 item 4): a run continued
 /// from a folder without the clock gives the network the clock (its new weights from zero), fits
 /// each window's clock to the real dancer's step, and scores what the network means to draw after
-/// its own draws against it: the real continuation is scored, the test loss is logged with the
-/// clock a quarter step late too, and the folder serves with the song's clock.
+/// its own draws against it, and with `--free-runs` dances a few windows freely through its
+/// sampler and scores those too: the real continuations are scored, the test loss is logged
+/// with the clock a quarter step late too, and the folder serves with the song's clock.
 #[test]
-fn tsmt_continues_with_the_step_clock_and_the_lock_term() {
+fn tsmt_continues_with_the_step_clock_the_lock_term_and_free_runs() {
     use choreo::models::train::tsmt;
     let first = tempfile::tempdir().unwrap();
     let opts = tsmt::Options {
@@ -588,6 +589,8 @@ fn tsmt_continues_with_the_step_clock_and_the_lock_term() {
         self_run: 4,
         step_clock: true,
         lock_weight: 1.0,
+        free_runs: 2,
+        free_frames: 100,
         ..tsmt::Options::default()
     };
     let logs = tsmt::train(&continued).expect("the continued run trains");
@@ -596,9 +599,23 @@ fn tsmt_continues_with_the_step_clock_and_the_lock_term() {
     // (the served window, 80 frames, scores the real dancer well above it), but it is scored.
     let real = real_lock(&logs[0].note);
     assert!(real != 0.0 && real.abs() <= 1.0, "{}", logs[0].note);
+    // The free runs' 100 frames hold several steps: the real continuation scores well above
+    // zero on the clock fitted to it, and the network's own run is scored too.
+    let free = |key: &str| -> f64 {
+        let note = &logs[0].note;
+        note.split(key)
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|r| r.parse().ok())
+            .unwrap_or_else(|| panic!("no {key} in {note}"))
+    };
+    assert!(free("free_real=") > 0.1, "{}", logs[0].note);
+    assert!(free("free_danced=").abs() <= 1.0, "{}", logs[0].note);
     let file = written_model_file(out.path());
     assert_eq!(file["config"]["step_clock"], true);
     assert_eq!(file["training"]["lock_weight"], 1.0);
+    assert_eq!(file["training"]["free_runs"], 2);
+    assert_eq!(file["training"]["free_frames"], 100);
     let served = choreo::models::tsmt::Served::load(out.path()).expect("the folder loads");
     let motion = dance(&served, &GenerateRequest::plain(song(), 1));
     assert!(motion.positions.iter().all(|v| v.is_finite()));

@@ -445,6 +445,17 @@ args_into! {
         /// continuation's.
         #[arg(long)]
         lock_uncapped: bool,
+        /// Free runs (with `--step-clock`): the first N windows of each batch are also danced
+        /// freely by the network, as served, from 40 real frames on, through straight-through
+        /// draws, and the toes' speed of the run is held to step with the clock (0: off).
+        #[arg(long, default_value_t = train::tsmt::Options::default().free_runs)]
+        free_runs: usize,
+        /// Frames each free run draws (at most 210: the clock's 250 frames less the context).
+        #[arg(long, default_value_t = train::tsmt::Options::default().free_frames)]
+        free_frames: usize,
+        /// Weight of the free runs' lock term.
+        #[arg(long, default_value_t = train::tsmt::Options::default().free_weight)]
+        free_weight: f64,
         /// Do not train: redraw the seed clips (the same clips for the same `--seed`) with each
         /// one's source and its song's beats into `--out` (`seed_clips.safetensors`,
         /// `seed_clips.json`; with it the song chooses the opening clip).

@@ -39,6 +39,7 @@ use super::layers::{sinusoid, Dims, KvCache, Stack};
 use super::ModelError;
 use crate::motion::repr::{self, FEATURE_DIM};
 
+mod free_run;
 pub mod sampling;
 pub mod served;
 

@@ -89,6 +89,13 @@ pub struct Options {
     /// The lock term raises the score itself rather than its shortfall against the real
     /// continuation's (`train::tsmt::lock::term`).
     pub lock_uncapped: bool,
+    /// Free runs (`tsmt::free_run`, `lock::free_term`; with `step_clock`): the first
+    /// `free_runs` windows of each batch are also danced by the network from
+    /// [`FREE_CONTEXT`] real frames on, `free_frames` frames as served, and their lock term
+    /// weighs `free_weight`. 0: off.
+    pub free_runs: usize,
+    pub free_frames: usize,
+    pub free_weight: f64,
     /// Do not train: redraw the seed clips (the same clips for the same `seed`) with each one's
     /// source and its song's beats (`seed_clips.json`) into the output folder.
     pub clips_only: bool,
@@ -123,6 +130,9 @@ impl Default for Options {
             lock_weight: 0.0,
             history_warp: 0.0,
             lock_uncapped: false,
+            free_runs: 0,
+            free_frames: 160,
+            free_weight: 1.0,
             clips_only: false,
         }
     }
@@ -131,6 +141,9 @@ impl Default for Options {
 /// Frames of a window's history that `history_warp` replays at another pace (1.6 s at 25 fps:
 /// half the served window, so the frames scored after it still see 40 frames of it).
 const HISTORY_FRAMES: usize = 40;
+
+/// Real frames a free run starts from (1.6 s: the served seed clip is 2 s).
+const FREE_CONTEXT: usize = 40;
 
 /// Seed clips kept in the folder, and their length in frames.
 const SEED_CLIPS: usize = 32;
@@ -238,6 +251,13 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             "--history-warp needs --step-clock and a window over {HISTORY_FRAMES} frames"
         )));
     }
+    let free = opts.free_runs > 0;
+    if free && (!opts.step_clock || FREE_CONTEXT + opts.free_frames > lock::CLOCK_CONTEXT) {
+        return Err(TrainError::InvalidOption(format!(
+            "--free-runs needs --step-clock and --free-frames of at most {}",
+            lock::CLOCK_CONTEXT - FREE_CONTEXT
+        )));
+    }
     if opts.step_clock && opts.beat_time {
         return Err(TrainError::InvalidOption(
             "--step-clock with --beat-time: the clock reads the dances as danced".into(),
@@ -335,6 +355,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 self_run: opts.self_run,
                 self_passes: opts.self_passes,
                 lock_weight: opts.lock_weight,
+                history_warp: opts.history_warp,
+                free_runs: opts.free_runs,
+                free_frames: if free { opts.free_frames } else { 0 },
+                free_weight: if free { opts.free_weight } else { 0.0 },
                 steps,
             },
         ),
@@ -372,7 +396,9 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 StdRng::seed_from_u64(opts.seed ^ (epoch as u64).wrapping_mul(0x9E37_79B9));
             let (mut total, mut batches) = (0.0, 0);
             let (mut lock_danced, mut lock_real, mut locked) = (0.0, 0.0, 0);
+            let (mut free_danced, mut free_real, mut freed) = (0.0, 0.0, 0);
             for chunk in starts.chunks(opts.batch) {
+                let mut free_windows = Vec::new();
                 let (target, music, clock) = match &windows {
                     None => (
                         token_batch(&train_tokens, chunk, len),
@@ -381,8 +407,11 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     ),
                     Some(w) => {
                         let (mut tokens, mut music, mut clocks) = (Vec::new(), Vec::new(), Vec::new());
-                        for &(i, f0) in chunk {
+                        for (j, &(i, f0)) in chunk.iter().enumerate() {
                             let (m, p) = w.raw_window(i, f0, drawn_len, &mut rng)?;
+                            if j < opts.free_runs {
+                                free_windows.push(free_window(&p, &m, opts.free_frames, &bins, &data)?);
+                            }
                             // The window is the drawn rows' last `len`; the clock hears them all.
                             if opts.step_clock {
                                 let k = lock::window_clock(p.view(), m.view(), len);
@@ -437,10 +466,19 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                         &model, &fused, &input, own.as_ref(), &target, k, &bins, skip as i64, capped,
                     );
                     if let Some(l) = l {
-                        loss = loss + l.loss * opts.lock_weight;
+                        loss += l.loss * opts.lock_weight;
                         lock_danced += l.danced;
                         lock_real += l.real;
                         locked += 1;
+                    }
+                }
+                if !free_windows.is_empty() {
+                    let l = free_lock(&model, &free_windows, &mut rng, opts, &bins);
+                    if let Some(l) = l {
+                        loss += l.loss * opts.free_weight;
+                        free_danced += l.danced;
+                        free_real += l.real;
+                        freed += 1;
                     }
                 }
                 opt.backward_step_clip(&loss, 1.0);
@@ -478,11 +516,23 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 ),
                 None => String::new(),
             };
+            let free_note = if free {
+                format!(
+                    " free_runs={}x{} free_danced={:.3} free_real={:.3} free_weight={}",
+                    opts.free_runs,
+                    opts.free_frames,
+                    free_danced / freed.max(1) as f64,
+                    free_real / freed.max(1) as f64,
+                    opts.free_weight
+                )
+            } else {
+                String::new()
+            };
             Ok(EpochResult {
                 train_loss: total / batches.max(1) as f64,
                 test_loss,
                 note: format!(
-                    "steps={steps} tempo={}..{} mirror={} self={}x{}/{}{clock_note} history_warp={} lock_uncapped={} (cross-entropy, nats per coordinate)",
+                    "steps={steps} tempo={}..{} mirror={} self={}x{}/{}{clock_note}{free_note} history_warp={} lock_uncapped={} (cross-entropy, nats per coordinate)",
                     opts.min_tempo, opts.max_tempo, opts.mirror, opts.self_condition, opts.self_run,
                     opts.self_passes, opts.history_warp, opts.lock_uncapped
                 ),
@@ -491,6 +541,67 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         |t| file_of(t, steps_cell.get()),
     )?;
     Ok(trainer.logs)
+}
+
+/// One free run's window: the real context's tokens `[FREE_CONTEXT, coords]`, the real
+/// continuation's `[frames, coords]`, the normalised music and the clock of all of them.
+struct FreeWindow {
+    prefix: Tensor,
+    real: Tensor,
+    music: Tensor,
+    clock: Tensor,
+}
+
+/// The free run of the last `FREE_CONTEXT + frames` rows of a drawn window (`poses` and `music`
+/// as drawn, before any warp), the clock fitted over all its rows as the window's.
+fn free_window(
+    poses: &Array2<f32>,
+    music: &Array2<f32>,
+    frames: usize,
+    bins: &Bins,
+    data: &Data,
+) -> Result<FreeWindow, TrainError> {
+    let n = FREE_CONTEXT + frames;
+    let from = poses.nrows() - n;
+    let tokens = token_tensor(bins.tokens(&poses.slice(s![from.., ..]).to_owned()).view());
+    Ok(FreeWindow {
+        prefix: tokens.narrow(0, 0, FREE_CONTEXT as i64),
+        real: tokens.narrow(0, FREE_CONTEXT as i64, frames as i64),
+        music: crate::models::to_tensor(
+            &data
+                .music_norm
+                .normalize(&music.slice(s![from.., ..]).to_owned())?,
+        ),
+        clock: crate::models::to_tensor(&lock::window_clock(poses.view(), music.view(), n)),
+    })
+}
+
+/// The free runs' lock term of one batch's free windows, from a song position of their own.
+fn free_lock(
+    model: &Tsmt,
+    windows: &[FreeWindow],
+    rng: &mut StdRng,
+    opts: &Options,
+    bins: &Bins,
+) -> Option<lock::Lock> {
+    let stack = |f: fn(&FreeWindow) -> &Tensor| {
+        Tensor::stack(&windows.iter().map(f).collect::<Vec<_>>(), 0)
+    };
+    let n = (FREE_CONTEXT + opts.free_frames) as i64;
+    lock::free_term(
+        model,
+        &stack(|w| &w.prefix),
+        &stack(|w| &w.real),
+        &stack(|w| &w.music),
+        &stack(|w| &w.clock),
+        rng.gen_range(0..MAX_POSITION - n),
+        Sampling {
+            temperature: opts.temperature,
+            top_k: opts.top_k,
+        },
+        bins,
+        !opts.lock_uncapped,
+    )
 }
 
 /// Mean speed (m/s) of the joints relative to the root, per frame (0 for the first), from

@@ -43,6 +43,17 @@ pub struct Schedule {
     /// Weight of the step clock's lock term (`train::tsmt::Options::lock_weight`; 0: off).
     #[serde(default)]
     pub lock_weight: f64,
+    /// Warped histories' pace range (`train::tsmt::Options::history_warp`; 0: off).
+    #[serde(default)]
+    pub history_warp: f64,
+    /// Free runs per batch, their frames and their term's weight
+    /// (`train::tsmt::Options::free_runs`; 0: off).
+    #[serde(default)]
+    pub free_runs: usize,
+    #[serde(default)]
+    pub free_frames: usize,
+    #[serde(default)]
+    pub free_weight: f64,
     pub steps: usize,
 }
 

@@ -22,7 +22,7 @@ use tch::{Kind, Tensor};
 use crate::audio::features::TSMT_BEAT;
 use crate::models::step_clock::{self, beat_count};
 use crate::models::train::step_lock::{signed_projection, step_phase};
-use crate::models::tsmt::{Bins, Tsmt};
+use crate::models::tsmt::{Bins, Sampling, Tsmt};
 use crate::motion::repr;
 use crate::motion::skeleton::TOES;
 
@@ -120,19 +120,8 @@ pub(super) fn term(
     capped: bool,
 ) -> Option<Lock> {
     let n = target.size()[1] - 1;
-    let coords = toe_coords();
-    let idx = Tensor::from_slice(&coords.map(|c| c as i64));
-    let nb = bins.n;
-    let centres: Vec<f32> = coords
-        .iter()
-        .flat_map(|&c| (0..nb as i64).map(move |i| bins.centre(c, i)))
-        .collect();
-    let centres = Tensor::from_slice(&centres).view([coords.len() as i64, nb as i64]);
-    // Tokens `[b, len, coords]` → values `[b, len, 8]` of the toe coordinates.
-    let values = |tokens: &Tensor| {
-        let k = Tensor::arange(coords.len() as i64, (Kind::Int64, tokens.device())) * nb as i64;
-        centres.view([-1]).take(&(tokens.index_select(2, &idx) + k))
-    };
+    let (idx, centres) = toe_centres(bins);
+    let values = |tokens: &Tensor| toe_values(tokens, &idx, &centres);
     let dance = values(target);
     let prev = match own {
         Some(own) => values(input).where_self(&own.unsqueeze(-1), &dance),
@@ -160,6 +149,96 @@ pub(super) fn term(
     // Held to at least the real dancer's score over the same frames, not past it: pushed
     // further, the feet would swing harder than anyone danced. Uncapped, the score itself is
     // raised (it is at most 1): a capped term the history already meets pulls on nothing.
+    let loss = if capped {
+        (&real - &danced).relu().mean(Kind::Float)
+    } else {
+        -danced.mean(Kind::Float)
+    };
+    Some(Lock {
+        loss,
+        danced: danced.mean(Kind::Float).double_value(&[]),
+        real: real.mean(Kind::Float).double_value(&[]),
+    })
+}
+
+/// The bin centres `[8, n_bins]` of [`toe_coords`] and their indices.
+fn toe_centres(bins: &Bins) -> (Tensor, Tensor) {
+    let coords = toe_coords();
+    let nb = bins.n as i64;
+    let centres: Vec<f32> = coords
+        .iter()
+        .flat_map(|&c| (0..nb).map(move |i| bins.centre(c, i)))
+        .collect();
+    (
+        Tensor::from_slice(&coords.map(|c| c as i64)),
+        Tensor::from_slice(&centres).view([coords.len() as i64, nb]),
+    )
+}
+
+/// The toe coordinates' values `[b, len, 8]` of `tokens` `[b, len, coords]`.
+fn toe_values(tokens: &Tensor, idx: &Tensor, centres: &Tensor) -> Tensor {
+    let (k, nb) = centres.size2().expect("centres are [k, n_bins]");
+    let offset = Tensor::arange(k, (Kind::Int64, tokens.device())) * nb;
+    centres
+        .view([-1])
+        .take(&(tokens.index_select(2, idx) + offset))
+}
+
+/// One free run's lock term (`--free-runs`, [`Tsmt::free_run`]): from the context `prefix`
+/// `[b, m, coords]` of real frames the network draws the `frames` after it as served
+/// (`sampling`), with the windows' `music` and `clock` over all `m + frames`; the toes' speed of
+/// its own frames is scored by the signed projection on the clock's phase and held to the real
+/// continuation `real` `[b, frames, coords]`'s score (the shortfall; its negative when not
+/// `capped`). Windows without two beats are left out; `None` when none is left.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn free_term(
+    model: &Tsmt,
+    prefix: &Tensor,
+    real: &Tensor,
+    music: &Tensor,
+    clock: &Tensor,
+    start: i64,
+    sampling: Sampling,
+    bins: &Bins,
+    capped: bool,
+) -> Option<Lock> {
+    let (m, frames) = (prefix.size()[1], real.size()[1]);
+    let keep = clock
+        .abs()
+        .sum_dim_intlist([1, 2].as_slice(), false, Kind::Float)
+        .gt(0.0)
+        .nonzero()
+        .squeeze_dim(1);
+    if keep.size()[0] == 0 {
+        return None;
+    }
+    let pick = |t: &Tensor| t.index_select(0, &keep);
+    let (idx, centres) = toe_centres(bins);
+    let clock = pick(clock);
+    let drawn = model.free_run(
+        &pick(prefix),
+        &pick(music),
+        Some(&clock),
+        start,
+        frames,
+        sampling,
+        &idx,
+        &centres,
+    );
+    let last = toe_values(&pick(prefix).narrow(1, m - 1, 1), &idx, &centres);
+    let real = Tensor::cat(
+        &[
+            last.shallow_clone(),
+            toe_values(&pick(real), &idx, &centres),
+        ],
+        1,
+    );
+    let own = Tensor::cat(&[last, drawn], 1);
+    let speed = |v: &Tensor| toe_speed(&v.narrow(1, 0, frames), &v.narrow(1, 1, frames));
+    let k = clock.narrow(1, m, frames);
+    let phase = k.select(2, 0).atan2(&k.select(2, 1));
+    let danced = signed_projection(&speed(&own), &phase);
+    let real = signed_projection(&speed(&real), &phase);
     let loss = if capped {
         (&real - &danced).relu().mean(Kind::Float)
     } else {
