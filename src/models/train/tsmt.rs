@@ -138,6 +138,16 @@ impl Default for Options {
     }
 }
 
+impl Options {
+    /// The sampling written into `model.json`, which training's own draws use too.
+    fn sampling(&self) -> Sampling {
+        Sampling {
+            temperature: self.temperature,
+            top_k: self.top_k,
+        }
+    }
+}
+
 /// Frames of a window's history that `history_warp` replays at another pace (1.6 s at 25 fps:
 /// half the served window, so the frames scored after it still see 40 frames of it).
 const HISTORY_FRAMES: usize = 40;
@@ -364,10 +374,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         ),
         extra: Serving {
             bins: bins.clone(),
-            sampling: Sampling {
-                temperature: opts.temperature,
-                top_k: opts.top_k,
-            },
+            sampling: opts.sampling(),
             smooth_frames: opts.smooth_frames,
             smooth_height_frames: opts.smooth_height_frames,
             stall_guard: (opts.stall_reach > 0.0).then_some(StallGuard {
@@ -409,13 +416,16 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                         let (mut tokens, mut music, mut clocks) = (Vec::new(), Vec::new(), Vec::new());
                         for (j, &(i, f0)) in chunk.iter().enumerate() {
                             let (m, p) = w.raw_window(i, f0, drawn_len, &mut rng)?;
-                            if j < opts.free_runs {
-                                free_windows.push(free_window(&p, &m, opts.free_frames, &bins, &data)?);
-                            }
-                            // The window is the drawn rows' last `len`; the clock hears them all.
+                            // The window is the drawn rows' last `len`, a free run their last
+                            // `FREE_CONTEXT + free_frames`; the clock is fitted once over them all.
                             if opts.step_clock {
-                                let k = lock::window_clock(p.view(), m.view(), len);
-                                clocks.push(crate::models::to_tensor(&k));
+                                let k = lock::window_clock(p.view(), m.view(), drawn_len);
+                                if j < opts.free_runs {
+                                    let f = free_window(&p, &m, k.view(), opts.free_frames, &bins, &data)?;
+                                    free_windows.push(f);
+                                }
+                                let k = k.slice(s![drawn_len - len.., ..]);
+                                clocks.push(crate::models::to_tensor(&k.to_owned()));
                             }
                             let p = if warping {
                                 let r = opts.history_warp.ln();
@@ -552,11 +562,12 @@ struct FreeWindow {
     clock: Tensor,
 }
 
-/// The free run of the last `FREE_CONTEXT + frames` rows of a drawn window (`poses` and `music`
-/// as drawn, before any warp), the clock fitted over all its rows as the window's.
+/// The free run of the last `FREE_CONTEXT + frames` rows of a drawn window (`poses`, `music` and
+/// the window's `clock` as drawn, before any warp).
 fn free_window(
     poses: &Array2<f32>,
     music: &Array2<f32>,
+    clock: ArrayView2<f32>,
     frames: usize,
     bins: &Bins,
     data: &Data,
@@ -572,7 +583,7 @@ fn free_window(
                 .music_norm
                 .normalize(&music.slice(s![from.., ..]).to_owned())?,
         ),
-        clock: crate::models::to_tensor(&lock::window_clock(poses.view(), music.view(), n)),
+        clock: crate::models::to_tensor(&clock.slice(s![from.., ..]).to_owned()),
     })
 }
 
@@ -595,10 +606,7 @@ fn free_lock(
         &stack(|w| &w.music),
         &stack(|w| &w.clock),
         rng.gen_range(0..MAX_POSITION - n),
-        Sampling {
-            temperature: opts.temperature,
-            top_k: opts.top_k,
-        },
+        opts.sampling(),
         bins,
         !opts.lock_uncapped,
     )

@@ -59,18 +59,10 @@ impl Tsmt {
         };
         let mut wx = read(&prefix.apply(&self.bin_embed), start, &mut caches);
         let table = self.bin_embed.ws.shallow_clone(); // [n_bins, e_bin]
-        let temperature = sampling.temperature.max(1e-3);
         let mut out = Vec::with_capacity(frames as usize);
         for t in 0..frames {
-            let logits = self.logits(&(&wx + wa.select(1, m + t))) / temperature; // [b, c, nb]
-            let logits = if sampling.top_k > 0 && (sampling.top_k as i64) < nb {
-                let (top, _) = logits.topk(sampling.top_k as i64, -1, true, true);
-                let floor = top.narrow(-1, sampling.top_k as i64 - 1, 1);
-                logits.masked_fill(&logits.lt_tensor(&floor), f64::NEG_INFINITY)
-            } else {
-                logits
-            };
-            let p = logits.softmax(-1, Kind::Float);
+            let logits = self.logits(&(&wx + wa.select(1, m + t))); // [b, c, nb]
+            let p = sampling.masked_logits(&logits).softmax(-1, Kind::Float);
             let drawn = p
                 .detach()
                 .reshape([-1, nb])
@@ -94,8 +86,9 @@ mod tests {
     use crate::models::tsmt::Config;
     use tch::{nn, Device};
 
-    /// Every drawn value is a bin centre (the forward pass carries the draw), and a loss on the values reaches the pose stream and the bin embedding (the backward pass
-    /// goes through the draws into the frames read after them).
+    /// Every drawn value is a bin centre (the forward pass carries the draw), and a loss on the
+    /// values reaches the pose stream and the bin embedding (the backward pass goes through the
+    /// draws into the frames read after them).
     #[test]
     fn a_free_run_draws_bins_and_its_loss_reaches_the_pose_stream() {
         tch::manual_seed(5);

@@ -179,6 +179,20 @@ impl Default for Sampling {
 }
 
 impl Sampling {
+    /// `logits` `[.., n_bins]` over the temperature, with every bin below the `top_k`-th largest
+    /// of its row at −∞ (ties at the cut are kept): the distribution [`Self::draw`] draws from, as
+    /// tensors (training's own draws: self-conditioning, free runs).
+    pub fn masked_logits(&self, logits: &Tensor) -> Tensor {
+        let logits = logits / self.temperature.max(1e-3);
+        let bins = logits.size().last().copied().unwrap_or(0);
+        if self.top_k == 0 || self.top_k as i64 >= bins {
+            return logits;
+        }
+        let (top, _) = logits.topk(self.top_k as i64, -1, true, true);
+        let floor = top.narrow(-1, self.top_k as i64 - 1, 1);
+        logits.masked_fill(&logits.lt_tensor(&floor), f64::NEG_INFINITY)
+    }
+
     /// Draws a bin from one coordinate's `logits`; `probs` is scratch of the same length.
     pub fn draw(&self, logits: &[f32], probs: &mut [f32], rng: &mut StdRng) -> usize {
         let t = self.temperature.max(1e-3) as f32;

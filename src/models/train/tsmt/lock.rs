@@ -99,6 +99,41 @@ pub(super) struct Lock {
     pub real: f64,
 }
 
+impl Lock {
+    /// The term from the toes' speed `[b, n]` the network danced (`own`) and the real
+    /// continuation's (`real`), both scored by their signed projection on `phase` `[b, n]`.
+    /// `capped`: the loss is the shortfall against the real score, else the score's negative.
+    fn of(own: &Tensor, real: &Tensor, phase: &Tensor, capped: bool) -> Self {
+        let danced = signed_projection(own, phase);
+        let real = signed_projection(real, phase);
+        // Held to at least the real dancer's score over the same frames, not past it: pushed
+        // further, the feet would swing harder than anyone danced. Uncapped, the score itself is
+        // raised (it is at most 1): a capped term the history already meets pulls on nothing.
+        let loss = if capped {
+            (&real - &danced).relu().mean(Kind::Float)
+        } else {
+            -danced.mean(Kind::Float)
+        };
+        Self {
+            loss,
+            danced: danced.mean(Kind::Float).double_value(&[]),
+            real: real.mean(Kind::Float).double_value(&[]),
+        }
+    }
+}
+
+/// The indices `[k]` of the windows of `clock` `[b, n, WIDTH]` that have a clock (those without
+/// two beats have zeros); `None` when none has.
+fn clocked(clock: &Tensor) -> Option<Tensor> {
+    let keep = clock
+        .abs()
+        .sum_dim_intlist([1, 2].as_slice(), false, Kind::Float)
+        .gt(0.0)
+        .nonzero()
+        .squeeze_dim(1);
+    (keep.size()[0] > 0).then_some(keep)
+}
+
 /// The term of one batch: `fused` the training pass's fused vectors (`Tsmt::fused`) of frames
 /// 1..=n, `input` the tokens it read `[b, n + 1, coords]`, `own` `[b, n + 1]` the frames of
 /// `input` that are the network's own draws (the rest are the dance, noised), `target` the
@@ -134,31 +169,14 @@ pub(super) fn term(
     let real_speed = scored(toe_speed(&dance.narrow(1, 0, n), &dance.narrow(1, 1, n)));
     let k = scored(clock.narrow(1, 1, n));
     let phase = k.select(2, 0).atan2(&k.select(2, 1));
-    let keep = k
-        .abs()
-        .sum_dim_intlist([1, 2].as_slice(), false, Kind::Float)
-        .gt(0.0)
-        .nonzero()
-        .squeeze_dim(1);
-    if keep.size()[0] == 0 {
-        return None;
-    }
+    let keep = clocked(&k)?;
     let pick = |t: &Tensor| t.index_select(0, &keep);
-    let danced = signed_projection(&pick(&own_speed), &pick(&phase));
-    let real = signed_projection(&pick(&real_speed), &pick(&phase));
-    // Held to at least the real dancer's score over the same frames, not past it: pushed
-    // further, the feet would swing harder than anyone danced. Uncapped, the score itself is
-    // raised (it is at most 1): a capped term the history already meets pulls on nothing.
-    let loss = if capped {
-        (&real - &danced).relu().mean(Kind::Float)
-    } else {
-        -danced.mean(Kind::Float)
-    };
-    Some(Lock {
-        loss,
-        danced: danced.mean(Kind::Float).double_value(&[]),
-        real: real.mean(Kind::Float).double_value(&[]),
-    })
+    Some(Lock::of(
+        &pick(&own_speed),
+        &pick(&real_speed),
+        &pick(&phase),
+        capped,
+    ))
 }
 
 /// The bin centres `[8, n_bins]` of [`toe_coords`] and their indices.
@@ -203,15 +221,7 @@ pub(super) fn free_term(
     capped: bool,
 ) -> Option<Lock> {
     let (m, frames) = (prefix.size()[1], real.size()[1]);
-    let keep = clock
-        .abs()
-        .sum_dim_intlist([1, 2].as_slice(), false, Kind::Float)
-        .gt(0.0)
-        .nonzero()
-        .squeeze_dim(1);
-    if keep.size()[0] == 0 {
-        return None;
-    }
+    let keep = clocked(clock)?;
     let pick = |t: &Tensor| t.index_select(0, &keep);
     let (idx, centres) = toe_centres(bins);
     let clock = pick(clock);
@@ -237,18 +247,7 @@ pub(super) fn free_term(
     let speed = |v: &Tensor| toe_speed(&v.narrow(1, 0, frames), &v.narrow(1, 1, frames));
     let k = clock.narrow(1, m, frames);
     let phase = k.select(2, 0).atan2(&k.select(2, 1));
-    let danced = signed_projection(&speed(&own), &phase);
-    let real = signed_projection(&speed(&real), &phase);
-    let loss = if capped {
-        (&real - &danced).relu().mean(Kind::Float)
-    } else {
-        -danced.mean(Kind::Float)
-    };
-    Some(Lock {
-        loss,
-        danced: danced.mean(Kind::Float).double_value(&[]),
-        real: real.mean(Kind::Float).double_value(&[]),
-    })
+    Some(Lock::of(&speed(&own), &speed(&real), &phase, capped))
 }
 
 #[cfg(test)]

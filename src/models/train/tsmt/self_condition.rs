@@ -37,23 +37,16 @@ pub(super) fn self_conditioned(
     own: &Tensor,
     opts: &Options,
 ) -> Tensor {
+    let sampling = opts.sampling();
     tch::no_grad(|| {
         let own = own.unsqueeze(-1); // [b, len, 1]
         let mut mixed = input.shallow_clone();
         for _ in 0..opts.self_passes.max(1) {
             // Logits for frames 1..=n from frames 0..n−1; the draw for frame 0 is the dance.
-            let logits =
-                model.forward(&mixed, music, clock, start, false) / opts.temperature.max(1e-3);
+            let logits = model.forward(&mixed, music, clock, start, false);
             let (b, n, c, bins) = logits.size4().expect("[b, n, coords, bins]");
-            let flat = logits.reshape([-1, bins]);
-            let flat = if opts.top_k > 0 && (opts.top_k as i64) < bins {
-                let (top, _) = flat.topk(opts.top_k as i64, -1, true, true);
-                let floor = top.narrow(1, opts.top_k as i64 - 1, 1);
-                flat.masked_fill(&flat.lt_tensor(&floor), f64::NEG_INFINITY)
-            } else {
-                flat
-            };
-            let drawn = flat
+            let drawn = sampling
+                .masked_logits(&logits.reshape([-1, bins]))
                 .softmax(-1, tch::Kind::Float)
                 .multinomial(1, true)
                 .reshape([b, n, c]);
