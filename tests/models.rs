@@ -564,7 +564,8 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
 /// from a folder without the clock gives the network the clock (its new weights from zero), fits
 /// each window's clock to the real dancer's step, and scores what the network means to draw after
 /// its own draws against it, and with `--free-runs` dances a few windows freely through its
-/// sampler and scores those too: the real continuations are scored, the test loss is logged
+/// sampler and scores those too (the lock and, with `--free-body`, the body term): the real
+/// continuations are scored, the test loss is logged
 /// with the clock a quarter step late too, and the folder serves with the song's clock.
 #[test]
 fn tsmt_continues_with_the_step_clock_the_lock_term_and_free_runs() {
@@ -591,6 +592,7 @@ fn tsmt_continues_with_the_step_clock_the_lock_term_and_free_runs() {
         lock_weight: 1.0,
         free_runs: 2,
         free_frames: 100,
+        free_body: 1.0,
         ..tsmt::Options::default()
     };
     let logs = tsmt::train(&continued).expect("the continued run trains");
@@ -611,11 +613,15 @@ fn tsmt_continues_with_the_step_clock_the_lock_term_and_free_runs() {
     };
     assert!(free("free_real=") > 0.1, "{}", logs[0].note);
     assert!(free("free_danced=").abs() <= 1.0, "{}", logs[0].note);
+    // The body term reads the run's pace against the real one's and its lift off the floor.
+    assert!(free("free_pace=") > 0.0, "{}", logs[0].note);
+    assert!(free("free_lift=") >= 0.0, "{}", logs[0].note);
     let file = written_model_file(out.path());
     assert_eq!(file["config"]["step_clock"], true);
     assert_eq!(file["training"]["lock_weight"], 1.0);
     assert_eq!(file["training"]["free_runs"], 2);
     assert_eq!(file["training"]["free_frames"], 100);
+    assert_eq!(file["training"]["free_body"], 1.0);
     let served = choreo::models::tsmt::Served::load(out.path()).expect("the folder loads");
     let motion = dance(&served, &GenerateRequest::plain(song(), 1));
     assert!(motion.positions.iter().all(|v| v.is_finite()));

@@ -19,10 +19,12 @@ use crate::models::tsmt::{
 };
 use crate::motion::repr;
 
+mod free;
 mod lock;
 mod self_condition;
 mod warp;
 
+use free::FREE_CONTEXT;
 use self_condition::{runs_mask, self_conditioned};
 
 /// Options of one training run (the card gives the run behind the committed weights).
@@ -89,13 +91,14 @@ pub struct Options {
     /// The lock term raises the score itself rather than its shortfall against the real
     /// continuation's (`train::tsmt::lock::term`).
     pub lock_uncapped: bool,
-    /// Free runs (`tsmt::free_run`, `lock::free_term`; with `step_clock`): the first
+    /// Free runs (`tsmt::free_run`, `free::runs`; with `step_clock`): the first
     /// `free_runs` windows of each batch are also danced by the network from
-    /// [`FREE_CONTEXT`] real frames on, `free_frames` frames as served, and their lock term
-    /// weighs `free_weight`. 0: off.
+    /// [`FREE_CONTEXT`] real frames on, `free_frames` frames as served; their lock term
+    /// weighs `free_weight`, their body term (`free::Body`) `free_body`. 0: off.
     pub free_runs: usize,
     pub free_frames: usize,
     pub free_weight: f64,
+    pub free_body: f64,
     /// Do not train: redraw the seed clips (the same clips for the same `seed`) with each one's
     /// source and its song's beats (`seed_clips.json`) into the output folder.
     pub clips_only: bool,
@@ -133,6 +136,7 @@ impl Default for Options {
             free_runs: 0,
             free_frames: 160,
             free_weight: 1.0,
+            free_body: 0.0,
             clips_only: false,
         }
     }
@@ -151,9 +155,6 @@ impl Options {
 /// Frames of a window's history that `history_warp` replays at another pace (1.6 s at 25 fps:
 /// half the served window, so the frames scored after it still see 40 frames of it).
 const HISTORY_FRAMES: usize = 40;
-
-/// Real frames a free run starts from (1.6 s: the served seed clip is 2 s).
-const FREE_CONTEXT: usize = 40;
 
 /// Seed clips kept in the folder, and their length in frames.
 const SEED_CLIPS: usize = 32;
@@ -369,6 +370,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 free_runs: opts.free_runs,
                 free_frames: if free { opts.free_frames } else { 0 },
                 free_weight: if free { opts.free_weight } else { 0.0 },
+                free_body: if free { opts.free_body } else { 0.0 },
                 steps,
             },
         ),
@@ -404,6 +406,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             let (mut total, mut batches) = (0.0, 0);
             let (mut lock_danced, mut lock_real, mut locked) = (0.0, 0.0, 0);
             let (mut free_danced, mut free_real, mut freed) = (0.0, 0.0, 0);
+            let (mut free_pace, mut free_lift) = (0.0, 0.0);
             for chunk in starts.chunks(opts.batch) {
                 let mut free_windows = Vec::new();
                 let (target, music, clock) = match &windows {
@@ -421,7 +424,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                             if opts.step_clock {
                                 let k = lock::window_clock(p.view(), m.view(), drawn_len);
                                 if j < opts.free_runs {
-                                    let f = free_window(&p, &m, k.view(), opts.free_frames, &bins, &data)?;
+                                    let f = free::window(&p, &m, k.view(), opts.free_frames, &bins, &data)?;
                                     free_windows.push(f);
                                 }
                                 let k = k.slice(s![drawn_len - len.., ..]);
@@ -483,11 +486,15 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     }
                 }
                 if !free_windows.is_empty() {
-                    let l = free_lock(&model, &free_windows, &mut rng, opts, &bins);
-                    if let Some(l) = l {
-                        loss += l.loss * opts.free_weight;
-                        free_danced += l.danced;
-                        free_real += l.real;
+                    if let Some(f) = free::runs(&model, &free_windows, &mut rng, opts, &bins) {
+                        loss += f.lock.loss * opts.free_weight;
+                        if opts.free_body > 0.0 {
+                            loss += f.body.loss * opts.free_body;
+                        }
+                        free_danced += f.lock.danced;
+                        free_real += f.lock.real;
+                        free_pace += f.body.pace;
+                        free_lift += f.body.lift;
                         freed += 1;
                     }
                 }
@@ -528,12 +535,15 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             };
             let free_note = if free {
                 format!(
-                    " free_runs={}x{} free_danced={:.3} free_real={:.3} free_weight={}",
+                    " free_runs={}x{} free_danced={:.3} free_real={:.3} free_weight={} free_pace={:.3} free_lift={:.4} free_body={}",
                     opts.free_runs,
                     opts.free_frames,
                     free_danced / freed.max(1) as f64,
                     free_real / freed.max(1) as f64,
-                    opts.free_weight
+                    opts.free_weight,
+                    free_pace / freed.max(1) as f64,
+                    free_lift / freed.max(1) as f64,
+                    opts.free_body
                 )
             } else {
                 String::new()
@@ -553,72 +563,12 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
     Ok(trainer.logs)
 }
 
-/// One free run's window: the real context's tokens `[FREE_CONTEXT, coords]`, the real
-/// continuation's `[frames, coords]`, the normalised music and the clock of all of them.
-struct FreeWindow {
-    prefix: Tensor,
-    real: Tensor,
-    music: Tensor,
-    clock: Tensor,
-}
-
-/// The free run of the last `FREE_CONTEXT + frames` rows of a drawn window (`poses`, `music` and
-/// the window's `clock` as drawn, before any warp).
-fn free_window(
-    poses: &Array2<f32>,
-    music: &Array2<f32>,
-    clock: ArrayView2<f32>,
-    frames: usize,
-    bins: &Bins,
-    data: &Data,
-) -> Result<FreeWindow, TrainError> {
-    let n = FREE_CONTEXT + frames;
-    let from = poses.nrows() - n;
-    let tokens = token_tensor(bins.tokens(&poses.slice(s![from.., ..]).to_owned()).view());
-    Ok(FreeWindow {
-        prefix: tokens.narrow(0, 0, FREE_CONTEXT as i64),
-        real: tokens.narrow(0, FREE_CONTEXT as i64, frames as i64),
-        music: crate::models::to_tensor(
-            &data
-                .music_norm
-                .normalize(&music.slice(s![from.., ..]).to_owned())?,
-        ),
-        clock: crate::models::to_tensor(&clock.slice(s![from.., ..]).to_owned()),
-    })
-}
-
-/// The free runs' lock term of one batch's free windows, from a song position of their own.
-fn free_lock(
-    model: &Tsmt,
-    windows: &[FreeWindow],
-    rng: &mut StdRng,
-    opts: &Options,
-    bins: &Bins,
-) -> Option<lock::Lock> {
-    let stack = |f: fn(&FreeWindow) -> &Tensor| {
-        Tensor::stack(&windows.iter().map(f).collect::<Vec<_>>(), 0)
-    };
-    let n = (FREE_CONTEXT + opts.free_frames) as i64;
-    lock::free_term(
-        model,
-        &stack(|w| &w.prefix),
-        &stack(|w| &w.real),
-        &stack(|w| &w.music),
-        &stack(|w| &w.clock),
-        rng.gen_range(0..MAX_POSITION - n),
-        opts.sampling(),
-        bins,
-        !opts.lock_uncapped,
-    )
-}
-
 /// Mean speed (m/s) of the joints relative to the root, per frame (0 for the first), from
 /// feature rows: root-relative joint coordinates in the facing frame, metres.
 fn local_speed(poses: &Array2<f32>, fps: f32) -> Vec<f32> {
     let joints = repr::POSE_DIM / 3;
-    let mut out = vec![0f32; poses.nrows()];
-    for t in 1..poses.nrows() {
-        let (a, b) = (poses.row(t - 1), poses.row(t));
+    let rows = poses.outer_iter();
+    let moved = rows.clone().zip(rows.skip(1)).map(|(a, b)| {
         let sum: f32 = (0..joints)
             .map(|j| {
                 (0..3)
@@ -627,9 +577,9 @@ fn local_speed(poses: &Array2<f32>, fps: f32) -> Vec<f32> {
                     .sqrt()
             })
             .sum();
-        out[t] = sum / joints as f32 * fps;
-    }
-    out
+        sum / joints as f32 * fps
+    });
+    std::iter::once(0.0).chain(moved).collect()
 }
 
 /// Frames of a training window: the pose stream's context and the frame it predicts last.

@@ -54,6 +54,9 @@ pub struct Schedule {
     pub free_frames: usize,
     #[serde(default)]
     pub free_weight: f64,
+    /// Weight of the free runs' body term (`train::tsmt::Options::free_body`; 0: off).
+    #[serde(default)]
+    pub free_body: f64,
     pub steps: usize,
 }
 

@@ -22,7 +22,7 @@ use tch::{Kind, Tensor};
 use crate::audio::features::TSMT_BEAT;
 use crate::models::step_clock::{self, beat_count};
 use crate::models::train::step_lock::{signed_projection, step_phase};
-use crate::models::tsmt::{Bins, Sampling, Tsmt};
+use crate::models::tsmt::{Bins, Tsmt};
 use crate::motion::repr;
 use crate::motion::skeleton::TOES;
 
@@ -32,7 +32,7 @@ pub(super) const CLOCK_CONTEXT: usize = 250;
 
 /// The pose coordinates the toes' speed is read from: each toe's root-relative x, y, z in the
 /// facing frame, then the root's displacement x and z.
-fn toe_coords() -> [usize; 8] {
+pub(super) fn toe_coords() -> [usize; 8] {
     let (r, l) = (3 * TOES[0], 3 * TOES[1]);
     [
         r,
@@ -49,7 +49,7 @@ fn toe_coords() -> [usize; 8] {
 /// Toes' summed speed (m/frame) from frame `prev` to frame `next`, rows `[.., 8]` in
 /// [`toe_coords`] order: each toe's move relative to the root plus the root's own (the facing
 /// frame's turn left out).
-fn toe_speed(prev: &Tensor, next: &Tensor) -> Tensor {
+pub(super) fn toe_speed(prev: &Tensor, next: &Tensor) -> Tensor {
     let root = Tensor::stack(
         &[
             next.select(-1, 6),
@@ -103,7 +103,7 @@ impl Lock {
     /// The term from the toes' speed `[b, n]` the network danced (`own`) and the real
     /// continuation's (`real`), both scored by their signed projection on `phase` `[b, n]`.
     /// `capped`: the loss is the shortfall against the real score, else the score's negative.
-    fn of(own: &Tensor, real: &Tensor, phase: &Tensor, capped: bool) -> Self {
+    pub(super) fn of(own: &Tensor, real: &Tensor, phase: &Tensor, capped: bool) -> Self {
         let danced = signed_projection(own, phase);
         let real = signed_projection(real, phase);
         // Held to at least the real dancer's score over the same frames, not past it: pushed
@@ -124,7 +124,7 @@ impl Lock {
 
 /// The indices `[k]` of the windows of `clock` `[b, n, WIDTH]` that have a clock (those without
 /// two beats have zeros); `None` when none has.
-fn clocked(clock: &Tensor) -> Option<Tensor> {
+pub(super) fn clocked(clock: &Tensor) -> Option<Tensor> {
     let keep = clock
         .abs()
         .sum_dim_intlist([1, 2].as_slice(), false, Kind::Float)
@@ -156,7 +156,7 @@ pub(super) fn term(
 ) -> Option<Lock> {
     let n = target.size()[1] - 1;
     let (idx, centres) = toe_centres(bins);
-    let values = |tokens: &Tensor| toe_values(tokens, &idx, &centres);
+    let values = |tokens: &Tensor| values_of(tokens, &idx, &centres);
     let dance = values(target);
     let prev = match own {
         Some(own) => values(input).where_self(&own.unsqueeze(-1), &dance),
@@ -181,73 +181,31 @@ pub(super) fn term(
 
 /// The bin centres `[8, n_bins]` of [`toe_coords`] and their indices.
 fn toe_centres(bins: &Bins) -> (Tensor, Tensor) {
-    let coords = toe_coords();
+    centres_of(bins, &toe_coords())
+}
+
+/// The bin centres `[k, n_bins]` of the pose coordinates `coords` and their indices `[k]`.
+pub(super) fn centres_of(bins: &Bins, coords: &[usize]) -> (Tensor, Tensor) {
     let nb = bins.n as i64;
     let centres: Vec<f32> = coords
         .iter()
         .flat_map(|&c| (0..nb).map(move |i| bins.centre(c, i)))
         .collect();
+    let idx: Vec<i64> = coords.iter().map(|&c| c as i64).collect();
     (
-        Tensor::from_slice(&coords.map(|c| c as i64)),
+        Tensor::from_slice(&idx),
         Tensor::from_slice(&centres).view([coords.len() as i64, nb]),
     )
 }
 
-/// The toe coordinates' values `[b, len, 8]` of `tokens` `[b, len, coords]`.
-fn toe_values(tokens: &Tensor, idx: &Tensor, centres: &Tensor) -> Tensor {
+/// The values `[b, len, k]` of the coordinates `idx` `[k]` (bin centres `centres` `[k, n_bins]`,
+/// [`centres_of`]) of `tokens` `[b, len, coords]`.
+pub(super) fn values_of(tokens: &Tensor, idx: &Tensor, centres: &Tensor) -> Tensor {
     let (k, nb) = centres.size2().expect("centres are [k, n_bins]");
     let offset = Tensor::arange(k, (Kind::Int64, tokens.device())) * nb;
     centres
         .view([-1])
         .take(&(tokens.index_select(2, idx) + offset))
-}
-
-/// One free run's lock term (`--free-runs`, [`Tsmt::free_run`]): from the context `prefix`
-/// `[b, m, coords]` of real frames the network draws the `frames` after it as served
-/// (`sampling`), with the windows' `music` and `clock` over all `m + frames`; the toes' speed of
-/// its own frames is scored by the signed projection on the clock's phase and held to the real
-/// continuation `real` `[b, frames, coords]`'s score (the shortfall; its negative when not
-/// `capped`). Windows without two beats are left out; `None` when none is left.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn free_term(
-    model: &Tsmt,
-    prefix: &Tensor,
-    real: &Tensor,
-    music: &Tensor,
-    clock: &Tensor,
-    start: i64,
-    sampling: Sampling,
-    bins: &Bins,
-    capped: bool,
-) -> Option<Lock> {
-    let (m, frames) = (prefix.size()[1], real.size()[1]);
-    let keep = clocked(clock)?;
-    let pick = |t: &Tensor| t.index_select(0, &keep);
-    let (idx, centres) = toe_centres(bins);
-    let clock = pick(clock);
-    let drawn = model.free_run(
-        &pick(prefix),
-        &pick(music),
-        Some(&clock),
-        start,
-        frames,
-        sampling,
-        &idx,
-        &centres,
-    );
-    let last = toe_values(&pick(prefix).narrow(1, m - 1, 1), &idx, &centres);
-    let real = Tensor::cat(
-        &[
-            last.shallow_clone(),
-            toe_values(&pick(real), &idx, &centres),
-        ],
-        1,
-    );
-    let own = Tensor::cat(&[last, drawn], 1);
-    let speed = |v: &Tensor| toe_speed(&v.narrow(1, 0, frames), &v.narrow(1, 1, frames));
-    let k = clock.narrow(1, m, frames);
-    let phase = k.select(2, 0).atan2(&k.select(2, 1));
-    Some(Lock::of(&speed(&own), &speed(&real), &phase, capped))
 }
 
 #[cfg(test)]
