@@ -457,10 +457,14 @@ args_into! {
         #[arg(long, default_value_t = train::tsmt::Options::default().free_weight)]
         free_weight: f64,
         /// Weight of the free runs' body term: every second of a run moves at least 0.7 of the
-        /// real continuation's joint speed, the whole run at most 1.3 of it, and its lowest foot
-        /// stays within 2 cm of the highest the real one reached (0: off).
+        /// real continuation's joint speed, the whole run at most `--free-pace-max` of it, and
+        /// its lowest foot stays within 2 cm of the highest the real one reached (0: off).
         #[arg(long, default_value_t = train::tsmt::Options::default().free_body)]
         free_body: f64,
+        /// The body term's pace ceiling, a multiple of the real continuation's mean joint speed
+        /// (0: none).
+        #[arg(long, default_value_t = train::tsmt::Options::default().free_pace_max)]
+        free_pace_max: f64,
         /// Do not train: redraw the seed clips (the same clips for the same `--seed`) with each
         /// one's source and its song's beats into `--out` (`seed_clips.safetensors`,
         /// `seed_clips.json`; with it the song chooses the opening clip).

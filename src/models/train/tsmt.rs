@@ -99,6 +99,8 @@ pub struct Options {
     pub free_frames: usize,
     pub free_weight: f64,
     pub free_body: f64,
+    /// The body term's pace ceiling, a multiple of the real continuation's (0: none).
+    pub free_pace_max: f64,
     /// Do not train: redraw the seed clips (the same clips for the same `seed`) with each one's
     /// source and its song's beats (`seed_clips.json`) into the output folder.
     pub clips_only: bool,
@@ -137,6 +139,7 @@ impl Default for Options {
             free_frames: 160,
             free_weight: 1.0,
             free_body: 0.0,
+            free_pace_max: free::FASTEST,
             clips_only: false,
         }
     }
@@ -371,6 +374,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 free_frames: if free { opts.free_frames } else { 0 },
                 free_weight: if free { opts.free_weight } else { 0.0 },
                 free_body: if free { opts.free_body } else { 0.0 },
+                free_pace_max: if free { opts.free_pace_max } else { 0.0 },
                 steps,
             },
         ),
@@ -535,7 +539,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             };
             let free_note = if free {
                 format!(
-                    " free_runs={}x{} free_danced={:.3} free_real={:.3} free_weight={} free_pace={:.3} free_lift={:.4} free_body={}",
+                    " free_runs={}x{} free_danced={:.3} free_real={:.3} free_weight={} free_pace={:.3} free_lift={:.4} free_body={} free_pace_max={}",
                     opts.free_runs,
                     opts.free_frames,
                     free_danced / freed.max(1) as f64,
@@ -543,7 +547,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                     opts.free_weight,
                     free_pace / freed.max(1) as f64,
                     free_lift / freed.max(1) as f64,
-                    opts.free_body
+                    opts.free_body,
+                    opts.free_pace_max
                 )
             } else {
                 String::new()

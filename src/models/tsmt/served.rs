@@ -57,6 +57,9 @@ pub struct Schedule {
     /// Weight of the free runs' body term (`train::tsmt::Options::free_body`; 0: off).
     #[serde(default)]
     pub free_body: f64,
+    /// The body term's pace ceiling (`train::tsmt::Options::free_pace_max`; 0: none).
+    #[serde(default)]
+    pub free_pace_max: f64,
     pub steps: usize,
 }
 

@@ -9,8 +9,9 @@
 //!   clock by holding still between bursts: a served dance at 0.49 m/s, one held off the floor
 //!   for 1.2 s, where the weights before it passed all 24. So every second of the run moves at
 //!   least [`SLOWEST`] of the real continuation's mean joint speed, the whole run at most
-//!   [`FASTEST`] of it, and its lowest foot rises no more than [`LIFT_M`] above the highest the
-//!   real lowest foot reached.
+//!   `--free-pace-max` of it ([`FASTEST`] by default), and its lowest foot rises no more than
+//!   [`LIFT_M`] above the highest the real lowest foot reached. The ceiling is a sum over all
+//!   joints: run G (the card) met it by stilling the arms, so 0 leaves it out.
 use ndarray::{s, Array2, ArrayView2};
 use rand::rngs::StdRng;
 use rand::Rng;
@@ -30,7 +31,8 @@ pub(super) const FREE_CONTEXT: usize = 40;
 const BLOCK: i64 = 25;
 /// Each block's mean joint speed is held to at least this share of the real continuation's.
 pub(super) const SLOWEST: f64 = 0.7;
-/// The run's mean joint speed is held to at most this multiple of the real continuation's.
+/// The run's mean joint speed is held by default to at most this multiple of the real
+/// continuation's (`Options::free_pace_max`).
 pub(super) const FASTEST: f64 = 1.3;
 /// The run's lowest foot may rise this much (m) above the real continuation's highest lowest
 /// foot before the term pulls it down (real dances lift it at most 0.14 m, `metrics::hang`).
@@ -133,7 +135,7 @@ pub(super) fn runs(
             &phase,
             !opts.lock_uncapped,
         ),
-        body: Body::of(&own, &real),
+        body: Body::of(&own, &real, opts.free_pace_max),
     })
 }
 
@@ -148,8 +150,9 @@ pub(super) struct Body {
 
 impl Body {
     /// From the run's and the real continuation's values `[b, n + 1, FEATURE_DIM]` (both
-    /// starting at the context's last frame).
-    pub(super) fn of(own: &Tensor, real: &Tensor) -> Self {
+    /// starting at the context's last frame), the pace held to at most `fastest` of the real
+    /// one's (0: no ceiling).
+    pub(super) fn of(own: &Tensor, real: &Tensor, fastest: f64) -> Self {
         let (s_own, s_real) = (joint_speed(own), joint_speed(real));
         let (b, n) = s_own.size2().expect("speed is [b, n]");
         let r = s_real.mean_dim(1, false, Kind::Float) + 1e-6; // [b]
@@ -160,7 +163,11 @@ impl Body {
             .mean_dim(-1, false, Kind::Float);
         let slow = ((r.unsqueeze(1) * SLOWEST - &blocks).relu() / r.unsqueeze(1)).mean(Kind::Float);
         let pace = s_own.mean_dim(1, false, Kind::Float) / &r;
-        let fast = (&pace - FASTEST).relu().mean(Kind::Float);
+        let fast = if fastest > 0.0 {
+            (&pace - fastest).relu().mean(Kind::Float)
+        } else {
+            pace.zeros_like().mean(Kind::Float)
+        };
         let ceiling = lowest_foot(real).amax(1, true) + LIFT_M;
         let lifted = (lowest_foot(own) - ceiling).relu();
         let loss = slow + fast + lifted.mean(Kind::Float) / 0.1;
@@ -241,7 +248,7 @@ mod tests {
     fn the_body_term_holds_the_runs_pace_and_floor_to_the_real_ones() {
         let n = 100;
         let real = dancer(n, |_| 0.02, |_| 0.0);
-        let same = Body::of(&real, &real);
+        let same = Body::of(&real, &real, FASTEST);
         assert!(same.loss.double_value(&[]).abs() < 1e-6);
         assert!((same.pace - 1.0).abs() < 1e-4);
 
@@ -251,7 +258,7 @@ mod tests {
             |t| if (26..=50).contains(&t) { 0.0 } else { 0.02 },
             |_| 0.0,
         );
-        let b = Body::of(&held, &real);
+        let b = Body::of(&held, &real, FASTEST);
         assert!(
             (b.loss.double_value(&[]) - 0.7 / 4.0).abs() < 1e-3,
             "{}",
@@ -259,12 +266,15 @@ mod tests {
         );
 
         // Twice the pace: 0.7 over the 1.3 allowed.
-        let busy = Body::of(&dancer(n, |_| 0.04, |_| 0.0), &real);
+        let busy = Body::of(&dancer(n, |_| 0.04, |_| 0.0), &real, FASTEST);
         assert!((busy.loss.double_value(&[]) - 0.7).abs() < 1e-3);
         assert!((busy.pace - 2.0).abs() < 1e-3);
+        // Without the ceiling the same run costs nothing.
+        let free = Body::of(&dancer(n, |_| 0.04, |_| 0.0), &real, 0.0);
+        assert!(free.loss.double_value(&[]).abs() < 1e-6);
 
         // Feet 0.1 m up throughout: 0.08 past the allowance, 0.8 in tenths of a metre.
-        let up = Body::of(&dancer(n, |_| 0.02, |_| 0.1), &real);
+        let up = Body::of(&dancer(n, |_| 0.02, |_| 0.1), &real, FASTEST);
         assert!((up.lift - 0.08).abs() < 1e-4);
         assert!((up.loss.double_value(&[]) - 0.8).abs() < 1e-3);
     }
