@@ -566,7 +566,8 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
 /// its own draws against it, and with `--free-runs` dances a few windows freely through its
 /// sampler and scores those too (the lock and, with `--free-body`, the body term): the real
 /// continuations are scored, the test loss is logged
-/// with the clock a quarter step late too, and the folder serves with the song's clock.
+/// with the clock a quarter step late too, and the folder serves with the song's clock at the
+/// gain written (`--clock-gain`), which the dance hears.
 #[test]
 fn tsmt_continues_with_the_step_clock_the_lock_term_and_free_runs() {
     use choreo::models::train::tsmt;
@@ -593,6 +594,8 @@ fn tsmt_continues_with_the_step_clock_the_lock_term_and_free_runs() {
         free_runs: 2,
         free_frames: 100,
         free_body: 1.0,
+        clock_gain: 3.0,
+        clock_step_hz: Some(0.49),
         ..tsmt::Options::default()
     };
     let logs = tsmt::train(&continued).expect("the continued run trains");
@@ -622,9 +625,29 @@ fn tsmt_continues_with_the_step_clock_the_lock_term_and_free_runs() {
     assert_eq!(file["training"]["free_runs"], 2);
     assert_eq!(file["training"]["free_frames"], 100);
     assert_eq!(file["training"]["free_body"], 1.0);
+    assert_eq!(file["clock_gain"], 3.0);
+    assert_eq!(file["clock_step_hz"], 0.49);
+    // A folder at the trained gain (1) and the metre's clock does not write them.
+    let plain_file = written_model_file(first.path());
+    assert!(plain_file.get("clock_gain").is_none() && plain_file.get("clock_step_hz").is_none());
     let served = choreo::models::tsmt::Served::load(out.path()).expect("the folder loads");
     let motion = dance(&served, &GenerateRequest::plain(song(), 1));
     assert!(motion.positions.iter().all(|v| v.is_finite()));
+    // The served gain is heard: the same seed at the gain the network trained with dances
+    // otherwise.
+    let mut at_one = file.clone();
+    at_one.as_object_mut().unwrap().remove("clock_gain");
+    std::fs::write(
+        out.path().join("model.json"),
+        serde_json::to_string_pretty(&at_one).unwrap(),
+    )
+    .unwrap();
+    let plain = choreo::models::tsmt::Served::load(out.path()).expect("the folder loads");
+    let other = dance(&plain, &GenerateRequest::plain(song(), 1));
+    assert_ne!(
+        motion.positions, other.positions,
+        "the clock's gain changed nothing"
+    );
 }
 
 /// The real continuations' lock logged in a dancenet epoch's note.

@@ -465,6 +465,15 @@ args_into! {
         /// (0: none).
         #[arg(long, default_value_t = train::tsmt::Options::default().free_pace_max)]
         free_pace_max: f64,
+        /// The step clock's gain as served, written into `model.json` (`tsmt::Serving::clock_gain`;
+        /// training itself hears the clock at 1).
+        #[arg(long, default_value_t = train::tsmt::Options::default().clock_gain)]
+        clock_gain: f64,
+        /// The served clock turns at the fraction of the song's beat whose step rate is nearest
+        /// this (Hz), written into `model.json` (`tsmt::Serving::clock_step_hz`; none: the
+        /// metre's fraction).
+        #[arg(long)]
+        clock_step_hz: Option<f64>,
         /// Do not train: redraw the seed clips (the same clips for the same `--seed`) with each
         /// one's source and its song's beats into `--out` (`seed_clips.safetensors`,
         /// `seed_clips.json`; with it the song chooses the opening clip).

@@ -103,6 +103,31 @@ pub fn phase_of_song(is_beat: &[bool], style: DanceStyle, fps: f64) -> Option<Ve
     )
 }
 
+/// Fractions of the beat a training window's clock may turn at: those of the real dances
+/// (1/2, 1/3, and 1/6 where the tracker counts a waltz in double time), and their neighbours.
+pub const FRACTIONS: [f64; 5] = [1.0 / 6.0, 1.0 / 4.0, 1.0 / 3.0, 1.0 / 2.0, 2.0 / 3.0];
+
+/// The phases of a clock at the fraction of the beat (one of [`FRACTIONS`], the training
+/// clock's) whose step rate is nearest `hz` in ratio; `None` under two beats.
+pub fn phase_near(is_beat: &[bool], hz: f64, fps: f64) -> Option<Vec<f64>> {
+    let count = beat_count(is_beat)?;
+    let n = count.len();
+    let beats_per_s = (count[n - 1] - count[0]) / ((n - 1).max(1) as f64 / fps);
+    let f = FRACTIONS
+        .into_iter()
+        .min_by(|a, b| {
+            let d = |f: f64| (f * beats_per_s / hz).ln().abs();
+            d(*a).total_cmp(&d(*b))
+        })
+        .unwrap_or(0.5);
+    Some(
+        count
+            .iter()
+            .map(|&b| std::f64::consts::TAU * f * b)
+            .collect(),
+    )
+}
+
 /// The style whose step rule a song of `bar` beats a bar is danced by where the model is not
 /// told a style (tsmt): three beats a bar steps as a waltz does (1/3 of the beat), any other
 /// metre as a rumba (1/2). The tempo lock accepts either on any song; the metre picks the one a
@@ -198,6 +223,33 @@ mod tests {
         assert!(of_song(&[false; 50], DanceStyle::Waltz, fps)
             .iter()
             .all(|&v| v == 0.0));
+    }
+
+    /// A clock near 0.49 Hz turns once every 4 beats at 130 BPM (0.54 Hz; 1/6 would be 0.36),
+    /// every 3 at 87 (0.48), every 6 at 174 (0.48); it starts at zero on the first beat.
+    #[test]
+    fn a_clock_near_a_step_rate_turns_at_the_nearest_fraction_of_the_beat() {
+        let fps = 25.0;
+        let beats = |bpm: f64| -> Vec<bool> {
+            let mut b = vec![false; 2000];
+            let mut t: f64 = 10.0;
+            while (t.round() as usize) < b.len() {
+                b[t.round() as usize] = true;
+                t += fps * 60.0 / bpm;
+            }
+            b
+        };
+        for (bpm, fraction) in [(130.0, 0.25), (87.0, 1.0 / 3.0), (174.0, 1.0 / 6.0)] {
+            let p = phase_near(&beats(bpm), 0.49, fps).unwrap();
+            let hz = (p[1500] - p[500]) / std::f64::consts::TAU / (1000.0 / fps);
+            let want = fraction * bpm / 60.0;
+            assert!(
+                (hz / want - 1.0).abs() < 0.01,
+                "{bpm} BPM: {hz} Hz, not {want}"
+            );
+            assert!(p[10].abs() < 1e-9, "{bpm} BPM: {}", p[10]);
+        }
+        assert!(phase_near(&[false; 50], 0.49, fps).is_none());
     }
 
     #[test]

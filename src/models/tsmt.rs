@@ -40,6 +40,7 @@ use super::ModelError;
 use crate::motion::repr::{self, FEATURE_DIM};
 
 mod free_run;
+mod opening;
 pub mod sampling;
 pub mod served;
 

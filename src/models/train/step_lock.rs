@@ -5,9 +5,7 @@
 //! `train::dancenet::lock`; tsmt: `train::tsmt::lock`).
 use tch::{Kind, Tensor};
 
-/// Fractions of the beat a training window's clock may turn at: those of the real dances
-/// (1/2, 1/3, and 1/6 where the tracker counts a waltz in double time), and their neighbours.
-const FRACTIONS: [f64; 5] = [1.0 / 6.0, 1.0 / 4.0, 1.0 / 3.0, 1.0 / 2.0, 2.0 / 3.0];
+use crate::models::step_clock::FRACTIONS;
 
 /// `speed` `[b, n]` less its Hann-weighted mean, times the Hann window, and the sum of its
 /// magnitude per window `[b]`: what both projections divide by.

@@ -61,6 +61,12 @@ pub struct Options {
     /// The stall guard's reopen reach (m) written into `model.json` (0: never;
     /// `tsmt::StallGuard::reopen_reach_m`).
     pub reopen_reach: f64,
+    /// The step clock's gain as served, written into `model.json` (`tsmt::Serving::clock_gain`);
+    /// training hears the clock at 1.
+    pub clock_gain: f64,
+    /// The served clock's step rate, written into `model.json` (`tsmt::Serving::clock_step_hz`;
+    /// none: the metre's fraction).
+    pub clock_step_hz: Option<f64>,
     pub seed: u64,
     /// Train in beat time (`models::beat_time`): every dance re-timed to the split's median
     /// tempo (after the bins are fitted on the dances as danced); the model then serves so.
@@ -123,6 +129,8 @@ impl Default for Options {
             smooth_height_frames: 4.0,
             stall_reach: 0.22,
             reopen_reach: 0.1,
+            clock_gain: 1.0,
+            clock_step_hz: None,
             seed: 2020,
             beat_time: false,
             min_tempo: 1.0,
@@ -390,6 +398,8 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 reopen_reach_m: opts.reopen_reach as f32,
             }),
             beat_time,
+            clock_gain: opts.clock_gain,
+            clock_step_hz: opts.clock_step_hz,
         },
     };
     let steps_cell = std::cell::Cell::new(0usize);

@@ -6,6 +6,10 @@ use std::path::Path;
 use ndarray::{s, Array2};
 use serde::{Deserialize, Serialize};
 
+use super::opening::{
+    frozen_from, holds_from, opening_measures, OpeningMeasures, FREEZE_FRAMES,
+    OPENING_CHECK_FRAMES, OPENING_HOLD_FRAMES,
+};
 use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
 use crate::models::beat_time;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
@@ -92,6 +96,25 @@ pub struct Serving {
     /// seconds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub beat_time: Option<crate::models::beat_time::BeatTimeConfig>,
+    /// The step clock's gain as served (not in the paper; issue 25 item 4): the clock's columns
+    /// are multiplied by it before both of its maps ([`super::StepClockIn`]). The maps are
+    /// linear, so at the fusion this is the clock's learned part pushed g times as far from the
+    /// clock-free one, as classifier-free guidance does. Trained at 1, the clock moves the
+    /// network's own steps too little to lock them (the card); at the gain chosen on the train
+    /// split they lock. 1: as trained; ignored without `config.step_clock`.
+    #[serde(default = "one", skip_serializing_if = "is_one")]
+    pub clock_gain: f64,
+    /// Where set, the served clock turns at the fraction of the song's beat (one of the training
+    /// clock's, 1/6 to 2/3) whose step rate is nearest this (Hz), not at its metre's fraction
+    /// (not in the paper; issue 25 item 4). TSMT takes no style, and its own steps settle near
+    /// the train split's pace, a waltz's 0.49 Hz (26 of its 37 dances are waltzes): it followed a clock
+    /// there, and drifted off one at a cha-cha's 1 Hz (the card).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clock_step_hz: Option<f64>,
+}
+
+fn is_one(v: &f64) -> bool {
+    *v == 1.0
 }
 
 /// `model.json`.
@@ -165,6 +188,22 @@ impl Served {
             .collect())
     }
 
+    /// The opening check's measures of `tokens` drawn on the network's `clock`, their bins
+    /// smoothed as served ([`opening_measures`]).
+    fn opening_measures(
+        &self,
+        tokens: &Array2<i64>,
+        clock: &beat_time::BeatTime,
+    ) -> Result<OpeningMeasures, ModelError> {
+        let x = &self.file.extra;
+        opening_measures(
+            &x.bins,
+            x.smooth_frames / clock.factor,
+            tokens,
+            self.file.fps / clock.factor,
+        )
+    }
+
     /// Generates `clock.net_frames` frames of features (clearance heights) for `audio` on the
     /// network's clock. The context is the seed motion's features (which then open the dance),
     /// else a drawn clip (context only).
@@ -200,11 +239,14 @@ impl Served {
                 .collect();
             let bar = crate::models::clip_choice::bar_of(&*req.analysis_or_analyze()?);
             // On the network's clock a frame lasts `factor` song frames.
-            step_clock::phase_of_song(
-                &is_beat,
-                step_clock::style_of_metre(bar),
-                fps / clock.factor,
-            )
+            match self.file.extra.clock_step_hz {
+                Some(hz) => step_clock::phase_near(&is_beat, hz, fps / clock.factor),
+                None => step_clock::phase_of_song(
+                    &is_beat,
+                    step_clock::style_of_metre(bar),
+                    fps / clock.factor,
+                ),
+            }
         } else {
             None
         };
@@ -212,7 +254,7 @@ impl Served {
         let clock_from = |m: usize, s0: usize, rows: usize| {
             song_phase.as_ref().map(|p| {
                 let span = step_clock::phase_span(p, s0 as i64 - m as i64, m + rows);
-                to_tensor(&step_clock::columns(&span))
+                to_tensor(&step_clock::columns(&span)) * self.file.extra.clock_gain
             })
         };
         progress.report(Stage::Features, 1.0)?;
@@ -261,10 +303,11 @@ impl Served {
                     .stall_guard
                     .as_ref()
                     .map(|g| (g, widths.as_slice()));
-                // A clip whose opening (the song's first 20 s) holds one pose for
-                // OPENING_HOLD_FRAMES is passed over for the next candidate
-                // ([`Self::opening_clips`]). When every candidate's opening holds, the first
-                // that does not freeze (FREEZE_FRAMES) is kept, else the last. The one kept is
+                // A clip whose opening (the song's first 20 s, or all of a shorter song) holds
+                // one pose for OPENING_HOLD_FRAMES (within the reach, or under OPENING_SLOW_M_S),
+                // or holds its arms (OPENING_MIN_ARMS_M_S), is passed over for the next candidate ([`Self::opening_clips`]). When every
+                // candidate's opening holds, the first that does not freeze (FREEZE_FRAMES) is
+                // kept, else the last. The one kept is
                 // drawn again whole, the same draws from the same seed.
                 // `rows` frames drawn from song frame `opened + from` on after the context `c`,
                 // with the clock of exactly those frames.
@@ -290,7 +333,8 @@ impl Served {
                         };
                         let window = guard.0.window_frames;
                         let held = |hold| holds_from(&tokens, window, guard.1, reach, 0, hold);
-                        if held(OPENING_HOLD_FRAMES).is_none() {
+                        let still = self.opening_measures(&tokens, clock)?.still();
+                        if held(OPENING_HOLD_FRAMES).is_none() && !still {
                             unfrozen = Some(i);
                             break;
                         }
@@ -365,73 +409,12 @@ impl Served {
     }
 }
 
-/// Frames of the opening drawn to see whether a candidate clip freezes (20 s at 25 fps).
-const OPENING_CHECK_FRAMES: usize = 500;
-/// A freeze holds this long (frames, 10 s): lively dances dip under the reach for a few
-/// seconds and come back (the card's calibration: at most 6 windows in a row, 7 s), frozen ones
-/// stay under it to the end of the song.
-const FREEZE_FRAMES: usize = 250;
-/// Windows of the reach measured every this many frames.
-const REACH_STRIDE: usize = 25;
-
 /// The sampled tokens and, for each rest drawn again after a freeze, where it starts and the
 /// frozen tokens it replaced.
 type Joined = (Array2<i64>, Vec<(usize, Array2<i64>)>);
 
 /// A rest drawn again after a freeze fades in over this many frames (1 s at 25 fps).
 const JOIN_FRAMES: usize = 25;
-
-/// An opening holds one pose this long (frames, 3 s: two 2-s windows a second apart) and
-/// another candidate clip is tried. A hold is what a viewer sees first: tsmt opened
-/// sweet_waltz, seed 3, in one lunge from 1.8 to 6.5 s (0.17 m/s) and the dance ended under the
-/// verdict's 0.5 m/s; choice_drum_bass, seed 1, held from 1.2 to 7.6 s. Later in the song only a
-/// freeze (FREEZE_FRAMES) is drawn again: lively dances dip for up to 7 s and come back.
-const OPENING_HOLD_FRAMES: usize = 75;
-
-/// Where the tokens freeze, from frame `after` on ([`holds_from`] for [`FREEZE_FRAMES`]).
-fn frozen_from(
-    tokens: &Array2<i64>,
-    window: usize,
-    widths: &[f32],
-    reach: f32,
-    after: usize,
-) -> Option<usize> {
-    holds_from(tokens, window, widths, reach, after, FREEZE_FRAMES)
-}
-
-/// Where the tokens hold one pose, from frame `after` on: the start of the first `hold` frames
-/// in a row over which every `window`-frame window, one every [`REACH_STRIDE`] frames, has
-/// reached less than `reach` m ([`super::sampling::reach_m`]).
-fn holds_from(
-    tokens: &Array2<i64>,
-    window: usize,
-    widths: &[f32],
-    reach: f32,
-    after: usize,
-    hold: usize,
-) -> Option<usize> {
-    let need = 1 + hold.saturating_sub(window) / REACH_STRIDE;
-    let mut run = 0;
-    let mut end = after + window;
-    while end <= tokens.nrows() {
-        let frames: std::collections::VecDeque<Vec<i64>> = tokens
-            .outer_iter()
-            .skip(end - window)
-            .take(window)
-            .map(|r| r.to_vec())
-            .collect();
-        run = if super::sampling::reach_m(&frames, widths) < reach {
-            run + 1
-        } else {
-            0
-        };
-        if run >= need {
-            return Some(end - window - (need - 1) * REACH_STRIDE);
-        }
-        end += REACH_STRIDE;
-    }
-    None
-}
 
 impl DanceModel for Served {
     fn info(&self) -> ModelInfo {
@@ -474,57 +457,5 @@ impl DanceModel for Served {
         let (motion, _root) = repr::from_features(g.features.view(), g.start, self.file.fps)?;
         Ok(Generated::from(clock.back(motion))
             .with_beat_time(clock.used(self.file.extra.beat_time)))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Tokens of 2 joints (6 coordinates, 1 cm a bin) over `frames` frames: moving `step` bins a
-    /// frame back and forth over 40 frames, plus a bin of jitter.
-    fn tokens(frames: usize, step: impl Fn(usize) -> i64) -> Array2<i64> {
-        Array2::from_shape_fn((frames, 6), |(t, c)| {
-            let phase = (t % 80) as i64;
-            let swing = if phase < 40 { phase } else { 80 - phase };
-            100 + swing * step(t) + ((t * 7 + c) % 2) as i64
-        })
-    }
-
-    /// A freeze is 10 s under the reach; a lively dance that holds still for 6 s and moves on is
-    /// not one (the card's calibration: lively openings dipped for at most 7 s), but its opening
-    /// holds (3 s); a 2-s pause does not.
-    #[test]
-    fn an_opening_freezes_after_ten_seconds_still_and_holds_after_three() {
-        let widths = [0.01f32; 6];
-        let frozen = |t: &Array2<i64>| frozen_from(t, 50, &widths, 0.1, 0).is_some();
-        let held = |t: &Array2<i64>| holds_from(t, 50, &widths, 0.1, 0, OPENING_HOLD_FRAMES);
-        let moving = tokens(500, |_| 2);
-        assert!(!frozen(&moving));
-        assert_eq!(held(&moving), None);
-        let still = tokens(500, |t| i64::from(t < 150));
-        assert!(frozen(&still));
-        let dip = tokens(500, |t| i64::from(!(150..300).contains(&t)) * 2);
-        assert!(!frozen(&dip));
-        let from = held(&dip).expect("a 6-s hold");
-        assert!((140..=180).contains(&from), "held from {from}");
-        let pause = tokens(500, |t| i64::from(!(150..200).contains(&t)) * 2);
-        assert_eq!(held(&pause), None);
-        // Too short to tell.
-        assert!(!frozen(&tokens(200, |_| 0)));
-    }
-
-    /// A dance that freezes mid-song is found where its freeze starts, and only after `after`.
-    #[test]
-    fn a_freeze_later_in_the_song_is_found_where_it_starts() {
-        let widths = [0.01f32; 6];
-        // Lively for 700 frames, then still to the end (1,200 frames).
-        let late = tokens(1200, |t| i64::from(t < 700) * 2);
-        let from = frozen_from(&late, 50, &widths, 0.1, 500).expect("a freeze");
-        assert!((650..=760).contains(&from), "found at {from}");
-        assert_eq!(frozen_from(&late, 50, &widths, 0.1, 0), Some(from));
-        // Nothing after the end of the freeze's search.
-        assert_eq!(frozen_from(&late, 50, &widths, 0.1, 1000), None);
-        assert_eq!(frozen_from(&tokens(1200, |_| 2), 50, &widths, 0.1, 0), None);
     }
 }
