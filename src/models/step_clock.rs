@@ -88,19 +88,13 @@ pub fn of_song(is_beat: &[bool], style: DanceStyle, fps: f64) -> Array2<f32> {
 
 /// The phases (radians) behind [`of_song`]; `None` under two beats.
 pub fn phase_of_song(is_beat: &[bool], style: DanceStyle, fps: f64) -> Option<Vec<f64>> {
-    let count = beat_count(is_beat)?;
-    let n = count.len();
-    let beats_per_s = (count[n - 1] - count[0]) / ((n - 1).max(1) as f64 / fps);
-    let mut f = step_fraction(style);
-    while f * beats_per_s > 1.5 * step_hz(style) && f > 1.0 / 12.0 {
-        f /= 2.0;
-    }
-    Some(
-        count
-            .iter()
-            .map(|&b| std::f64::consts::TAU * f * b)
-            .collect(),
-    )
+    clock_at(is_beat, fps, |beats_per_s| {
+        let mut f = step_fraction(style);
+        while f * beats_per_s > 1.5 * step_hz(style) && f > 1.0 / 12.0 {
+            f /= 2.0;
+        }
+        f
+    })
 }
 
 /// Fractions of the beat a training window's clock may turn at: those of the real dances
@@ -110,16 +104,23 @@ pub const FRACTIONS: [f64; 5] = [1.0 / 6.0, 1.0 / 4.0, 1.0 / 3.0, 1.0 / 2.0, 2.0
 /// The phases of a clock at the fraction of the beat (one of [`FRACTIONS`], the training
 /// clock's) whose step rate is nearest `hz` in ratio; `None` under two beats.
 pub fn phase_near(is_beat: &[bool], hz: f64, fps: f64) -> Option<Vec<f64>> {
+    clock_at(is_beat, fps, |beats_per_s| {
+        FRACTIONS
+            .into_iter()
+            .min_by(|a, b| {
+                let d = |f: f64| (f * beats_per_s / hz).ln().abs();
+                d(*a).total_cmp(&d(*b))
+            })
+            .unwrap_or(0.5)
+    })
+}
+
+/// The phases of a clock that turns at the fraction `fraction(beats per second)` of the song's
+/// beat count; `None` under two beats. The served rules above differ only in the fraction.
+fn clock_at(is_beat: &[bool], fps: f64, fraction: impl Fn(f64) -> f64) -> Option<Vec<f64>> {
     let count = beat_count(is_beat)?;
     let n = count.len();
-    let beats_per_s = (count[n - 1] - count[0]) / ((n - 1).max(1) as f64 / fps);
-    let f = FRACTIONS
-        .into_iter()
-        .min_by(|a, b| {
-            let d = |f: f64| (f * beats_per_s / hz).ln().abs();
-            d(*a).total_cmp(&d(*b))
-        })
-        .unwrap_or(0.5);
+    let f = fraction((count[n - 1] - count[0]) / ((n - 1).max(1) as f64 / fps));
     Some(
         count
             .iter()

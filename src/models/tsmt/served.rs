@@ -304,11 +304,11 @@ impl Served {
                     .as_ref()
                     .map(|g| (g, widths.as_slice()));
                 // A clip whose opening (the song's first 20 s, or all of a shorter song) holds
-                // one pose for OPENING_HOLD_FRAMES (within the reach, or under OPENING_SLOW_M_S),
-                // or holds its arms (OPENING_MIN_ARMS_M_S), is passed over for the next candidate ([`Self::opening_clips`]). When every
-                // candidate's opening holds, the first that does not freeze (FREEZE_FRAMES) is
-                // kept, else the last. The one kept is
-                // drawn again whole, the same draws from the same seed.
+                // one pose for OPENING_HOLD_FRAMES (within the reach, or under
+                // OPENING_SLOW_M_S), or holds its arms (OPENING_MIN_ARMS_M_S), is passed over
+                // for the next candidate ([`Self::opening_clips`]). When every candidate's
+                // opening holds, the first that does not freeze (FREEZE_FRAMES) is kept, else
+                // the last. The one kept is drawn again whole, the same draws from the same seed.
                 // `rows` frames drawn from song frame `opened + from` on after the context `c`,
                 // with the clock of exactly those frames.
                 let draw = |c: &Array2<i64>,
@@ -333,8 +333,10 @@ impl Served {
                         };
                         let window = guard.0.window_frames;
                         let held = |hold| holds_from(&tokens, window, guard.1, reach, 0, hold);
-                        let still = self.opening_measures(&tokens, clock)?.still();
-                        if held(OPENING_HOLD_FRAMES).is_none() && !still {
+                        // The poses are rebuilt for the measures only where the reach passed.
+                        if held(OPENING_HOLD_FRAMES).is_none()
+                            && !self.opening_measures(&tokens, clock)?.still()
+                        {
                             unfrozen = Some(i);
                             break;
                         }
