@@ -1384,5 +1384,12 @@ mod musicality_real {
             committed.summary.knee_backward_max <= worst_knee + 1e-12,
             "{committed:?}"
         );
+        // The longest hold of the train split is DANCE_R_7's rumba pose (9.5 s), the longest of
+        // all 43 ([`choreo::metrics::hold`]).
+        let hold = committed.summary.longest_hold_max_s;
+        assert!(
+            (hold - 9.48).abs() < 0.05 && hold <= choreo::metrics::hold::HOLD_REAL_MAX_S,
+            "{committed:?}"
+        );
     }
 }

@@ -1,4 +1,5 @@
-//! Does the dance go with *this* song: tempo lock, arm liveliness, knee direction.
+//! Does the dance go with *this* song: tempo lock, arm liveliness, knee direction (and, kept with
+//! them in every report and eval row, the longest hold of [`super::hold`]).
 //!
 //! # Tempo lock
 //! Real dancers step at a fixed fraction of the beat. Over a whole dance, the peak (0.25–3 Hz) of
@@ -83,7 +84,7 @@ pub struct TempoLock {
     pub locked: bool,
 }
 
-/// The three measures of this module for one dance (`Default`: nothing measured, for reports
+/// The measures of this module (and the hold, [`super::hold`]) for one dance (`Default`: nothing measured, for reports
 /// written before they existed).
 #[derive(
     Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
@@ -95,6 +96,10 @@ pub struct Musicality {
     pub arm_speed_m_s: f64,
     /// Share of knee-frames bent backwards (0..=1).
     pub knee_backward_share: f64,
+    /// The longest span (s) held in one pose ([`super::hold::longest_hold_s`]; 0 in reports
+    /// written before it was measured).
+    #[serde(default)]
+    pub longest_hold_s: f64,
 }
 
 impl Musicality {
@@ -106,6 +111,7 @@ impl Musicality {
             tempo_lock: tempo_lock(p, motion.fps, beat_times_s),
             arm_speed_m_s: arm_speed_m_s(p, motion.fps),
             knee_backward_share: knee_backward_share(p),
+            longest_hold_s: super::hold::longest_hold_s(p, motion.fps),
         }
     }
 }
@@ -126,6 +132,9 @@ pub struct MusicalitySummary {
     pub arm_speed_min_m_s: f64,
     /// The worst dance's share of knee-frames bent backwards.
     pub knee_backward_max: f64,
+    /// The longest hold of any dance (s; 0 in files written before it was measured).
+    #[serde(default)]
+    pub longest_hold_max_s: f64,
 }
 
 impl MusicalitySummary {
@@ -144,6 +153,7 @@ impl MusicalitySummary {
             }
             s.arm_speed_min_m_s = s.arm_speed_min_m_s.min(m.arm_speed_m_s);
             s.knee_backward_max = s.knee_backward_max.max(m.knee_backward_share);
+            s.longest_hold_max_s = s.longest_hold_max_s.max(m.longest_hold_s);
         }
         if !any {
             s.arm_speed_min_m_s = f64::NAN;
@@ -156,7 +166,7 @@ impl MusicalitySummary {
         s
     }
 
-    /// The mean dance, for a set's `mean` scores: arms and knees averaged, no tempo lock (a
+    /// The mean dance, for a set's `mean` scores: arms, knees and holds averaged, no tempo lock (a
     /// set's tempo lock is [`MusicalitySummary::tempo_locked_share`]).
     pub fn mean<'a>(dances: impl IntoIterator<Item = &'a Musicality> + Clone) -> Musicality {
         let n = dances.clone().into_iter().count().max(1) as f64;
@@ -169,10 +179,12 @@ impl MusicalitySummary {
                 .sum::<f64>()
                 / n,
             knee_backward_share: dances
+                .clone()
                 .into_iter()
                 .map(|m| m.knee_backward_share)
                 .sum::<f64>()
                 / n,
+            longest_hold_s: dances.into_iter().map(|m| m.longest_hold_s).sum::<f64>() / n,
         }
     }
 }

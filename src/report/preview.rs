@@ -322,7 +322,7 @@ fn draw_title<DB: DrawingBackend>(
         sheet.song_duration_s
     ));
     parts.push(format!("mean joint speed {:.2} m/s", series.mean_speed));
-    // Does it go with this song (issue 25): the step rate against the beat, and the arms.
+    // Does it go with this song (issue 25): the step rate against the beat, the arms, a hold.
     let m = crate::metrics::musicality::Musicality::of(sheet.motion, sheet.beat_times);
     if let Some(lock) = m.tempo_lock {
         let mark = if lock.locked { "locked" } else { "off" };
@@ -334,6 +334,10 @@ fn draw_title<DB: DrawingBackend>(
         ));
     }
     parts.push(format!("arms {:.2} m/s", m.arm_speed_m_s));
+    // A stand the eye may miss between the sheet's sampled frames.
+    if m.longest_hold_s >= crate::metrics::hold::HOLD_NOTED_S {
+        parts.push(format!("holds {:.0} s", m.longest_hold_s));
+    }
     area.draw_text(
         &parts.join("  ·  "),
         &font(24).pos(Pos::new(HPos::Left, VPos::Center)),
