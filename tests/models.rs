@@ -433,25 +433,14 @@ fn tsmt_opens_again_from_another_clip_where_it_would_freeze() {
 }
 
 /// The longest stretch (s) within the first `within_s` seconds over which the mean joint speed,
-/// averaged over each second, stays under `under` m/s: a held pose.
+/// averaged over each second, stays under `under` m/s: a held pose ([`choreo::metrics::hold`]).
 fn longest_hold_s(motion: &Motion, within_s: f64, under: f64) -> f64 {
     let frames = motion.positions.shape()[0].min((within_s * motion.fps) as usize);
     let speed = choreo::motion::skeleton::mean_speed(
         motion.positions.slice(ndarray::s![..frames, .., ..]),
         motion.fps,
     );
-    let w = motion.fps as usize;
-    let (mut run, mut longest) = (0usize, 0usize);
-    for end in w..=speed.len() {
-        let second = speed[end - w..end].iter().sum::<f64>() / w as f64;
-        run = if second < under { run + 1 } else { 0 };
-        longest = longest.max(run);
-    }
-    // A run of k one-second windows, one a frame apart, spans k − 1 frames and a second.
-    match longest {
-        0 => 0.0,
-        k => (k - 1 + w) as f64 / motion.fps,
-    }
+    choreo::metrics::hold::longest_slow_s(&speed, motion.fps, under)
 }
 
 /// TSMT opened some songs in one held pose: seeds 3 and 7 on hungarian_dance_5 stood from about
@@ -495,6 +484,27 @@ fn tsmt_draws_again_where_it_would_freeze_mid_song() {
     };
     let speed = mean_speed(&rest);
     assert!(speed >= 0.5, "seed 3 from 60 s: {speed:.3} m/s");
+}
+
+/// TSMT stood still in the middle of songs for longer than 41 of the 43 real dances ever do:
+/// seed 2 on hungarian_dance_5 from 31 to 36 s (the network's own dance held 5.4 s under
+/// 0.3 m/s, the served one 6.0), too short for the freeze test (10 s). A hold of 5 s after the
+/// opening is drawn again from the next candidate clip, from a second before it starts.
+/// This is the network's own output, before any served stage.
+#[test]
+fn tsmt_draws_again_where_it_would_hold_mid_song() {
+    let m = model("tsmt");
+    let song = audio::decode_path(&shared_song_path("hungarian_dance_5.ogg")).expect("decodes");
+    let motion = dance(m.as_ref(), &GenerateRequest::plain(&song, 2));
+    let held = longest_hold_s(
+        &motion,
+        f64::INFINITY,
+        choreo::metrics::hold::HOLD_SPEED_M_S,
+    );
+    assert!(
+        held < choreo::metrics::hold::HOLD_NOTED_S,
+        "seed 2: held {held:.1} s"
+    );
 }
 
 /// keypose-transformer turns as its scaffold's real clips turn (`scaffold_facing`): on the

@@ -1,10 +1,11 @@
 //! TSMT's served opening check (not in the paper; issue 25): a candidate clip whose opening,
 //! drawn by the network, freezes, holds one pose or holds its arms is passed over for the next
-//! candidate the song chose (`Served::generate_features`), and a freeze later in the song is
-//! found where it starts.
+//! candidate the song chose (`Served::generate_features`), and a freeze or a hold later in the
+//! song is found where it starts.
 use ndarray::Array2;
 
 use super::Bins;
+use crate::metrics::hold::{longest_slow_s, slow_spans, HOLD_NOTED_S, HOLD_SPEED_M_S};
 use crate::models::{smooth_columns, ModelError};
 use crate::motion::repr::{self, RootStart};
 
@@ -43,45 +44,75 @@ impl OpeningMeasures {
     }
 }
 
-/// [`OpeningMeasures`] of `tokens` at `fps`, their bin centres smoothed over `sigma` frames.
-pub(super) fn opening_measures(
-    bins: &Bins,
-    sigma: f64,
-    tokens: &Array2<i64>,
-    fps: f64,
-) -> Result<OpeningMeasures, ModelError> {
-    let mut f = bins.values(tokens);
-    smooth_columns(&mut f, 0, sigma);
-    let (motion, _) = repr::from_features(f.view(), RootStart::default(), fps)?;
-    let p = motion.positions.view();
-    let speed = crate::motion::skeleton::mean_speed(p, fps);
-    let w = (fps.round() as usize).max(1);
-    let (mut run, mut longest) = (0usize, 0usize);
-    for end in w..=speed.len() {
-        let second = speed[end - w..end].iter().sum::<f64>() / w as f64;
-        run = if second < OPENING_SLOW_M_S {
-            run + 1
-        } else {
-            0
-        };
-        longest = longest.max(run);
-    }
-    Ok(OpeningMeasures {
-        arms_m_s: crate::metrics::musicality::arm_speed_m_s(p, fps),
-        // A run of k one-second windows a frame apart spans k − 1 frames and a second.
-        slow_s: match longest {
-            0 => 0.0,
-            k => (k - 1 + w) as f64 / fps,
-        },
-        fps,
-    })
+/// Reads tokens drawn on the network's clock as served: their bin centres smoothed over `sigma`
+/// frames, the root's height over `sigma_height` ([`super::served::heights_as_served`]), and
+/// rebuilt into poses at `fps` (network frames a second of the song). What the served dance
+/// measures, before the beat-align stage and the feet: read on the clearance instead, its
+/// hopping root (0.31–0.35 m/s) hid a 6-s stand the dance made at 0.22–0.28 (tsmt, sweet_waltz,
+/// seed 2, 25–32 s).
+pub(super) struct PoseReader<'a> {
+    pub bins: &'a Bins,
+    pub sigma: f64,
+    pub sigma_height: f64,
+    pub fps: f64,
 }
+
+impl PoseReader<'_> {
+    /// The poses of `tokens`.
+    fn poses(&self, tokens: &Array2<i64>) -> Result<crate::motion::Motion, ModelError> {
+        let mut f = self.bins.values(tokens);
+        smooth_columns(&mut f, 0, self.sigma);
+        super::served::heights_as_served(&mut f, 0, self.sigma_height);
+        Ok(repr::from_features(f.view(), RootStart::default(), self.fps)?.0)
+    }
+
+    /// [`OpeningMeasures`] of `tokens`.
+    pub(super) fn opening_measures(
+        &self,
+        tokens: &Array2<i64>,
+    ) -> Result<OpeningMeasures, ModelError> {
+        let fps = self.fps;
+        let motion = self.poses(tokens)?;
+        let p = motion.positions.view();
+        let speed = crate::motion::skeleton::mean_speed(p, fps);
+        Ok(OpeningMeasures {
+            arms_m_s: crate::metrics::musicality::arm_speed_m_s(p, fps),
+            slow_s: longest_slow_s(&speed, fps, OPENING_SLOW_M_S),
+            fps,
+        })
+    }
+
+    /// Where the poses of `tokens` hold one pose for [`MIDSONG_HOLD_S`] from frame `after` on:
+    /// the first frame of the first such hold ([`crate::metrics::hold`]'s measure) that lasts
+    /// past `after`, or `after` where it began before.
+    pub(super) fn midsong_hold_from(
+        &self,
+        tokens: &Array2<i64>,
+        after: usize,
+    ) -> Result<Option<usize>, ModelError> {
+        let motion = self.poses(tokens)?;
+        let speed = crate::motion::skeleton::mean_speed(motion.positions.view(), self.fps);
+        let hold = (MIDSONG_HOLD_S * self.fps).ceil() as usize;
+        // `mean_speed`'s value k is the step from frame k to k + 1.
+        Ok(slow_spans(&speed, self.fps, HOLD_SPEED_M_S)
+            .into_iter()
+            .find(|r| r.len() >= hold && r.end > after)
+            .map(|r| r.start.max(after)))
+    }
+}
+
+/// A hold later in the song this long (s) or longer is drawn again from the next candidate clip:
+/// longer than 41 of the 43 real dances' longest (all but two rumba poses of 8.6 and 9.5 s;
+/// [`crate::metrics::hold`]). The served dances' previews held 5–19 s mid-song (the card's
+/// twenty-fifth session: hungarian_dance_5 31–36 s, vibe_ace 26–45 s), which the freeze check,
+/// reading the reach over 10 s, let pass.
+pub(super) const MIDSONG_HOLD_S: f64 = HOLD_NOTED_S;
 
 /// An opening that moves slower than this (m/s, mean joint speed over each second) for
 /// OPENING_HOLD_FRAMES holds one pose, though it drifts: the network's own dance on
 /// hungarian_dance_5, seed 7, stood from 2 to 7 s at 0.13–0.16 m/s and reached more than the
 /// reopen reach (the card).
-pub(super) const OPENING_SLOW_M_S: f64 = 0.3;
+pub(super) const OPENING_SLOW_M_S: f64 = HOLD_SPEED_M_S;
 
 /// An opening whose arms move slower than this against the spine (m/s; the slowest real
 /// dance's, issue 25's line) is passed over for the next candidate clip. On a 5-s loop the
@@ -196,7 +227,13 @@ mod tests {
         };
         let [elbow, wrist, _, _] = crate::metrics::musicality::ARM_JOINTS;
         let held = Array2::from_elem((100, FEATURE_DIM), 50i64);
-        let measure = |t: &Array2<i64>| opening_measures(&bins, 1.0, t, 25.0).unwrap();
+        let reader = PoseReader {
+            bins: &bins,
+            sigma: 1.0,
+            sigma_height: 1.0,
+            fps: 25.0,
+        };
+        let measure = |t: &Array2<i64>| reader.opening_measures(t).unwrap();
         let still = measure(&held);
         assert!(still.arms_m_s < 1e-6, "held arms move {still:?}");
         assert!(
@@ -218,6 +255,45 @@ mod tests {
         let all: &'static [usize] = &[0, 1, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16];
         let lively = measure(&swinging(all));
         assert!(lively.slow_s == 0.0 && !lively.still(), "{lively:?}");
+    }
+
+    /// A stand of 8 s mid-song is found where it starts (with the few frames of its one-second
+    /// windows before it), also where it began before `after`; a stand of 3 s, as long as a
+    /// real waltz's closing pose, is not one.
+    #[test]
+    fn a_hold_later_in_the_song_is_found_where_it_starts() {
+        let bins = Bins {
+            n: 101,
+            lo: vec![-1.0; FEATURE_DIM],
+            hi: vec![1.0; FEATURE_DIM],
+        };
+        // Every joint but the spine swinging (about 1 m/s), standing over `still`.
+        let dance = |still: std::ops::Range<usize>| {
+            Array2::from_shape_fn((1000, FEATURE_DIM), move |(t, c)| {
+                let swing = (t % 20) as i64;
+                let swing = if swing < 10 { swing } else { 20 - swing };
+                let joint = c / 3;
+                if c < repr::POSE_DIM && c % 3 == 0 && joint != 2 && !still.contains(&t) {
+                    40 + 2 * swing
+                } else {
+                    50
+                }
+            })
+        };
+        let reader = PoseReader {
+            bins: &bins,
+            sigma: 1.0,
+            sigma_height: 1.0,
+            fps: 25.0,
+        };
+        let found = |t: &Array2<i64>, after| reader.midsong_hold_from(t, after).unwrap();
+        let eight = dance(400..600);
+        let from = found(&eight, 0).expect("an 8-s hold");
+        assert!((385..=400).contains(&from), "found at {from}");
+        assert_eq!(found(&eight, 500), Some(500));
+        assert_eq!(found(&eight, 700), None);
+        assert_eq!(found(&dance(400..475), 0), None);
+        assert_eq!(found(&dance(0..0), 0), None);
     }
 
     /// A dance that freezes mid-song is found where its freeze starts, and only after `after`.

@@ -7,8 +7,7 @@ use ndarray::{s, Array2};
 use serde::{Deserialize, Serialize};
 
 use super::opening::{
-    frozen_from, holds_from, opening_measures, OpeningMeasures, FREEZE_FRAMES,
-    OPENING_CHECK_FRAMES, OPENING_HOLD_FRAMES,
+    frozen_from, holds_from, PoseReader, FREEZE_FRAMES, OPENING_CHECK_FRAMES, OPENING_HOLD_FRAMES,
 };
 use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
 use crate::models::beat_time;
@@ -188,20 +187,15 @@ impl Served {
             .collect())
     }
 
-    /// The opening check's measures of `tokens` drawn on the network's `clock`, their bins
-    /// smoothed as served ([`opening_measures`]).
-    fn opening_measures(
-        &self,
-        tokens: &Array2<i64>,
-        clock: &beat_time::BeatTime,
-    ) -> Result<OpeningMeasures, ModelError> {
+    /// Reads tokens drawn on the network's `clock` as served ([`PoseReader`]).
+    fn pose_reader(&self, clock: &beat_time::BeatTime) -> PoseReader<'_> {
         let x = &self.file.extra;
-        opening_measures(
-            &x.bins,
-            x.smooth_frames / clock.factor,
-            tokens,
-            self.file.fps / clock.factor,
-        )
+        PoseReader {
+            bins: &x.bins,
+            sigma: x.smooth_frames / clock.factor,
+            sigma_height: x.smooth_height_frames / clock.factor,
+            fps: self.file.fps / clock.factor,
+        }
     }
 
     /// Generates `clock.net_frames` frames of features (clearance heights) for `audio` on the
@@ -320,6 +314,7 @@ impl Served {
                     let audio = rest.narrow(0, from as i64, rows as i64);
                     model.sample_guarded(c, &audio, k.as_ref(), sampling, guard, req.seed, on_step)
                 };
+                let reader = self.pose_reader(clock);
                 let check = self.file.extra.stall_guard.as_ref().and_then(|g| {
                     (g.reopen_reach_m > 0.0 && contexts.len() > 1)
                         .then(|| (g.reopen_reach_m, OPENING_CHECK_FRAMES.min(n - opened)))
@@ -335,7 +330,7 @@ impl Served {
                         let held = |hold| holds_from(&tokens, window, guard.1, reach, 0, hold);
                         // The poses are rebuilt for the measures only where the reach passed.
                         if held(OPENING_HOLD_FRAMES).is_none()
-                            && !self.opening_measures(&tokens, clock)?.still()
+                            && !reader.opening_measures(&tokens)?.still()
                         {
                             unfrozen = Some(i);
                             break;
@@ -353,16 +348,27 @@ impl Served {
                 }) else {
                     return Ok(None);
                 };
-                // A freeze later in the song: from where it starts, the rest is drawn again from
-                // the next candidate clip, joined to the frozen frames over JOIN_FRAMES (below).
+                // A freeze or a hold (MIDSONG_HOLD_S) later in the song: from where it starts,
+                // the rest is drawn again from the next candidate clip, joined to the held frames
+                // over JOIN_FRAMES (below). Where the new rest holds there too, the next
+                // candidate is tried from the same frame. The candidates are taken in turn after
+                // the kept one, round again where the opening check used them up (a clip read
+                // from another frame continues otherwise), at most one fewer times than there are
+                // candidates: the cost of an opening check that passed every one over.
                 let mut joins = Vec::new();
                 if let (Some((reach, checked)), Some(guard)) = (check, guard) {
                     // The opening check has seen the first `checked` frames already.
                     let mut after = checked;
-                    for c in &contexts[kept + 1..] {
-                        let Some(from) =
-                            frozen_from(&tokens, guard.0.window_frames, guard.1, reach, after)
-                        else {
+                    let turns = contexts.len() - 1;
+                    for c in contexts.iter().cycle().skip(kept + 1).take(turns) {
+                        let frozen =
+                            frozen_from(&tokens, guard.0.window_frames, guard.1, reach, after);
+                        // A hold is drawn again from a second before it, so that the join's fade
+                        // blends the new rest with the old one's last steps, not with the hold.
+                        let held = reader
+                            .midsong_hold_from(&tokens, after)?
+                            .map(|h| h.saturating_sub(JOIN_FRAMES).max(after));
+                        let Some(from) = frozen.into_iter().chain(held).min() else {
                             break;
                         };
                         let Some(again) =
@@ -373,7 +379,7 @@ impl Served {
                         let old = tokens.slice(s![from.., ..]).to_owned();
                         tokens.slice_mut(s![from.., ..]).assign(&again);
                         joins.push((from, old));
-                        after = from + FREEZE_FRAMES;
+                        after = from;
                     }
                 }
                 Ok(Some((tokens, joins)))
@@ -411,6 +417,20 @@ impl Served {
     }
 }
 
+/// Turns drawn `features`' clearance into the root's height, smoothed over `sigma` frames from
+/// frame `keep` on. The root height follows the lowest foot point, which hops between feet and
+/// points as their coordinates are drawn; smoothing the height itself (not the clearance) keeps
+/// the body from jumping with it.
+pub(super) fn heights_as_served(features: &mut Array2<f32>, keep: usize, sigma: f64) {
+    repr::clearance_to_height(features);
+    let mut h = features
+        .column(repr::ROOT_Y)
+        .to_owned()
+        .insert_axis(ndarray::Axis(1));
+    smooth_columns(&mut h, keep, sigma);
+    features.column_mut(repr::ROOT_Y).assign(&h.column(0));
+}
+
 /// The sampled tokens and, for each rest drawn again after a freeze, where it starts and the
 /// frozen tokens it replaced.
 type Joined = (Array2<i64>, Vec<(usize, Array2<i64>)>);
@@ -438,24 +458,15 @@ impl DanceModel for Served {
         let clock = beat_time::BeatTime::for_request(self.file.extra.beat_time, req, song_frames)?;
         let n = clock.net_frames;
         let mut g = self.generate_features(req, &clock, progress)?;
-        repr::clearance_to_height(&mut g.features);
-        // The root height follows the lowest foot point, which hops between feet and points as
-        // their coordinates are drawn; smoothing the height itself (not the clearance) keeps the
-        // body from jumping with it. The opening (a request's seed motion) is kept.
+        // The opening (a request's seed motion) is kept.
         let keep = req
             .seed_motion
             .map_or(0, |m| clock.seed_frames(m.num_frames()).min(n));
-        let mut h = g
-            .features
-            .column(repr::ROOT_Y)
-            .to_owned()
-            .insert_axis(ndarray::Axis(1));
-        smooth_columns(
-            &mut h,
+        heights_as_served(
+            &mut g.features,
             keep,
             self.file.extra.smooth_height_frames / clock.factor,
         );
-        g.features.column_mut(repr::ROOT_Y).assign(&h.column(0));
         let (motion, _root) = repr::from_features(g.features.view(), g.start, self.file.fps)?;
         Ok(Generated::from(clock.back(motion))
             .with_beat_time(clock.used(self.file.extra.beat_time)))
