@@ -180,6 +180,44 @@ mod tests {
         })
     }
 
+    /// 101 bins over [-1, 1]: bin 50's centre is 0 (no root velocity, no turn).
+    fn centred_bins() -> Bins {
+        Bins {
+            n: 101,
+            lo: vec![-1.0; FEATURE_DIM],
+            hi: vec![1.0; FEATURE_DIM],
+        }
+    }
+
+    /// Reads `bins` at 25 fps, smoothed over a frame.
+    fn reader(bins: &Bins) -> PoseReader<'_> {
+        PoseReader {
+            bins,
+            sigma: 1.0,
+            sigma_height: 1.0,
+            fps: 25.0,
+        }
+    }
+
+    /// Pose tokens over `frames` frames: the first coordinate of every joint that `moves` swings
+    /// 2 bins a frame back and forth over 20 frames, outside the frames `still`; every other
+    /// coordinate stays at bin 50.
+    fn swinging(
+        frames: usize,
+        moves: impl Fn(usize) -> bool,
+        still: std::ops::Range<usize>,
+    ) -> Array2<i64> {
+        Array2::from_shape_fn((frames, FEATURE_DIM), |(t, c)| {
+            let swing = (t % 20) as i64;
+            let swing = if swing < 10 { swing } else { 20 - swing };
+            if c < repr::POSE_DIM && c % 3 == 0 && moves(c / 3) && !still.contains(&t) {
+                40 + 2 * swing
+            } else {
+                50
+            }
+        })
+    }
+
     /// A freeze is 10 s under the reach; a lively dance that holds still for 6 s and moves on is
     /// not one (the card's calibration: lively openings dipped for at most 7 s), but its opening
     /// holds (3 s); a 2-s pause does not.
@@ -208,31 +246,11 @@ mod tests {
     /// half the arm joints' mean; the legs swinging move the arms not at all.
     #[test]
     fn an_opening_that_holds_its_arms_or_drifts_slowly_is_still() {
-        // 101 bins over [-1, 1]: bin 50's centre is 0 (no root velocity, no turn).
-        let bins = Bins {
-            n: 101,
-            lo: vec![-1.0; FEATURE_DIM],
-            hi: vec![1.0; FEATURE_DIM],
-        };
-        let swinging = |joints: &'static [usize]| {
-            Array2::from_shape_fn((100, FEATURE_DIM), move |(t, c)| {
-                let swing = (t % 20) as i64;
-                let swing = if swing < 10 { swing } else { 20 - swing };
-                if c < repr::POSE_DIM && c % 3 == 0 && joints.contains(&(c / 3)) {
-                    40 + 2 * swing
-                } else {
-                    50
-                }
-            })
-        };
+        let bins = centred_bins();
+        let reader = reader(&bins);
+        let swinging = |joints: &'static [usize]| swinging(100, |j| joints.contains(&j), 0..0);
         let [elbow, wrist, _, _] = crate::metrics::musicality::ARM_JOINTS;
         let held = Array2::from_elem((100, FEATURE_DIM), 50i64);
-        let reader = PoseReader {
-            bins: &bins,
-            sigma: 1.0,
-            sigma_height: 1.0,
-            fps: 25.0,
-        };
         let measure = |t: &Array2<i64>| reader.opening_measures(t).unwrap();
         let still = measure(&held);
         assert!(still.arms_m_s < 1e-6, "held arms move {still:?}");
@@ -262,30 +280,10 @@ mod tests {
     /// real waltz's closing pose, is not one.
     #[test]
     fn a_hold_later_in_the_song_is_found_where_it_starts() {
-        let bins = Bins {
-            n: 101,
-            lo: vec![-1.0; FEATURE_DIM],
-            hi: vec![1.0; FEATURE_DIM],
-        };
+        let bins = centred_bins();
+        let reader = reader(&bins);
         // Every joint but the spine swinging (about 1 m/s), standing over `still`.
-        let dance = |still: std::ops::Range<usize>| {
-            Array2::from_shape_fn((1000, FEATURE_DIM), move |(t, c)| {
-                let swing = (t % 20) as i64;
-                let swing = if swing < 10 { swing } else { 20 - swing };
-                let joint = c / 3;
-                if c < repr::POSE_DIM && c % 3 == 0 && joint != 2 && !still.contains(&t) {
-                    40 + 2 * swing
-                } else {
-                    50
-                }
-            })
-        };
-        let reader = PoseReader {
-            bins: &bins,
-            sigma: 1.0,
-            sigma_height: 1.0,
-            fps: 25.0,
-        };
+        let dance = |still| swinging(1000, |j| j != 2, still);
         let found = |t: &Array2<i64>, after| reader.midsong_hold_from(t, after).unwrap();
         let eight = dance(400..600);
         let from = found(&eight, 0).expect("an 8-s hold");
