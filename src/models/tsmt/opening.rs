@@ -58,9 +58,9 @@ pub(super) struct PoseReader<'a> {
 }
 
 impl PoseReader<'_> {
-    /// The poses of `tokens`.
-    fn poses(&self, tokens: &Array2<i64>) -> Result<crate::motion::Motion, ModelError> {
-        let mut f = self.bins.values(tokens);
+    /// The poses of feature `values` (bin centres, or joins of them).
+    fn poses(&self, values: &Array2<f32>) -> Result<crate::motion::Motion, ModelError> {
+        let mut f = values.clone();
         smooth_columns(&mut f, 0, self.sigma);
         super::served::heights_as_served(&mut f, 0, self.sigma_height);
         Ok(repr::from_features(f.view(), RootStart::default(), self.fps)?.0)
@@ -72,7 +72,7 @@ impl PoseReader<'_> {
         tokens: &Array2<i64>,
     ) -> Result<OpeningMeasures, ModelError> {
         let fps = self.fps;
-        let motion = self.poses(tokens)?;
+        let motion = self.poses(&self.bins.values(tokens))?;
         let p = motion.positions.view();
         let speed = crate::motion::skeleton::mean_speed(p, fps);
         Ok(OpeningMeasures {
@@ -82,22 +82,22 @@ impl PoseReader<'_> {
         })
     }
 
-    /// Where the poses of `tokens` hold one pose for [`MIDSONG_HOLD_S`] from frame `after` on:
-    /// the first frame of the first such hold ([`crate::metrics::hold`]'s measure) that lasts
-    /// past `after`, or `after` where it began before.
-    pub(super) fn midsong_hold_from(
+    /// Where the poses of feature `values` hold one pose for [`MIDSONG_HOLD_S`] from frame
+    /// `after` on: the frames of the first such hold ([`crate::metrics::hold`]'s measure) that
+    /// lasts past `after`, from `after` where it began before.
+    pub(super) fn midsong_hold(
         &self,
-        tokens: &Array2<i64>,
+        values: &Array2<f32>,
         after: usize,
-    ) -> Result<Option<usize>, ModelError> {
-        let motion = self.poses(tokens)?;
+    ) -> Result<Option<std::ops::Range<usize>>, ModelError> {
+        let motion = self.poses(values)?;
         let speed = crate::motion::skeleton::mean_speed(motion.positions.view(), self.fps);
         let hold = (MIDSONG_HOLD_S * self.fps).ceil() as usize;
         // `mean_speed`'s value k is the step from frame k to k + 1.
         Ok(slow_spans(&speed, self.fps, HOLD_SPEED_M_S)
             .into_iter()
             .find(|r| r.len() >= hold && r.end > after)
-            .map(|r| r.start.max(after)))
+            .map(|r| r.start.max(after)..r.end))
     }
 }
 
@@ -275,8 +275,8 @@ mod tests {
         assert!(lively.slow_s == 0.0 && !lively.still(), "{lively:?}");
     }
 
-    /// A stand of 8 s mid-song is found where it starts (with the few frames of its one-second
-    /// windows before it), also where it began before `after`; a stand of 3 s, as long as a
+    /// A stand of 8 s mid-song is found where it starts and ends (with the few frames of its
+    /// one-second windows around it), also where it began before `after`; a stand of 3 s, as long as a
     /// real waltz's closing pose, is not one.
     #[test]
     fn a_hold_later_in_the_song_is_found_where_it_starts() {
@@ -284,11 +284,12 @@ mod tests {
         let reader = reader(&bins);
         // Every joint but the spine swinging (about 1 m/s), standing over `still`.
         let dance = |still| swinging(1000, |j| j != 2, still);
-        let found = |t: &Array2<i64>, after| reader.midsong_hold_from(t, after).unwrap();
+        let found = |t: &Array2<i64>, after| reader.midsong_hold(&bins.values(t), after).unwrap();
         let eight = dance(400..600);
-        let from = found(&eight, 0).expect("an 8-s hold");
-        assert!((385..=400).contains(&from), "found at {from}");
-        assert_eq!(found(&eight, 500), Some(500));
+        let held = found(&eight, 0).expect("an 8-s hold");
+        assert!((385..=400).contains(&held.start), "found at {held:?}");
+        assert!((600..=615).contains(&held.end), "found at {held:?}");
+        assert_eq!(found(&eight, 500), Some(500..held.end));
         assert_eq!(found(&eight, 700), None);
         assert_eq!(found(&dance(400..475), 0), None);
         assert_eq!(found(&dance(0..0), 0), None);

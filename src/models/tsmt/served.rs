@@ -1,6 +1,7 @@
 //! TSMT as served: the song's features, the opening (the request's seed motion or a real clip),
 //! the audio stream over the whole song, then the poses sampled frame by frame and rebuilt into
 //! joint positions.
+use std::ops::Range;
 use std::path::Path;
 
 use ndarray::{s, Array2};
@@ -277,7 +278,7 @@ impl Served {
         };
         let opened = opening.as_ref().map_or(0, |o| o.nrows());
         let out = self.pool.with(|model| {
-            tch::no_grad(|| -> Result<Option<Joined>, ModelError> {
+            tch::no_grad(|| -> Result<Option<Array2<f32>>, ModelError> {
                 let mut cancelled = false;
                 let song_clock = clock_from(0, 0, n);
                 let Some(vectors) = model.audio_logit_vectors(&music, song_clock.as_ref(), |f| {
@@ -348,14 +349,15 @@ impl Served {
                 }) else {
                     return Ok(None);
                 };
-                // A freeze or a hold (MIDSONG_HOLD_S) later in the song: from where it starts,
-                // the rest is drawn again from the next candidate clip, joined to the held frames
-                // over JOIN_FRAMES (below). Where the new rest holds there too, the next
-                // candidate is tried from the same frame. The candidates are taken in turn after
-                // the kept one, round again where the opening check used them up (a clip read
-                // from another frame continues otherwise), at most one fewer times than there are
-                // candidates: the cost of an opening check that passed every one over.
-                let mut joins = Vec::new();
+                // A freeze or a hold (MIDSONG_HOLD_S) later in the song is drawn again from the
+                // next candidate clip ([`redrawn_span`]): a hold from a second before it to
+                // REJOIN_FRAMES after it, a freeze to the end of the song. Where the new frames
+                // hold there too, the next candidate is tried from the same frame. The candidates
+                // are taken in turn after the kept one, round again where the opening check used
+                // them up (a clip read from another frame continues otherwise), at most one fewer
+                // times than there are candidates: the cost of an opening check that passed
+                // every one over.
+                let mut values = bins.values(&tokens);
                 if let (Some((reach, checked)), Some(guard)) = (check, guard) {
                     // The opening check has seen the first `checked` frames already.
                     let mut after = checked;
@@ -363,44 +365,28 @@ impl Served {
                     for c in contexts.iter().cycle().skip(kept + 1).take(turns) {
                         let frozen =
                             frozen_from(&tokens, guard.0.window_frames, guard.1, reach, after);
-                        // A hold is drawn again from a second before it, so that the join's fade
-                        // blends the new rest with the old one's last steps, not with the hold.
-                        let held = reader
-                            .midsong_hold_from(&tokens, after)?
-                            .map(|h| h.saturating_sub(JOIN_FRAMES).max(after));
-                        let Some(from) = frozen.into_iter().chain(held).min() else {
+                        let held = reader.midsong_hold(&values, after)?;
+                        let Some(span) = redrawn_span(frozen, held.clone(), after, tokens.nrows())
+                        else {
                             break;
                         };
+                        tracing::debug!(?frozen, ?held, ?span, "tsmt: drawn again");
                         let Some(again) =
-                            draw(c, from, n - opened - from, Some(guard), &mut |_| true)
+                            draw(c, span.start, span.len(), Some(guard), &mut |_| true)
                         else {
                             return Ok(None);
                         };
-                        let old = tokens.slice(s![from.., ..]).to_owned();
-                        tokens.slice_mut(s![from.., ..]).assign(&again);
-                        joins.push((from, old));
-                        after = from;
+                        join(&mut values, span.clone(), bins.values(&again));
+                        tokens.slice_mut(s![span.clone(), ..]).assign(&again);
+                        after = span.start;
                     }
                 }
-                Ok(Some((tokens, joins)))
+                Ok(Some(values))
             })
         })??;
-        let Some((tokens, joins)) = out else {
+        let Some(mut sampled) = out else {
             return Err(Cancelled.into());
         };
-        let mut sampled = bins.values(&tokens);
-        // Each redrawn rest fades in over the frozen frames it replaces, so the join is a turn
-        // of the body over a second, not a jump.
-        for (from, old) in &joins {
-            let old = bins.values(old);
-            for k in 0..JOIN_FRAMES.min(old.nrows()) {
-                let x = (k + 1) as f32 / (JOIN_FRAMES + 1) as f32;
-                let w = x * x * (3.0 - 2.0 * x);
-                let mut row = sampled.row_mut(from + k);
-                row *= w;
-                row.scaled_add(1.0 - w, &old.row(k));
-            }
-        }
         // σ is a time in the song (what the jitter of drawn bins is smoothed over before 25-fps
         // playback), so on the network's clock it is σ / factor frames.
         smooth_columns(
@@ -431,12 +417,63 @@ pub(super) fn heights_as_served(features: &mut Array2<f32>, keep: usize, sigma: 
     features.column_mut(repr::ROOT_Y).assign(&h.column(0));
 }
 
-/// The sampled tokens and, for each rest drawn again after a freeze, where it starts and the
-/// frozen tokens it replaced.
-type Joined = (Array2<i64>, Vec<(usize, Array2<i64>)>);
+/// The frames drawn again after `after` for a freeze that starts at `frozen` or a `held` span
+/// (whichever starts first; the freeze where they start together) in a dance of `frames` frames:
+/// a freeze to the end (a frozen network stays frozen), a hold from JOIN_FRAMES before it, so
+/// the join blends the new frames with the old one's last steps rather than with the hold, to
+/// REJOIN_FRAMES after it, where the old dance moves again. Drawing the rest of the song again
+/// for every hold cost 1.6–2.3× on a 3-minute song (the card's twenty-sixth session).
+pub(super) fn redrawn_span(
+    frozen: Option<usize>,
+    held: Option<Range<usize>>,
+    after: usize,
+    frames: usize,
+) -> Option<Range<usize>> {
+    let frozen = frozen.map(|f| f..frames);
+    let held = held.map(|h| {
+        h.start.saturating_sub(JOIN_FRAMES).max(after)..(h.end + REJOIN_FRAMES).min(frames)
+    });
+    match (frozen, held) {
+        (Some(f), Some(h)) if h.start < f.start => Some(h),
+        (Some(f), _) => Some(f),
+        (None, h) => h,
+    }
+}
 
-/// A rest drawn again after a freeze fades in over this many frames (1 s at 25 fps).
+/// Writes `new` feature values over `span` of `values`, fading in from the old values over its
+/// first JOIN_FRAMES (a turn of the body over a second, not a jump) and back into them over its
+/// last JOIN_FRAMES where the old dance goes on after it.
+pub(super) fn join(values: &mut Array2<f32>, span: Range<usize>, new: Array2<f32>) {
+    let old = values.slice(s![span.clone(), ..]).to_owned();
+    let rows = span.len();
+    let fade = JOIN_FRAMES.min(rows);
+    let goes_on = span.end < values.nrows() && rows >= 2 * JOIN_FRAMES;
+    let mut part = values.slice_mut(s![span.clone(), ..]);
+    part.assign(&new);
+    // The new frames' weight: rising smoothly from 0 over the first JOIN_FRAMES, falling back
+    // to 0 over the last where the old dance goes on.
+    let smooth = |k: usize| {
+        let x = (k + 1) as f32 / (JOIN_FRAMES + 1) as f32;
+        x * x * (3.0 - 2.0 * x)
+    };
+    let weights = (0..fade).map(|k| (k, smooth(k))).chain(
+        (0..JOIN_FRAMES)
+            .filter(|_| goes_on)
+            .map(|k| (rows - 1 - k, smooth(k))),
+    );
+    for (k, w) in weights {
+        let mut row = part.row_mut(k);
+        row *= w;
+        row.scaled_add(1.0 - w, &old.row(k));
+    }
+}
+
+/// A redrawn rest fades in over this many frames (1 s at 25 fps), and a redrawn hold back out.
 const JOIN_FRAMES: usize = 25;
+
+/// A hold is drawn again until this many frames after it ends (2 s at 25 fps): a second of new
+/// steps where the old dance moves again, then a second's fade back into it.
+const REJOIN_FRAMES: usize = 2 * JOIN_FRAMES;
 
 impl DanceModel for Served {
     fn info(&self) -> ModelInfo {

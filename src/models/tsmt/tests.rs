@@ -291,3 +291,54 @@ fn the_step_clock_starts_silent_and_the_cached_steps_hear_it() {
         assert!(d < 1e-4, "step {t} differs by {d}");
     }
 }
+
+/// A hold is drawn again from a second before it (not before `after`) to two seconds after it
+/// (not past the song), a freeze to the end; whichever starts first, the freeze on a tie.
+#[test]
+fn a_hold_is_drawn_again_around_it_and_a_freeze_to_the_end() {
+    use super::served::redrawn_span;
+    assert_eq!(redrawn_span(None, None, 500, 2000), None);
+    assert_eq!(redrawn_span(Some(900), None, 500, 2000), Some(900..2000));
+    assert_eq!(
+        redrawn_span(None, Some(700..900), 500, 2000),
+        Some(675..950)
+    );
+    assert_eq!(
+        redrawn_span(None, Some(510..900), 500, 2000),
+        Some(500..950)
+    );
+    assert_eq!(
+        redrawn_span(None, Some(700..1990), 500, 2000),
+        Some(675..2000)
+    );
+    assert_eq!(
+        redrawn_span(Some(800), Some(700..900), 500, 2000),
+        Some(675..950)
+    );
+    assert_eq!(
+        redrawn_span(Some(600), Some(700..900), 500, 2000),
+        Some(600..2000)
+    );
+    assert_eq!(
+        redrawn_span(Some(675), Some(700..900), 500, 2000),
+        Some(675..2000)
+    );
+}
+
+/// The new frames fade in over a second and back out over the last where the old dance goes
+/// on, each fade smooth and one-way; where the span reaches the end they stay.
+#[test]
+fn a_redrawn_span_fades_in_and_back_out() {
+    use super::served::join;
+    let mut values = Array2::<f32>::zeros((300, 2));
+    join(&mut values, 50..150, Array2::ones((100, 2)));
+    let w: Vec<f32> = values.column(0).to_vec();
+    assert!(w[..50].iter().all(|&v| v == 0.0) && w[150..].iter().all(|&v| v == 0.0));
+    assert!(w[75..125].iter().all(|&v| v == 1.0));
+    assert!(w[50] > 0.0 && w[50] < 0.01 && w[149] > 0.0 && w[149] < 0.01);
+    assert!(w[50..75].windows(2).all(|p| p[0] < p[1]));
+    assert!(w[125..150].windows(2).all(|p| p[0] > p[1]));
+    assert_eq!(values.column(1), values.column(0));
+    join(&mut values, 250..300, Array2::from_elem((50, 2), 2.0));
+    assert!(values[[274, 0]] > 1.9 && values[[299, 0]] == 2.0);
+}
