@@ -1385,10 +1385,10 @@ mod musicality_real {
             "{committed:?}"
         );
         // The longest hold of the train split is DANCE_R_7's rumba pose (9.5 s), the longest of
-        // all 43 ([`choreo::metrics::hold`]).
+        // all 43 ([`choreo::motion::hold`]).
         let hold = committed.summary.longest_hold_max_s;
         assert!(
-            (hold - 9.48).abs() < 0.05 && hold <= choreo::metrics::hold::HOLD_REAL_MAX_S,
+            (hold - 9.48).abs() < 0.05 && hold <= choreo::motion::hold::HOLD_REAL_MAX_S,
             "{committed:?}"
         );
     }

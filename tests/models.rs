@@ -433,14 +433,14 @@ fn tsmt_opens_again_from_another_clip_where_it_would_freeze() {
 }
 
 /// The longest stretch (s) within the first `within_s` seconds over which the mean joint speed,
-/// averaged over each second, stays under `under` m/s: a held pose ([`choreo::metrics::hold`]).
+/// averaged over each second, stays under `under` m/s: a held pose ([`choreo::motion::hold`]).
 fn longest_hold_s(motion: &Motion, within_s: f64, under: f64) -> f64 {
     let frames = motion.positions.shape()[0].min((within_s * motion.fps) as usize);
     let speed = choreo::motion::skeleton::mean_speed(
         motion.positions.slice(ndarray::s![..frames, .., ..]),
         motion.fps,
     );
-    choreo::metrics::hold::longest_slow_s(&speed, motion.fps, under)
+    choreo::motion::hold::longest_slow_s(&speed, motion.fps, under)
 }
 
 /// TSMT opened some songs in one held pose: seeds 3 and 7 on hungarian_dance_5 stood from about
@@ -499,10 +499,10 @@ fn tsmt_draws_again_where_it_would_hold_mid_song() {
     let held = longest_hold_s(
         &motion,
         f64::INFINITY,
-        choreo::metrics::hold::HOLD_SPEED_M_S,
+        choreo::motion::hold::HOLD_SPEED_M_S,
     );
     assert!(
-        held < choreo::metrics::hold::HOLD_NOTED_S,
+        held < choreo::motion::hold::HOLD_NOTED_S,
         "seed 2: held {held:.1} s"
     );
 }

@@ -1,5 +1,5 @@
 //! Does the dance go with *this* song: tempo lock, arm liveliness, knee direction (and, kept with
-//! them in every report and eval row, the longest hold of [`super::hold`]).
+//! them in every report and eval row, the longest hold of [`crate::motion::hold`]).
 //!
 //! # Tempo lock
 //! Real dancers step at a fixed fraction of the beat. Over a whole dance, the peak (0.25–3 Hz) of
@@ -84,7 +84,7 @@ pub struct TempoLock {
     pub locked: bool,
 }
 
-/// The measures of this module (and the hold, [`super::hold`]) for one dance (`Default`: nothing measured, for reports
+/// The measures of this module (and the hold, [`crate::motion::hold`]) for one dance (`Default`: nothing measured, for reports
 /// written before they existed).
 #[derive(
     Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
@@ -96,7 +96,7 @@ pub struct Musicality {
     pub arm_speed_m_s: f64,
     /// Share of knee-frames bent backwards (0..=1).
     pub knee_backward_share: f64,
-    /// The longest span (s) held in one pose ([`super::hold::longest_hold_s`]; 0 in reports
+    /// The longest span (s) held in one pose ([`crate::motion::hold::longest_hold_s`]; 0 in reports
     /// written before it was measured).
     #[serde(default)]
     pub longest_hold_s: f64,
@@ -111,7 +111,7 @@ impl Musicality {
             tempo_lock: tempo_lock(p, motion.fps, beat_times_s),
             arm_speed_m_s: arm_speed_m_s(p, motion.fps),
             knee_backward_share: knee_backward_share(p),
-            longest_hold_s: super::hold::longest_hold_s(p, motion.fps),
+            longest_hold_s: crate::motion::hold::longest_hold_s(p, motion.fps),
         }
     }
 }

@@ -335,7 +335,7 @@ fn draw_title<DB: DrawingBackend>(
     }
     parts.push(format!("arms {:.2} m/s", m.arm_speed_m_s));
     // A stand the eye may miss between the sheet's sampled frames.
-    if m.longest_hold_s >= crate::metrics::hold::HOLD_NOTED_S {
+    if m.longest_hold_s >= crate::motion::hold::HOLD_NOTED_S {
         parts.push(format!("holds {:.0} s", m.longest_hold_s));
     }
     area.draw_text(

@@ -5,7 +5,7 @@
 use ndarray::Array2;
 
 use super::Bins;
-use crate::metrics::hold::{longest_slow_s, slow_spans, HOLD_NOTED_S, HOLD_SPEED_M_S};
+use crate::motion::hold::{longest_slow_s, slow_spans, HOLD_NOTED_S, HOLD_SPEED_M_S};
 use crate::models::{smooth_columns, ModelError};
 use crate::motion::repr::{self, RootStart};
 
@@ -83,7 +83,7 @@ impl PoseReader<'_> {
     }
 
     /// Where the poses of feature `values` hold one pose for [`MIDSONG_HOLD_S`] from frame
-    /// `after` on: the frames of the first such hold ([`crate::metrics::hold`]'s measure) that
+    /// `after` on: the frames of the first such hold ([`crate::motion::hold`]'s measure) that
     /// lasts past `after`, from `after` where it began before.
     pub(super) fn midsong_hold(
         &self,
@@ -103,7 +103,7 @@ impl PoseReader<'_> {
 
 /// A hold later in the song this long (s) or longer is drawn again from the next candidate clip:
 /// longer than 41 of the 43 real dances' longest (all but two rumba poses of 8.6 and 9.5 s;
-/// [`crate::metrics::hold`]). The served dances' previews held 5–19 s mid-song (the card's
+/// [`crate::motion::hold`]). The served dances' previews held 5–19 s mid-song (the card's
 /// twenty-fifth session: hungarian_dance_5 31–36 s, vibe_ace 26–45 s), which the freeze check,
 /// reading the reach over 10 s, let pass.
 pub(super) const MIDSONG_HOLD_S: f64 = HOLD_NOTED_S;

@@ -1,7 +1,11 @@
 //! Holds: a body that stands in one pose for seconds in the middle of a song.
 //!
-//! The liveliness measures of [`super::physical`] average a whole dance, and the freezing ratio
-//! ([`super::kinematics::freezing`]) compares its first and last 30 s, so a dance that steps for
+//! A property of the motion, measured in every report ([`crate::metrics::musicality`]) and read
+//! by the stages that would make one (tsmt's mid-song redraw, the beat-align stage's choice of
+//! warp), so it lives here, beside [`super::skeleton::mean_speed`], not in `metrics`.
+//!
+//! The liveliness measures of [`crate::metrics::physical`] average a whole dance, and the
+//! freezing ratio ([`crate::metrics::kinematics::freezing`]) compares its first and last 30 s, so a dance that steps for
 //! two minutes and stands for 19 s between scores like one that never stops (tsmt on
 //! `vibe_ace`, seed 2, 26–45 s at 0.2–0.4 m/s: the tsmt card's twenty-fifth session).
 //!
@@ -15,7 +19,7 @@
 //! 3.3–4.0 s (a figure's closing pose), the cha-chas at most 2.9 s.
 use ndarray::ArrayView3;
 
-use crate::motion::skeleton::mean_speed;
+use super::skeleton::mean_speed;
 
 /// The longest hold of the 43 real dances (s), measured by `real_dances_hold`.
 pub const HOLD_REAL_MAX_S: f64 = 9.5;
