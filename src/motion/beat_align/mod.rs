@@ -43,6 +43,7 @@
 //! 3-minute song.
 use ndarray::Array3;
 
+use super::hold::{longest_hold_s, HOLD_NOTED_S};
 use super::Motion;
 
 mod plan;
@@ -228,6 +229,8 @@ pub fn align(
 /// (`judge`) steps on it too is served: the rigid fit moves the ankles a little, and where a
 /// spectrum's two peaks are near it can move the peak off the grid (dancenet on
 /// sugar_plum_fairy at 0.85×, seed 1: 1/6 of the beat finished, 0.346 served, 3.7 % off 1/3).
+/// A warp whose served dance holds one pose for 5 s or longer, and longer than the dance as it
+/// came, is passed over for the next ([`lengthens_hold`]).
 /// When none is judged to, the first of them is served still; when none steps on the beat, the
 /// warp of least cost. Without a warp the finished motion is served as it came. Cost: `finish`
 /// once per warp, at most 13 times (15–78 ms on a 133-s song), and `judge` once per candidate
@@ -271,6 +274,7 @@ pub fn align_served(
         RhythmFrom::Network
     };
     let as_it_came = planted.unwrap_or(motion);
+    let came_hold_s = longest_hold_s(as_it_came.positions.view(), as_it_came.fps);
     let why_unwarped = if candidates.is_empty() {
         skipped.unwrap_or("nothing to align")
     } else {
@@ -291,22 +295,68 @@ pub fn align_served(
             .cmp(&!b.1.steps_on_beat)
             .then(a.2.total_cmp(&b.2))
     });
-    let mut chosen = 0;
-    if let Some(judge) = &judge {
-        for (i, (served, summary, _)) in candidates.iter_mut().take(MAX_JUDGED).enumerate() {
-            if !summary.steps_on_beat {
-                break;
-            }
-            summary.steps_on_beat = judge(served).is_some_and(|m| steps_on_beat(&m, beat_times_s));
-            if summary.steps_on_beat {
-                chosen = i;
-                break;
-            }
-        }
-    }
+    let chosen = choose(&mut candidates, beat_times_s, judge.as_ref(), came_hold_s);
     let (served, summary, _) = candidates.swap_remove(chosen);
     (served, summary)
 }
+
+/// Which of the sorted `candidates` [`align_served`] serves: of the first [`MAX_JUDGED`] that
+/// step on the beat, the first whose served dance (`judge`'s; the candidate itself without one)
+/// steps on it too and does not hold one pose longer than the dance as it came did
+/// (`came_hold_s`, [`lengthens_hold`]); else the first of them whose served dance steps on the
+/// beat; else the first. Each judged candidate's `steps_on_beat` is set to what its served dance
+/// does.
+fn choose(
+    candidates: &mut [(Motion, BeatAlignSummary, f64)],
+    beat_times_s: &[f64],
+    judge: Option<&impl Fn(&Motion) -> Option<Motion>>,
+    came_hold_s: f64,
+) -> usize {
+    let mut on_beat = None;
+    for (i, (candidate, summary, _)) in candidates.iter_mut().take(MAX_JUDGED).enumerate() {
+        if !summary.steps_on_beat {
+            break;
+        }
+        let judged = judge.map(|j| j(candidate));
+        let served = match &judged {
+            Some(Some(m)) => m,
+            Some(None) => {
+                summary.steps_on_beat = false;
+                continue;
+            }
+            None => &*candidate,
+        };
+        if judged.is_some() {
+            summary.steps_on_beat = steps_on_beat(served, beat_times_s);
+            if !summary.steps_on_beat {
+                continue;
+            }
+        }
+        if !lengthens_hold(served, came_hold_s) {
+            return i;
+        }
+        tracing::debug!(
+            candidate = i,
+            "beat-align: a warp passed over, it lengthens a hold"
+        );
+        on_beat.get_or_insert(i);
+    }
+    on_beat.unwrap_or(0)
+}
+
+/// `served` holds one pose ([`longest_hold_s`]) for [`HOLD_NOTED_S`] or longer, and longer
+/// than the dance as it came (`came_hold_s`, plus [`HOLD_SLACK_S`]). A warp slows what it
+/// stretches, and a slow stretch slowed reads as a hold: tsmt's own 2.6–4.8-s holds were served
+/// as 5.0–6.4-s stands (16 of 120 dances at seeds 1–6 held 5 s or longer; the tsmt card's
+/// twenty-seventh session), longer than 41 of the 43 real dances ever hold.
+fn lengthens_hold(served: &Motion, came_hold_s: f64) -> bool {
+    let held = longest_hold_s(served.positions.view(), served.fps);
+    held >= HOLD_NOTED_S && held > came_hold_s + HOLD_SLACK_S
+}
+
+/// How much longer (s) than the dance as it came a served hold may read without the warp being
+/// blamed: planting and the rigid fit move a hold's edges by a few frames.
+const HOLD_SLACK_S: f64 = 0.2;
 
 /// Most candidates [`align_served`] has judged as served (each a rigid fit of the whole dance,
 /// about as long as the export's: 0.1–0.3 s for a 3-minute song) before it gives up on finding

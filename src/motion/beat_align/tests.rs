@@ -289,3 +289,79 @@ fn too_short_too_few_beats_or_out_of_reach_is_left_alone() {
     assert!(!s.applied && s.skipped.is_some(), "{s:?}");
     assert_eq!(out.positions, m.positions);
 }
+
+/// Every joint moving 1 m/s along x for `seconds`, but standing still over `still_s` (s).
+fn walking(seconds: f64, still_s: std::ops::Range<f64>) -> Motion {
+    let frames = (seconds * FPS) as usize;
+    let mut p = Array3::<f32>::zeros((frames, NUM_JOINTS, 3));
+    let mut x = 0.0;
+    for t in 0..frames {
+        if !still_s.contains(&(t as f64 / FPS)) {
+            x += 1.0 / FPS;
+        }
+        for j in 0..NUM_JOINTS {
+            p[[t, j, 0]] = x as f32;
+            p[[t, j, 1]] = j as f32 * 0.1;
+        }
+    }
+    Motion {
+        fps: FPS,
+        positions: p,
+    }
+}
+
+/// Of the candidates that step on the beat, the first that does not hold a pose for 5 s or
+/// longer than the dance as it came is served; where every one does, or the dance as it came
+/// held as long, the first; a 4-s hold is no reason to pass one over.
+#[test]
+fn a_warp_that_lengthens_a_hold_is_passed_over() {
+    let candidate = |m: Motion, on_beat: bool| {
+        let mut s = BeatAlignSummary::skipped("test");
+        s.steps_on_beat = on_beat;
+        (m, s, 0.0)
+    };
+    let no_judge = None::<&fn(&Motion) -> Option<Motion>>;
+    let holds_6 = || walking(30.0, 10.0..16.0);
+    let lively = || walking(30.0, 0.0..0.0);
+    let chosen =
+        |mut c: Vec<(Motion, BeatAlignSummary, f64)>, came| choose(&mut c, &[], no_judge, came);
+    assert_eq!(
+        chosen(
+            vec![candidate(holds_6(), true), candidate(lively(), true)],
+            3.0
+        ),
+        1
+    );
+    assert_eq!(
+        chosen(
+            vec![candidate(holds_6(), true), candidate(lively(), true)],
+            6.5
+        ),
+        0
+    );
+    assert_eq!(
+        chosen(
+            vec![candidate(holds_6(), true), candidate(holds_6(), true)],
+            3.0
+        ),
+        0
+    );
+    assert_eq!(
+        chosen(
+            vec![candidate(holds_6(), true), candidate(lively(), false)],
+            3.0
+        ),
+        0
+    );
+    let holds_4 = walking(30.0, 10.0..14.0);
+    assert_eq!(
+        chosen(
+            vec![candidate(holds_4, true), candidate(lively(), true)],
+            0.0
+        ),
+        0
+    );
+    // The measure the choice reads.
+    let held = longest_hold_s(holds_6().positions.view(), FPS);
+    assert!((6.0..6.6).contains(&held), "{held}");
+}
