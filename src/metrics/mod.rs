@@ -9,9 +9,10 @@
 //! - [`kinematics`]: smoothness, foot skating, freezing, key-pose error; [`plausibility`]:
 //!   authenticity and coherence against real joint-angle limits (TSMT).
 //! - [`physical`]: floor contact, ground penetration, pops, liveliness, seed sensitivity, and
-//!   issue 10's pass/fail verdict on them; [`hang`]: a body held off the floor (both feet up)
-//!   longer than a dancer can be; [`crate::motion::hold`] (the motion's, read by served stages
-//!   too, reported here): a body standing in one pose longer than 41 of the 43 real dances do.
+//!   issue 10's pass/fail verdict on them; [`crate::motion::hang`]: a body held off the floor
+//!   (both feet up) longer than a dancer can be; [`crate::motion::hold`]: a body standing in one
+//!   pose longer than 41 of the 43 real dances do (both the motion's, read by served stages too,
+//!   reported here).
 //! - [`rotation_flips`]: frame steps on which a rig joint's local rotation turns past 60° / 90°
 //!   (the exported rotations a skinned mesh follows; takes a `RigMotion`, not positions).
 //! - [`reference`]: the committed train-split statistics; [`score`]: one dance and a set;
@@ -37,7 +38,6 @@ pub mod beats;
 pub mod diversity;
 pub mod features;
 pub mod fid;
-pub mod hang;
 pub mod kinematics;
 pub mod musicality;
 pub mod physical;

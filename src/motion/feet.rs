@@ -223,7 +223,7 @@ pub const AIRBORNE_HALF_S: f64 = 0.12;
 /// ±[`AIRBORNE_HALF_S`] so the shift ramps rather than jumps. [`ground`] cannot: its floor is the lowest foot
 /// within ±1 s, so a float between two steps keeps it (tsmt on `choice_drum_bass`, seed 1, held
 /// both feet 0.33 m up for 1.2 s; real dances hold them 0.10 m up for at most 0.72 s,
-/// `metrics::hang`). The erosion's minimum never exceeds a frame's own excess, so no foot is
+/// `motion::hang`). The erosion's minimum never exceeds a frame's own excess, so no foot is
 /// pushed below its lowest within ±1 s, and a hop shorter than 0.24 s is left as it is; of the
 /// real dances' frames, 0.9 % would move by more than 1 cm (at most 7 cm). Returns the largest
 /// shift (m).
@@ -242,7 +242,7 @@ pub fn land_hangs(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> f64 {
 }
 
 /// Per frame of `lowest` (the lowest foot point's height, m), its height above its own lowest
-/// within ±[`GROUND_WINDOW_S`]: what [`land_hangs`] brings down and `metrics::hang` measures, one
+/// within ±[`GROUND_WINDOW_S`]: what [`land_hangs`] brings down and `motion::hang` measures, one
 /// definition so the stage and the verdict agree on the floor.
 pub fn lift(lowest: &[f64], fps: f64) -> Vec<f64> {
     let floor = window_min(lowest, (GROUND_WINDOW_S * fps).round().max(1.0) as usize);

@@ -22,6 +22,7 @@ pub mod bvh;
 pub mod dataset;
 pub mod export;
 pub mod feet;
+pub mod hang;
 pub mod hold;
 pub mod input;
 pub mod input_error;

@@ -43,6 +43,7 @@
 //! 3-minute song.
 use ndarray::Array3;
 
+use super::hang::{contact_lift, longest_hang_s, HANG_REAL_MAX_S};
 use super::hold::{longest_hold_s, HOLD_NOTED_S};
 use super::Motion;
 
@@ -230,7 +231,7 @@ pub fn align(
 /// spectrum's two peaks are near it can move the peak off the grid (dancenet on
 /// sugar_plum_fairy at 0.85×, seed 1: 1/6 of the beat finished, 0.346 served, 3.7 % off 1/3).
 /// A warp whose served dance holds one pose for 5 s or longer, and longer than the dance as it
-/// came, is passed over for the next ([`lengthens_hold`]).
+/// came, is passed over for the next ([`lengthens_hold`]) that hangs no longer ([`choose`]).
 /// When none is judged to, the first of them is served still; when none steps on the beat, the
 /// warp of least cost. Without a warp the finished motion is served as it came. Cost: `finish`
 /// once per warp, at most 13 times (15–78 ms on a 133-s song), and `judge` once per candidate
@@ -303,16 +304,21 @@ pub fn align_served(
 /// Which of the sorted `candidates` [`align_served`] serves: of the first [`MAX_JUDGED`] that
 /// step on the beat, the first whose served dance (`judge`'s; the candidate itself without one)
 /// steps on it too and does not hold one pose longer than the dance as it came did
-/// (`came_hold_s`, [`lengthens_hold`]); else the first of them whose served dance steps on the
-/// beat; else the first. Each judged candidate's `steps_on_beat` is set to what its served dance
-/// does.
+/// (`came_hold_s`, [`lengthens_hold`]); one after a candidate passed over for a hold only where
+/// its served dance hangs (both feet up, [`hang_s`]) no longer than that one's or than real
+/// dancers do ([`HANG_REAL_MAX_S`]): a warp slows a hop as it slows a pose, and the first
+/// alternative to a hold found was served with a 1.04-s hang, over the verdict's 1.0 (tsmt,
+/// DANCE_R_9 seed 4; the card's twenty-seventh session). Else the first of them whose served
+/// dance steps on the beat; else the first. Each judged candidate's `steps_on_beat` is set to
+/// what its served dance does.
 fn choose(
     candidates: &mut [(Motion, BeatAlignSummary, f64)],
     beat_times_s: &[f64],
     judge: Option<&impl Fn(&Motion) -> Option<Motion>>,
     came_hold_s: f64,
 ) -> usize {
-    let mut on_beat = None;
+    // The first on the beat, passed over for a hold, and its hang.
+    let mut on_beat: Option<(usize, f64)> = None;
     for (i, (candidate, summary, _)) in candidates.iter_mut().take(MAX_JUDGED).enumerate() {
         if !summary.steps_on_beat {
             break;
@@ -332,16 +338,27 @@ fn choose(
                 continue;
             }
         }
-        if !lengthens_hold(served, came_hold_s) {
-            return i;
+        let holds = lengthens_hold(served, came_hold_s);
+        match on_beat {
+            None if !holds => return i,
+            None => on_beat = Some((i, hang_s(served))),
+            Some((_, first_hang_s)) => {
+                if !holds && hang_s(served) <= first_hang_s.max(HANG_REAL_MAX_S) {
+                    return i;
+                }
+            }
         }
-        tracing::debug!(
-            candidate = i,
-            "beat-align: a warp passed over, it lengthens a hold"
-        );
-        on_beat.get_or_insert(i);
+        tracing::debug!(candidate = i, holds, "beat-align: a warp passed over");
     }
-    on_beat.unwrap_or(0)
+    on_beat.map_or(0, |(i, _)| i)
+}
+
+/// The longest hang (s) of `motion` ([`super::hang`]).
+fn hang_s(motion: &Motion) -> f64 {
+    longest_hang_s(
+        &contact_lift(motion.positions.view(), motion.fps),
+        motion.fps,
+    )
 }
 
 /// `served` holds one pose ([`longest_hold_s`]) for [`HOLD_NOTED_S`] or longer, and longer

@@ -290,18 +290,21 @@ fn too_short_too_few_beats_or_out_of_reach_is_left_alone() {
     assert_eq!(out.positions, m.positions);
 }
 
-/// Every joint moving 1 m/s along x for `seconds`, but standing still over `still_s` (s).
-fn walking(seconds: f64, still_s: std::ops::Range<f64>) -> Motion {
+/// Every joint moving 1 m/s along x for `seconds`, but standing still over `still_s` (s) and
+/// lifted 0.3 m (both feet up) over `up_s`.
+fn walking(seconds: f64, still_s: std::ops::Range<f64>, up_s: std::ops::Range<f64>) -> Motion {
     let frames = (seconds * FPS) as usize;
     let mut p = Array3::<f32>::zeros((frames, NUM_JOINTS, 3));
     let mut x = 0.0;
     for t in 0..frames {
-        if !still_s.contains(&(t as f64 / FPS)) {
+        let s = t as f64 / FPS;
+        if !still_s.contains(&s) {
             x += 1.0 / FPS;
         }
+        let up = if up_s.contains(&s) { 0.3 } else { 0.0 };
         for j in 0..NUM_JOINTS {
             p[[t, j, 0]] = x as f32;
-            p[[t, j, 1]] = j as f32 * 0.1;
+            p[[t, j, 1]] = j as f32 * 0.1 + up;
         }
     }
     Motion {
@@ -312,7 +315,8 @@ fn walking(seconds: f64, still_s: std::ops::Range<f64>) -> Motion {
 
 /// Of the candidates that step on the beat, the first that does not hold a pose for 5 s or
 /// longer than the dance as it came is served; where every one does, or the dance as it came
-/// held as long, the first; a 4-s hold is no reason to pass one over.
+/// held as long, the first; a 4-s hold is no reason to pass one over; one that hangs longer is
+/// no alternative.
 #[test]
 fn a_warp_that_lengthens_a_hold_is_passed_over() {
     let candidate = |m: Motion, on_beat: bool| {
@@ -321,8 +325,8 @@ fn a_warp_that_lengthens_a_hold_is_passed_over() {
         (m, s, 0.0)
     };
     let no_judge = None::<&fn(&Motion) -> Option<Motion>>;
-    let holds_6 = || walking(30.0, 10.0..16.0);
-    let lively = || walking(30.0, 0.0..0.0);
+    let holds_6 = || walking(30.0, 10.0..16.0, 0.0..0.0);
+    let lively = || walking(30.0, 0.0..0.0, 0.0..0.0);
     let chosen =
         |mut c: Vec<(Motion, BeatAlignSummary, f64)>, came| choose(&mut c, &[], no_judge, came);
     assert_eq!(
@@ -353,7 +357,7 @@ fn a_warp_that_lengthens_a_hold_is_passed_over() {
         ),
         0
     );
-    let holds_4 = walking(30.0, 10.0..14.0);
+    let holds_4 = walking(30.0, 10.0..14.0, 0.0..0.0);
     assert_eq!(
         chosen(
             vec![candidate(holds_4, true), candidate(lively(), true)],
@@ -361,7 +365,21 @@ fn a_warp_that_lengthens_a_hold_is_passed_over() {
         ),
         0
     );
-    // The measure the choice reads.
+    // In place of one passed over for a hold, none that hangs longer than it or a real dancer
+    // (0.72 s).
+    let hangs = |s: f64| walking(30.0, 0.0..0.0, 20.0..20.0 + s);
+    let three = |hang_s| {
+        let c = vec![
+            candidate(holds_6(), true),
+            candidate(hangs(hang_s), true),
+            candidate(lively(), true),
+        ];
+        chosen(c, 3.0)
+    };
+    assert_eq!(three(1.0), 2);
+    assert_eq!(three(0.5), 1);
+    // The measures the choice reads.
+    assert!((hang_s(&hangs(1.0)) - 1.0).abs() < 0.05);
     let held = longest_hold_s(holds_6().positions.view(), FPS);
     assert!((6.0..6.6).contains(&held), "{held}");
 }

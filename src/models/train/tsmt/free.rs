@@ -35,7 +35,7 @@ pub(super) const SLOWEST: f64 = 0.7;
 /// continuation's (`Options::free_pace_max`).
 pub(super) const FASTEST: f64 = 1.3;
 /// The run's lowest foot may rise this much (m) above the real continuation's highest lowest
-/// foot before the term pulls it down (real dances lift it at most 0.14 m, `metrics::hang`).
+/// foot before the term pulls it down (real dances lift it at most 0.14 m, `motion::hang`).
 pub(super) const LIFT_M: f64 = 0.02;
 
 /// One free run's window: the real context's tokens `[FREE_CONTEXT, coords]`, the real
