@@ -363,7 +363,7 @@ fn hang_s(motion: &Motion) -> f64 {
 
 /// `served` holds one pose ([`longest_hold_s`]) for [`HOLD_NOTED_S`] or longer, and longer
 /// than the dance as it came (`came_hold_s`, plus [`HOLD_SLACK_S`]). A warp slows what it
-/// stretches, and a slow stretch slowed reads as a hold: tsmt's own 2.6–4.8-s holds were served
+/// stretches, and a slow stretch slowed reads as a hold: tsmt's own 2.6–5.0-s holds were served
 /// as 5.0–6.4-s stands (16 of 120 dances at seeds 1–6 held 5 s or longer; the tsmt card's
 /// twenty-seventh session), longer than 41 of the 43 real dances ever hold.
 fn lengthens_hold(served: &Motion, came_hold_s: f64) -> bool {
