@@ -16,7 +16,7 @@
 //!   over 23 joints: a single joint jumping `d` metres for one frame adds `2d·fps²/23`
 //!   (54 m/s² per metre at 25 fps), so the measure sees whole-body snaps, not one stray marker;
 //! - **liveliness**: mean joint speed (m/s) over the dance and its ratio to the real train mean;
-//! - **hang** ([`crate::motion::hang`]): the longest span with the lowest heel or toe over 0.10 m above
+//! - **hang** ([`hang`]): the longest span with the lowest heel or toe over 0.10 m above
 //!   its lowest within ±1 s, and that lift's largest value;
 //! - **freeze**: [`super::kinematics::freezing`], already in every score;
 //! - **seed sensitivity** ([`seed_distance_m`]): mean distance between the root-relative poses
@@ -132,10 +132,10 @@ pub struct PhysicalScores {
     pub mean_speed_m_s: f64,
     /// `mean_speed_m_s` over the real train mean.
     pub speed_ratio: f64,
-    /// The lowest heel or toe's largest height above its lowest within ±1 s (m; [`crate::motion::hang`]).
+    /// The lowest heel or toe's largest height above its lowest within ±1 s (m; [`hang`]).
     #[serde(default)]
     pub lift_max_m: f64,
-    /// The longest span (s) with that lift over [`crate::motion::hang::HANG_LIFT_M`] (both feet up).
+    /// The longest span (s) with that lift over [`hang::HANG_LIFT_M`] (both feet up).
     #[serde(default)]
     pub hang_s: f64,
 }
@@ -151,7 +151,7 @@ pub struct PhysicalSeries {
     pub speed: Vec<f64>,
     /// Largest acceleration near each key pose.
     pub key_pose_pops: Vec<f64>,
-    /// The lowest heel or toe's height above its lowest within ±1 s, per frame (m; [`crate::motion::hang`]).
+    /// The lowest heel or toe's height above its lowest within ±1 s, per frame (m; [`hang`]).
     pub lift: Vec<f64>,
     /// The longest hang (s): of a pooled set, its longest dance's.
     pub hang_s: f64,

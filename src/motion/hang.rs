@@ -4,9 +4,9 @@
 //! verdict and read by the beat-align stage, which serves no warp that lengthens a hang in place
 //! of one that lengthens a hold.
 //!
-//! The floor-contact measures of [`crate::metrics::physical`] summarise the lowest foot over a whole dance
-//! (its p5 and median), so a dance that stands on the floor for 24 s and floats 0.33 m up with
-//! both feet for 1.2 s in between scores like one that never leaves it (tsmt on
+//! The floor-contact measures of [`crate::metrics::physical`] summarise the lowest foot over a
+//! whole dance (its p5 and median), so a dance that stands on the floor for 24 s and floats 0.33 m
+//! up with both feet for 1.2 s in between scores like one that never leaves it (tsmt on
 //! `choice_drum_bass`, seed 1, at 19–20 s). A dancer cannot: a 1.2-s flight is a 1.8-m jump.
 //!
 //! - **lift** ([`contact_lift`]): per frame, the lowest heel or toe's height above its own lowest
@@ -36,6 +36,11 @@ pub const HANG_LIFT_M: f64 = 0.10;
 /// [`lift`] of the lowest heel or toe ([`FOOT_POINTS`]) of world positions `[T, J, 3]`.
 pub fn contact_lift(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
     lift(&lowest_foot(positions, &FOOT_POINTS), fps)
+}
+
+/// The longest hang (s, [`longest_hang_s`] of [`contact_lift`]) of world positions `[T, J, 3]`.
+pub fn hang_s(positions: ArrayView3<'_, f32>, fps: f64) -> f64 {
+    longest_hang_s(&contact_lift(positions, fps), fps)
 }
 
 /// The longest span (s) in which `lift` (from [`lift`]) stays above [`HANG_LIFT_M`].

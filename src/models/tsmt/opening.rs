@@ -276,8 +276,8 @@ mod tests {
     }
 
     /// A stand of 8 s mid-song is found where it starts and ends (with the few frames of its
-    /// one-second windows around it), also where it began before `after`; a stand of 3 s, as long as a
-    /// real waltz's closing pose, is not one.
+    /// one-second windows around it), also where it began before `after`; a stand of 3 s, as long
+    /// as a real waltz's closing pose, is not one.
     #[test]
     fn a_hold_later_in_the_song_is_found_where_it_starts() {
         let bins = centred_bins();

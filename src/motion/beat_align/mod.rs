@@ -43,7 +43,7 @@
 //! 3-minute song.
 use ndarray::Array3;
 
-use super::hang::{contact_lift, longest_hang_s, HANG_REAL_MAX_S};
+use super::hang::{hang_s, HANG_REAL_MAX_S};
 use super::hold::{longest_hold_s, HOLD_NOTED_S};
 use super::Motion;
 
@@ -341,9 +341,12 @@ fn choose(
         let holds = lengthens_hold(served, came_hold_s);
         match on_beat {
             None if !holds => return i,
-            None => on_beat = Some((i, hang_s(served))),
+            None => on_beat = Some((i, hang_s(served.positions.view(), served.fps))),
             Some((_, first_hang_s)) => {
-                if !holds && hang_s(served) <= first_hang_s.max(HANG_REAL_MAX_S) {
+                if !holds
+                    && hang_s(served.positions.view(), served.fps)
+                        <= first_hang_s.max(HANG_REAL_MAX_S)
+                {
                     return i;
                 }
             }
@@ -351,14 +354,6 @@ fn choose(
         tracing::debug!(candidate = i, holds, "beat-align: a warp passed over");
     }
     on_beat.map_or(0, |(i, _)| i)
-}
-
-/// The longest hang (s) of `motion` ([`super::hang`]).
-fn hang_s(motion: &Motion) -> f64 {
-    longest_hang_s(
-        &contact_lift(motion.positions.view(), motion.fps),
-        motion.fps,
-    )
 }
 
 /// `served` holds one pose ([`longest_hold_s`]) for [`HOLD_NOTED_S`] or longer, and longer

@@ -329,34 +329,17 @@ fn a_warp_that_lengthens_a_hold_is_passed_over() {
     let lively = || walking(30.0, 0.0..0.0, 0.0..0.0);
     let chosen =
         |mut c: Vec<(Motion, BeatAlignSummary, f64)>, came| choose(&mut c, &[], no_judge, came);
-    assert_eq!(
+    // A 6-s hold first, then `second` (on the beat or not).
+    let after_a_hold = |second: Motion, on_beat, came| {
         chosen(
-            vec![candidate(holds_6(), true), candidate(lively(), true)],
-            3.0
-        ),
-        1
-    );
-    assert_eq!(
-        chosen(
-            vec![candidate(holds_6(), true), candidate(lively(), true)],
-            6.5
-        ),
-        0
-    );
-    assert_eq!(
-        chosen(
-            vec![candidate(holds_6(), true), candidate(holds_6(), true)],
-            3.0
-        ),
-        0
-    );
-    assert_eq!(
-        chosen(
-            vec![candidate(holds_6(), true), candidate(lively(), false)],
-            3.0
-        ),
-        0
-    );
+            vec![candidate(holds_6(), true), candidate(second, on_beat)],
+            came,
+        )
+    };
+    assert_eq!(after_a_hold(lively(), true, 3.0), 1);
+    assert_eq!(after_a_hold(lively(), true, 6.5), 0);
+    assert_eq!(after_a_hold(holds_6(), true, 3.0), 0);
+    assert_eq!(after_a_hold(lively(), false, 3.0), 0);
     let holds_4 = walking(30.0, 10.0..14.0, 0.0..0.0);
     assert_eq!(
         chosen(
@@ -379,7 +362,8 @@ fn a_warp_that_lengthens_a_hold_is_passed_over() {
     assert_eq!(three(1.0), 2);
     assert_eq!(three(0.5), 1);
     // The measures the choice reads.
-    assert!((hang_s(&hangs(1.0)) - 1.0).abs() < 0.05);
+    let hung = hangs(1.0);
+    assert!((hang_s(hung.positions.view(), FPS) - 1.0).abs() < 0.05);
     let held = longest_hold_s(holds_6().positions.view(), FPS);
     assert!((6.0..6.6).contains(&held), "{held}");
 }
