@@ -199,7 +199,10 @@ impl Bins {
     }
 
     /// Bin centres `[T, D]` of tokens `[T, D]`.
-    pub fn values(&self, tokens: &Array2<i64>) -> Array2<f32> {
+    pub fn values<S: ndarray::Data<Elem = i64>>(
+        &self,
+        tokens: &ndarray::ArrayBase<S, ndarray::Ix2>,
+    ) -> Array2<f32> {
         Array2::from_shape_fn(tokens.dim(), |(t, c)| self.centre(c, tokens[[t, c]]))
     }
 }

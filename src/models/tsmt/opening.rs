@@ -2,11 +2,11 @@
 //! drawn by the network, freezes, holds one pose or holds its arms is passed over for the next
 //! candidate the song chose (`Served::generate_features`), and a freeze or a hold later in the
 //! song is found where it starts.
-use ndarray::Array2;
+use ndarray::{Array2, ArrayBase, Ix2};
 
 use super::Bins;
-use crate::motion::hold::{longest_slow_s, slow_spans, HOLD_NOTED_S, HOLD_SPEED_M_S};
 use crate::models::{smooth_columns, ModelError};
+use crate::motion::hold::{longest_slow_s, slow_spans, HOLD_NOTED_S, HOLD_SPEED_M_S};
 use crate::motion::repr::{self, RootStart};
 
 /// Frames of the opening drawn to see whether a candidate clip freezes (20 s at 25 fps).
@@ -67,9 +67,9 @@ impl PoseReader<'_> {
     }
 
     /// [`OpeningMeasures`] of `tokens`.
-    pub(super) fn opening_measures(
+    pub(super) fn opening_measures<S: ndarray::Data<Elem = i64>>(
         &self,
-        tokens: &Array2<i64>,
+        tokens: &ArrayBase<S, Ix2>,
     ) -> Result<OpeningMeasures, ModelError> {
         let fps = self.fps;
         let motion = self.poses(&self.bins.values(tokens))?;
@@ -121,8 +121,8 @@ pub(super) const OPENING_SLOW_M_S: f64 = HOLD_SPEED_M_S;
 pub(super) const OPENING_MIN_ARMS_M_S: f64 = 0.43;
 
 /// Where the tokens freeze, from frame `after` on ([`holds_from`] for [`FREEZE_FRAMES`]).
-pub(super) fn frozen_from(
-    tokens: &Array2<i64>,
+pub(super) fn frozen_from<S: ndarray::Data<Elem = i64>>(
+    tokens: &ArrayBase<S, Ix2>,
     window: usize,
     widths: &[f32],
     reach: f32,
@@ -134,8 +134,8 @@ pub(super) fn frozen_from(
 /// Where the tokens hold one pose, from frame `after` on: the start of the first `hold` frames
 /// in a row over which every `window`-frame window, one every [`REACH_STRIDE`] frames, has
 /// reached less than `reach` m ([`super::sampling::reach_m`]).
-pub(super) fn holds_from(
-    tokens: &Array2<i64>,
+pub(super) fn holds_from<S: ndarray::Data<Elem = i64>>(
+    tokens: &ArrayBase<S, Ix2>,
     window: usize,
     widths: &[f32],
     reach: f32,

@@ -37,69 +37,163 @@ impl Tsmt {
         sampling: Sampling,
         guard: Option<(&StallGuard, &[f32])>,
         seed: u64,
-        mut on_step: impl FnMut(usize) -> bool,
+        on_step: impl FnMut(usize) -> bool,
     ) -> Option<Array2<i64>> {
-        let c = self.config.coords as usize;
+        let clock = clock.map(Tensor::shallow_clone);
+        let audio = audio_vectors.shallow_clone();
+        let mut draw = Draw::new(self, prefix, audio, clock, sampling, guard, seed);
+        let n = draw.frames();
+        draw.run_to(n, on_step)?;
+        Some(draw.into_tokens())
+    }
+}
+
+/// One draw of [`Tsmt::sample_guarded`] that can stop after any frame and go on later, drawing
+/// exactly what one run would. The served opening check draws a candidate clip's first seconds,
+/// stops at a hold, and goes on from where it stopped for the candidate it keeps: a sampler that
+/// could not go on drew the kept opening twice, and every passed-over one to its end (the card:
+/// a quarter of a 3-minute song's time).
+pub struct Draw<'a> {
+    model: &'a Tsmt,
+    audio_vectors: Tensor,
+    clock: Option<Tensor>,
+    sampling: Sampling,
+    guard: Option<(&'a StallGuard, &'a [f32])>,
+    /// Context frames (the prefix), whose clock rows come before the drawn frames'.
+    m: usize,
+    caches: Vec<crate::models::layers::KvCache>,
+    rng: StdRng,
+    wx: Tensor,
+    pos: i64,
+    probs: Vec<f32>,
+    /// The last frames drawn, for the guard.
+    recent: std::collections::VecDeque<Vec<i64>>,
+    /// The frames drawn, row after row (a candidate's opening holds only its own seconds).
+    out: Vec<i64>,
+    coords: usize,
+    frames: usize,
+    done: usize,
+}
+
+impl<'a> Draw<'a> {
+    /// A draw of `audio_vectors.size(0)` frames after the context `prefix` (the arguments of
+    /// [`Tsmt::sample_guarded`]), its caches filled with the context; nothing drawn yet.
+    pub fn new(
+        model: &'a Tsmt,
+        prefix: &Array2<i64>,
+        audio_vectors: Tensor,
+        clock: Option<Tensor>,
+        sampling: Sampling,
+        guard: Option<(&'a StallGuard, &'a [f32])>,
+        seed: u64,
+    ) -> Self {
+        let c = model.config.coords as usize;
         let n = audio_vectors.size()[0] as usize;
-        let mut out = Array2::<i64>::zeros((n, c));
-        let mut caches = self.pose.stack.new_caches();
-        let mut rng = StdRng::seed_from_u64(seed ^ 0x7357_0000_D0CE);
-        let tensor_of = |row: ndarray::ArrayView1<'_, i64>| Tensor::from_slice(&row.to_vec());
+        let mut caches = model.pose.stack.new_caches();
         // The context, all but its last frame, fills the caches (at most the window's worth).
         let m = prefix.nrows();
-        let keep = (m as i64).min(self.config.window) as usize;
-        let first = m - keep;
+        let keep = (m as i64).min(model.config.window) as usize;
         let mut wx = Tensor::zeros([1], (Kind::Float, Device::Cpu));
-        let clock_at = |row: usize| clock.map(|c| c.get(row as i64));
-        for (k, t) in (first..m).enumerate() {
-            wx = self.step(
-                &tensor_of(prefix.row(t)),
-                clock_at(t).as_ref(),
+        for (k, t) in (m - keep..m).enumerate() {
+            wx = model.step(
+                &Tensor::from_slice(&prefix.row(t).to_vec()),
+                clock.as_ref().map(|c| c.get(t as i64)).as_ref(),
                 k as i64,
                 &mut caches,
             );
         }
-        let mut pos = keep as i64;
-        let mut probs = vec![0f32; self.config.n_bins as usize];
+        Self {
+            model,
+            audio_vectors,
+            clock,
+            sampling,
+            guard,
+            m,
+            caches,
+            rng: StdRng::seed_from_u64(seed ^ 0x7357_0000_D0CE),
+            wx,
+            pos: keep as i64,
+            probs: vec![0f32; model.config.n_bins as usize],
+            recent: std::collections::VecDeque::new(),
+            out: Vec::new(),
+            coords: c,
+            frames: n,
+            done: 0,
+        }
+    }
+
+    /// Frames the whole draw has.
+    pub fn frames(&self) -> usize {
+        self.frames
+    }
+
+    /// Frames drawn so far.
+    pub fn done(&self) -> usize {
+        self.done
+    }
+
+    /// The frames drawn so far.
+    pub fn tokens(&self) -> ndarray::ArrayView2<'_, i64> {
+        ndarray::ArrayView2::from_shape((self.done, self.coords), &self.out)
+            .expect("done rows of coords tokens")
+    }
+
+    /// The whole draw (rows not drawn yet are zero).
+    pub fn into_tokens(mut self) -> Array2<i64> {
+        self.out.resize(self.frames * self.coords, 0);
+        Array2::from_shape_vec((self.frames, self.coords), self.out).expect("frames rows of coords")
+    }
+
+    /// Draws on up to frame `end` (at most [`Self::frames`]). `on_step(done)` is called before the
+    /// first frame drawn here and after every 250th frame of the draw, and may stop it: `None`.
+    pub fn run_to(&mut self, end: usize, mut on_step: impl FnMut(usize) -> bool) -> Option<()> {
+        let end = end.min(self.frames());
         // Says the loop has begun (a stage clock starts timing it here, however short the song).
-        if !on_step(0) {
+        if !on_step(self.done) {
             return None;
         }
-        // The last frames drawn, for the guard.
-        let mut recent: std::collections::VecDeque<Vec<i64>> = std::collections::VecDeque::new();
-        for t in 0..n {
-            let logits = self.logits(&(wx.shallow_clone() + audio_vectors.get(t as i64))); // [coords, n_bins]
+        let model = self.model;
+        let n_bins = model.config.n_bins as usize;
+        for t in self.done..end {
+            let fused = self.wx.shallow_clone() + self.audio_vectors.get(t as i64);
+            let logits = model.logits(&fused); // [coords, n_bins]
             let flat: Vec<f32> = Vec::<f32>::try_from(logits.contiguous().view([-1])).ok()?;
-            let now = match guard {
+            let now = match self.guard {
                 Some((g, widths))
-                    if recent.len() >= g.window_frames
-                        && reach_m(&recent, widths) < g.min_reach_m =>
+                    if self.recent.len() >= g.window_frames
+                        && reach_m(&self.recent, widths) < g.min_reach_m =>
                 {
-                    g.boosted(sampling)
+                    g.boosted(self.sampling)
                 }
-                _ => sampling,
+                _ => self.sampling,
             };
-            for (ci, row) in flat.chunks(self.config.n_bins as usize).enumerate() {
-                out[[t, ci]] = now.draw(row, &mut probs, &mut rng) as i64;
-            }
-            if let Some((g, _)) = guard {
-                recent.push_back(out.row(t).to_vec());
-                while recent.len() > g.window_frames {
-                    recent.pop_front();
+            let row: Vec<i64> = flat
+                .chunks(n_bins)
+                .map(|logits| now.draw(logits, &mut self.probs, &mut self.rng) as i64)
+                .collect();
+            self.out.extend_from_slice(&row);
+            if let Some((g, _)) = self.guard {
+                self.recent.push_back(row.clone());
+                while self.recent.len() > g.window_frames {
+                    self.recent.pop_front();
                 }
             }
-            wx = self.step(
-                &tensor_of(out.row(t)),
-                clock_at(m + t).as_ref(),
-                pos,
-                &mut caches,
+            self.wx = model.step(
+                &Tensor::from_slice(&row),
+                self.clock
+                    .as_ref()
+                    .map(|c| c.get((self.m + t) as i64))
+                    .as_ref(),
+                self.pos,
+                &mut self.caches,
             );
-            pos += 1;
+            self.pos += 1;
+            self.done = t + 1;
             if (t + 1) % 250 == 0 && !on_step(t + 1) {
                 return None;
             }
         }
-        Some(out)
+        Some(())
     }
 }
 

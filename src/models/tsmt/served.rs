@@ -9,7 +9,9 @@ use serde::{Deserialize, Serialize};
 
 use super::opening::{
     frozen_from, holds_from, PoseReader, FREEZE_FRAMES, OPENING_CHECK_FRAMES, OPENING_HOLD_FRAMES,
+    REACH_STRIDE,
 };
+use super::sampling::Draw;
 use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
 use crate::models::beat_time;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
@@ -298,12 +300,6 @@ impl Served {
                     .stall_guard
                     .as_ref()
                     .map(|g| (g, widths.as_slice()));
-                // A clip whose opening (the song's first 20 s, or all of a shorter song) holds
-                // one pose for OPENING_HOLD_FRAMES (within the reach, or under
-                // OPENING_SLOW_M_S), or holds its arms (OPENING_MIN_ARMS_M_S), is passed over
-                // for the next candidate ([`Self::opening_clips`]). When every candidate's
-                // opening holds, the first that does not freeze (FREEZE_FRAMES) is kept, else
-                // the last. The one kept is drawn again whole, the same draws from the same seed.
                 // `rows` frames drawn from song frame `opened + from` on after the context `c`,
                 // with the clock of exactly those frames.
                 let draw = |c: &Array2<i64>,
@@ -315,40 +311,83 @@ impl Served {
                     let audio = rest.narrow(0, from as i64, rows as i64);
                     model.sample_guarded(c, &audio, k.as_ref(), sampling, guard, req.seed, on_step)
                 };
+                // The whole song's draw after the context `c`, nothing drawn yet.
+                let whole = |c: &Array2<i64>| {
+                    let k = clock_from(c.nrows(), opened, n - opened);
+                    Draw::new(model, c, rest.shallow_clone(), k, sampling, guard, req.seed)
+                };
                 let reader = self.pose_reader(clock);
                 let check = self.file.extra.stall_guard.as_ref().and_then(|g| {
                     (g.reopen_reach_m > 0.0 && contexts.len() > 1)
                         .then(|| (g.reopen_reach_m, OPENING_CHECK_FRAMES.min(n - opened)))
                 });
+                // A clip whose opening (the song's first 20 s, or all of a shorter song) holds
+                // one pose for OPENING_HOLD_FRAMES (within the reach, or under
+                // OPENING_SLOW_M_S), or holds its arms (OPENING_MIN_ARMS_M_S), is passed over
+                // for the next candidate ([`Self::opening_clips`]). When every candidate's
+                // opening holds, the first that does not freeze (FREEZE_FRAMES) is kept, else
+                // the last. Each opening is drawn REACH_STRIDE frames at a time and stops at the
+                // first hold the reach sees; the one kept goes on from where it stopped, so the
+                // song is drawn as one run would draw it.
+                let mut opened_draws: Vec<Draw> = Vec::new();
                 let mut kept = 0;
                 if let (Some((reach, frames)), Some(guard)) = (check, guard) {
-                    let mut unfrozen = None;
-                    for (i, c) in contexts.iter().enumerate() {
-                        let Some(tokens) = draw(c, 0, frames, Some(guard), &mut |_| true) else {
-                            return Ok(None);
-                        };
-                        let window = guard.0.window_frames;
-                        let held = |hold| holds_from(&tokens, window, guard.1, reach, 0, hold);
+                    let window = guard.0.window_frames;
+                    let holds = |d: &Draw, hold| {
+                        holds_from(&d.tokens(), window, guard.1, reach, 0, hold).is_some()
+                    };
+                    let mut passed = None;
+                    for c in &contexts {
+                        let mut d = whole(c);
+                        let mut held = false;
+                        while d.done() < frames && !held {
+                            let next = (d.done() + REACH_STRIDE).min(frames);
+                            if d.run_to(next, |_| true).is_none() {
+                                return Ok(None);
+                            }
+                            held = holds(&d, OPENING_HOLD_FRAMES);
+                        }
                         // The poses are rebuilt for the measures only where the reach passed.
-                        if held(OPENING_HOLD_FRAMES).is_none()
-                            && !reader.opening_measures(&tokens)?.still()
-                        {
-                            unfrozen = Some(i);
+                        let lively = !held && !reader.opening_measures(&d.tokens())?.still();
+                        opened_draws.push(d);
+                        if lively {
+                            passed = Some(opened_draws.len() - 1);
                             break;
                         }
-                        if unfrozen.is_none() && held(FREEZE_FRAMES).is_none() {
-                            unfrozen = Some(i);
-                        }
                     }
-                    kept = unfrozen.unwrap_or(contexts.len() - 1);
+                    kept = match passed {
+                        Some(i) => i,
+                        None => {
+                            let mut unfrozen = None;
+                            for (i, d) in opened_draws.iter_mut().enumerate() {
+                                if d.run_to(frames, |_| true).is_none() {
+                                    return Ok(None);
+                                }
+                                if !holds(d, FREEZE_FRAMES) {
+                                    unfrozen = Some(i);
+                                    break;
+                                }
+                            }
+                            unfrozen.unwrap_or(contexts.len() - 1)
+                        }
+                    };
                 }
-                let Some(mut tokens) = draw(&contexts[kept], 0, n - opened, guard, &mut |done| {
+                let mut song = if opened_draws.is_empty() {
+                    whole(&contexts[kept])
+                } else {
+                    opened_draws.swap_remove(kept)
+                };
+                drop(opened_draws);
+                let end = song.frames();
+                let ran = song.run_to(end, |done| {
                     progress
                         .report(Stage::Generate, done as f32 / total as f32)
                         .is_ok()
-                }) else {
+                });
+                if ran.is_none() {
                     return Ok(None);
-                };
+                }
+                let mut tokens = song.into_tokens();
                 // A freeze or a hold (MIDSONG_HOLD_S) later in the song is drawn again from the
                 // next candidate clip ([`redrawn_span`]): a hold from a second before it to
                 // REJOIN_FRAMES after it, a freeze to the end of the song. Where the new frames

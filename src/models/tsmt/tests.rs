@@ -1,6 +1,6 @@
 //! Unit tests of the TSMT network: causality, the chunked audio stream, the cached steps,
 //! sampling and the loss.
-use super::sampling::reach_m;
+use super::sampling::{reach_m, Draw};
 use super::*;
 use crate::models::smooth_columns;
 use ndarray::s;
@@ -155,6 +155,46 @@ fn same_seed_same_dance_other_seed_other_dance() {
     );
 }
 
+/// The opening check stops a draw at a hold and the kept one goes on later: stopped anywhere and
+/// gone on with, with a guard that acts, a draw is the one run's, frame for frame.
+#[test]
+fn a_draw_stopped_and_gone_on_with_is_the_one_runs() {
+    let (_vs, m) = model(3);
+    let music = Tensor::randn([1, 60, 3], (Kind::Float, Device::Cpu));
+    let av = m.audio_logit_vectors(&music, None, |_| true).unwrap();
+    let prefix = Array2::from_shape_fn((20, 5), |(t, c)| ((t + c) % 12) as i64);
+    let s = Sampling::default();
+    // A reach every draw stays under: the guard boosts each frame once it has seen its window
+    // (from the fifth on), so what it remembers must carry over the stops.
+    let guard = StallGuard {
+        min_reach_m: 10.0,
+        window_frames: 4,
+        boost: 3.0,
+        reopen_reach_m: 0.0,
+    };
+    let widths = vec![0.05f32; 5];
+    let guard = Some((&guard, widths.as_slice()));
+    let one = m
+        .sample_guarded(&prefix, &av, None, s, guard, 7, |_| true)
+        .unwrap();
+    let unguarded = m.sample(&prefix, &av, None, s, 7, |_| true).unwrap();
+    assert_ne!(one, unguarded, "the guard acts");
+    let mut calls = Vec::new();
+    let mut d = Draw::new(&m, &prefix, av.shallow_clone(), None, s, guard, 7);
+    for end in [1, 13, 13, 40, 60] {
+        d.run_to(end, |done| {
+            calls.push(done);
+            true
+        })
+        .unwrap();
+        assert_eq!(d.done(), end);
+        assert_eq!(d.tokens(), one.slice(ndarray::s![..end, ..]));
+    }
+    assert_eq!(d.into_tokens(), one);
+    // Told at the start of each stretch where it begins.
+    assert_eq!(calls, vec![0, 1, 13, 13, 40]);
+}
+
 #[test]
 fn reach_measures_how_far_the_pose_came_and_the_guard_only_acts_on_a_stall() {
     // Two joints, 1 cm per bin: a held pose reaches 0; a joint 30 bins away 0.15 m on the mean.
@@ -273,7 +313,7 @@ fn the_step_clock_starts_silent_and_the_cached_steps_hear_it() {
     tch::no_grad(|| {
         for (name, mut v) in vs.variables() {
             if name.starts_with("step_clock.") {
-                let _ = v.copy_(&Tensor::randn(v.size(), (Kind::Float, Device::Cpu)));
+                v.copy_(&Tensor::randn(v.size(), (Kind::Float, Device::Cpu)));
             }
         }
     });
