@@ -9,7 +9,8 @@ use crate::models::{smooth_columns, ModelError};
 use crate::motion::hold::{longest_slow_s, slow_spans, HOLD_NOTED_S, HOLD_SPEED_M_S};
 use crate::motion::repr::{self, RootStart};
 
-/// Frames of the opening drawn to see whether a candidate clip freezes (20 s at 25 fps).
+/// Frames of the opening drawn to see whether a candidate clip freezes (20 s at 25 fps; a hold
+/// the reach sees sooner stops it there).
 pub(super) const OPENING_CHECK_FRAMES: usize = 500;
 /// A freeze holds this long (frames, 10 s): lively dances dip under the reach for a few
 /// seconds and come back (the card's calibration: at most 6 windows in a row, 7 s), frozen ones
