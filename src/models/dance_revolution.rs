@@ -515,50 +515,108 @@ impl DanceRevolution {
         guard: Option<(&StallGuard, &NormStats)>,
         warm_up: i64,
         report_every: i64,
-        mut on_step: impl FnMut(f32) -> bool,
-        mut sink: Option<&mut Vec<(Tensor, Tensor)>>,
+        on_step: impl FnMut(f32) -> bool,
+        sink: Option<&mut Vec<(Tensor, Tensor)>>,
     ) -> Option<Tensor> {
+        let mut d = self.begin(z, seed, seed_poses, guard, warm_up);
+        d.run_to(z, z.size()[1], report_every, on_step, sink)?;
+        Some(d.output())
+    }
+
+    /// A decode of `z` `[1, n, d_z]` (the arguments of [`Self::decode`]) with its warm-up or
+    /// seed poses run and nothing after them decoded yet: [`Decoding::run_to`] goes on.
+    pub fn begin<'a>(
+        &'a self,
+        z: &Tensor,
+        seed: u64,
+        seed_poses: Option<&Tensor>,
+        guard: Option<(&StallGuard, &'a NormStats)>,
+        warm_up: i64,
+    ) -> Decoding<'a> {
         let n = z.size()[1];
         let device = z.device();
-        let mut state = self.decoder.initial_state(1, seed, device);
-        // The guard's own draws: seeded apart from h_0's, so a dance that never stalls is unchanged.
-        let mut watch = guard.map(|(g, norm)| StallWatch::new(*g, norm, seed));
-        let mut out = Vec::with_capacity(n as usize);
-        let mut prev = Tensor::zeros([1, 1, self.config.pose_dim], (Kind::Float, device));
+        let mut d = Decoding {
+            decoder: &self.decoder,
+            state: self.decoder.initial_state(1, seed, device),
+            // The guard's own draws: seeded apart from h_0's, so a dance that never stalls is
+            // unchanged.
+            watch: guard.map(|(g, norm)| StallWatch::new(*g, norm, seed)),
+            prev: Tensor::zeros([1, 1, self.config.pose_dim], (Kind::Float, device)),
+            out: Vec::with_capacity(n as usize),
+            done: 0,
+        };
         let seeded = seed_poses.map(|s| s.size()[1].min(n)).unwrap_or(0);
         if seeded == 0 {
             // Warm-up: the decoder starts from the mean pose, a standing stance it leaves only
             // slowly; run it over the song's opening and keep only its state and last pose.
             for i in 0..warm_up.min(n) {
-                let (y, _) = self.decoder.run(&prev, &z.narrow(1, i, 1), &mut state);
-                if let Some(w) = watch.as_mut() {
-                    w.observe(&y, &mut state);
+                let (y, _) = d.decoder.run(&d.prev, &z.narrow(1, i, 1), &mut d.state);
+                if let Some(w) = d.watch.as_mut() {
+                    w.observe(&y, &mut d.state);
                 }
-                prev = y;
+                d.prev = y;
             }
         }
         if let Some(s) = seed_poses.filter(|_| seeded > 0) {
             // Teacher-force the seed frames: inputs are [mean, s_0 .. s_{m-2}], outputs replaced by s.
-            let inputs = Tensor::cat(&[prev.shallow_clone(), s.narrow(1, 0, seeded - 1)], 1);
-            let _ = self
+            let inputs = Tensor::cat(&[d.prev.shallow_clone(), s.narrow(1, 0, seeded - 1)], 1);
+            let _ = d
                 .decoder
-                .run(&inputs, &z.narrow(1, 0, seeded), &mut state);
+                .run(&inputs, &z.narrow(1, 0, seeded), &mut d.state);
             let seg = s.narrow(1, 0, seeded);
-            prev = seg.narrow(1, seeded - 1, 1);
-            out.push(seg);
+            d.prev = seg.narrow(1, seeded - 1, 1);
+            d.out.push(seg);
+            d.done = seeded;
         }
-        for i in seeded..n {
+        d
+    }
+}
+
+/// One decode of [`DanceRevolution::decode`] that can stop after any frame and go on later,
+/// decoding exactly what one run would: the opening check decodes a draw's opening, and the
+/// draw it keeps goes on from there instead of being decoded again from its warm-up.
+pub struct Decoding<'a> {
+    decoder: &'a DanceDecoder,
+    state: LstmState,
+    watch: Option<StallWatch<'a>>,
+    prev: Tensor,
+    /// The emitted frames, in runs of one or more.
+    out: Vec<Tensor>,
+    done: i64,
+}
+
+impl Decoding<'_> {
+    /// Frames decoded so far (seed poses included).
+    pub fn done(&self) -> i64 {
+        self.done
+    }
+
+    /// Decodes on up to frame `end` of `z` (the song's encoding, or as much of its start as is
+    /// decoded: frame i reads `z`'s frame i). `on_step` is called with the fraction of `z` done
+    /// after every `report_every`-th frame (0: never) and may stop it: `None`. `sink` collects
+    /// what [`DanceRevolution::rollout`] returns.
+    pub fn run_to(
+        &mut self,
+        z: &Tensor,
+        end: i64,
+        report_every: i64,
+        mut on_step: impl FnMut(f32) -> bool,
+        mut sink: Option<&mut Vec<(Tensor, Tensor)>>,
+    ) -> Option<()> {
+        let n = z.size()[1];
+        for i in self.done..end.min(n) {
             let (y, emitted, hz) =
                 self.decoder
-                    .run_with_input(&prev, &z.narrow(1, i, 1), &mut state);
+                    .run_with_input(&self.prev, &z.narrow(1, i, 1), &mut self.state);
             if let Some(sink) = sink.as_mut() {
                 sink.push((y.shallow_clone(), hz));
             }
-            if let Some(w) = watch.as_mut() {
-                w.observe(&y, &mut state);
+            if let Some(w) = self.watch.as_mut() {
+                w.observe(&y, &mut self.state);
             }
-            prev = y;
-            out.push(emitted);
+            self.prev = y;
+            self.out.push(emitted);
+            self.done = i + 1;
             if report_every > 0
                 && (i + 1) % report_every == 0
                 && !on_step((i + 1) as f32 / n as f32)
@@ -566,14 +624,19 @@ impl DanceRevolution {
                 return None;
             }
         }
-        if let Some(w) = watch {
+        Some(())
+    }
+
+    /// The frames decoded so far `[1, done, pose]`.
+    pub fn output(&self) -> Tensor {
+        if let Some(w) = self.watch.as_ref() {
             tracing::debug!(
-                frames = n,
+                frames = self.done,
                 kicked = w.kicked,
                 "dance-revolution stall guard"
             );
         }
-        Some(Tensor::cat(&out, 1))
+        Tensor::cat(&self.out, 1)
     }
 }
 
@@ -780,6 +843,56 @@ mod tests {
             .unwrap();
         assert_eq!(warmed.size(), vec![1, 40, 5]);
         assert!((plain - warmed).abs().max().double_value(&[]) > 1e-4);
+    }
+
+    /// The opening check decodes a draw's opening on the song's first frames and the kept draw
+    /// goes on from there: with a warm-up and a guard that kicks, that is the one run's dance.
+    #[test]
+    fn a_decode_stopped_and_gone_on_with_is_the_one_runs() {
+        let (_vs, m) = model(5);
+        let x = Tensor::randn([1, 40, 6], (Kind::Float, Device::Cpu));
+        let z = m.encoder.forward(&x, 0, false);
+        let norm = NormStats {
+            mean: vec![0.0; 5],
+            std: vec![1.0; 5],
+        };
+        // Kicks from the 4th frame on: the warm-up's and every later frame's.
+        let always = StallGuard {
+            min_reach_m: 1e9,
+            window_frames: 4,
+            kick: 0.3,
+        };
+        let guard = Some((&always, &norm));
+        let one = m.decode(&z, 3, None, guard, 6, 0, |_| true).unwrap();
+        let head = z.narrow(1, 0, 17);
+        let mut d = m.begin(&head, 3, None, guard, 6);
+        d.run_to(&head, 17, 0, |_| true, None).unwrap();
+        assert_eq!(d.done(), 17);
+        let opening = d.output();
+        let mut reports = Vec::new();
+        d.run_to(
+            &z,
+            40,
+            10,
+            |f| {
+                reports.push(f);
+                true
+            },
+            None,
+        )
+        .unwrap();
+        let gone_on = d.output();
+        assert_eq!(gone_on.size(), vec![1, 40, 5]);
+        assert_eq!((&one - &gone_on).abs().max().double_value(&[]), 0.0);
+        assert_eq!(
+            (one.narrow(1, 0, 17) - opening)
+                .abs()
+                .max()
+                .double_value(&[]),
+            0.0
+        );
+        // Reported as a whole decode reports: after frames 20, 30 and 40 of 40.
+        assert_eq!(reports, vec![0.5, 0.75, 1.0]);
     }
 
     #[test]

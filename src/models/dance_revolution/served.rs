@@ -5,7 +5,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 use tch::Tensor;
 
-use super::{DanceRevolution, ModelFile, ID};
+use super::{DanceRevolution, Decoding, ModelFile, ID};
 use crate::models::beat_time;
 use crate::models::folder;
 use crate::models::layers::LstmState;
@@ -189,30 +189,47 @@ impl Served {
     }
 
     /// The draw a job without a seed motion dances from ([`OpeningCheck`]) and what the check
-    /// saw: `seed` itself, and nothing, where there is no check.
-    fn checked_seed(
+    /// saw: `seed` itself, and nothing, where there is no check. With the check, the kept draw's
+    /// decode too, stopped at the end of its opening, where going on from there decodes what
+    /// one run from the start would (the warm-up it ran is the whole song's).
+    fn checked_seed<'a>(
         &self,
-        model: &DanceRevolution,
+        model: &'a DanceRevolution,
         z: &Tensor,
         seed: u64,
-        guard: Option<(&StallGuard, &NormStats)>,
+        guard: Option<(&StallGuard, &'a NormStats)>,
         clock: &beat_time::BeatTime,
-    ) -> Result<(u64, Option<OpeningChosen>), ModelError> {
+    ) -> Result<(u64, Option<OpeningChosen>, Option<Decoding<'a>>), ModelError> {
         let Some(check) = self.file.extra.opening_check else {
-            return Ok((seed, None));
+            return Ok((seed, None, None));
         };
         let warm = self.file.extra.warm_up_frames;
         let window = check.window(clock);
-        let m = (window.net_frames as i64).min(z.size()[1]);
+        let n = z.size()[1];
+        let m = (window.net_frames as i64).min(n);
         let head = z.narrow(1, 0, m);
+        // A warm-up that ran over all of `head` but not all of the song would differ.
+        let resumable = warm.min(m) == warm.min(n);
+        let mut opened: Vec<(u64, Decoding<'a>)> = Vec::new();
         let chosen = check.choose(ID, seed, &window, |s| -> Result<_, ModelError> {
-            model
-                .decode(&head, s, None, guard, warm, 0, |_| true)
-                .map(|y| self.motion_of(&y))
-                .transpose()
+            let mut d = model.begin(&head, s, None, guard, warm);
+            if d.run_to(&head, m, 0, |_| true, None).is_none() {
+                return Ok(None);
+            }
+            let motion = self.motion_of(&d.output())?;
+            if resumable {
+                opened.push((s, d));
+            }
+            Ok(Some(motion))
         })?;
         let (seed, seen) = chosen.ok_or(Cancelled)?;
-        Ok((seed, Some(seen)))
+        let kept = opened
+            .into_iter()
+            .find_map(|(s, d)| (s == seed).then_some(d));
+        if let Some(d) = kept.as_ref() {
+            tracing::debug!(from = d.done(), "dance-revolution: the kept draw goes on");
+        }
+        Ok((seed, Some(seen), kept))
     }
 
     /// The decoder's output `[1, n, pose]` (normalised) as a dance on the network's clock.
@@ -290,27 +307,33 @@ impl DanceModel for Served {
                     .stall_guard
                     .as_ref()
                     .map(|g| (g, &self.file.pose_norm));
-                let seed = match seed_poses {
-                    Some(_) => req.seed,
+                let (seed, kept) = match seed_poses {
+                    Some(_) => (req.seed, None),
                     None => {
-                        let (seed, seen) = self.checked_seed(model, &z, req.seed, guard, &clock)?;
+                        let (seed, seen, kept) =
+                            self.checked_seed(model, &z, req.seed, guard, &clock)?;
                         opening = seen;
-                        seed
+                        (seed, kept)
                     }
                 };
-                let y = model.decode(
+                // The kept draw goes on from the end of its opening; else one decode from the
+                // start.
+                let mut d = kept.unwrap_or_else(|| {
+                    let warm = self.file.extra.warm_up_frames;
+                    model.begin(&z, seed, seed_poses.as_ref(), guard, warm)
+                });
+                let ran = d.run_to(
                     &z,
-                    seed,
-                    seed_poses.as_ref(),
-                    guard,
-                    self.file.extra.warm_up_frames,
+                    z.size()[1],
                     250,
                     |f| {
                         cancelled = progress.report(Stage::Generate, f).is_err();
                         !cancelled
                     },
+                    None,
                 );
-                y.ok_or(ModelError::Cancelled(Cancelled))
+                ran.map(|()| d.output())
+                    .ok_or(ModelError::Cancelled(Cancelled))
             })
         })?;
         let motion = self.motion_of(&out?)?;
