@@ -13,8 +13,10 @@ use crate::motion::Motion;
 /// (dance-revolution's seed 3 on DANCE_C_8 opens at 0.5–1 m/s and steps a 2-m/s metronome from
 /// 5 s on). Where its mean joint speed or its arms' speed against the spine falls outside the
 /// ranges (m/s), the next of `draws` draws is tried; where none passes, the draw nearest the
-/// ranges is danced. The kept draw is danced again in the full run (a sampler cannot resume a
-/// draw), so the check costs at most `draws × frames` frames. A job's seed motion skips it.
+/// ranges is danced. The check costs at most `draws × frames` frames (and each draw's warm-up):
+/// dance-revolution's kept draw goes on from the end of its opening
+/// (`dance_revolution::Decoding`), dancenet's is danced again in the full run (its sampler
+/// cannot go on). A job's seed motion skips it.
 #[derive(Clone, Copy, Debug, Serialize, Deserialize, PartialEq)]
 pub struct OpeningCheck {
     pub frames: usize,
