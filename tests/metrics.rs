@@ -739,6 +739,32 @@ mod real_data {
                 && t.step_rate_ratios_raw.len() <= 2,
             "{t:?}"
         );
+        // Each stretched dance is named, and the counts above are its rows'.
+        let named: Vec<(&str, f64, u64)> = t
+            .per_dance
+            .iter()
+            .map(|d| (d.song.as_str(), d.factor, d.seed))
+            .collect();
+        let song = "trumpet_loop_90bpm.ogg";
+        assert_eq!(
+            named,
+            [
+                (song, 0.85, 0),
+                (song, 0.85, 1),
+                (song, 1.2, 0),
+                (song, 1.2, 1)
+            ]
+        );
+        let count = |own: bool| {
+            let locks = t
+                .per_dance
+                .iter()
+                .filter_map(|d| if own { d.own } else { d.served });
+            let locks: Vec<_> = locks.collect();
+            (locks.len(), locks.iter().filter(|l| l.locked).count())
+        };
+        assert_eq!(count(false), (t.measured, t.tempo_locked));
+        assert_eq!(count(true), (t.measured_raw, t.tempo_locked_raw));
         assert!(
             r.rows
                 .iter()

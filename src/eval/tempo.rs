@@ -51,6 +51,24 @@ pub struct TempoRow {
     /// its "own" motion is then made on that clock and played back at each song's tempo.
     #[serde(default)]
     pub beat_time_bpm: Option<f64>,
+    /// Each stretched dance's tempo lock, served and the network's own: which songs, tempi and
+    /// seeds a count or a ratio above comes from (the tracker can hear one song's two tempi at
+    /// two metrical levels, and a network can step at one pace on both).
+    #[serde(default)]
+    pub per_dance: Vec<TempoDance>,
+}
+
+/// One stretched dance of a [`TempoRow`].
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct TempoDance {
+    /// The song's name in the eval (the original's, without the factor).
+    pub song: String,
+    pub factor: f64,
+    pub seed: u64,
+    /// As served (beat-aligned, feet planted); none without a measurable step rate.
+    pub served: Option<crate::metrics::musicality::TempoLock>,
+    /// The network's own motion.
+    pub own: Option<crate::metrics::musicality::TempoLock>,
 }
 
 /// `song` (called `name` in the eval) at `factor` × its tempo (pitch kept), written by sox into
@@ -128,6 +146,7 @@ pub(super) fn tempo_row(
     // [served, the network's own] for each count.
     let (mut dances, mut measured, mut locked, mut ratios) =
         (0, [0; 2], [0; 2], [Vec::new(), Vec::new()]);
+    let mut per_dance = Vec::new();
     for (path, name) in paths.iter().zip(names) {
         // step rate per (tempo, seed), served and the network's own
         let mut steps: Vec<Vec<[Option<f64>; 2]>> = Vec::new();
@@ -167,6 +186,13 @@ pub(super) fn tempo_row(
                     }
                 }
                 per_seed.push([lock, own].map(|l| l.map(|l| l.step_hz)));
+                per_dance.push(TempoDance {
+                    song: name.clone(),
+                    factor,
+                    seed,
+                    served: lock,
+                    own,
+                });
             }
             steps.push(per_seed);
         }
@@ -210,6 +236,7 @@ pub(super) fn tempo_row(
         step_rate_ratios_raw: ratios_raw,
         followed_ratio: followed,
         beat_time_bpm: model.info().beat_time.map(|b| b.bpm),
+        per_dance,
     })
 }
 
