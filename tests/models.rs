@@ -496,11 +496,7 @@ fn tsmt_draws_again_where_it_would_hold_mid_song() {
     let m = model("tsmt");
     let song = audio::decode_path(&shared_song_path("hungarian_dance_5.ogg")).expect("decodes");
     let motion = dance(m.as_ref(), &GenerateRequest::plain(&song, 2));
-    let held = longest_hold_s(
-        &motion,
-        f64::INFINITY,
-        choreo::motion::hold::HOLD_SPEED_M_S,
-    );
+    let held = longest_hold_s(&motion, f64::INFINITY, choreo::motion::hold::HOLD_SPEED_M_S);
     assert!(
         held < choreo::motion::hold::HOLD_NOTED_S,
         "seed 2: held {held:.1} s"

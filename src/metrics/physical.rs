@@ -30,8 +30,8 @@
 use crate::motion::feet::lowest_foot;
 use ndarray::ArrayView3;
 
-use crate::motion::hang;
 use super::kinematics::{mean_speed, percentile};
+use crate::motion::hang;
 use crate::motion::{skeleton as sk, KeyPose, Motion};
 
 /// The foot points whose lowest is the body's contact with the floor: ankles, heels, toes.
