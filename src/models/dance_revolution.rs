@@ -795,15 +795,21 @@ mod tests {
         assert!((reach_m(&h) - 0.3).abs() < 1e-6, "{}", reach_m(&h));
     }
 
-    #[test]
-    fn stall_guard_acts_only_on_a_held_pose() {
-        let (_vs, m) = model(5);
+    /// A 40-frame song encoded by `m` (random music), and the identity normalisation its
+    /// stall guard reads poses through.
+    fn guarded_song(m: &DanceRevolution) -> (Tensor, NormStats) {
         let x = Tensor::randn([1, 40, 6], (Kind::Float, Device::Cpu));
-        let z = m.encoder.forward(&x, 0, false);
         let norm = NormStats {
             mean: vec![0.0; 5],
             std: vec![1.0; 5],
         };
+        (m.encoder.forward(&x, 0, false), norm)
+    }
+
+    #[test]
+    fn stall_guard_acts_only_on_a_held_pose() {
+        let (_vs, m) = model(5);
+        let (z, norm) = guarded_song(&m);
         let plain = m.decode(&z, 3, None, None, 0, 0, |_| true).unwrap();
         // A reach of 0 is always met: nothing is kicked and the dance is the unguarded one.
         let never = StallGuard {
@@ -850,12 +856,7 @@ mod tests {
     #[test]
     fn a_decode_stopped_and_gone_on_with_is_the_one_runs() {
         let (_vs, m) = model(5);
-        let x = Tensor::randn([1, 40, 6], (Kind::Float, Device::Cpu));
-        let z = m.encoder.forward(&x, 0, false);
-        let norm = NormStats {
-            mean: vec![0.0; 5],
-            std: vec![1.0; 5],
-        };
+        let (z, norm) = guarded_song(&m);
         // Kicks from the 4th frame on: the warm-up's and every later frame's.
         let always = StallGuard {
             min_reach_m: 1e9,

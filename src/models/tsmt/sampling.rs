@@ -70,8 +70,6 @@ pub struct Draw<'a> {
     recent: std::collections::VecDeque<Vec<i64>>,
     /// The frames drawn, row after row (a candidate's opening holds only its own seconds).
     out: Vec<i64>,
-    coords: usize,
-    frames: usize,
     done: usize,
 }
 
@@ -87,8 +85,6 @@ impl<'a> Draw<'a> {
         guard: Option<(&'a StallGuard, &'a [f32])>,
         seed: u64,
     ) -> Self {
-        let c = model.config.coords as usize;
-        let n = audio_vectors.size()[0] as usize;
         let mut caches = model.pose.stack.new_caches();
         // The context, all but its last frame, fills the caches (at most the window's worth).
         let m = prefix.nrows();
@@ -116,15 +112,18 @@ impl<'a> Draw<'a> {
             probs: vec![0f32; model.config.n_bins as usize],
             recent: std::collections::VecDeque::new(),
             out: Vec::new(),
-            coords: c,
-            frames: n,
             done: 0,
         }
     }
 
     /// Frames the whole draw has.
     pub fn frames(&self) -> usize {
-        self.frames
+        self.audio_vectors.size()[0] as usize
+    }
+
+    /// Coordinates a frame has.
+    fn coords(&self) -> usize {
+        self.model.config.coords as usize
     }
 
     /// Frames drawn so far.
@@ -134,14 +133,15 @@ impl<'a> Draw<'a> {
 
     /// The frames drawn so far.
     pub fn tokens(&self) -> ndarray::ArrayView2<'_, i64> {
-        ndarray::ArrayView2::from_shape((self.done, self.coords), &self.out)
+        ndarray::ArrayView2::from_shape((self.done, self.coords()), &self.out)
             .expect("done rows of coords tokens")
     }
 
     /// The whole draw (rows not drawn yet are zero).
     pub fn into_tokens(mut self) -> Array2<i64> {
-        self.out.resize(self.frames * self.coords, 0);
-        Array2::from_shape_vec((self.frames, self.coords), self.out).expect("frames rows of coords")
+        let shape = (self.frames(), self.coords());
+        self.out.resize(shape.0 * shape.1, 0);
+        Array2::from_shape_vec(shape, self.out).expect("frames rows of coords")
     }
 
     /// Draws on up to frame `end` (at most [`Self::frames`]). `on_step(done)` is called before the
