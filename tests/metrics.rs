@@ -765,6 +765,37 @@ mod real_data {
         };
         assert_eq!(count(false), (t.measured, t.tempo_locked));
         assert_eq!(count(true), (t.measured_raw, t.tempo_locked_raw));
+        // Every stretched dance is measured by the other served lines too, and the row's are its
+        // dances' worst.
+        let lines: Vec<_> = t
+            .per_dance
+            .iter()
+            .map(|d| d.served_lines.clone().expect("served lines measured"))
+            .collect();
+        for l in &lines {
+            assert!(
+                l.arms_m_s > 0.0
+                    && (0.0..=1.0).contains(&l.knee_backward_share)
+                    && l.longest_hold_s >= 0.0
+                    && l.verdict_pass == l.verdict_failed.is_empty(),
+                "{l:?}"
+            );
+        }
+        let worst = t.served_lines.as_ref().expect("the row's worst lines");
+        let min = |f: fn(&choreo::eval::tempo::ServedLines) -> f64| {
+            lines.iter().map(f).fold(f64::INFINITY, f64::min)
+        };
+        let max = |f: fn(&choreo::eval::tempo::ServedLines) -> f64| {
+            lines.iter().map(f).fold(f64::NEG_INFINITY, f64::max)
+        };
+        assert_eq!(worst.dances, 4);
+        assert_eq!(worst.arms_min_m_s, min(|l| l.arms_m_s));
+        assert_eq!(worst.knee_backward_max, max(|l| l.knee_backward_share));
+        assert_eq!(worst.longest_hold_max_s, max(|l| l.longest_hold_s));
+        assert_eq!(
+            worst.verdict_passed,
+            lines.iter().filter(|l| l.verdict_pass).count()
+        );
         assert!(
             r.rows
                 .iter()

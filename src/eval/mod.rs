@@ -464,6 +464,7 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
                     &extra_paths,
                     &extra_names,
                     args,
+                    &reference,
                 )?);
             }
             if model.info().capabilities.style {

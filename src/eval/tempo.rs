@@ -15,6 +15,7 @@ use super::as_served;
 use super::songs::{whole_song, Song};
 use super::{EvalError, EvalOptions};
 use crate::metrics::musicality::Musicality;
+use crate::metrics::reference::ReferenceStats;
 use crate::models::{DanceModel, GenerateRequest};
 
 /// The tempi every extra song is also danced at (`Default` of [`EvalOptions::tempi`]).
@@ -56,6 +57,62 @@ pub struct TempoRow {
     /// two metrical levels, and a network can step at one pace on both).
     #[serde(default)]
     pub per_dance: Vec<TempoDance>,
+    /// Issue 25 asks every line of "Done when" of the stretched songs too, not only the tempo
+    /// lock: the row's worst served dance by each ([`TempoDance::served_lines`]). Absent in eval
+    /// files written before they were measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub served_lines: Option<WorstLines>,
+}
+
+/// The served lines of one stretched dance (as a user downloads it), or the worst of a row's.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct ServedLines {
+    /// Elbows and wrists against the spine (m/s; issue 25: ≥ 0.43 in every dance).
+    pub arms_m_s: f64,
+    /// Share of knee-frames bent backwards (issue 25: ≤ 6 %).
+    pub knee_backward_share: f64,
+    /// The longest span held in one pose (s; [`crate::motion::hold`]).
+    pub longest_hold_s: f64,
+    /// Issue 10's plausibility verdict, and the criteria it fails.
+    pub verdict_pass: bool,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub verdict_failed: Vec<String>,
+}
+
+/// A row's worst stretched dances, each line on its own (they need not be one dance).
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct WorstLines {
+    /// Dances measured.
+    pub dances: usize,
+    pub arms_min_m_s: f64,
+    pub knee_backward_max: f64,
+    pub longest_hold_max_s: f64,
+    /// Dances whose verdict passes.
+    pub verdict_passed: usize,
+}
+
+impl WorstLines {
+    /// The worst of `lines` by each line; `None` without any.
+    fn of<'a>(lines: impl IntoIterator<Item = &'a ServedLines>) -> Option<Self> {
+        lines.into_iter().fold(None, |worst, l| {
+            Some(match worst {
+                None => Self {
+                    dances: 1,
+                    arms_min_m_s: l.arms_m_s,
+                    knee_backward_max: l.knee_backward_share,
+                    longest_hold_max_s: l.longest_hold_s,
+                    verdict_passed: usize::from(l.verdict_pass),
+                },
+                Some(w) => Self {
+                    dances: w.dances + 1,
+                    arms_min_m_s: w.arms_min_m_s.min(l.arms_m_s),
+                    knee_backward_max: w.knee_backward_max.max(l.knee_backward_share),
+                    longest_hold_max_s: w.longest_hold_max_s.max(l.longest_hold_s),
+                    verdict_passed: w.verdict_passed + usize::from(l.verdict_pass),
+                },
+            })
+        })
+    }
 }
 
 /// One stretched dance of a [`TempoRow`].
@@ -69,6 +126,32 @@ pub struct TempoDance {
     pub served: Option<crate::metrics::musicality::TempoLock>,
     /// The network's own motion.
     pub own: Option<crate::metrics::musicality::TempoLock>,
+    /// The other lines of "Done when" as served (absent in files written before they were
+    /// measured).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub served_lines: Option<ServedLines>,
+}
+
+impl ServedLines {
+    /// The lines of `motion` (a dance as downloaded), its musicality `served` measured already;
+    /// `reference` gives the verdict's speed floor, as in every row.
+    fn of(served: &Musicality, motion: &crate::motion::Motion, reference: &ReferenceStats) -> Self {
+        let physical = crate::metrics::physical::physical_series(motion, &[])
+            .scores(reference.physical.pooled.mean_speed_m_s);
+        let verdict = crate::metrics::physical::verdict(&physical, &[], None);
+        Self {
+            arms_m_s: served.arm_speed_m_s,
+            knee_backward_share: served.knee_backward_share,
+            longest_hold_s: served.longest_hold_s,
+            verdict_pass: verdict.pass,
+            verdict_failed: verdict
+                .criteria
+                .iter()
+                .filter(|c| c.pass == Some(false))
+                .map(|c| c.name.clone())
+                .collect(),
+        }
+    }
 }
 
 /// `song` (called `name` in the eval) at `factor` × its tempo (pitch kept), written by sox into
@@ -129,13 +212,15 @@ fn stretched(song: &Path, name: &str, factor: f64, dir: &Path) -> Result<Song, E
 }
 
 /// Every song of `paths` (called `names`) at every factor of `args.tempi`, danced by `model`
-/// with the eval's seeds, as served and as the network made it.
+/// with the eval's seeds, as served and as the network made it; `reference` gives the verdict's
+/// speed floor.
 pub(super) fn tempo_row(
     model: &dyn DanceModel,
     id: &str,
     paths: &[std::path::PathBuf],
     names: &[String],
     args: &EvalOptions,
+    reference: &ReferenceStats,
 ) -> Result<TempoRow, EvalError> {
     let dir = tempfile::tempdir().map_err(|source| EvalError::Io {
         path: std::env::temp_dir(),
@@ -172,7 +257,9 @@ pub(super) fn tempo_row(
                         song: song.name.clone(),
                         source,
                     })?;
-                let lock = Musicality::of(&served, &song.beats).tempo_lock;
+                let as_served = Musicality::of(&served, &song.beats);
+                let lock = as_served.tempo_lock;
+                let lines = ServedLines::of(&as_served, &served, reference);
                 // The same contact sheet as the whole songs': how the stepping changes with the
                 // tempo is what the issue asks to be looked at.
                 if let Some(dir) = &args.previews {
@@ -192,6 +279,7 @@ pub(super) fn tempo_row(
                     seed,
                     served: lock,
                     own,
+                    served_lines: Some(lines),
                 });
             }
             steps.push(per_seed);
@@ -236,13 +324,14 @@ pub(super) fn tempo_row(
         step_rate_ratios_raw: ratios_raw,
         followed_ratio: followed,
         beat_time_bpm: model.info().beat_time.map(|b| b.bpm),
+        served_lines: WorstLines::of(per_dance.iter().filter_map(|d| d.served_lines.as_ref())),
         per_dance,
     })
 }
 
 /// The section's Markdown table: served (beat-aligned) and the network's own, side by side.
 pub fn markdown(rows: &[TempoRow]) -> String {
-    let mut out = String::from("| Model | network's clock | tempi | n | tempo-locked ↑ served | network's own | step-rate ratio fast/slow (median) served | network's own | a dancer who follows |\n|---|---|---|---|---|---|---|---|---|\n");
+    let mut out = String::from("| Model | network's clock | tempi | n | tempo-locked ↑ served | network's own | step-rate ratio fast/slow (median) served | network's own | a dancer who follows | arms min (m/s) ↑ | knees backwards max ↓ | longest hold (s) ↓ | verdict passed |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     let share = |locked: usize, measured: usize| {
         if measured == 0 {
             "–".into()
@@ -255,8 +344,21 @@ pub fn markdown(rows: &[TempoRow]) -> String {
     };
     for r in rows {
         let tempi: Vec<String> = r.tempi.iter().map(|t| format!("{t}×")).collect();
+        let lines = r.served_lines.as_ref().map_or_else(
+            || "– | – | – | –".to_string(),
+            |w| {
+                format!(
+                    "{:.2} | {:.1} % | {:.1} | {}/{}",
+                    w.arms_min_m_s,
+                    100.0 * w.knee_backward_max,
+                    w.longest_hold_max_s,
+                    w.verdict_passed,
+                    w.dances
+                )
+            },
+        );
         out += &format!(
-            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} |\n",
+            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {lines} |\n",
             r.model,
             r.beat_time_bpm
                 .map_or("seconds".into(), |b| format!("beats at {b:.0} BPM")),
