@@ -323,10 +323,10 @@ impl Served {
                 });
                 // A clip whose opening (the song's first 20 s, or all of a shorter song) holds
                 // one pose for OPENING_HOLD_FRAMES (within the reach, or under
-                // OPENING_SLOW_M_S), or holds its arms (OPENING_MIN_ARMS_M_S), is passed over
-                // for the next candidate ([`Self::opening_clips`]). When every candidate's
-                // opening holds, the first that does not freeze (FREEZE_FRAMES) is kept, else
-                // the last. Each opening is drawn REACH_STRIDE frames at a time and stops at the
+                // OPENING_SLOW_M_S), holds its arms (OPENING_MIN_ARMS_M_S) or bends its knees
+                // backwards (OPENING_MAX_KNEE_BACKWARD) is passed over for the next candidate
+                // ([`Self::opening_clips`]). When every candidate's opening is passed over, the
+                // first that does not freeze (FREEZE_FRAMES) is kept, else the last. Each opening is drawn REACH_STRIDE frames at a time and stops at the
                 // first hold the reach sees; the one kept goes on from where it stopped, so the
                 // song is drawn as one run would draw it.
                 let mut opened_draws: Vec<Draw> = Vec::new();
@@ -348,7 +348,11 @@ impl Served {
                             held = holds(&d, OPENING_HOLD_FRAMES);
                         }
                         // The poses are rebuilt for the measures only where the reach passed.
-                        let lively = !held && !reader.opening_measures(&d.tokens())?.still();
+                        let lively = !held && {
+                            let m = reader.opening_measures(&d.tokens())?;
+                            tracing::debug!(?m, "tsmt: opening measured");
+                            !m.passed_over()
+                        };
                         opened_draws.push(d);
                         if lively {
                             passed = Some(opened_draws.len() - 1);
@@ -372,6 +376,7 @@ impl Served {
                         }
                     };
                 }
+                tracing::debug!(kept, tried = opened_draws.len(), "tsmt: opening check");
                 let mut song = if opened_draws.is_empty() {
                     whole(&contexts[kept])
                 } else {
@@ -401,6 +406,7 @@ impl Served {
                     // The opening check has seen the first `checked` frames already.
                     let mut after = checked;
                     let turns = contexts.len() - 1;
+                    tracing::debug!(turns, candidates = contexts.len(), "tsmt: mid-song check");
                     for c in contexts.iter().cycle().skip(kept + 1).take(turns) {
                         let frozen =
                             frozen_from(&tokens, guard.0.window_frames, guard.1, reach, after);
