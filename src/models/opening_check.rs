@@ -134,7 +134,7 @@ pub struct OpeningChosen {
 }
 
 /// The `k`-th draw a job's seed may dance from: the seed itself first.
-fn draw_seed(seed: u64, k: usize) -> u64 {
+pub fn draw_seed(seed: u64, k: usize) -> u64 {
     seed.wrapping_add((k as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15))
 }
 
