@@ -520,6 +520,58 @@ fn keypose_transformer_turns_its_waltz_and_its_arms_with_it() {
     assert!(arms >= 0.43, "arms {arms:.3} m/s against the spine");
 }
 
+/// keypose-transformer dances a short song by a draw that moves: on the whole trumpet loop at 1.2×
+/// (4.4 s), seed 2's own scaffold draw moved 0.40 m/s downloaded, under the verdict's 0.5, and
+/// the served dance is a later draw's (what report.json's `opening_check` says), at least
+/// `SHORT_SONG_MIN_SPEED_M_S` with its feet planted.
+#[test]
+fn keypose_transformer_dances_a_short_song_by_a_draw_that_moves() {
+    use choreo::models::keypose_transformer::served::SHORT_SONG_MIN_SPEED_M_S;
+    let m = model("keypose-transformer");
+    let song = stretched_song("trumpet_loop_90bpm.ogg", 6.0, 1.2);
+    let g = m
+        .generate(&GenerateRequest::plain(&song, 2), &mut Quiet)
+        .expect("dances");
+    let seen = g.opening.expect("a short song's draws are reported");
+    assert!(seen.kept >= 1 && seen.tried == seen.kept + 1, "{seen:?}");
+    let planted = choreo::motion::finish(g.motion, true);
+    let speed = mean_speed(&planted);
+    assert!(
+        speed >= SHORT_SONG_MIN_SPEED_M_S,
+        "seed 2: {speed:.3} m/s planted ({seen:?})"
+    );
+}
+
+/// TSMT passes over an opening whose knees bend backwards as served: on the whole trumpet loop at 1.2×
+/// (4.4 s, all of it the opening) seed 1's first candidate clip bent its right knee behind the
+/// hip–ankle line on 9.9 % of the knee-frames downloaded (issue 25's line: 6 %), over a foot
+/// pointed along the shin that the served knee step leaves alone.
+#[test]
+fn tsmt_passes_over_an_opening_that_bends_its_knees_backwards() {
+    let m = model("tsmt");
+    let song = stretched_song("trumpet_loop_90bpm.ogg", 6.0, 1.2);
+    let analysis = audio::analyze(&song).expect("analysis");
+    let mut req = GenerateRequest::plain(&song, 1);
+    req.analysis = Some(&analysis);
+    let motion = dance(m.as_ref(), &req);
+    let (finished, _) = choreo::motion::after_model(
+        motion,
+        &analysis.beat_times,
+        &[],
+        0,
+        MotionStages::default(),
+    );
+    let served = choreo::motion::serve(&finished, &[], true, 0)
+        .expect("served")
+        .motion;
+    let knees = choreo::metrics::musicality::knee_backward_share(served.positions.view());
+    assert!(
+        knees <= 0.06,
+        "seed 1: knees backwards on {:.1} %",
+        100.0 * knees
+    );
+}
+
 /// The `model.json` a training run wrote into `dir`.
 fn written_model_file(dir: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("model.json")).unwrap()).unwrap()
