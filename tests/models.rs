@@ -572,6 +572,32 @@ fn tsmt_passes_over_an_opening_that_bends_its_knees_backwards() {
     );
 }
 
+/// TSMT dances a song no longer than its opening window at the verdict's speed: on the whole
+/// trumpet loop at 1.2×, seed 5's first candidate clip moved 0.49 m/s downloaded (floor 0.5;
+/// `choreo eval tsmt --seed 3 --seeds 4`), and the opening check now passes over a short song's
+/// opening that moves slower than `SHORT_SONG_MIN_SPEED_M_S` with its feet planted.
+#[test]
+fn tsmt_dances_a_short_song_at_the_verdicts_speed() {
+    let m = model("tsmt");
+    let song = stretched_song("trumpet_loop_90bpm.ogg", 6.0, 1.2);
+    let analysis = audio::analyze(&song).expect("analysis");
+    let mut req = GenerateRequest::plain(&song, 5);
+    req.analysis = Some(&analysis);
+    let motion = dance(m.as_ref(), &req);
+    let (finished, _) = choreo::motion::after_model(
+        motion,
+        &analysis.beat_times,
+        &[],
+        0,
+        MotionStages::default(),
+    );
+    let served = choreo::motion::serve(&finished, &[], true, 0)
+        .expect("served")
+        .motion;
+    let speed = mean_speed(&served);
+    assert!(speed >= 0.5, "seed 5: {speed:.3} m/s downloaded");
+}
+
 /// The `model.json` a training run wrote into `dir`.
 fn written_model_file(dir: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(dir.join("model.json")).unwrap()).unwrap()

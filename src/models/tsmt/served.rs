@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::opening::{
     frozen_from, holds_from, PoseReader, FREEZE_FRAMES, OPENING_CHECK_FRAMES, OPENING_HOLD_FRAMES,
-    REACH_STRIDE,
+    REACH_STRIDE, SHORT_SONG_MIN_SPEED_M_S,
 };
 use super::sampling::Draw;
 use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
@@ -324,7 +324,8 @@ impl Served {
                 // A clip whose opening (the song's first 20 s, or all of a shorter song) holds
                 // one pose for OPENING_HOLD_FRAMES (within the reach, or under
                 // OPENING_SLOW_M_S), holds its arms (OPENING_MIN_ARMS_M_S) or bends its knees
-                // backwards (OPENING_MAX_KNEE_BACKWARD) is passed over for the next candidate
+                // backwards (OPENING_MAX_KNEE_BACKWARD), or on a song no longer than the window
+                // moves slower than SHORT_SONG_MIN_SPEED_M_S, is passed over for the next candidate
                 // ([`Self::opening_clips`]). When every candidate's opening is passed over, the
                 // first that does not freeze (FREEZE_FRAMES) is kept, else the last. Each opening is drawn REACH_STRIDE frames at a time and stops at the
                 // first hold the reach sees; the one kept goes on from where it stopped, so the
@@ -351,7 +352,10 @@ impl Served {
                         let lively = !held && {
                             let m = reader.opening_measures(&d.tokens())?;
                             tracing::debug!(?m, "tsmt: opening measured");
-                            !m.passed_over()
+                            // A song no longer than the window is all opening: its speed is the
+                            // verdict's.
+                            let whole = frames == n - opened;
+                            !m.passed_over() && !(whole && m.speed_m_s < SHORT_SONG_MIN_SPEED_M_S)
                         };
                         opened_draws.push(d);
                         if lively {
