@@ -259,6 +259,31 @@ fn stretched_song(name: &str, seconds: f64, factor: f64) -> DecodedAudio {
     audio::decode_path(&out).expect("the stretched song decodes")
 }
 
+/// Model `m`'s dance of `song` with `seed` as a user downloads it: beat-aligned on the song's
+/// analysed beats, feet planted and fitted to the export's rigid skeleton; and what the beat-align
+/// stage did, and the song's beats.
+fn downloaded(
+    m: &dyn DanceModel,
+    song: &DecodedAudio,
+    seed: u64,
+) -> (
+    Motion,
+    choreo::motion::beat_align::BeatAlignSummary,
+    Vec<f64>,
+) {
+    let analysis = audio::analyze(song).expect("analysis");
+    let mut req = GenerateRequest::plain(song, seed);
+    req.analysis = Some(&analysis);
+    let motion = dance(m, &req);
+    let beats = analysis.beat_times.clone();
+    let (finished, summary) =
+        choreo::motion::after_model(motion, &beats, &[], 0, MotionStages::default());
+    let served = choreo::motion::serve(&finished, &[], true, 0)
+        .expect("served")
+        .motion;
+    (served, summary.expect("the stage ran"), beats)
+}
+
 /// dance-revolution runs in beat time (`models::beat_time`): on one song played at 0.85× and at
 /// 1.1× (117 BPM → 99 and 129), the network's own motion (no beat-align stage here: this is the
 /// model alone) steps 1.1 / 0.85 = 1.29× as often on the faster copy. Before beat time its steps
@@ -306,19 +331,9 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
 fn dancenet_at_1_2x_is_served_on_the_beat_through_the_whole_chain() {
     let m = model("dancenet");
     let song = stretched_song("hungarian_dance_5.ogg", 60.0, 1.2);
-    let analysis = audio::analyze(&song).expect("analysis");
-    let mut req = GenerateRequest::plain(&song, 1);
-    req.analysis = Some(&analysis);
-    let motion = dance(m.as_ref(), &req);
-    let beats = &analysis.beat_times;
-    let (finished, summary) =
-        choreo::motion::after_model(motion, beats, &[], 0, MotionStages::default());
-    let served = choreo::motion::serve(&finished, &[], true, 0)
-        .expect("served")
-        .motion;
-    let lock = choreo::metrics::musicality::tempo_lock(served.positions.view(), served.fps, beats)
+    let (served, summary, beats) = downloaded(m.as_ref(), &song, 1);
+    let lock = choreo::metrics::musicality::tempo_lock(served.positions.view(), served.fps, &beats)
         .expect("a step rate");
-    let summary = summary.expect("the stage ran");
     assert!(lock.locked, "{lock:?} {summary:?}");
     assert!(summary.steps_on_beat, "{summary:?}");
 }
@@ -550,20 +565,7 @@ fn keypose_transformer_dances_a_short_song_by_a_draw_that_moves() {
 fn tsmt_passes_over_an_opening_that_bends_its_knees_backwards() {
     let m = model("tsmt");
     let song = stretched_song("trumpet_loop_90bpm.ogg", 6.0, 1.2);
-    let analysis = audio::analyze(&song).expect("analysis");
-    let mut req = GenerateRequest::plain(&song, 1);
-    req.analysis = Some(&analysis);
-    let motion = dance(m.as_ref(), &req);
-    let (finished, _) = choreo::motion::after_model(
-        motion,
-        &analysis.beat_times,
-        &[],
-        0,
-        MotionStages::default(),
-    );
-    let served = choreo::motion::serve(&finished, &[], true, 0)
-        .expect("served")
-        .motion;
+    let (served, _, _) = downloaded(m.as_ref(), &song, 1);
     let knees = choreo::metrics::musicality::knee_backward_share(served.positions.view());
     assert!(
         knees <= 0.06,
@@ -580,20 +582,7 @@ fn tsmt_passes_over_an_opening_that_bends_its_knees_backwards() {
 fn tsmt_dances_a_short_song_at_the_verdicts_speed() {
     let m = model("tsmt");
     let song = stretched_song("trumpet_loop_90bpm.ogg", 6.0, 1.2);
-    let analysis = audio::analyze(&song).expect("analysis");
-    let mut req = GenerateRequest::plain(&song, 5);
-    req.analysis = Some(&analysis);
-    let motion = dance(m.as_ref(), &req);
-    let (finished, _) = choreo::motion::after_model(
-        motion,
-        &analysis.beat_times,
-        &[],
-        0,
-        MotionStages::default(),
-    );
-    let served = choreo::motion::serve(&finished, &[], true, 0)
-        .expect("served")
-        .motion;
+    let (served, _, _) = downloaded(m.as_ref(), &song, 5);
     let speed = mean_speed(&served);
     assert!(speed >= 0.5, "seed 5: {speed:.3} m/s downloaded");
 }
