@@ -765,6 +765,28 @@ mod real_data {
         };
         assert_eq!(count(false), (t.measured, t.tempo_locked));
         assert_eq!(count(true), (t.measured_raw, t.tempo_locked_raw));
+        // How the analysis heard the song at each tempo, and the ratios of step rates again over
+        // the songs it heard at one metrical level (a sub-list of all of them).
+        assert_eq!(t.heard.len(), 1, "{:?}", t.heard);
+        let heard = &t.heard[0];
+        assert_eq!((heard.song.as_str(), heard.beat_hz.len()), (song, 2));
+        let ratio = heard.beat_rate_ratio.expect("both copies have beats");
+        assert_eq!(
+            heard.one_level,
+            (ratio / t.followed_ratio - 1.0).abs() <= choreo::eval::tempo::ONE_LEVEL_TOLERANCE,
+            "{heard:?}"
+        );
+        let (served_one, own_one) = if heard.one_level {
+            (t.step_rate_ratios.clone(), t.step_rate_ratios_raw.clone())
+        } else {
+            (Vec::new(), Vec::new())
+        };
+        assert_eq!(t.step_rate_ratios_one_level, served_one);
+        assert_eq!(t.step_rate_ratios_one_level_raw, own_one);
+        assert_eq!(
+            t.step_rate_ratio_median_one_level.is_some(),
+            !t.step_rate_ratios_one_level.is_empty()
+        );
         // Every stretched dance is measured by the other served lines too, and the row's are its
         // dances' worst.
         let lines: Vec<_> = t

@@ -8,6 +8,15 @@
 //! ([`crate::metrics::musicality`]), and, per song and seed, the ratio of the step rates at the
 //! fastest and the slowest tempo, which is `fast / slow` (1.41 for 1.2 / 0.85) for a dancer who
 //! follows the tempo and 1 for a metronome.
+//!
+//! That holds only where the song's analysis hears both copies at one metrical level. Its tempo
+//! is librosa's (a prior centred on 120 BPM, one octave wide), and at 0.85× and 1.2× it counts
+//! about half of the songs measured so far at another level at one tempo than at the other
+//! (lets_go_fishin: 152 BPM at 0.85×, 108 at 1.2×; librosa 0.11 itself gives the same), so a
+//! dance that keeps its fraction of the beat it is given steps *slower* on the faster copy. The
+//! row therefore names how each song was heard ([`HeardTempo`]) and gives the ratio of step
+//! rates again over the songs heard at one level only, where 1.41 is a follower's and 1 a
+//! metronome's without that confusion.
 use std::path::Path;
 use std::process::Command;
 
@@ -62,6 +71,56 @@ pub struct TempoRow {
     /// files written before they were measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub served_lines: Option<WorstLines>,
+    /// How the analysis heard each song at the row's tempi (absent in files written before).
+    #[serde(default)]
+    pub heard: Vec<HeardTempo>,
+    /// `step_rate_ratios` (served) and `step_rate_ratios_raw` (the network's own) of the songs
+    /// heard at one metrical level only ([`HeardTempo::one_level`]), and their medians (none
+    /// without such a song).
+    #[serde(default)]
+    pub step_rate_ratios_one_level: Vec<f64>,
+    #[serde(default)]
+    pub step_rate_ratios_one_level_raw: Vec<f64>,
+    #[serde(default)]
+    pub step_rate_ratio_median_one_level: Option<f64>,
+    #[serde(default)]
+    pub step_rate_ratio_median_one_level_raw: Option<f64>,
+}
+
+/// How far (relative) the analysis' ratio of beat rates may lie from the ratio of the tempi for
+/// a song to count as heard at one metrical level. Another level is at least a factor 1.5 away
+/// (2 for double time, 1.5 between twos and threes), and the tracker's rates of one level agree
+/// within 3 % on the songs measured (hungarian_dance_5 1.38 for 1.41).
+pub const ONE_LEVEL_TOLERANCE: f64 = 0.1;
+
+/// One song of a [`TempoRow`] as the song's analysis heard it at each tempo.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
+pub struct HeardTempo {
+    pub song: String,
+    /// The beat rate (Hz, [`crate::metrics::musicality::beat_rate_hz`]) at each of the row's
+    /// `tempi`; none with under the tempo lock's beats.
+    pub beat_hz: Vec<Option<f64>>,
+    /// The fastest tempo's beat rate over the slowest's.
+    pub beat_rate_ratio: Option<f64>,
+    /// `beat_rate_ratio` within [`ONE_LEVEL_TOLERANCE`] of the ratio of the tempi: both copies
+    /// heard at one metrical level, where following the beat is following the tempo.
+    pub one_level: bool,
+}
+
+impl HeardTempo {
+    fn of(song: &str, beat_hz: Vec<Option<f64>>, followed: f64) -> Self {
+        let beat_rate_ratio = match (beat_hz.first(), beat_hz.last()) {
+            (Some(Some(slow)), Some(Some(fast))) if beat_hz.len() >= 2 => Some(fast / slow),
+            _ => None,
+        };
+        Self {
+            song: song.into(),
+            one_level: beat_rate_ratio
+                .is_some_and(|r| (r / followed - 1.0).abs() <= ONE_LEVEL_TOLERANCE),
+            beat_hz,
+            beat_rate_ratio,
+        }
+    }
 }
 
 /// The served lines of one stretched dance (as a user downloads it), or the worst of a row's.
@@ -229,14 +288,25 @@ pub(super) fn tempo_row(
     let mut tempi = args.tempi.clone();
     tempi.sort_by(f64::total_cmp);
     // [served, the network's own] for each count.
+    let followed = match (tempi.first(), tempi.last()) {
+        (Some(a), Some(b)) if tempi.len() >= 2 => b / a,
+        _ => f64::NAN,
+    };
     let (mut dances, mut measured, mut locked, mut ratios) =
         (0, [0; 2], [0; 2], [Vec::new(), Vec::new()]);
-    let mut per_dance = Vec::new();
+    // [served, the network's own] of the songs heard at one metrical level
+    let mut one_level = [Vec::new(), Vec::new()];
+    let (mut per_dance, mut heard) = (Vec::new(), Vec::new());
     for (path, name) in paths.iter().zip(names) {
         // step rate per (tempo, seed), served and the network's own
         let mut steps: Vec<Vec<[Option<f64>; 2]>> = Vec::new();
+        let mut beat_hz = Vec::new();
         for &factor in &tempi {
             let song = stretched(path, name, factor, dir.path())?;
+            beat_hz.push(crate::metrics::musicality::beat_rate_hz(
+                &song.beats,
+                song.audio.duration_s,
+            ));
             let mut per_seed = Vec::new();
             for seed in args.seed..args.seed + args.seeds.max(1) {
                 let raw = model
@@ -284,17 +354,23 @@ pub(super) fn tempo_row(
             }
             steps.push(per_seed);
         }
+        let song = HeardTempo::of(name, beat_hz, followed);
         if let (Some(slow), Some(fast)) = (steps.first(), steps.last()) {
             if tempi.len() >= 2 {
-                for (n, r) in ratios.iter_mut().enumerate() {
-                    r.extend(
-                        slow.iter()
-                            .zip(fast)
-                            .filter_map(|(s, f)| Some(f[n].as_ref()? / s[n].as_ref()?)),
-                    );
+                for n in 0..2 {
+                    let pairs: Vec<f64> = slow
+                        .iter()
+                        .zip(fast)
+                        .filter_map(|(s, f)| Some(f[n].as_ref()? / s[n].as_ref()?))
+                        .collect();
+                    if song.one_level {
+                        one_level[n].extend(&pairs);
+                    }
+                    ratios[n].extend(pairs);
                 }
             }
         }
+        heard.push(song);
     }
     let median = |r: &[f64]| {
         let mut sorted = r.to_vec();
@@ -306,10 +382,8 @@ pub(super) fn tempo_row(
         }
     };
     let [ratios, ratios_raw] = ratios;
-    let followed = match (tempi.first(), tempi.last()) {
-        (Some(a), Some(b)) if tempi.len() >= 2 => b / a,
-        _ => f64::NAN,
-    };
+    let [one_level, one_level_raw] = one_level;
+    let median_of = |r: &[f64]| (!r.is_empty()).then(|| median(r));
     Ok(TempoRow {
         model: id.into(),
         tempi,
@@ -326,12 +400,17 @@ pub(super) fn tempo_row(
         beat_time_bpm: model.info().beat_time.map(|b| b.bpm),
         served_lines: WorstLines::of(per_dance.iter().filter_map(|d| d.served_lines.as_ref())),
         per_dance,
+        heard,
+        step_rate_ratio_median_one_level: median_of(&one_level),
+        step_rate_ratio_median_one_level_raw: median_of(&one_level_raw),
+        step_rate_ratios_one_level: one_level,
+        step_rate_ratios_one_level_raw: one_level_raw,
     })
 }
 
 /// The section's Markdown table: served (beat-aligned) and the network's own, side by side.
 pub fn markdown(rows: &[TempoRow]) -> String {
-    let mut out = String::from("| Model | network's clock | tempi | n | tempo-locked ↑ served | network's own | step-rate ratio fast/slow (median) served | network's own | a dancer who follows | arms min (m/s) ↑ | knees backwards max ↓ | longest hold (s) ↓ | verdict passed |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let mut out = String::from("| Model | network's clock | tempi | n | tempo-locked ↑ served | network's own | step-rate ratio fast/slow (median) served | network's own | a dancer who follows | songs heard at one level | their step-rate ratio, served | network's own | arms min (m/s) ↑ | knees backwards max ↓ | longest hold (s) ↓ | verdict passed |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     let share = |locked: usize, measured: usize| {
         if measured == 0 {
             "–".into()
@@ -357,8 +436,10 @@ pub fn markdown(rows: &[TempoRow]) -> String {
                 )
             },
         );
+        let one_level = r.heard.iter().filter(|h| h.one_level).count();
+        let ratio = |m: Option<f64>| m.map_or("–".into(), |m| format!("{m:.2}"));
         out += &format!(
-            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {lines} |\n",
+            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {one_level}/{} | {} | {} | {lines} |\n",
             r.model,
             r.beat_time_bpm
                 .map_or("seconds".into(), |b| format!("beats at {b:.0} BPM")),
@@ -368,7 +449,10 @@ pub fn markdown(rows: &[TempoRow]) -> String {
             share(r.tempo_locked_raw, r.measured_raw),
             r.step_rate_ratio_median,
             r.step_rate_ratio_median_raw,
-            r.followed_ratio
+            r.followed_ratio,
+            r.heard.len(),
+            ratio(r.step_rate_ratio_median_one_level),
+            ratio(r.step_rate_ratio_median_one_level_raw),
         );
     }
     out
@@ -377,6 +461,21 @@ pub fn markdown(rows: &[TempoRow]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A song heard in double time at one tempo only (lets_go_fishin: 152 BPM at 0.85×, 108 at
+    /// 1.2×) is not at one level; one heard 1.38× faster at 1.2×/0.85× is.
+    #[test]
+    fn a_song_heard_at_another_metrical_level_is_named() {
+        let followed = 1.2 / 0.85;
+        let hz = |bpm: f64| Some(bpm / 60.0);
+        let flipped = HeardTempo::of("fishin", vec![hz(152.0), hz(107.7)], followed);
+        assert!(!flipped.one_level, "{flipped:?}");
+        assert!((flipped.beat_rate_ratio.unwrap() - 107.7 / 152.0).abs() < 1e-12);
+        let heard = HeardTempo::of("hungarian", vec![hz(125.0), hz(172.3)], followed);
+        assert!(heard.one_level, "{heard:?}");
+        let short = HeardTempo::of("loop", vec![None, hz(120.0)], followed);
+        assert!(!short.one_level && short.beat_rate_ratio.is_none());
+    }
 
     /// Debian's sox cannot read an mp3: the eval decodes it itself and hands sox the samples.
     #[test]
