@@ -2,7 +2,9 @@
 //! (dance-revolution's `h_0`, DanceNet's sampling stream and context clip) sets the dance's
 //! character for the whole song, the draw first dances the song's opening, and one that shuffles
 //! or flails is passed over for the next draw derived from the job's seed. Each model's serving
-//! decides what a draw is; this module holds the rule and the measure.
+//! decides what a draw is; this module holds the rule and the measure. The draw rule itself
+//! ([`first_inside`]) also chooses keypose-transformer's draw of a short song, by its own measure
+//! (`keypose_transformer::served::SHORT_SONG_FRAMES`).
 use serde::{Deserialize, Serialize};
 
 use crate::models::beat_time::BeatTime;
@@ -32,8 +34,7 @@ impl OpeningCheck {
         let settled = opening
             .positions
             .slice(ndarray::s![opening.num_frames() / 2.., .., ..]);
-        let speeds = crate::motion::skeleton::mean_speed(settled, opening.fps);
-        let speed = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64;
+        let speed = crate::motion::skeleton::average_speed(settled, opening.fps);
         let arms = crate::metrics::musicality::arm_speed_m_s(settled, opening.fps);
         (speed, arms)
     }
@@ -75,46 +76,89 @@ impl OpeningCheck {
         window: &BeatTime,
         mut opening: impl FnMut(u64) -> Result<Option<Motion>, E>,
     ) -> Result<Option<(u64, OpeningChosen)>, E> {
-        let mut best: Option<(f64, u64, OpeningChosen)> = None;
-        for k in 0..self.draws.max(1) {
-            let s = draw_seed(seed, k);
-            let Some(motion) = opening(s)? else {
-                return Ok(None);
-            };
-            let (speed, arms) = Self::measure(&window.back(motion));
-            let miss = self.miss_of(speed, arms);
-            if best.as_ref().is_none_or(|b| miss < b.0) {
-                best = Some((
-                    miss,
-                    s,
-                    OpeningChosen {
-                        tried: 0,
-                        kept: k,
-                        speed_m_s: speed,
-                        arms_m_s: arms,
-                        inside: miss == 0.0,
-                    },
-                ));
-            }
-            if let Some(b) = best.as_mut() {
-                b.2.tried = k + 1;
-            }
-            if miss == 0.0 {
-                break;
-            }
-        }
-        Ok(best.map(|(miss, s, chosen)| {
+        let measured = first_inside(
+            seed,
+            self.draws,
+            |s| {
+                Ok(opening(s)?.map(|motion| {
+                    let (speed, arms) = Self::measure(&window.back(motion));
+                    (speed, arms, self.miss_of(speed, arms))
+                }))
+            },
+            |m| m.2,
+        )?;
+        Ok(measured.map(|d| {
+            let (speed_m_s, arms_m_s, miss) = d.kept;
             tracing::info!(
                 model,
                 seed,
-                tried = chosen.tried,
-                kept = chosen.kept,
+                tried = d.tried,
+                kept = d.index,
                 miss,
                 "opening check"
             );
-            (s, chosen)
+            (
+                d.seed,
+                OpeningChosen {
+                    tried: d.tried,
+                    kept: d.index,
+                    speed_m_s,
+                    arms_m_s,
+                    inside: miss == 0.0,
+                },
+            )
         }))
     }
+}
+
+/// The draw a [`first_inside`] search keeps.
+pub struct Drawn<T> {
+    /// Its seed ([`draw_seed`]) and index (0: the job's seed itself).
+    pub seed: u64,
+    pub index: usize,
+    /// Draws made, this one among them.
+    pub tried: usize,
+    pub kept: T,
+}
+
+/// The draw rule every served check shares: up to `draws` draws of `seed` ([`draw_seed`], the
+/// seed's own first) are made by `draw` and judged by `miss` (0 inside the check's limits, more
+/// the farther outside), stopping at the first inside; the kept draw is that one, else the one
+/// that missed least (the first of equals). `None` where `draw` is stopped (the job was
+/// cancelled). Used by [`OpeningCheck::choose`] and keypose-transformer's short songs, which
+/// judge a draw by different measures.
+pub fn first_inside<T, E>(
+    seed: u64,
+    draws: usize,
+    mut draw: impl FnMut(u64) -> Result<Option<T>, E>,
+    miss: impl Fn(&T) -> f64,
+) -> Result<Option<Drawn<T>>, E> {
+    let mut best: Option<(f64, Drawn<T>)> = None;
+    for k in 0..draws.max(1) {
+        let s = draw_seed(seed, k);
+        let Some(made) = draw(s)? else {
+            return Ok(None);
+        };
+        let m = miss(&made);
+        if best.as_ref().is_none_or(|b| m < b.0) {
+            best = Some((
+                m,
+                Drawn {
+                    seed: s,
+                    index: k,
+                    tried: 0,
+                    kept: made,
+                },
+            ));
+        }
+        if let Some(b) = best.as_mut() {
+            b.1.tried = k + 1;
+        }
+        if m == 0.0 {
+            break;
+        }
+    }
+    Ok(best.map(|(_, d)| d))
 }
 
 /// What a model's opening check did for one job ([`OpeningCheck::choose`]), in report.json.
@@ -157,6 +201,39 @@ mod tests {
         assert!(CHECK.miss_of(0.4, 0.7) > CHECK.miss_of(0.5, 0.7));
         assert_eq!(draw_seed(7, 0), 7);
         assert_ne!(draw_seed(7, 1), draw_seed(8, 1));
+    }
+
+    /// The shared draw rule: it stops at the first draw inside, else keeps the first of the
+    /// nearest, and stops with the job.
+    #[test]
+    fn draws_stop_at_the_first_inside_else_the_nearest_is_kept() {
+        let misses = |m: Vec<f64>| {
+            move |s: u64| -> Result<Option<(u64, f64)>, ()> {
+                let k = (0..6)
+                    .position(|k| draw_seed(7, k) == s)
+                    .expect("a draw of seed 7");
+                Ok(Some((s, m[k])))
+            }
+        };
+        let d = first_inside(7, 6, misses(vec![0.3, 0.0, 0.0, 0.0, 0.0, 0.0]), |m| m.1)
+            .unwrap()
+            .unwrap();
+        assert_eq!((d.index, d.tried, d.seed), (1, 2, draw_seed(7, 1)));
+        let d = first_inside(7, 6, misses(vec![0.3, 0.1, 0.2, 0.1, 0.4, 0.5]), |m| m.1)
+            .unwrap()
+            .unwrap();
+        assert_eq!((d.index, d.tried, d.kept.1), (1, 6, 0.1));
+        let mut made = 0;
+        let stopped = first_inside(
+            7,
+            6,
+            |_| -> Result<Option<()>, ()> {
+                made += 1;
+                Ok((made < 3).then_some(()))
+            },
+            |_| 1.0,
+        );
+        assert!(matches!(stopped, Ok(None)) && made == 3);
     }
 
     #[test]

@@ -177,6 +177,13 @@ pub fn mean_speed(positions: ndarray::ArrayView3<'_, f32>, fps: f64) -> Vec<f64>
         .collect()
 }
 
+/// The mean over frames of [`mean_speed`] (m/s; 0 under two frames): how fast a dance moves,
+/// as the served checks read it.
+pub fn average_speed(positions: ndarray::ArrayView3<'_, f32>, fps: f64) -> f64 {
+    let speeds = mean_speed(positions, fps);
+    speeds.iter().sum::<f64>() / speeds.len().max(1) as f64
+}
+
 /// The body centre of every frame of `[T, J, 3]` positions, `[T, 3]`.
 pub fn body_centre_track(positions: ndarray::ArrayView3<'_, f32>) -> ndarray::Array2<f32> {
     let mut out = ndarray::Array2::zeros((positions.shape()[0], 3));

@@ -360,23 +360,26 @@ impl DanceModel for Served {
         }
         // A short song: its dance is one or two scaffold clips, and how fast it moves is theirs
         // and the network's (module doc of `SHORT_SONG_FRAMES`).
-        let mut best: Option<(f64, usize, crate::motion::Motion)> = None;
-        let mut tried = 0;
-        for k in 0..SHORT_SONG_DRAWS {
-            let motion = dance(crate::models::opening_check::draw_seed(req.seed, k))?;
-            let planted = crate::motion::finish(motion.clone(), true);
-            let speeds = crate::motion::skeleton::mean_speed(planted.positions.view(), fps);
-            let speed = speeds.iter().sum::<f64>() / speeds.len().max(1) as f64;
-            tried = k + 1;
-            tracing::debug!(draw = k, speed, "keypose-transformer: a short song's draw");
-            if best.as_ref().is_none_or(|b| speed > b.0) {
-                best = Some((speed, k, motion));
-            }
-            if speed >= SHORT_SONG_MIN_SPEED_M_S {
-                break;
-            }
-        }
-        let Some((speed, kept, motion)) = best else {
+        let drawn = crate::models::opening_check::first_inside(
+            req.seed,
+            SHORT_SONG_DRAWS,
+            |s| -> Result<_, ModelError> {
+                let motion = dance(s)?;
+                let planted = crate::motion::finish(motion.clone(), true);
+                let speed = crate::motion::skeleton::average_speed(planted.positions.view(), fps);
+                tracing::debug!(seed = s, speed, "keypose-transformer: a short song's draw");
+                Ok(Some((speed, motion)))
+            },
+            // Below the floor, the slower the farther; at or above it, inside.
+            |(speed, _)| (SHORT_SONG_MIN_SPEED_M_S / speed.max(1e-6)).ln().max(0.0),
+        )?;
+        let Some(crate::models::opening_check::Drawn {
+            tried,
+            index: kept,
+            kept: (speed, motion),
+            ..
+        }) = drawn
+        else {
             return Err(Cancelled.into());
         };
         tracing::debug!(tried, kept, speed, "keypose-transformer: short-song draws");

@@ -102,9 +102,8 @@ impl PoseReader<'_> {
         let p = motion.positions.view();
         let speed = crate::motion::skeleton::mean_speed(p, fps);
         let finished = crate::motion::finish(motion.clone(), true);
-        let speeds = crate::motion::skeleton::mean_speed(finished.positions.view(), fps);
         Ok(OpeningMeasures {
-            speed_m_s: speeds.iter().sum::<f64>() / speeds.len().max(1) as f64,
+            speed_m_s: crate::motion::skeleton::average_speed(finished.positions.view(), fps),
             arms_m_s: crate::metrics::musicality::arm_speed_m_s(p, fps),
             slow_s: longest_slow_s(&speed, fps, OPENING_SLOW_M_S),
             knee_backward_share: crate::metrics::musicality::knee_backward_share(

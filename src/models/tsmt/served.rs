@@ -327,9 +327,10 @@ impl Served {
                 // backwards (OPENING_MAX_KNEE_BACKWARD), or on a song no longer than the window
                 // moves slower than SHORT_SONG_MIN_SPEED_M_S, is passed over for the next candidate
                 // ([`Self::opening_clips`]). When every candidate's opening is passed over, the
-                // first that does not freeze (FREEZE_FRAMES) is kept, else the last. Each opening is drawn REACH_STRIDE frames at a time and stops at the
-                // first hold the reach sees; the one kept goes on from where it stopped, so the
-                // song is drawn as one run would draw it.
+                // first that does not freeze (FREEZE_FRAMES) is kept, else the last. Each
+                // opening is drawn REACH_STRIDE frames at a time and stops at the first hold the
+                // reach sees; the one kept goes on from where it stopped, so the song is drawn as
+                // one run would draw it.
                 let mut opened_draws: Vec<Draw> = Vec::new();
                 let mut kept = 0;
                 if let (Some((reach, frames)), Some(guard)) = (check, guard) {
@@ -355,7 +356,7 @@ impl Served {
                             // A song no longer than the window is all opening: its speed is the
                             // verdict's.
                             let whole = frames == n - opened;
-                            !m.passed_over() && !(whole && m.speed_m_s < SHORT_SONG_MIN_SPEED_M_S)
+                            !(m.passed_over() || (whole && m.speed_m_s < SHORT_SONG_MIN_SPEED_M_S))
                         };
                         opened_draws.push(d);
                         if lively {
