@@ -538,10 +538,14 @@ fn keypose_transformer_turns_its_waltz_and_its_arms_with_it() {
 /// keypose-transformer dances a short song by a draw that moves: on the whole trumpet loop at 1.2×
 /// (4.4 s), seed 2's own scaffold draw moved 0.40 m/s downloaded, under the verdict's 0.5, and
 /// the served dance is a later draw's (what report.json's `opening_check` says), at least
-/// `SHORT_SONG_MIN_SPEED_M_S` with its feet planted.
+/// `SHORT_SONG_MIN_SPEED_M_S` with its feet planted. The first later draw moved 1.50 m/s and then
+/// stood for its last 2.2 s at 0.25 (downloaded): each half must now move too, and the download's
+/// halves both move at least 0.4 m/s.
 #[test]
 fn keypose_transformer_dances_a_short_song_by_a_draw_that_moves() {
-    use choreo::models::keypose_transformer::served::SHORT_SONG_MIN_SPEED_M_S;
+    use choreo::models::keypose_transformer::served::{
+        SHORT_SONG_MIN_HALF_SPEED_M_S, SHORT_SONG_MIN_SPEED_M_S,
+    };
     let m = model("keypose-transformer");
     let song = stretched_song("trumpet_loop_90bpm.ogg", 6.0, 1.2);
     let g = m
@@ -555,6 +559,22 @@ fn keypose_transformer_dances_a_short_song_by_a_draw_that_moves() {
         speed >= SHORT_SONG_MIN_SPEED_M_S,
         "seed 2: {speed:.3} m/s planted ({seen:?})"
     );
+    let (served, _, _) = downloaded(m.as_ref(), &song, 2);
+    let half = served.num_frames() / 2;
+    for (name, range) in [("first", 0..half), ("second", half..served.num_frames())] {
+        let part = Motion {
+            fps: served.fps,
+            positions: served
+                .positions
+                .slice(ndarray::s![range, .., ..])
+                .to_owned(),
+        };
+        let v = mean_speed(&part);
+        assert!(
+            v >= SHORT_SONG_MIN_HALF_SPEED_M_S,
+            "seed 2: the {name} half moves {v:.3} m/s downloaded ({seen:?})"
+        );
+    }
 }
 
 /// TSMT passes over an opening whose knees bend backwards as served: on the whole trumpet loop at 1.2×

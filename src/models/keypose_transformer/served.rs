@@ -5,7 +5,7 @@
 //! exact pass through the user's key poses ([`super::keys`]).
 use std::path::Path;
 
-use ndarray::Array2;
+use ndarray::{s, Array2};
 use serde::{Deserialize, Serialize};
 use tch::Tensor;
 
@@ -366,23 +366,43 @@ impl DanceModel for Served {
             |s| -> Result<_, ModelError> {
                 let motion = dance(s)?;
                 let planted = crate::motion::finish(motion.clone(), true);
-                let speed = crate::motion::skeleton::average_speed(planted.positions.view(), fps);
-                tracing::debug!(seed = s, speed, "keypose-transformer: a short song's draw");
-                Ok(Some((speed, motion)))
+                let p = planted.positions.view();
+                let speed = crate::motion::skeleton::average_speed(p, fps);
+                let half = p.shape()[0] / 2;
+                let halves = [s![..half, .., ..], s![half.., .., ..]]
+                    .map(|h| crate::motion::skeleton::average_speed(p.slice(h), fps));
+                let slower_half = halves[0].min(halves[1]);
+                tracing::debug!(
+                    seed = s,
+                    speed,
+                    ?halves,
+                    "keypose-transformer: a short song's draw"
+                );
+                Ok(Some((speed, slower_half, motion)))
             },
-            // Below the floor, the slower the farther; at or above it, inside.
-            |(speed, _)| (SHORT_SONG_MIN_SPEED_M_S / speed.max(1e-6)).ln().max(0.0),
+            // Below either floor, the slower the farther; at or above both, inside.
+            |(speed, half, _)| {
+                let below = |v: f64, floor: f64| (floor / v.max(1e-6)).ln().max(0.0);
+                below(*speed, SHORT_SONG_MIN_SPEED_M_S)
+                    + below(*half, SHORT_SONG_MIN_HALF_SPEED_M_S)
+            },
         )?;
         let Some(crate::models::opening_check::Drawn {
             tried,
             index: kept,
-            kept: (speed, motion),
+            kept: (speed, half, motion),
             ..
         }) = drawn
         else {
             return Err(Cancelled.into());
         };
-        tracing::debug!(tried, kept, speed, "keypose-transformer: short-song draws");
+        tracing::debug!(
+            tried,
+            kept,
+            speed,
+            half,
+            "keypose-transformer: short-song draws"
+        );
         let arms = crate::metrics::musicality::arm_speed_m_s(motion.positions.view(), fps);
         Ok(Generated::from(motion).with_opening(Some(
             crate::models::opening_check::OpeningChosen {
@@ -390,7 +410,7 @@ impl DanceModel for Served {
                 kept,
                 speed_m_s: speed,
                 arms_m_s: arms,
-                inside: speed >= SHORT_SONG_MIN_SPEED_M_S,
+                inside: speed >= SHORT_SONG_MIN_SPEED_M_S && half >= SHORT_SONG_MIN_HALF_SPEED_M_S,
             },
         )))
     }
@@ -412,3 +432,8 @@ pub const SHORT_SONG_DRAWS: usize = 6;
 /// m/s (the loop at 1.2×: seed 2's first draw 0.398 and 0.397, seed 7's 0.573 and 0.569, seed
 /// 4's 0.598 and 0.592).
 pub const SHORT_SONG_MIN_SPEED_M_S: f64 = 0.55;
+/// The mean joint speed (m/s, feet planted) each half of a short song's draw must reach besides:
+/// tsmt's line for an opening that stands (`OPENING_SLOW_M_S`). The mean alone let through a
+/// draw that moves and then stands: the loop at 1.2×, seed 2, redrawn, moved 1.50 m/s and then
+/// 0.25 for its last 2.2 s (0.88 m/s mean), a dance that stops halfway.
+pub const SHORT_SONG_MIN_HALF_SPEED_M_S: f64 = 0.4;
