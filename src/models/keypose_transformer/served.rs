@@ -419,7 +419,8 @@ impl DanceModel for Served {
 /// A song this short (frames, 20 s: the other models' opening window) is danced by up to
 /// [`SHORT_SONG_DRAWS`] scaffold draws (the job's seed first, then the seeds
 /// `opening_check::draw_seed` derives from it) until one moves at least
-/// [`SHORT_SONG_MIN_SPEED_M_S`], else the fastest. Such a dance is one or two scaffold clips, and
+/// [`SHORT_SONG_MIN_SPEED_M_S`] and each half [`SHORT_SONG_MIN_HALF_SPEED_M_S`], else the one
+/// nearest both (the least summed log shortfall). Such a dance is one or two scaffold clips, and
 /// its pace is theirs: on the 5-s trumpet loop seeds 0–31 moved 0.42–0.80 m/s, 4 under the
 /// verdict's 0.5 (the card); at 1.2× (4.4 s) seeds 2 and 15 drew the same clips and moved 0.40.
 /// A longer song's dance passes through many clips, and its pace is their average (whole songs
