@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::opening::{
     frozen_from, holds_from, PoseReader, FREEZE_FRAMES, OPENING_CHECK_FRAMES, OPENING_HOLD_FRAMES,
-    REACH_STRIDE, SHORT_SONG_MIN_SPEED_M_S,
+    REACH_STRIDE,
 };
 use super::sampling::Draw;
 use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
@@ -353,10 +353,8 @@ impl Served {
                         let lively = !held && {
                             let m = reader.opening_measures(&d.tokens())?;
                             tracing::debug!(?m, "tsmt: opening measured");
-                            // A song no longer than the window is all opening: its speed is the
-                            // verdict's.
-                            let whole = frames == n - opened;
-                            !(m.passed_over() || (whole && m.speed_m_s < SHORT_SONG_MIN_SPEED_M_S))
+                            // A song no longer than the window is all opening.
+                            !m.passed_over(frames == n - opened)
                         };
                         opened_draws.push(d);
                         if lively {
