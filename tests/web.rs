@@ -149,7 +149,8 @@ async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
         .expect("the flow prints its summary");
     for (phase, sync) in summary["sync"].as_object().expect("sync phases") {
         let worst = sync["worst_diff_s"].as_f64().expect("worst_diff_s");
-        // Over the frames drawn in time; flow.mjs bounds the CPU-starved ones (see checkSync).
+        // Over the frames drawn in time; clock.mjs checks every pose against the clock read in its
+        // frame and bounds the CPU-starved frames.
         assert!(
             worst <= 1.0 / 25.0,
             "{phase}: |audioTime − animationTime| reached {worst} s"

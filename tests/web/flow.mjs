@@ -13,6 +13,7 @@ import { chromium } from 'playwright-core';
 import { mkdtempSync, readFileSync, writeFileSync, mkdirSync } from 'node:fs';
 import { join, basename } from 'node:path';
 import { fileURLToPath } from 'node:url';
+import { recordMediaClock, sample, checkSamples } from './clock.mjs';
 
 const env = (name) => {
   const value = process.env[name];
@@ -25,7 +26,6 @@ const TOKEN = env('TOKEN');
 const SONG = env('SONG');
 const OUT = env('OUT_DIR');
 const CHROMIUM = process.env.CHROMIUM || '/usr/bin/chromium';
-const FRAME_S = 1 / 25;
 const JOB_TIMEOUT_MS = Number(process.env.JOB_TIMEOUT_MS || 300_000);
 const EXPECT_EVENTS = process.env.EXPECT_EVENTS === '1';
 const EVENTS_URL = /\/v1\/jobs\/[^/]+\/events$/;
@@ -75,46 +75,19 @@ async function shot(page, name) {
   log('screenshot', path);
 }
 
-/** audioTime and animationTime read together in one animation frame, after the player drew it. */
-const sample = (page) => page.evaluate(() => new Promise((resolve) => requestAnimationFrame(() => {
-  const p = window.choreoPlayer;
-  resolve({ audio: p.audioTime, animation: p.animationTime, frames: p.renderedFrames, frameMs: p.frameMs, now: performance.now() });
-})));
-
-/** Samples the two clocks while the song plays; every pair must agree within one motion frame. */
+/** Samples the two clocks while the song plays; every pose is the song's clock (clock.mjs). */
 async function checkSync(page, label, seconds = 3) {
   const samples = [];
   const end = Date.now() + seconds * 1000;
   while (Date.now() < end) {
-    samples.push(await sample(page));
+    samples.push(await sample(page, 'page'));
     await page.waitForTimeout(100);
   }
-  // A frame whose drawing itself took longer than a motion frame was starved of CPU (the 2-core
-  // machine is shared): its gap measures the machine, not the player. Every gap must be explained
-  // by its frame's drawing time (the pose came from the audio clock read when the frame began);
-  // frames drawn in time must keep the gap within one motion frame; and starved frames must be few.
-  const gap = (s) => Math.abs(s.audio - s.animation);
-  const starved = samples.filter((s) => s.frameMs > FRAME_S * 1000);
-  const inTime = samples.filter((s) => s.frameMs <= FRAME_S * 1000);
-  const worst = Math.max(...inTime.map(gap));
-  for (const s of samples) {
-    check(gap(s) <= s.frameMs / 1000 + 0.01, `${label}: a gap of ${gap(s).toFixed(4)} s is more than its frame's ${s.frameMs} ms of drawing`);
-  }
-  check(starved.length <= samples.length / 5, `${label}: ${starved.length} of ${samples.length} frames took over ${FRAME_S * 1000} ms to draw`);
-  const first = samples[0], last = samples[samples.length - 1];
-  // Forward steps only: a loop's jump back is not time played.
-  const advanced = samples.slice(1).reduce((sum, s, i) => sum + Math.max(0, s.audio - samples[i].audio), 0);
-  const wall = (last.now - first.now) / 1000;
-  const frameMs = samples.map((s) => s.frameMs).sort((a, b) => a - b);
-  summary.sync[label] = {
-    samples: samples.length, worst_diff_s: worst, worst_diff_all_s: Math.max(...samples.map(gap)), starved_frames: starved.length,
-    audio_advanced_s: advanced, wall_s: wall, frames_drawn: last.frames - first.frames,
-    frame_ms_median: frameMs[Math.floor(frameMs.length / 2)], frame_ms_max: frameMs[frameMs.length - 1],
-  };
+  summary.sync[label] = checkSamples(samples, label, check);
   log(label, JSON.stringify(summary.sync[label]));
-  check(worst <= FRAME_S, `${label}: |audioTime − animationTime| reached ${worst.toFixed(4)} s (> ${FRAME_S} s)`);
-  check(advanced > 0.6 * wall, `${label}: the song's currentTime advanced ${advanced.toFixed(2)} s in ${wall.toFixed(2)} s of wall time`);
-  check(last.frames - first.frames >= 5, `${label}: only ${last.frames - first.frames} frames drawn while playing`);
+  check(summary.sync[label].audio_advanced_s > 0.6 * summary.sync[label].wall_s,
+    `${label}: the song's currentTime advanced ${summary.sync[label].audio_advanced_s.toFixed(2)} s in ${summary.sync[label].wall_s.toFixed(2)} s of wall time`);
+  check(summary.sync[label].frames_drawn >= 5, `${label}: only ${summary.sync[label].frames_drawn} frames drawn while playing`);
   return samples;
 }
 
@@ -473,6 +446,8 @@ const context = await chromium.launchPersistentContext(userDataDir, {
   args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run', '--disable-background-networking',
     '--disable-component-update', '--disable-sync'],
 });
+// Every page of the context records its media clock for checkSync (clock.mjs).
+await context.addInitScript(recordMediaClock);
 let failed = null;
 try {
   await run(context);
