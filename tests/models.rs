@@ -318,6 +318,46 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
     );
 }
 
+/// dance-revolution keeps a slow song's tempo as the tracker hears it (`beat_time::FOLD_LO_BPM`):
+/// sugar_plum_fairy's first 40 s at 0.65× are heard at 72 BPM and danced as the network makes
+/// them (factor 1), as the same song at 0.7× (77 BPM) is. When the fold's window began at 75 BPM,
+/// 72 was doubled to 144 and the dance played back 1.66 times as fast: 1.05 m/s against 0.67 at
+/// 0.7× (the test waltzes at 0.85×, 74 BPM, were danced so too: its card).
+#[test]
+fn dance_revolution_dances_a_slow_song_at_its_own_pace() {
+    let m = model("dance-revolution");
+    let run = |factor: f64| {
+        let song = stretched_song("sugar_plum_fairy.ogg", 40.0, factor);
+        let analysis = audio::analyze(&song).expect("analysis");
+        let bpm = 60.0
+            * choreo::metrics::musicality::beat_rate_hz(&analysis.beat_times, song.duration_s)
+                .expect("a tempo");
+        let mut req = GenerateRequest::plain(&song, 1);
+        req.analysis = Some(&analysis);
+        let out = m
+            .generate(&req, &mut Quiet)
+            .unwrap_or_else(|e| panic!("{e}"));
+        let used = out
+            .beat_time
+            .expect("dance-revolution is served in beat time");
+        (bpm, used.factor, mean_speed(&out.motion))
+    };
+    let (slow_bpm, slow_factor, slow_speed) = run(0.65);
+    let (bpm, factor, speed) = run(0.7);
+    // The premise: the tracker hears the slow copy under 75 BPM, where the old window doubled it.
+    assert!((60.0..75.0).contains(&slow_bpm), "0.65×: {slow_bpm:.1} BPM");
+    assert!((75.0..87.0).contains(&bpm), "0.7×: {bpm:.1} BPM");
+    assert_eq!(
+        slow_factor, 1.0,
+        "0.65× ({slow_bpm:.1} BPM) is heard as it is"
+    );
+    assert_eq!(factor, 1.0, "0.7× ({bpm:.1} BPM)");
+    assert!(
+        (slow_speed / speed - 1.0).abs() < 0.2,
+        "0.65×: {slow_speed:.3} m/s, 0.7×: {speed:.3} m/s"
+    );
+}
+
 /// dancenet on hungarian_dance_5 at 1.2×, seed 1, through the whole chain a job runs (the model,
 /// the stages, the rigid fit) is served on the beat, and the beat-align stage says so. Planted
 /// but not warped it steps at 0.507 of the beat rate. Before hangs were brought down

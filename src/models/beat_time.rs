@@ -30,7 +30,7 @@ pub struct BeatTimeConfig {
     /// Reference tempo (beats per minute): the median tempo of the train split's songs as the
     /// service's own beat tracker hears them, so the train dances move least when re-timed.
     pub bpm: f64,
-    /// The largest factor a served song is heard at (absent: the fold's own, `bpm / 75`). 1 means
+    /// The largest factor a served song is heard at (absent: the fold's own, `bpm / 60`). 1 means
     /// a song that folds below the reference is danced at the network's own pace, never slowed
     /// ([`serving_factor`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -50,22 +50,34 @@ pub struct BeatTimeUsed {
 }
 
 /// The tempo window (BPM) a song's tracked tempo is folded into by octaves: `[FOLD_LO_BPM,
-/// 2 · FOLD_LO_BPM)`. Trackers count many songs in double time: ours reads 8 of the train split's
+/// FOLD_HI_BPM)`. Trackers count many songs in double time: ours reads 8 of the train split's
 /// 15 waltzes at 174 BPM, not 87, and the shared trumpet loop (90 BPM) at 185. Folded, such a
 /// song is heard at its own tempo and a train dance is re-timed like the others of its style; a
 /// dancer, too, dances a song that fast in half time. The window holds every tempo of the data
 /// (waltz 87, rumba 87–96, cha-cha 115–130), so the network hears the data's songs as they are.
-/// The price: a song near an edge and its 0.85× or 1.2× copy can fold to opposite ends (the
+///
+/// It is wider than an octave (2.5×): between 60 and 75 BPM, and between 120 and 150, both
+/// octaves are tempi songs have, and there the tracker's reading is kept. With an octave window
+/// from 75, a song heard at 74 BPM (the test waltzes at 0.85×) was doubled to 148 and its dance
+/// played back 1.7 times as fast as the network made it (dance-revolution: arms 0.96–1.0 m/s
+/// there, 0.71–0.74 on the same songs at 1.2×), while one at 76 BPM was danced as made. The
+/// tracker does not count slow songs in half time the way it counts fast ones in double time
+/// (its prior centres on 120 BPM), so a slow reading is taken as it is.
+///
+/// The price: a song near 150 BPM and its 0.85× or 1.2× copy can fold to opposite ends (the
 /// shared songs at 153 and 130 BPM do), and the faster copy is then danced in half time.
-pub const FOLD_LO_BPM: f64 = 75.0;
+pub const FOLD_LO_BPM: f64 = 60.0;
 
-/// The tempo (BPM) of `beat_hz` folded by octaves into the window of [`FOLD_LO_BPM`].
+/// The window's top (BPM), see [`FOLD_LO_BPM`]: a song at or above it is halved until under it.
+pub const FOLD_HI_BPM: f64 = 150.0;
+
+/// The tempo (BPM) of `beat_hz` folded by octaves into `[FOLD_LO_BPM, FOLD_HI_BPM)`.
 pub fn folded_bpm(beat_hz: f64) -> Option<f64> {
     let mut bpm = beat_hz * 60.0;
     if !(bpm.is_finite() && bpm > 0.0) {
         return None;
     }
-    while bpm >= 2.0 * FOLD_LO_BPM {
+    while bpm >= FOLD_HI_BPM {
         bpm /= 2.0;
     }
     while bpm < FOLD_LO_BPM {
@@ -297,10 +309,14 @@ mod tests {
             600,
         );
         assert!((bt.factor - 1.0).abs() < 1e-9, "{}", bt.factor);
-        // 130 BPM (a fast cha-cha) stays; 174 (a waltz counted in double time) is 87; 72 is 144.
+        // 130 BPM (a fast cha-cha) stays; 174 (a waltz counted in double time) is 87; a slow
+        // song at 72 stays (it was doubled to 144 and danced 1.7 times as fast); 50 is 100.
         assert!((folded_factor(87.0, 130.0 / 60.0) - 87.0 / 130.0).abs() < 1e-12);
         assert!((folded_factor(87.0, 174.0 / 60.0) - 1.0).abs() < 1e-12);
-        assert!((folded_factor(87.0, 72.0 / 60.0) - 87.0 / 144.0).abs() < 1e-12);
+        assert!((folded_factor(87.0, 72.0 / 60.0) - 87.0 / 72.0).abs() < 1e-12);
+        assert!((folded_factor(87.0, 50.0 / 60.0) - 87.0 / 100.0).abs() < 1e-12);
+        assert_eq!(folded_bpm(150.0 / 60.0), Some(75.0));
+        assert_eq!(folded_bpm(60.0 / 60.0), Some(60.0));
         assert!((reference_bpm(&[1.45, 2.9, 2.1, 1.5, 1.45]).unwrap() - 87.0).abs() < 1e-9);
         // Capped at 1, a song slower than the reference is danced at the network's own pace.
         let capped = BeatTimeConfig {

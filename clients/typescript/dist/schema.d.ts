@@ -402,7 +402,7 @@ export interface components {
             bpm: number;
             /**
              * Format: double
-             * @description The largest factor a served song is heard at (absent: the fold's own, `bpm / 75`). 1 means
+             * @description The largest factor a served song is heard at (absent: the fold's own, `bpm / 60`). 1 means
              *     a song that folds below the reference is danced at the network's own pace, never slowed
              *     ([`serving_factor`]).
              */
