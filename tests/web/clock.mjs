@@ -8,8 +8,8 @@
 // the "drawing time + 10 ms" once allowed, and the check failed 2 runs in 6 with nothing wrong in
 // the player. So the page's `currentTime` is wrapped (before any of its scripts run) to record
 // every value read or set, and each sample checks the pose against the last value the page took
-// from the clock before the sample: exactly, not within a slack. A player 4 ms behind the clock,
-// or one that draws every other frame, fails it; the old slack let both through.
+// from the clock before the sample: exactly, not within a slack. A player 4 ms behind the clock
+// fails it (the old slack let it through), and so does one that draws every other frame.
 export const FRAME_S = 1 / 25;
 
 /** For `addInitScript`: records each `currentTime` read or set (wall time, value), the last 64. */
