@@ -52,11 +52,22 @@ export const sample = (page, player) => page.evaluate((which) => new Promise((re
   });
 })), player);
 
+/** Samples (as [`sample`]) every 100 ms for `seconds` while the song plays. */
+export async function sampleFor(page, player, seconds) {
+  const samples = [];
+  const end = Date.now() + seconds * 1000;
+  while (Date.now() < end) {
+    samples.push(await sample(page, player));
+    await page.waitForTimeout(100);
+  }
+  return samples;
+}
+
 /**
  * Checks samples taken while the song played; returns the summary. Every pose is the clock's value
  * taken in its own frame (clamped to the dance, as the player clamps it); frames drawn in time
  * stay within one motion frame of the live clock; CPU-starved frames (drawing alone over a motion
- * frame: the 2-core machine is shared) are at most a fifth.
+ * frame: the 2-core machine is shared) are at most a fifth; at least 5 frames were drawn.
  */
 export function checkSamples(samples, label, check) {
   const gap = (s) => Math.abs(s.audio - s.animation);
@@ -73,6 +84,7 @@ export function checkSamples(samples, label, check) {
   check(starved.length <= samples.length / 5, `${label}: ${starved.length} of ${samples.length} frames took over ${FRAME_S * 1000} ms to draw`);
   check(worst <= FRAME_S, `${label}: |audioTime − animationTime| reached ${worst.toFixed(4)} s (> ${FRAME_S} s)`);
   const first = samples[0], last = samples[samples.length - 1];
+  check(last.frames - first.frames >= 5, `${label}: only ${last.frames - first.frames} frames drawn while playing`);
   // Forward steps only: a loop's jump back is not time played.
   const advanced = samples.slice(1).reduce((sum, s, i) => sum + Math.max(0, s.audio - samples[i].audio), 0);
   const frameMs = samples.map((s) => s.frameMs).sort((a, b) => a - b);

@@ -12,7 +12,7 @@ import { chromium } from 'playwright-core';
 import { createServer } from 'node:http';
 import { readFileSync, mkdirSync } from 'node:fs';
 import { join } from 'node:path';
-import { recordMediaClock, sample, checkSamples } from './clock.mjs';
+import { recordMediaClock, sampleFor, checkSamples } from './clock.mjs';
 
 const env = (name) => {
   const value = process.env[name];
@@ -76,17 +76,11 @@ try {
   // within a motion frame of the live clock (clock.mjs).
   await page.evaluate(() => document.getElementById('player').play());
   await page.waitForFunction(() => document.getElementById('player').audioTime > 0.3, null, { timeout: 20_000 });
-  const samples = [];
-  const end = Date.now() + 3000;
-  while (Date.now() < end) {
-    samples.push(await sample(page, 'element'));
-    await page.waitForTimeout(100);
-  }
+  const samples = await sampleFor(page, 'element', 3);
   summary.sync = checkSamples(samples, 'playing', check);
   log('sync', JSON.stringify(summary.sync));
   const advanced = samples[samples.length - 1].audio - samples[0].audio;
   check(advanced > 1, `the song played ${advanced} s`);
-  check(summary.sync.frames_drawn >= 5, 'frames were drawn while playing');
 
   // Paused and sought: the pose drawn is the one at the new time; the dancer moved.
   await page.evaluate(() => document.getElementById('player').pause());
