@@ -83,6 +83,22 @@ fn dance(m: &dyn DanceModel, req: &GenerateRequest<'_>) -> Motion {
         .motion
 }
 
+/// Model `m`'s generation for `song` with `seed`, given the song's analysis as a job gives it
+/// (models in beat time read its tempo, the step clocks its beats); and that analysis.
+fn generated(
+    m: &dyn DanceModel,
+    song: &DecodedAudio,
+    seed: u64,
+) -> (choreo::models::Generated, audio::Analysis) {
+    let analysis = audio::analyze(song).expect("analysis");
+    let mut req = GenerateRequest::plain(song, seed);
+    req.analysis = Some(&analysis);
+    let out = m
+        .generate(&req, &mut Quiet)
+        .unwrap_or_else(|e| panic!("{}: {e}", m.info().id.0));
+    (out, analysis)
+}
+
 /// Mean joint speed of a dance (m/s), as the plausibility verdict reads it.
 fn mean_speed(motion: &Motion) -> f64 {
     choreo::metrics::physical::physical_series(motion, &[])
@@ -271,11 +287,8 @@ fn downloaded(
     choreo::motion::beat_align::BeatAlignSummary,
     Vec<f64>,
 ) {
-    let analysis = audio::analyze(song).expect("analysis");
-    let mut req = GenerateRequest::plain(song, seed);
-    req.analysis = Some(&analysis);
-    let motion = dance(m, &req);
-    let beats = analysis.beat_times.clone();
+    let (out, analysis) = generated(m, song, seed);
+    let (motion, beats) = (out.motion, analysis.beat_times);
     let (finished, summary) =
         choreo::motion::after_model(motion, &beats, &[], 0, MotionStages::default());
     let served = choreo::motion::serve(&finished, &[], true, 0)
@@ -298,10 +311,8 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
     assert!((80.0..100.0).contains(&bt.bpm), "{bt:?}");
     let step_hz = |factor: f64| {
         let song = stretched_song("lets_go_fishin.ogg", 40.0, factor);
-        let analysis = audio::analyze(&song).expect("analysis");
-        let mut req = GenerateRequest::plain(&song, 1);
-        req.analysis = Some(&analysis);
-        let motion = dance(m.as_ref(), &req);
+        let (out, analysis) = generated(m.as_ref(), &song, 1);
+        let motion = out.motion;
         choreo::metrics::musicality::tempo_lock(
             motion.positions.view(),
             motion.fps,
@@ -328,15 +339,10 @@ fn dance_revolution_dances_a_slow_song_at_its_own_pace() {
     let m = model("dance-revolution");
     let run = |factor: f64| {
         let song = stretched_song("sugar_plum_fairy.ogg", 40.0, factor);
-        let analysis = audio::analyze(&song).expect("analysis");
+        let (out, analysis) = generated(m.as_ref(), &song, 1);
         let bpm = 60.0
             * choreo::metrics::musicality::beat_rate_hz(&analysis.beat_times, song.duration_s)
                 .expect("a tempo");
-        let mut req = GenerateRequest::plain(&song, 1);
-        req.analysis = Some(&analysis);
-        let out = m
-            .generate(&req, &mut Quiet)
-            .unwrap_or_else(|e| panic!("{e}"));
         let used = out
             .beat_time
             .expect("dance-revolution is served in beat time");
@@ -567,11 +573,7 @@ fn tsmt_draws_again_where_it_would_hold_mid_song() {
 fn keypose_transformer_turns_its_waltz_and_its_arms_with_it() {
     let m = model("keypose-transformer");
     let song = stretched_song("hungarian_dance_5.ogg", 30.0, 1.0);
-    let analysis = audio::analyze(&song).expect("analysis");
-    let mut req = GenerateRequest::plain(&song, 1);
-    req.analysis = Some(&analysis);
-    let motion = dance(m.as_ref(), &req);
-    let arms = arm_speed(&motion);
+    let arms = arm_speed(&generated(m.as_ref(), &song, 1).0.motion);
     assert!(arms >= 0.43, "arms {arms:.3} m/s against the spine");
 }
 
