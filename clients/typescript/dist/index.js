@@ -751,32 +751,37 @@ var Choreo = class {
    */
   async wait(jobId, options = {}) {
     let job = await this.job(jobId);
-    options.onUpdate?.(job);
-    if (TERMINAL.includes(job.status)) return job;
+    if (TERMINAL.includes(job.status)) {
+      options.onUpdate?.(job);
+      return job;
+    }
     if (options.transport !== "poll") {
       try {
         this.lastTransport = "events";
+        let view = options.lastEventId === void 0 ? unstarted(job) : job;
+        if (options.lastEventId !== void 0) options.onUpdate?.(view);
         for await (const event of this.events(jobId, options)) {
           options.onEvent?.(event);
-          job = apply(job, event);
-          options.onUpdate?.(job);
-          if (event.type === "done") return job;
+          view = apply(view, event);
+          options.onUpdate?.(view);
+          if (event.type === "done") return view;
         }
         throw new Error(`the events of job ${jobId} ended without a done event`);
       } catch (e) {
         const noRoute = e instanceof ApiError && (e.status === 404 || e.status === 405) && options.transport !== "events";
         if (!noRoute) throw e;
-        await this.job(jobId);
+        job = await this.job(jobId);
       }
     }
     this.lastTransport = "poll";
-    for (; ; ) {
+    options.onUpdate?.(job);
+    while (!TERMINAL.includes(job.status)) {
       await sleep2(options.pollMs ?? 500);
       options.signal?.throwIfAborted();
       job = await this.job(jobId);
       options.onUpdate?.(job);
-      if (TERMINAL.includes(job.status)) return job;
     }
+    return job;
   }
   /** Polls a song until its analysis is done or failed (analysis is a short job without events). */
   async waitForSong(id, onUpdate = () => {
@@ -799,6 +804,9 @@ var Choreo = class {
     return this.fetch(`/v1/songs/${encodeURIComponent(songId)}/audio`).then((r) => r.blob());
   }
 };
+function unstarted(job) {
+  return { ...job, status: "queued", stage: null, progress: 0, attempts: 0, error: null, started_at: null, finished_at: null };
+}
 function apply(job, event) {
   switch (event.type) {
     case "status":

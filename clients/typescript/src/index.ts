@@ -151,32 +151,40 @@ export class Choreo {
    */
   async wait(jobId: string, options: WaitOptions = {}): Promise<Job> {
     let job = await this.job(jobId);
-    options.onUpdate?.(job);
-    if (TERMINAL.includes(job.status)) return job;
+    if (TERMINAL.includes(job.status)) {
+      options.onUpdate?.(job);
+      return job;
+    }
     if (options.transport !== 'poll') {
       try {
         this.lastTransport = 'events';
+        // Without a Last-Event-ID the server replays the job's events from its first, so the view
+        // is built from them alone. Laid over the snapshot above, a replayed event older than the
+        // snapshot would set its status or progress back (0.1, then 0 again, then 0.1).
+        let view = options.lastEventId === undefined ? unstarted(job) : job;
+        if (options.lastEventId !== undefined) options.onUpdate?.(view);
         for await (const event of this.events(jobId, options)) {
           options.onEvent?.(event);
-          job = apply(job, event);
-          options.onUpdate?.(job);
-          if (event.type === 'done') return job;
+          view = apply(view, event);
+          options.onUpdate?.(view);
+          if (event.type === 'done') return view;
         }
         throw new Error(`the events of job ${jobId} ended without a done event`);
       } catch (e) {
         const noRoute = e instanceof ApiError && (e.status === 404 || e.status === 405) && options.transport !== 'events';
         if (!noRoute) throw e;
-        await this.job(jobId); // still there (a 404 here is the job's own, and is thrown)
+        job = await this.job(jobId); // still there (a 404 here is the job's own, and is thrown)
       }
     }
     this.lastTransport = 'poll';
-    for (;;) {
+    options.onUpdate?.(job);
+    while (!TERMINAL.includes(job.status)) {
       await sleep(options.pollMs ?? 500);
       options.signal?.throwIfAborted();
       job = await this.job(jobId);
       options.onUpdate?.(job);
-      if (TERMINAL.includes(job.status)) return job;
     }
+    return job;
   }
 
   /** Polls a song until its analysis is done or failed (analysis is a short job without events). */
@@ -200,6 +208,11 @@ export class Choreo {
   songAudio(songId: string): Promise<Blob> {
     return this.fetch(`/v1/songs/${encodeURIComponent(songId)}/audio`).then((r) => r.blob());
   }
+}
+
+/** The job as it was registered, before its first event: what a replay from the start is laid over. */
+function unstarted(job: Job): Job {
+  return { ...job, status: 'queued', stage: null, progress: 0, attempts: 0, error: null, started_at: null, finished_at: null };
 }
 
 /** The job view after an event: status events move its status, progress events its stage. */

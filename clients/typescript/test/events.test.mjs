@@ -23,14 +23,14 @@ const HISTORY = [
 ].map(([event, data], i) => ({ seq: i + 1, event, data: { seq: i + 1, job_id: JOB, at: '2026-11-26T00:00:00Z', ...data } }));
 
 /** A fake choreo: `events` false answers the events route with 404, as a server without it would. */
-async function fakeServer({ events = true, dropAfter = 3 } = {}) {
+async function fakeServer({ events = true, dropAfter = 3, snapshot = job('queued', 0) } = {}) {
   const seen = { eventRequests: [], authorization: new Set(), jobGets: 0 };
   const server = createServer((req, res) => {
     seen.authorization.add(req.headers.authorization);
     if (req.url === `/v1/jobs/${JOB}`) {
       seen.jobGets += 1;
       const view = seen.jobGets < 3 ? job('running', 0.5, 'generate') : job('succeeded', 1, 'done');
-      res.writeHead(200, { 'content-type': 'application/json' }).end(JSON.stringify(seen.jobGets === 1 ? job('queued', 0) : view));
+      res.writeHead(200, { 'content-type': 'application/json' }).end(JSON.stringify(seen.jobGets === 1 ? snapshot : view));
     } else if (req.url === `/v1/jobs/${JOB}/events` && events) {
       const after = Number(req.headers['last-event-id'] ?? 0);
       seen.eventRequests.push(req.headers['last-event-id'] ?? null);
@@ -70,7 +70,22 @@ test('wait() follows the events in order and resumes a dropped stream with Last-
     assert.deepEqual(events.map((e) => e.type), ['status', 'status', 'progress', 'progress', 'progress', 'status', 'done']);
     assert.deepEqual(seen.eventRequests, [null, '3'], 'reconnected once, after the last whole event');
     assert.deepEqual([...seen.authorization], ['Bearer secret-key']);
-    assert.deepEqual(updates, ['queued:0', 'queued:0', 'running:0', 'running:0.1', 'running:0.5', 'running:0.9', 'succeeded:0.9', 'succeeded:1']);
+    assert.deepEqual(updates, ['queued:0', 'running:0', 'running:0.1', 'running:0.5', 'running:0.9', 'succeeded:0.9', 'succeeded:1']);
+  } finally {
+    server.close();
+  }
+});
+
+test('wait() on a job already under way: the replayed events never set its progress back', async () => {
+  // GET /v1/jobs/{id} answers a job at 0.5; the stream then replays its events from the first.
+  const { server, baseUrl } = await fakeServer({ snapshot: job('running', 0.5, 'generate'), dropAfter: 99 });
+  try {
+    const updates = [];
+    const done = await new Choreo({ baseUrl }).wait(JOB, { onUpdate: (j) => updates.push([j.status, j.progress]) });
+    assert.equal(done.status, 'succeeded');
+    const progress = updates.filter(([s]) => s === 'running').map(([, p]) => p);
+    assert.deepEqual(progress, [0, 0.1, 0.5, 0.9], `updates: ${JSON.stringify(updates)}`);
+    assert.deepEqual(updates[0], ['queued', 0], 'the first view is the first event, not the newer snapshot');
   } finally {
     server.close();
   }
