@@ -433,8 +433,10 @@ pub const SHORT_SONG_DRAWS: usize = 6;
 /// m/s (the loop at 1.2×: seed 2's first draw 0.398 and 0.397, seed 7's 0.573 and 0.569, seed
 /// 4's 0.598 and 0.592).
 pub const SHORT_SONG_MIN_SPEED_M_S: f64 = 0.55;
-/// The mean joint speed (m/s, feet planted) each half of a short song's draw must reach besides:
-/// tsmt's line for an opening that stands (`OPENING_SLOW_M_S`). The mean alone let through a
+/// The mean joint speed (m/s, feet planted) each half of a short song's draw must reach besides,
+/// a margin over the line under which a second stands in one pose
+/// ([`crate::motion::hold::HOLD_SPEED_M_S`], 0.3; a half is a mean over seconds, some of which
+/// may stand as a dancer's pose does). The mean alone let through a
 /// draw that moves and then stands: the loop at 1.2×, seed 2, redrawn, moved 1.50 m/s and then
 /// 0.25 for its last 2.2 s (0.88 m/s mean), a dance that stops halfway.
 pub const SHORT_SONG_MIN_HALF_SPEED_M_S: f64 = 0.4;
