@@ -1405,6 +1405,7 @@ mod musicality_real {
         }
         let data = Dataset::open(&root).expect("dataset opens");
         let (mut within_2, mut within_3, mut arms, mut knees) = (0, 0, Vec::new(), Vec::new());
+        let mut postures = Vec::new();
         let ids = data.all_ids();
         for id in &ids {
             let d = data.load(id).expect("dance loads");
@@ -1423,6 +1424,10 @@ mod musicality_real {
             eprintln!("{id}: step/beat {:.3} (nearest {:.3}, {:.1} %), arms {:.2} m/s, knees back {:.1} %", lock.ratio, lock.fraction, 100.0 * lock.distance, m.arm_speed_m_s, 100.0 * m.knee_backward_share);
             arms.push(m.arm_speed_m_s);
             knees.push(m.knee_backward_share);
+            postures.push(
+                m.posture_variety_m
+                    .expect("every real dance is longer than 12 s"),
+            );
         }
         assert_eq!(ids.len(), 43);
         // numpy on the same beats (Hann, 16× zero-padding, beats inside the dance) gives 28 and 32.
@@ -1439,6 +1444,16 @@ mod musicality_real {
         assert!(
             (lo - 0.43).abs() < 0.01 && (med - 0.61).abs() < 0.01 && (hi - 1.44).abs() < 0.01,
             "arms {lo:.3}/{med:.3}/{hi:.3} m/s"
+        );
+        // The arms' posture over the song: no real dance holds one figure throughout
+        // (tools/posture_variety.py, numpy, gives 0.059 / 0.127 / 0.216 m).
+        postures.sort_by(f64::total_cmp);
+        let (p_lo, p_med, p_hi) = (postures[0], postures[21], postures[42]);
+        assert!(
+            (p_lo - 0.059).abs() < 0.002
+                && (p_med - 0.127).abs() < 0.002
+                && (p_hi - 0.216).abs() < 0.002,
+            "posture variety {p_lo:.3}/{p_med:.3}/{p_hi:.3} m"
         );
         let worst_knee = knees.iter().copied().fold(0.0, f64::max);
         assert!(
@@ -1461,6 +1476,13 @@ mod musicality_real {
         );
         assert!(
             committed.summary.knee_backward_max <= worst_knee + 1e-12,
+            "{committed:?}"
+        );
+        let [p_min, p_max] = committed
+            .posture_variety_range_m
+            .expect("the committed reference measures posture variety");
+        assert!(
+            p_min >= p_lo - 1e-9 && p_max <= p_hi + 1e-9,
             "{committed:?}"
         );
         // The longest hold of the train split is DANCE_R_7's rumba pose (9.5 s), the longest of

@@ -15,6 +15,10 @@ that moves through figures has distant ones. Songs shorter than 30 s are left ou
     python3 tools/posture_variety.py real [DATA]     # the 43 real dances (default ../shared/...)
     python3 tools/posture_variety.py DIR...          # every motion.json below each DIR
 
+choreo computes the same measure in Rust (`metrics::posture::posture_variety_m`: every
+report.json's musicality, `posture_variety_m`); this script is the independent numpy check, and
+measures folders of downloaded dances.
+
 Needs numpy (Debian's python3-numpy: /usr/bin/python3).
 """
 import glob

@@ -214,10 +214,12 @@ fn worst_key_error(r: &EvalRow) -> Option<f64> {
 /// Issue 25's bars on each row: tempo-locked dances (step rate within 3 % of 1/6…1 of the beat
 /// rate; real dances 32 of 43), the stillest arms (≥ 0.43 m/s), the worst knees (≤ 6 %), and
 /// the same seed on two songs (≥ 0.15 m apart); and the longest hold in one pose (real dances
-/// at most 9.5 s, 41 of 43 under 5 s: [`crate::motion::hold`]).
+/// at most 9.5 s, 41 of 43 under 5 s: [`crate::motion::hold`]), and the posture that changed
+/// least over its song ([`crate::metrics::posture::posture_variety_m`]; real dances 0.059 m
+/// at the least, a dance holding one figure near 0).
 /// Beside the row's own tempo lock, the network's before the beat-align stage (model rows).
 fn musicality_table(rows: &[EvalRow]) -> String {
-    let mut out = String::from("| Motion | n | tempo-locked ↑ | network's own (before beat-align) | arms min (m/s) ↑ | knees backwards max ↓ | longest hold (s) ↓ | same seed, two songs min (m) ↑ |\n|---|---|---|---|---|---|---|---|\n");
+    let mut out = String::from("| Motion | n | tempo-locked ↑ | network's own (before beat-align) | arms min (m/s) ↑ | knees backwards max ↓ | longest hold (s) ↓ | posture variety min (m) ↑ | same seed, two songs min (m) ↑ |\n|---|---|---|---|---|---|---|---|---|\n");
     let locked = |m: &crate::metrics::musicality::MusicalitySummary| {
         if m.measured == 0 {
             "–".to_string()
@@ -244,6 +246,8 @@ fn musicality_table(rows: &[EvalRow]) -> String {
             f2(m.arm_speed_min_m_s),
             format!("{:.1} %", 100.0 * m.knee_backward_max),
             format!("{:.1}", m.longest_hold_max_s),
+            m.posture_variety_min_m
+                .map_or_else(|| "–".to_string(), |v| format!("{v:.3}")),
             opt(r.song_distance_min_m),
         ];
         out.push_str(&format!("| {} |\n", cells.join(" | ")));

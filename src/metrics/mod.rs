@@ -42,6 +42,7 @@ pub mod kinematics;
 pub mod musicality;
 pub mod physical;
 pub mod plausibility;
+pub mod posture;
 pub mod reference;
 pub mod rotation_flips;
 pub mod score;

@@ -100,6 +100,11 @@ pub struct Musicality {
     /// written before it was measured).
     #[serde(default)]
     pub longest_hold_s: f64,
+    /// How far the arms' posture moves over the song (m, [`super::posture::posture_variety_m`]): near 0 for a
+    /// dance that holds one figure throughout. `None` for a dance shorter than 12 s, and in
+    /// reports written before it was measured.
+    #[serde(default)]
+    pub posture_variety_m: Option<f64>,
 }
 
 impl Musicality {
@@ -112,6 +117,7 @@ impl Musicality {
             arm_speed_m_s: arm_speed_m_s(p, motion.fps),
             knee_backward_share: knee_backward_share(p),
             longest_hold_s: crate::motion::hold::longest_hold_s(p, motion.fps),
+            posture_variety_m: super::posture::posture_variety_m(p, motion.fps),
         }
     }
 }
@@ -135,6 +141,10 @@ pub struct MusicalitySummary {
     /// The longest hold of any dance (s; 0 in files written before it was measured).
     #[serde(default)]
     pub longest_hold_max_s: f64,
+    /// The dance whose arms' posture moved least over its song (m; `None` when no dance was long
+    /// enough, or in files written before it was measured).
+    #[serde(default)]
+    pub posture_variety_min_m: Option<f64>,
 }
 
 impl MusicalitySummary {
@@ -154,6 +164,9 @@ impl MusicalitySummary {
             s.arm_speed_min_m_s = s.arm_speed_min_m_s.min(m.arm_speed_m_s);
             s.knee_backward_max = s.knee_backward_max.max(m.knee_backward_share);
             s.longest_hold_max_s = s.longest_hold_max_s.max(m.longest_hold_s);
+            if let Some(v) = m.posture_variety_m {
+                s.posture_variety_min_m = Some(s.posture_variety_min_m.map_or(v, |w| w.min(v)));
+            }
         }
         if !any {
             s.arm_speed_min_m_s = f64::NAN;
@@ -166,25 +179,25 @@ impl MusicalitySummary {
         s
     }
 
-    /// The mean dance, for a set's `mean` scores: arms, knees and holds averaged, no tempo lock (a
-    /// set's tempo lock is [`MusicalitySummary::tempo_locked_share`]).
+    /// The mean dance, for a set's `mean` scores: arms, knees, holds and posture variety averaged
+    /// (the last over the dances long enough to have one), no tempo lock (a set's tempo lock is
+    /// [`MusicalitySummary::tempo_locked_share`]).
     pub fn mean<'a>(dances: impl IntoIterator<Item = &'a Musicality> + Clone) -> Musicality {
         let n = dances.clone().into_iter().count().max(1) as f64;
+        let mean_of =
+            |f: fn(&Musicality) -> f64| dances.clone().into_iter().map(f).sum::<f64>() / n;
         Musicality {
             tempo_lock: None,
-            arm_speed_m_s: dances
-                .clone()
-                .into_iter()
-                .map(|m| m.arm_speed_m_s)
-                .sum::<f64>()
-                / n,
-            knee_backward_share: dances
-                .clone()
-                .into_iter()
-                .map(|m| m.knee_backward_share)
-                .sum::<f64>()
-                / n,
-            longest_hold_s: dances.into_iter().map(|m| m.longest_hold_s).sum::<f64>() / n,
+            arm_speed_m_s: mean_of(|m| m.arm_speed_m_s),
+            knee_backward_share: mean_of(|m| m.knee_backward_share),
+            longest_hold_s: mean_of(|m| m.longest_hold_s),
+            posture_variety_m: {
+                let v: Vec<f64> = dances
+                    .into_iter()
+                    .filter_map(|m| m.posture_variety_m)
+                    .collect();
+                (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64)
+            },
         }
     }
 }
@@ -203,6 +216,13 @@ pub struct MusicalityReference {
     pub arm_speed_range_m_s: [f64; 2],
     /// The median dance's arms (m/s).
     pub arm_speed_median_m_s: f64,
+    /// The stillest and the most changing dance's arms' posture over the song (m,
+    /// [`super::posture::posture_variety_m`]; absent in files written before it was measured).
+    #[serde(default)]
+    pub posture_variety_range_m: Option<[f64; 2]>,
+    /// The median dance's posture variety (m).
+    #[serde(default)]
+    pub posture_variety_median_m: Option<f64>,
 }
 
 impl MusicalityReference {
@@ -214,6 +234,8 @@ impl MusicalityReference {
             .collect();
         let mut arms: Vec<f64> = all.iter().map(|m| m.arm_speed_m_s).collect();
         arms.sort_by(f64::total_cmp);
+        let mut postures: Vec<f64> = all.iter().filter_map(|m| m.posture_variety_m).collect();
+        postures.sort_by(f64::total_cmp);
         Self {
             summary: MusicalitySummary::of(&all),
             within_2_percent: all
@@ -225,6 +247,8 @@ impl MusicalityReference {
                 arms.last().copied().unwrap_or(f64::NAN),
             ],
             arm_speed_median_m_s: arms.get(arms.len() / 2).copied().unwrap_or(f64::NAN),
+            posture_variety_range_m: postures.first().zip(postures.last()).map(|(a, b)| [*a, *b]),
+            posture_variety_median_m: postures.get(postures.len() / 2).copied(),
         }
     }
 }
