@@ -23,7 +23,7 @@ use std::process::Command;
 use super::as_served;
 use super::songs::{whole_song, Song};
 use super::{EvalError, EvalOptions};
-use crate::metrics::musicality::Musicality;
+use crate::metrics::musicality::{tempo_lock, Musicality};
 use crate::metrics::reference::ReferenceStats;
 use crate::models::{DanceModel, GenerateRequest};
 
@@ -320,7 +320,7 @@ pub(super) fn tempo_row(
                         source,
                     })?
                     .motion;
-                let own = Musicality::of(&raw, &song.beats).tempo_lock;
+                let own = tempo_lock(raw.positions.view(), raw.fps, &song.beats);
                 let (served, _) =
                     as_served(raw, &[], &song.beats).map_err(|source| EvalError::Export {
                         model: id.into(),

@@ -24,6 +24,8 @@ const POSTURE_GAP_WINDOWS: usize = 2;
 /// read 0.059–0.216; `tools/posture_variety.py` computes the same in numpy). `None` when the dance
 /// has fewer than three windows (12 s).
 pub fn posture_variety_m(positions: ArrayView3<'_, f32>, fps: f64) -> Option<f64> {
+    // The hips alone set the frame, not `repr::facing_yaw`'s hips and shoulders: the shoulders
+    // turn with the arms, and a frame that followed them would take part of the arms' posture out.
     let [right_hip, left_hip] = HIPS;
     let w = (POSTURE_WINDOW_S * fps).round() as usize;
     let n = if w == 0 { 0 } else { positions.shape()[0] / w };

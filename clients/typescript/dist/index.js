@@ -758,8 +758,9 @@ var Choreo = class {
     if (options.transport !== "poll") {
       try {
         this.lastTransport = "events";
-        let view = options.lastEventId === void 0 ? unstarted(job) : job;
-        if (options.lastEventId !== void 0) options.onUpdate?.(view);
+        const resuming = options.lastEventId !== void 0;
+        let view = resuming ? job : unstarted(job);
+        if (resuming) options.onUpdate?.(view);
         for await (const event of this.events(jobId, options)) {
           options.onEvent?.(event);
           view = apply(view, event);

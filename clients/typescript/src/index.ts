@@ -161,8 +161,9 @@ export class Choreo {
         // Without a Last-Event-ID the server replays the job's events from its first, so the view
         // is built from them alone. Laid over the snapshot above, a replayed event older than the
         // snapshot would set its status or progress back (0.1, then 0 again, then 0.1).
-        let view = options.lastEventId === undefined ? unstarted(job) : job;
-        if (options.lastEventId !== undefined) options.onUpdate?.(view);
+        const resuming = options.lastEventId !== undefined;
+        let view = resuming ? job : unstarted(job);
+        if (resuming) options.onUpdate?.(view);
         for await (const event of this.events(jobId, options)) {
           options.onEvent?.(event);
           view = apply(view, event);
