@@ -186,13 +186,14 @@ fn dance_songs(
                     source,
                 })?;
             let finished = [served, crate::motion::finish(raw, false)];
-            if let Some(dir) = &args.previews {
-                write_preview(dir, id, s, seed, &finished[0], &keys)?;
-            }
             let mut scored = [
                 score_dance(&finished[0], &s.beats, &keys, reference)?,
                 score_dance(&finished[1], &s.beats, &keys, reference)?,
             ];
+            if let Some(dir) = &args.previews {
+                let m = &scored[0].scores.musicality;
+                write_preview(dir, id, s, seed, &finished[0], &keys, m)?;
+            }
             scored[0].scores.rotation_flips = Some(flips);
             // Both rows keep the network's own musicality beside their own.
             let raw_musicality = scored[1].scores.musicality;
@@ -285,6 +286,7 @@ pub(super) fn write_preview(
     seed: u64,
     motion: &Motion,
     keys: &[KeyPose],
+    musicality: &crate::metrics::musicality::Musicality,
 ) -> Result<(), EvalError> {
     use crate::report::preview::{write_png, Caption, Sheet};
     let stem = song
@@ -318,6 +320,7 @@ pub(super) fn write_preview(
         key_pose_times: &key_pose_times,
         song_duration_s: song.audio.duration_s,
         caption: &caption,
+        musicality,
     };
     let path = dir.join(name);
     write_png(&path, &sheet).map_err(|source| EvalError::Preview { path, source })

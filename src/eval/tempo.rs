@@ -333,7 +333,7 @@ pub(super) fn tempo_row(
                 // The same contact sheet as the whole songs': how the stepping changes with the
                 // tempo is what the issue asks to be looked at.
                 if let Some(dir) = &args.previews {
-                    super::rows::write_preview(dir, id, &song, seed, &served, &[])?;
+                    super::rows::write_preview(dir, id, &song, seed, &served, &[], &as_served)?;
                 }
                 dances += 1;
                 for (n, lock) in [lock, own].into_iter().enumerate() {

@@ -24,6 +24,7 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
+use crate::metrics::musicality::Musicality;
 use crate::motion::feet::floor_height;
 use crate::motion::feet::SUPPORT_HEIGHT_M;
 use crate::motion::skeleton::{
@@ -103,6 +104,9 @@ pub struct Sheet<'a> {
     /// Length of the song (s); the dance may be a frame shorter.
     pub song_duration_s: f64,
     pub caption: &'a Caption,
+    /// The dance's musicality as its report gives it ([`crate::metrics::score`]), for the
+    /// title: measured once, where the report scores the dance, not again here.
+    pub musicality: &'a Musicality,
 }
 
 /// What can stop a preview from being drawn.
@@ -323,7 +327,7 @@ fn draw_title<DB: DrawingBackend>(
     ));
     parts.push(format!("mean joint speed {:.2} m/s", series.mean_speed));
     // Does it go with this song (issue 25): the step rate against the beat, the arms, a hold.
-    let m = crate::metrics::musicality::Musicality::of(sheet.motion, sheet.beat_times);
+    let m = sheet.musicality;
     if let Some(lock) = m.tempo_lock {
         let mark = if lock.locked { "locked" } else { "off" };
         parts.push(format!(
@@ -719,12 +723,14 @@ mod tests {
             song: Some("a song".into()),
             style: None,
         };
+        let musicality = Musicality::of(motion, &[0.5, 1.0, 1.5]);
         let sheet = Sheet {
             motion,
             beat_times: &[0.5, 1.0, 1.5],
             key_pose_times: &[1.2],
             song_duration_s: motion.duration_s(),
             caption: &caption,
+            musicality: &musicality,
         };
         render_rgb(&sheet).expect("draws")
     }
@@ -776,12 +782,14 @@ mod tests {
             song: None,
             style: None,
         };
+        let musicality = Musicality::of(&motion, &[]);
         let sheet = Sheet {
             motion: &motion,
             beat_times: &[],
             key_pose_times: &[],
             song_duration_s: 1.2,
             caption: &caption,
+            musicality: &musicality,
         };
         let bytes = render_png(&sheet).expect("png");
         let decoder = png::Decoder::new(std::io::Cursor::new(bytes));
@@ -807,12 +815,14 @@ mod tests {
             fps: 25.0,
             positions: Array3::zeros((0, NUM_JOINTS, 3)),
         };
+        let musicality = Musicality::of(&empty, &[]);
         let sheet = |m| Sheet {
             motion: m,
             beat_times: &[],
             key_pose_times: &[],
             song_duration_s: 1.0,
             caption: &caption,
+            musicality: &musicality,
         };
         assert!(matches!(
             render_rgb(&sheet(&empty)),

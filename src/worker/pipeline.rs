@@ -372,6 +372,7 @@ pub fn render(
         key_pose_times: &key_pose_times,
         song_duration_s: finished.song_duration_s,
         caption,
+        musicality: &report.scores.musicality,
     };
     let png = preview::render_png(&sheet)
         .map_err(|e| WorkerError::Export(format!("{}: {e}", preview::PREVIEW_FILE)))?;
