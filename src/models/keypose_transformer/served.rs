@@ -380,12 +380,7 @@ impl DanceModel for Served {
                 );
                 Ok(Some((speed, slower_half, motion)))
             },
-            // Below either floor, the slower the farther; at or above both, inside.
-            |(speed, half, _)| {
-                let below = |v: f64, floor: f64| (floor / v.max(1e-6)).ln().max(0.0);
-                below(*speed, SHORT_SONG_MIN_SPEED_M_S)
-                    + below(*half, SHORT_SONG_MIN_HALF_SPEED_M_S)
-            },
+            |(speed, half, _)| short_song_miss(*speed, *half),
         )?;
         let Some(crate::models::opening_check::Drawn {
             tried,
@@ -410,10 +405,18 @@ impl DanceModel for Served {
                 kept,
                 speed_m_s: speed,
                 arms_m_s: arms,
-                inside: speed >= SHORT_SONG_MIN_SPEED_M_S && half >= SHORT_SONG_MIN_HALF_SPEED_M_S,
+                inside: short_song_miss(speed, half) == 0.0,
             },
         )))
     }
+}
+
+/// How far a short song's draw with mean joint speed `speed` and slower half `half` (m/s) lies
+/// under the floors ([`SHORT_SONG_MIN_SPEED_M_S`], [`SHORT_SONG_MIN_HALF_SPEED_M_S`]): summed log
+/// ratios, the slower the farther; 0 at or above both, which is what report.json calls inside.
+fn short_song_miss(speed: f64, half: f64) -> f64 {
+    let below = |v: f64, floor: f64| (floor / v.max(1e-6)).ln().max(0.0);
+    below(speed, SHORT_SONG_MIN_SPEED_M_S) + below(half, SHORT_SONG_MIN_HALF_SPEED_M_S)
 }
 
 /// A song this short (frames, 20 s: the other models' opening window) is danced by up to
