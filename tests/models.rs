@@ -329,6 +329,36 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
     );
 }
 
+/// TSMT's served step clock turns once a bar (`tsmt::Serving::clock_bar_hz`), so a song played
+/// faster turns it faster, and the network trained on windows at 0.65–1.5× tempo with warped
+/// histories steps with it: on sugar_plum_fairy's first 40 s at 0.85× and 1.2× (the tracker hears
+/// both at one level) its own motion steps 1.2 / 0.85 = 1.41× as often on the faster copy. Its
+/// weights before stepped at one pace whatever the tempo (own ratios 0.87–1.07 on the test
+/// songs, the card) with a clock kept near 0.49 Hz.
+#[test]
+fn tsmt_steps_faster_to_the_same_song_played_faster() {
+    let m = model("tsmt");
+    let step_hz = |factor: f64| {
+        let song = stretched_song("sugar_plum_fairy.ogg", 40.0, factor);
+        let (out, analysis) = generated(m.as_ref(), &song, 1);
+        let motion = out.motion;
+        choreo::metrics::musicality::tempo_lock(
+            motion.positions.view(),
+            motion.fps,
+            &analysis.beat_times,
+        )
+        .expect("a step rate")
+        .step_hz
+    };
+    let (slow, fast) = (step_hz(0.85), step_hz(1.2));
+    let ratio = fast / slow;
+    eprintln!("tsmt seed 1: {slow:.3} Hz (0.85×), {fast:.3} Hz (1.2×), ratio {ratio:.3}");
+    assert!(
+        (ratio / (1.2 / 0.85) - 1.0).abs() < 0.08,
+        "steps at {slow:.3} Hz (0.85×) and {fast:.3} Hz (1.2×): ratio {ratio:.3}, a follower 1.412"
+    );
+}
+
 /// dance-revolution keeps a slow song's tempo as the tracker hears it (`beat_time::FOLD_LO_BPM`):
 /// sugar_plum_fairy's first 40 s at 0.65× are heard at 72 BPM and danced as the network makes
 /// them (factor 1), as the same song at 0.7× (77 BPM) is. When the fold's window began at 75 BPM,

@@ -474,6 +474,11 @@ args_into! {
         /// metre's fraction).
         #[arg(long)]
         clock_step_hz: Option<f64>,
+        /// The served clock turns once a bar, halved or doubled into this band of step rates
+        /// (Hz, `LOW,HIGH`), written into `model.json` (`tsmt::Serving::clock_bar_hz`; read
+        /// before `--clock-step-hz`).
+        #[arg(long, value_delimiter = ',')]
+        clock_bar_hz: Option<Vec<f64>>,
         /// Do not train: redraw the seed clips (the same clips for the same `--seed`) with each
         /// one's source and its song's beats into `--out` (`seed_clips.safetensors`,
         /// `seed_clips.json`; with it the song chooses the opening clip).

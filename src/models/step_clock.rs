@@ -115,6 +115,23 @@ pub fn phase_near(is_beat: &[bool], hz: f64, fps: f64) -> Option<Vec<f64>> {
     })
 }
 
+/// The phases of a clock that turns once a bar of `bar` beats (1/3 of the beat in three beats a
+/// bar, 1/4 in four), halved or doubled while its step rate lies outside `band` (Hz, low to
+/// high): one fraction for one song over a wide span of tempi, so a song played faster turns
+/// it faster, where [`phase_near`] keeps one pace. `None` under two beats.
+pub fn phase_per_bar(is_beat: &[bool], bar: usize, band: [f64; 2], fps: f64) -> Option<Vec<f64>> {
+    clock_at(is_beat, fps, |beats_per_s| {
+        let mut f = 1.0 / bar.max(1) as f64;
+        while f * beats_per_s > band[1] && f > 1.0 / 64.0 {
+            f /= 2.0;
+        }
+        while f * beats_per_s < band[0] && f < 1.0 {
+            f *= 2.0;
+        }
+        f
+    })
+}
+
 /// The phases of a clock that turns at the fraction `fraction(beats per second)` of the song's
 /// beat count; `None` under two beats. The served rules above differ only in the fraction.
 fn clock_at(is_beat: &[bool], fps: f64, fraction: impl Fn(f64) -> f64) -> Option<Vec<f64>> {
@@ -251,6 +268,29 @@ mod tests {
             assert!(p[10].abs() < 1e-9, "{bpm} BPM: {}", p[10]);
         }
         assert!(phase_near(&[false; 50], 0.49, fps).is_none());
+    }
+
+    #[test]
+    fn a_clock_once_a_bar_follows_the_tempo_inside_its_band() {
+        // Beats every 12 frames at 25 fps: 125 BPM, 2.08 beats a second.
+        let beats = |every: usize| -> Vec<bool> { (0..500).map(|t| t % every == 0).collect() };
+        let rate = |p: &[f64]| (p[400] - p[100]) / std::f64::consts::TAU / 12.0;
+        let band = [0.3, 0.8];
+        // Four beats a bar: 1/4 of the beat, 0.52 Hz; the same song 1.2× faster turns 1.2× faster.
+        let at = phase_per_bar(&beats(12), 4, band, 25.0).unwrap();
+        assert!((rate(&at) - 2.0833 / 4.0).abs() < 1e-3, "{}", rate(&at));
+        let faster = phase_per_bar(&beats(10), 4, band, 25.0).unwrap();
+        assert!((rate(&faster) / rate(&at) - 1.2).abs() < 1e-3);
+        // Three beats a bar at 125 BPM: 1/3, 0.69 Hz; at 250 BPM halved into the band.
+        let waltz = phase_per_bar(&beats(12), 3, band, 25.0).unwrap();
+        assert!((rate(&waltz) - 2.0833 / 3.0).abs() < 1e-3);
+        let double = phase_per_bar(&beats(6), 3, band, 25.0).unwrap();
+        assert!(
+            (rate(&double) - 4.1667 / 6.0).abs() < 1e-3,
+            "{}",
+            rate(&double)
+        );
+        assert!(phase_per_bar(&[false; 10], 4, band, 25.0).is_none());
     }
 
     #[test]

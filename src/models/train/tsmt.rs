@@ -67,6 +67,9 @@ pub struct Options {
     /// The served clock's step rate, written into `model.json` (`tsmt::Serving::clock_step_hz`;
     /// none: the metre's fraction).
     pub clock_step_hz: Option<f64>,
+    /// The served clock's band once a bar, written into `model.json`
+    /// (`tsmt::Serving::clock_bar_hz`).
+    pub clock_bar_hz: Option<Vec<f64>>,
     pub seed: u64,
     /// Train in beat time (`models::beat_time`): every dance re-timed to the split's median
     /// tempo (after the bins are fitted on the dances as danced); the model then serves so.
@@ -131,6 +134,7 @@ impl Default for Options {
             reopen_reach: 0.1,
             clock_gain: 1.0,
             clock_step_hz: None,
+            clock_bar_hz: None,
             seed: 2020,
             beat_time: false,
             min_tempo: 1.0,
@@ -225,6 +229,14 @@ fn seed_clips(data: &Data, opts: &Options) -> Result<SeedClips, TrainError> {
 
 /// Trains and writes the model folder; returns the per-epoch log.
 pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
+    if let Some(band) = opts.clock_bar_hz.as_deref() {
+        if !matches!(band, &[lo, hi] if lo > 0.0 && hi > 2.0 * lo) {
+            // Under an octave wide, halving or doubling could not bring every tempo inside.
+            return Err(TrainError::InvalidOption(format!(
+                "--clock-bar-hz {band:?}: want LOW,HIGH with 0 < LOW and HIGH over 2 × LOW"
+            )));
+        }
+    }
     // The root height becomes the lowest foot's clearance over each dance's own floor.
     let tempo = if opts.beat_time {
         Tempo::Analysed
@@ -400,6 +412,10 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             beat_time,
             clock_gain: opts.clock_gain,
             clock_step_hz: opts.clock_step_hz,
+            clock_bar_hz: match opts.clock_bar_hz.as_deref() {
+                Some(&[lo, hi]) => Some([lo, hi]),
+                _ => None,
+            },
         },
     };
     let steps_cell = std::cell::Cell::new(0usize);

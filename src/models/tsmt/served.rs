@@ -113,6 +113,11 @@ pub struct Serving {
     /// there, and drifted off one at a cha-cha's 1 Hz (the card).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clock_step_hz: Option<f64>,
+    /// Where set, the served clock turns once a bar, halved or doubled into this band of step
+    /// rates (Hz; `step_clock::phase_per_bar`), before `clock_step_hz` is read: a clock that
+    /// follows the song's tempo (issue 25; tried, the card).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clock_bar_hz: Option<[f64; 2]>,
 }
 
 fn is_one(v: &f64) -> bool {
@@ -236,9 +241,12 @@ impl Served {
                 .collect();
             let bar = crate::models::clip_choice::bar_of(&*req.analysis_or_analyze()?);
             // On the network's clock a frame lasts `factor` song frames.
-            match self.file.extra.clock_step_hz {
-                Some(hz) => step_clock::phase_near(&is_beat, hz, fps / clock.factor),
-                None => step_clock::phase_of_song(
+            match (self.file.extra.clock_bar_hz, self.file.extra.clock_step_hz) {
+                (Some(band), _) => {
+                    step_clock::phase_per_bar(&is_beat, bar, band, fps / clock.factor)
+                }
+                (None, Some(hz)) => step_clock::phase_near(&is_beat, hz, fps / clock.factor),
+                (None, None) => step_clock::phase_of_song(
                     &is_beat,
                     step_clock::style_of_metre(bar),
                     fps / clock.factor,
