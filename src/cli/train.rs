@@ -198,6 +198,11 @@ args_into! {
         /// With `--arm-head-only`: how many seeds (101, 102, …) each train song is danced from.
         #[arg(long, default_value_t = train::dance_revolution::Options::default().rollout_seeds)]
         rollout_seeds: u64,
+        /// With `--arm-head-only`: the head also reads the figure the arms are to hold, trained
+        /// on the network's own dances told real figures from the train split, which
+        /// `model.json` then keeps for serving (issue 25; the card).
+        #[arg(long, default_value_t = train::dance_revolution::Options::default().arm_figures, action = clap::ArgAction::Set)]
+        arm_figures: bool,
     }
 }
 

@@ -71,6 +71,7 @@ impl Serving {
             warm_up_frames: WARM_UP_FRAMES,
             beat_time: None,
             opening_check: Some(OPENING_CHECK),
+            figures: None,
         }
     }
 }
@@ -91,6 +92,10 @@ pub struct Serving {
     /// The check of `h_0`'s draw, if any ([`OpeningCheck`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub opening_check: Option<OpeningCheck>,
+    /// The figures an arm head with figures is told ([`super::figures`]); read only where
+    /// `config.arm_figures` is set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub figures: Option<super::figures::Figures>,
 }
 
 /// The guard's running state: the last frames' root-relative joints in metres.
@@ -185,6 +190,18 @@ impl Served {
         let (file, pool) = folder::load(dir, ID, |p, f: &ModelFile| {
             DanceRevolution::new(p, f.config.clone())
         })?;
+        let told = file
+            .extra
+            .figures
+            .as_ref()
+            .is_some_and(|f| !f.bank.is_empty());
+        if file.config.arm_figures && !told {
+            // The head would read the spine's own place as the figure: no dance holds that.
+            return Err(ModelError::BadModelFile(format!(
+                "{}: config.arm_figures without figures to tell the arm head",
+                dir.join("model.json").display()
+            )));
+        }
         Ok(Self { file, pool })
     }
 
@@ -212,7 +229,7 @@ impl Served {
         let resumable = warm.min(m) == warm.min(n);
         let mut opened: Vec<(u64, Decoding<'a>)> = Vec::new();
         let chosen = check.choose(ID, seed, &window, |s| -> Result<_, ModelError> {
-            let mut d = model.begin(&head, s, None, guard, warm);
+            let mut d = self.with_figures(model.begin(&head, s, None, guard, warm), n, s);
             if d.run_to(&head, m, 0, |_| true, None).is_none() {
                 return Ok(None);
             }
@@ -230,6 +247,14 @@ impl Served {
             tracing::debug!(from = d.done(), "dance-revolution: the kept draw goes on");
         }
         Ok((seed, Some(seen), kept))
+    }
+
+    /// `d` told the figures of draw `seed` over `n` network frames, where the arm head reads them.
+    fn with_figures<'a>(&self, d: Decoding<'a>, n: i64, seed: u64) -> Decoding<'a> {
+        match &self.file.extra.figures {
+            Some(f) if self.file.config.arm_figures => d.with_figures(&f.plan(n as usize, seed)),
+            _ => d,
+        }
     }
 
     /// The decoder's output `[1, n, pose]` (normalised) as a dance on the network's clock.
@@ -320,7 +345,8 @@ impl DanceModel for Served {
                 // start.
                 let mut d = kept.unwrap_or_else(|| {
                     let warm = self.file.extra.warm_up_frames;
-                    model.begin(&z, seed, seed_poses.as_ref(), guard, warm)
+                    let d = model.begin(&z, seed, seed_poses.as_ref(), guard, warm);
+                    self.with_figures(d, z.size()[1], seed)
                 });
                 let ran = d.run_to(
                     &z,

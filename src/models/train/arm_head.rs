@@ -17,11 +17,18 @@
 //!   network's own arms rather than moving them somewhere else.
 //!
 //! The test split is danced from one seed, for the test loss and the arms' speeds in the epoch log.
+//!
+//! A head with figures (`--arm-figures`, `dance_revolution::figures`) is told, over each window,
+//! one real figure of the train split and then another one at least 0.10 m away, blended over a
+//! second at a random frame, and the third and fourth terms give way to the *figure term*: each
+//! 2-s mean of the arms held to the figure's. The spectral term and the speed shortfall still
+//! keep the arms moving around it.
 use rand::seq::SliceRandom;
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use tch::{Kind, Tensor};
 
 use super::{Sequence, TrainError};
+use crate::models::dance_revolution::figures::{self, Figure, FIGURE_DIM};
 use crate::models::dance_revolution::{DanceRevolution, StallGuard, WARM_UP_FRAMES};
 use crate::motion::dataset::NormStats;
 
@@ -47,6 +54,96 @@ const SPEED_FLOOR_M_S: f64 = 0.55;
 const SIZE_WEIGHT: f64 = 0.5;
 /// Weight of the offsets' mean over each window (normalised units, mean over the arm columns).
 const OFFSET_WEIGHT: f64 = 1.0;
+
+/// Weight of the figure term (m, the four joints' mean distance between the arms' 2-s mean and
+/// the figure's): a window 0.1 m off its figure costs 1, about what the spectral term costs a
+/// held arm.
+const FIGURE_WEIGHT: f64 = 10.0;
+/// Weight of the forearms' length term (m, how far each frame's elbow-to-wrist distance falls
+/// short of [`FOREARM_FLOOR_M`]). The figures are means, shorter from elbow to wrist than any one
+/// frame of a moving arm: held to them alone, the head brought the wrist within 0.15 m of the
+/// elbow in 13–32 % of a song's frames, which the skeleton's fit shows as a forearm folded at its
+/// marker (the network's own left arm does so in 12–15 %; the real dances in 0–1.5 %).
+const LENGTH_WEIGHT: f64 = 10.0;
+/// The elbow-to-wrist distance (m) a frame should keep: the real dances' 5th percentile is
+/// 0.21–0.25 m.
+const FOREARM_FLOOR_M: f64 = 0.20;
+/// Frames of each mean the figure term compares: 2 s, so the arms may swing around the figure.
+const FIGURE_BLOCK: i64 = 50;
+
+/// What a head with figures is told and measured against.
+pub struct FigureTerm {
+    /// The train split's figures.
+    bank: Vec<Figure>,
+    /// The pose normalisation's means and stds (`[pose]`), to read the arms in metres.
+    mean: Tensor,
+    std: Tensor,
+}
+
+impl FigureTerm {
+    pub fn new(bank: Vec<Figure>, norm: &NormStats) -> Self {
+        Self {
+            bank,
+            mean: Tensor::from_slice(&norm.mean),
+            std: Tensor::from_slice(&norm.std),
+        }
+    }
+
+    /// `[WINDOW, FIGURE_DIM]`: one figure, then another at least the served change away, blended
+    /// in over the served blend ending at a frame drawn in the window's middle half.
+    fn window_plan(&self, rng: &mut impl Rng) -> Tensor {
+        let a = figures::next_figure(&self.bank, None, 0.0, rng);
+        let b = figures::next_figure(&self.bank, Some(&a), figures::SERVED_MIN_CHANGE_M, rng);
+        let end = rng.gen_range(WINDOW / 4..3 * WINDOW / 4);
+        let blend = figures::SERVED_BLEND_FRAMES;
+        let mut p = ndarray::Array2::<f32>::zeros((WINDOW, FIGURE_DIM as usize));
+        for t in 0..WINDOW {
+            // As `Figures::plan` blends: the last blend frame is the new figure.
+            let s = ((t + blend + 1).saturating_sub(end) as f32 / blend as f32).min(1.0);
+            let w = s * s * (3.0 - 2.0 * s);
+            for c in 0..FIGURE_DIM as usize {
+                p[[t, c]] = a[c] + (b[c] - a[c]) * w;
+            }
+        }
+        crate::models::to_tensor(&p)
+    }
+
+    /// The mean shortfall (m) of the elbow-to-wrist distances of `x` (`[b, t, pose]`,
+    /// normalised) under [`FOREARM_FLOOR_M`].
+    fn forearm_shortfall(&self, x: &Tensor) -> Tensor {
+        let arms = figures::postures_of(x, &self.mean, &self.std);
+        let (b, t, _) = arms.size3().expect("[b, t, figure]");
+        let joints = arms.view([b, t, FIGURE_DIM / 3, 3]);
+        // ARM_JOINTS is right elbow, right wrist, left elbow, left wrist.
+        let forearm = |e: i64| joints.select(2, e + 1) - joints.select(2, e);
+        let lengths = (Tensor::stack(&[forearm(0), forearm(2)], 2)
+            .square()
+            .sum_dim_intlist(-1, false, Kind::Float)
+            + 1e-10)
+            .sqrt();
+        (-lengths + FOREARM_FLOOR_M).relu().mean(Kind::Float)
+    }
+
+    /// The figure term: the mean over windows, 2-s blocks and joints of the distance (m) between
+    /// the arms' mean of `x` `[b, WINDOW, pose]` (normalised) and the figures' `plan`
+    /// `[b, WINDOW, FIGURE_DIM]` over the block.
+    fn miss(&self, x: &Tensor, plan: &Tensor) -> Tensor {
+        let arms = figures::postures_of(x, &self.mean, &self.std);
+        let (b, t, _) = arms.size3().expect("[b, t, figure]");
+        let blocks = t / FIGURE_BLOCK;
+        let means = |y: &Tensor| {
+            y.narrow(1, 0, blocks * FIGURE_BLOCK)
+                .view([b, blocks, FIGURE_BLOCK, FIGURE_DIM / 3, 3])
+                .mean_dim(2, false, Kind::Float)
+        };
+        ((means(&arms) - means(plan))
+            .square()
+            .sum_dim_intlist(-1, false, Kind::Float)
+            + 1e-10)
+            .sqrt()
+            .mean(Kind::Float)
+    }
+}
 
 /// One whole-song dance of the frozen network with what its read-outs read, and the real dance.
 struct Rollout {
@@ -113,14 +210,16 @@ impl Rollouts {
     }
 
     /// The loss of `windows` (indices into [`Self::windows`]): the arms' spectral term against
-    /// the real dance × `arm_weight`, plus the mean offset's cost.
+    /// the real dance × `arm_weight`, plus the mean offset's cost; with `figures`, the figure
+    /// term instead of the offsets' (their plans drawn from the generator), and its miss (m).
     fn loss(
         &self,
         model: &DanceRevolution,
         windows: &[(usize, usize)],
         pose_std: &Tensor,
         arm_weight: f64,
-    ) -> Tensor {
+        figures: Option<(&FigureTerm, &mut rand::rngs::StdRng)>,
+    ) -> (Tensor, Option<f64>) {
         let pick = |f: fn(&Rollout) -> &Tensor| {
             Tensor::stack(
                 &windows
@@ -131,9 +230,13 @@ impl Rollouts {
             )
         };
         let (fed, hz, truth) = (pick(|r| &r.fed), pick(|r| &r.hz), pick(|r| &r.truth));
+        let told = figures.map(|(term, rng)| {
+            let plans: Vec<Tensor> = windows.iter().map(|_| term.window_plan(rng)).collect();
+            (term, Tensor::stack(&plans, 0))
+        });
         let offsets = model
             .decoder
-            .arm_offsets(&hz)
+            .arm_offsets(&hz, told.as_ref().map(|(_, plan)| plan))
             .expect("the arm head is checked before training");
         let pred = &fed + &offsets;
         let spectral = super::spectral::relative_spectral_loss(
@@ -144,6 +247,23 @@ impl Rollouts {
             crate::motion::skeleton::SPINE,
             crate::motion::MOTION_FPS,
         );
+        let shortfall = (window_arm_speed(&truth, pose_std).clamp_max(SPEED_FLOOR_M_S)
+            - window_arm_speed(&pred, pose_std))
+        .relu()
+        .mean(Kind::Float);
+        if let Some((term, plan)) = told {
+            let miss = term.miss(&pred, &plan);
+            let figure_miss = miss.double_value(&[]);
+            let length = term.forearm_shortfall(&pred);
+            return (
+                (spectral
+                    + shortfall * SPEED_WEIGHT
+                    + miss * FIGURE_WEIGHT
+                    + length * LENGTH_WEIGHT)
+                    * arm_weight,
+                Some(figure_miss),
+            );
+        }
         let columns = crate::models::dance_revolution::arm_columns().len() as f64;
         // Offsets are zero outside the arm columns: the sum over columns / 12 is their mean.
         let offset = offsets
@@ -152,18 +272,17 @@ impl Rollouts {
             .sum_dim_intlist(-1, false, Kind::Float)
             .mean(Kind::Float)
             / columns;
-        let shortfall = (window_arm_speed(&truth, pose_std).clamp_max(SPEED_FLOOR_M_S)
-            - window_arm_speed(&pred, pose_std))
-        .relu()
-        .mean(Kind::Float);
         // The offsets' size (mean over the arm columns, normalised units).
         let size = offsets
             .abs()
             .sum_dim_intlist(-1, false, Kind::Float)
             .mean(Kind::Float)
             / columns;
-        (spectral + shortfall * SPEED_WEIGHT + offset * OFFSET_WEIGHT + size * SIZE_WEIGHT)
-            * arm_weight
+        (
+            (spectral + shortfall * SPEED_WEIGHT + offset * OFFSET_WEIGHT + size * SIZE_WEIGHT)
+                * arm_weight,
+            None,
+        )
     }
 }
 
@@ -171,14 +290,27 @@ impl Rollouts {
     /// Each dance's mean speed (m/s) of the elbows and wrists relative to the spine, with the
     /// head's offsets (what `metrics::musicality::arm_speed_m_s` reads) and without.
     /// Without a head, both are the network's own.
-    fn arm_speeds(&self, model: &DanceRevolution, pose_std: &Tensor) -> Vec<(f64, f64)> {
+    /// A head with figures is told a served plan of the train split's `bank` (seed: the dance's
+    /// index).
+    fn arm_speeds(
+        &self,
+        model: &DanceRevolution,
+        pose_std: &Tensor,
+        bank: Option<&FigureTerm>,
+    ) -> Vec<(f64, f64)> {
         let speed = |x: &Tensor| window_arm_speed(&x.unsqueeze(0), pose_std).double_value(&[0]);
         tch::no_grad(|| {
             self.dances
                 .iter()
-                .map(|r| {
+                .enumerate()
+                .map(|(i, r)| {
                     let own = speed(&r.fed);
-                    match model.decoder.arm_offsets(&r.hz) {
+                    let plan = bank.map(|term| {
+                        let n = r.hz.size()[0] as usize;
+                        let plan = figures::Figures::served(term.bank.clone()).plan(n, i as u64);
+                        crate::models::to_tensor(&plan)
+                    });
+                    match model.decoder.arm_offsets(&r.hz, plan.as_ref()) {
                         Some(offsets) => (speed(&(&r.fed + offsets)), own),
                         None => (own, own),
                     }
@@ -210,6 +342,8 @@ fn window_arm_speed(x: &Tensor, pose_std: &Tensor) -> Tensor {
 pub struct HeadData {
     train: Rollouts,
     test: Rollouts,
+    /// For a head with figures.
+    figures: Option<FigureTerm>,
 }
 
 impl HeadData {
@@ -220,15 +354,22 @@ impl HeadData {
         test: &[Sequence],
         pose_norm: &NormStats,
         seeds: u64,
+        bank: Option<Vec<Figure>>,
     ) -> Result<Self, TrainError> {
         let started = std::time::Instant::now();
         let seeds: Vec<u64> = (FIRST_SEED..FIRST_SEED + seeds.max(1)).collect();
+        if model.config.arm_figures != bank.is_some() {
+            return Err(TrainError::InvalidOption(
+                "a head with figures is trained with the train split's figures, and only it".into(),
+            ));
+        }
         let data = Self {
             train: Rollouts::collect(model, train, &seeds, pose_norm)?,
             test: Rollouts::collect(model, test, &[TEST_SEED], pose_norm)?,
+            figures: bank.map(|b| FigureTerm::new(b, pose_norm)),
         };
         let std = Tensor::from_slice(&pose_norm.std[..crate::motion::repr::POSE_DIM]);
-        let speeds = data.train.arm_speeds(model, &std);
+        let speeds = data.train.arm_speeds(model, &std, data.figures.as_ref());
         let held = |pick: fn(&(f64, f64)) -> f64| {
             (
                 speeds.iter().filter(|s| pick(s) < 0.43).count(),
@@ -250,6 +391,32 @@ impl HeadData {
         Ok(data)
     }
 
+    /// The test loss and, with figures, the figure term's miss (m): the same figures every call.
+    fn test_loss(
+        &self,
+        model: &DanceRevolution,
+        batch: usize,
+        pose_std: &Tensor,
+        arm_weight: f64,
+    ) -> (Option<f64>, Option<f64>) {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(TEST_SEED);
+        let mut misses = Vec::new();
+        let losses: Vec<f64> = tch::no_grad(|| {
+            self.test
+                .windows
+                .chunks(batch.max(1))
+                .map(|c| {
+                    let told = self.figures.as_ref().map(|f| (f, &mut rng));
+                    let (loss, miss) = self.test.loss(model, c, pose_std, arm_weight, told);
+                    misses.extend(miss);
+                    loss.double_value(&[])
+                })
+                .collect()
+        });
+        let mean = |v: &[f64]| (!v.is_empty()).then(|| v.iter().sum::<f64>() / v.len() as f64);
+        (mean(&losses), mean(&misses))
+    }
+
     /// One epoch over the train windows in a seeded order; returns the mean train loss, the test
     /// loss, and the test dances' arm speeds as a log note.
     #[allow(clippy::too_many_arguments)]
@@ -264,28 +431,18 @@ impl HeadData {
         arm_weight: f64,
     ) -> (f64, Option<f64>, String) {
         let mut order = self.train.windows.clone();
-        order.shuffle(&mut rand::rngs::StdRng::seed_from_u64(seed));
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        order.shuffle(&mut rng);
         let (mut total, mut batches) = (0.0, 0);
         for chunk in order.chunks(batch.max(1)) {
-            let loss = self.train.loss(model, chunk, pose_std, arm_weight);
+            let told = self.figures.as_ref().map(|f| (f, &mut rng));
+            let (loss, _) = self.train.loss(model, chunk, pose_std, arm_weight, told);
             super::dance_revolution::masked_step(opt, &loss, masks);
             total += loss.double_value(&[]);
             batches += 1;
         }
-        let test = tch::no_grad(|| {
-            let losses: Vec<f64> = self
-                .test
-                .windows
-                .chunks(batch.max(1))
-                .map(|c| {
-                    self.test
-                        .loss(model, c, pose_std, arm_weight)
-                        .double_value(&[])
-                })
-                .collect();
-            (!losses.is_empty()).then(|| losses.iter().sum::<f64>() / losses.len() as f64)
-        });
-        let speeds = self.test.arm_speeds(model, pose_std);
+        let (test, miss) = self.test_loss(model, batch, pose_std, arm_weight);
+        let speeds = self.test.arm_speeds(model, pose_std, self.figures.as_ref());
         let slowest = speeds
             .iter()
             .cloned()
@@ -296,8 +453,11 @@ impl HeadData {
                     a
                 }
             });
+        let figure_miss = miss
+            .map(|m| format!("test figure miss {m:.3} m; "))
+            .unwrap_or_default();
         let note = format!(
-            "test arms (m/s, with the head / without): slowest {:.3} / {:.3}, each {:?}",
+            "{figure_miss}test arms (m/s, with the head / without): slowest {:.3} / {:.3}, each {:?}",
             slowest.0,
             slowest.1,
             speeds
@@ -336,6 +496,44 @@ mod tests {
         }
     }
 
+    /// A head with figures learns to put the arms' mean where it is told, on dances it never
+    /// trained on.
+    #[test]
+    fn a_head_with_figures_learns_to_hold_the_arms_where_it_is_told() {
+        tch::manual_seed(5);
+        let vs = tch::nn::VarStore::new(tch::Device::Cpu);
+        let model = DanceRevolution::new(
+            &vs.root(),
+            Config {
+                arm_head: 32,
+                arm_figures: true,
+                ..Config::tiny(6, 73)
+            },
+        );
+        let norm = NormStats {
+            mean: vec![0.0; 73],
+            std: vec![1.0; 73],
+        };
+        let train = [swinging("a", 300, 1), swinging("b", 300, 2)];
+        let test = [swinging("c", 300, 3)];
+        let bank: Vec<Figure> = [0.4f32, -0.4, 0.0, 0.8]
+            .iter()
+            .map(|&v| std::array::from_fn(|k| if k % 3 == 1 { v } else { -v / 2.0 }))
+            .collect();
+        assert!(HeadData::collect(&model, &train, &test, &norm, 1, None).is_err());
+        let data = HeadData::collect(&model, &train, &test, &norm, 2, Some(bank)).unwrap();
+        let std = Tensor::ones([69], (Kind::Float, tch::Device::Cpu));
+        let (_, first) = data.test_loss(&model, 4, &std, 1.0);
+        let masks = super::super::dance_revolution::arm_head_masks(&vs).unwrap();
+        let mut opt = tch::nn::Adam::default().build(&vs, 1e-2).unwrap();
+        for epoch in 0..40 {
+            data.epoch(&model, &mut opt, &masks, 4, epoch, &std, 1.0);
+        }
+        let (_, last) = data.test_loss(&model, 4, &std, 1.0);
+        let (first, last) = (first.unwrap(), last.unwrap());
+        assert!(last < 0.5 * first, "figure miss {first} → {last} m");
+    }
+
     /// The head learns to swing the arms the network holds still: the loss on a dance it never
     /// trained on falls, and the frozen network's own read-out (what it feeds itself) is the
     /// same after training as before.
@@ -356,7 +554,7 @@ mod tests {
         };
         let train = [swinging("a", 300, 1), swinging("b", 300, 2)];
         let test = [swinging("c", 300, 3)];
-        let data = HeadData::collect(&model, &train, &test, &norm, 2).unwrap();
+        let data = HeadData::collect(&model, &train, &test, &norm, 2, None).unwrap();
         let own_before = data.train.dances[0].fed.copy();
         let masks = super::super::dance_revolution::arm_head_masks(&vs).unwrap();
         let mut opt = tch::nn::Adam::default().build(&vs, 1e-2).unwrap();
@@ -368,7 +566,7 @@ mod tests {
         }
         let (first, last) = (first.unwrap(), last.unwrap());
         assert!(last < 0.7 * first, "test loss {first} → {last}");
-        let again = HeadData::collect(&model, &train, &test, &norm, 2).unwrap();
+        let again = HeadData::collect(&model, &train, &test, &norm, 2, None).unwrap();
         let moved = (&again.train.dances[0].fed - &own_before)
             .abs()
             .max()

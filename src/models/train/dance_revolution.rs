@@ -10,7 +10,7 @@ use super::{
     Trainer, Windows,
 };
 use crate::models::dance_revolution::{
-    curriculum_q, Config, Curriculum, DanceRevolution, ModelFile, Serving, ID,
+    curriculum_q, figures, Config, Curriculum, DanceRevolution, ModelFile, Serving, ID,
 };
 
 /// Options of one training run; the defaults reproduce the committed weights' schedule (the
@@ -66,6 +66,8 @@ pub struct Options {
     pub arm_head_only: bool,
     /// With `--arm-head-only`: how many seeds each train song is danced from.
     pub rollout_seeds: u64,
+    /// With `arm_head_only`: the head also reads a figure (`dance_revolution::figures`).
+    pub arm_figures: bool,
 }
 
 impl Default for Options {
@@ -96,6 +98,7 @@ impl Default for Options {
             arm_head: 0,
             arm_head_only: false,
             rollout_seeds: 3,
+            arm_figures: false,
         }
     }
 }
@@ -123,6 +126,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         pose_dim: data.pose_norm.dim() as i64,
         beat_clock: opts.beat_clock,
         arm_head: opts.arm_head,
+        arm_figures: opts.arm_figures,
         ..base
     };
     if opts.arm_head_only && (opts.arm_head == 0 || opts.arm_readout_only) {
@@ -130,6 +134,24 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             "--arm-head-only needs --arm-head N (N > 0) and not --arm-readout-only".into(),
         ));
     }
+    if opts.arm_figures && !opts.arm_head_only {
+        return Err(TrainError::InvalidOption(
+            "--arm-figures trains the arm head alone: give --arm-head-only true".into(),
+        ));
+    }
+    // The real figures the head is told (and serving draws from): the train split's only.
+    let bank = opts.arm_figures.then(|| {
+        let joints = crate::motion::repr::POSE_DIM;
+        let dances: Vec<ndarray::Array2<f32>> = data
+            .train
+            .iter()
+            .map(|s| data.pose_norm.denormalize(&s.poses))
+            .collect::<Result<_, _>>()?;
+        Ok::<_, TrainError>(figures::bank_of(
+            dances.iter().map(|d| d.slice(ndarray::s![.., ..joints])),
+        ))
+    });
+    let bank = bank.transpose()?;
     let augment = Augment {
         min_tempo: opts.min_tempo,
         max_tempo: opts.max_tempo,
@@ -168,6 +190,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             &data.test,
             &data.pose_norm,
             opts.rollout_seeds,
+            bank.clone(),
         )?)
     } else {
         None
@@ -254,6 +277,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             training: t.record(opts.lr, opts.batch, opts.seed, curriculum.clone()),
             extra: Serving {
                 beat_time,
+                figures: bank.clone().map(figures::Figures::served),
                 ..Serving::served()
             },
         },
