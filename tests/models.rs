@@ -297,6 +297,21 @@ fn downloaded(
     (served, summary.expect("the stage ran"), beats)
 }
 
+/// The step rate (Hz) of model `m`'s own motion (seed 1, no served stage after it) on the first
+/// 40 s of shared song `name` played at `factor`, against the song's beats.
+fn own_step_hz(m: &dyn DanceModel, name: &str, factor: f64) -> f64 {
+    let song = stretched_song(name, 40.0, factor);
+    let (out, analysis) = generated(m, &song, 1);
+    let motion = out.motion;
+    choreo::metrics::musicality::tempo_lock(
+        motion.positions.view(),
+        motion.fps,
+        &analysis.beat_times,
+    )
+    .expect("a step rate")
+    .step_hz
+}
+
 /// dance-revolution runs in beat time (`models::beat_time`): on one song played at 0.85× and at
 /// 1.1× (117 BPM → 99 and 129), the network's own motion (no beat-align stage here: this is the
 /// model alone) steps 1.1 / 0.85 = 1.29× as often on the faster copy. Before beat time its steps
@@ -309,18 +324,7 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
         .beat_time
         .expect("dance-revolution is served in beat time");
     assert!((80.0..100.0).contains(&bt.bpm), "{bt:?}");
-    let step_hz = |factor: f64| {
-        let song = stretched_song("lets_go_fishin.ogg", 40.0, factor);
-        let (out, analysis) = generated(m.as_ref(), &song, 1);
-        let motion = out.motion;
-        choreo::metrics::musicality::tempo_lock(
-            motion.positions.view(),
-            motion.fps,
-            &analysis.beat_times,
-        )
-        .expect("a step rate")
-        .step_hz
-    };
+    let step_hz = |factor| own_step_hz(m.as_ref(), "lets_go_fishin.ogg", factor);
     let (slow, fast) = (step_hz(0.85), step_hz(1.1));
     let ratio = fast / slow;
     assert!(
@@ -338,18 +342,7 @@ fn dance_revolution_steps_faster_to_the_same_song_played_faster() {
 #[test]
 fn tsmt_steps_faster_to_the_same_song_played_faster() {
     let m = model("tsmt");
-    let step_hz = |factor: f64| {
-        let song = stretched_song("sugar_plum_fairy.ogg", 40.0, factor);
-        let (out, analysis) = generated(m.as_ref(), &song, 1);
-        let motion = out.motion;
-        choreo::metrics::musicality::tempo_lock(
-            motion.positions.view(),
-            motion.fps,
-            &analysis.beat_times,
-        )
-        .expect("a step rate")
-        .step_hz
-    };
+    let step_hz = |factor| own_step_hz(m.as_ref(), "sugar_plum_fairy.ogg", factor);
     let (slow, fast) = (step_hz(0.85), step_hz(1.2));
     let ratio = fast / slow;
     eprintln!("tsmt seed 1: {slow:.3} Hz (0.85×), {fast:.3} Hz (1.2×), ratio {ratio:.3}");

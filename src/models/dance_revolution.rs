@@ -405,7 +405,8 @@ mod tests {
     use super::*;
     use tch::nn::OptimizerConfig;
 
-    fn model(seed: i64) -> (nn::VarStore, DanceRevolution) {
+    /// A tiny network from `seed` (6 music columns, 5 pose columns).
+    pub(super) fn model(seed: i64) -> (nn::VarStore, DanceRevolution) {
         tch::manual_seed(seed);
         let vs = nn::VarStore::new(Device::Cpu);
         let m = DanceRevolution::new(&vs.root(), Config::tiny(6, 5));

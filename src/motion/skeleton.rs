@@ -119,6 +119,10 @@ pub const ANKLES: [usize; 2] = [9, 18];
 pub const HEELS: [usize; 2] = [10, 19];
 /// Toes (right, left).
 pub const TOES: [usize; 2] = [11, 20];
+/// Elbows (right, left).
+pub const ELBOWS: [usize; 2] = [4, 13];
+/// Forearm markers (right, left), between elbow and wrist: not anatomical joints' centres.
+pub const FOREARMS: [usize; 2] = [5, 14];
 /// Wrists, the hand end of each arm (right, left).
 pub const WRISTS: [usize; 2] = [6, 15];
 /// Hand-direction points (right, left): not anatomical joints.

@@ -3,14 +3,9 @@
 use tch::nn;
 use tch::{Kind, Tensor};
 
-use super::figures::FIGURE_DIM;
+use super::figures::{self, FIGURE_DIM};
 use super::Config;
-use crate::metrics::musicality::ARM_JOINTS;
-use crate::motion::skeleton::{HAND_DIRS, WRISTS};
-
-/// Elbows and forearm markers (right, left), as [`crate::motion::skeleton`] orders its joints.
-const ELBOWS: [usize; 2] = [4, 13];
-const FOREARMS: [usize; 2] = [5, 14];
+use crate::motion::skeleton::{FOREARMS, HAND_DIRS};
 
 /// The pose vector's columns of the elbows and wrists (`metrics::musicality::ARM_JOINTS`, x y z
 /// each): what the [`ArmHead`] and `choreo train … --arm-readout-only` move.
@@ -61,22 +56,13 @@ impl ArmHead {
             // place would stay behind and bend the arm (the skeleton is fitted to every marker):
             // the forearm's marker, about halfway from the elbow to the wrist in the data, moves
             // by the mean of the two, and the hand's direction point with the wrist.
-            for (side, &hand) in HAND_DIRS.iter().enumerate() {
-                let row = |joint: usize| {
-                    3 * ARM_JOINTS
-                        .iter()
-                        .position(|&j| j == joint)
-                        .expect("an arm joint") as i64
-                };
-                let (elbow, wrist) = (row(ELBOWS[side]), row(WRISTS[side]));
-                let forearm = 3 * FOREARMS[side] as i64;
+            for (side, (elbow, wrist)) in figures::forearms().into_iter().enumerate() {
+                let (elbow, wrist) = (3 * elbow as i64, 3 * wrist as i64);
+                let (forearm, hand) = (3 * FOREARMS[side] as i64, 3 * HAND_DIRS[side] as i64);
                 for axis in 0..3 {
                     let _ = place.get(elbow + axis).get(forearm + axis).fill_(0.5);
                     let _ = place.get(wrist + axis).get(forearm + axis).fill_(0.5);
-                    let _ = place
-                        .get(wrist + axis)
-                        .get(3 * hand as i64 + axis)
-                        .fill_(1.0);
+                    let _ = place.get(wrist + axis).get(hand + axis).fill_(1.0);
                 }
             }
         }
@@ -132,6 +118,17 @@ mod tests {
     use super::*;
     use tch::{nn, Device};
 
+    /// The pose columns in which two dances `[1, n, pose]` differ in any frame.
+    fn moved_columns(a: &Tensor, b: &Tensor) -> Vec<i64> {
+        Vec::<bool>::try_from((a - b).abs().gt(0.0).any_dim(1, false).squeeze_dim(0))
+            .unwrap()
+            .iter()
+            .enumerate()
+            .filter(|(_, &m)| m)
+            .map(|(i, _)| i as i64)
+            .collect()
+    }
+
     /// The arm head is never fed back: a trained head changes the emitted elbows and wrists and no
     /// other column of any frame (a head fed back would move the legs of every later frame). And
     /// weights saved without a head (`--init`) load into a network with one that dances exactly as
@@ -169,20 +166,7 @@ mod tests {
             }
         });
         let after = dance(&headed);
-        let moved: Vec<i64> = Vec::<bool>::try_from(
-            (after - &before)
-                .abs()
-                .gt(0.0)
-                .any_dim(1, false)
-                .squeeze_dim(0),
-        )
-        .unwrap()
-        .iter()
-        .enumerate()
-        .filter(|(_, &m)| m)
-        .map(|(i, _)| i as i64)
-        .collect();
-        assert_eq!(moved, arm_columns());
+        assert_eq!(moved_columns(&after, &before), arm_columns());
     }
 
     /// A head without figures loads into one with them and dances as before (to rounding), told
@@ -255,19 +239,7 @@ mod tests {
                 }
             }
         });
-        let moved: Vec<i64> = Vec::<bool>::try_from(
-            (dance(&told, Some(0.7)) - dance(&told, Some(-0.7)))
-                .abs()
-                .gt(0.0)
-                .any_dim(1, false)
-                .squeeze_dim(0),
-        )
-        .unwrap()
-        .iter()
-        .enumerate()
-        .filter(|(_, &m)| m)
-        .map(|(i, _)| i as i64)
-        .collect();
+        let moved = moved_columns(&dance(&told, Some(0.7)), &dance(&told, Some(-0.7)));
         // The elbows and wrists, and the forearm and hand markers that follow them.
         let mut arms: Vec<i64> = [4i64, 5, 6, 13, 14, 15, 21, 22]
             .iter()

@@ -167,15 +167,8 @@ impl MusicEncoder {
 
 #[cfg(test)]
 mod tests {
-    use super::super::{Config, DanceRevolution};
-    use tch::{nn, Device, Kind, Tensor};
-
-    fn model(seed: i64) -> (nn::VarStore, DanceRevolution) {
-        tch::manual_seed(seed);
-        let vs = nn::VarStore::new(Device::Cpu);
-        let m = DanceRevolution::new(&vs.root(), Config::tiny(6, 5));
-        (vs, m)
-    }
+    use super::super::tests::model;
+    use tch::{Device, Kind, Tensor};
 
     #[test]
     fn local_attention_sees_only_its_window() {

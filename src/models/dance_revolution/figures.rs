@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use tch::{Kind, Tensor};
 
 use crate::metrics::musicality::ARM_JOINTS;
-use crate::motion::skeleton::SPINE;
+use crate::motion::skeleton::{ELBOWS, SPINE, WRISTS};
 
 /// Numbers in one figure: the four arm joints' `x, y, z` relative to the spine (m, facing frame).
 pub const FIGURE_DIM: i64 = 3 * ARM_JOINTS.len() as i64;
@@ -137,37 +137,64 @@ impl Figures {
         }
     }
 
-    /// `[n, FIGURE_DIM]`: the figure at each of `n` network frames for the draw `seed`: figure k
-    /// is held over frames `k·every ..`, and over the last `blend` frames before `(k+1)·every`
-    /// it becomes figure k+1. The same seed gives the same figures.
+    /// `[n, FIGURE_DIM]`: the figure at each of `n` network frames for the draw `seed`
+    /// ([`held_and_blended`] of figures drawn from the bank, each the least change from the
+    /// last). The same seed gives the same figures.
     pub fn plan(&self, n: usize, seed: u64) -> Array2<f32> {
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed ^ 0x4649_4755_5245_5300);
         let every = self.every_frames.max(1);
-        let blend_frames = self.blend_frames.min(every);
         let mut figures: Vec<Figure> = Vec::with_capacity(n / every + 2);
         for _ in 0..n / every + 2 {
             let f = next_figure(&self.bank, figures.last(), self.min_change_m, &mut rng);
             figures.push(f);
         }
-        let mut out = Array2::zeros((n, FIGURE_DIM as usize));
-        for t in 0..n {
-            let k = t / every;
-            let into = (t % every + blend_frames) as isize - every as isize;
-            let f = if blend_frames > 0 && into >= 0 {
-                blend(
-                    &figures[k],
-                    &figures[k + 1],
-                    (into as f32 + 1.0) / blend_frames as f32,
-                )
-            } else {
-                figures[k]
-            };
-            for (c, v) in f.iter().enumerate() {
-                out[[t, c]] = *v;
-            }
-        }
-        out
+        held_and_blended(&figures, n, every, self.blend_frames)
     }
+}
+
+/// `[n, FIGURE_DIM]`: `figures[k]` held over frames `k·every ..`, and over the last
+/// `blend_frames` frames before `(k+1)·every` becoming `figures[k+1]` (smoothstep; the last blend frame is the
+/// next figure itself). The last figure is held on to the end. What is served and what the head
+/// is trained on (`train::arm_head`) blend alike.
+pub fn held_and_blended(
+    figures: &[Figure],
+    n: usize,
+    every: usize,
+    blend_frames: usize,
+) -> Array2<f32> {
+    let every = every.max(1);
+    let blend_frames = blend_frames.min(every);
+    let last = figures.len().saturating_sub(1);
+    let mut out = Array2::zeros((n, FIGURE_DIM as usize));
+    for t in 0..n {
+        let k = (t / every).min(last);
+        let into = (t % every + blend_frames) as isize - every as isize;
+        let f = if blend_frames > 0 && into >= 0 && k < last {
+            blend(
+                &figures[k],
+                &figures[k + 1],
+                (into as f32 + 1.0) / blend_frames as f32,
+            )
+        } else {
+            figures[k]
+        };
+        for (c, v) in f.iter().enumerate() {
+            out[[t, c]] = *v;
+        }
+    }
+    out
+}
+
+/// Rows of the right and the left elbow and wrist in a figure (or in [`postures_of`]'s joints):
+/// `[(elbow, wrist); 2]`, indices into [`ARM_JOINTS`].
+pub fn forearms() -> [(usize, usize); 2] {
+    let row = |joint: usize| {
+        ARM_JOINTS
+            .iter()
+            .position(|&j| j == joint)
+            .expect("an arm joint")
+    };
+    [0, 1].map(|side| (row(ELBOWS[side]), row(WRISTS[side])))
 }
 
 /// `[b, t, FIGURE_DIM]`: the figure of every frame of `x` `[b, t, pose]` (normalised by `mean`,
@@ -234,6 +261,16 @@ mod tests {
             plan.row(100),
             "the blend ends on the next figure"
         );
+    }
+
+    /// Past its last figure a blend holds it; the forearms are the arm joints' elbow and wrist.
+    #[test]
+    fn the_last_figure_is_held_to_the_end() {
+        let p = held_and_blended(&[figure(0.0), figure(1.0)], 60, 20, 5);
+        assert_eq!(p[[14, 0]], 0.0);
+        assert!(p[[15, 0]] > 0.0 && p[[18, 0]] < 1.0);
+        assert!((19..60).all(|t| p[[t, 0]] == 1.0));
+        assert_eq!(forearms(), [(0, 1), (2, 3)]);
     }
 
     /// The bank's figures are the arms' 4-s means relative to the spine.

@@ -28,7 +28,7 @@ use rand::{Rng, SeedableRng};
 use tch::{Kind, Tensor};
 
 use super::{Sequence, TrainError};
-use crate::models::dance_revolution::figures::{self, Figure, FIGURE_DIM};
+use crate::models::dance_revolution::figures::{self, Figures, FIGURE_DIM};
 use crate::models::dance_revolution::{DanceRevolution, StallGuard, WARM_UP_FRAMES};
 use crate::motion::dataset::NormStats;
 
@@ -73,17 +73,17 @@ const FIGURE_BLOCK: i64 = 50;
 
 /// What a head with figures is told and measured against.
 pub struct FigureTerm {
-    /// The train split's figures.
-    bank: Vec<Figure>,
+    /// The train split's figures, with the served change and blend.
+    figures: Figures,
     /// The pose normalisation's means and stds (`[pose]`), to read the arms in metres.
     mean: Tensor,
     std: Tensor,
 }
 
 impl FigureTerm {
-    pub fn new(bank: Vec<Figure>, norm: &NormStats) -> Self {
+    pub fn new(figures: Figures, norm: &NormStats) -> Self {
         Self {
-            bank,
+            figures,
             mean: Tensor::from_slice(&norm.mean),
             std: Tensor::from_slice(&norm.std),
         }
@@ -92,31 +92,32 @@ impl FigureTerm {
     /// `[WINDOW, FIGURE_DIM]`: one figure, then another at least the served change away, blended
     /// in over the served blend ending at a frame drawn in the window's middle half.
     fn window_plan(&self, rng: &mut impl Rng) -> Tensor {
-        let a = figures::next_figure(&self.bank, None, 0.0, rng);
-        let b = figures::next_figure(&self.bank, Some(&a), figures::SERVED_MIN_CHANGE_M, rng);
+        let f = &self.figures;
+        let a = figures::next_figure(&f.bank, None, 0.0, rng);
+        let b = figures::next_figure(&f.bank, Some(&a), f.min_change_m, rng);
         let end = rng.gen_range(WINDOW / 4..3 * WINDOW / 4);
-        let blend = figures::SERVED_BLEND_FRAMES;
-        let mut p = ndarray::Array2::<f32>::zeros((WINDOW, FIGURE_DIM as usize));
-        for t in 0..WINDOW {
-            // As `Figures::plan` blends: the last blend frame is the new figure.
-            let s = ((t + blend + 1).saturating_sub(end) as f32 / blend as f32).min(1.0);
-            let w = s * s * (3.0 - 2.0 * s);
-            for c in 0..FIGURE_DIM as usize {
-                p[[t, c]] = a[c] + (b[c] - a[c]) * w;
-            }
-        }
-        crate::models::to_tensor(&p)
+        crate::models::to_tensor(&figures::held_and_blended(
+            &[a, b],
+            WINDOW,
+            end,
+            f.blend_frames,
+        ))
     }
 
-    /// The mean shortfall (m) of the elbow-to-wrist distances of `x` (`[b, t, pose]`,
-    /// normalised) under [`FOREARM_FLOOR_M`].
-    fn forearm_shortfall(&self, x: &Tensor) -> Tensor {
-        let arms = figures::postures_of(x, &self.mean, &self.std);
+    /// `[b, t, FIGURE_DIM]`: the arms of `x` (`[b, t, pose]`, normalised) as figures, in metres.
+    fn arms(&self, x: &Tensor) -> Tensor {
+        figures::postures_of(x, &self.mean, &self.std)
+    }
+
+    /// The mean shortfall (m) of the elbow-to-wrist distances of `arms` ([`Self::arms`]) under
+    /// [`FOREARM_FLOOR_M`].
+    fn forearm_shortfall(&self, arms: &Tensor) -> Tensor {
         let (b, t, _) = arms.size3().expect("[b, t, figure]");
         let joints = arms.view([b, t, FIGURE_DIM / 3, 3]);
-        // ARM_JOINTS is right elbow, right wrist, left elbow, left wrist.
-        let forearm = |e: i64| joints.select(2, e + 1) - joints.select(2, e);
-        let lengths = (Tensor::stack(&[forearm(0), forearm(2)], 2)
+        let forearm = |(elbow, wrist): (usize, usize)| {
+            joints.select(2, wrist as i64) - joints.select(2, elbow as i64)
+        };
+        let lengths = (Tensor::stack(&figures::forearms().map(forearm), 2)
             .square()
             .sum_dim_intlist(-1, false, Kind::Float)
             + 1e-10)
@@ -125,10 +126,9 @@ impl FigureTerm {
     }
 
     /// The figure term: the mean over windows, 2-s blocks and joints of the distance (m) between
-    /// the arms' mean of `x` `[b, WINDOW, pose]` (normalised) and the figures' `plan`
+    /// the mean of `arms` `[b, WINDOW, FIGURE_DIM]` ([`Self::arms`]) and the figures' `plan`
     /// `[b, WINDOW, FIGURE_DIM]` over the block.
-    fn miss(&self, x: &Tensor, plan: &Tensor) -> Tensor {
-        let arms = figures::postures_of(x, &self.mean, &self.std);
+    fn miss(&self, arms: &Tensor, plan: &Tensor) -> Tensor {
         let (b, t, _) = arms.size3().expect("[b, t, figure]");
         let blocks = t / FIGURE_BLOCK;
         let means = |y: &Tensor| {
@@ -136,7 +136,7 @@ impl FigureTerm {
                 .view([b, blocks, FIGURE_BLOCK, FIGURE_DIM / 3, 3])
                 .mean_dim(2, false, Kind::Float)
         };
-        ((means(&arms) - means(plan))
+        ((means(arms) - means(plan))
             .square()
             .sum_dim_intlist(-1, false, Kind::Float)
             + 1e-10)
@@ -252,9 +252,10 @@ impl Rollouts {
         .relu()
         .mean(Kind::Float);
         if let Some((term, plan)) = told {
-            let miss = term.miss(&pred, &plan);
+            let arms = term.arms(&pred);
+            let miss = term.miss(&arms, &plan);
             let figure_miss = miss.double_value(&[]);
-            let length = term.forearm_shortfall(&pred);
+            let length = term.forearm_shortfall(&arms);
             return (
                 (spectral
                     + shortfall * SPEED_WEIGHT
@@ -290,13 +291,12 @@ impl Rollouts {
     /// Each dance's mean speed (m/s) of the elbows and wrists relative to the spine, with the
     /// head's offsets (what `metrics::musicality::arm_speed_m_s` reads) and without.
     /// Without a head, both are the network's own.
-    /// A head with figures is told a served plan of the train split's `bank` (seed: the dance's
-    /// index).
+    /// A head with figures is told a served plan of `figures` (seed: the dance's index).
     fn arm_speeds(
         &self,
         model: &DanceRevolution,
         pose_std: &Tensor,
-        bank: Option<&FigureTerm>,
+        figures: Option<&FigureTerm>,
     ) -> Vec<(f64, f64)> {
         let speed = |x: &Tensor| window_arm_speed(&x.unsqueeze(0), pose_std).double_value(&[0]);
         tch::no_grad(|| {
@@ -305,10 +305,9 @@ impl Rollouts {
                 .enumerate()
                 .map(|(i, r)| {
                     let own = speed(&r.fed);
-                    let plan = bank.map(|term| {
+                    let plan = figures.map(|term| {
                         let n = r.hz.size()[0] as usize;
-                        let plan = figures::Figures::served(term.bank.clone()).plan(n, i as u64);
-                        crate::models::to_tensor(&plan)
+                        crate::models::to_tensor(&term.figures.plan(n, i as u64))
                     });
                     match model.decoder.arm_offsets(&r.hz, plan.as_ref()) {
                         Some(offsets) => (speed(&(&r.fed + offsets)), own),
@@ -354,11 +353,11 @@ impl HeadData {
         test: &[Sequence],
         pose_norm: &NormStats,
         seeds: u64,
-        bank: Option<Vec<Figure>>,
+        figures: Option<Figures>,
     ) -> Result<Self, TrainError> {
         let started = std::time::Instant::now();
         let seeds: Vec<u64> = (FIRST_SEED..FIRST_SEED + seeds.max(1)).collect();
-        if model.config.arm_figures != bank.is_some() {
+        if model.config.arm_figures != figures.is_some() {
             return Err(TrainError::InvalidOption(
                 "a head with figures is trained with the train split's figures, and only it".into(),
             ));
@@ -366,7 +365,7 @@ impl HeadData {
         let data = Self {
             train: Rollouts::collect(model, train, &seeds, pose_norm)?,
             test: Rollouts::collect(model, test, &[TEST_SEED], pose_norm)?,
-            figures: bank.map(|b| FigureTerm::new(b, pose_norm)),
+            figures: figures.map(|f| FigureTerm::new(f, pose_norm)),
         };
         let std = Tensor::from_slice(&pose_norm.std[..crate::motion::repr::POSE_DIM]);
         let speeds = data.train.arm_speeds(model, &std, data.figures.as_ref());
@@ -496,6 +495,22 @@ mod tests {
         }
     }
 
+    /// A pose normalisation that leaves the poses as they are.
+    fn unit_norm() -> NormStats {
+        NormStats {
+            mean: vec![0.0; 73],
+            std: vec![1.0; 73],
+        }
+    }
+
+    /// Two train dances and a test dance, each swinging its arms.
+    fn swinging_split() -> ([Sequence; 2], [Sequence; 1]) {
+        (
+            [swinging("a", 300, 1), swinging("b", 300, 2)],
+            [swinging("c", 300, 3)],
+        )
+    }
+
     /// A head with figures learns to put the arms' mean where it is told, on dances it never
     /// trained on.
     #[test]
@@ -510,18 +525,15 @@ mod tests {
                 ..Config::tiny(6, 73)
             },
         );
-        let norm = NormStats {
-            mean: vec![0.0; 73],
-            std: vec![1.0; 73],
-        };
-        let train = [swinging("a", 300, 1), swinging("b", 300, 2)];
-        let test = [swinging("c", 300, 3)];
-        let bank: Vec<Figure> = [0.4f32, -0.4, 0.0, 0.8]
+        let norm = unit_norm();
+        let (train, test) = swinging_split();
+        let bank: Vec<figures::Figure> = [0.4f32, -0.4, 0.0, 0.8]
             .iter()
             .map(|&v| std::array::from_fn(|k| if k % 3 == 1 { v } else { -v / 2.0 }))
             .collect();
         assert!(HeadData::collect(&model, &train, &test, &norm, 1, None).is_err());
-        let data = HeadData::collect(&model, &train, &test, &norm, 2, Some(bank)).unwrap();
+        let figures = Some(Figures::served(bank));
+        let data = HeadData::collect(&model, &train, &test, &norm, 2, figures).unwrap();
         let std = Tensor::ones([69], (Kind::Float, tch::Device::Cpu));
         let (_, first) = data.test_loss(&model, 4, &std, 1.0);
         let masks = super::super::dance_revolution::arm_head_masks(&vs).unwrap();
@@ -548,12 +560,8 @@ mod tests {
                 ..Config::tiny(6, 73)
             },
         );
-        let norm = NormStats {
-            mean: vec![0.0; 73],
-            std: vec![1.0; 73],
-        };
-        let train = [swinging("a", 300, 1), swinging("b", 300, 2)];
-        let test = [swinging("c", 300, 3)];
+        let norm = unit_norm();
+        let (train, test) = swinging_split();
         let data = HeadData::collect(&model, &train, &test, &norm, 2, None).unwrap();
         let own_before = data.train.dances[0].fed.copy();
         let masks = super::super::dance_revolution::arm_head_masks(&vs).unwrap();

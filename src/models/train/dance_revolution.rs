@@ -140,18 +140,18 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
         ));
     }
     // The real figures the head is told (and serving draws from): the train split's only.
-    let bank = opts.arm_figures.then(|| {
+    let figures = opts.arm_figures.then(|| {
         let joints = crate::motion::repr::POSE_DIM;
         let dances: Vec<ndarray::Array2<f32>> = data
             .train
             .iter()
             .map(|s| data.pose_norm.denormalize(&s.poses))
             .collect::<Result<_, _>>()?;
-        Ok::<_, TrainError>(figures::bank_of(
+        Ok::<_, TrainError>(figures::Figures::served(figures::bank_of(
             dances.iter().map(|d| d.slice(ndarray::s![.., ..joints])),
-        ))
+        )))
     });
-    let bank = bank.transpose()?;
+    let figures = figures.transpose()?;
     let augment = Augment {
         min_tempo: opts.min_tempo,
         max_tempo: opts.max_tempo,
@@ -190,7 +190,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             &data.test,
             &data.pose_norm,
             opts.rollout_seeds,
-            bank.clone(),
+            figures.clone(),
         )?)
     } else {
         None
@@ -277,7 +277,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             training: t.record(opts.lr, opts.batch, opts.seed, curriculum.clone()),
             extra: Serving {
                 beat_time,
-                figures: bank.clone().map(figures::Figures::served),
+                figures: figures.clone(),
                 ..Serving::served()
             },
         },

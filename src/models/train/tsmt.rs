@@ -229,14 +229,16 @@ fn seed_clips(data: &Data, opts: &Options) -> Result<SeedClips, TrainError> {
 
 /// Trains and writes the model folder; returns the per-epoch log.
 pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
-    if let Some(band) = opts.clock_bar_hz.as_deref() {
-        if !matches!(band, &[lo, hi] if lo > 0.0 && hi > 2.0 * lo) {
-            // Under an octave wide, halving or doubling could not bring every tempo inside.
+    let clock_bar_hz = match opts.clock_bar_hz.as_deref() {
+        None => None,
+        Some(&[lo, hi]) if lo > 0.0 && hi > 2.0 * lo => Some([lo, hi]),
+        // Under an octave wide, halving or doubling could not bring every tempo inside.
+        Some(band) => {
             return Err(TrainError::InvalidOption(format!(
                 "--clock-bar-hz {band:?}: want LOW,HIGH with 0 < LOW and HIGH over 2 × LOW"
-            )));
+            )))
         }
-    }
+    };
     // The root height becomes the lowest foot's clearance over each dance's own floor.
     let tempo = if opts.beat_time {
         Tempo::Analysed
@@ -412,10 +414,7 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
             beat_time,
             clock_gain: opts.clock_gain,
             clock_step_hz: opts.clock_step_hz,
-            clock_bar_hz: match opts.clock_bar_hz.as_deref() {
-                Some(&[lo, hi]) => Some([lo, hi]),
-                _ => None,
-            },
+            clock_bar_hz,
         },
     };
     let steps_cell = std::cell::Cell::new(0usize);
