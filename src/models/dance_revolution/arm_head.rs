@@ -5,7 +5,7 @@ use tch::{Kind, Tensor};
 
 use super::figures::{self, FIGURE_DIM};
 use super::Config;
-use crate::motion::skeleton::{FOREARMS, HAND_DIRS};
+use crate::motion::skeleton::{FOREARMS, HAND_DIRS, PARENTS, WRISTS};
 
 /// The pose vector's columns of the elbows and wrists (`metrics::musicality::ARM_JOINTS`, x y z
 /// each): what the [`ArmHead`] and `choreo train … --arm-readout-only` move.
@@ -53,16 +53,25 @@ impl ArmHead {
         }
         if c.arm_figures {
             // A figure moves the arm by tens of centimetres, and the markers the head does not
-            // place would stay behind and bend the arm (the skeleton is fitted to every marker):
-            // the forearm's marker, about halfway from the elbow to the wrist in the data, moves
-            // by the mean of the two, and the hand's direction point with the wrist.
+            // place would stay behind and bend the arm (the skeleton is fitted to every marker).
+            // A marker on the forearm moves by the mean of the elbow's and the wrist's offsets:
+            // the forearm marker, 0.4–0.67 of the way from elbow to wrist in the data, and the
+            // left hand's direction point, 12 cm from the left elbow on the forearm. The right
+            // hand's, 4.7 cm beyond the right wrist, moves with the wrist (`motion::skeleton`).
             for (side, (elbow, wrist)) in figures::forearms().into_iter().enumerate() {
+                let wrist_joint = WRISTS[side];
                 let (elbow, wrist) = (3 * elbow as i64, 3 * wrist as i64);
-                let (forearm, hand) = (3 * FOREARMS[side] as i64, 3 * HAND_DIRS[side] as i64);
-                for axis in 0..3 {
-                    let _ = place.get(elbow + axis).get(forearm + axis).fill_(0.5);
-                    let _ = place.get(wrist + axis).get(forearm + axis).fill_(0.5);
-                    let _ = place.get(wrist + axis).get(hand + axis).fill_(1.0);
+                for marker in [FOREARMS[side], HAND_DIRS[side]] {
+                    let beyond_wrist = PARENTS[marker] == Some(wrist_joint);
+                    let (from_elbow, from_wrist) =
+                        if beyond_wrist { (0.0, 1.0) } else { (0.5, 0.5) };
+                    let column = 3 * marker as i64;
+                    for axis in 0..3 {
+                        if from_elbow > 0.0 {
+                            let _ = place.get(elbow + axis).get(column + axis).fill_(from_elbow);
+                        }
+                        let _ = place.get(wrist + axis).get(column + axis).fill_(from_wrist);
+                    }
                 }
             }
         }
@@ -239,7 +248,20 @@ mod tests {
                 }
             }
         });
-        let moved = moved_columns(&dance(&told, Some(0.7)), &dance(&told, Some(-0.7)));
+        let (a, b) = (dance(&told, Some(0.7)), dance(&told, Some(-0.7)));
+        let moved = moved_columns(&a, &b);
+        // The left hand's point lies on the forearm and moves as the forearm marker does; the
+        // right hand's lies beyond the wrist and moves with it.
+        let change = |joint: i64| (&a - &b).narrow(2, 3 * joint, 3);
+        let apart = |j: i64, k: i64| (change(j) - change(k)).abs().max().double_value(&[]);
+        assert!(
+            apart(21, 14) < 1e-5 && apart(21, 15) > 1e-3,
+            "left hand point"
+        );
+        assert!(
+            apart(22, 6) < 1e-5 && apart(22, 5) > 1e-3,
+            "right hand point"
+        );
         // The elbows and wrists, and the forearm and hand markers that follow them.
         let mut arms: Vec<i64> = [4i64, 5, 6, 13, 14, 15, 21, 22]
             .iter()
