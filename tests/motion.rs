@@ -242,7 +242,7 @@ fn formats_disagree_m(m: &rig::RigMotion) -> (f64, f64) {
 
     // BVH, read back by our reader.
     let bvh = Bvh::parse(&export::bvh_string(m).expect("bvh")).expect("read bvh");
-    assert_eq!(bvh.frames.len(), t_len);
+    assert_eq!(bvh.num_frames(), t_len);
     assert!((bvh.fps() - 25.0).abs() < 1e-6);
     let bw = bvh.world_positions();
     let mut worst_bvh = 0.0f64;

@@ -158,16 +158,86 @@ pub struct Bvh {
     pub offsets: Vec<Vector3<f64>>,
     pub channels: Vec<Vec<Channel>>,
     pub frame_time: f64,
-    /// `[T][total channels]`, in the file's joint order.
-    pub frames: Vec<Vec<f64>>,
+    /// The channel values, frame after frame (`[T × width]`, in the file's joint order): one flat
+    /// vector, so a frame costs its numbers and nothing more, however many frames there are.
+    values: Vec<f64>,
+    /// Channels per frame.
+    width: usize,
+    /// Frames in the file.
+    num_frames: usize,
 }
 
 /// Largest BVH we parse (bytes): an hour at 60 fps of a 100-joint skeleton fits well within.
 pub const MAX_BVH_BYTES: usize = 256 * 1024 * 1024;
+/// Most joints a BVH may have: a Mixamo rig with fingers has 65, a VRoid avatar with hair and
+/// skirt bones a few hundred. Each joint costs memory on every frame a tool reads.
+pub const MAX_BVH_JOINTS: usize = 1024;
+
+/// The fewest bytes one channel value takes in the text: a digit and a separator.
+const MIN_BYTES_PER_VALUE: usize = 2;
 
 impl Bvh {
-    /// Parses BVH text.
+    /// Parses BVH text: the hierarchy and every frame.
+    ///
+    /// What is allocated follows from the bytes sent, never from a number the file claims: the
+    /// joints are capped ([`MAX_BVH_JOINTS`]), and `Frames:` × the channels per frame must fit in
+    /// the text that follows (two bytes a value at least) before a frame is read, so a 1 KB file
+    /// claiming ten billion frames is refused at once. Every number must be finite.
     pub fn parse(text: &str) -> Result<Bvh, MotionError> {
+        let (mut bvh, mut tokens) = Self::parse_head(text)?;
+        let n_frames = Self::parse_motion_header(&mut bvh, &mut tokens)?;
+        let values = n_frames * bvh.width;
+        bvh.values.reserve_exact(values);
+        for _ in 0..values {
+            let v: f64 = tokens.parse_num()?;
+            if !v.is_finite() {
+                return Err(tokens.not_finite("a channel value"));
+            }
+            bvh.values.push(v);
+        }
+        bvh.num_frames = n_frames;
+        Ok(bvh)
+    }
+
+    /// Parses the hierarchy (a rig's rest pose) and, when the file goes on, checks its `MOTION`
+    /// header as [`Bvh::parse`] does, without reading the frames: no frames are kept.
+    pub fn parse_rest_pose(text: &str) -> Result<Bvh, MotionError> {
+        let (mut bvh, mut tokens) = Self::parse_head(text)?;
+        if tokens.peek_token().is_some() {
+            Self::parse_motion_header(&mut bvh, &mut tokens)?;
+        }
+        Ok(bvh)
+    }
+
+    /// Reads `MOTION`, `Frames:` and `Frame Time:`; the number of frames, once it is known that
+    /// the text that follows can hold them (so it is safe to allocate for).
+    fn parse_motion_header(bvh: &mut Bvh, tokens: &mut Tokens<'_>) -> Result<usize, MotionError> {
+        tokens.expect("MOTION")?;
+        tokens.expect("Frames:")?;
+        let n_frames: usize = tokens.parse_num()?;
+        tokens.expect("Frame")?;
+        tokens.expect("Time:")?;
+        bvh.frame_time = tokens.parse_num()?;
+        if !(bvh.frame_time > 0.0 && bvh.frame_time.is_finite()) {
+            return Err(tokens.error(format!("invalid frame time {}", bvh.frame_time)));
+        }
+        let width = bvh.width;
+        if width == 0 && n_frames > 0 {
+            return Err(tokens.error(format!(
+                "the hierarchy has no CHANNELS, so its {n_frames} frames carry no motion"
+            )));
+        }
+        let values = n_frames.saturating_mul(width.max(1));
+        let remaining = tokens.remaining_bytes();
+        if values.saturating_mul(MIN_BYTES_PER_VALUE) > remaining + 1 {
+            return Err(tokens.error(format!(
+                "{n_frames} frames of {width} channels cannot fit in the {remaining} bytes that follow"
+            )));
+        }
+        Ok(n_frames)
+    }
+
+    fn parse_head(text: &str) -> Result<(Bvh, Tokens<'_>), MotionError> {
         if text.len() > MAX_BVH_BYTES {
             return Err(MotionError::Bvh {
                 line: 0,
@@ -182,40 +252,27 @@ impl Bvh {
             offsets: Vec::new(),
             channels: Vec::new(),
             frame_time: 0.0,
-            frames: Vec::new(),
+            values: Vec::new(),
+            width: 0,
+            num_frames: 0,
         };
         let kw = tokens.next_token()?;
         if kw != "ROOT" {
             return Err(tokens.error(format!("expected ROOT, found {kw:?}")));
         }
         parse_joint(&mut tokens, &mut bvh, None, 0)?;
-        tokens.expect("MOTION")?;
-        tokens.expect("Frames:")?;
-        let n_frames: usize = tokens.parse_num()?;
-        tokens.expect("Frame")?;
-        tokens.expect("Time:")?;
-        bvh.frame_time = tokens.parse_num()?;
-        if !(bvh.frame_time > 0.0 && bvh.frame_time.is_finite()) {
-            return Err(tokens.error(format!("invalid frame time {}", bvh.frame_time)));
-        }
-        let width: usize = bvh.channels.iter().map(Vec::len).sum();
-        // Refuse frame counts the text cannot hold before allocating for them.
-        if n_frames.saturating_mul(width) > text.len() {
-            return Err(tokens.error(format!("{n_frames} frames cannot fit in the file")));
-        }
-        bvh.frames.reserve(n_frames);
-        for _ in 0..n_frames {
-            let mut row = Vec::with_capacity(width);
-            for _ in 0..width {
-                let v: f64 = tokens.parse_num()?;
-                if !v.is_finite() {
-                    return Err(tokens.error("non-finite channel value".into()));
-                }
-                row.push(v);
-            }
-            bvh.frames.push(row);
-        }
-        Ok(bvh)
+        bvh.width = bvh.channels.iter().map(Vec::len).sum();
+        Ok((bvh, tokens))
+    }
+
+    /// Frames in the file.
+    pub fn num_frames(&self) -> usize {
+        self.num_frames
+    }
+
+    /// The channel values of frame `t`, in the file's joint order.
+    pub fn frame(&self, t: usize) -> &[f64] {
+        &self.values[t * self.width..(t + 1) * self.width]
     }
 
     /// Frames per second (1 / frame time).
@@ -227,7 +284,7 @@ impl Bvh {
     pub fn local_pose(&self, t: usize) -> (Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>) {
         let mut trans = self.offsets.clone();
         let mut rots = vec![UnitQuaternion::identity(); self.names.len()];
-        let row = &self.frames[t];
+        let row = self.frame(t);
         let mut k = 0;
         for (j, chans) in self.channels.iter().enumerate() {
             let mut q = UnitQuaternion::identity();
@@ -279,8 +336,8 @@ impl Bvh {
     /// World positions of every joint, `[T, J, 3]` (forward kinematics).
     pub fn world_positions(&self) -> Array3<f64> {
         let n = self.names.len();
-        let mut out = Array3::zeros((self.frames.len(), n, 3));
-        for t in 0..self.frames.len() {
+        let mut out = Array3::zeros((self.num_frames, n, 3));
+        for t in 0..self.num_frames {
             for (j, p) in self.world_frame(t).iter().enumerate() {
                 for c in 0..3 {
                     out[[t, j, c]] = p[c];
@@ -306,8 +363,8 @@ impl Bvh {
     /// The motion of the 23 dataset joints, for a BVH that names them as we do (metres, y up).
     pub fn to_motion(&self) -> Result<Motion, MotionError> {
         let idx = self.dataset_joints()?;
-        let mut positions = Array3::zeros((self.frames.len(), NUM_JOINTS, 3));
-        for t in 0..self.frames.len() {
+        let mut positions = Array3::zeros((self.num_frames, NUM_JOINTS, 3));
+        for t in 0..self.num_frames {
             let world = self.world_frame(t);
             for (j, &k) in idx.iter().enumerate() {
                 for c in 0..3 {
@@ -328,9 +385,9 @@ impl Bvh {
             parents: self.parents.clone(),
             offsets: self.offsets.clone(),
         };
-        let mut root_translation = Vec::with_capacity(self.frames.len());
-        let mut rotations = Vec::with_capacity(self.frames.len());
-        for t in 0..self.frames.len() {
+        let mut root_translation = Vec::with_capacity(self.num_frames);
+        let mut rotations = Vec::with_capacity(self.num_frames);
+        for t in 0..self.num_frames {
             let (trans, rots) = self.local_pose(t);
             for j in 1..self.names.len() {
                 if (trans[j] - self.offsets[j]).norm() > 0.0 {
@@ -364,6 +421,9 @@ fn parse_joint(
     if depth > MAX_DEPTH {
         return Err(tokens.error("hierarchy nested too deeply".into()));
     }
+    if bvh.names.len() >= MAX_BVH_JOINTS {
+        return Err(tokens.error(format!("more than {MAX_BVH_JOINTS} joints")));
+    }
     let name = tokens.next_token()?.to_string();
     let j = bvh.names.len();
     bvh.names.push(name);
@@ -378,7 +438,13 @@ fn parse_joint(
                 let x = tokens.parse_num()?;
                 let y = tokens.parse_num()?;
                 let z = tokens.parse_num()?;
-                bvh.offsets[j] = Vector3::new(x, y, z);
+                let offset = Vector3::new(x, y, z);
+                if !offset.iter().all(|v: &f64| v.is_finite()) {
+                    return Err(
+                        tokens.not_finite(&format!("the OFFSET of joint {:?}", bvh.names[j]))
+                    );
+                }
+                bvh.offsets[j] = offset;
             }
             "CHANNELS" => {
                 let n: usize = tokens.parse_num()?;
@@ -404,7 +470,10 @@ fn parse_joint(
                 tokens.expect("{")?;
                 tokens.expect("OFFSET")?;
                 for _ in 0..3 {
-                    let _: f64 = tokens.parse_num()?;
+                    let v: f64 = tokens.parse_num()?;
+                    if !v.is_finite() {
+                        return Err(tokens.not_finite("an End Site OFFSET"));
+                    }
                 }
                 tokens.expect("}")?;
             }
@@ -418,6 +487,8 @@ struct Tokens<'a> {
     iter: std::iter::Peekable<std::str::Lines<'a>>,
     current: std::str::SplitWhitespace<'a>,
     line: usize,
+    /// The whole text, to tell how much of it is left.
+    text: &'a str,
 }
 
 impl<'a> Tokens<'a> {
@@ -426,6 +497,25 @@ impl<'a> Tokens<'a> {
             iter: text.lines().peekable(),
             current: "".split_whitespace(),
             line: 0,
+            text,
+        }
+    }
+
+    /// Bytes of the text not yet read (from the start of the next line; the current line's
+    /// rest counts as read, which only makes the bound on frames tighter by a line).
+    fn remaining_bytes(&mut self) -> usize {
+        let rest = self.current.clone().map(str::len).sum::<usize>();
+        let next = self
+            .iter
+            .peek()
+            .map(|l| l.as_ptr() as usize - self.text.as_ptr() as usize);
+        rest + next.map_or(0, |start| self.text.len().saturating_sub(start))
+    }
+
+    fn not_finite(&self, what: &str) -> MotionError {
+        MotionError::NotFinite {
+            line: self.line,
+            what: what.to_string(),
         }
     }
 
@@ -442,6 +532,21 @@ impl<'a> Tokens<'a> {
                 None => return Err(self.error("unexpected end of file".into())),
             }
         }
+    }
+
+    /// The next token, left unread; none at the end of the text.
+    fn peek_token(&mut self) -> Option<&'a str> {
+        if let Some(t) = self.current.clone().next() {
+            return Some(t);
+        }
+        while let Some(line) = self.iter.peek() {
+            if let Some(t) = line.split_whitespace().next() {
+                return Some(t);
+            }
+            self.iter.next();
+            self.line += 1;
+        }
+        None
     }
 
     fn expect(&mut self, want: &str) -> Result<(), MotionError> {
@@ -531,7 +636,7 @@ mod tests {
         let text = "HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n JOINT b\n {\n  OFFSET 0 1 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n  End Site\n  {\n   OFFSET 0 1 0\n  }\n }\n}\nMOTION\nFrames: 2\nFrame Time: 0.04\n1 2 3 0 0 0 0 0 0\n1 2 3 90 0 0 0 0 0\n";
         let b = Bvh::parse(text).expect("parse");
         assert_eq!(b.names, vec!["a", "b"]);
-        assert_eq!(b.frames.len(), 2);
+        assert_eq!(b.num_frames(), 2);
         let w = b.world_positions();
         assert!((w[[0, 1, 1]] - 3.0).abs() < 1e-9);
         // Rotating the root 90° about z takes the child's +y offset to −x.
@@ -540,5 +645,57 @@ mod tests {
         assert!(Bvh::parse(&text.replace("CHANNELS 3", "CHANNELS 4")).is_err());
         assert!(Bvh::parse(&text.replace("90", "nan")).is_err());
         assert!(Bvh::parse("HIERARCHY\nROOT").is_err());
+    }
+
+    const TWO_JOINTS: &str = "HIERARCHY\nROOT a\n{\n OFFSET 0 0 0\n CHANNELS 6 Xposition Yposition Zposition Zrotation Yrotation Xrotation\n JOINT b\n {\n  OFFSET 0 1 0\n  CHANNELS 3 Zrotation Yrotation Xrotation\n  End Site\n  {\n   OFFSET 0 1 0\n  }\n }\n}\nMOTION\nFrames: 1\nFrame Time: 0.04\n1 2 3 0 0 0 0 0 0\n";
+
+    /// A frame count the text cannot hold is refused before anything is allocated for it,
+    /// whatever the width of a frame (none: every CHANNELS clause removed).
+    #[test]
+    fn claimed_frames_are_held_to_the_bytes_that_follow() {
+        let no_channels = TWO_JOINTS
+            .lines()
+            .filter(|l| !l.contains("CHANNELS"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        for frames in ["10000000000", "1000000000000000000", "18446744073709551615"] {
+            for text in [&no_channels, TWO_JOINTS] {
+                let claimed = text.replace("Frames: 1", &format!("Frames: {frames}"));
+                let err = Bvh::parse(&claimed).expect_err("refused");
+                assert_eq!(err.code(), "invalid-bvh", "{err}");
+            }
+        }
+        // Without channels and without frames, it is a hierarchy (a rig's rest pose).
+        let rest = no_channels.replace("Frames: 1", "Frames: 0");
+        let rest = rest.replace("1 2 3 0 0 0 0 0 0", "");
+        assert_eq!(Bvh::parse(&rest).expect("a rest pose").num_frames(), 0);
+        // A rest pose is read without its frames, but its claim is checked all the same.
+        let rest = Bvh::parse_rest_pose(TWO_JOINTS).expect("rest pose");
+        assert_eq!((rest.names.len(), rest.num_frames()), (2, 0));
+        let hierarchy = &TWO_JOINTS[..TWO_JOINTS.find("MOTION").expect("motion")];
+        assert!(Bvh::parse_rest_pose(hierarchy).is_ok());
+        assert!(
+            Bvh::parse_rest_pose(&TWO_JOINTS.replace("Frames: 1", "Frames: 99999999")).is_err()
+        );
+    }
+
+    #[test]
+    fn numbers_must_be_finite_and_joints_few() {
+        for (from, to) in [
+            ("OFFSET 0 1 0\n  CHANNELS", "OFFSET NaN 1 0\n  CHANNELS"),
+            ("OFFSET 0 1 0\n  }", "OFFSET 0 inf 0\n  }"),
+            ("Frame Time: 0.04\n1 2 3", "Frame Time: 0.04\n1 -inf 3"),
+        ] {
+            assert!(TWO_JOINTS.contains(from), "{from}");
+            let err = Bvh::parse(&TWO_JOINTS.replace(from, to)).expect_err("refused");
+            assert_eq!(err.code(), "motion-not-finite", "{to}: {err}");
+        }
+        let mut many = String::from("HIERARCHY\nROOT j0\n{\n OFFSET 0 0 0\n");
+        for j in 1..=MAX_BVH_JOINTS {
+            many.push_str(&format!(" JOINT j{j}\n {{\n  OFFSET 0 0 0\n }}\n"));
+        }
+        many.push_str("}\nMOTION\nFrames: 0\nFrame Time: 0.04\n");
+        let err = Bvh::parse(&many).expect_err("refused");
+        assert!(err.to_string().contains("more than 1024 joints"), "{err}");
     }
 }

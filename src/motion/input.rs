@@ -495,7 +495,7 @@ mod tests {
         let mut nan = pose.clone();
         nan[25][1] = f64::NAN; // the neck: unused, but still refused
         let err = key_poses(&[key(nan, None)], 5, MOTION_FPS).unwrap_err();
-        assert_eq!(err.code(), "non-finite");
+        assert_eq!(err.code(), "motion-not-finite");
         assert!(err.to_string().contains("neck"), "{err}");
         let both = KeyPoseInput {
             bvh: Some(BvhFrame {

@@ -133,7 +133,7 @@ impl InputError {
     /// Stable kebab-case code for problem responses.
     pub fn code(&self) -> &'static str {
         match self {
-            InputError::NonFinite { .. } => "non-finite",
+            InputError::NonFinite { .. } => "motion-not-finite",
             InputError::WrongJointCount { .. } => "wrong-joint-count",
             InputError::AbsurdBone { .. } => "absurd-bone-length",
             InputError::AbsurdSize { .. } => "absurd-skeleton-size",

@@ -249,6 +249,8 @@ pub enum MotionError {
     Invalid(String),
     #[error("BVH parse error at line {line}: {reason}")]
     Bvh { line: usize, reason: String },
+    #[error("BVH line {line}: {what} is not a finite number")]
+    NotFinite { line: usize, what: String },
     #[error("export failed: {0}")]
     Export(String),
     #[error(transparent)]
@@ -266,6 +268,7 @@ impl MotionError {
             MotionError::Shape(_) => "motion-shape",
             MotionError::Invalid(_) => "invalid-motion",
             MotionError::Bvh { .. } => "invalid-bvh",
+            MotionError::NotFinite { .. } => "motion-not-finite",
             MotionError::Export(_) => "export-failed",
             MotionError::Input(e) => e.code(),
         }
@@ -276,6 +279,7 @@ impl MotionError {
         match self {
             MotionError::Invalid(_)
             | MotionError::Bvh { .. }
+            | MotionError::NotFinite { .. }
             | MotionError::Shape(_)
             | MotionError::Input(_) => true,
             MotionError::UnknownDance { .. } => true,
@@ -296,7 +300,8 @@ impl MotionError {
             | MotionError::Shape(_)
             | MotionError::Invalid(_)
             | MotionError::Input(_)
-            | MotionError::Bvh { .. } => false,
+            | MotionError::Bvh { .. }
+            | MotionError::NotFinite { .. } => false,
         }
     }
 

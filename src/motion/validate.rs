@@ -231,7 +231,12 @@ pub fn validate_seed_motion(motion: &Motion) -> Result<(), InputError> {
 }
 
 fn bvh_input(what: &str, e: MotionError) -> InputError {
-    InputError::Malformed(format!("{what}: {e}"))
+    match e {
+        MotionError::NotFinite { line, what: value } => InputError::NonFinite {
+            what: format!("{what}, line {line}: {value}"),
+        },
+        e => InputError::Malformed(format!("{what}: {e}")),
+    }
 }
 
 /// A seed motion from BVH text (metres, y up, our joint names), validated.
@@ -254,10 +259,10 @@ pub fn key_pose_from_bvh(
 ) -> Result<KeyPose, InputError> {
     let what = format!("key pose {index} BVH");
     let bvh = Bvh::parse(text).map_err(|e| bvh_input(&what, e))?;
-    if frame >= bvh.frames.len() {
+    if frame >= bvh.num_frames() {
         return Err(InputError::Malformed(format!(
             "{what} has {} frames, no frame {frame}",
-            bvh.frames.len()
+            bvh.num_frames()
         )));
     }
     let world = bvh.world_frame(frame);
@@ -333,10 +338,10 @@ mod tests {
         let mut nan = pose(1.0);
         nan.joints[4][1] = f64::NAN;
         let v = |poses: &[KeyPose]| validate_key_poses(poses, 250, 25.0).unwrap_err().code();
-        assert_eq!(v(&[nan]), "non-finite");
+        assert_eq!(v(&[nan]), "motion-not-finite");
         let mut inf = pose(1.0);
         inf.time_s = f64::INFINITY;
-        assert_eq!(v(&[inf]), "non-finite");
+        assert_eq!(v(&[inf]), "motion-not-finite");
         let mut short = pose(1.0);
         short.joints.pop();
         assert_eq!(v(&[short]), "wrong-joint-count");

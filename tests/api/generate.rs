@@ -35,7 +35,7 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
         .expect("our reader reads the BVH");
     let frames = (duration * 25.0).floor() as usize;
     assert_eq!(
-        bvh.frames.len(),
+        bvh.num_frames(),
         frames,
         "one BVH frame per 1/25 s of music"
     );

@@ -21,6 +21,7 @@ use serde::{Deserialize, Serialize};
 use super::rig::Rig;
 
 mod body;
+mod gltf_skin;
 pub mod mixamo;
 pub mod names;
 pub mod smpl;

@@ -3,8 +3,9 @@
 //! mapping.
 //!
 //! - **BVH**: the hierarchy's `OFFSET`s are the rest pose, already in the form a
-//!   [`TargetSkeleton`] keeps (offsets in the parent's frame, rest rotations identity); any
-//!   frames are ignored, and a file with a hierarchy but no `MOTION` section is read too.
+//!   [`TargetSkeleton`] keeps (offsets in the parent's frame, rest rotations identity); the
+//!   frames are not read (the `MOTION` header's claim is checked, so a file claiming more
+//!   frames than it holds is refused), and a file with a hierarchy but no `MOTION` is read too.
 //! - **glb** (or a `.gltf` JSON): the skeleton is the skin's joints (the skin with the most joints
 //!   when there are several), each joint's parent its nearest ancestor node that is a joint too;
 //!   the rest pose is the joints' node transforms as stored (not the animation), with every node
@@ -20,7 +21,7 @@
 //! refused, naming the bones it could not map and the joints left unmapped.
 use std::collections::{BTreeMap, BTreeSet};
 
-use gltf_json as gj;
+use super::gltf_skin::{Document, Nodes, Transform};
 use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
@@ -34,6 +35,7 @@ use crate::motion::rig::Rig;
 pub const MAX_JOINTS: usize = 1024;
 /// Deepest node nesting read in a glTF (deeper only exhausts the stack or the time).
 const MAX_DEPTH: usize = 256;
+pub use super::gltf_skin::MAX_NODES;
 
 /// The humanoid bones a dance needs: the legs and feet it stands on, the trunk and head it faces
 /// with, and the arms it moves. Shoulders, chest, neck, hands and toes are driven when present.
@@ -99,6 +101,8 @@ pub enum RigFileError {
     Bvh(String),
     #[error("glTF: {0}")]
     Gltf(String),
+    #[error("{0} is not a finite number")]
+    NotFinite(String),
     #[error("the glTF has no skin: export the armature with its mesh (a skin lists the skeleton's joints)")]
     NoSkin,
     #[error("the skeleton has {count} joints; at most {limit} are read")]
@@ -122,6 +126,7 @@ impl RigFileError {
             RigFileError::UnknownFormat => "rig-format",
             RigFileError::Bvh(_) => "rig-bvh",
             RigFileError::Gltf(_) => "rig-gltf",
+            RigFileError::NotFinite(_) => "motion-not-finite",
             RigFileError::NoSkin => "rig-no-skin",
             RigFileError::TooManyJoints { .. } => "rig-too-many-joints",
             RigFileError::SeveralRoots(..) => "rig-several-roots",
@@ -138,6 +143,7 @@ impl RigFileError {
             RigFileError::UnknownFormat => true,
             RigFileError::Bvh(_)
             | RigFileError::Gltf(_)
+            | RigFileError::NotFinite(_)
             | RigFileError::NoSkin
             | RigFileError::TooManyJoints { .. }
             | RigFileError::SeveralRoots(..)
@@ -155,6 +161,7 @@ impl RigFileError {
             RigFileError::UnknownFormat
             | RigFileError::Bvh(_)
             | RigFileError::Gltf(_)
+            | RigFileError::NotFinite(_)
             | RigFileError::NoSkin
             | RigFileError::TooManyJoints { .. }
             | RigFileError::SeveralRoots(..)
@@ -348,15 +355,13 @@ pub fn read(
 }
 
 fn read_bvh(text: &str) -> Result<Raw, RigFileError> {
-    // A hierarchy alone is a rest pose; the parser wants a MOTION section, so give it an empty one.
-    let with_motion;
-    let text = if text.contains("MOTION") {
-        text
-    } else {
-        with_motion = format!("{text}\nMOTION\nFrames: 0\nFrame Time: 0.04\n");
-        &with_motion
-    };
-    let bvh = Bvh::parse(text).map_err(|e| RigFileError::Bvh(e.to_string()))?;
+    // The rest pose is the hierarchy: a MOTION section's claim is checked, its frames unread.
+    let bvh = Bvh::parse_rest_pose(text).map_err(|e| match e {
+        crate::motion::MotionError::NotFinite { line, what } => {
+            RigFileError::NotFinite(format!("line {line}: {what}"))
+        }
+        e => RigFileError::Bvh(e.to_string()),
+    })?;
     let n = bvh.names.len();
     if n > MAX_JOINTS {
         return Err(RigFileError::TooManyJoints {
@@ -397,33 +402,36 @@ fn glb_json(bytes: &[u8]) -> Result<&[u8], RigFileError> {
         .ok_or_else(|| bad("the JSON chunk is cut short"))
 }
 
-/// A node's local transform.
-fn local_matrix(node: &gj::Node) -> Matrix4<f64> {
-    if let Some(m) = node.matrix {
-        return Matrix4::from_column_slice(&m.map(f64::from));
+/// Node `i`'s local transform.
+fn local_matrix(nodes: &Nodes, i: usize) -> Matrix4<f64> {
+    match nodes.transform(i) {
+        None => Matrix4::identity(),
+        Some(Transform::Matrix(m)) => Matrix4::from_column_slice(&m.map(f64::from)),
+        Some(Transform::Trs {
+            translation,
+            rotation,
+            scale,
+        }) => {
+            let t = translation.map(f64::from);
+            let r = rotation.map(f64::from);
+            let s = scale.map(f64::from);
+            let q = UnitQuaternion::from_quaternion(Quaternion::new(r[3], r[0], r[1], r[2]));
+            Matrix4::new_translation(&Vector3::from(t))
+                * q.to_homogeneous()
+                * Matrix4::new_nonuniform_scaling(&Vector3::from(s))
+        }
     }
-    let t = node.translation.unwrap_or([0.0; 3]).map(f64::from);
-    let r = node
-        .rotation
-        .as_ref()
-        .map_or([0.0, 0.0, 0.0, 1.0], |q| q.0)
-        .map(f64::from);
-    let s = node.scale.unwrap_or([1.0; 3]).map(f64::from);
-    let q = UnitQuaternion::from_quaternion(Quaternion::new(r[3], r[0], r[1], r[2]));
-    Matrix4::new_translation(&Vector3::from(t))
-        * q.to_homogeneous()
-        * Matrix4::new_nonuniform_scaling(&Vector3::from(s))
 }
 
 fn read_gltf(json: &[u8]) -> Result<Raw, RigFileError> {
-    let root: gj::Root =
+    let root: Document =
         serde_json::from_slice(json).map_err(|e| RigFileError::Gltf(e.to_string()))?;
     let skin = root
         .skins
         .iter()
         .max_by_key(|s| s.joints.len())
         .ok_or(RigFileError::NoSkin)?;
-    let joints: Vec<usize> = skin.joints.iter().map(|j| j.value()).collect();
+    let joints: Vec<usize> = skin.joints.iter().map(|&j| j as usize).collect();
     if joints.len() > MAX_JOINTS {
         return Err(RigFileError::TooManyJoints {
             count: joints.len(),
@@ -431,22 +439,29 @@ fn read_gltf(json: &[u8]) -> Result<Raw, RigFileError> {
         });
     }
     let nodes = &root.nodes;
-    let mut node_parent: Vec<Option<usize>> = vec![None; nodes.len()];
-    for (i, node) in nodes.iter().enumerate() {
-        for c in node.children.iter().flatten() {
-            let c = c.value();
-            if c >= nodes.len() || node_parent[c].is_some() {
+    // Each node's parent, `NO_PARENT` for a root: four bytes a node, as the nodes themselves.
+    const NO_PARENT: u32 = u32::MAX;
+    let mut node_parent: Vec<u32> = vec![NO_PARENT; nodes.count()];
+    for i in 0..nodes.count() {
+        for &c in nodes.children(i) {
+            let c = c as usize;
+            if c >= nodes.count() || node_parent[c] != NO_PARENT {
                 return Err(RigFileError::Gltf(format!(
                     "node {c} is out of range or has two parents"
                 )));
             }
-            node_parent[c] = Some(i);
+            node_parent[c] = i as u32;
         }
     }
+    let parent_of = |i: usize| {
+        Some(node_parent[i])
+            .filter(|&p| p != NO_PARENT)
+            .map(|p| p as usize)
+    };
     // Ancestors (nearest first) of a node, refusing cycles and absurd depth.
     let ancestors = |mut i: usize| -> Result<Vec<usize>, RigFileError> {
         let mut out = Vec::new();
-        while let Some(p) = node_parent[i] {
+        while let Some(p) = parent_of(i) {
             if out.len() >= MAX_DEPTH {
                 return Err(RigFileError::Gltf(
                     "node hierarchy nested too deeply or cyclic".into(),
@@ -469,20 +484,26 @@ fn read_gltf(json: &[u8]) -> Result<Raw, RigFileError> {
     let mut parents = Vec::with_capacity(joints.len());
     let mut rest = Vec::with_capacity(joints.len());
     for (k, &node) in joints.iter().enumerate() {
-        let n = nodes
-            .get(node)
-            .ok_or_else(|| RigFileError::Gltf(format!("skin joint {node} is not a node")))?;
-        names.push(n.name.clone().unwrap_or_else(|| format!("joint{k}")));
+        if node >= nodes.count() {
+            return Err(RigFileError::Gltf(format!(
+                "skin joint {node} is not a node"
+            )));
+        }
+        names.push(
+            nodes
+                .name(node)
+                .map_or_else(|| format!("joint{k}"), str::to_string),
+        );
         let up = ancestors(node)?;
         parents.push(up.iter().find_map(|a| index_of.get(a).copied()));
-        let mut world = local_matrix(n);
+        let mut world = local_matrix(nodes, node);
         for &a in &up {
-            world = local_matrix(&nodes[a]) * world;
+            world = local_matrix(nodes, a) * world;
         }
         let p = world.column(3);
         if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
-            return Err(RigFileError::Gltf(format!(
-                "joint {:?} has a non-finite rest position",
+            return Err(RigFileError::NotFinite(format!(
+                "the rest position of joint {:?}",
                 names[k]
             )));
         }

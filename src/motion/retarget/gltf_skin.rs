@@ -1,0 +1,185 @@
+//! The parts of a glTF document a rig is read from, its nodes and skins, with everything else
+//! skipped unread, kept compactly.
+//!
+//! Written here rather than read through `gltf_json::Root` (which the exporter still uses to
+//! write glb): `Root` deserializes the whole document, and every empty node `{}` becomes a struct
+//! of a few hundred bytes, so a 9 MB file of three million empty nodes took 676 MB before it could
+//! be refused. Here the other arrays (meshes, accessors, materials, …) go through serde's
+//! `IgnoredAny`, which allocates nothing; nodes are counted as they are read and refused past
+//! [`MAX_NODES`]; and a node costs 8 bytes (its children's range) plus what it actually carries (a
+//! name, a transform, child indices), each no larger than the text that sent it. What is kept is
+//! then a few times the bytes sent at most, whatever the file holds.
+use serde::de::{self, Deserializer, SeqAccess, Visitor};
+use serde::Deserialize;
+use std::fmt;
+
+/// Most nodes a glTF may have (a rigged, dressed avatar has a few thousand).
+pub const MAX_NODES: usize = 65_536;
+
+/// A glTF document's nodes and skins.
+#[derive(Default, Deserialize)]
+pub struct Document {
+    #[serde(default)]
+    pub nodes: Nodes,
+    #[serde(default)]
+    pub skins: Vec<Skin>,
+}
+
+/// A skin: the nodes that are its joints.
+#[derive(Deserialize)]
+pub struct Skin {
+    pub joints: Vec<u32>,
+}
+
+/// A node's local transform as stored.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Transform {
+    /// Column-major 4 × 4.
+    Matrix([f32; 16]),
+    /// Translation, rotation (`[x, y, z, w]`), scale; each defaults to the identity's.
+    Trs {
+        translation: [f32; 3],
+        rotation: [f32; 4],
+        scale: [f32; 3],
+    },
+}
+
+/// The nodes, compactly: per node the range of its children in one shared array; names and
+/// transforms only for the nodes that have them, in node order.
+#[derive(Default)]
+pub struct Nodes {
+    ranges: Vec<(u32, u32)>,
+    children: Vec<u32>,
+    names: Vec<(u32, String)>,
+    transforms: Vec<(u32, Transform)>,
+}
+
+impl Nodes {
+    /// How many nodes there are.
+    pub fn count(&self) -> usize {
+        self.ranges.len()
+    }
+
+    /// Node `i`'s children.
+    pub fn children(&self, i: usize) -> &[u32] {
+        self.ranges.get(i).map_or(&[], |&(start, len)| {
+            &self.children[start as usize..(start + len) as usize]
+        })
+    }
+
+    /// Node `i`'s name, if it has one.
+    pub fn name(&self, i: usize) -> Option<&str> {
+        find(&self.names, i).map(String::as_str)
+    }
+
+    /// Node `i`'s transform; `None` is the identity.
+    pub fn transform(&self, i: usize) -> Option<&Transform> {
+        find(&self.transforms, i)
+    }
+}
+
+/// The value kept for node `i` in a list sorted by node.
+fn find<T>(list: &[(u32, T)], i: usize) -> Option<&T> {
+    let i = u32::try_from(i).ok()?;
+    list.binary_search_by_key(&i, |(node, _)| *node)
+        .ok()
+        .map(|k| &list[k].1)
+}
+
+/// One node as sent, read on the stack before its parts are kept.
+#[derive(Deserialize)]
+struct Node {
+    #[serde(default)]
+    name: Option<String>,
+    #[serde(default)]
+    children: Vec<u32>,
+    #[serde(default)]
+    matrix: Option<[f32; 16]>,
+    #[serde(default)]
+    translation: Option<[f32; 3]>,
+    #[serde(default)]
+    rotation: Option<[f32; 4]>,
+    #[serde(default)]
+    scale: Option<[f32; 3]>,
+}
+
+impl<'de> Deserialize<'de> for Nodes {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        deserializer.deserialize_seq(NodesVisitor)
+    }
+}
+
+struct NodesVisitor;
+
+impl<'de> Visitor<'de> for NodesVisitor {
+    type Value = Nodes;
+
+    fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "an array of at most {MAX_NODES} nodes")
+    }
+
+    fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Nodes, A::Error> {
+        let mut nodes = Nodes::default();
+        while let Some(node) = seq.next_element::<Node>()? {
+            let i = nodes.ranges.len();
+            if i == MAX_NODES {
+                return Err(de::Error::custom(format!(
+                    "more than {MAX_NODES} nodes; a rig has at most that many"
+                )));
+            }
+            // Both fit in u32: nodes are capped, and children are fewer than the bytes sent.
+            let start = nodes.children.len() as u32;
+            nodes.children.extend_from_slice(&node.children);
+            nodes.ranges.push((start, node.children.len() as u32));
+            let i = i as u32;
+            if let Some(name) = node.name {
+                nodes.names.push((i, name));
+            }
+            let transform = match (node.matrix, node.translation, node.rotation, node.scale) {
+                (Some(m), ..) => Some(Transform::Matrix(m)),
+                (None, None, None, None) => None,
+                (None, t, r, s) => Some(Transform::Trs {
+                    translation: t.unwrap_or([0.0; 3]),
+                    rotation: r.unwrap_or([0.0, 0.0, 0.0, 1.0]),
+                    scale: s.unwrap_or([1.0; 3]),
+                }),
+            };
+            if let Some(transform) = transform {
+                nodes.transforms.push((i, transform));
+            }
+        }
+        Ok(nodes)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn other_parts_are_skipped_and_nodes_are_capped() {
+        let doc: Document = serde_json::from_str(
+            r#"{"asset": {"version": "2.0"}, "meshes": [{}, {}], "nodes": [{"name": "a", "children": [1], "extras": {"x": [1, 2]}}, {"translation": [0, 1, 0]}], "skins": [{"joints": [0, 1]}]}"#,
+        )
+        .expect("read");
+        assert_eq!(doc.nodes.count(), 2);
+        assert_eq!(doc.nodes.children(0), &[1]);
+        assert_eq!(doc.nodes.children(1), &[] as &[u32]);
+        assert_eq!((doc.nodes.name(0), doc.nodes.name(1)), (Some("a"), None));
+        assert_eq!(doc.nodes.transform(0), None);
+        assert_eq!(
+            doc.nodes.transform(1),
+            Some(&Transform::Trs {
+                translation: [0.0, 1.0, 0.0],
+                rotation: [0.0, 0.0, 0.0, 1.0],
+                scale: [1.0; 3]
+            })
+        );
+        assert_eq!(doc.skins[0].joints, vec![0, 1]);
+        let many = format!("{{\"nodes\": [{}{{}}]}}", "{},".repeat(MAX_NODES));
+        let err = serde_json::from_str::<Document>(&many)
+            .err()
+            .expect("refused");
+        assert!(err.to_string().contains("more than 65536 nodes"), "{err}");
+    }
+}
