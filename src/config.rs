@@ -7,7 +7,39 @@ use figment::providers::{Env, Format, Serialized, Toml};
 use figment::Figment;
 use serde::{Deserialize, Serialize};
 use std::fmt;
+use std::ops::RangeInclusive;
 use std::path::{Path, PathBuf};
+
+/// The ranges a tenant's limits are held to wherever they are set (the config, `choreo keys
+/// create`): a rate of 1e-19 per second would make the limiter's next arrival overflow time.
+pub const RATE_LIMIT_RPS: RangeInclusive<f64> = 0.01..=100_000.0;
+/// Jobs queued or running per tenant.
+pub const MAX_QUEUED_JOBS: RangeInclusive<u64> = 1..=1_000_000;
+/// Bytes stored per tenant: 1 KiB to 1 PiB.
+pub const STORAGE_QUOTA_BYTES: RangeInclusive<u64> = 1024..=(1 << 50);
+/// Event streams one key may hold open at once.
+pub const MAX_EVENT_STREAMS_PER_KEY: RangeInclusive<usize> = 1..=10_000;
+/// The longest an event stream may stay open, in seconds.
+pub const EVENT_STREAM_MAX_S: RangeInclusive<f64> = 1.0..=86_400.0;
+/// Days of retention: up to a century.
+pub const RETENTION_DAYS: RangeInclusive<f64> = 0.0..=36_500.0;
+
+/// `value` if it lies in `range`, else why not, for a flag or setting called `name`.
+pub fn in_range<T: PartialOrd + fmt::Display>(
+    name: &str,
+    value: T,
+    range: &RangeInclusive<T>,
+) -> Result<T, String> {
+    if range.contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!(
+            "{name} is {value}; it must be from {} to {}",
+            range.start(),
+            range.end()
+        ))
+    }
+}
 
 /// The default config file, read from the working directory when present.
 pub const DEFAULT_CONFIG_FILE: &str = "config.toml";
@@ -49,6 +81,8 @@ pub const SETTINGS: &[&str] = &[
     "max_queued_jobs",
     "storage_quota_bytes",
     "retention_days",
+    "max_event_streams_per_key",
+    "event_stream_max_s",
     "webhook_secret",
     "webhook_allowed_hosts",
     "webhook_retry_s",
@@ -208,6 +242,12 @@ pub struct Config {
     /// Songs and results are removed this many days (fractions allowed) after their last use;
     /// unset keeps them until deleted.
     pub retention_days: Option<f64>,
+    /// Event streams (`GET /v1/jobs/{id}/events`) one key may hold open at once, per API
+    /// process; past it `429 too-many-event-streams` and the connection is closed.
+    pub max_event_streams_per_key: usize,
+    /// The longest an event stream stays open, in seconds; then it ends and the client resumes
+    /// with `Last-Event-ID`, so a stream on a job that never ends does not hold a slot for good.
+    pub event_stream_max_s: f64,
     /// The key webhooks are signed with, in Standard Webhooks' form `whsec_<base64 of 24 to 64
     /// random bytes>` (`CHOREO_WEBHOOK_SECRET`). Unset: a job with a `webhook_url` is refused
     /// (422 `webhooks-not-configured`), since the receiver could not check what it gets. Every
@@ -295,6 +335,8 @@ impl Default for Config {
             max_queued_jobs: None,
             storage_quota_bytes: None,
             retention_days: None,
+            max_event_streams_per_key: 16,
+            event_stream_max_s: 300.0,
             webhook_secret: None,
             webhook_allowed_hosts: Vec::new(),
             webhook_retry_s: 24.0 * 3600.0,
@@ -344,6 +386,8 @@ struct Defaults {
     max_part_header_bytes: usize,
     db_timeout_s: f64,
     sweep_grace_s: f64,
+    max_event_streams_per_key: usize,
+    event_stream_max_s: f64,
     webhook_allowed_hosts: Vec<String>,
     webhook_retry_s: f64,
     webhook_backoff_s: f64,
@@ -378,6 +422,8 @@ impl Defaults {
             max_part_header_bytes: d.max_part_header_bytes,
             db_timeout_s: d.db_timeout_s,
             sweep_grace_s: d.sweep_grace_s,
+            max_event_streams_per_key: d.max_event_streams_per_key,
+            event_stream_max_s: d.event_stream_max_s,
             webhook_allowed_hosts: d.webhook_allowed_hosts,
             webhook_retry_s: d.webhook_retry_s,
             webhook_backoff_s: d.webhook_backoff_s,
@@ -471,32 +517,43 @@ impl Config {
                 "must be zero or a positive number of seconds",
             );
         }
-        if self
-            .rate_limit_rps
-            .is_some_and(|rps| !(rps.is_finite() && rps > 0.0))
-        {
-            return invalid(
-                "rate_limit_rps",
-                "must be a positive number of requests per second; leave it unset for no limit",
-            );
+        let unset = "; leave it unset for no limit";
+        if let Some(rps) = self.rate_limit_rps {
+            if let Err(e) = in_range("rate_limit_rps", rps, &RATE_LIMIT_RPS) {
+                return invalid("rate_limit_rps", &format!("{e} requests per second{unset}"));
+            }
         }
-        if self.max_queued_jobs == Some(0) {
-            return invalid(
-                "max_queued_jobs",
-                "must be at least 1; leave it unset for no limit",
-            );
+        if let Some(jobs) = self.max_queued_jobs {
+            if let Err(e) = in_range("max_queued_jobs", jobs, &MAX_QUEUED_JOBS) {
+                return invalid("max_queued_jobs", &format!("{e}{unset}"));
+            }
         }
-        if self.storage_quota_bytes == Some(0) {
-            return invalid(
-                "storage_quota_bytes",
-                "must be positive; leave it unset for no limit",
-            );
+        if let Some(bytes) = self.storage_quota_bytes {
+            if let Err(e) = in_range("storage_quota_bytes", bytes, &STORAGE_QUOTA_BYTES) {
+                return invalid("storage_quota_bytes", &format!("{e}{unset}"));
+            }
+        }
+        if let Err(e) = in_range(
+            "max_event_streams_per_key",
+            self.max_event_streams_per_key,
+            &MAX_EVENT_STREAMS_PER_KEY,
+        ) {
+            return invalid("max_event_streams_per_key", &e);
+        }
+        if let Err(e) = in_range(
+            "event_stream_max_s",
+            self.event_stream_max_s,
+            &EVENT_STREAM_MAX_S,
+        ) {
+            return invalid("event_stream_max_s", &format!("{e} seconds"));
         }
         if let Some(days) = self.retention_days {
-            if !(days.is_finite() && days > 0.0) || self.retention().is_none() {
+            if !(days.is_finite() && days > 0.0 && RETENTION_DAYS.contains(&days))
+                || self.retention().is_none()
+            {
                 return invalid(
                     "retention_days",
-                    "must be a positive number of days (fractions allowed); leave it unset to keep everything",
+                    "must be a positive number of days (fractions allowed), at most 36500; leave it unset to keep everything",
                 );
             }
         }

@@ -8,7 +8,29 @@ mod cli;
 
 use cli::{BenchCommand, Cli, Command, ServiceArgs};
 
-fn main() -> anyhow::Result<()> {
+/// Exit code for a configuration that is refused, as clap uses for a refused flag.
+const EXIT_USAGE: u8 = 2;
+
+fn main() -> std::process::ExitCode {
+    match run() {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("Error: {e:?}");
+            let refused = e.chain().any(|cause| {
+                cause
+                    .downcast_ref::<choreo::config::ConfigError>()
+                    .is_some()
+            });
+            if refused {
+                std::process::ExitCode::from(EXIT_USAGE)
+            } else {
+                std::process::ExitCode::FAILURE
+            }
+        }
+    }
+}
+
+fn run() -> anyhow::Result<()> {
     let cli = Cli::parse();
     let load = |args: &ServiceArgs| {
         Config::load(cli.config.as_deref(), &args.overrides()).context("loading configuration")

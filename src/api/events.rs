@@ -11,10 +11,14 @@
 //! `progress`), then one `done` carrying the job as `GET /v1/jobs/{id}` returns it once the job is
 //! terminal (at once when it already is), after which the server closes the stream. A comment
 //! line (`: keep-alive`) every [`KEEP_ALIVE`] keeps proxies from closing an idle stream. The
-//! stream ends when the server stops; the client reconnects with `Last-Event-ID`.
+//! stream ends when the server stops, and after `event_stream_max_s` (so a stream on a job that
+//! never ends cannot hold its slot for good); the client reconnects with `Last-Event-ID`. A key
+//! holds at most `max_event_streams_per_key` streams at once in one API process; past it, `429
+//! too-many-event-streams` and the connection closes.
 use super::auth::Caller;
 use super::jobs::{parse_job_id, JobView};
 use super::problem::{ApiError, Problem};
+use super::tenancy::StreamSlot;
 use super::AppState;
 use crate::queue::events::{Change, JobEvent};
 use crate::queue::{JobId, QueueError, Scope, Status};
@@ -117,6 +121,11 @@ struct Cursor {
     /// Polls in a row that found nothing new.
     idle: u32,
     shutdown: CancellationToken,
+    /// When the stream ends even if the job has not (`event_stream_max_s`): the client resumes
+    /// with `Last-Event-ID`, and the slot it held is free meanwhile.
+    ends_at: tokio::time::Instant,
+    /// The tenant's slot for this stream, given back when the stream is dropped.
+    _slot: StreamSlot,
 }
 
 impl Cursor {
@@ -152,7 +161,10 @@ impl Cursor {
             if let Some(event) = self.queue.pop_front() {
                 return Some((Ok(event), self));
             }
-            if self.over || self.shutdown.is_cancelled() {
+            if self.over
+                || self.shutdown.is_cancelled()
+                || tokio::time::Instant::now() >= self.ends_at
+            {
                 return None;
             }
             let before = self.last;
@@ -173,6 +185,7 @@ impl Cursor {
                 }
                 tokio::select! {
                     _ = self.shutdown.cancelled() => return None,
+                    _ = tokio::time::sleep_until(self.ends_at) => return None,
                     _ = tokio::time::sleep(POLL) => {}
                 }
             }
@@ -187,7 +200,9 @@ impl Cursor {
 /// `{seq, job_id, from, to, attempt, error, at}`; `progress` data: `{seq, job_id, stage,
 /// progress, at}` (sent when the stage changes and at every 5 % of progress); `done` data: the job
 /// as `GET /v1/jobs/{id}` returns it, sent once the job is terminal (at once when it already is),
-/// after which the stream closes. `: keep-alive` comments every 15 s.
+/// after which the stream closes. `: keep-alive` comments every 15 s. A stream also ends after
+/// `event_stream_max_s` (300 s by default): resume with `Last-Event-ID`. A key may hold
+/// `max_event_streams_per_key` streams (16 by default) at once; past it, 429.
 #[utoipa::path(
     get,
     path = "/v1/jobs/{id}/events",
@@ -211,6 +226,13 @@ pub async fn events(
 ) -> Result<Response, ApiError> {
     let id = parse_job_id(&id)?;
     let scope = caller.scope();
+    // Taken first: a key past its streams is refused before it costs a database read.
+    let slot = state
+        .tenancy
+        .streams
+        .take(caller.tenant, state.config.max_event_streams_per_key)?;
+    let ends_at =
+        tokio::time::Instant::now() + Duration::from_secs_f64(state.config.event_stream_max_s);
     // 404 before any byte of the stream, and another tenant's job reads as no job.
     let job = state.store.job(scope, id).await?;
     // A malformed Last-Event-ID replays from the start, as a client without one would get: the
@@ -231,6 +253,8 @@ pub async fn events(
         ending: job.status.is_terminal(),
         over: false,
         idle: 0,
+        ends_at,
+        _slot: slot,
     };
     let stream = futures::stream::unfold(cursor, Cursor::next);
     let mut response = sse(stream).into_response();

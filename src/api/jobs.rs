@@ -223,6 +223,17 @@ fn invalid(field: &str, message: impl Into<String>) -> ApiError {
     }
 }
 
+/// A refused key pose or seed motion: a number that is not finite has its own code.
+fn motion_input(field: &str, e: crate::motion::validate::InputError) -> ApiError {
+    match e {
+        crate::motion::validate::InputError::NonFinite { .. } => ApiError::MotionNotFinite {
+            field: field.into(),
+            message: e.to_string(),
+        },
+        e => invalid(field, e.to_string()),
+    }
+}
+
 /// The request's key poses and seed motion made canonical and validated by the motion module
 /// (`motion::input`), the rules the models apply: 422 here rather than a failed job later.
 /// BVH parsing and resampling are CPU work, so they run off the async threads.
@@ -237,11 +248,11 @@ async fn motion_inputs(
     tokio::task::spawn_blocking(move || {
         let frames = validate::song_frames(duration_s, MOTION_FPS);
         let keys = crate::motion::input::key_poses(&key_poses, frames, MOTION_FPS)
-            .map_err(|e| invalid("key_poses", e.to_string()))?;
+            .map_err(|e| motion_input("key_poses", e))?;
         let seed = seed_motion
             .map(|s| crate::motion::input::seed_motion(&s))
             .transpose()
-            .map_err(|e| invalid("seed_motion", e.to_string()))?
+            .map_err(|e| motion_input("seed_motion", e))?
             .map(|m| SeedMotion {
                 fps: m.fps,
                 positions: m
@@ -322,10 +333,10 @@ fn idempotency(headers: &HeaderMap, request: &CreateJob) -> Result<Option<Idempo
         (status = 202, description = "Job queued (or replayed)", body = JobView),
         (status = 400, description = "Malformed JSON, or a malformed Idempotency-Key", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "The song does not exist", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "The body is over max_job_body_bytes", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "The body is over max_job_body_bytes (code body-too-large), or the key already stores its storage_quota_bytes so the job's results have no room (code storage-quota-exceeded: delete songs, rigs or results)", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Body is not JSON", body = Problem, content_type = "application/problem+json"),
         (status = 408, description = "The body stalled for more than body_timeout_s", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set, or a webhook_url refused: `webhook-url-refused`, `webhooks-not-configured`), the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set, a number in a key pose or seed motion that is not finite: `motion-not-finite`, or a webhook_url refused: `webhook-url-refused`, `webhooks-not-configured`), the model is unknown, or the key was reused", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The database is unreachable; nothing was queued, send it again shortly", body = Problem, content_type = "application/problem+json"),
         (status = 507, description = "The server is out of storage; nothing was queued", body = Problem, content_type = "application/problem+json"),
     ),
@@ -339,7 +350,6 @@ pub async fn create(
 ) -> Result<Response, ApiError> {
     check_sizes(&request)?;
     let idempotency = idempotency(&headers, &request)?;
-    super::tenancy::check_queue(&state, &caller).await?;
     let song = match state.store.song(caller.scope(), request.song_id).await {
         Ok(song) => song,
         // 404, as for any id that names nothing: the request itself is well formed.
@@ -440,7 +450,8 @@ pub async fn create(
         max_attempts: state.config.max_attempts,
         idempotency,
     };
-    let registered = state.store.register(job).await?;
+    // The tenant's limits are checked in the transaction that inserts the job.
+    let registered = state.store.register_within(job, caller.limits).await?;
     let replayed = matches!(registered, Registered::Existing(_));
     if !replayed {
         state.wake.notify_waiters();

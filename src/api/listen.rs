@@ -11,7 +11,11 @@
 //! - a semaphore caps open connections at [`connection_cap`]: `max_connections`, lowered to the
 //!   open-file limit less `fd_reserve`, so sockets never take the file handles workers need. A
 //!   connection past the cap gets a `503 too-many-connections` problem and is closed; when even
-//!   the few slots for those answers are taken it is closed at once.
+//!   the few slots for those answers are taken it is closed at once;
+//! - except a health probe: a connection past the cap whose first bytes are `GET /healthz` or
+//!   `GET /readyz` (peeked, not read) is served anyway, one request, from the slots kept for
+//!   refusals, so a load balancer is told the truth about a busy server rather than a 503 that
+//!   would take it out of rotation.
 use super::problem::ApiError;
 use axum::Router;
 use hyper::server::conn::http1;
@@ -37,6 +41,10 @@ const MAX_HEAD_BYTES: usize = 64 * 1024;
 const DRAIN: Duration = Duration::from_secs(10);
 /// After an accept error (out of file handles), wait this long before accepting again.
 const ACCEPT_BACKOFF: Duration = Duration::from_millis(100);
+/// How long a connection past the cap may take to show whether it is a health probe.
+const PROBE_PEEK: Duration = Duration::from_millis(200);
+/// The request lines served past the connection cap.
+const HEALTH_PROBES: [&[u8]; 2] = [b"GET /healthz ", b"GET /readyz "];
 
 /// The limits one server loop applies.
 #[derive(Clone, Copy, Debug)]
@@ -136,8 +144,23 @@ pub async fn serve(
             metrics::counter!(crate::telemetry::CONNECTIONS_REFUSED).increment(1);
             if let Ok(slot) = refusals.clone().try_acquire_owned() {
                 let refusal = refusal.clone();
+                let mut probe_builder = builder.clone();
+                probe_builder.keep_alive(false);
+                let app = app.clone();
                 tokio::spawn(async move {
-                    refuse(stream, &refusal).await;
+                    if is_health_probe(&stream).await {
+                        let mut io = TimeoutStream::new(stream);
+                        io.set_write_timeout(Some(limits.write_timeout));
+                        let served = probe_builder.serve_connection(
+                            TokioIo::new(Box::pin(io)),
+                            TowerToHyperService::new(app),
+                        );
+                        if let Err(e) = served.await {
+                            tracing::debug!(error = %e, "health probe past the cap ended with an error");
+                        }
+                    } else {
+                        refuse(stream, &refusal).await;
+                    }
                     drop(slot);
                 });
             }
@@ -163,6 +186,34 @@ pub async fn serve(
         _ = tokio::time::sleep(DRAIN) => tracing::warn!("connections still open {} s after shutdown; closing them", DRAIN.as_secs()),
     }
     Ok(())
+}
+
+/// Whether the connection's first bytes, peeked without reading them, are a health probe's
+/// request line. Waits at most [`PROBE_PEEK`] for them; a client that sent other bytes is told
+/// at once.
+async fn is_health_probe(stream: &TcpStream) -> bool {
+    let longest = HEALTH_PROBES.iter().map(|p| p.len()).max().unwrap_or(0);
+    let mut head = vec![0u8; longest];
+    let deadline = tokio::time::Instant::now() + PROBE_PEEK;
+    loop {
+        let peeked = match tokio::time::timeout_at(deadline, stream.peek(&mut head)).await {
+            Ok(Ok(n)) if n > 0 => &head[..n],
+            _ => return false,
+        };
+        let mut could_be = false;
+        for probe in HEALTH_PROBES {
+            if peeked.len() >= probe.len() && peeked.starts_with(probe) {
+                return true;
+            }
+            could_be |= probe.starts_with(peeked);
+        }
+        if !could_be || tokio::time::Instant::now() >= deadline {
+            return false;
+        }
+        // Only part of a request line is in: peek again shortly (a peek returns at once while
+        // the bytes it saw are still unread).
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    }
 }
 
 /// The whole HTTP response a connection past the cap gets.

@@ -126,11 +126,18 @@ impl Modify for BearerAuth {
                     .responses
                     .entry("401".into())
                     .or_insert_with(|| RefOr::T(unauthorized.clone()));
-                let too_many = if op.operation_id.as_deref() == Some("createJob") {
-                    "The key made more requests per second than its rate_limit_rps (code rate-limited), or has \
-                     max_queued_jobs jobs queued or running already (code too-many-queued-jobs); nothing was queued"
-                } else {
-                    "The key made more requests per second than its rate_limit_rps (code rate-limited)"
+                let too_many = match op.operation_id.as_deref() {
+                    Some("createJob") | Some("uploadSong") => {
+                        "The key made more requests per second than its rate_limit_rps (code rate-limited), or has \
+                         max_queued_jobs jobs queued or running already, an upload's analysis included (code \
+                         too-many-queued-jobs); nothing was queued or stored"
+                    }
+                    Some("getJobEvents") => {
+                        "The key made more requests per second than its rate_limit_rps (code rate-limited), or has \
+                         max_event_streams_per_key event streams open already (code too-many-event-streams; the \
+                         connection is closed)"
+                    }
+                    _ => "The key made more requests per second than its rate_limit_rps (code rate-limited)",
                 };
                 op.responses
                     .responses

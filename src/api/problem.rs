@@ -45,6 +45,8 @@ pub enum ApiError {
     NotJson,
     #[error("`{field}`: {message}")]
     InvalidField { field: String, message: String },
+    #[error("`{field}`: {message}")]
+    MotionNotFinite { field: String, message: String },
     #[error("unknown field `{0}`; remove it")]
     UnknownField(String),
     #[error("missing field `{0}`")]
@@ -79,6 +81,8 @@ pub enum ApiError {
     RigNotFound(String),
     #[error("{0}")]
     Rig(RigFileError),
+    #[error("the rig file was not read within {limit_s} s (audio_timeout_s); send a smaller file")]
+    RigTimedOut { limit_s: f64 },
     #[error("model `{model}` is not available; use one of the available models")]
     UnknownModel {
         model: String,
@@ -122,6 +126,10 @@ pub enum ApiError {
     TooManyQueuedJobs { limit: u64 },
     #[error("this key stores {used} bytes of songs, rigs and results; {size} more would pass its {quota} byte quota: delete songs or results to make room")]
     StorageQuotaExceeded { used: u64, size: u64, quota: u64 },
+    #[error("this key stores {used} bytes of songs, rigs and results, at or past its {quota} byte quota, so a job's results have no room: delete songs, rigs or results, then submit again")]
+    StorageQuotaFull { used: u64, quota: u64 },
+    #[error("this key has {limit} event streams open, its most; close one (or follow the job with GET /v1/jobs/{{id}}) and try again")]
+    TooManyEventStreams { limit: usize },
     #[error("webhook_url is refused: {0}")]
     WebhookUrlRefused(String),
     #[error("this server has no webhook_secret (CHOREO_WEBHOOK_SECRET) to sign webhooks with; submit without webhook_url, or ask its operator to set one")]
@@ -135,6 +143,7 @@ impl ApiError {
             ApiError::MalformedJson(_) => "malformed-json",
             ApiError::NotJson => "not-json",
             ApiError::InvalidField { .. } => "invalid-field",
+            ApiError::MotionNotFinite { .. } => "motion-not-finite",
             ApiError::UnknownField(_) => "unknown-field",
             ApiError::MissingField(_) => "missing-field",
             ApiError::InvalidQuery(_) => "invalid-query",
@@ -171,6 +180,9 @@ impl ApiError {
             ApiError::RateLimited { .. } => "rate-limited",
             ApiError::TooManyQueuedJobs { .. } => "too-many-queued-jobs",
             ApiError::StorageQuotaExceeded { .. } => "storage-quota-exceeded",
+            ApiError::StorageQuotaFull { .. } => "storage-quota-exceeded",
+            ApiError::TooManyEventStreams { .. } => "too-many-event-streams",
+            ApiError::RigTimedOut { .. } => "rig-timed-out",
             ApiError::WebhookUrlRefused(_) => "webhook-url-refused",
             ApiError::WebhooksNotConfigured => "webhooks-not-configured",
         }
@@ -182,6 +194,7 @@ impl ApiError {
             ApiError::MalformedJson(_) => StatusCode::BAD_REQUEST,
             ApiError::NotJson => StatusCode::UNSUPPORTED_MEDIA_TYPE,
             ApiError::InvalidField { .. } => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::MotionNotFinite { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::UnknownField(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::MissingField(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::InvalidQuery(_) => StatusCode::BAD_REQUEST,
@@ -224,6 +237,11 @@ impl ApiError {
             ApiError::TooManyQueuedJobs { .. } => StatusCode::TOO_MANY_REQUESTS,
             // The upload is too large for the room the tenant has left: a smaller one may fit.
             ApiError::StorageQuotaExceeded { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            // The same quota, met at a job: its results are what would not fit.
+            ApiError::StorageQuotaFull { .. } => StatusCode::PAYLOAD_TOO_LARGE,
+            // Like the queue limit, it clears by itself as the key's other streams end.
+            ApiError::TooManyEventStreams { .. } => StatusCode::TOO_MANY_REQUESTS,
+            ApiError::RigTimedOut { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::WebhookUrlRefused(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::WebhooksNotConfigured => StatusCode::UNPROCESSABLE_ENTITY,
         }
@@ -244,6 +262,7 @@ impl ApiError {
         };
         match self {
             ApiError::InvalidField { field, .. }
+            | ApiError::MotionNotFinite { field, .. }
             | ApiError::UnknownField(field)
             | ApiError::MissingField(field) => {
                 problem.field = Some(field.clone());
@@ -364,6 +383,11 @@ impl From<QueueError> for ApiError {
             }
             QueueError::RigNotFound(id) => ApiError::RigNotFound(id.to_string()),
             QueueError::IdempotencyConflict(id) => ApiError::IdempotencyConflict(id),
+            QueueError::QueueFull { limit } => ApiError::TooManyQueuedJobs { limit },
+            QueueError::QuotaExceeded { used, size, quota } => {
+                ApiError::StorageQuotaExceeded { used, size, quota }
+            }
+            QueueError::QuotaFull { used, quota } => ApiError::StorageQuotaFull { used, quota },
             // Keys are only looked up by `authenticate`, where a missing one is a 401.
             QueueError::KeyNotFound(_) => ApiError::Unauthorized,
             QueueError::Database(db) => ApiError::database(&db)
@@ -412,6 +436,13 @@ impl IntoResponse for ApiError {
                 response
                     .headers_mut()
                     .insert(header::RETRY_AFTER, HeaderValue::from_static(RETRY_AFTER_S));
+            }
+            ApiError::TooManyEventStreams { .. } => {
+                // Closed, so a client that tries a thousand streams does not keep a thousand
+                // idle connections open (each would hold one of the server's connection slots).
+                let headers = response.headers_mut();
+                headers.insert(header::RETRY_AFTER, HeaderValue::from_static(RETRY_AFTER_S));
+                headers.insert(header::CONNECTION, HeaderValue::from_static("close"));
             }
             _ => {}
         }

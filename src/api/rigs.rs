@@ -22,6 +22,7 @@ use chrono::{DateTime, Utc};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::str::FromStr;
+use std::time::Duration;
 
 /// Longest `mapping` field accepted, bytes (a few hundred joints' names).
 const MAX_MAPPING_BYTES: usize = 64 * 1024;
@@ -189,7 +190,7 @@ fn parse_mapping(text: Option<&str>) -> Result<BTreeMap<String, Option<HumanBone
         (status = 408, description = "The body stalled for more than body_timeout_s", body = Problem, content_type = "application/problem+json"),
         (status = 413, description = "Over the size limit (code file-too-large), or past the key's storage quota (code storage-quota-exceeded: delete songs or results to make room)", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Neither BVH nor glTF", body = Problem, content_type = "application/problem+json"),
-        (status = 422, description = "No file; an unknown field; a skeleton that cannot be read or lacks a bone a dance needs (named); a bad `mapping`", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "No file; an unknown field; a skeleton that cannot be read, has a number that is not finite (code motion-not-finite), too many joints or nodes, or lacks a bone a dance needs (named); a bad `mapping`; a file not read within audio_timeout_s (code rig-timed-out)", body = Problem, content_type = "application/problem+json"),
         (status = 431, description = "A part's headers are longer than max_part_header_bytes", body = Problem, content_type = "application/problem+json"),
         (status = 503, description = "The server's database is unreachable; send the upload again when it is back", body = Problem, content_type = "application/problem+json"),
         (status = 507, description = "The server is out of storage; nothing was stored", body = Problem, content_type = "application/problem+json"),
@@ -206,14 +207,36 @@ pub async fn upload(
         .file
         .ok_or_else(|| ApiError::MissingField("file".into()))?;
     let overrides = parse_mapping(form.mapping.as_deref())?;
+    // An early refusal that saves the read; the store's check, in the transaction that inserts
+    // the rig, is the one that holds against uploads racing each other.
     super::tenancy::check_storage(&state, &caller, received.size).await?;
-    let bytes = tokio::fs::read(received.file.path())
-        .await
-        .map_err(|e| ApiError::storage("reading the upload", &e))?;
-    let read = tokio::task::spawn_blocking(move || uploaded::read(&bytes, &overrides))
-        .await
-        .map_err(|e| ApiError::Internal(format!("rig reader thread: {e}")))?
-        .map_err(ApiError::Rig)?;
+    // Read under the songs' decode budget: one of the permits that bound decodes in parallel
+    // (so uploads cannot take every core, or memory, at once), and `audio_timeout_s`.
+    let read = {
+        let _permit = state
+            .decode_permits
+            .acquire()
+            .await
+            .map_err(|e| ApiError::Internal(e.to_string()))?;
+        let bytes = tokio::fs::read(received.file.path())
+            .await
+            .map_err(|e| ApiError::storage("reading the upload", &e))?;
+        let limit = Duration::from_secs_f64(state.config.audio_timeout_s);
+        let reading = tokio::task::spawn_blocking(move || uploaded::read(&bytes, &overrides));
+        // The reader's work is bounded by the file's size (joints and nodes are capped), so a
+        // reader past its time is left to finish on its own and its answer dropped.
+        match tokio::time::timeout(limit, reading).await {
+            Ok(joined) => joined
+                .map_err(|e| ApiError::Internal(format!("rig reader thread: {e}")))?
+                .map_err(ApiError::Rig)?,
+            Err(_) => {
+                return Err(ApiError::RigTimedOut {
+                    limit_s: limit.as_secs_f64(),
+                }
+                .into())
+            }
+        }
+    };
 
     let id = RigId::new();
     let path = state.data.rig_path(id, read.format);
@@ -237,7 +260,7 @@ pub async fn upload(
         skeleton: read.skeleton,
         created_at: Utc::now(),
     };
-    let stored = match state.store.add_rig(rig).await {
+    let stored = match state.store.add_rig_within(rig, caller.limits).await {
         Ok(stored) => stored,
         Err(e) => {
             forget(&state, artifact).await;

@@ -312,6 +312,8 @@ pub async fn upload(
             Json(view(&state, existing).await?),
         ));
     }
+    // An early refusal that saves the decode; the store's check, in the transaction that
+    // inserts the song, is the one that holds against uploads racing each other.
     super::tenancy::check_storage(&state, &caller, received.size).await?;
 
     // Decode fully: that is the only proof the bytes are audio we can use. No samples are kept,
@@ -392,7 +394,11 @@ pub async fn upload(
         max_attempts: state.config.max_attempts,
         idempotency: None,
     };
-    let (stored, created) = match state.store.add_song(song, analyze).await {
+    let (stored, created) = match state
+        .store
+        .add_song_within(song, analyze, caller.limits)
+        .await
+    {
         Ok(added) => added,
         Err(e) => {
             // No row names the file: remove it now rather than leave it to the start-up sweep.

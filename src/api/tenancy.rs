@@ -41,6 +41,55 @@ pub struct Tenancy {
     /// `Some(true)` for good once seen; `Some(false)` is re-read after [`KEY_CACHE`].
     any_key: Mutex<Option<(bool, Instant)>>,
     pub limiter: RateLimiter,
+    /// Event streams open per tenant.
+    pub streams: Arc<StreamSlots>,
+}
+
+/// Event streams each tenant holds open in this process: `max_event_streams_per_key` each, so
+/// one key's thousand streams cannot take the connections every other client needs.
+#[derive(Default)]
+pub struct StreamSlots {
+    open: Mutex<HashMap<TenantId, usize>>,
+}
+
+/// One open event stream of a tenant; its slot is given back when dropped (the stream ended,
+/// or its client went away).
+pub struct StreamSlot {
+    slots: Arc<StreamSlots>,
+    tenant: TenantId,
+}
+
+impl StreamSlots {
+    /// A slot for one more stream of `tenant`, or `429 too-many-event-streams` past `limit`.
+    pub fn take(self: &Arc<Self>, tenant: TenantId, limit: usize) -> Result<StreamSlot, ApiError> {
+        let mut open = lock(&self.open);
+        let count = open.entry(tenant).or_default();
+        if *count >= limit {
+            return Err(ApiError::TooManyEventStreams { limit });
+        }
+        *count += 1;
+        Ok(StreamSlot {
+            slots: self.clone(),
+            tenant,
+        })
+    }
+
+    /// Streams `tenant` holds open now.
+    pub fn open(&self, tenant: TenantId) -> usize {
+        lock(&self.open).get(&tenant).copied().unwrap_or(0)
+    }
+}
+
+impl Drop for StreamSlot {
+    fn drop(&mut self) {
+        let mut open = lock(&self.slots.open);
+        if let Some(count) = open.get_mut(&self.tenant) {
+            *count = count.saturating_sub(1);
+            if *count == 0 {
+                open.remove(&self.tenant);
+            }
+        }
+    }
 }
 
 fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
@@ -118,6 +167,15 @@ impl RateLimiter {
     /// Counts one request of `tenant` against `rps` (a burst of `ceil(rps)` is allowed); the
     /// error says how many seconds to wait.
     pub fn admit(&self, tenant: TenantId, rps: f64) -> Result<(), ApiError> {
+        // Limits are checked where they are set, but a row written by hand (or by an older
+        // version) could hold anything: held to the range here too, so no stored value can make
+        // the arithmetic below overflow (1e-19 per second once panicked every request).
+        let range = crate::config::RATE_LIMIT_RPS;
+        let rps = if rps.is_nan() {
+            *range.start()
+        } else {
+            rps.clamp(*range.start(), *range.end())
+        };
         let now = Instant::now();
         let interval = Duration::from_secs_f64(1.0 / rps);
         // A burst of one second's worth: `burst` requests may arrive at once.
@@ -129,6 +187,12 @@ impl RateLimiter {
         }
         let tat = next.get(&tenant).copied().unwrap_or(now).max(now);
         let allowed_at = tat.checked_sub(tolerance).unwrap_or(now);
+        let Some(after) = tat.checked_add(interval) else {
+            return Err(ApiError::RateLimited {
+                rps,
+                retry_after_s: interval.as_secs_f64().ceil().max(1.0) as u64,
+            });
+        };
         if allowed_at > now {
             let wait = allowed_at - now;
             return Err(ApiError::RateLimited {
@@ -136,26 +200,14 @@ impl RateLimiter {
                 retry_after_s: wait.as_secs_f64().ceil().max(1.0) as u64,
             });
         }
-        next.insert(tenant, tat + interval);
+        next.insert(tenant, after);
         Ok(())
     }
 }
 
-/// Refuses a new job when the caller's tenant already has its most jobs queued or running.
-/// The count is read before the job is stored, so requests racing each other may pass the
-/// limit by as many as race.
-pub async fn check_queue(state: &AppState, caller: &Caller) -> Result<(), ApiError> {
-    let Some(limit) = caller.limits.max_queued_jobs else {
-        return Ok(());
-    };
-    let usage = state.store.usage(caller.tenant).await?;
-    if usage.queued_jobs >= limit {
-        return Err(ApiError::TooManyQueuedJobs { limit });
-    }
-    Ok(())
-}
-
-/// Refuses an upload of `size` bytes that would take the caller's tenant past its storage quota.
+/// Refuses an upload of `size` bytes that would take the caller's tenant past its storage quota,
+/// before the upload is read. Only an early answer: uploads racing each other all pass it, and
+/// the store holds the quota where it inserts the row (`queue::sql::quota`).
 pub async fn check_storage(state: &AppState, caller: &Caller, size: u64) -> Result<(), ApiError> {
     let Some(quota) = caller.limits.storage_quota_bytes else {
         return Ok(());
@@ -187,5 +239,40 @@ mod tests {
             .expect("another tenant has its own budget");
         std::thread::sleep(Duration::from_millis(250));
         limiter.admit(a, 5.0).expect("one interval later, one more");
+    }
+
+    /// A stored rate out of range (1e-19 once overflowed the arrival time and panicked every
+    /// request) is held to the range: each call answers.
+    #[test]
+    fn rates_out_of_range_are_held_to_the_range() {
+        let limiter = RateLimiter::default();
+        for rps in [1e-19, f64::NAN, 0.0, -5.0, 1e300, f64::INFINITY] {
+            let tenant = TenantId::new();
+            assert!(limiter.admit(tenant, rps).is_ok(), "{rps}");
+            for _ in 0..3 {
+                match limiter.admit(tenant, rps) {
+                    Ok(()) => {}
+                    Err(ApiError::RateLimited { retry_after_s, .. }) => {
+                        assert!(retry_after_s <= 100, "{rps}: {retry_after_s}")
+                    }
+                    Err(e) => panic!("{rps}: {e}"),
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn a_tenants_streams_are_capped_and_given_back() {
+        let slots = Arc::new(StreamSlots::default());
+        let (a, b) = (TenantId::new(), TenantId::new());
+        let held: Vec<_> = (0..3).map(|_| slots.take(a, 3).expect("room")).collect();
+        assert!(matches!(
+            slots.take(a, 3),
+            Err(ApiError::TooManyEventStreams { limit: 3 })
+        ));
+        let _other = slots.take(b, 3).expect("another tenant has its own");
+        drop(held);
+        assert_eq!(slots.open(a), 0);
+        slots.take(a, 3).expect("given back");
     }
 }

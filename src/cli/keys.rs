@@ -1,7 +1,7 @@
 //! `choreo keys create|list|revoke`: API keys, written straight to the configured database, so
 //! they work while the server runs (it reads keys back within `api::tenancy::KEY_CACHE`).
 use anyhow::Context;
-use choreo::config::Config;
+use choreo::config::{self as limits, in_range, Config};
 use choreo::queue::{ApiKey, KeyId, KeyLimits, NewKey, Store};
 use clap::{Args, Subcommand};
 use serde_json::json;
@@ -51,15 +51,39 @@ pub struct CreateArgs {
     /// An operator's key: reads every tenant's songs, jobs and rigs.
     #[arg(long)]
     pub admin: bool,
-    /// This key's requests per second (default: the config's rate_limit_rps).
-    #[arg(long)]
+    /// This key's requests per second, 0.01 to 100000 (default: the config's rate_limit_rps).
+    #[arg(long, value_parser = rate_limit_rps)]
     pub rate_limit_rps: Option<f64>,
-    /// This key's most jobs queued or running (default: the config's max_queued_jobs).
-    #[arg(long)]
+    /// This key's most jobs queued or running, 1 to 1000000 (default: the config's
+    /// max_queued_jobs).
+    #[arg(long, value_parser = max_queued_jobs)]
     pub max_queued_jobs: Option<u64>,
-    /// This key's most bytes stored (default: the config's storage_quota_bytes).
-    #[arg(long)]
+    /// This key's most bytes stored, 1024 to 2^50 (default: the config's storage_quota_bytes).
+    #[arg(long, value_parser = storage_quota_bytes)]
     pub storage_quota_bytes: Option<u64>,
+}
+
+// Checked where the flags are parsed, so a value out of range is refused as any bad flag is:
+// a message naming the range, and exit code 2, before the database is opened.
+fn rate_limit_rps(s: &str) -> Result<f64, String> {
+    let rps: f64 = s
+        .parse()
+        .map_err(|e| format!("{s:?} is not a number: {e}"))?;
+    in_range("the rate", rps, &limits::RATE_LIMIT_RPS)
+}
+
+fn max_queued_jobs(s: &str) -> Result<u64, String> {
+    let n: u64 = s
+        .parse()
+        .map_err(|e| format!("{s:?} is not a whole number: {e}"))?;
+    in_range("the queue limit", n, &limits::MAX_QUEUED_JOBS)
+}
+
+fn storage_quota_bytes(s: &str) -> Result<u64, String> {
+    let n: u64 = s
+        .parse()
+        .map_err(|e| format!("{s:?} is not a whole number of bytes: {e}"))?;
+    in_range("the quota", n, &limits::STORAGE_QUOTA_BYTES)
 }
 
 fn shown(key: &ApiKey) -> serde_json::Value {

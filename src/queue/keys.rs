@@ -148,8 +148,11 @@ pub trait TenantStore: Send + Sync {
     fn touch_key(&self, id: KeyId, at: DateTime<Utc>) -> StoreFuture<'_, ()>;
     /// What `tenant` holds now.
     fn usage(&self, tenant: TenantId) -> StoreFuture<'_, Usage>;
-    /// Records the bytes of a job's published result files (counted by [`TenantStore::usage`]).
-    fn set_result_bytes(&self, job: JobId, bytes: u64) -> StoreFuture<'_, ()>;
+    /// Records the bytes of a job's result files (counted by [`TenantStore::usage`]) before they
+    /// are published. A job admitted under a storage quota is refused (`QuotaFull`, nothing
+    /// recorded) when its tenant already stores that much: so a tenant goes past its quota by one
+    /// job's results at most, the job that crossed it.
+    fn record_result_bytes(&self, job: JobId, bytes: u64) -> StoreFuture<'_, ()>;
 }
 
 #[cfg(test)]

@@ -61,6 +61,12 @@ pub enum QueueError {
     IdempotencyConflict(JobId),
     #[error("API key {0} not found")]
     KeyNotFound(KeyId),
+    #[error("the tenant has {limit} jobs queued or running, its most")]
+    QueueFull { limit: u64 },
+    #[error("the tenant stores {used} bytes; {size} more would pass its {quota} byte quota")]
+    QuotaExceeded { used: u64, size: u64, quota: u64 },
+    #[error("the tenant stores {used} bytes of songs, rigs and results, at or past its {quota} byte quota: no room for results")]
+    QuotaFull { used: u64, quota: u64 },
 }
 
 impl QueueError {
@@ -75,6 +81,10 @@ impl QueueError {
             QueueError::RigNotFound(_) => "rig-not-found",
             QueueError::IdempotencyConflict(_) => "idempotency-key-reused",
             QueueError::KeyNotFound(_) => "key-not-found",
+            QueueError::QueueFull { .. } => "too-many-queued-jobs",
+            QueueError::QuotaExceeded { .. } | QueueError::QuotaFull { .. } => {
+                "storage-quota-exceeded"
+            }
         }
     }
 
@@ -89,6 +99,11 @@ impl QueueError {
             QueueError::RigNotFound(_) => false,
             QueueError::IdempotencyConflict(_) => false,
             QueueError::KeyNotFound(_) => false,
+            // A job refused for its results is not tried again: the tenant must make room and
+            // submit anew (it was told so at submission while already at its quota).
+            QueueError::QueueFull { .. }
+            | QueueError::QuotaExceeded { .. }
+            | QueueError::QuotaFull { .. } => false,
         }
     }
 }
@@ -484,8 +499,15 @@ pub type StoreFuture<'a, T> = BoxFuture<'a, Result<T, QueueError>>;
 
 /// The job queue.
 pub trait JobStore: Send + Sync {
-    /// Creates a queued job, or returns the one its idempotency key already made.
-    fn register(&self, job: NewJob) -> StoreFuture<'_, Registered>;
+    /// Creates a queued job, or returns the one its idempotency key already made (no limits).
+    fn register(&self, job: NewJob) -> StoreFuture<'_, Registered> {
+        self.register_within(job, KeyLimits::default())
+    }
+    /// [`JobStore::register`] within the tenant's `limits`, checked in the transaction that
+    /// inserts the job: `QueueFull` past `max_queued_jobs`, `QuotaFull` when the tenant already
+    /// stores its `storage_quota_bytes` (the job's results would have no room). The quota is kept
+    /// on the job, and its results are held to it ([`TenantStore::record_result_bytes`]).
+    fn register_within(&self, job: NewJob, limits: KeyLimits) -> StoreFuture<'_, Registered>;
     /// Atomically takes the next runnable job, leasing it to `owner`.
     fn claim<'a>(&'a self, owner: &'a str, policy: LeasePolicy) -> StoreFuture<'a, Option<Job>>;
     /// Extends `owner`'s lease and records progress.
@@ -540,7 +562,18 @@ pub trait JobStore: Send + Sync {
 pub trait SongStore: Send + Sync {
     /// Stores a new song with its analyze job in one transaction; when the same tenant has a
     /// song with the same sha256, returns it and stores nothing (`false`).
-    fn add_song(&self, song: Song, analyze: NewJob) -> StoreFuture<'_, (Song, bool)>;
+    fn add_song(&self, song: Song, analyze: NewJob) -> StoreFuture<'_, (Song, bool)> {
+        self.add_song_within(song, analyze, KeyLimits::default())
+    }
+    /// [`SongStore::add_song`] within the tenant's `limits`, checked in the same transaction:
+    /// `QuotaExceeded` when the song's bytes would pass `storage_quota_bytes`, `QueueFull` when
+    /// its analyze job would pass `max_queued_jobs`. Bytes the tenant already has cost nothing.
+    fn add_song_within(
+        &self,
+        song: Song,
+        analyze: NewJob,
+        limits: KeyLimits,
+    ) -> StoreFuture<'_, (Song, bool)>;
     /// One song.
     fn song(&self, scope: Scope, id: SongId) -> StoreFuture<'_, Song>;
     /// The tenant's song with these bytes, if it uploaded them before.
@@ -579,7 +612,12 @@ pub trait SongStore: Send + Sync {
 /// The uploaded rigs.
 pub trait RigStore: Send + Sync {
     /// Stores a new rig (its file is already published).
-    fn add_rig(&self, rig: UploadedRig) -> StoreFuture<'_, UploadedRig>;
+    fn add_rig(&self, rig: UploadedRig) -> StoreFuture<'_, UploadedRig> {
+        self.add_rig_within(rig, KeyLimits::default())
+    }
+    /// [`RigStore::add_rig`] within the tenant's `limits`: `QuotaExceeded` when its bytes would
+    /// pass `storage_quota_bytes`, checked in the transaction that inserts it.
+    fn add_rig_within(&self, rig: UploadedRig, limits: KeyLimits) -> StoreFuture<'_, UploadedRig>;
     /// One rig.
     fn rig(&self, scope: Scope, id: RigId) -> StoreFuture<'_, UploadedRig>;
 }

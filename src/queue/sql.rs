@@ -19,9 +19,9 @@
 //! connections, encodings of the Rust types it binds and reads); those bounds sit on the three
 //! `impl` blocks below and are met by both SQLite and PostgreSQL.
 use super::{
-    Beat, Idempotency, Job, JobFiles, JobFilter, JobId, JobKind, JobStore, LeasePolicy, NewJob,
-    Outcome, QueueError, Registered, Requeued, Scope, Song, SongId, SongStore, Status, StoreFuture,
-    TenantId,
+    Beat, Idempotency, Job, JobFiles, JobFilter, JobId, JobKind, JobStore, KeyLimits, LeasePolicy,
+    NewJob, Outcome, QueueError, Registered, Requeued, Scope, Song, SongId, SongStore, Status,
+    StoreFuture, TenantId,
 };
 use chrono::{DateTime, TimeZone, Utc};
 use sqlx::pool::PoolConnection;
@@ -36,9 +36,12 @@ use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 use uuid::Uuid;
 
+use quota::Adds;
+
 mod delete;
 mod events;
 mod keys;
+pub mod quota;
 mod rigs;
 
 /// Cap on the backoff exponent, so `1 << n` cannot overflow.
@@ -197,6 +200,7 @@ where
     for<'q> Option<String>: Encode<'q, D>,
     for<'q> Option<&'q str>: Encode<'q, D>,
     for<'q> Option<D::Id>: Encode<'q, D>,
+    for<'q> Option<i64>: Encode<'q, D>,
     &'static str: ColumnIndex<D::Row>,
 {
     /// Starts the transaction a write runs in. Every write begins here and ends in
@@ -306,11 +310,13 @@ where
     }
 
     /// Inserts a queued job: the one statement that creates a job. `None` when its idempotency
-    /// key is already taken.
+    /// key is already taken. `quota_bytes` is the tenant's storage quota when it was admitted,
+    /// which its results are held to.
     async fn insert_job(
         conn: &mut D::Connection,
         job: &NewJob,
         now: i64,
+        quota_bytes: Option<u64>,
     ) -> Result<Option<Job>, QueueError> {
         let options = serde_json::to_string(&job.kind).map_err(|e| corrupt("job options", e))?;
         let (key, hash) = match &job.idempotency {
@@ -321,8 +327,8 @@ where
         };
         let sql = format!(
             "INSERT INTO jobs (id, kind, song_id, model, options, status, priority, max_attempts, run_after, \
-             idempotency_key, request_hash, created_at, tenant_id) \
-             VALUES ($1, $2, $3, $4, $5, 'queued', $6, $7, $8, $9, $10, $8, $11) \
+             idempotency_key, request_hash, created_at, tenant_id, storage_quota_bytes) \
+             VALUES ($1, $2, $3, $4, $5, 'queued', $6, $7, $8, $9, $10, $8, $11, $12) \
              ON CONFLICT (tenant_id, idempotency_key) DO NOTHING RETURNING {JOB_COLUMNS}"
         );
         let row = sqlx::query(&sql)
@@ -337,6 +343,12 @@ where
             .bind(key)
             .bind(hash)
             .bind(D::id(job.tenant.0))
+            .bind(
+                quota_bytes
+                    .map(i64::try_from)
+                    .transpose()
+                    .map_err(|e| corrupt("storage quota", e))?,
+            )
             .fetch_optional(conn)
             .await?;
         row.as_ref().map(Self::job_from_row).transpose()
@@ -356,9 +368,10 @@ where
     for<'q> Option<String>: Encode<'q, D>,
     for<'q> Option<&'q str>: Encode<'q, D>,
     for<'q> Option<D::Id>: Encode<'q, D>,
+    for<'q> Option<i64>: Encode<'q, D>,
     &'static str: ColumnIndex<D::Row>,
 {
-    fn register(&self, job: NewJob) -> StoreFuture<'_, Registered> {
+    fn register_within(&self, job: NewJob, limits: KeyLimits) -> StoreFuture<'_, Registered> {
         Box::pin(async move {
             let song = job.kind.song_id();
             // A job works on its own tenant's song: another tenant's reads as missing.
@@ -370,8 +383,30 @@ where
             if exists.is_none() {
                 return Err(QueueError::SongNotFound(song));
             }
+            // A retried request (its idempotency key taken) is answered with its job below
+            // whatever the limits: only a new job is held to them.
+            let taken = match &job.idempotency {
+                Some(idem) => {
+                    sqlx::query("SELECT 1 FROM jobs WHERE tenant_id = $1 AND idempotency_key = $2")
+                        .bind(D::id(job.tenant.0))
+                        .bind(&idem.key)
+                        .fetch_optional(&self.pool)
+                        .await?
+                        .is_some()
+                }
+                None => false,
+            };
             let mut tx = self.begin().await?;
-            let created = Self::insert_job(&mut tx, &job, now_ms()).await?;
+            if !taken {
+                let adds = Adds {
+                    jobs: 1,
+                    bytes: 0,
+                    results: true,
+                };
+                Self::admit(&mut tx, job.tenant, &limits, adds).await?;
+            }
+            let created =
+                Self::insert_job(&mut tx, &job, now_ms(), limits.storage_quota_bytes).await?;
             Self::commit(tx).await?;
             if let Some(created) = created {
                 return Ok(Registered::Created(created));
@@ -719,12 +754,33 @@ where
     for<'q> Option<String>: Encode<'q, D>,
     for<'q> Option<&'q str>: Encode<'q, D>,
     for<'q> Option<D::Id>: Encode<'q, D>,
+    for<'q> Option<i64>: Encode<'q, D>,
     &'static str: ColumnIndex<D::Row>,
 {
-    fn add_song(&self, song: Song, analyze: NewJob) -> StoreFuture<'_, (Song, bool)> {
+    fn add_song_within(
+        &self,
+        song: Song,
+        analyze: NewJob,
+        limits: KeyLimits,
+    ) -> StoreFuture<'_, (Song, bool)> {
         Box::pin(async move {
             let now = now_ms();
+            // Bytes the tenant already has cost nothing: such an upload is answered with its song.
+            let known = sqlx::query("SELECT 1 FROM songs WHERE tenant_id = $1 AND sha256 = $2")
+                .bind(D::id(song.tenant.0))
+                .bind(&song.sha256)
+                .fetch_optional(&self.pool)
+                .await?
+                .is_some();
             let mut tx = self.begin().await?;
+            if !known {
+                let adds = Adds {
+                    jobs: 1,
+                    bytes: song.size_bytes,
+                    results: false,
+                };
+                Self::admit(&mut tx, song.tenant, &limits, adds).await?;
+            }
             let sql = format!(
                 "INSERT INTO songs (id, filename, format, duration_s, sample_rate, channels, sha256, size_bytes, created_at, \
                  tenant_id) VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9, $10) \
@@ -759,7 +815,10 @@ where
                 return Ok((existing, false));
             };
             let stored = Self::song_from_row(&row)?;
-            if Self::insert_job(&mut tx, &analyze, now).await?.is_none() {
+            if Self::insert_job(&mut tx, &analyze, now, None)
+                .await?
+                .is_none()
+            {
                 return Err(QueueError::Corrupt(
                     "analyze job insert returned nothing".into(),
                 ));

@@ -547,17 +547,31 @@ async fn publish(
     // The layout exists (the server made it); this only names the result files' paths.
     let data = crate::queue::DataDir::create(&ctx.data_root).ok();
     let mut bytes = 0;
-    for file in &files.files {
-        // Measured before publishing: a bucket store may move the local file away.
-        if let Some(data) = &data {
+    // Measured before publishing: a bucket store may move the local file away.
+    if let Some(data) = &data {
+        for file in &files.files {
             let path = Artifact::Result(id, file).local_path(data);
             bytes += tokio::fs::metadata(path).await.map_or(0, |m| m.len());
         }
-        ctx.artifacts.publish(Artifact::Result(id, file)).await?;
     }
-    // Counted against the tenant's storage quota; a failed write only under-counts.
-    if let Err(e) = ctx.store.set_result_bytes(id, bytes).await {
-        tracing::warn!(error = %e, "could not record the size of the job's results");
+    // Counted against the tenant's storage quota before anything is published: a tenant already
+    // at its quota gets no more results (the job fails with storage-quota-exceeded, its files
+    // removed). A failed write for any other reason only under-counts.
+    match ctx.store.record_result_bytes(id, bytes).await {
+        Ok(()) => {}
+        Err(e @ (QueueError::QuotaFull { .. } | QueueError::QuotaExceeded { .. })) => {
+            if let Some(data) = &data {
+                for file in &files.files {
+                    let _ =
+                        tokio::fs::remove_file(Artifact::Result(id, file).local_path(data)).await;
+                }
+            }
+            return Err(WorkerError::Queue(e));
+        }
+        Err(e) => tracing::warn!(error = %e, "could not record the size of the job's results"),
+    }
+    for file in &files.files {
+        ctx.artifacts.publish(Artifact::Result(id, file)).await?;
     }
     Ok(())
 }

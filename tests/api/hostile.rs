@@ -12,22 +12,28 @@ use std::time::{Duration, Instant};
 const MEMORY_BUDGET_KB: u64 = 300 * 1024;
 
 /// A `choreo serve` child process on port 0 with its own data dir.
-struct Serve {
+pub(crate) struct Serve {
     child: Child,
-    url: String,
+    pub(crate) url: String,
     _dir: tempfile::TempDir,
 }
 
 impl Serve {
     /// Starts the release binary with `env` (`CHOREO_*` settings) and waits for its address.
-    fn start(env: &[(&str, &str)]) -> Self {
+    pub(crate) fn start(env: &[(&str, &str)]) -> Self {
+        Self::start_with(env, None)
+    }
+
+    /// [`Serve::start`] serving the models in `models` (none: no model).
+    pub(crate) fn start_with(env: &[(&str, &str)], models: Option<&std::path::Path>) -> Self {
         let dir = tempfile::tempdir().expect("tempdir");
+        let models = models.map_or_else(|| dir.path().join("no-models"), |m| m.to_path_buf());
         let mut child = Command::new(env!("CARGO_BIN_EXE_choreo"))
             .args(["serve", "--bind", "127.0.0.1:0", "--workers", "1"])
             .arg("--data-dir")
             .arg(dir.path().join("data"))
             .arg("--models-dir")
-            .arg(dir.path().join("no-models"))
+            .arg(models)
             .envs(env.iter().copied())
             .env("CHOREO_LOG_LEVEL", "warn")
             .current_dir(dir.path())
@@ -48,12 +54,12 @@ impl Serve {
         }
     }
 
-    fn pid(&self) -> u32 {
+    pub(crate) fn pid(&self) -> u32 {
         self.child.id()
     }
 
     /// A field of /proc/<pid>/status, in kB.
-    fn status_kb(&self, field: &str) -> u64 {
+    pub(crate) fn status_kb(&self, field: &str) -> u64 {
         let status =
             std::fs::read_to_string(format!("/proc/{}/status", self.pid())).expect("proc status");
         status
@@ -68,6 +74,11 @@ impl Serve {
                     .ok()
             })
             .unwrap_or_else(|| panic!("no {field} in /proc status"))
+    }
+
+    /// Whether the process is still running.
+    pub(crate) fn alive(&mut self) -> bool {
+        self.child.try_wait().expect("try_wait").is_none()
     }
 
     /// CPU time used so far (user + system), in clock ticks.

@@ -9,20 +9,25 @@ mod crash;
 mod dancenet;
 mod delete;
 mod events;
+mod fairness;
 mod generate;
 mod health;
 mod helpers;
 mod hostile;
 #[path = "../common/hostile_files.rs"]
 mod hostile_files;
+mod hostile_motion;
 mod jobs;
 mod keypose;
 mod limits;
 mod models;
+#[path = "../common/motion_files.rs"]
+mod motion_files;
 mod openapi;
 #[path = "../common/postgres.rs"]
 mod postgres;
 mod preview;
+mod quotas;
 mod resilience;
 mod retarget;
 mod rigs;

@@ -17,24 +17,24 @@ use std::time::{Duration, Instant};
 
 /// Which store a test runs on.
 #[derive(Clone, Copy, Debug)]
-enum Db {
+pub(crate) enum Db {
     Sqlite,
     Postgres,
 }
 
 /// The service, its database server when PostgreSQL, and its config (for the CLI's environment).
-struct App {
-    app: TestApp,
+pub(crate) struct App {
+    pub(crate) app: TestApp,
     config: Config,
     _pg: Option<Postgres>,
 }
 
-async fn spawn(db: Db, edit: impl FnOnce(&mut Config)) -> App {
+pub(crate) async fn spawn(db: Db, edit: impl FnOnce(&mut Config)) -> App {
     spawn_with(db, true, edit).await
 }
 
 /// The service on `db`, with its workers or (`workers: false`) the API only, so jobs stay queued.
-async fn spawn_with(db: Db, workers: bool, edit: impl FnOnce(&mut Config)) -> App {
+pub(crate) async fn spawn_with(db: Db, workers: bool, edit: impl FnOnce(&mut Config)) -> App {
     choreo::telemetry::init_tracing(choreo::config::LogFormat::Pretty, "warn");
     let pg = match db {
         Db::Sqlite => None,
@@ -75,18 +75,18 @@ async fn spawn_with(db: Db, workers: bool, edit: impl FnOnce(&mut Config)) -> Ap
 
 impl App {
     /// A new key (its own tenant) with `limits`; returns its secret.
-    async fn key(&self, name: &str, limits: KeyLimits) -> String {
+    pub(crate) async fn key(&self, name: &str, limits: KeyLimits) -> String {
         let (key, secret) = NewKey::mint(name, false, limits);
         self.store().add_key(key).await.expect("add key");
         secret
     }
 
-    fn store(&self) -> &std::sync::Arc<dyn choreo::queue::Store> {
+    pub(crate) fn store(&self) -> &std::sync::Arc<dyn choreo::queue::Store> {
         &self.app.server.as_ref().expect("server runs").state().store
     }
 
     /// `method path` with `secret` as the bearer (none: no Authorization header).
-    async fn call(&self, method: Method, path: &str, secret: Option<&str>) -> Response {
+    pub(crate) async fn call(&self, method: Method, path: &str, secret: Option<&str>) -> Response {
         let mut request = self.app.client.request(method, self.app.url(path));
         if let Some(secret) = secret {
             request = request.bearer_auth(secret);
@@ -94,11 +94,11 @@ impl App {
         request.send().await.expect("request")
     }
 
-    async fn get(&self, path: &str, secret: &str) -> Response {
+    pub(crate) async fn get(&self, path: &str, secret: &str) -> Response {
         self.call(Method::GET, path, Some(secret)).await
     }
 
-    async fn upload(&self, secret: &str, path: &Path) -> Response {
+    pub(crate) async fn upload(&self, secret: &str, path: &Path) -> Response {
         let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("song");
         let form = Form::new().part(
             "file",
@@ -114,7 +114,7 @@ impl App {
             .expect("upload")
     }
 
-    async fn upload_rig(&self, secret: &str) -> Response {
+    pub(crate) async fn upload_rig(&self, secret: &str) -> Response {
         let bytes = std::fs::read(
             Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/rig_unreal_cm.bvh"),
         )
@@ -130,7 +130,7 @@ impl App {
             .expect("upload rig")
     }
 
-    async fn post_job(&self, secret: &str, body: &Value) -> Response {
+    pub(crate) async fn post_job(&self, secret: &str, body: &Value) -> Response {
         self.app
             .client
             .post(self.app.url("/v1/jobs"))
@@ -141,7 +141,7 @@ impl App {
             .expect("POST /v1/jobs")
     }
 
-    async fn json(&self, path: &str, secret: &str) -> Value {
+    pub(crate) async fn json(&self, path: &str, secret: &str) -> Value {
         let response = self.get(path, secret).await;
         let status = response.status();
         let body: Value = response.json().await.expect("json");
@@ -150,7 +150,7 @@ impl App {
     }
 
     /// Polls a job until it is terminal.
-    async fn wait_job(&self, secret: &str, id: &str) -> Value {
+    pub(crate) async fn wait_job(&self, secret: &str, id: &str) -> Value {
         let deadline = Instant::now() + Duration::from_secs(180);
         loop {
             let job = self.json(&format!("/v1/jobs/{id}"), secret).await;
@@ -164,7 +164,7 @@ impl App {
     }
 
     /// Uploads the short song as `secret` and returns its id (201 expected).
-    async fn song(&self, secret: &str) -> String {
+    pub(crate) async fn song(&self, secret: &str) -> String {
         let response = self.upload(secret, &short_song()).await;
         let status = response.status();
         let body: Value = response.json().await.expect("song");
@@ -172,7 +172,7 @@ impl App {
         body["id"].as_str().expect("song id").to_string()
     }
 
-    async fn stop(self) {
+    pub(crate) async fn stop(self) {
         self.app.stop().await;
     }
 }

@@ -37,6 +37,7 @@ where
     for<'q> Option<String>: Encode<'q, D>,
     for<'q> Option<&'q str>: Encode<'q, D>,
     for<'q> Option<D::Id>: Encode<'q, D>,
+    for<'q> Option<i64>: Encode<'q, D>,
     &'static str: ColumnIndex<D::Row>,
 {
     /// The audit line of a removed job.

@@ -1,4 +1,5 @@
 //! The API key and usage statements of [`SqlStore`], for both stores.
+use super::quota::Adds;
 use super::{corrupt, now_ms, opt_time, to_time, Dialect, SqlStore, StoreFuture};
 use crate::queue::keys::{ApiKey, KeyLimits, NewKey, TenantStore, Usage};
 use crate::queue::{JobId, KeyId, QueueError, TenantId};
@@ -163,28 +164,33 @@ where
 
     fn usage(&self, tenant: TenantId) -> StoreFuture<'_, Usage> {
         Box::pin(async move {
-            // PostgreSQL's SUM of a BIGINT is NUMERIC: cast back, in both.
-            let row = sqlx::query(
-                "SELECT \
-                   (SELECT COUNT(*) FROM jobs WHERE tenant_id = $1 AND status IN ('queued', 'running')) AS queued_jobs, \
-                   CAST((SELECT COALESCE(SUM(size_bytes), 0) FROM songs WHERE tenant_id = $1) \
-                      + (SELECT COALESCE(SUM(size_bytes), 0) FROM rigs WHERE tenant_id = $1) \
-                      + (SELECT COALESCE(SUM(result_bytes), 0) FROM jobs WHERE tenant_id = $1) AS BIGINT) AS stored_bytes",
-            )
-            .bind(D::id(tenant.0))
-            .fetch_one(&self.pool)
-            .await?;
-            Ok(Usage {
-                queued_jobs: to_u64("queued jobs", Some(row.try_get("queued_jobs")?))?.unwrap_or(0),
-                stored_bytes: to_u64("stored bytes", Some(row.try_get("stored_bytes")?))?
-                    .unwrap_or(0),
-            })
+            let mut conn = self.pool.acquire().await?;
+            Self::usage_on(&mut conn, tenant).await
         })
     }
 
-    fn set_result_bytes(&self, job: JobId, bytes: u64) -> StoreFuture<'_, ()> {
+    fn record_result_bytes(&self, job: JobId, bytes: u64) -> StoreFuture<'_, ()> {
         Box::pin(async move {
+            let row = sqlx::query("SELECT tenant_id, storage_quota_bytes FROM jobs WHERE id = $1")
+                .bind(D::id(job.0))
+                .fetch_optional(&self.pool)
+                .await?;
+            let Some(row) = row else {
+                // Deleted while it ran: nothing to count.
+                return Ok(());
+            };
+            let tenant = Self::tenant_from_row(&row)?;
+            let quota = to_u64("storage quota", row.try_get("storage_quota_bytes")?)?;
             let mut tx = self.begin().await?;
+            let limits = KeyLimits {
+                storage_quota_bytes: quota,
+                ..KeyLimits::default()
+            };
+            let adds = Adds {
+                results: true,
+                ..Adds::default()
+            };
+            Self::admit(&mut tx, tenant, &limits, adds).await?;
             sqlx::query("UPDATE jobs SET result_bytes = $1 WHERE id = $2")
                 .bind(i64::try_from(bytes).map_err(|e| corrupt("result bytes", e))?)
                 .bind(D::id(job.0))

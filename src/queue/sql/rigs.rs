@@ -1,8 +1,9 @@
 //! The rig statements of [`SqlStore`], for both stores (the rules in one place, as the queue's).
+use super::quota::Adds;
 use super::{corrupt, now_ms, to_time, Dialect, SqlStore, StoreFuture};
 use crate::motion::retarget::uploaded::SkeletonJson;
 use crate::motion::retarget::TargetSkeleton;
-use crate::queue::{QueueError, RigId, RigStore, Scope, TenantId, UploadedRig};
+use crate::queue::{KeyLimits, QueueError, RigId, RigStore, Scope, TenantId, UploadedRig};
 use sqlx::{ColumnIndex, Decode, Encode, Executor, IntoArguments, Row, Type};
 
 /// The columns a rig row is read from.
@@ -64,13 +65,19 @@ where
     for<'q> Option<String>: Encode<'q, D>,
     for<'q> Option<&'q str>: Encode<'q, D>,
     for<'q> Option<D::Id>: Encode<'q, D>,
+    for<'q> Option<i64>: Encode<'q, D>,
     &'static str: ColumnIndex<D::Row>,
 {
-    fn add_rig(&self, rig: UploadedRig) -> StoreFuture<'_, UploadedRig> {
+    fn add_rig_within(&self, rig: UploadedRig, limits: KeyLimits) -> StoreFuture<'_, UploadedRig> {
         Box::pin(async move {
             let skeleton = serde_json::to_string(&SkeletonJson::from(&rig.skeleton))
                 .map_err(|e| corrupt("rig skeleton", e))?;
             let mut tx = self.begin().await?;
+            let adds = Adds {
+                bytes: rig.size_bytes,
+                ..Adds::default()
+            };
+            Self::admit(&mut tx, rig.tenant, &limits, adds).await?;
             let sql = format!(
                 "INSERT INTO rigs (id, filename, format, units, sha256, size_bytes, skeleton, created_at, tenant_id) \
                  VALUES ($1, $2, $3, $4, $5, $6, $7, $8, $9) RETURNING {RIG_COLUMNS}"
