@@ -37,6 +37,7 @@ pub mod jobs;
 pub mod listen;
 pub mod multipart;
 pub mod openapi;
+pub mod paging;
 pub mod problem;
 pub mod rigs;
 pub mod songs;
