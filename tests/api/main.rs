@@ -25,6 +25,7 @@ mod postgres;
 mod preview;
 mod resilience;
 mod retarget;
+mod rig_lifecycle;
 mod rigs;
 mod roundtrip;
 mod scale;
