@@ -7,6 +7,9 @@ use std::path::PathBuf;
 
 fn main() {
     println!("cargo:rerun-if-env-changed=LIBTORCH");
+    // `sqlx::migrate!` embeds the migrations at compile time but cannot tell cargo to watch
+    // them: without this a new migration file leaves a binary that never runs it.
+    println!("cargo:rerun-if-changed=migrations");
     let Ok(libtorch) = std::env::var("LIBTORCH") else {
         println!("cargo:warning=LIBTORCH is not set; run scripts/setup.sh first");
         return;

@@ -3,6 +3,8 @@
 //! `contract!` makes one test per store from it, so both stores answer every case the same way.
 #[path = "common/postgres.rs"]
 mod postgres;
+#[path = "queue/rigs.rs"]
+mod rigs;
 
 use choreo::audio::AudioFormat;
 use choreo::queue::{
@@ -17,6 +19,10 @@ use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
+
+use rigs::{
+    rigs_keep_their_skeleton_and_mapping, rigs_list_by_tenant_delete_once_and_expire_unused,
+};
 
 /// A store under test and what keeps it alive (its temp dir or its server).
 struct TestDb {
@@ -589,56 +595,6 @@ async fn concurrent_claims_take_each_job_once(db: TestDb) {
     }
 }
 
-async fn rigs_keep_their_skeleton_and_mapping(db: TestDb) {
-    use choreo::motion::retarget::uploaded::{RigFormat, Units};
-    use choreo::motion::retarget::{HumanBone, TargetSkeleton};
-    use choreo::motion::rig::Rig;
-    use choreo::queue::{RigId, UploadedRig};
-    let store = db.store.as_ref();
-    let skeleton = TargetSkeleton {
-        rig: Rig {
-            names: vec!["Hips".into(), "Spine".into(), "Bone.001".into()],
-            parents: vec![None, Some(0), Some(1)],
-            offsets: vec![
-                nalgebra::Vector3::new(0.0, 0.95, 0.0),
-                nalgebra::Vector3::new(0.0, 0.1, 0.0),
-                nalgebra::Vector3::new(0.0, 0.125, 0.0),
-            ],
-        },
-        humanoid: vec![Some(HumanBone::Hips), Some(HumanBone::Spine), None],
-    };
-    let rig = UploadedRig {
-        id: RigId::new(),
-        tenant: TenantId::OPEN,
-        filename: "mine.bvh".into(),
-        format: RigFormat::Bvh,
-        units: Units::Cm,
-        sha256: "abc".into(),
-        size_bytes: 123,
-        skeleton: skeleton.clone(),
-        created_at: Utc::now(),
-    };
-    let stored = store.add_rig(rig.clone()).await.expect("add rig");
-    let read = store.rig(Scope::All, rig.id).await.expect("read rig");
-    for got in [&stored, &read] {
-        assert_eq!(
-            (
-                got.id,
-                got.filename.as_str(),
-                got.format,
-                got.units,
-                got.size_bytes
-            ),
-            (rig.id, "mine.bvh", RigFormat::Bvh, Units::Cm, 123)
-        );
-        assert_eq!(got.skeleton, skeleton);
-    }
-    assert!(matches!(
-        store.rig(Scope::All, RigId::new()).await,
-        Err(QueueError::RigNotFound(_))
-    ));
-}
-
 /// Two tenants share nothing they can see: the same bytes are two songs, an idempotency key is
 /// each one's own, and every scoped read, listing and cancel of the other's id is "not found".
 async fn tenants_see_only_their_own_rows(db: TestDb) {
@@ -1028,6 +984,7 @@ contract!(
     higher_priority_runs_first,
     concurrent_claims_take_each_job_once,
     rigs_keep_their_skeleton_and_mapping,
+    rigs_list_by_tenant_delete_once_and_expire_unused,
     deletion_and_expiry_leave_only_an_audit_line,
 );
 

@@ -1,6 +1,7 @@
 //! `/v1/jobs`: submit, read, list, cancel, and the result files.
 use super::auth::Caller;
 use super::extract::{optional_integer, ApiJson, ApiQuery};
+use super::paging::PageRequest;
 use super::problem::{ApiError, Problem};
 use super::AppState;
 use crate::models::{DanceStyle, ModelId};
@@ -25,9 +26,6 @@ use std::str::FromStr;
 pub const IDEMPOTENCY_KEY: HeaderName = HeaderName::from_static("idempotency-key");
 /// Set on a response that replays an earlier submission.
 pub const IDEMPOTENT_REPLAYED: HeaderName = HeaderName::from_static("idempotent-replayed");
-/// Default and largest page of `GET /v1/jobs`.
-const DEFAULT_LIMIT: u32 = 20;
-const MAX_LIMIT: u32 = 100;
 /// Priority bounds a client may ask for.
 const PRIORITY_RANGE: std::ops::RangeInclusive<i64> = -100..=100;
 /// Sampling temperatures a job may ask for.
@@ -519,36 +517,20 @@ pub async fn list(
         .map(Status::from_str)
         .transpose()
         .map_err(|e| invalid("status", e.to_string()))?;
-    let limit = query.limit.unwrap_or(DEFAULT_LIMIT);
-    if !(1..=MAX_LIMIT).contains(&limit) {
-        return Err(invalid("limit", format!("must be within 1..={MAX_LIMIT}")));
-    }
-    let before = query
-        .cursor
-        .as_deref()
-        .map(JobId::from_str)
-        .transpose()
-        .map_err(|_| invalid("cursor", "must be the next_cursor of a previous page"))?;
-    // One extra row tells whether another page exists.
-    let mut jobs = state
+    let page = PageRequest::<JobId>::parse(query.limit, query.cursor.as_deref())?;
+    let jobs = state
         .store
         .jobs(
             caller.scope(),
             JobFilter {
                 status,
                 model: query.model,
-                before,
-                limit: limit + 1,
+                before: page.before,
+                limit: page.fetch(),
             },
         )
         .await?;
-    let more = jobs.len() > limit as usize;
-    jobs.truncate(limit as usize);
-    let next_cursor = if more {
-        jobs.last().map(|j| j.id.to_string())
-    } else {
-        None
-    };
+    let (jobs, next_cursor) = page.page(jobs, |j| j.id.to_string());
     Ok(Json(JobPage {
         items: jobs.into_iter().map(JobView::from).collect(),
         next_cursor,

@@ -37,6 +37,7 @@ pub mod jobs;
 pub mod listen;
 pub mod multipart;
 pub mod openapi;
+pub mod paging;
 pub mod problem;
 pub mod rigs;
 pub mod songs;
@@ -121,8 +122,8 @@ pub fn router(state: AppState) -> Router {
         .route("/songs", axum::routing::post(songs::upload))
         .route("/songs/{id}", get(songs::get).delete(songs::delete))
         .route("/songs/{id}/audio", get(songs::audio))
-        .route("/rigs", axum::routing::post(rigs::upload))
-        .route("/rigs/{id}", get(rigs::get))
+        .route("/rigs", get(rigs::list).post(rigs::upload))
+        .route("/rigs/{id}", get(rigs::get).delete(rigs::delete))
         .route(
             "/jobs",
             get(jobs::list)

@@ -26,7 +26,9 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
         super::songs::audio,
         super::songs::delete,
         super::rigs::upload,
+        super::rigs::list,
         super::rigs::get,
+        super::rigs::delete,
         super::jobs::create,
         super::jobs::list,
         super::jobs::get,
@@ -46,7 +48,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
     modifiers(&BearerAuth),
     tags(
         (name = "songs", description = "Upload songs; read their analysis; delete them"),
-        (name = "rigs", description = "Your own skeletons (BVH or glb) to take dances onto"),
+        (name = "rigs", description = "Your own skeletons (BVH or glb) to take dances onto: upload, list, delete"),
         (name = "jobs", description = "Dances: submit, follow, cancel, download, delete"),
         (name = "models", description = "The models this server has"),
         (name = "system", description = "Health, readiness, metrics"),
@@ -170,6 +172,7 @@ fn add_links(spec: &mut Value) {
     });
     let rig = json!({
         "GetRig": { "operationId": "getRig", "parameters": { "id": "$response.body#/id" } },
+        "DeleteRig": { "operationId": "deleteRig", "parameters": { "id": "$response.body#/id" } },
     });
     for (path, status, links) in [
         ("/v1/songs", "201", &song),

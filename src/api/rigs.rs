@@ -1,25 +1,30 @@
-//! `POST /v1/rigs` and `GET /v1/rigs/{id}`: a user's own skeleton to take dances onto.
+//! `POST /v1/rigs`, `GET /v1/rigs`, `GET /v1/rigs/{id}` and `DELETE /v1/rigs/{id}`: a user's own
+//! skeleton to take dances onto.
 //!
 //! An upload is a BVH or glb whose skeleton stands in a rest pose, and optionally a `mapping`
 //! (joint name → humanoid bone) that overrides the name mapping. It streams to a temp file in the
 //! data dir like a song ([`super::songs`]: the same size limit, checks and refusals), is read into
 //! a [`TargetSkeleton`] ([`crate::motion::retarget::uploaded`]), renamed into `rigs/<id>.<ext>`,
 //! published to the artifact store and recorded with its skeleton. Dance downloads name the rig by
-//! its id (`?rig=<id>`); [`target_skeleton`] is the lookup they use.
+//! its id (`?rig=<id>`); [`target_skeleton`] is the lookup they use, and each such lookup is a
+//! use that restarts the rig's retention. A deletion removes the row, then the file, as a song's
+//! does ([`crate::artifacts::retention::remove_files`]).
 use super::auth::Caller;
+use super::extract::ApiQuery;
 use super::multipart::{self, Form};
+use super::paging::PageRequest;
 use super::problem::{ApiError, Problem};
 use super::songs::{drain, receive, Received, UploadError};
 use super::AppState;
 use crate::artifacts::Artifact;
 use crate::motion::retarget::uploaded::{self, RigFormat, Units};
 use crate::motion::retarget::{HumanBone, TargetSkeleton};
-use crate::queue::{RigId, Scope, UploadedRig};
+use crate::queue::{RigFilter, RigId, Scope, UploadedRig};
 use axum::extract::{Path, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::{Json, RequestExt};
 use chrono::{DateTime, Utc};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::str::FromStr;
 use std::time::Duration;
@@ -69,6 +74,27 @@ impl From<&UploadedRig> for RigView {
             created_at: rig.created_at,
         }
     }
+}
+
+/// A page of rigs.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct RigPage {
+    pub items: Vec<RigView>,
+    /// Pass as `cursor` for the next page; absent on the last page.
+    pub next_cursor: Option<String>,
+}
+
+/// The page of `GET /v1/rigs`.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct RigListQuery {
+    /// 1..=100, default 20.
+    #[param(minimum = 1, maximum = 100, default = 20)]
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page (a rig id).
+    #[param(format = Uuid)]
+    pub cursor: Option<String>,
 }
 
 /// The multipart form of a rig upload: `file` and, optionally, `mapping` (any other field is
@@ -188,7 +214,7 @@ fn parse_mapping(text: Option<&str>) -> Result<BTreeMap<String, Option<HumanBone
         (status = 201, description = "Rig stored", body = RigView),
         (status = 400, description = "Empty file, a second or unnamed field, bad file name or bad multipart", body = Problem, content_type = "application/problem+json"),
         (status = 408, description = "The body stalled for more than body_timeout_s", body = Problem, content_type = "application/problem+json"),
-        (status = 413, description = "Over the size limit (code file-too-large), or past the key's storage quota (code storage-quota-exceeded: delete songs or results to make room)", body = Problem, content_type = "application/problem+json"),
+        (status = 413, description = "Over the size limit (code file-too-large), or past the key's storage quota (code storage-quota-exceeded: delete songs, rigs or results to make room)", body = Problem, content_type = "application/problem+json"),
         (status = 415, description = "Neither BVH nor glTF", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "No file; an unknown field; a skeleton that cannot be read, has a number that is not finite (code motion-not-finite), too many joints or nodes, or lacks a bone a dance needs (named); a bad `mapping`; a file not read within audio_timeout_s (code rig-timed-out)", body = Problem, content_type = "application/problem+json"),
         (status = 431, description = "A part's headers are longer than max_part_header_bytes", body = Problem, content_type = "application/problem+json"),
@@ -306,8 +332,78 @@ pub async fn get(
     Ok(Json(RigView::from(&rig)))
 }
 
+/// The caller's rigs, newest first, a page at a time.
+#[utoipa::path(
+    get,
+    path = "/v1/rigs",
+    operation_id = "listRigs",
+    tag = "rigs",
+    params(RigListQuery),
+    responses(
+        (status = 200, description = "A page of rigs", body = RigPage),
+        (status = 400, description = "An unknown or malformed query parameter", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A limit outside 1..=100, or a cursor that is not a next_cursor", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn list(
+    State(state): State<AppState>,
+    caller: Caller,
+    ApiQuery(query): ApiQuery<RigListQuery>,
+) -> Result<Json<RigPage>, ApiError> {
+    let page = PageRequest::<RigId>::parse(query.limit, query.cursor.as_deref())?;
+    let filter = RigFilter {
+        before: page.before,
+        limit: page.fetch(),
+    };
+    let rigs = state.store.rigs(caller.scope(), filter).await?;
+    let (rigs, next_cursor) = page.page(rigs, |r| r.id.to_string());
+    Ok(Json(RigPage {
+        items: rigs.iter().map(RigView::from).collect(),
+        next_cursor,
+    }))
+}
+
+/// Delete a rig: its row and its file.
+///
+/// Afterwards its id is 404, to `GET` and to the downloads that name it (`?rig=<id>`), and its
+/// bytes no longer count against the key's storage quota. Dances already downloaded on it are
+/// the client's; any job can still be downloaded on another rig.
+#[utoipa::path(
+    delete,
+    path = "/v1/rigs/{id}",
+    operation_id = "deleteRig",
+    tag = "rigs",
+    params(("id" = String, Path, description = "Rig id")),
+    responses(
+        (status = 204, description = "The rig and its file are deleted"),
+        (status = 404, description = "No such rig", body = Problem, content_type = "application/problem+json"),
+        (status = 503, description = "The database is unreachable; nothing was deleted, send it again shortly", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn delete(
+    State(state): State<AppState>,
+    caller: Caller,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    let id = RigId::from_str(&id)
+        .map_err(|_| ApiError::RigNotFound(format!("{id:?} (not a rig id)")))?;
+    // The row first, so no download finds the rig any more; then its file.
+    let removed = state.store.delete_rig(caller.scope(), id).await?;
+    if let Err(e) =
+        crate::artifacts::retention::remove_files(state.artifacts.as_ref(), &removed).await
+    {
+        // No row names it now: the data dir's sweep removes what is left.
+        tracing::warn!(rig_id = %id, error = %e, "a deleted rig's file could not be removed");
+    }
+    tracing::info!(rig_id = %id, "rig deleted");
+    Ok(StatusCode::NO_CONTENT)
+}
+
 /// The skeleton of uploaded rig `id` (a `?rig=` value that is not a built-in's name), for the
-/// downloads that retarget onto it; only `scope`'s rigs are found.
+/// downloads that retarget onto it; only `scope`'s rigs are found. Finding it is a use of the
+/// rig, which restarts its retention.
 pub async fn target_skeleton(
     state: &AppState,
     scope: Scope,
@@ -315,7 +411,12 @@ pub async fn target_skeleton(
 ) -> Result<TargetSkeleton, ApiError> {
     let id = RigId::from_str(id)
         .map_err(|_| ApiError::RigNotFound(format!("{id:?} (not a rig id nor a built-in rig)")))?;
-    Ok(state.store.rig(scope, id).await?.skeleton)
+    let rig = state.store.rig(scope, id).await?;
+    // A failure only logs: the download does not depend on it.
+    if let Err(e) = state.store.touch_rig(id).await {
+        tracing::warn!(rig_id = %id, error = %e, "could not record a use of the rig");
+    }
+    Ok(rig.skeleton)
 }
 
 #[cfg(test)]

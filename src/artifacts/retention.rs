@@ -1,15 +1,18 @@
-//! Deletion's files, and retention: songs and results expire `retention_days` after last use.
+//! Deletion's files, and retention: songs, results and rigs expire `retention_days` after last
+//! use.
 //!
-//! A deletion (`DELETE /v1/songs/{id}`, `DELETE /v1/jobs/{id}`) and an expiry remove rows first,
-//! in one transaction of the store (`queue/sql/delete.rs`), then the files those rows named, with
-//! [`remove_files`]. A file left behind by a failed removal has no row any more, so the data dir's
-//! sweep ([`super::sweep`]) removes it after its grace period.
+//! A deletion (`DELETE /v1/songs/{id}`, `DELETE /v1/jobs/{id}`, `DELETE /v1/rigs/{id}`) and an
+//! expiry remove rows first, in one transaction of the store (`queue/sql/delete.rs`,
+//! `queue/sql/rigs.rs`), then the files those rows named, with [`remove_files`]. A file left
+//! behind by a failed removal has no row any more, so the data dir's sweep ([`super::sweep`])
+//! removes it after its grace period.
 //!
 //! The expiry runs on the worker side ([`spawn`], from every process that runs workers: `choreo
 //! serve` and `choreo worker`, not `choreo serve --no-workers`), a pass every tenth of the
 //! retention (at least every [`MIN_PASS`], at most every [`MAX_PASS`]); with several worker
 //! processes each runs it, and the store's transaction makes a row go once. What counts as a use
-//! is in `migrations/20261127000300_retention.sql`.
+//! is in `migrations/20261127000300_retention.sql` (songs and jobs) and
+//! `migrations/20261207000000_rig_use.sql` (rigs).
 //!
 //! A worker whose job was deleted while it ran writes nothing to the store (every write matches
 //! no row) and calls [`forget_if_deleted`] when it is done, removing what it published meanwhile.
@@ -24,15 +27,16 @@ use tokio_util::sync::CancellationToken;
 pub const MIN_PASS: Duration = Duration::from_millis(200);
 /// The longest pause between two expiry passes.
 pub const MAX_PASS: Duration = Duration::from_secs(600);
-/// Rows one pass removes at most of each kind (songs, jobs), so a transaction stays short; a
-/// full batch starts the next pass at once.
+/// Rows one pass removes at most of each kind (songs, jobs, rigs), so a transaction stays
+/// short; a full batch starts the next pass at once.
 pub const BATCH: u32 = 200;
 
 /// The audit reason of an expiry.
 pub const EXPIRED: &str = "expired: unused for longer than retention_days";
 
-/// Removes the files of removed rows: each song's file and each job's results. Every file is
-/// tried; the first failure is returned (what it left has no row, so the sweep takes it later).
+/// Removes the files of removed rows: each song's and each rig's file and each job's results.
+/// Every file is tried; the first failure is returned (what it left has no row, so the sweep
+/// takes it later).
 pub async fn remove_files(
     artifacts: &dyn ArtifactStore,
     removed: &Removed,
@@ -45,6 +49,11 @@ pub async fn remove_files(
     }
     for job in &removed.jobs {
         if let Err(e) = artifacts.remove_results(job.id).await {
+            first.get_or_insert(e);
+        }
+    }
+    for rig in &removed.rigs {
+        if let Err(e) = artifacts.remove(Artifact::Rig(rig.id, rig.format)).await {
             first.get_or_insert(e);
         }
     }
@@ -89,9 +98,12 @@ pub async fn expire(
         if let Err(e) = remove_files(artifacts, &removed).await {
             tracing::warn!(error = %e, "removing expired files failed; the sweep removes what is left");
         }
-        let full = removed.songs.len() >= BATCH as usize || removed.jobs.len() >= BATCH as usize;
+        let full = [removed.songs.len(), removed.jobs.len(), removed.rigs.len()]
+            .into_iter()
+            .any(|n| n >= BATCH as usize);
         all.songs.extend(removed.songs);
         all.jobs.extend(removed.jobs);
+        all.rigs.extend(removed.rigs);
         if !full {
             return Ok(all);
         }
@@ -117,7 +129,8 @@ pub fn spawn(
                 Ok(removed) if !removed.is_empty() => tracing::info!(
                     songs = removed.songs.len(),
                     jobs = removed.jobs.len(),
-                    "removed songs and results past retention_days"
+                    rigs = removed.rigs.len(),
+                    "removed songs, results and rigs past retention_days"
                 ),
                 Ok(_) => {}
                 Err(e) => {

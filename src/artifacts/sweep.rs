@@ -1,14 +1,15 @@
 //! The sweep of files no row names in the local data dir.
 //!
 //! A process killed mid-write leaves files no row names: a result's `.partial-*` temp file in a
-//! job dir, a song renamed into `songs/` whose row was never committed, a job dir of a job that
-//! does not exist. A deletion whose file removal failed leaves the same, and so does another
-//! host's deletion of a song or result this host has a cached copy of (with a bucket, the data
+//! job dir, a song or rig renamed into `songs/` or `rigs/` whose row was never committed, a job
+//! dir of a job that does not exist. A deletion whose file removal failed leaves the same, and so
+//! does another host's deletion of a song, rig or result this host has a cached copy of (with a bucket, the data
 //! dir is each host's cache: `artifacts::retention`). Nothing reads them, but they fill the disk.
 //! The sweep removes those older than the grace period (`sweep_grace_s`), so it never races a
 //! write in progress in another process sharing the data dir. It runs in the background, once
 //! after the store opens and then every half grace period (at least every second, at most hourly).
-use crate::queue::{DataDir, JobId, QueueError, Scope, SongId, Store};
+use crate::queue::{DataDir, JobId, QueueError, Scope, Store};
+use std::future::Future;
 use std::path::Path;
 use std::str::FromStr;
 use std::sync::Arc;
@@ -21,6 +22,7 @@ use tokio_util::sync::CancellationToken;
 pub struct Swept {
     pub temp_files: usize,
     pub songs: usize,
+    pub rigs: usize,
     pub job_dirs: usize,
 }
 
@@ -65,39 +67,62 @@ fn older_than(path: &Path, grace: Duration) -> bool {
         .is_ok_and(|age| age >= grace)
 }
 
+/// Removes the uploads in `dir` (files named `<id>.<ext>`) older than `grace` whose row is gone
+/// (`exists` answers false); returns how many went.
+async fn sweep_uploads<Id, F, Fut>(
+    dir: &Path,
+    grace: Duration,
+    exists: F,
+) -> Result<usize, QueueError>
+where
+    Id: FromStr,
+    F: Fn(Id) -> Fut,
+    Fut: Future<Output = Result<bool, QueueError>>,
+{
+    let mut removed = 0;
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let path = entry.path();
+        let Some(id) = path
+            .file_stem()
+            .and_then(|s| s.to_str())
+            .and_then(|s| Id::from_str(s).ok())
+        else {
+            continue;
+        };
+        if older_than(&path, grace) && !exists(id).await? && std::fs::remove_file(&path).is_ok() {
+            removed += 1;
+        }
+    }
+    Ok(removed)
+}
+
 /// Removes leftovers older than `grace`; a database error stops it (nothing is removed on doubt).
 pub async fn sweep(
     store: &dyn Store,
     data: &DataDir,
     grace: Duration,
 ) -> Result<Swept, QueueError> {
-    let mut swept = Swept::default();
-    for entry in std::fs::read_dir(data.root().join("songs"))
-        .into_iter()
-        .flatten()
-        .flatten()
-    {
-        let path = entry.path();
-        let Some(id) = path
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .and_then(|s| SongId::from_str(s).ok())
-        else {
-            continue;
-        };
-        if !older_than(&path, grace) {
-            continue;
-        }
+    let songs = sweep_uploads(&data.root().join("songs"), grace, |id| async move {
         match store.song(Scope::All, id).await {
-            Err(QueueError::SongNotFound(_)) => {
-                if std::fs::remove_file(&path).is_ok() {
-                    swept.songs += 1;
-                }
-            }
-            Err(e) => return Err(e),
-            Ok(_) => {}
+            Err(QueueError::SongNotFound(_)) => Ok(false),
+            Err(e) => Err(e),
+            Ok(_) => Ok(true),
         }
-    }
+    })
+    .await?;
+    let rigs = sweep_uploads(&data.root().join("rigs"), grace, |id| async move {
+        match store.rig(Scope::All, id).await {
+            Err(QueueError::RigNotFound(_)) => Ok(false),
+            Err(e) => Err(e),
+            Ok(_) => Ok(true),
+        }
+    })
+    .await?;
+    let mut swept = Swept {
+        songs,
+        rigs,
+        ..Swept::default()
+    };
     for entry in std::fs::read_dir(data.root().join("jobs"))
         .into_iter()
         .flatten()

@@ -15,8 +15,6 @@
 //! they connect. [`open`] picks one from the configured database URL.
 use crate::audio::{Analysis, AudioFormat};
 use crate::models::ModelId;
-use crate::motion::retarget::uploaded::{RigFormat, Units};
-use crate::motion::retarget::TargetSkeleton;
 use crate::motion::KeyPose;
 use chrono::{DateTime, Utc};
 use futures::future::BoxFuture;
@@ -33,6 +31,7 @@ pub mod events;
 pub mod files;
 pub mod keys;
 pub mod postgres;
+pub mod rigs;
 pub mod sql;
 pub mod sqlite;
 
@@ -40,6 +39,7 @@ pub use events::EventStore;
 pub use files::DataDir;
 pub use keys::{ApiKey, KeyLimits, NewKey, TenantStore, Usage};
 pub use postgres::PgStore;
+pub use rigs::{RigFilter, RigStore, UploadedRig};
 pub use sqlite::SqliteStore;
 
 /// Errors from the job, song and rig store.
@@ -462,35 +462,18 @@ pub struct Song {
     pub created_at: DateTime<Utc>,
 }
 
-/// An uploaded rig (a skeleton to retarget dances onto), as stored.
-#[derive(Clone, Debug)]
-pub struct UploadedRig {
-    pub id: RigId,
-    pub tenant: TenantId,
-    /// The upload's own name, for display only.
-    pub filename: String,
-    /// Found from the bytes.
-    pub format: RigFormat,
-    /// The unit the file's rest pose was read in (the skeleton is in metres).
-    pub units: Units,
-    pub sha256: String,
-    pub size_bytes: u64,
-    /// The skeleton read from the file, with its humanoid mapping.
-    pub skeleton: TargetSkeleton,
-    pub created_at: DateTime<Utc>,
-}
-
 /// Rows a deletion or the retention sweep removed; their files are still to be removed.
 #[derive(Clone, Debug, Default)]
 pub struct Removed {
     pub songs: Vec<Song>,
     pub jobs: Vec<Job>,
+    pub rigs: Vec<UploadedRig>,
 }
 
 impl Removed {
     /// Whether nothing was removed.
     pub fn is_empty(&self) -> bool {
-        self.songs.is_empty() && self.jobs.is_empty()
+        self.songs.is_empty() && self.jobs.is_empty() && self.rigs.is_empty()
     }
 }
 
@@ -598,28 +581,17 @@ pub trait SongStore: Send + Sync {
     /// Records a use of the song (an upload of the same bytes, a download of its audio), which
     /// restarts its retention.
     fn touch_song(&self, id: SongId) -> StoreFuture<'_, ()>;
-    /// Removes, as [`SongStore::delete_song`] and [`JobStore::delete_job`] do, up to `limit`
-    /// finished generate jobs and up to `limit` songs last used before `cutoff`. A song is
-    /// removed only when no job made from it is queued, running or used since `cutoff`.
+    /// Removes, as [`SongStore::delete_song`], [`JobStore::delete_job`] and
+    /// [`RigStore::delete_rig`] do, up to `limit` finished generate jobs, up to `limit` songs and
+    /// up to `limit` rigs last used before `cutoff`, in one transaction. A song is removed only
+    /// when no job made from it is queued, running or used since `cutoff`; a rig is used only by
+    /// the downloads that name it, so its own last use decides.
     fn expire<'a>(
         &'a self,
         cutoff: DateTime<Utc>,
         limit: u32,
         reason: &'a str,
     ) -> StoreFuture<'a, Removed>;
-}
-
-/// The uploaded rigs.
-pub trait RigStore: Send + Sync {
-    /// Stores a new rig (its file is already published).
-    fn add_rig(&self, rig: UploadedRig) -> StoreFuture<'_, UploadedRig> {
-        self.add_rig_within(rig, KeyLimits::default())
-    }
-    /// [`RigStore::add_rig`] within the tenant's `limits`: `QuotaExceeded` when its bytes would
-    /// pass `storage_quota_bytes`, checked in the transaction that inserts it.
-    fn add_rig_within(&self, rig: UploadedRig, limits: KeyLimits) -> StoreFuture<'_, UploadedRig>;
-    /// One rig.
-    fn rig(&self, scope: Scope, id: RigId) -> StoreFuture<'_, UploadedRig>;
 }
 
 /// Everything the service stores.

@@ -30,6 +30,7 @@ mod preview;
 mod quotas;
 mod resilience;
 mod retarget;
+mod rig_lifecycle;
 mod rigs;
 mod roundtrip;
 mod scale;

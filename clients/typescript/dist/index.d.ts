@@ -10,6 +10,7 @@ export type CreateJob = Schemas['CreateJob'];
 export type JobPage = Schemas['JobPage'];
 export type ModelInfo = Schemas['ModelInfo'];
 export type Rig = Schemas['RigView'];
+export type RigPage = Schemas['RigPage'];
 /** The files a finished generate job serves under `/v1/jobs/{id}/`. */
 export type JobFile = 'motion.json' | 'motion.glb' | 'motion.bvh' | 'motion.vrma' | 'motion.smpl.npz' | 'report.json' | 'preview.png';
 /** Statuses after which a job never changes again. */
@@ -55,6 +56,10 @@ export declare class Choreo {
     /** POST /v1/rigs: a skeleton (BVH or glb) in its rest pose, with an optional joint mapping. */
     uploadRig(file: Blob, mapping?: Record<string, string> | null, filename?: string): Promise<Rig>;
     rig(id: string): Promise<Rig>;
+    /** GET /v1/rigs: this key's rigs, newest first; pass a page's `next_cursor` as `cursor` for the next. */
+    listRigs(query?: NonNullable<paths['/v1/rigs']['get']['parameters']['query']>): Promise<RigPage>;
+    /** DELETE /v1/rigs/{id}: deletes the rig and its file (204); an unknown id is an ApiError (404). */
+    deleteRig(id: string): Promise<void>;
     /** POST /v1/jobs with an idempotency key (a new one unless given), so a retried call makes one job. */
     createJob(body: CreateJob, idempotencyKey?: string): Promise<Job>;
     /** The job's server-sent events (see jobEvents), with this client's key. */

@@ -1,4 +1,4 @@
-// node_modules/openapi-fetch/dist/index.mjs
+// ../../../main/clients/typescript/node_modules/openapi-fetch/dist/index.mjs
 var PATH_PARAM_RE = /\{[^{}]+\}/g;
 var supportsRequestInitExt = () => {
   return typeof process === "object" && Number.parseInt(process?.versions?.node?.substring(0, 2)) >= 18 && process.versions.undici;
@@ -500,7 +500,7 @@ var ApiError = class _ApiError extends Error {
   }
 };
 
-// node_modules/eventsource-parser/dist/index.js
+// ../../../main/clients/typescript/node_modules/eventsource-parser/dist/index.js
 var ParseError = class extends Error {
   constructor(message, options) {
     super(message), this.name = "ParseError", this.type = options.type, this.field = options.field, this.value = options.value, this.line = options.line;
@@ -734,6 +734,15 @@ var Choreo = class {
   }
   rig(id) {
     return data(this.api.GET("/v1/rigs/{id}", { params: { path: { id } } }));
+  }
+  /** GET /v1/rigs: this key's rigs, newest first; pass a page's `next_cursor` as `cursor` for the next. */
+  listRigs(query = { limit: 50 }) {
+    return data(this.api.GET("/v1/rigs", { params: { query } }));
+  }
+  /** DELETE /v1/rigs/{id}: deletes the rig and its file (204); an unknown id is an ApiError (404). */
+  async deleteRig(id) {
+    const { error, response } = await this.api.DELETE("/v1/rigs/{id}", { params: { path: { id } } });
+    if (!response.ok) throw new ApiError(response.status, error ?? null, response.url);
   }
   /** POST /v1/jobs with an idempotency key (a new one unless given), so a retried call makes one job. */
   createJob(body, idempotencyKey = randomUuid()) {

@@ -275,7 +275,8 @@ export interface paths {
             path?: never;
             cookie?: never;
         };
-        get?: never;
+        /** The caller's rigs, newest first, a page at a time. */
+        get: operations["listRigs"];
         put?: never;
         /**
          * Upload a rig.
@@ -304,7 +305,13 @@ export interface paths {
         get: operations["getRig"];
         put?: never;
         post?: never;
-        delete?: never;
+        /**
+         * Delete a rig: its row and its file.
+         * @description Afterwards its id is 404, to `GET` and to the downloads that name it (`?rig=<id>`), and its
+         *     bytes no longer count against the key's storage quota. Dances already downloaded on it are
+         *     the client's; any job can still be downloaded on another rig.
+         */
+        delete: operations["deleteRig"];
         options?: never;
         head?: never;
         patch?: never;
@@ -742,6 +749,12 @@ export interface components {
          * @description An uploaded rig's id: a UUID v7, naming its stored file as a song's id does.
          */
         RigId: string;
+        /** @description A page of rigs. */
+        RigPage: {
+            items: components["schemas"]["RigView"][];
+            /** @description Pass as `cursor` for the next page; absent on the last page. */
+            next_cursor?: string | null;
+        };
         /**
          * @description The multipart form of a rig upload: `file` and, optionally, `mapping` (any other field is
          *     refused with 422).
@@ -1895,6 +1908,69 @@ export interface operations {
             };
         };
     };
+    listRigs: {
+        parameters: {
+            query?: {
+                /** @description 1..=100, default 20. */
+                limit?: number;
+                /** @description `next_cursor` of the previous page (a rig id). */
+                cursor?: string;
+            };
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description A page of rigs */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["RigPage"];
+                };
+            };
+            /** @description An unknown or malformed query parameter */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
+            401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description A limit outside 1..=100, or a cursor that is not a next_cursor */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+        };
+    };
     uploadRig: {
         parameters: {
             query?: never;
@@ -1944,7 +2020,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description Over the size limit (code file-too-large), or past the key's storage quota (code storage-quota-exceeded: delete songs or results to make room) */
+            /** @description Over the size limit (code file-too-large), or past the key's storage quota (code storage-quota-exceeded: delete songs, rigs or results to make room) */
             413: {
                 headers: {
                     [name: string]: unknown;
@@ -2055,6 +2131,65 @@ export interface operations {
                 headers: {
                     /** @description Seconds to wait before trying again */
                     "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+        };
+    };
+    deleteRig: {
+        parameters: {
+            query?: never;
+            header?: never;
+            path: {
+                /** @description Rig id */
+                id: string;
+            };
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description The rig and its file are deleted */
+            204: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
+            };
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
+            401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description No such rig */
+            404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The database is unreachable; nothing was deleted, send it again shortly */
+            503: {
+                headers: {
                     [name: string]: unknown;
                 };
                 content: {

@@ -24,6 +24,7 @@ export type CreateJob = Schemas['CreateJob'];
 export type JobPage = Schemas['JobPage'];
 export type ModelInfo = Schemas['ModelInfo'];
 export type Rig = Schemas['RigView'];
+export type RigPage = Schemas['RigPage'];
 
 /** The files a finished generate job serves under `/v1/jobs/{id}/`. */
 export type JobFile = 'motion.json' | 'motion.glb' | 'motion.bvh' | 'motion.vrma' | 'motion.smpl.npz' | 'report.json' | 'preview.png';
@@ -131,6 +132,17 @@ export class Choreo {
 
   rig(id: string): Promise<Rig> {
     return data(this.api.GET('/v1/rigs/{id}', { params: { path: { id } } }));
+  }
+
+  /** GET /v1/rigs: this key's rigs, newest first; pass a page's `next_cursor` as `cursor` for the next. */
+  listRigs(query: NonNullable<paths['/v1/rigs']['get']['parameters']['query']> = { limit: 50 }): Promise<RigPage> {
+    return data(this.api.GET('/v1/rigs', { params: { query } }));
+  }
+
+  /** DELETE /v1/rigs/{id}: deletes the rig and its file (204); an unknown id is an ApiError (404). */
+  async deleteRig(id: string): Promise<void> {
+    const { error, response } = await this.api.DELETE('/v1/rigs/{id}', { params: { path: { id } } });
+    if (!response.ok) throw new ApiError(response.status, (error as ApiError['problem']) ?? null, response.url);
   }
 
   /** POST /v1/jobs with an idempotency key (a new one unless given), so a retried call makes one job. */

@@ -1,13 +1,15 @@
 // The client against a real choreo server (run by tests/web.rs, which starts the server):
 // uploads a song from disk, waits for its analysis, asks for a dance, waits for it (its
-// server-sent events when the server has them), and downloads motion.glb and motion.json.
+// server-sent events when the server has them), and downloads motion.glb and motion.json; then
+// uploads a rig, lists it, downloads the dance on it and deletes it.
 //
 //   API_URL=http://127.0.0.1:PORT API_KEY=… SONG=path MODEL=id [EXPECT_EVENTS=1] node test/e2e.mjs
 //
 // Prints one JSON summary line (prefixed "summary: ") and exits 0, or prints why and exits 1.
 import { openAsBlob } from 'node:fs';
 import { basename } from 'node:path';
-import { Choreo } from '../dist/index.js';
+import { fileURLToPath } from 'node:url';
+import { ApiError, Choreo } from '../dist/index.js';
 
 const env = (name) => {
   const value = process.env[name];
@@ -49,7 +51,19 @@ check(motion.fps === 25 && motion.num_frames > 25 && motion.positions.length ===
 const audio = await choreo.songAudio(song.id);
 check(audio.size === (await openAsBlob(env('SONG'))).size, 'the song comes back as uploaded');
 
+// A rig of one's own: listed once uploaded, a dance downloaded on it, gone once deleted.
+const rigFile = fileURLToPath(new URL('../../../tests/fixtures/rig_unreal_cm.bvh', import.meta.url));
+const rig = await choreo.uploadRig(await openAsBlob(rigFile), null, 'mannequin.bvh');
+const listed = async () => (await choreo.listRigs({ limit: 100 })).items.map((r) => r.id);
+check((await listed()).includes(rig.id), `the uploaded rig ${rig.id} is listed`);
+const onRig = await (await choreo.download(job.id, 'motion.bvh', { rig: rig.id })).text();
+check(onRig.startsWith('HIERARCHY') && onRig.includes('pelvis'), 'motion.bvh on the rig has its joints');
+await choreo.deleteRig(rig.id);
+check(!(await listed()).includes(rig.id), 'the deleted rig is no longer listed');
+const gone = await choreo.rig(rig.id).catch((e) => e);
+check(gone instanceof ApiError && gone.status === 404 && gone.code === 'rig-not-found', `the deleted rig: ${gone}`);
+
 console.log('summary: ' + JSON.stringify({
   song_id: song.id, job_id: job.id, transport: choreo.lastTransport, events: events.map((e) => e.type),
-  updates: updates.length, glb_bytes: glb.length, frames: motion.num_frames,
+  updates: updates.length, glb_bytes: glb.length, frames: motion.num_frames, rig_id: rig.id,
 }));

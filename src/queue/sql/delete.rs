@@ -12,7 +12,9 @@
 //! `to_status = 'deleted'` with the reason in `error`, the audit trail that outlives the row.
 //!
 //! The last use of a song is `COALESCE(last_used_at, created_at)`, of a job
-//! `COALESCE(last_used_at, finished_at, created_at)` (migration `20261127000300_retention.sql`).
+//! `COALESCE(last_used_at, finished_at, created_at)` (migration `20261127000300_retention.sql`),
+//! of a rig `COALESCE(last_used_at, created_at)` (`20261207000000_rig_use.sql`). A rig is
+//! deleted in `sql/rigs.rs`; it expires here, in the same transaction as songs and jobs.
 use super::{now_ms, Dialect, SqlStore, JOB_COLUMNS, SONG_COLUMNS};
 use crate::queue::{Job, JobId, QueueError, Removed, Scope, Song, SongId};
 use chrono::{DateTime, Utc};
@@ -156,11 +158,13 @@ where
         Ok(Removed {
             songs: vec![song],
             jobs,
+            rigs: Vec::new(),
         })
     }
 
-    /// [`crate::queue::JobStore::touch_job`] and [`crate::queue::SongStore::touch_song`]:
-    /// `table` is `jobs` or `songs`, never user input.
+    /// [`crate::queue::JobStore::touch_job`], [`crate::queue::SongStore::touch_song`] and
+    /// [`crate::queue::RigStore::touch_rig`]: `table` is `jobs`, `songs` or `rigs`, never user
+    /// input.
     pub(super) async fn record_use(&self, table: &'static str, id: Uuid) -> Result<(), QueueError> {
         let sql = format!("UPDATE {table} SET last_used_at = $1 WHERE id = $2");
         let mut tx = self.begin().await?;
@@ -225,7 +229,9 @@ where
                 jobs.extend(removed);
             }
         }
+        // Rigs: no song or job refers to one, so its own last use decides.
+        let rigs = Self::expire_rigs(&mut tx, cutoff, limit).await?;
         Self::commit(tx).await?;
-        Ok(Removed { songs, jobs })
+        Ok(Removed { songs, jobs, rigs })
     }
 }

@@ -1,9 +1,15 @@
 //! The rig statements of [`SqlStore`], for both stores (the rules in one place, as the queue's).
+//!
+//! A rig's last use is `COALESCE(last_used_at, created_at)` (migration
+//! `20261207000000_rig_use.sql`); its expiry runs inside the store's one expiry transaction
+//! (`sql/delete.rs`), through [`SqlStore::expire_rigs`].
 use super::quota::Adds;
 use super::{corrupt, now_ms, to_time, Dialect, SqlStore, StoreFuture};
 use crate::motion::retarget::uploaded::SkeletonJson;
 use crate::motion::retarget::TargetSkeleton;
-use crate::queue::{KeyLimits, QueueError, RigId, RigStore, Scope, TenantId, UploadedRig};
+use crate::queue::{
+    KeyLimits, QueueError, Removed, RigFilter, RigId, RigStore, Scope, TenantId, UploadedRig,
+};
 use sqlx::{ColumnIndex, Decode, Encode, Executor, IntoArguments, Row, Type};
 
 /// The columns a rig row is read from.
@@ -49,6 +55,36 @@ where
             skeleton: TargetSkeleton::try_from(skeleton).map_err(|e| corrupt("rig skeleton", e))?,
             created_at: to_time(row.try_get("created_at")?)?,
         })
+    }
+}
+
+impl<D> SqlStore<D>
+where
+    D: Dialect,
+    for<'c> &'c mut D::Connection: Executor<'c, Database = D>,
+    for<'q> D::Arguments<'q>: IntoArguments<'q, D>,
+    for<'q> i64: Encode<'q, D> + Decode<'q, D> + Type<D>,
+    for<'q> String: Decode<'q, D> + Type<D>,
+    &'static str: ColumnIndex<D::Row>,
+{
+    /// Removes up to `limit` rigs last used before `cutoff` (epoch ms) inside the caller's
+    /// transaction ([`crate::queue::SongStore::expire`]); returns them, whose files are the
+    /// caller's to remove.
+    pub(super) async fn expire_rigs(
+        conn: &mut D::Connection,
+        cutoff: i64,
+        limit: i64,
+    ) -> Result<Vec<UploadedRig>, QueueError> {
+        let sql = format!(
+            "DELETE FROM rigs WHERE id IN (SELECT id FROM rigs WHERE COALESCE(last_used_at, created_at) < $1 \
+             ORDER BY id LIMIT $2) RETURNING {RIG_COLUMNS}"
+        );
+        let rows = sqlx::query(&sql)
+            .bind(cutoff)
+            .bind(limit)
+            .fetch_all(conn)
+            .await?;
+        rows.iter().map(Self::rig_from_row).collect()
     }
 }
 
@@ -115,5 +151,51 @@ where
                 None => Err(QueueError::RigNotFound(id)),
             }
         })
+    }
+
+    fn rigs(&self, scope: Scope, filter: RigFilter) -> StoreFuture<'_, Vec<UploadedRig>> {
+        Box::pin(async move {
+            // Ids are UUID v7, so their order is the upload order in both stores.
+            let sql = format!(
+                "SELECT {RIG_COLUMNS} FROM rigs WHERE ($1 IS NULL OR id < $1) \
+                 AND ($2 IS NULL OR tenant_id = $2) ORDER BY id DESC LIMIT $3"
+            );
+            let rows = sqlx::query(&sql)
+                .bind(filter.before.map(|id| D::id(id.0)))
+                .bind(D::scope_id(scope))
+                .bind(i64::from(filter.limit))
+                .fetch_all(&self.pool)
+                .await?;
+            rows.iter().map(Self::rig_from_row).collect()
+        })
+    }
+
+    fn delete_rig(&self, scope: Scope, id: RigId) -> StoreFuture<'_, Removed> {
+        Box::pin(async move {
+            let sql = format!(
+                "DELETE FROM rigs WHERE id = $1 AND ($2 IS NULL OR tenant_id = $2) RETURNING {RIG_COLUMNS}"
+            );
+            let mut tx = self.begin().await?;
+            let row = sqlx::query(&sql)
+                .bind(D::id(id.0))
+                .bind(D::scope_id(scope))
+                .fetch_optional(&mut *tx)
+                .await?;
+            let Some(row) = row else {
+                // Another tenant's rig reads as missing, and stays.
+                Self::rollback(tx).await?;
+                return Err(QueueError::RigNotFound(id));
+            };
+            let rig = Self::rig_from_row(&row)?;
+            Self::commit(tx).await?;
+            Ok(Removed {
+                rigs: vec![rig],
+                ..Removed::default()
+            })
+        })
+    }
+
+    fn touch_rig(&self, id: RigId) -> StoreFuture<'_, ()> {
+        Box::pin(self.record_use("rigs", id.0))
     }
 }
