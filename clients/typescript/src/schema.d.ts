@@ -114,7 +114,9 @@ export interface paths {
          *     `{seq, job_id, from, to, attempt, error, at}`; `progress` data: `{seq, job_id, stage,
          *     progress, at}` (sent when the stage changes and at every 5 % of progress); `done` data: the job
          *     as `GET /v1/jobs/{id}` returns it, sent once the job is terminal (at once when it already is),
-         *     after which the stream closes. `: keep-alive` comments every 15 s.
+         *     after which the stream closes. `: keep-alive` comments every 15 s. A stream also ends after
+         *     `event_stream_max_s` (300 s by default): resume with `Last-Event-ID`. A key may hold
+         *     `max_event_streams_per_key` streams (16 by default) at once; past it, 429.
          */
         get: operations["getJobEvents"];
         put?: never;
@@ -1218,7 +1220,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The body is over max_job_body_bytes */
+            /** @description The body is over max_job_body_bytes (code body-too-large), or the key already stores its storage_quota_bytes so the job's results have no room (code storage-quota-exceeded: delete songs, rigs or results) */
             413: {
                 headers: {
                     [name: string]: unknown;
@@ -1236,7 +1238,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set, or a webhook_url refused: `webhook-url-refused`, `webhooks-not-configured`), the model is unknown, or the key was reused */
+            /** @description A field is invalid (e.g. a key pose whose time has no frame of the dance, or joints that fit neither joint set, a number in a key pose or seed motion that is not finite: `motion-not-finite`, or a webhook_url refused: `webhook-url-refused`, `webhooks-not-configured`), the model is unknown, or the key was reused */
             422: {
                 headers: {
                     [name: string]: unknown;
@@ -1245,7 +1247,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited), or has max_queued_jobs jobs queued or running already (code too-many-queued-jobs); nothing was queued */
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited), or has max_queued_jobs jobs queued or running already, an upload's analysis included (code too-many-queued-jobs); nothing was queued or stored */
             429: {
                 headers: {
                     /** @description Seconds to wait before trying again */
@@ -1438,7 +1440,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited), or has max_event_streams_per_key event streams open already (code too-many-event-streams; the connection is closed) */
             429: {
                 headers: {
                     /** @description Seconds to wait before trying again */
@@ -2038,7 +2040,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description No file; an unknown field; a skeleton that cannot be read or lacks a bone a dance needs (named); a bad `mapping` */
+            /** @description No file; an unknown field; a skeleton that cannot be read, has a number that is not finite (code motion-not-finite), too many joints or nodes, or lacks a bone a dance needs (named); a bad `mapping`; a file not read within audio_timeout_s (code rig-timed-out) */
             422: {
                 headers: {
                     [name: string]: unknown;
@@ -2283,7 +2285,7 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
-            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited), or has max_queued_jobs jobs queued or running already, an upload's analysis included (code too-many-queued-jobs); nothing was queued or stored */
             429: {
                 headers: {
                     /** @description Seconds to wait before trying again */
