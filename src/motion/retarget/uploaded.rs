@@ -21,8 +21,8 @@
 //! refused, naming the bones it could not map and the joints left unmapped.
 use std::collections::{BTreeMap, BTreeSet};
 
-use super::gltf_skin::{Document, Nodes, Transform};
-use nalgebra::{Matrix4, Quaternion, UnitQuaternion, Vector3};
+use super::gltf_skin::{glb_json, read_gltf};
+use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::names::map_skeleton;
@@ -33,8 +33,6 @@ use crate::motion::rig::Rig;
 /// Most joints an uploaded skeleton may have (a Mixamo rig with fingers has 65, a VRoid avatar
 /// with hair and skirt bones a few hundred).
 pub const MAX_JOINTS: usize = 1024;
-/// Deepest node nesting read in a glTF (deeper only exhausts the stack or the time).
-const MAX_DEPTH: usize = 256;
 pub use super::gltf_skin::MAX_NODES;
 
 /// The humanoid bones a dance needs: the legs and feet it stands on, the trunk and head it faces
@@ -173,10 +171,10 @@ impl RigFileError {
 
 /// A skeleton read from a file, before mapping: names, parents and world rest positions in the
 /// file's units.
-struct Raw {
-    names: Vec<String>,
-    parents: Vec<Option<usize>>,
-    rest: Vec<Vector3<f64>>,
+pub(super) struct Raw {
+    pub(super) names: Vec<String>,
+    pub(super) parents: Vec<Option<usize>>,
+    pub(super) rest: Vec<Vector3<f64>>,
 }
 
 /// A file read into a target skeleton.
@@ -381,158 +379,6 @@ fn read_bvh(text: &str) -> Result<Raw, RigFileError> {
         names: bvh.names,
         parents: bvh.parents,
         rest,
-    })
-}
-
-/// The JSON chunk of a glb.
-fn glb_json(bytes: &[u8]) -> Result<&[u8], RigFileError> {
-    let u32_at = |i: usize| -> Option<u32> {
-        Some(u32::from_le_bytes(bytes.get(i..i + 4)?.try_into().ok()?))
-    };
-    let bad = |why: &str| RigFileError::Gltf(format!("not a glb: {why}"));
-    if u32_at(4) != Some(2) {
-        return Err(bad("version is not 2"));
-    }
-    let len = u32_at(12).ok_or_else(|| bad("no JSON chunk"))? as usize;
-    if u32_at(16) != Some(0x4E4F_534A) {
-        return Err(bad("the first chunk is not JSON"));
-    }
-    bytes
-        .get(20..20usize.saturating_add(len))
-        .ok_or_else(|| bad("the JSON chunk is cut short"))
-}
-
-/// Node `i`'s local transform.
-fn local_matrix(nodes: &Nodes, i: usize) -> Matrix4<f64> {
-    match nodes.transform(i) {
-        None => Matrix4::identity(),
-        Some(Transform::Matrix(m)) => Matrix4::from_column_slice(&m.map(f64::from)),
-        Some(Transform::Trs {
-            translation,
-            rotation,
-            scale,
-        }) => {
-            let t = translation.map(f64::from);
-            let r = rotation.map(f64::from);
-            let s = scale.map(f64::from);
-            let q = UnitQuaternion::from_quaternion(Quaternion::new(r[3], r[0], r[1], r[2]));
-            Matrix4::new_translation(&Vector3::from(t))
-                * q.to_homogeneous()
-                * Matrix4::new_nonuniform_scaling(&Vector3::from(s))
-        }
-    }
-}
-
-fn read_gltf(json: &[u8]) -> Result<Raw, RigFileError> {
-    let root: Document =
-        serde_json::from_slice(json).map_err(|e| RigFileError::Gltf(e.to_string()))?;
-    let skin = root
-        .skins
-        .iter()
-        .max_by_key(|s| s.joints.len())
-        .ok_or(RigFileError::NoSkin)?;
-    let joints: Vec<usize> = skin.joints.iter().map(|&j| j as usize).collect();
-    if joints.len() > MAX_JOINTS {
-        return Err(RigFileError::TooManyJoints {
-            count: joints.len(),
-            limit: MAX_JOINTS,
-        });
-    }
-    let nodes = &root.nodes;
-    // Each node's parent, `NO_PARENT` for a root: four bytes a node, as the nodes themselves.
-    const NO_PARENT: u32 = u32::MAX;
-    let mut node_parent: Vec<u32> = vec![NO_PARENT; nodes.count()];
-    for i in 0..nodes.count() {
-        for &c in nodes.children(i) {
-            let c = c as usize;
-            if c >= nodes.count() || node_parent[c] != NO_PARENT {
-                return Err(RigFileError::Gltf(format!(
-                    "node {c} is out of range or has two parents"
-                )));
-            }
-            node_parent[c] = i as u32;
-        }
-    }
-    let parent_of = |i: usize| {
-        Some(node_parent[i])
-            .filter(|&p| p != NO_PARENT)
-            .map(|p| p as usize)
-    };
-    // Ancestors (nearest first) of a node, refusing cycles and absurd depth.
-    let ancestors = |mut i: usize| -> Result<Vec<usize>, RigFileError> {
-        let mut out = Vec::new();
-        while let Some(p) = parent_of(i) {
-            if out.len() >= MAX_DEPTH {
-                return Err(RigFileError::Gltf(
-                    "node hierarchy nested too deeply or cyclic".into(),
-                ));
-            }
-            out.push(p);
-            i = p;
-        }
-        Ok(out)
-    };
-    let index_of: BTreeMap<usize, usize> = joints
-        .iter()
-        .enumerate()
-        .map(|(k, &node)| (node, k))
-        .collect();
-    if index_of.len() != joints.len() {
-        return Err(RigFileError::Gltf("the skin lists a joint twice".into()));
-    }
-    let mut names = Vec::with_capacity(joints.len());
-    let mut parents = Vec::with_capacity(joints.len());
-    let mut rest = Vec::with_capacity(joints.len());
-    for (k, &node) in joints.iter().enumerate() {
-        if node >= nodes.count() {
-            return Err(RigFileError::Gltf(format!(
-                "skin joint {node} is not a node"
-            )));
-        }
-        names.push(
-            nodes
-                .name(node)
-                .map_or_else(|| format!("joint{k}"), str::to_string),
-        );
-        let up = ancestors(node)?;
-        parents.push(up.iter().find_map(|a| index_of.get(a).copied()));
-        let mut world = local_matrix(nodes, node);
-        for &a in &up {
-            world = local_matrix(nodes, a) * world;
-        }
-        let p = world.column(3);
-        if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
-            return Err(RigFileError::NotFinite(format!(
-                "the rest position of joint {:?}",
-                names[k]
-            )));
-        }
-        rest.push(Vector3::new(p.x, p.y, p.z));
-    }
-    // Parents before children, as a rig lists them.
-    let depth = |j: usize| {
-        let mut d = 0;
-        let mut cur = parents[j];
-        while let Some(p) = cur {
-            d += 1;
-            cur = parents[p];
-        }
-        d
-    };
-    let mut order: Vec<usize> = (0..joints.len()).collect();
-    order.sort_by_key(|&j| depth(j));
-    let new_index: BTreeMap<usize, usize> = order
-        .iter()
-        .enumerate()
-        .map(|(new, &old)| (old, new))
-        .collect();
-    Ok(Raw {
-        names: order.iter().map(|&j| names[j].clone()).collect(),
-        parents: order
-            .iter()
-            .map(|&j| parents[j].map(|p| new_index[&p]))
-            .collect(),
-        rest: order.iter().map(|&j| rest[j]).collect(),
     })
 }
 
