@@ -2,10 +2,10 @@
 //! `max_event_streams_per_key`, the connection closed) while another key is answered at once, a
 //! stream ends after `event_stream_max_s` and resumes, and health probes are served past the
 //! connection cap. The flood's figures are printed (`--nocapture`).
-use crate::helpers::{expect_problem, short_song, spawn_app_with, test_config, TestApp};
-use choreo::api::Server;
+use crate::helpers::{expect_problem, short_song, spawn_app_with, TestApp};
+use crate::tenants::{spawn_with, Db};
 use choreo::config::Config;
-use choreo::queue::{KeyLimits, NewKey};
+use choreo::queue::KeyLimits;
 use reqwest::multipart::{Form, Part};
 use reqwest::StatusCode;
 use serde_json::Value;
@@ -14,33 +14,10 @@ use std::time::{Duration, Instant};
 /// An API-only service (no workers: jobs stay queued, and a stream on one never ends) with two
 /// keys; returns it with the keys' secrets.
 async fn api_only(edit: impl FnOnce(&mut Config)) -> (TestApp, String, String) {
-    choreo::telemetry::init_tracing(choreo::config::LogFormat::Pretty, "warn");
-    let data_dir = tempfile::tempdir().expect("tempdir");
-    let mut config = test_config(data_dir.path());
-    edit(&mut config);
-    config.validate().expect("valid config");
-    let server = Server::start_api_only(config)
-        .await
-        .expect("service starts");
-    let mut secrets = Vec::new();
-    for name in ["flood", "other"] {
-        let (key, secret) = NewKey::mint(name, false, KeyLimits::default());
-        server.state().store.add_key(key).await.expect("add key");
-        secrets.push(secret);
-    }
-    let app = TestApp {
-        addr: server.addr(),
-        client: reqwest::Client::builder()
-            .timeout(Duration::from_secs(60))
-            .build()
-            .expect("client"),
-        data_dir,
-        server: Some(server),
-        token: None,
-    };
-    let other = secrets.pop().expect("key");
-    let flood = secrets.pop().expect("key");
-    (app, flood, other)
+    let app = spawn_with(Db::Sqlite, false, edit).await;
+    let flood = app.key("flood", KeyLimits::default()).await;
+    let other = app.key("other", KeyLimits::default()).await;
+    (app.app, flood, other)
 }
 
 /// Uploads the short song as `secret`; returns the id of its analyze job, which stays queued.
