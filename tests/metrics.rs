@@ -904,7 +904,7 @@ mod real_data {
     }
 }
 
-/// Issue 10's physical measures on the real dances and on bad motions made from them.
+/// The physical-plausibility measures on the real dances and on bad motions made from them.
 mod physical_real {
     use super::*;
     use choreo::metrics::physical::{names, seed_distance_m, PhysicalReference, Verdict};
@@ -1386,8 +1386,9 @@ fn style_probes() {
     }
 }
 
-/// Issue 25's musicality measures on all 43 real dances, each against its own song's beats: the
-/// figures the issue states (and the model cards compare against) are what these functions give.
+/// The musicality measures on all 43 real dances, each against its own song's beats: the
+/// figures docs/evaluation.md states (and the model cards compare against) are what these
+/// functions give.
 mod musicality_real {
     use choreo::audio;
     use choreo::metrics::musicality::Musicality;

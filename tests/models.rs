@@ -106,7 +106,7 @@ fn mean_speed(motion: &Motion) -> f64 {
         .mean_speed_m_s
 }
 
-/// Elbows' and wrists' speed against the spine (m/s), issue 25's arm liveliness.
+/// Elbows' and wrists' speed against the spine (m/s): arm liveliness.
 fn arm_speed(motion: &Motion) -> f64 {
     choreo::metrics::musicality::arm_speed_m_s(motion.positions.view(), motion.fps)
 }
@@ -373,7 +373,7 @@ fn dance_revolution_dances_a_slow_song_at_its_own_pace() {
     };
     let (slow_bpm, slow_factor, slow_speed) = run(0.65);
     let (bpm, factor, speed) = run(0.7);
-    // The premise: the tracker hears the slow copy under 75 BPM, where the old window doubled it.
+    // The premise: the tracker hears the slow copy under 75 BPM, which a 75–150 window doubles.
     assert!((60.0..75.0).contains(&slow_bpm), "0.65×: {slow_bpm:.1} BPM");
     assert!((75.0..87.0).contains(&bpm), "0.7×: {bpm:.1} BPM");
     assert_eq!(
@@ -412,10 +412,10 @@ fn dancenet_at_1_2x_is_served_on_the_beat_through_the_whole_chain() {
 /// with the arms at 2.50 m/s against the spine (real dances: 0.43–1.44) and seed 4 at 0.53 m/s
 /// (the slowest real dance: 0.63). The served opening check (`dance_revolution::OpeningCheck`)
 /// dances each draw's first 20 s and passes over one out of the real ranges: 0.77 m/s arms and
-/// 0.85 m/s when measured. Since the 10-s warm-up, seed 4's own draw no longer shuffles and is
-/// kept; with the arm head told figures its arms swing slower (1.0 m/s in the opening, where
-/// the head before swung them at 1.25), and the 40 s read 0.589 m/s (0.63 or more before): held here to
-/// the verdict's floor. The network's own output, before any served stage.
+/// 0.85 m/s when measured. With the served 10-s warm-up, seed 4's own draw does not shuffle
+/// and is kept; with the arm head told figures its arms swing at 1.0 m/s in the opening, and
+/// the 40 s read 0.589 m/s: held here to the verdict's floor. The network's own output, before
+/// any served stage.
 #[test]
 fn dance_revolution_passes_over_a_draw_that_flails_or_shuffles() {
     let m = model("dance-revolution");
@@ -493,7 +493,7 @@ fn dancenet_opens_a_different_dance_to_a_different_song() {
 
 /// dance-revolution's opening was its `h_0`'s more than the song's: after a 3-s warm-up, seed 0
 /// danced the 5-s trumpet loop and sugar_plum_fairy's opening 0.13 m apart over the loop's frames
-/// (root-relative; two real dances are 0.34 m apart; issue 25 asks ≥ 0.15 m of the same seed on
+/// (root-relative; two real dances are 0.34 m apart; the bar is ≥ 0.15 m of the same seed on
 /// two songs). The served warm-up is the song's first 10 s, so the dance opens from the state the
 /// song has put the decoder in: 0.17 m when measured. This is the network's own output, before any
 /// served stage.
@@ -611,7 +611,7 @@ fn tsmt_draws_again_where_it_would_hold_mid_song() {
 
 /// keypose-transformer turns as its scaffold's real clips turn (`scaffold_facing`): on the
 /// Hungarian dance (tracked in 3/4, so waltz clips) its arms move against the spine as fast as
-/// the slowest real dance's (0.43 m/s, issue 25). A waltz holds its arms in a frame; they move
+/// the slowest real dance's (0.43 m/s). A waltz holds its arms in a frame; they move
 /// against the spine mostly as the body turns, and with the network's own facing the same
 /// dance turned 25°/s (real waltzers 56–70°/s) and its arms measured 0.26.
 #[test]
@@ -666,7 +666,7 @@ fn keypose_transformer_dances_a_short_song_by_a_draw_that_moves() {
 
 /// TSMT passes over an opening whose knees bend backwards as served: on the whole trumpet loop at 1.2×
 /// (4.4 s, all of it the opening) seed 1's first candidate clip bent its right knee behind the
-/// hip–ankle line on 9.9 % of the knee-frames downloaded (issue 25's line: 6 %), over a foot
+/// hip–ankle line on 9.9 % of the knee-frames downloaded (the musicality line: 6 %), over a foot
 /// pointed along the shin that the served knee step leaves alone.
 #[test]
 fn tsmt_passes_over_an_opening_that_bends_its_knees_backwards() {
@@ -710,7 +710,7 @@ fn one_finite_epoch(logs: &[choreo::models::train::EpochLog], note: &str) {
     assert!(log.note.contains(note), "{}", log.note);
 }
 
-/// `choreo train tsmt --min-tempo … --max-tempo … --mirror true --self-condition …` (issue 25)
+/// `choreo train tsmt --min-tempo … --max-tempo … --mirror true --self-condition …`
 /// trains on windows re-timed and mirrored from the real train split, half of each window's input
 /// frames drawn by the model itself: one tiny epoch gives finite losses, `model.json` records the
 /// self-conditioning, and the folder it writes is served and dances the song.
@@ -740,7 +740,7 @@ fn tsmt_trains_on_windows_at_other_tempi_and_mirrored() {
     assert!(motion.positions.iter().all(|v| v.is_finite()));
 }
 
-/// `choreo train tsmt --init … --step-clock --lock-weight …` (issue 25 item 4): a run continued
+/// `choreo train tsmt --init … --step-clock --lock-weight …`: a run continued
 /// from a folder without the clock gives the network the clock (its new weights from zero), fits
 /// each window's clock to the real dancer's step, and scores what the network means to draw after
 /// its own draws against it, and with `--free-runs` dances a few windows freely through its
@@ -842,7 +842,7 @@ fn real_lock(note: &str) -> f64 {
 /// DanceNet's trainer draws each window at its own tempo (`train::augment`: the rotation rows
 /// and the music resampled together, the root and yaw velocities scaled), with `style_dropout`
 /// leaves the style input out of a share of them, and with `lock_weight` dances a few windows on
-/// its own and scores their toes' speed against the beats (issue 25): a tiny epoch on the real
+/// its own and scores their toes' speed against the beats: a tiny epoch on the real
 /// train split runs, logs all three (the real continuations' lock well above zero), records them
 /// in `model.json`, and serves. A run continued from that folder (`--init`) keeps its rig and
 /// normalisation.

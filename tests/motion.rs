@@ -117,8 +117,8 @@ fn rigid_fit_error_over_every_dance() {
         pooled.joints_over_60,
         100.0 * at_limit as f64 / pooled.steps as f64
     );
-    // Issue 26: no joint of an export turns past 60° between two frames on more than 0.1 % of
-    // the steps of any dance (1.66 % pooled, 7.17 % on DANCE_C_8, before the twist was carried).
+    // No joint of an export turns past 60° between two frames on more than 0.1 % of the steps
+    // of any dance (each frame's twist solved alone: 1.66 % pooled, 7.17 % on DANCE_C_8).
     assert!(
         worst <= 0.001,
         "a dance's rotations flip on {:.3} % of its steps",
@@ -517,7 +517,7 @@ fn anchored_fit_returns_the_key_frame_as_posed() {
     );
 }
 
-/// Captured key poses come back within issue 10's 3 cm through the export, with no pop: the five
+/// Captured key poses come back within the 3-cm target through the export, with no pop: the five
 /// poses of DANCE_W_3 that `tools/wholesong_check.sh` spreads over every song, and the key frames
 /// `choreo eval --key-poses 4` draws from the three test dances whose worst key missed (seeds 0,
 /// 1, 4 of `key_poses_of`). The dance itself stands in for the model's motion, which passes
@@ -592,8 +592,8 @@ fn captured_key_poses_come_back_within_3_cm() {
 /// in turn, drawn from frame 25 on with seeds 100–105), each exported as `captured_key_poses_…`
 /// does (the key frames alone stand in for the motion: the export of a key frame depends on the
 /// key poses only). Prints the worst key per set through the least-squares export and through the
-/// chain IK on the key frames' median skeleton (the export before 2026-11-25); the model card's
-/// table quotes both.
+/// chain IK on the key frames' median skeleton, for comparison; the model card's table quotes
+/// both.
 #[test]
 fn captured_key_sets_of_every_dance() {
     use choreo::metrics::kinematics::key_pose_errors_cm;

@@ -141,7 +141,7 @@ async fn the_whole_flow_works_in_chromium_with_the_api_on_another_origin() {
         out.display()
     );
 
-    // The script's own summary, checked again here: the numbers the issue asks for.
+    // The script's own summary, checked again here: the numbers it must meet.
     let summary: serde_json::Value = stdout
         .lines()
         .find_map(|l| l.strip_prefix("summary: "))

@@ -1,18 +1,18 @@
 #!/usr/bin/env bash
 # The λ × σ sweep of the key-pose transformer's weighted loss ω(t) = 1 + λ·Σ exp(−(t−t_i)²/2σ²)
-# (issue 6 §5, like the paper's Tables 1–4): one short training run per setting, all with the same
+# (like the paper's Tables 1–4): one short training run per setting, all with the same
 # seed, data, steps and evaluation, then a table of key-pose consistency against smoothness.
 #
 # Usage: tools/keypose_sweep.sh [OUT_DIR] [EPOCHS] [PARALLEL]
-#   OUT_DIR   where each run's folder goes (default: models/keypose-transformer/sweep)
+#   OUT_DIR   where each run's folder goes (default: target/keypose-sweep)
 #   EPOCHS    training epochs per setting (default 3; the served model trained 13)
 #   PARALLEL  runs at once, one libtorch thread each (default 1)
 # CHOREO_BIN names another binary (e.g. a copy, so that rebuilding meanwhile is safe).
 # Each run writes OUT_DIR/lambda<L>_sigma<S>/{model.json,train_log.jsonl,eval.json,weights.safetensors};
-# the weights are not committed (see .gitignore), the logs, evaluations and OUT_DIR/sweep.md are.
+# its result is one row of docs/experiments.md (OUT_DIR/sweep.md holds the table).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-out=${1:-models/keypose-transformer/sweep}
+out=${1:-target/keypose-sweep}
 epochs=${2:-3}
 parallel=${3:-1}
 bin=${CHOREO_BIN:-target/release/choreo}

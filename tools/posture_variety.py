@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Does a dance change its posture over the song, or hold one figure throughout? (issue 25)
+"""Does a dance change its posture over the song, or hold one figure throughout?
 
 The served lines (arm speed, tempo lock, song and seed distances) all pass for a dance whose
 arms swing fast around one fixed shape for three minutes: dance-revolution's previews hold one

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Does librosa hear one song's slow and fast copies at one metrical level? (issue 25)
+"""Does librosa hear one song's slow and fast copies at one metrical level?
 
 The tempo section of `choreo eval` reads a follower's step-rate ratio (1.41 for 1.2x over 0.85x)
 only where the song's analysis hears both copies at one level. choreo's analysis is librosa's

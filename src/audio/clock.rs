@@ -1,4 +1,4 @@
-//! The beat clock (issue 25): where each frame lies in its beat and its bar, and how fast the
+//! The beat clock: where each frame lies in its beat and its bar, and how fast the
 //! beats come, as feature columns a network can read directly.
 //!
 //! A beat one-hot column tells a network *that* a beat falls on this frame; to step on the next

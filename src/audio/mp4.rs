@@ -237,7 +237,7 @@ mod tests {
         )
     }
 
-    /// The hostile file of issue 11, byte for byte.
+    /// The 40-byte hostile M4A (an `mdat` size that wraps the position), byte for byte.
     pub(crate) fn the_40_byte_m4a() -> Vec<u8> {
         let mut b = mp4_box(b"ftyp", b"M4A \0\0\0\0");
         b.extend_from_slice(&1u32.to_be_bytes());

@@ -200,7 +200,7 @@ args_into! {
         rollout_seeds: u64,
         /// With `--arm-head-only`: the head also reads the figure the arms are to hold, trained
         /// on the network's own dances told real figures from the train split, which
-        /// `model.json` then keeps for serving (issue 25; the card).
+        /// `model.json` then keeps for serving (the model card).
         #[arg(long, default_value_t = train::dance_revolution::Options::default().arm_figures, action = clap::ArgAction::Set)]
         arm_figures: bool,
     }
@@ -276,7 +276,7 @@ args_into! {
         #[arg(long, default_value_t = train::dancenet::Options::default().spectral_weight)]
         spectral_weight: f64,
         /// Weight of the lock term: the same free-running windows, scored by how much of the
-        /// toes' speed swings at the style's fraction of the song's beats (model card, issue 25).
+        /// toes' speed swings at the style's fraction of the song's beats (model card).
         #[arg(long, default_value_t = train::dancenet::Options::default().lock_weight)]
         lock_weight: f64,
         /// Windows per batch danced on freely for the rhythm and lock terms.
@@ -437,7 +437,7 @@ args_into! {
         step_clock: bool,
         /// Weight of the lock term (with `--step-clock`): the toes' speed the network means to
         /// draw next, after its own draws and the dance, held to peak where the clock says the
-        /// real dancer's does (model card, issue 25).
+        /// real dancer's does (model card).
         #[arg(long, default_value_t = train::tsmt::Options::default().lock_weight)]
         lock_weight: f64,
         /// Warped histories (with `--step-clock`): each window's first 40 frames are the same

@@ -17,7 +17,8 @@
 //! Every model dances every song with seeds `seed, seed+1, …` (`--seeds`, default 2), so the same
 //! seeds give the same numbers and the seed sensitivity ([`crate::metrics::physical::seed_distance_m`],
 //! per song pair, averaged) is measured. Every row carries the physical-plausibility numbers of
-//! [`crate::metrics::physical`] and issue 10's verdict (each criterion as the row's worst dance has it).
+//! [`crate::metrics::physical`] and its plausibility verdict (each criterion as the row's worst
+//! dance has it).
 //!
 //! FID in two protocols: `fid_*_window` fits a Gaussian to every 5-s window of the row (biased
 //! by sample size: the Mismatched-real row with one train dance per song scores FID_k 38.9, with
@@ -208,7 +209,7 @@ pub struct EvalRow {
     /// different songs, per song pair and seed, averaged (model rows only).
     #[serde(default)]
     pub song_distance_m: Option<f64>,
-    /// The smallest such distance (issue 25's bar: ≥ 0.15 m; two real dances are 0.34 apart).
+    /// The smallest such distance (the musicality bar: ≥ 0.15 m; two real dances are 0.34 apart).
     #[serde(default)]
     pub song_distance_min_m: Option<f64>,
     /// The two dances (`song motion`) of the smallest song distance.

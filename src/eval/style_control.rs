@@ -2,7 +2,7 @@
 //! each of the four styles with one seed, then
 //! - how far apart the styles' dances are (root-relative pose distance, the seed-sensitivity
 //!   measure of [`crate::metrics::physical::seed_distance_m`]): a style input that changes nothing reads 0;
-//! - whether each dance still passes issue 10's plausibility verdict, and how fast it moves;
+//! - whether each dance still passes the plausibility verdict, and how fast it moves;
 //! - what a classifier trained on real motion alone ([`crate::models::motion_style::MotionStyle`]) says each
 //!   dance is, beside what it says of the real test dances: its accuracy on real dances is the
 //!   ceiling a model's "agrees" share can be read against.
@@ -30,7 +30,7 @@ pub struct StyleSong<'a> {
 pub struct StyleAsked {
     pub style: DanceStyle,
     pub dances: usize,
-    /// Dances that pass issue 10's verdict (as served: feet planted, rigid export).
+    /// Dances that pass the plausibility verdict (as served: feet planted, rigid export).
     pub passing: usize,
     /// Mean joint speed over the dances (m/s).
     pub mean_speed_m_s: f64,

@@ -211,7 +211,7 @@ fn worst_key_error(r: &EvalRow) -> Option<f64> {
         .and_then(|c| c.value)
 }
 
-/// Issue 25's bars on each row: tempo-locked dances (step rate within 3 % of 1/6…1 of the beat
+/// The musicality bars on each row: tempo-locked dances (step rate within 3 % of 1/6…1 of the beat
 /// rate; real dances 32 of 43), the stillest arms (≥ 0.43 m/s), the worst knees (≤ 6 %), and
 /// the same seed on two songs (≥ 0.15 m apart); and the longest hold in one pose (real dances
 /// at most 9.5 s, 41 of 43 under 5 s: [`crate::motion::hold`]), and the posture that changed

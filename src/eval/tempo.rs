@@ -1,4 +1,4 @@
-//! The tempo section of `choreo eval` (issue 25): does a model follow the music's tempo?
+//! The tempo section of `choreo eval`: does a model follow the music's tempo?
 //!
 //! The data cannot tell: every waltz in it is near 87 bpm, every cha-cha 115–127, so a model
 //! that steps at one fixed rate looks tempo-locked on its own genre. So every extra song is also
@@ -66,7 +66,7 @@ pub struct TempoRow {
     /// two metrical levels, and a network can step at one pace on both).
     #[serde(default)]
     pub per_dance: Vec<TempoDance>,
-    /// Issue 25 asks every line of "Done when" of the stretched songs too, not only the tempo
+    /// Every served musicality line is asked of the stretched songs too, not only the tempo
     /// lock: the row's worst served dance by each ([`TempoDance::served_lines`]). Absent in eval
     /// files written before they were measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -126,13 +126,13 @@ impl HeardTempo {
 /// The served lines of one stretched dance (as a user downloads it), or the worst of a row's.
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema)]
 pub struct ServedLines {
-    /// Elbows and wrists against the spine (m/s; issue 25: ≥ 0.43 in every dance).
+    /// Elbows and wrists against the spine (m/s; the bar: ≥ 0.43 in every dance).
     pub arms_m_s: f64,
-    /// Share of knee-frames bent backwards (issue 25: ≤ 6 %).
+    /// Share of knee-frames bent backwards (the bar: ≤ 6 %).
     pub knee_backward_share: f64,
     /// The longest span held in one pose (s; [`crate::motion::hold`]).
     pub longest_hold_s: f64,
-    /// Issue 10's plausibility verdict, and the criteria it fails.
+    /// The plausibility verdict (`metrics::physical`), and the criteria it fails.
     pub verdict_pass: bool,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub verdict_failed: Vec<String>,
@@ -331,7 +331,7 @@ pub(super) fn tempo_row(
                 let lock = as_served.tempo_lock;
                 let lines = ServedLines::of(&as_served, &served, reference);
                 // The same contact sheet as the whole songs': how the stepping changes with the
-                // tempo is what the issue asks to be looked at.
+                // tempo is what this section is read for.
                 if let Some(dir) = &args.previews {
                     super::rows::write_preview(dir, id, &song, seed, &served, &[], &as_served)?;
                 }

@@ -9,7 +9,7 @@
 //! - [`kinematics`]: smoothness, foot skating, freezing, key-pose error; [`plausibility`]:
 //!   authenticity and coherence against real joint-angle limits (TSMT).
 //! - [`physical`]: floor contact, ground penetration, pops, liveliness, seed sensitivity, and
-//!   issue 10's pass/fail verdict on them; [`crate::motion::hang`]: a body held off the floor
+//!   the pass/fail verdict on them; [`crate::motion::hang`]: a body held off the floor
 //!   (both feet up) longer than a dancer can be; [`crate::motion::hold`]: a body standing in one
 //!   pose longer than 41 of the 43 real dances do (both the motion's, read by served stages too,
 //!   reported here).

@@ -51,7 +51,7 @@ pub fn fraction_name(q: f64) -> &'static str {
 }
 
 /// A dance is tempo-locked when its step-rate ratio is within this relative distance of a
-/// fraction (issue 25's bar: 3 %).
+/// fraction (the tempo-lock bar: 3 %).
 pub const TEMPO_LOCK_TOLERANCE: f64 = 0.03;
 /// The band (Hz) searched for the step rate: slower is drift, faster is jitter.
 pub const STEP_BAND_HZ: (f64, f64) = (0.25, 3.0);
@@ -122,8 +122,8 @@ impl Musicality {
     }
 }
 
-/// A set of dances against issue 25's bars: the share tempo-locked, the stillest arms, the worst
-/// knees (each bar is on every dance, so the set reports its extremes, not its means).
+/// A set of dances against the musicality bars: the share tempo-locked, the stillest arms, the
+/// worst knees (each bar is on every dance, so the set reports its extremes, not its means).
 #[derive(
     Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
 )]

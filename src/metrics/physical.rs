@@ -22,7 +22,7 @@
 //! - **seed sensitivity** ([`seed_distance_m`]): mean distance between the root-relative poses
 //!   of two dances, so two seeds that give the same dance are seen.
 //!
-//! [`verdict`] applies the thresholds of issue 10 ([`thresholds`]) and says pass or fail per
+//! [`verdict`] applies the plausibility thresholds ([`thresholds`]) and says pass or fail per
 //! criterion with the measured value. The real train figures (`choreo eval --write-reference`,
 //! in `reference_train.json` under `physical`): lowest foot p5 0.01 m, median 0.16 m; mean joint
 //! acceleration median 3.3 m/s², p99.9 ≈ 56 (max 112, capture glitches); mean joint speed per
@@ -48,7 +48,7 @@ pub const PENETRATION_M: f64 = -0.05;
 /// The span around a key pose searched for its largest pop (seconds either side).
 pub const KEY_POP_SPAN_S: f64 = 0.5;
 
-/// The thresholds of issue 10, each with why.
+/// The plausibility thresholds, each with why.
 pub mod thresholds {
     /// The lowest foot's median (m): real 0.16; a body standing on the floor keeps it near.
     pub const FOOT_MEDIAN_M: (f64, f64) = (-0.05, 0.35);
@@ -380,7 +380,7 @@ impl Criterion {
     }
 }
 
-/// Pass or fail per criterion of issue 10, with the measured values.
+/// Pass or fail per plausibility criterion, with the measured values.
 #[derive(
     Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize, utoipa::ToSchema,
 )]

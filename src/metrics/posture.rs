@@ -1,4 +1,4 @@
-//! Posture variety (issue 25): does a dance move through figures over the song, or hold one?
+//! Posture variety: does a dance move through figures over the song, or hold one?
 //!
 //! The musicality measures ([`super::musicality`]) are speeds and rates, and a dance whose arms
 //! swing fast around one fixed shape for three minutes passes them all: dance-revolution's

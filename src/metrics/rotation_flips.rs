@@ -6,7 +6,7 @@
 //! sweet paper and a tool that interpolates between frames spins the limb. This measure counts
 //! the frame steps on which some joint's local rotation turns more than 60° (and 90°): the angle
 //! of `q_t⁻¹ · q_{t+1}`. In the real data a bone's direction changes more than 60° in one frame
-//! (1/25 s) on 0.003 % of frames (issue 26), so a step past 60° is a flip of the fit, not motion.
+//! (1/25 s) on 0.003 % of frames, so a step past 60° is a flip of the fit, not motion.
 //!
 //! It takes a [`RigMotion`] (what motion.bvh, motion.json and motion.glb carry), not positions:
 //! the report and `choreo eval` fill it in where the rig exists (`scores.rotation_flips`).

@@ -63,7 +63,7 @@ pub struct DanceScores {
     pub key_pose_error_cm: Option<f64>,
     /// Floor contact, ground penetration, pops and speed ([`super::physical`]).
     pub physical: PhysicalScores,
-    /// Issue 10's thresholds applied (the seed criterion only where two seeds are compared).
+    /// The plausibility thresholds applied (the seed criterion only where two seeds are compared).
     pub verdict: Verdict,
     /// Does it go with this song: tempo lock, arm liveliness, knee direction
     /// ([`super::musicality`]).
@@ -255,7 +255,7 @@ pub struct SetScores {
     pub div_k: f64,
     /// Div_g over all windows pooled.
     pub div_g: f64,
-    /// Issue 25's bars on the set: tempo-locked share, stillest arms, worst knees.
+    /// The musicality bars on the set: tempo-locked share, stillest arms, worst knees.
     #[serde(default)]
     pub musicality: MusicalitySummary,
 }

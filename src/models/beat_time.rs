@@ -1,4 +1,4 @@
-//! Beat time (issue 25): a network that runs on a clock of beats, not of seconds.
+//! Beat time: a network that runs on a clock of beats, not of seconds.
 //!
 //! Every network here learned one step rate per style, because the data's tempi cluster by style
 //! (every waltz near 87 BPM, every cha-cha 115–127) and no figure was ever danced at two tempi.

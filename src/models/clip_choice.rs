@@ -1,4 +1,4 @@
-//! Real clips chosen by the music (issue 25), shared by keypose-transformer's scaffold and
+//! Real clips chosen by the music, shared by keypose-transformer's scaffold and
 //! TSMT's opening: each clip of a model's bank keeps where it came from and what its own song
 //! did under it ([`ClipInfo`]: the train dance, its style, the song's beats on the clip's frames,
 //! the meter and the energy), and a song ranks the clips by how well they would dance to it —

@@ -55,16 +55,16 @@ pub struct Config {
     pub lstm_layers: i64,
     /// Dropout in the encoder during training.
     pub dropout: f64,
-    /// The music features end with the beat clock ([`crate::audio::clock`], issue 25): weights
+    /// The music features end with the beat clock ([`crate::audio::clock`]): weights
     /// trained before it read the paper's 438 columns only.
     #[serde(default)]
     pub beat_clock: bool,
-    /// Hidden width of the arm head ([`ArmHead`], issue 25; not in the paper); 0: none, as every
-    /// run before it.
+    /// Hidden width of the arm head ([`ArmHead`]; not in the paper); 0: none, the paper's
+    /// read-out alone.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub arm_head: i64,
-    /// The arm head also reads the figure the arms are to hold ([`figures`], issue 25; not in
-    /// the paper).
+    /// The arm head also reads the figure the arms are to hold ([`figures`]; not in the
+    /// paper).
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub arm_figures: bool,
 }

@@ -85,7 +85,7 @@ pub struct Config {
     pub absolute_dims: i64,
     /// The control signals themselves (onset, beat, downbeat, chroma) join the music code in
     /// every gated layer's conditioning, so a beat reaches the decoder on its frame rather than
-    /// only through the 8-s encoder (issue 25: the network heard the music seconds late). Absent
+    /// only through the 8-s encoder (without it the network heard the music seconds late). Absent
     /// in older `model.json` files: no.
     #[serde(default)]
     pub music_direct: bool,

@@ -1,5 +1,5 @@
 //! Key-pose controllable cross-modal transformer: "Controllable music-driven dance generation
-//! with key-pose constraints" (the seed paper of issue 6; its architecture §3, loss §3.4).
+//! with key-pose constraints" (its architecture §3, loss §3.4).
 //!
 //! - **Music transformer encoder** over the 15-d key-pose feature set (chroma 12, beat and
 //!   downbeat 2, onset 1): [`MusicEncoder`].

@@ -1,4 +1,4 @@
-//! The step clock (issue 25 item 4): a phase that turns once per step of the song's beats,
+//! The step clock: a phase that turns once per step of the song's beats,
 //! given to a network beside the music (dancenet: every gated layer's conditioning,
 //! `dancenet::Config::step_clock`; tsmt: the pose stream's input and the fusion,
 //! `tsmt::Config::step_clock`). Written for dancenet first; the text below tells its story.
@@ -36,7 +36,7 @@ pub fn step_hz(style: DanceStyle) -> f64 {
     }
 }
 
-/// Steps per beat of a style's dancers (the README's tempo lock on the real dances).
+/// Steps per beat of a style's dancers (the tempo lock on the real dances, docs/evaluation.md).
 pub fn step_fraction(style: DanceStyle) -> f64 {
     match style {
         DanceStyle::Waltz => 1.0 / 3.0,

@@ -89,7 +89,7 @@ pub struct Config {
     /// Context window of the pose stream, frames (training window length and the cache kept).
     pub window: i64,
     pub dropout: f64,
-    /// The step clock (issue 25 item 4, `models::step_clock`): a phase that turns once per step
+    /// The step clock (`models::step_clock`): a phase that turns once per step
     /// of the song's beats, added to the pose stream's input frames and to the fusion
     /// ([`StepClockIn`]). Absent in older `model.json` files: off.
     #[serde(default)]

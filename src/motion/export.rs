@@ -404,7 +404,7 @@ pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
         name: Some("dance".into()),
         samplers,
     });
-    // A figure for viewers to show (issue 26): the skin's mannequin, made from the rig.
+    // A figure for viewers to show: the skin's mannequin, made from the rig.
     super::mannequin::attach(&mut root, &mut bin, &m.rig, skin, scene)?;
     while bin.len() % 4 != 0 {
         bin.push(0);

@@ -68,10 +68,10 @@ const FEET: [[usize; 2]; 2] = [
 /// point less slide, or it lifts. The body moves by minus the mean horizontal step of the
 /// support's touching points.
 ///
-/// Why not the first foot down, kept while it touches (this stage until issue 25): on 75 whole
+/// Why not the first foot down, kept while it touches: on 75 whole
 /// served dances (the five songs of `../shared/audio`, seeds 1, 2 and 7, the four served models
 /// and dance-revolution's rhythm-term weights) feet in contact slid less on 67, by model
-/// 0.378–0.531 → 0.367–0.518 m/s, acceleration and verdicts unchanged (README, "Feet").
+/// 0.378–0.531 → 0.367–0.518 m/s, acceleration and verdicts unchanged (docs/serving.md).
 pub fn plant_feet(mut positions: ArrayViewMut3<'_, f32>, fps: f64) -> usize {
     let t = positions.dim().0;
     if t < 2 {

@@ -7,7 +7,7 @@
 //! The liveliness measures of [`crate::metrics::physical`] average a whole dance, and the freezing
 //! ratio ([`crate::metrics::kinematics::freezing`]) compares its first and last 30 s, so a dance
 //! that steps for two minutes and stands for 19 s between scores like one that never stops (tsmt on
-//! `vibe_ace`, seed 2, 26–45 s at 0.2–0.4 m/s: the tsmt card's twenty-fifth session).
+//! `vibe_ace`, seed 2, 26–45 s at 0.2–0.4 m/s: the tsmt card).
 //!
 //! - **hold** ([`longest_hold_s`]): the longest span (s) over which every one-second mean joint
 //!   speed ([`crate::motion::skeleton::mean_speed`], world positions) is under

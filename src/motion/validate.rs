@@ -1,4 +1,4 @@
-//! Validation of motion users send: key poses and seed motions (§6 of the motion issue).
+//! Validation of motion users send: key poses and seed motions.
 //!
 //! [`super::input`] turns what the API and the CLI accept (either joint set, or BVH) into the
 //! canonical forms checked here:

@@ -326,7 +326,7 @@ fn draw_title<DB: DrawingBackend>(
         sheet.song_duration_s
     ));
     parts.push(format!("mean joint speed {:.2} m/s", series.mean_speed));
-    // Does it go with this song (issue 25): the step rate against the beat, the arms, a hold.
+    // Does it go with this song: the step rate against the beat, the arms, a hold.
     let m = sheet.musicality;
     if let Some(lock) = m.tempo_lock {
         let mark = if lock.locked { "locked" } else { "off" };

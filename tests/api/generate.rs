@@ -88,7 +88,7 @@ async fn dance_revolution_dances_a_real_song_through_the_api() {
             .is_some_and(f64::is_finite),
         "{report}"
     );
-    // Issue 10's physical numbers and their verdict ride in every report.
+    // The physical-plausibility numbers and their verdict ride in every report.
     assert!(
         report["scores"]["physical"]["lowest_foot_m"]["median"]
             .as_f64()

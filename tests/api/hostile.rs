@@ -1,4 +1,4 @@
-//! Hostile uploads and oversized job requests (issue 11), against a real `choreo serve` process
+//! Hostile uploads and oversized job requests, against a real `choreo serve` process
 //! where memory, CPU and signals are what is measured, and the in-process service otherwise.
 use crate::helpers::{expect_problem, spawn_app, spawn_app_with};
 use crate::hostile_files as files;

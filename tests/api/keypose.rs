@@ -8,10 +8,10 @@ use reqwest::StatusCode;
 use serde_json::{json, Value};
 use std::path::Path;
 
-/// The consistency target for the generated motion (mean per-joint error at the key
+/// The consistency target for the generated motion (mean per-joint error at the key
 /// frames, centroid-aligned), cm; the report measures it before export.
 const KEY_POSE_TARGET_CM: f64 = 3.0;
-/// The error through the BVH, per key pose, cm: the 3 cm. The BVH is a rigid skeleton;
+/// The error through the BVH, per key pose, cm: the same 3 cm. The BVH is a rigid skeleton;
 /// the export fits it to the key-pose frames (`rig::fit_and_solve`'s anchors), so the body the
 /// user posed is the body that dances, and solves it in least squares (measured 0.49–1.28 cm on
 /// these four; 0.52–2.19 cm with the chain IK on the key frames' median skeleton; 3.26–4.88 cm

@@ -1,4 +1,4 @@
-//! The small limits of issue 30, in process: request ids, the Bearer scheme, multipart part
+//! The small limits, in process: request ids, the Bearer scheme, multipart part
 //! headers, stalled bodies and the start-up sweep of crash leftovers.
 use crate::helpers::{expect_problem, spawn_app_with};
 use reqwest::StatusCode;

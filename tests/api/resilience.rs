@@ -1,4 +1,4 @@
-//! Bad clients and a failing log sink (issue 30), each against a real `choreo serve` process:
+//! Bad clients and a failing log sink, each against a real `choreo serve` process:
 //! stalled connections under a lowered open-file limit, stalled readers of a large result, a
 //! closed stderr. Every loop is bounded in count and time; all traffic stays on 127.0.0.1.
 use crate::helpers::{short_song, song};

@@ -18,7 +18,7 @@ use serde_json::{json, Value};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-/// The issue's bar: the angles between bones match motion.json's within this median, degrees.
+/// The bar: the angles between bones match motion.json's within this median, degrees.
 const MEDIAN_LIMIT_DEG: f64 = 10.0;
 /// Frames compared per dance (spread evenly).
 const FRAMES: usize = 40;
@@ -66,7 +66,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 /// Joint positions of one pose by name.
 type Pose = HashMap<String, Vector3<f64>>;
 
-/// The angles the issue names, from a pose and the names of its joints for each landmark:
+/// The angles compared, from a pose and the names of its joints for each landmark:
 /// elbows and knees (between the two bones), shoulders and hips (upper arm or thigh against the
 /// torso, mid-hips to mid-shoulders).
 fn angles(p: &Pose, n: &dyn Fn(&str) -> String) -> Vec<(&'static str, f64)> {
@@ -539,7 +539,7 @@ fn smpl_npz_follows_the_dance(npz: &Path, motion: &Value, frames: &[usize]) {
         target.rig.names.iter().cloned().zip(pos).collect()
     };
     // SMPL's collar-to-shoulder and the hips differ from choreo's markers; knees and elbows are
-    // what the issue asks of SMPL.
+    // what is compared on SMPL.
     let mut knee_elbow: HashMap<&str, Vec<f64>> = HashMap::new();
     for &t in frames {
         let want = angles(&choreo_pose(motion, t), &|k| k.to_string());

@@ -7,7 +7,7 @@ use crate::helpers::{expect_problem, short_song, spawn_app_with, TestApp};
 use reqwest::StatusCode;
 use serde_json::{json, Value};
 
-/// The consistency target: mean per-joint distance between a key pose and the result at
+/// The key-pose consistency target: mean per-joint distance between a key pose and the result at
 /// its frame, both relative to the body centre, cm.
 const KEY_POSE_TARGET_CM: f64 = 3.0;
 /// How far the exported dance's first frames may be from a seed motion's last ones, cm (see its use).

@@ -3,7 +3,7 @@
 //!
 //! A mutation loop runs thousands of mutated headers of real mp3, ogg, flac, wav and m4a files
 //! (made with ffmpeg from ../shared/audio) through the decoder; the regression tests write the
-//! two files of issue 11 byte by byte.
+//! two hostile files (`hostile_files`) byte by byte.
 use crate::hostile_files::{silent_flac, the_40_byte_m4a};
 use choreo::audio::{self, AudioError, Budget, DecodeOptions, Keep};
 use rand::rngs::StdRng;
@@ -35,7 +35,7 @@ fn options<'a>(keep: Keep, max_duration_s: f64, budget: &'a Budget<'a>) -> Decod
 }
 
 // ---------------------------------------------------------------------------------------------
-// The files of issue 11 (written by `hostile_files`).
+// The two hostile files (written by `hostile_files`).
 
 #[test]
 fn the_40_byte_m4a_is_refused_at_once() {

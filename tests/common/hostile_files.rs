@@ -1,7 +1,7 @@
-//! The two hostile files of issue 11, written byte by byte (shared by the audio and API tests).
+//! The two hostile files, written byte by byte (shared by the audio and API tests).
 
 /// A 16-byte `ftyp`, then an `mdat` whose 64-bit size is 2^64 − 16: summed into the position,
-/// it wrapped to 0 and the old box walker looped for ever.
+/// it wraps to 0, and a box walker that does not check it loops for ever.
 pub fn the_40_byte_m4a() -> Vec<u8> {
     let mut b = Vec::new();
     b.extend_from_slice(&16u32.to_be_bytes());

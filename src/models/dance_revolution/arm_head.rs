@@ -1,4 +1,4 @@
-//! The arm head (issue 25; not in the paper): a second read-out of the elbows and wrists, never fed
+//! The arm head (not in the paper): a second read-out of the elbows and wrists, never fed
 //! back to the LSTM, and the figure it may be told to dance ([`super::figures`]).
 use tch::nn;
 use tch::{Kind, Tensor};
@@ -16,7 +16,7 @@ pub fn arm_columns() -> Vec<i64> {
         .collect()
 }
 
-/// Not in the paper (issue 25): a second read-out of the elbows and wrists from `[h_i; z_i]`, added
+/// Not in the paper: a second read-out of the elbows and wrists from `[h_i; z_i]`, added
 /// to the paper's read-out in what the decoder emits but never fed back, so the LSTM steps exactly
 /// as it does without it: the legs and their timing (what the tempo test checks) stay the trained
 /// network's own. Its last layer starts at zero, so a head added to trained weights changes
@@ -26,7 +26,7 @@ pub fn arm_columns() -> Vec<i64> {
 ///
 /// With `Config::arm_figures` the head also reads the figure the arms are to hold at each frame
 /// (`[h_i; z_i; f_i]`, [`super::figures`]): the decoder alone holds one arm shape for a whole song
-/// (its card, thirty-second session), and a figure that changes over the song moves it. The
+/// (its card), and a figure that changes over the song moves it. The
 /// figure's input weights are added as new columns of the hidden layer, so a head trained without
 /// them loads (`train::load_widened`) and reads the figure as nothing until it trains.
 #[derive(Debug)]

@@ -1,8 +1,8 @@
-//! Figures the arms move through over a song (issue 25; not in the paper).
+//! Figures the arms move through over a song (not in the paper).
 //!
 //! The decoder holds one arm shape from a song's first second to its last: a draw of `h_0` sets
 //! it, and neither kicks to the LSTM state nor fresh draws at cuts through the song left it for
-//! anything but a stand or a flail (the card, thirty-second and thirty-third sessions). Real
+//! anything but a stand or a flail (the model card). Real
 //! dancers move through figures: their arms' 4-s mean posture lies 0.06–0.22 m (median 0.13) from
 //! itself 8 s later (`metrics::posture`). So the arm head ([`super::ArmHead`], never fed back) is
 //! also told a *figure* at each frame: the elbows' and wrists' place relative to the spine in the

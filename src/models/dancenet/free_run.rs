@@ -1,4 +1,4 @@
-//! The decoder dancing on its own for training (issue 25, the lock term): a batch of windows
+//! The decoder dancing on its own for training (the lock term): a batch of windows
 //! continued frame by frame from a real context, as §3.4's sampler does, but batched and with
 //! the autograd tape kept, so a loss on the danced frames reaches the network.
 //!

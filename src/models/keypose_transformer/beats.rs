@@ -1,8 +1,8 @@
 //! What the scaffold hears of a song ([`SongCues`]: its beat grid, tempo, meter and energy), and
 //! the time maps that retime a bank clip onto it ([`TimeMap`], [`resample_rows`]).
 //!
-//! The scaffold used to hand the network a train clip in the clip's own timing, a pose every 12
-//! frames: the feet moved at that fixed 0.48-s spacing on every song and at every tempo (7 of 30
+//! A train clip handed to the network in the clip's own timing, a pose every 12 frames, moves
+//! the feet at that fixed 0.48-s spacing on every song and at every tempo (measured: 7 of 30
 //! dances tempo-locked; the same song at 0.85× and 1.2× stepped at one rate). A real dancer's
 //! steps sit at a fixed fraction of the beat, so a clip whose own beats are put on the song's beats
 //! carries its steps onto the song's beat: the clip is played faster or slower between matched

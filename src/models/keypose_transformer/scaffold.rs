@@ -3,13 +3,13 @@
 //! job draws the seed motion and a scaffold of poses.
 //!
 //! A deterministic regression network started from the mean pose gives the same small, averaged
-//! motion for every seed (the failure the plausibility issue measured: 0.15–0.20 m/s and seeds 1
+//! motion for every seed (measured: 0.15–0.20 m/s and seeds 1
 //! and 2 identical). The paper's model composes a dance *between key poses*; so when the user gives
 //! few of them, the scaffold supplies the rest: real poses handed to the network as key poses it is
 //! *not* held to (no exact pass, unlike the user's). The network still makes every frame: the
 //! transitions, the travel, the facing and the height. Scaffold poses keep away from user keys.
 //!
-//! **Following the music** ([`PoseBank::scaffold_to`], issue 25): the song's beats, tempo, meter
+//! **Following the music** ([`PoseBank::scaffold_to`]): the song's beats, tempo, meter
 //! and energy ([`SongCues`]) choose the clips: those whose own beat period is near the song's (or
 //! twice or half of it), in the song's meter (waltz clips for three beats a bar) and whose music
 //! had the energy of the song around the frame they enter; the job's seed draws among the best few,
@@ -49,7 +49,7 @@ use crate::motion::repr::{self, FEATURE_DIM, POSE_DIM};
 pub const LIVELY_M_S: f64 = 0.63;
 /// A clip whose arms move slower than this against the spine (m/s, over the whole clip) is
 /// ranked [`HELD_ARMS_PENALTY`] lower: the slowest real dance's arms, as a whole dance
-/// (`metrics::musicality`, issue 25). Three of the bank's 18 waltz clips hold their arms slower
+/// (`metrics::musicality`). Three of the bank's 18 waltz clips hold their arms slower
 /// (0.37, 0.42, 0.43 m/s), and a waltz drawn from them danced DANCE_W_8 (seed 6) with its arms at
 /// 0.42.
 pub const HELD_ARMS_M_S: f64 = 0.43;

@@ -72,7 +72,7 @@ pub struct Serving {
     pub scaffold_spacing: usize,
     /// The dance turns as the scaffold's clips turn ([`super::scaffold::Scaffold::facing`])
     /// instead of as the network turns it: the network makes the poses, the travel and the
-    /// height, the clips give the facing (issue 25: the network turned a waltz 25°/s where real
+    /// height, the clips give the facing (measured: the network turned a waltz 25°/s where real
     /// waltzers turn 56–70°/s, and a waltz's arms move against the spine mostly by turning).
     #[serde(default)]
     pub scaffold_facing: bool,

@@ -1,5 +1,5 @@
-//! Training dance-revolution's arm head on the network's own whole-song dances (issue 25,
-//! `choreo train dance-revolution --arm-head N --arm-head-only true`).
+//! Training dance-revolution's arm head on the network's own whole-song dances
+//! (`choreo train dance-revolution --arm-head N --arm-head-only true`).
 //!
 //! The arm head (`dance_revolution::ArmHead`) is never fed back, so the frozen network dances
 //! exactly the same whatever the head does: its dances can be made once, before training, and the

@@ -1,4 +1,4 @@
-//! Training windows at other tempi and mirrored (issue 25).
+//! Training windows at other tempi and mirrored.
 //!
 //! The data's tempi cluster by style (every waltz near 87 BPM, every cha-cha 115–127), so a network
 //! never sees one figure danced at two tempi and learns a step rate per style, not per song. Each

@@ -36,14 +36,14 @@ pub struct Options {
     pub first_epoch: usize,
     /// Train the encoder at position offsets drawn over a whole 15-minute song (default), or at 0 only.
     pub random_positions: bool,
-    /// Append the beat clock to the music features (`audio::clock`, issue 25).
+    /// Append the beat clock to the music features (`audio::clock`).
     pub beat_clock: bool,
     /// Windows at tempo factors in `[min_tempo, max_tempo]` and mirrored (`train::augment`).
     pub min_tempo: f64,
     pub max_tempo: f64,
     pub mirror: bool,
     /// Weight of an L1 loss on frame-to-frame pose change beside the pose loss: a pose loss alone
-    /// is met best by the mean pose where a motion is uncertain, which froze the arms (issue 25).
+    /// is met best by the mean pose where a motion is uncertain, which froze the arms.
     pub velocity_weight: f64,
     /// Re-time every train dance to the split's median tempo (`models::beat_time`), and serve so.
     pub beat_time: bool,
@@ -85,7 +85,7 @@ impl Default for Options {
             seed: 2021,
             first_epoch: 0,
             random_positions: true,
-            // The served weights' schedule: issue 25's runs (the model card) set these by flag.
+            // The served weights' schedule; the runs in the model card set these by flag.
             beat_clock: false,
             min_tempo: 1.0,
             max_tempo: 1.0,
@@ -313,7 +313,7 @@ fn window_loss(
 ) -> Tensor {
     let len = poses.size()[1];
     let music = music.narrow(1, 1, len - 1);
-    // A position offset drawn per batch over the whole range a served song uses (issue 10 §5).
+    // A position offset drawn per batch over the whole range a served song uses.
     let start = if random_positions {
         (seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) >> 11) as i64
             % (crate::models::dance_revolution::MAX_POSITION - len).max(1)

@@ -71,20 +71,20 @@ pub struct Options {
     /// σ (frames) of the served smoothing written into `model.json` (`dancenet::Serving`).
     pub smooth_frames: f64,
     pub seed: u64,
-    /// Weight of the rhythm term (issue 25): `rollout_windows` windows of each batch are danced on
+    /// Weight of the rhythm term: `rollout_windows` windows of each batch are danced on
     /// by the decoder alone after their first `warmup` real frames, drawing as served (σ ×
     /// `temperature`, draws of coherence `coherence`, reparameterised so the gradient reaches each
     /// draw's mean and σ), and the magnitude spectra of that motion's velocities are held to the real
     /// continuation's (`train::spectral`). Teacher forcing alone never scores the decoder's own
     /// stepping, which is where it loses the beat. 0: the paper's losses only.
     pub spectral_weight: f64,
-    /// Weight of the lock term (issue 25 item 4; [`lock`]): the same free-running windows, scored
+    /// Weight of the lock term ([`lock`]): the same free-running windows, scored
     /// by how much of the toes' speed swings at the style's fraction of the song's beats. 0: off.
     pub lock_weight: f64,
     /// Windows of each batch danced on freely for the rhythm and lock terms.
     pub rollout_windows: usize,
     /// Windows drawn at tempo factors in `[min_tempo, max_tempo]` (log-uniform): music and dance
-    /// resampled together (`train::augment`, issue 25), so one figure is seen at many tempi.
+    /// resampled together (`train::augment`), so one figure is seen at many tempi.
     pub min_tempo: f64,
     pub max_tempo: f64,
     /// Share of training windows whose style input is zeroed, so the decoder learns what the

@@ -1,4 +1,4 @@
-//! A loss that sees rhythm (issue 25): the L1 between the magnitude spectra of predicted and real
+//! A loss that sees rhythm: the L1 between the magnitude spectra of predicted and real
 //! velocities over a window.
 //!
 //! A pose loss is met best by the mean of what may come next; where the timing of a movement is

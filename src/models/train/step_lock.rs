@@ -1,4 +1,4 @@
-//! What the step clock's trainers share (issue 25 item 4; `choreo train dancenet --step-clock`,
+//! What the step clock's trainers share (`choreo train dancenet --step-clock`,
 //! `choreo train tsmt --step-clock`): the projections of a speed on a phase that score how a
 //! danced window steps with the clock, and the real dancer's own phase in a training window that
 //! the clock is set to. Each model measures its toes' speed in its own features (dancenet:

@@ -74,12 +74,12 @@ pub struct Options {
     /// Train in beat time (`models::beat_time`): every dance re-timed to the split's median
     /// tempo (after the bins are fitted on the dances as danced); the model then serves so.
     pub beat_time: bool,
-    /// Windows at tempo factors in `[min_tempo, max_tempo]` and mirrored (`train::augment`; issue
-    /// 25): one figure heard at many tempi. The bins stay those fitted on the dances as danced.
+    /// Windows at tempo factors in `[min_tempo, max_tempo]` and mirrored (`train::augment`):
+    /// one figure heard at many tempi. The bins stay those fitted on the dances as danced.
     pub min_tempo: f64,
     pub max_tempo: f64,
     pub mirror: bool,
-    /// Self-conditioning (issue 25, the freeze): share of each window's input frames replaced
+    /// Self-conditioning (against the freeze): share of each window's input frames replaced
     /// by the model's own draws, in runs of `self_run` frames between runs of the dance, as
     /// Zhou et al.'s auto-conditioned LSTM (ICLR 2018) does against motion that freezes on long
     /// generation; made parallel for a transformer as in Duckworth et al. (2019): `self_passes`

@@ -1,4 +1,4 @@
-//! A free run of TSMT that a loss can reach (`choreo train tsmt --free-runs`, issue 25 item 4):
+//! A free run of TSMT that a loss can reach (`choreo train tsmt --free-runs`):
 //! the network draws its own frames one at a time, as served (§3.4: the caches, the temperature,
 //! top-k), and every draw is straight-through: the forward pass carries the drawn bin exactly,
 //! the backward pass the gradient of its probabilities (Bengio, Léonard, Courville 2013; the
@@ -7,7 +7,7 @@
 //!
 //! Teacher-forced windows cannot teach what the served sampler gets wrong: each scored frame is
 //! one step from a history that already steps at the dance's rate, so a term on the step clock
-//! is met before the network reads the clock (the card: runs L, W, U). In a free run the
+//! is met before the network reads the clock (the tsmt card). In a free run the
 //! network's own history drifts, as served, and only the clock can bring it back.
 use tch::{Kind, Tensor};
 

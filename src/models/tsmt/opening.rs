@@ -1,4 +1,4 @@
-//! TSMT's served opening check (not in the paper; issue 25): a candidate clip whose opening,
+//! TSMT's served opening check (not in the paper): a candidate clip whose opening,
 //! drawn by the network, freezes, holds one pose, holds its arms or bends its knees backwards
 //! (as served) is passed over for the next
 //! candidate the song chose (`Served::generate_features`), and a freeze or a hold later in the
@@ -65,7 +65,7 @@ impl OpeningMeasures {
 const SHORT_SONG_MIN_SPEED_M_S: f64 = 0.6;
 
 /// An opening whose knees bend backwards on more of its knee-frames than this, with the served
-/// knee step and feet, is passed over: half of issue 25's line (6 %; real dances at most 5.8 %),
+/// knee step and feet, is passed over: half of the knee line (6 %; real dances at most 5.8 %),
 /// since the stages after the check (the beat-align warp, the export's rigid skeleton) add to
 /// it. The knee step turns most of tsmt's backward knees forward, but not over a foot pointed
 /// along the shin: on the trumpet loop at 1.2× (4.4 s, all of it the opening), seed 1's first
@@ -140,8 +140,8 @@ impl PoseReader<'_> {
 
 /// A hold later in the song this long (s) or longer is drawn again from the next candidate clip:
 /// longer than 41 of the 43 real dances' longest (all but two rumba poses of 8.6 and 9.5 s;
-/// [`crate::motion::hold`]). The served dances' previews held 5–19 s mid-song (the card's
-/// twenty-fifth session: hungarian_dance_5 31–36 s, vibe_ace 26–45 s), which the freeze check,
+/// [`crate::motion::hold`]). The served dances' previews held 5–19 s mid-song (the tsmt
+/// card: hungarian_dance_5 31–36 s, vibe_ace 26–45 s), which the freeze check,
 /// reading the reach over 10 s, let pass.
 pub(super) const MIDSONG_HOLD_S: f64 = HOLD_NOTED_S;
 
@@ -152,7 +152,7 @@ pub(super) const MIDSONG_HOLD_S: f64 = HOLD_NOTED_S;
 pub(super) const OPENING_SLOW_M_S: f64 = HOLD_SPEED_M_S;
 
 /// An opening whose arms move slower than this against the spine (m/s; the slowest real
-/// dance's, issue 25's line) is passed over for the next candidate clip. On a 5-s loop the
+/// dance's, the musicality line) is passed over for the next candidate clip. On a 5-s loop the
 /// opening is the whole dance: a clip continued in a ballroom hold kept its arms at 0.34 m/s
 /// and, beat-aligned, under the line (the card).
 pub(super) const OPENING_MIN_ARMS_M_S: f64 = 0.43;

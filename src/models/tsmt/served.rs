@@ -98,7 +98,7 @@ pub struct Serving {
     /// seconds.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub beat_time: Option<crate::models::beat_time::BeatTimeConfig>,
-    /// The step clock's gain as served (not in the paper; issue 25 item 4): the clock's columns
+    /// The step clock's gain as served (not in the paper): the clock's columns
     /// are multiplied by it before both of its maps ([`super::StepClockIn`]). The maps are
     /// linear, so at the fusion this is the clock's learned part pushed g times as far from the
     /// clock-free one, as classifier-free guidance does. Trained at 1, the clock moves the
@@ -108,14 +108,14 @@ pub struct Serving {
     pub clock_gain: f64,
     /// Where set, the served clock turns at the fraction of the song's beat (one of the training
     /// clock's, 1/6 to 2/3) whose step rate is nearest this (Hz), not at its metre's fraction
-    /// (not in the paper; issue 25 item 4). TSMT takes no style, and its own steps settle near
+    /// (not in the paper). TSMT takes no style, and its own steps settle near
     /// the train split's pace, a waltz's 0.49 Hz (26 of its 37 dances are waltzes): it followed a clock
     /// there, and drifted off one at a cha-cha's 1 Hz (the card).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clock_step_hz: Option<f64>,
     /// Where set, the served clock turns once a bar, halved or doubled into this band of step
     /// rates (Hz; `step_clock::phase_per_bar`), before `clock_step_hz` is read: a clock that
-    /// follows the song's tempo (issue 25; tried, the card).
+    /// follows the song's tempo (tried: the tsmt card).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub clock_bar_hz: Option<[f64; 2]>,
 }
@@ -478,7 +478,7 @@ pub(super) fn heights_as_served(features: &mut Array2<f32>, keep: usize, sigma: 
 /// a freeze to the end (a frozen network stays frozen), a hold from JOIN_FRAMES before it, so
 /// the join blends the new frames with the old one's last steps rather than with the hold, to
 /// REJOIN_FRAMES after it, where the old dance moves again. Drawing the rest of the song again
-/// for every hold cost 1.6–2.3× on a 3-minute song (the card's twenty-sixth session).
+/// for every hold cost 1.6–2.3× on a 3-minute song (the tsmt card).
 pub(super) fn redrawn_span(
     frozen: Option<usize>,
     held: Option<Range<usize>>,

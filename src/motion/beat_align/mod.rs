@@ -1,5 +1,5 @@
-//! Beat alignment: the served stage that moves a dance's steps onto the song's beats (issue 25,
-//! item 4), after the network and before [`super::finish`] plants the feet.
+//! Beat alignment: the served stage that moves a dance's steps onto the song's beats, after
+//! the network and before [`super::finish`] plants the feet.
 //!
 //! Real dancers step at a fixed fraction of the beat ([`crate::metrics::musicality`]: the peak of
 //! the ankles' summed-speed spectrum is 1/2 of the beat rate for rumba and cha-cha, 1/3 for
@@ -308,7 +308,7 @@ pub fn align_served(
 /// its served dance hangs (both feet up, [`hang_s`]) no longer than that one's or than real
 /// dancers do ([`HANG_REAL_MAX_S`]): a warp slows a hop as it slows a pose, and the first
 /// alternative to a hold found was served with a 1.04-s hang, over the verdict's 1.0 (tsmt,
-/// DANCE_R_9 seed 4; the card's twenty-seventh session). Else the first of them whose served
+/// DANCE_R_9 seed 4; the tsmt card). Else the first of them whose served
 /// dance steps on the beat; else the first. Each judged candidate's `steps_on_beat` is set to
 /// what its served dance does.
 fn choose(
@@ -359,8 +359,8 @@ fn choose(
 /// `served` holds one pose ([`longest_hold_s`]) for [`HOLD_NOTED_S`] or longer, and longer
 /// than the dance as it came (`came_hold_s`, plus [`HOLD_SLACK_S`]). A warp slows what it
 /// stretches, and a slow stretch slowed reads as a hold: tsmt's own 2.6–5.0-s holds were served
-/// as 5.0–6.4-s stands (16 of 120 dances at seeds 1–6 held 5 s or longer; the tsmt card's
-/// twenty-seventh session), longer than 41 of the 43 real dances ever hold.
+/// as 5.0–6.4-s stands (16 of 120 dances at seeds 1–6 held 5 s or longer; the tsmt
+/// card), longer than 41 of the 43 real dances ever hold.
 fn lengthens_hold(served: &Motion, came_hold_s: f64) -> bool {
     let held = longest_hold_s(served.positions.view(), served.fps);
     held >= HOLD_NOTED_S && held > came_hold_s + HOLD_SLACK_S

@@ -1,4 +1,4 @@
-//! Retargeting: a dance on a skeleton other than choreo's own (issue 26).
+//! Retargeting: a dance on a skeleton other than choreo's own.
 //!
 //! Every target skeleton is described the same way, whatever it comes from (a built-in such as
 //! Mixamo, VRM or SMPL, or a BVH/glb a user uploads): a rigid [`Rig`] with the target's own joint

@@ -115,7 +115,7 @@ fn ik_of_a_rigid_motion_is_exact() {
 
 /// A nearly straight right arm swinging forward and back while its elbow bend (±1.5°) changes
 /// side: the positions leave the arm's twist free, and a frame solved on its own picks it from
-/// whichever side the bend is on, half a turn apart. Carried from frame to frame (issue 26) no
+/// whichever side the bend is on, half a turn apart. Carried from frame to frame, no
 /// joint turns past 60° between frames, and the positions stay exact.
 #[test]
 fn a_straight_arm_keeps_its_twist() {

@@ -1,11 +1,12 @@
-//! The lock term (`choreo train dancenet --lock-weight W`, issue 25 item 4): how much of the
+//! The lock term (`choreo train dancenet --lock-weight W`): how much of the
 //! toes' speed, while the decoder dances on its own, turns with the song's beats at the style's
 //! step fraction.
 //!
 //! Real dancers step at a fixed fraction of the beat (1/2 of it in rumba and cha-cha, 1/3 in
-//! waltz: the README's tempo lock), and the network's own dances do not. The rhythm term tried
-//! before held the danced velocities' magnitude spectra to the real continuation's; that never
-//! names the beat, and a 5-s rollout cannot tell a step rate 10 % off. This term names it: the
+//! waltz: the tempo lock, docs/evaluation.md), and the network's own dances do not. The rhythm
+//! term (`train::spectral`) holds the danced velocities' magnitude spectra to the real
+//! continuation's; that never names the beat, and a 5-s rollout cannot tell a step rate 10 % off.
+//! This term names it: the
 //! phase 2π·f·B(t), with B the beat count at each frame (from the window's beat column, so a
 //! window drawn at another tempo brings its own grid) and f the style's fraction, and it scores
 //! the normalised projection of the toes' speed on it,

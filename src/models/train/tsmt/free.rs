@@ -1,17 +1,17 @@
-//! Free runs of `choreo train tsmt` (`--free-runs`, issue 25 item 4): a few windows of each
+//! Free runs of `choreo train tsmt` (`--free-runs`): a few windows of each
 //! batch are danced on by the network from [`FREE_CONTEXT`] real frames, as served
 //! ([`Tsmt::free_run`], straight-through draws), and the run is scored against the real
 //! continuation of the same frames:
 //! - the **lock** term ([`super::lock::Lock`]): the toes' speed projected on the window's step
 //!   clock, held to the real dancer's score (`--free-weight`);
 //! - the **body** term ([`Body`], `--free-body`): the run keeps the pace and the floor of the
-//!   dance it continues. The lock term alone (the card's run F) taught runs that step on the
+//!   dance it continues. The lock term alone (docs/experiments.md) taught runs that step on the
 //!   clock by holding still between bursts: a served dance at 0.49 m/s, one held off the floor
 //!   for 1.2 s, where the weights before it passed all 24. So every second of the run moves at
 //!   least [`SLOWEST`] of the real continuation's mean joint speed, the whole run at most
 //!   `--free-pace-max` of it ([`FASTEST`] by default), and its lowest foot rises no more than
 //!   [`LIFT_M`] above the highest the real lowest foot reached. The ceiling is a sum over all
-//!   joints: run G (the card) met it by stilling the arms, so 0 leaves it out.
+//!   joints: a run met it by stilling the arms (docs/experiments.md), so 0 leaves it out.
 use ndarray::{s, Array2, ArrayView2};
 use rand::rngs::StdRng;
 use rand::Rng;

@@ -1,5 +1,5 @@
 //! The step clock of tsmt's training windows and its lock term (`choreo train tsmt --step-clock
-//! --lock-weight W`, issue 25 item 4).
+//! --lock-weight W`).
 //!
 //! TSMT's pose stream, taught by teacher forcing, continues the step rate of its history; its
 //! own dances drift off the beat (the card: the network's own tempo lock at chance). The clock
@@ -7,7 +7,7 @@
 //! real dancer's own rate and zero (`train::step_lock::dancer_phase`) over the 10 s up to the
 //! window's end, longer than the 3.2-s window, so a waltz's step every 2 s is heard.
 //!
-//! The clock alone is ignored in teacher forcing (dancenet's card: its run A), since the real
+//! The clock alone is ignored in teacher forcing (dancenet's card), since the real
 //! history already says when the next step comes. The lock term asks what the history cannot:
 //! after the model's own draws (self-conditioning's runs) and the noised dance, the toes' speed
 //! the network means to draw next (the expected value of its read-out, differentiable) is

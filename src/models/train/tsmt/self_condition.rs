@@ -1,4 +1,4 @@
-//! Self-conditioning (`choreo train tsmt --self-condition S`, issue 25, the freeze): runs of
+//! Self-conditioning (`choreo train tsmt --self-condition S`, against the freeze): runs of
 //! each window's input frames replaced by the model's own draws (`train::tsmt::Options`).
 use rand::rngs::StdRng;
 use rand::Rng;

@@ -1,4 +1,4 @@
-//! Warped histories (`choreo train tsmt --step-clock --history-warp R`, issue 25 item 4): the
+//! Warped histories (`choreo train tsmt --step-clock --history-warp R`): the
 //! pose stream reads a history danced at another pace than the clock's, and is scored on the
 //! frames after it, danced at the clock's.
 //!
