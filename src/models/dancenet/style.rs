@@ -18,8 +18,8 @@
 //!   than 30 s is one shorter window.
 //!
 //! The same network over motion is the motion style metric (`crate::models::motion_style`);
-//! [`WindowedClassifier`] and [`evaluate`] serve both. The model card is
-//! `models/dancenet/STYLE_CARD.md`; `choreo train dancenet-style` writes the files.
+//! [`WindowedClassifier`] and [`evaluate`] serve both. Its card is the section "Musical style
+//! classifier" of `models/dancenet/README.md`; `choreo train dancenet-style` writes the files.
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
