@@ -298,7 +298,7 @@ fn web_dist_is_what_web_src_builds_to() {
 /// The TypeScript client's own checks (node's test runner): its generated types are what
 /// openapi-typescript makes of `openapi/openapi.json` today, `dist/` is what its sources build to,
 /// its server-sent-events reader keeps order and resumes with Last-Event-ID (a fake server), and
-/// the README's webhook receiver verifies a Standard Webhooks signature.
+/// the webhook receiver of docs/integrating.md verifies a Standard Webhooks signature.
 #[test]
 fn the_typescript_client_is_what_the_spec_and_its_sources_make() {
     let needs = Needs {

@@ -1,4 +1,4 @@
-// The README's webhook receiver (examples/webhook-receiver.mjs) accepts a delivery signed the
+// The webhook receiver of docs/integrating.md (examples/webhook-receiver.mjs) accepts a delivery signed the
 // Standard Webhooks way and refuses a tampered or unsigned one. The signature is made here from
 // the scheme itself (HMAC-SHA256 of "id.timestamp.body" with the secret's bytes, base64, "v1,"),
 // independently of the standardwebhooks package the receiver uses; tests/api/webhooks.rs checks
