@@ -283,7 +283,7 @@ pub fn markdown(result: &EvalResult) -> String {
         reference.as_ref(),
         [
             " (diversity on z-normalised kinetic 5-s windows, beat P/R/F ±0.1 s)",
-            " (issue 25: tempo lock, arms, knees, song sensitivity)",
+            " (musicality: tempo lock, arms, knees, song sensitivity)",
         ],
     );
     if !result.extra_rows.is_empty() {
