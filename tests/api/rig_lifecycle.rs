@@ -262,7 +262,7 @@ async fn a_rig_downloads_name_is_kept_and_an_unused_one_expires() {
     )
     .await;
     assert!(
-        !stored(&app, unused).exists(),
+        file_goes(&stored(&app, unused)).await,
         "the expired rig's file is gone"
     );
 
@@ -276,8 +276,21 @@ async fn a_rig_downloads_name_is_kept_and_an_unused_one_expires() {
         tokio::time::sleep(Duration::from_millis(200)).await;
     }
     assert!(
-        !stored(&app, used).exists(),
+        file_goes(&stored(&app, used)).await,
         "the expired rig's file is gone"
     );
     app.stop().await;
+}
+
+/// Whether `path` is gone within a few seconds: an expiry removes the row first, then the file,
+/// so a client can see the 404 a moment before the file leaves the disk.
+async fn file_goes(path: &std::path::Path) -> bool {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while path.exists() {
+        if Instant::now() > deadline {
+            return false;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    true
 }
