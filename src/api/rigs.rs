@@ -239,18 +239,23 @@ pub async fn upload(
     // Read under the songs' decode budget: one of the permits that bound decodes in parallel
     // (so uploads cannot take every core, or memory, at once), and `audio_timeout_s`.
     let read = {
-        let _permit = state
+        let permit = state
             .decode_permits
-            .acquire()
+            .clone()
+            .acquire_owned()
             .await
             .map_err(|e| ApiError::Internal(e.to_string()))?;
         let bytes = tokio::fs::read(received.file.path())
             .await
             .map_err(|e| ApiError::storage("reading the upload", &e))?;
         let limit = Duration::from_secs_f64(state.config.audio_timeout_s);
-        let reading = tokio::task::spawn_blocking(move || uploaded::read(&bytes, &overrides));
         // The reader's work is bounded by the file's size (joints and nodes are capped), so a
-        // reader past its time is left to finish on its own and its answer dropped.
+        // reader past its time is left to finish on its own and its answer dropped; it keeps its
+        // permit until it does, so readers left running still count against the budget.
+        let reading = tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            uploaded::read(&bytes, &overrides)
+        });
         match tokio::time::timeout(limit, reading).await {
             Ok(joined) => joined
                 .map_err(|e| ApiError::Internal(format!("rig reader thread: {e}")))?

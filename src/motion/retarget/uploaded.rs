@@ -30,9 +30,9 @@ use super::{HumanBone, TargetSkeleton};
 use crate::motion::bvh::Bvh;
 use crate::motion::rig::Rig;
 
-/// Most joints an uploaded skeleton may have (a Mixamo rig with fingers has 65, a VRoid avatar
-/// with hair and skirt bones a few hundred).
-pub const MAX_JOINTS: usize = 1024;
+/// Most joints an uploaded skeleton may have: the BVH reader's own cap, which glTF skins are
+/// held to as well.
+pub const MAX_JOINTS: usize = crate::motion::bvh::MAX_BVH_JOINTS;
 pub use super::gltf_skin::MAX_NODES;
 
 /// The humanoid bones a dance needs: the legs and feet it stands on, the trunk and head it faces
@@ -360,13 +360,8 @@ fn read_bvh(text: &str) -> Result<Raw, RigFileError> {
         }
         e => RigFileError::Bvh(e.to_string()),
     })?;
+    // The parser has held the joints to MAX_JOINTS.
     let n = bvh.names.len();
-    if n > MAX_JOINTS {
-        return Err(RigFileError::TooManyJoints {
-            count: n,
-            limit: MAX_JOINTS,
-        });
-    }
     let mut rest = vec![Vector3::zeros(); n];
     // The parser lists parents before their children.
     for j in 0..n {
