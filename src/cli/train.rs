@@ -9,6 +9,9 @@ use choreo::models::train::{self, Training};
 /// `choreo train <model>`: one variant per trainable model.
 #[derive(Clone, Debug, clap::Subcommand)]
 pub enum TrainArgs {
+    /// beat-graph: real dance units of the train split, a motion graph and a music match
+    /// (ChoreoMaster's manner); minutes, no gradient descent.
+    BeatGraph(BeatGraphArgs),
     /// DanceRevolution (Huang et al., ICLR 2021).
     DanceRevolution(DanceRevolutionArgs),
     /// DanceNet (Zhuang et al. 2020): dilated gated causal convolutions, mixture output, style control.
@@ -26,6 +29,7 @@ pub enum TrainArgs {
 impl From<TrainArgs> for Training {
     fn from(a: TrainArgs) -> Self {
         match a {
+            TrainArgs::BeatGraph(o) => Training::BeatGraph(o.into()),
             TrainArgs::DanceRevolution(o) => Training::DanceRevolution(o.into()),
             TrainArgs::Dancenet(o) => Training::Dancenet(o.into()),
             TrainArgs::KeyposeTransformer(o) => Training::KeyposeTransformer(o.into()),
@@ -517,5 +521,19 @@ args_into! {
         /// (0: none).
         #[arg(long, default_value_t = train::motion_style::Options::default().no_style_per_batch)]
         no_style_per_batch: usize,
+    }
+}
+
+args_into! {
+    /// Options of the library build (the card gives the one behind the committed folder).
+    pub struct BeatGraphArgs => train::beat_graph::Options {
+        #[command(flatten)]
+        common: CommonArgs,
+        /// Ridge penalty of the music match, per pair.
+        #[arg(long, default_value_t = train::beat_graph::Options::default().ridge)]
+        ridge: f64,
+        /// Edges kept per unit in the motion graph.
+        #[arg(long, default_value_t = train::beat_graph::Options::default().graph_degree)]
+        graph_degree: usize,
     }
 }

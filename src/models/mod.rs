@@ -8,6 +8,7 @@ use crate::motion::{KeyPose, Motion};
 use crate::stage::Stage;
 use serde::{Deserialize, Serialize};
 
+pub mod beat_graph;
 pub mod beat_time;
 pub mod clip_choice;
 pub mod dance_revolution;
@@ -39,6 +40,10 @@ pub const MODELS: &[Entry] = &[
     Entry {
         id: tsmt::ID,
         load: |dir| Ok(std::sync::Arc::new(tsmt::Served::load(dir)?)),
+    },
+    Entry {
+        id: beat_graph::ID,
+        load: |dir| Ok(std::sync::Arc::new(beat_graph::Served::load(dir)?)),
     },
 ];
 

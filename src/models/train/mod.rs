@@ -572,6 +572,7 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
 }
 pub mod arm_head;
 pub mod augment;
+pub mod beat_graph;
 mod windows;
 pub use windows::Windows;
 pub mod classify;
@@ -587,6 +588,8 @@ pub mod tsmt;
 /// One training run (`choreo train <model>`): one variant per trainable model, with its options.
 #[derive(Clone, Debug)]
 pub enum Training {
+    /// beat-graph (ChoreoMaster's manner): the unit library, its graph and the music match.
+    BeatGraph(beat_graph::Options),
     /// DanceRevolution (Huang et al., ICLR 2021).
     DanceRevolution(dance_revolution::Options),
     /// DanceNet (Zhuang et al. 2020): dilated gated causal convolutions, mixture output, style control.
@@ -605,6 +608,17 @@ impl Training {
     /// Trains (or evaluates) and says what it wrote.
     pub fn run(&self) -> Result<String, TrainError> {
         match self {
+            Self::BeatGraph(o) => {
+                let file = beat_graph::train(o)?;
+                Ok(format!(
+                    "built {} units of {} dances into {} (held-out match AUC {:.3} against the library, {:.3} within a dance)",
+                    file.library.units,
+                    file.library.dances.len(),
+                    o.common.out_dir(crate::models::beat_graph::ID).display(),
+                    file.held_out.auc_library,
+                    file.held_out.auc_same_dance,
+                ))
+            }
             Self::DanceRevolution(o) => {
                 let logs = dance_revolution::train(o)?;
                 Ok(format!(
