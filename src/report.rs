@@ -63,6 +63,11 @@ pub struct Report {
     /// where no check ran.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub opening_check: Option<crate::models::opening_check::OpeningChosen>,
+    /// What a composed dance was made of (beat-graph): its slots, how many training dances its
+    /// units came from, and the longest stretch it took in order from one of them. Absent for
+    /// the networks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub composition: Option<crate::models::beat_graph::Composition>,
 }
 
 /// The beat-align stage in report.json: its summary, and the tempo lock of the motion as the
@@ -101,6 +106,7 @@ pub fn build(
         beat_align: None,
         beat_time: None,
         opening_check: None,
+        composition: None,
     })
 }
 

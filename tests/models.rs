@@ -1,4 +1,4 @@
-//! One contract for every `DanceModel`, like the queue's for both stores: each of the four
+//! One contract for every `DanceModel`, like the queue's for both stores: each of the five
 //! committed models, on a real 5.3-s song, dances every frame of the song in the dataset's joint
 //! layout, gives the same dance for the same seed and another for another seed, and refuses each
 //! input its capabilities do not list (before any work, with `model-unsupported-input`).
@@ -236,7 +236,11 @@ contract! {
     keypose_transformer => "keypose-transformer",
     tsmt => "tsmt",
     dancenet => "dancenet",
+    beat_graph => "beat-graph",
 }
+
+#[path = "models/beat_graph.rs"]
+mod beat_graph_composes;
 
 #[test]
 fn the_contract_covers_every_served_model() {

@@ -23,13 +23,14 @@
 //! of jobs.
 use serde::{Deserialize, Serialize};
 
+pub mod body;
 pub mod compose;
 pub mod library;
 pub mod rhythm;
 pub mod search;
 pub mod served;
 
-pub use served::{Served, ID};
+pub use served::{Composition, Served, ID};
 
 /// The composition's settings: ChoreoMaster's graph and search, with the weights of its costs.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -66,6 +67,11 @@ pub struct Config {
     /// Scale of the Gumbel noise the job's seed adds to every cost: different seeds, different
     /// paths, each still a good one.
     pub gumbel_scale: f64,
+    /// Most cost the job's seed adds to a training dance's units (a uniform draw per dance): each
+    /// seed leans towards some dancers, so a dance keeps a character and seeds differ in it,
+    /// where an even mixture of every dancer is the same average dance on every seed.
+    #[serde(default)]
+    pub dance_preference: f64,
     /// Half-life (seconds) of the inertialization that absorbs a join's pose and velocity gap.
     pub blend_halflife_s: f64,
 }
@@ -86,6 +92,7 @@ impl Default for Config {
             repetition_weight: 4.0,
             key_weight: 20.0,
             gumbel_scale: 0.35,
+            dance_preference: 2.0,
             blend_halflife_s: 0.12,
         }
     }

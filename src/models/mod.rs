@@ -157,6 +157,8 @@ pub struct Generated {
     pub beat_time: Option<beat_time::BeatTimeUsed>,
     /// What the model's opening check chose, for a model that has one ([`opening_check`]).
     pub opening: Option<opening_check::OpeningChosen>,
+    /// What a composed dance was made of, for a model that composes ([`beat_graph`]).
+    pub composition: Option<beat_graph::Composition>,
 }
 
 impl Generated {
@@ -178,6 +180,7 @@ impl From<Motion> for Generated {
             style: None,
             beat_time: None,
             opening: None,
+            composition: None,
         }
     }
 }

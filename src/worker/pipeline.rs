@@ -149,7 +149,7 @@ impl Pipeline {
             )?
         };
         progress.report(Stage::BeatAlign, MODEL_END)?;
-        let finished = {
+        let mut finished = {
             let _timer = StageTimer::start("generate", Stage::BeatAlign);
             let stages = MotionStages {
                 beat_align: true,
@@ -166,6 +166,7 @@ impl Pipeline {
                 stages,
             )
         };
+        finished.composition = generated.composition;
         progress.report(Stage::Export, MODEL_END)?;
         let _timer = StageTimer::start("generate", Stage::Export);
         let caption = Caption {
@@ -269,6 +270,8 @@ pub struct Finished {
     pub beat_time: Option<crate::models::beat_time::BeatTimeUsed>,
     /// What the model's opening check chose, for the report.
     pub opening: Option<crate::models::opening_check::OpeningChosen>,
+    /// What a composing model's dance was made of, for the report (set by the caller).
+    pub composition: Option<crate::models::beat_graph::Composition>,
     /// Frames the request's seed motion opens the dance on (0 without): the export fits its
     /// skeleton on them ([`crate::motion::serve`]).
     pub seed_frames: usize,
@@ -317,6 +320,7 @@ pub fn after_model(
         plant_feet: stages.plant_feet,
         beat_time,
         opening,
+        composition: None,
         seed_frames,
     }
 }
@@ -359,6 +363,7 @@ pub fn render(
     report.beat_align = finished.beat_align.clone();
     report.beat_time = finished.beat_time;
     report.opening_check = finished.opening.clone();
+    report.composition = finished.composition.clone();
     report.scores.rotation_flips = Some(crate::metrics::rotation_flips::RotationFlips::of(
         &served.rig,
     ));

@@ -144,7 +144,8 @@ pub fn generate_decoded(
     };
     let analysis = analysis.into_owned();
     clock.report(Stage::BeatAlign, 0.0)?;
-    let finished = super::pipeline::after_model(
+    let composition = generated.composition.clone();
+    let mut finished = super::pipeline::after_model(
         generated.motion,
         generated.beat_time,
         generated.opening,
@@ -154,6 +155,7 @@ pub fn generate_decoded(
         request.seed_motion,
         stages,
     );
+    finished.composition = composition;
     let files =
         super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| {
             clock.enter(stage)

@@ -2,12 +2,13 @@
 #![allow(dead_code)]
 use std::path::PathBuf;
 
-/// The four served models, by id.
-pub const SERVED: [&str; 4] = [
+/// The five served models, by id.
+pub const SERVED: [&str; 5] = [
     "dance-revolution",
     "keypose-transformer",
     "tsmt",
     "dancenet",
+    "beat-graph",
 ];
 
 /// `models/` of this checkout; panics, naming what is missing, unless every served model's

@@ -279,13 +279,17 @@ fn gumbel(config: &Config, seed: u64, slot: usize, unit: usize) -> f64 {
     if config.gumbel_scale <= 0.0 {
         return 0.0;
     }
+    -config.gumbel_scale * (-uniform(seed, slot, unit).ln()).ln()
+}
+
+/// A uniform draw in (0, 1) for (seed, a, b): the same triple, the same draw.
+pub fn uniform(seed: u64, a: usize, b: usize) -> f64 {
     let mut z = seed
         .wrapping_mul(0x9E37_79B9_7F4A_7C15)
-        .wrapping_add((slot as u64) << 32 ^ unit as u64);
+        .wrapping_add((a as u64) << 32 ^ b as u64);
     // splitmix64's finaliser: a well-mixed 64-bit value from any input.
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^= z >> 31;
-    let u = ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
-    -config.gumbel_scale * (-u.ln()).ln()
+    ((z >> 11) as f64 + 0.5) / (1u64 << 53) as f64
 }

@@ -6,6 +6,7 @@ use std::path::Path;
 use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 
+use super::body::{bone_lengths, rebone};
 use super::library::{style_counts, Library, MIN_STYLE_UNITS};
 use super::rhythm::{music_descriptors, Match};
 use super::search::{search, Problem, Slot, SlotKey};
@@ -19,6 +20,7 @@ use crate::models::{
     ModelInfo, Progress, StyleChoice,
 };
 use crate::motion::repr::{self, RootStart, POSE_DIM};
+use crate::motion::NUM_JOINTS;
 use crate::stage::Stage;
 
 /// The API id.
@@ -89,6 +91,11 @@ pub struct Composition {
     pub dances_used: usize,
     /// The longest stretch taken in order from one training dance, seconds of the dance.
     pub longest_copy_s: f64,
+    /// Where one unit gives way to another that does not follow it in its dance (seconds):
+    /// what a test of the joins looks at; too long for the report.
+    #[serde(skip)]
+    #[schema(ignore)]
+    pub joins_s: Vec<f64>,
 }
 
 impl Served {
@@ -140,8 +147,14 @@ impl Served {
         }
     }
 
-    /// Per unit: whether it may dance `style`, and at what cost.
-    fn allowed(&self, style: DanceStyle) -> Vec<Option<f64>> {
+    /// Per unit: whether it may dance `style`, and at what cost: the style's, plus the seed's
+    /// leaning towards the unit's dance ([`Config::dance_preference`]).
+    fn allowed(&self, style: DanceStyle, seed: u64) -> Vec<Option<f64>> {
+        let lean: Vec<f64> = (0..self.lib.dance_first.len().saturating_sub(1))
+            .map(|d| {
+                self.file.config.dance_preference * super::search::uniform(seed ^ 0xDA7CE, d, 0)
+            })
+            .collect();
         let counts = style_counts(&self.lib.units);
         let own = counts[style.index()];
         let meter = self
@@ -154,13 +167,14 @@ impl Served {
             .units
             .iter()
             .map(|u| {
-                if u.style == style {
+                let cost = if u.style == style {
                     Some(0.0)
                 } else if own < MIN_STYLE_UNITS && u.meter == meter {
                     Some(self.file.config.style_weight)
                 } else {
                     None
-                }
+                };
+                cost.map(|c| c + lean[u.dance])
             })
             .collect()
     }
@@ -225,7 +239,7 @@ impl Served {
                 }
             })
             .collect();
-        let allowed = self.allowed(style);
+        let allowed = self.allowed(style, req.seed);
         let mut config = self.file.config.clone();
         config.gumbel_scale *= req.temperature.unwrap_or(1.0).max(0.0);
         let problem = Problem {
@@ -255,15 +269,30 @@ impl Served {
             config.blend_halflife_s,
             seed_rows.view(),
         );
+        let mut start = start;
+        if let Some(lengths) = body_of(req) {
+            // The key pass comes after, so the key poses are met on their own bones.
+            let (mut motion, root) = repr::from_features(x.view(), start, fps)?;
+            // A seed motion sets the floor; the dance goes on from it where it stands.
+            rebone(&mut motion.positions, root.view(), &lengths, from == 0);
+            (x, start) = repr::to_features(motion.positions.view(), root.view())?;
+        }
         let targets: Vec<(usize, Vec<f32>)> =
             keys.iter().map(|k| (k.frame, k.local.clone())).collect();
         pass_through_keys(&mut x, 0..POSE_DIM, &targets, BLEND_RADIUS);
-        let mut start = start;
         let yaws: Vec<(usize, f32)> = keys.iter().map(|k| (k.frame, k.yaw)).collect();
         if !yaws.is_empty() {
             start.yaw = pass_through_yaws(&mut x, start.yaw, &yaws, YAW_BLEND_RADIUS);
         }
-        let (motion, _) = repr::from_features(x.view(), start, fps)?;
+        let (mut motion, _) = repr::from_features(x.view(), start, fps)?;
+        if let Some(seed) = req.seed_motion {
+            // The seed's own frames open the dance exactly as they came.
+            let n = from.min(motion.num_frames());
+            motion
+                .positions
+                .slice_mut(ndarray::s![..n, .., ..])
+                .assign(&seed.positions.slice(ndarray::s![..n, .., ..]));
+        }
         progress.report(Stage::Generate, 1.0)?;
         let mut dances: Vec<usize> = path
             .units
@@ -273,6 +302,10 @@ impl Served {
         dances.sort_unstable();
         dances.dedup();
         let longest_copy_s = longest_copy_frames(&self.lib, &path.units) / fps;
+        let joins_s = (1..path.units.len())
+            .filter(|&i| self.lib.units[path.units[i - 1]].next != Some(path.units[i]))
+            .map(|i| slots[first + i].t0)
+            .collect();
         Ok((
             motion,
             Composition {
@@ -280,9 +313,26 @@ impl Served {
                 beats_per_slot: per_slot,
                 dances_used: dances.len(),
                 longest_copy_s,
+                joins_s,
             },
         ))
     }
+}
+
+/// The bone lengths the dance should have: its key poses' (the medians over them), else its
+/// seed motion's, else none (the library's own).
+fn body_of(req: &GenerateRequest<'_>) -> Option<Vec<f32>> {
+    if !req.key_poses.is_empty() {
+        let keys =
+            ndarray::Array3::from_shape_fn((req.key_poses.len(), NUM_JOINTS, 3), |(k, j, c)| {
+                req.key_poses[k].joints.get(j).map_or(0.0, |p| p[c] as f32)
+            });
+        let centre = ndarray::Array2::zeros((req.key_poses.len(), 3));
+        return Some(bone_lengths(keys.view(), centre.view()));
+    }
+    let seed = req.seed_motion.filter(|m| m.num_frames() > 0)?;
+    let centre = crate::motion::skeleton::body_centre_track(seed.positions.view());
+    Some(bone_lengths(seed.positions.view(), centre.view()))
 }
 
 /// Frames of the longest run of natural successors in `units` (in the source dances' time).
@@ -466,6 +516,7 @@ impl DanceModel for Served {
         );
         let mut generated = Generated::from(motion);
         generated.style = Some(choice);
+        generated.composition = Some(composition);
         Ok(generated)
     }
 }

@@ -415,6 +415,7 @@ impl DanceModel for Served {
             style: Some(g.style),
             beat_time: clock.used(self.file.extra.beat_time),
             opening: g.opening,
+            composition: None,
         })
     }
 }

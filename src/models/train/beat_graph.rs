@@ -7,6 +7,7 @@ use ndarray::Array2;
 
 use super::{CommonOptions, TrainError};
 use crate::audio::Analysis;
+use crate::models::beat_graph::body::{bone_lengths, rebone};
 use crate::models::beat_graph::library::{style_counts, Library, Unit};
 use crate::models::beat_graph::rhythm::{motion_descriptors, music_descriptors, Match, MUSIC_DIM};
 use crate::models::beat_graph::served::{
@@ -16,7 +17,7 @@ use crate::models::beat_graph::Config;
 use crate::models::folder::{MODEL_FILE, WEIGHTS_FILE};
 use crate::models::DanceStyle;
 use crate::motion::dataset::Dataset;
-use crate::motion::MOTION_FPS;
+use crate::motion::{MOTION_FPS, NUM_JOINTS};
 
 /// The build's options.
 #[derive(Clone, Debug)]
@@ -58,8 +59,16 @@ struct Cut {
     music: Array2<f32>,
 }
 
-fn cut(ds: &Dataset, id: &str, dance: usize) -> Result<(Cut, Analysis), TrainError> {
-    let d = ds.load(id)?;
+fn cut(
+    ds: &Dataset,
+    id: &str,
+    dance: usize,
+    lengths: Option<&[f32]>,
+) -> Result<(Cut, Analysis), TrainError> {
+    let mut d = ds.load(id)?;
+    if let Some(lengths) = lengths {
+        rebone(&mut d.motion.positions, d.center.view(), lengths, true);
+    }
     let audio = crate::audio::decode_path(&d.audio_path)?;
     let analysis = crate::audio::analyze(&audio)?;
     let fps = MOTION_FPS;
@@ -186,9 +195,22 @@ pub fn train(o: &Options) -> Result<ModelFile, TrainError> {
     let started = Instant::now();
     let fps = MOTION_FPS;
     let ds = Dataset::open(&o.common.data)?;
+    // One skeleton for every unit: each bone at the median of the train dances' own medians.
+    let mut per_dance = Vec::new();
+    for id in ds.train_ids() {
+        let d = ds.load(id)?;
+        per_dance.push(bone_lengths(d.motion.positions.view(), d.center.view()));
+    }
+    let lengths: Vec<f32> = (0..NUM_JOINTS)
+        .map(|j| {
+            let mut l: Vec<f32> = per_dance.iter().map(|b| b[j]).collect();
+            l.sort_by(f32::total_cmp);
+            l[l.len() / 2]
+        })
+        .collect();
     let mut cuts = Vec::new();
     for (d, id) in ds.train_ids().iter().enumerate() {
-        cuts.push(cut(&ds, id, d)?.0);
+        cuts.push(cut(&ds, id, d, Some(&lengths))?.0);
     }
     let mut units = Vec::new();
     let mut dance_first = vec![0];
@@ -231,7 +253,7 @@ pub fn train(o: &Options) -> Result<ModelFile, TrainError> {
     let mut test_motion = Vec::new();
     let mut test_dance = Vec::new();
     for (d, id) in ds.test_ids().iter().enumerate() {
-        let (c, _) = cut(&ds, id, d)?;
+        let (c, _) = cut(&ds, id, d, None)?;
         test_motion.push(motion_descriptors(
             c.units.iter().map(|u| (c.rows.view(), u.start, u.end)),
             fps,
