@@ -1,4 +1,4 @@
-import type { components } from './schema';
+import type { components } from './schema.js';
 export type Problem = components['schemas']['Problem'];
 /** An HTTP error answer, with the problem+json fields when the server sent them. */
 export declare class ApiError extends Error {

@@ -1,4 +1,4 @@
-import type { components } from './schema';
+import type { components } from './schema.js';
 export type Job = components['schemas']['JobView'];
 export type Status = components['schemas']['Status'];
 /** `event: status`: the job moved from one status to another. */

@@ -1,6 +1,6 @@
 // Every error choreo sends is problem+json (RFC 9457); ApiError carries its status, its stable
 // `code` (for matching) and its `detail` (for people).
-import type { components } from './schema';
+import type { components } from './schema.js';
 
 export type Problem = components['schemas']['Problem'];
 

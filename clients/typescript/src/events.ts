@@ -5,8 +5,8 @@
 // before the `done` event, the stream is opened again with `Last-Event-ID: <last seq>` and the
 // server replays what was missed, so a reader sees every event once and in order.
 import { createParser, type EventSourceMessage } from 'eventsource-parser';
-import { ApiError } from './errors';
-import type { components } from './schema';
+import { ApiError } from './errors.js';
+import type { components } from './schema.js';
 
 export type Job = components['schemas']['JobView'];
 export type Status = components['schemas']['Status'];

@@ -10,13 +10,13 @@
 //   const done = await choreo.wait(job.id, { onUpdate: (j) => console.log(j.status, j.progress) });
 //   const glb = await choreo.download(done.id, 'motion.glb');
 import createClient, { type Client } from 'openapi-fetch';
-import { ApiError } from './errors';
-import { jobEvents, type EventStreamOptions, type Job, type JobEvent } from './events';
-import type { components, paths } from './schema';
+import { ApiError } from './errors.js';
+import { jobEvents, type EventStreamOptions, type Job, type JobEvent } from './events.js';
+import type { components, paths } from './schema.js';
 
-export { ApiError, type Problem } from './errors';
-export { jobEvents, type EventStreamOptions, type Job, type JobEvent, type ProgressEvent, type Status, type StatusEvent } from './events';
-export type { components, paths } from './schema';
+export { ApiError, type Problem } from './errors.js';
+export { jobEvents, type EventStreamOptions, type Job, type JobEvent, type ProgressEvent, type Status, type StatusEvent } from './events.js';
+export type { components, paths } from './schema.js';
 
 type Schemas = components['schemas'];
 export type Song = Schemas['SongView'];
