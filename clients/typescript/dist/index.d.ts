@@ -1,7 +1,7 @@
 import { type Client } from 'openapi-fetch';
 import { type EventStreamOptions, type Job, type JobEvent } from './events.js';
 import type { components, paths } from './schema.js';
-export { ApiError, type Problem } from './errors.js';
+export { ApiError, NETWORK_ERROR, type Problem } from './errors.js';
 export { jobEvents, type EventStreamOptions, type Job, type JobEvent, type ProgressEvent, type Status, type StatusEvent } from './events.js';
 export type { components, paths } from './schema.js';
 type Schemas = components['schemas'];

@@ -31,7 +31,7 @@ export async function dance(songId: string): Promise<Job> {
 }
 
 export function describe(e: unknown): string {
-  if (e instanceof ApiError) return \`\${e.status} \${e.code ?? ''} \${e.problem?.detail ?? ''}\`;
+  if (e instanceof ApiError) return \`\${e.status} \${e.code ?? ''} \${e.detail} \${e.problem?.title ?? ''}\`;
   return String(e);
 }
 `;
