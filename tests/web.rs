@@ -297,8 +297,11 @@ fn web_dist_is_what_web_src_builds_to() {
 
 /// The TypeScript client's own checks (node's test runner): its generated types are what
 /// openapi-typescript makes of `openapi/openapi.json` today, `dist/` is what its sources build to,
-/// its server-sent-events reader keeps order and resumes with Last-Event-ID (a fake server), and
-/// the webhook receiver of docs/integrating.md verifies a Standard Webhooks signature.
+/// its server-sent-events reader keeps order and resumes with Last-Event-ID (a fake server),
+/// the webhook receiver of docs/integrating.md verifies a Standard Webhooks signature, a stopped
+/// server is an `ApiError` with the code `network-error` that names the URL, and the
+/// `npm pack`ed package type-checks in a project with moduleResolution nodenext and bundler
+/// (where a misspelt request field is a compile error).
 #[test]
 fn the_typescript_client_is_what_the_spec_and_its_sources_make() {
     let needs = Needs {
@@ -319,6 +322,8 @@ fn the_typescript_client_is_what_the_spec_and_its_sources_make() {
             "test/drift.test.mjs",
             "test/events.test.mjs",
             "test/webhook.test.mjs",
+            "test/errors.test.mjs",
+            "test/consumer.test.mjs",
         ])
         .current_dir(root().join("clients/typescript"))
         .output()

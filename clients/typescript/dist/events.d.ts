@@ -1,4 +1,4 @@
-import type { components } from './schema';
+import type { components } from './schema.js';
 export type Job = components['schemas']['JobView'];
 export type Status = components['schemas']['Status'];
 /** `event: status`: the job moved from one status to another. */
@@ -51,6 +51,7 @@ export interface EventStreamRequest {
 /**
  * The job's events in order, until `done` (then the iterator ends). Reconnects with
  * `Last-Event-ID` when the stream drops; an HTTP error answer (401, 404) is thrown as ApiError
- * at once, since asking again would get the same answer.
+ * at once, since asking again would get the same answer. After `maxRetries` failures in a row it
+ * throws: an ApiError (`network-error`) when the server no longer answers at all.
  */
 export declare function jobEvents(request: EventStreamRequest, options?: EventStreamOptions): AsyncGenerator<JobEvent>;

@@ -1,9 +1,9 @@
 import { type Client } from 'openapi-fetch';
-import { type EventStreamOptions, type Job, type JobEvent } from './events';
-import type { components, paths } from './schema';
-export { ApiError, type Problem } from './errors';
-export { jobEvents, type EventStreamOptions, type Job, type JobEvent, type ProgressEvent, type Status, type StatusEvent } from './events';
-export type { components, paths } from './schema';
+import { type EventStreamOptions, type Job, type JobEvent } from './events.js';
+import type { components, paths } from './schema.js';
+export { ApiError, NETWORK_ERROR, type Problem } from './errors.js';
+export { jobEvents, type EventStreamOptions, type Job, type JobEvent, type ProgressEvent, type Status, type StatusEvent } from './events.js';
+export type { components, paths } from './schema.js';
 type Schemas = components['schemas'];
 export type Song = Schemas['SongView'];
 export type CreateJob = Schemas['CreateJob'];

@@ -475,17 +475,29 @@ function removeTrailingSlash(url) {
 }
 
 // src/errors.ts
+var NETWORK_ERROR = "network-error";
 var ApiError = class _ApiError extends Error {
+  /** The HTTP status; 0 when no answer came. */
   status;
+  /** The problem's stable kebab-case name, to match on (`not-found`, `network-error`…);
+   * undefined for an answer that was not problem+json. */
   code;
+  /** What went wrong and what to fix, for people: the problem's `detail`, else its title or the
+   * HTTP status. */
+  detail;
+  /** The problem+json body as the server sent it; null when it sent none. */
   problem;
+  /** The URL that was requested. */
   url;
-  constructor(status, problem, url) {
-    const detail = problem?.detail || problem?.title || `HTTP ${status}`;
-    super(`${detail}${problem?.code ? ` (${problem.code})` : ""}`);
+  /** `options` set `code` and `detail` where no problem body carries them (see `network`). */
+  constructor(status, problem, url, options = {}) {
+    const detail = options.detail ?? (problem?.detail || problem?.title || `HTTP ${status}`);
+    const code = options.code ?? problem?.code;
+    super(`${detail}${code ? ` (${code})` : ""}`, "cause" in options ? { cause: options.cause } : void 0);
     this.name = "ApiError";
     this.status = status;
-    this.code = problem?.code;
+    this.code = code;
+    this.detail = detail;
     this.problem = problem;
     this.url = url;
   }
@@ -498,7 +510,18 @@ var ApiError = class _ApiError extends Error {
     }
     return new _ApiError(response.status, problem, response.url);
   }
+  /** The error for a fetch of `url` that rejected with `cause` before any answer came. */
+  static network(url, cause) {
+    const detail = `no answer from ${url} (${reason(cause)}): the server may be down or the address wrong; in a browser, a cross-origin request the server does not allow (CORS) fails the same way`;
+    return new _ApiError(0, null, url, { code: NETWORK_ERROR, detail, cause });
+  }
 };
+function reason(error) {
+  const outer = error instanceof Error ? error.message : String(error);
+  const inner = error instanceof Error ? error.cause : void 0;
+  const detail = inner?.message || inner?.code;
+  return detail ? `${outer}: ${detail}` : outer;
+}
 
 // node_modules/eventsource-parser/dist/index.js
 var ParseError = class extends Error {
@@ -625,10 +648,12 @@ async function* jobEvents(request, options = {}) {
     const headers = { ...request.headers, Accept: "text/event-stream" };
     if (lastEventId !== void 0) headers["Last-Event-ID"] = lastEventId;
     let response = null;
+    let unanswered = null;
     try {
       response = await request.fetch(request.url, { headers, signal: options.signal, cache: "no-store" });
     } catch (e) {
       if (options.signal?.aborted) throw e;
+      unanswered = e;
     }
     if (response && !response.ok) throw await ApiError.from(response);
     if (response?.body) {
@@ -663,7 +688,10 @@ async function* jobEvents(request, options = {}) {
       }
     }
     failures += 1;
-    if (failures > maxRetries) throw new Error(`the event stream of ${request.url} dropped ${failures} times`);
+    if (failures > maxRetries) {
+      if (unanswered !== null) throw unanswered instanceof ApiError ? unanswered : ApiError.network(request.url, unanswered);
+      throw new Error(`the event stream of ${request.url} dropped ${failures} times`);
+    }
     await sleep(retryMs, options.signal);
   }
 }
@@ -678,6 +706,16 @@ function randomUuid() {
   const h = Array.from(b, (x) => x.toString(16).padStart(2, "0")).join("");
   return `${h.slice(0, 8)}-${h.slice(8, 12)}-${h.slice(12, 16)}-${h.slice(16, 20)}-${h.slice(20)}`;
 }
+function answering(fetch) {
+  return async (input, init) => {
+    try {
+      return await fetch(input, init);
+    } catch (e) {
+      if (!(e instanceof TypeError)) throw e;
+      throw ApiError.network(typeof input === "string" ? input : input instanceof URL ? input.href : input.url, e);
+    }
+  };
+}
 var Choreo = class {
   /** openapi-fetch's typed client, for any route: `choreo.api.GET('/v1/jobs/{id}', …)`. */
   api;
@@ -689,7 +727,7 @@ var Choreo = class {
   constructor(options = {}) {
     this.baseUrl = (options.baseUrl ?? "").replace(/\/+$/, "");
     this.#headers = options.apiKey ? { Authorization: `Bearer ${options.apiKey}` } : {};
-    this.#fetch = options.fetch ?? ((input, init) => globalThis.fetch(input, init));
+    this.#fetch = answering(options.fetch ?? ((input, init) => globalThis.fetch(input, init)));
     this.api = createClient({ baseUrl: this.baseUrl, headers: this.#headers, fetch: (request) => this.#fetch(request) });
   }
   /** An absolute URL for a path of this server (links in answers are paths). */
@@ -742,7 +780,7 @@ var Choreo = class {
   /** DELETE /v1/rigs/{id}: deletes the rig and its file (204); an unknown id is an ApiError (404). */
   async deleteRig(id) {
     const { error, response } = await this.api.DELETE("/v1/rigs/{id}", { params: { path: { id } } });
-    if (!response.ok) throw new ApiError(response.status, error ?? null, response.url);
+    if (!response.ok) throw new ApiError(response.status, asProblem(error), response.url);
   }
   /** POST /v1/jobs with an idempotency key (a new one unless given), so a retried call makes one job. */
   createJob(body, idempotencyKey = randomUuid()) {
@@ -827,16 +865,20 @@ function apply(job, event) {
       return event.data;
   }
 }
+function asProblem(error) {
+  return typeof error === "object" && error !== null ? error : null;
+}
 async function data(call) {
   const { data: data2, error, response } = await call;
   if (!response.ok || data2 === void 0) {
-    throw new ApiError(response.status, error ?? null, response.url);
+    throw new ApiError(response.status, asProblem(error), response.url);
   }
   return data2;
 }
 export {
   ApiError,
   Choreo,
+  NETWORK_ERROR,
   TERMINAL,
   jobEvents
 };

@@ -5,8 +5,8 @@
 // before the `done` event, the stream is opened again with `Last-Event-ID: <last seq>` and the
 // server replays what was missed, so a reader sees every event once and in order.
 import { createParser, type EventSourceMessage } from 'eventsource-parser';
-import { ApiError } from './errors';
-import type { components } from './schema';
+import { ApiError } from './errors.js';
+import type { components } from './schema.js';
 
 export type Job = components['schemas']['JobView'];
 export type Status = components['schemas']['Status'];
@@ -72,7 +72,8 @@ function toEvent(message: EventSourceMessage): JobEvent | null {
 /**
  * The job's events in order, until `done` (then the iterator ends). Reconnects with
  * `Last-Event-ID` when the stream drops; an HTTP error answer (401, 404) is thrown as ApiError
- * at once, since asking again would get the same answer.
+ * at once, since asking again would get the same answer. After `maxRetries` failures in a row it
+ * throws: an ApiError (`network-error`) when the server no longer answers at all.
  */
 export async function* jobEvents(request: EventStreamRequest, options: EventStreamOptions = {}): AsyncGenerator<JobEvent> {
   let lastEventId = options.lastEventId;
@@ -83,11 +84,12 @@ export async function* jobEvents(request: EventStreamRequest, options: EventStre
     const headers: Record<string, string> = { ...request.headers, Accept: 'text/event-stream' };
     if (lastEventId !== undefined) headers['Last-Event-ID'] = lastEventId;
     let response: Response | null = null;
+    let unanswered: unknown = null;
     try {
       response = await request.fetch(request.url, { headers, signal: options.signal, cache: 'no-store' });
     } catch (e) {
       if (options.signal?.aborted) throw e;
-      // A network error: try again below.
+      unanswered = e; // a network error: try again below
     }
     if (response && !response.ok) throw await ApiError.from(response);
     if (response?.body) {
@@ -121,7 +123,11 @@ export async function* jobEvents(request: EventStreamRequest, options: EventStre
       }
     }
     failures += 1;
-    if (failures > maxRetries) throw new Error(`the event stream of ${request.url} dropped ${failures} times`);
+    if (failures > maxRetries) {
+      // The server stopped answering (it went down): say so as every other call does.
+      if (unanswered !== null) throw unanswered instanceof ApiError ? unanswered : ApiError.network(request.url, unanswered);
+      throw new Error(`the event stream of ${request.url} dropped ${failures} times`);
+    }
     await sleep(retryMs, options.signal);
   }
 }

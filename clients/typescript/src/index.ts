@@ -10,13 +10,13 @@
 //   const done = await choreo.wait(job.id, { onUpdate: (j) => console.log(j.status, j.progress) });
 //   const glb = await choreo.download(done.id, 'motion.glb');
 import createClient, { type Client } from 'openapi-fetch';
-import { ApiError } from './errors';
-import { jobEvents, type EventStreamOptions, type Job, type JobEvent } from './events';
-import type { components, paths } from './schema';
+import { ApiError } from './errors.js';
+import { jobEvents, type EventStreamOptions, type Job, type JobEvent } from './events.js';
+import type { components, paths } from './schema.js';
 
-export { ApiError, type Problem } from './errors';
-export { jobEvents, type EventStreamOptions, type Job, type JobEvent, type ProgressEvent, type Status, type StatusEvent } from './events';
-export type { components, paths } from './schema';
+export { ApiError, NETWORK_ERROR, type Problem } from './errors.js';
+export { jobEvents, type EventStreamOptions, type Job, type JobEvent, type ProgressEvent, type Status, type StatusEvent } from './events.js';
+export type { components, paths } from './schema.js';
 
 type Schemas = components['schemas'];
 export type Song = Schemas['SongView'];
@@ -64,6 +64,20 @@ function randomUuid(): string {
   return `${h.slice(0, 8)}-${h.slice(8, 12)}-${h.slice(12, 16)}-${h.slice(16, 20)}-${h.slice(20)}`;
 }
 
+/** `fetch`, but a request that gets no answer rejects with an ApiError (`network-error`) naming
+ * its URL. The fetch standard rejects such a request with a TypeError and nothing else does, so
+ * an abort (an AbortError) and a custom fetch's own errors pass through unchanged. */
+function answering(fetch: typeof globalThis.fetch): typeof globalThis.fetch {
+  return async (input, init) => {
+    try {
+      return await fetch(input, init);
+    } catch (e) {
+      if (!(e instanceof TypeError)) throw e;
+      throw ApiError.network(typeof input === 'string' ? input : input instanceof URL ? input.href : input.url, e);
+    }
+  };
+}
+
 export class Choreo {
   /** openapi-fetch's typed client, for any route: `choreo.api.GET('/v1/jobs/{id}', …)`. */
   readonly api: Client<paths>;
@@ -77,7 +91,7 @@ export class Choreo {
     this.baseUrl = (options.baseUrl ?? '').replace(/\/+$/, '');
     this.#headers = options.apiKey ? { Authorization: `Bearer ${options.apiKey}` } : {};
     // Looked up at each call, so a fetch replaced later (tests, polyfills) is the one used.
-    this.#fetch = options.fetch ?? ((input, init) => globalThis.fetch(input, init));
+    this.#fetch = answering(options.fetch ?? ((input, init) => globalThis.fetch(input, init)));
     this.api = createClient<paths>({ baseUrl: this.baseUrl, headers: this.#headers, fetch: (request) => this.#fetch(request) });
   }
 
@@ -142,7 +156,7 @@ export class Choreo {
   /** DELETE /v1/rigs/{id}: deletes the rig and its file (204); an unknown id is an ApiError (404). */
   async deleteRig(id: string): Promise<void> {
     const { error, response } = await this.api.DELETE('/v1/rigs/{id}', { params: { path: { id } } });
-    if (!response.ok) throw new ApiError(response.status, (error as ApiError['problem']) ?? null, response.url);
+    if (!response.ok) throw new ApiError(response.status, asProblem(error), response.url);
   }
 
   /** POST /v1/jobs with an idempotency key (a new one unless given), so a retried call makes one job. */
@@ -240,11 +254,17 @@ function apply(job: Job, event: JobEvent): Job {
   }
 }
 
+/** openapi-fetch's `error`: the parsed problem+json, or the body's text when it was not JSON
+ * (a proxy's HTML error page), which is no problem. */
+function asProblem(error: unknown): ApiError['problem'] {
+  return typeof error === 'object' && error !== null ? (error as ApiError['problem']) : null;
+}
+
 /** The answer's body, or its problem as ApiError. */
 async function data<T>(call: Promise<{ data?: T; error?: unknown; response: Response }>): Promise<T> {
   const { data, error, response } = await call;
   if (!response.ok || data === undefined) {
-    throw new ApiError(response.status, (error as ApiError['problem']) ?? null, response.url);
+    throw new ApiError(response.status, asProblem(error), response.url);
   }
   return data;
 }
