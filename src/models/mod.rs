@@ -25,6 +25,12 @@ pub mod tsmt;
 /// One row per served model: its id (the folder name under the models dir) and how to load it.
 /// Adding a model is one row here, one `pub mod` above and one trainer under [`train`].
 pub const MODELS: &[Entry] = &[
+    // First: `GET /v1/models` lists it first and the page dances it by default, as the model
+    // whose served dances score closest to real ones (docs/evaluation.md).
+    Entry {
+        id: beat_graph::ID,
+        load: |dir| Ok(std::sync::Arc::new(beat_graph::Served::load(dir)?)),
+    },
     Entry {
         id: dance_revolution::ID,
         load: |dir| Ok(std::sync::Arc::new(dance_revolution::Served::load(dir)?)),
@@ -40,10 +46,6 @@ pub const MODELS: &[Entry] = &[
     Entry {
         id: tsmt::ID,
         load: |dir| Ok(std::sync::Arc::new(tsmt::Served::load(dir)?)),
-    },
-    Entry {
-        id: beat_graph::ID,
-        load: |dir| Ok(std::sync::Arc::new(beat_graph::Served::load(dir)?)),
     },
 ];
 
