@@ -10,6 +10,8 @@ use ndarray_npy::ReadNpyExt;
 
 #[path = "audio/hostile.rs"]
 mod hostile;
+#[path = "audio/tempo_change.rs"]
+mod tempo_change;
 #[path = "common/hostile_files.rs"]
 mod hostile_files;
 
