@@ -73,14 +73,15 @@ pub struct Analysis {
     pub tempo_bpm: f64,
     pub beat_times: Vec<f64>,
     pub downbeat_times: Vec<f64>,
-    /// The tempo through the song ([`tempo_curve`]): two points for a steady song, a point
-    /// every 2 s or so where the tempo moves. Empty in analyses stored before it existed and
-    /// for songs without beats.
+    /// The music's tempo through the song: two points for a steady song, a point every 2 s or
+    /// so where the tempo moves (`src/audio/tempo_curve.rs`). Empty in analyses stored before
+    /// it existed and for songs without beats.
     #[serde(default)]
     pub tempo_curve: Vec<TempoPoint>,
 }
 
-/// One point of [`Analysis::tempo_curve`]: the tempo from `time_s` on (linear to the next point).
+/// One point of an analysis' `tempo_curve`: the tempo (BPM) at `time_s` (s), running linearly to
+/// the next point.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct TempoPoint {
     pub time_s: f64,
