@@ -10,10 +10,10 @@ use ndarray_npy::ReadNpyExt;
 
 #[path = "audio/hostile.rs"]
 mod hostile;
-#[path = "audio/tempo_change.rs"]
-mod tempo_change;
 #[path = "common/hostile_files.rs"]
 mod hostile_files;
+#[path = "audio/tempo_change.rs"]
+mod tempo_change;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

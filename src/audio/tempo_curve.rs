@@ -388,7 +388,11 @@ mod tests {
         let env = clicks(40.0, |_| 100.0);
         let local = local_tempo(&tempogram(&env, tempo_window(22050, 512)), 22050, 512);
         assert!(local.steady, "{:?}", local.shift);
-        assert!((local.median_bpm() / 100.0 - 1.0).abs() < 0.03, "{}", local.median_bpm());
+        assert!(
+            (local.median_bpm() / 100.0 - 1.0).abs() < 0.03,
+            "{}",
+            local.median_bpm()
+        );
     }
 
     #[test]
