@@ -27,6 +27,10 @@ pub struct Report {
     pub duration_s: f64,
     /// Music beat times (s) within the dance, from the audio analysis.
     pub music_beat_times: Vec<f64>,
+    /// The music's tempo through the song, from the audio analysis (`Analysis::tempo_curve`;
+    /// empty in reports written before it existed).
+    #[serde(default)]
+    pub music_tempo_curve: Vec<crate::audio::TempoPoint>,
     /// Kinematic beat times (s), both published variants.
     pub kinematic_beat_times: KinematicBeats,
     /// Every per-dance score (BAS in both conventions, FID_k/FID_g, diversity, smoothness, foot
@@ -96,6 +100,7 @@ pub fn build(
         frames: motion.positions.dim().0,
         duration_s: motion.positions.dim().0 as f64 / motion.fps,
         music_beat_times: scored.music_beats,
+        music_tempo_curve: analysis.tempo_curve.clone(),
         kinematic_beat_times: scored.kinematic_beats,
         scores: scored.scores,
         fid_k_curve: fid_k_curve(motion, reference),

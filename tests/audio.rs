@@ -12,6 +12,8 @@ use ndarray_npy::ReadNpyExt;
 mod hostile;
 #[path = "common/hostile_files.rs"]
 mod hostile_files;
+#[path = "audio/tempo_change.rs"]
+mod tempo_change;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))

@@ -509,6 +509,7 @@ fn report_of_a_synthetic_dance_round_trips_through_json() {
         tempo_bpm: 120.0,
         beat_times: (0..40).map(|i| i as f64 * 0.5).collect(),
         downbeat_times: vec![],
+        tempo_curve: vec![],
     };
     let report = choreo::report::build(&m, &analysis, &[], &reference).expect("report");
     assert_eq!(report.frames, 400);
@@ -568,6 +569,7 @@ fn report_rejects_a_motion_with_the_wrong_joint_count() {
         tempo_bpm: 120.0,
         beat_times: vec![],
         downbeat_times: vec![],
+        tempo_curve: vec![],
     };
     assert!(choreo::report::build(&m, &analysis, &[], &reference).is_err());
 }

@@ -353,6 +353,7 @@ async fn complete_stores_the_outcome_once(db: TestDb) {
         tempo_bpm: 120.0,
         beat_times: vec![0.5, 1.0],
         downbeat_times: vec![0.5],
+        tempo_curve: vec![],
     };
     assert!(store
         .complete(analysis.id, "w", Outcome::Analysis(outcome))

@@ -3,7 +3,7 @@
 //! The flow is `decode` (symphonia, mono downmix, encoder-delay trim, rubato resampling while
 //! streaming) → `dsp` (STFT, Slaney mel, MFCC, delta: librosa 0.11 defaults) → `onset`,
 //! `rhythm` (onset strength, tempogram, tempo, the Ellis dynamic-programming beat tracker,
-//! downbeats) and `chroma` (chroma_stft, constant-Q chroma) → `features` (one named feature set
+//! downbeats), `tempo_curve` (the local tempo of songs whose tempo changes) and `chroma` (chroma_stft, constant-Q chroma) → `features` (one named feature set
 //! per model, frame i = music at time i/fps). `reference` compares against librosa fixtures.
 //!
 //! Every function here returns `AudioError` for bad input and never panics on user audio.
@@ -22,6 +22,7 @@ pub mod mp4;
 pub mod onset;
 mod resample;
 pub mod rhythm;
+pub mod tempo_curve;
 
 pub use budget::Budget;
 pub use decode::{
@@ -67,9 +68,24 @@ pub struct DecodedAudio {
 /// What `choreo analyze` prints and `GET /v1/songs/{id}` returns.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Analysis {
+    /// librosa's global tempo for a steady song; for a song whose tempo changes, the median of
+    /// `tempo_curve`.
     pub tempo_bpm: f64,
     pub beat_times: Vec<f64>,
     pub downbeat_times: Vec<f64>,
+    /// The music's tempo through the song: two points for a steady song, a point every 2 s or
+    /// so where the tempo moves (`src/audio/tempo_curve.rs`). Empty in analyses stored before
+    /// it existed and for songs without beats.
+    #[serde(default)]
+    pub tempo_curve: Vec<TempoPoint>,
+}
+
+/// One point of an analysis' `tempo_curve`: the tempo (BPM) at `time_s` (s), running linearly to
+/// the next point.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct TempoPoint {
+    pub time_s: f64,
+    pub bpm: f64,
 }
 
 /// Errors from decoding or analysing audio.

@@ -23,7 +23,7 @@ use rustfft::num_complex::Complex32;
 
 use super::dsp;
 use super::onset::{onset_strength_from_db, Aggregate};
-use super::{Analysis, AudioError, Budget, N_FFT, N_MELS};
+use super::{tempo_curve, Analysis, AudioError, Budget, N_FFT, N_MELS};
 use crate::stage::Stage;
 
 /// Autocorrelation tempogram, `[frames, win_length]`, librosa `feature.tempogram`
@@ -100,11 +100,26 @@ pub fn tempo_frequencies(n_bins: usize, hop: usize, sr: u32) -> Vec<f64> {
         .collect()
 }
 
+/// Tempogram window of [`tempo`] in frames (librosa's `ac_size` of 8 s).
+pub fn tempo_window(sr: u32, hop: usize) -> usize {
+    (((8.0 * sr as f64) as usize) / hop).max(2)
+}
+
+/// librosa's tempo prior: log-normal around 120 BPM, one octave wide (log density, up to a
+/// constant).
+pub fn tempo_prior(bpm: f64) -> f64 {
+    -0.5 * ((bpm.log2() - 120f64.log2()) / 1.0).powi(2)
+}
+
 /// Global tempo (librosa `feature.tempo`, start_bpm 120, std 1 octave, ac_size 8 s, max 320).
 pub fn tempo(onset: &[f32], sr: u32, hop: usize) -> f64 {
-    let win = ((8.0 * sr as f64) as usize) / hop;
-    let win = win.max(2);
-    let tg = tempogram(onset, win);
+    tempo_of_tempogram(&tempogram(onset, tempo_window(sr, hop)), sr, hop)
+}
+
+/// [`tempo`] from its tempogram (`tempogram(onset, tempo_window(sr, hop))`), so the tempo
+/// curve ([`super::tempo_curve`]) reads the same tempogram without computing it twice.
+pub fn tempo_of_tempogram(tg: &Array2<f32>, sr: u32, hop: usize) -> f64 {
+    let win = tg.ncols();
     let n = tg.nrows().max(1) as f64;
     let mean: Vec<f64> = (0..win)
         .map(|l| tg.column(l).iter().map(|&v| v as f64).sum::<f64>() / n)
@@ -113,7 +128,7 @@ pub fn tempo(onset: &[f32], sr: u32, hop: usize) -> f64 {
     let max_idx = bpms.iter().position(|&b| b < 320.0).unwrap_or(0);
     let mut best = (f64::NEG_INFINITY, 0usize);
     for l in max_idx.max(1)..win {
-        let prior = -0.5 * ((bpms[l].log2() - 120f64.log2()) / 1.0).powi(2);
+        let prior = tempo_prior(bpms[l]);
         // librosa computes this in float32; the sum is rounded the same way.
         let score = ((1e6f32 * mean[l] as f32).ln_1p() as f64) + prior;
         if score > best.0 {
@@ -135,11 +150,24 @@ fn round_even(x: f64) -> f64 {
 
 /// Beat frames from an onset envelope and a tempo (librosa `__beat_tracker`, trim=True).
 pub fn beat_track_frames(onset: &[f32], bpm: f64, frame_rate: f64, tightness: f64) -> Vec<usize> {
-    let n = onset.len();
-    if n == 0 || bpm <= 0.0 || !onset.iter().any(|&v| v != 0.0) {
+    if bpm <= 0.0 {
         return Vec::new();
     }
     let fpb = round_even(frame_rate * 60.0 / bpm).max(1.0);
+    beat_track_periods(onset, &[fpb], tightness)
+}
+
+/// The dynamic programme of [`beat_track_frames`] with a beat period (frames, ≥ 1) per onset
+/// frame, as librosa 0.11 runs it for `beat_track(bpm=array)`; one period serves every frame.
+/// The periods need not be whole frames: at 150 BPM and more a rounded period is off by up
+/// to 3 % and the beats drift off the music within a few bars. A whole-frame period gives
+/// exactly what [`beat_track_frames`] gives.
+pub fn beat_track_periods(onset: &[f32], periods: &[f64], tightness: f64) -> Vec<usize> {
+    let n = onset.len();
+    if n == 0 || periods.is_empty() || !onset.iter().any(|&v| v != 0.0) {
+        return Vec::new();
+    }
+    let fpb_at = |i: usize| periods[i.min(periods.len() - 1)].max(1.0);
     // Normalise by the standard deviation (ddof=1).
     let mean = onset.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
     let var = if n > 1 {
@@ -154,14 +182,24 @@ pub fn beat_track_frames(onset: &[f32], bpm: f64, frame_rate: f64, tightness: f6
     let norm = var.sqrt() + f32::MIN_POSITIVE as f64;
     let env: Vec<f64> = onset.iter().map(|&v| v as f64 / norm).collect();
 
-    // Local score: same-mode convolution with a Gaussian of width fpb/32, as librosa writes it.
-    let k_len = 2 * fpb as usize + 1;
-    let window: Vec<f64> = (0..k_len)
-        .map(|k| (-0.5 * ((k as f64 - fpb) * 32.0 / fpb).powi(2)).exp())
-        .collect();
-    let kh = k_len / 2;
+    // Local score: same-mode convolution with a Gaussian of width fpb/32, as librosa writes it
+    // (with one period per frame, each frame's own kernel; the kernel is rebuilt only when the
+    // period changes).
+    let mut kernel_fpb = f64::NAN;
+    let mut window: Vec<f64> = Vec::new();
     let mut local = vec![0.0f64; n];
     for (i, l) in local.iter_mut().enumerate() {
+        let fpb = fpb_at(i);
+        if fpb != kernel_fpb {
+            kernel_fpb = fpb;
+            // Offsets -⌊fpb⌋..=⌊fpb⌋ (librosa's np.arange(-fpb, fpb + 1) for a whole period).
+            let half = fpb as usize;
+            window = (0..2 * half + 1)
+                .map(|k| (-0.5 * ((k as f64 - half as f64) * 32.0 / fpb).powi(2)).exp())
+                .collect();
+        }
+        let k_len = window.len();
+        let kh = k_len / 2;
         let lo = (i + kh + 1).saturating_sub(n);
         let hi = (i + kh).min(k_len);
         let mut acc = 0.0;
@@ -177,10 +215,11 @@ pub fn beat_track_frames(onset: &[f32], bpm: f64, frame_rate: f64, tightness: f6
     let mut backlink = vec![-1i64; n];
     let mut cum = vec![0.0f64; n];
     let mut first_beat = true;
-    let near = round_even(fpb / 2.0) as i64;
-    let far = 2 * fpb as i64;
-    let log_fpb = fpb.ln();
     for i in 0..n {
+        let fpb = fpb_at(i);
+        let near = round_even(fpb / 2.0) as i64;
+        let far = (2.0 * fpb) as i64;
+        let log_fpb = fpb.ln();
         let mut best = f64::NEG_INFINITY;
         let mut loc_best = -1i64;
         let mut loc = i as i64 - near;
@@ -314,15 +353,31 @@ pub fn analyze_mono_within(
     dsp::power_to_db_inplace(&mut mel_db);
     let onset = onset_strength_from_db(&mel_db, N_FFT, hop, Aggregate::Median);
     budget.check(stage)?;
-    let (bpm, beats) = if onset.iter().any(|&v| v != 0.0) {
-        let bpm = tempo(&onset, sr, hop);
+    let frame_rate = sr as f64 / hop as f64;
+    let duration_s = y.len() as f64 / sr as f64;
+    let (bpm, beats, curve) = if onset.iter().any(|&v| v != 0.0) {
+        let tg = tempogram(&onset, tempo_window(sr, hop));
+        let bpm = tempo_of_tempogram(&tg, sr, hop);
         budget.check(stage)?;
-        (
-            bpm,
-            beat_track_frames(&onset, bpm, sr as f64 / hop as f64, 100.0),
-        )
+        let local = tempo_curve::local_tempo(&tg, sr, hop);
+        budget.check(stage)?;
+        if !local.follows() {
+            // librosa's single-tempo tracker, exactly as before the curve existed.
+            (
+                bpm,
+                beat_track_frames(&onset, bpm, frame_rate, 100.0),
+                tempo_curve::flat(bpm, duration_s),
+            )
+        } else {
+            let periods = local.periods(onset.len(), frame_rate);
+            (
+                local.median_bpm(),
+                beat_track_periods(&onset, &periods, 100.0),
+                local.points(frame_rate),
+            )
+        }
     } else {
-        (0.0, Vec::new())
+        (0.0, Vec::new(), Vec::new())
     };
     budget.check(stage)?;
     let to_s = |f: usize| f as f64 * hop as f64 / sr as f64;
@@ -331,6 +386,7 @@ pub fn analyze_mono_within(
         tempo_bpm: bpm,
         beat_times: beats.iter().map(|&f| to_s(f)).collect(),
         downbeat_times: down.iter().map(|&f| to_s(f)).collect(),
+        tempo_curve: curve,
     })
 }
 

@@ -33,6 +33,7 @@ mod songs;
 pub mod style_control;
 pub mod tables;
 pub mod tempo;
+pub mod tempo_change;
 
 use std::path::{Path, PathBuf};
 
@@ -264,6 +265,10 @@ pub struct EvalResult {
     /// Each model on every extra song at each of [`EvalOptions::tempi`].
     #[serde(default)]
     pub tempo: Vec<tempo::TempoRow>,
+    /// The extra songs of 90 s or more slowed then sped up, as analysed and as each model
+    /// danced them (with the tempo section: off with it).
+    #[serde(default)]
+    pub tempo_change: tempo_change::TempoChange,
 }
 
 /// Recomputes the reference statistics from the train split and writes them.
@@ -401,6 +406,7 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
     let mut extra_rows = Vec::new();
     let mut extra_names = Vec::new();
     let (mut style_control, mut real_styles, mut tempo_rows) = (Vec::new(), None, Vec::new());
+    let mut tempo_change_section = tempo_change::TempoChange::default();
     if !args.real_only {
         let registry = Registry::load(&args.models_dir).map_err(EvalError::Models)?;
         let mut folders: Vec<PathBuf> = Vec::new();
@@ -421,6 +427,20 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
         }
         name_apart(&mut extra, &extra_paths);
         extra_names = extra.iter().map(|s| s.name.clone()).collect();
+        // The songs that speed up in the middle, made once for every model.
+        let change_dir = tempfile::tempdir().map_err(|source| EvalError::Io {
+            path: std::env::temp_dir(),
+            source,
+        })?;
+        let mut changed = Vec::new();
+        if !args.tempi.is_empty() {
+            for (p, name) in extra_paths.iter().zip(&extra_names) {
+                if let Some(j) = tempo_change::joined(p, name, change_dir.path())? {
+                    tempo_change_section.songs.push(j.song.clone());
+                    changed.push(j);
+                }
+            }
+        }
         let ids: Vec<String> = if args.models.is_empty() {
             registry.list().into_iter().map(|m| m.id.0).collect()
         } else {
@@ -468,6 +488,15 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
                     &reference,
                 )?);
             }
+            if !changed.is_empty() {
+                tempo_change_section.rows.push(tempo_change::row(
+                    model.as_ref(),
+                    id,
+                    &changed,
+                    args.seed,
+                    args.seeds,
+                )?);
+            }
             if model.info().capabilities.style {
                 let all: Vec<style_control::StyleSong<'_>> = songs
                     .iter()
@@ -506,5 +535,6 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
         style_control,
         real_styles,
         tempo: tempo_rows,
+        tempo_change: tempo_change_section,
     })
 }

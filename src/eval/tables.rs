@@ -297,6 +297,11 @@ pub fn markdown(result: &EvalResult) -> String {
         out += "\n## Tempo: the extra songs slower and faster (sox, pitch kept)\n\n";
         out += &super::tempo::markdown(&result.tempo);
     }
+    if !result.tempo_change.songs.is_empty() {
+        out +=
+            "\n## Tempo change: the extra songs slowed, then sped up 1.5625× (sox, pitch kept)\n\n";
+        out += &super::tempo_change::markdown(&result.tempo_change);
+    }
     if !result.style_control.is_empty() {
         out += "\n## Style control (every song above, test and extra, in each style)\n\n";
         out += &super::style_control::markdown(&result.style_control, result.real_styles.as_ref());

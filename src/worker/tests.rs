@@ -29,6 +29,7 @@ impl Execute for Scripted {
                 tempo_bpm: 120.0,
                 beat_times: vec![0.5],
                 downbeat_times: vec![0.5],
+                tempo_curve: vec![],
             })),
         }
     }

@@ -70,10 +70,13 @@ export class ReportView {
     }
     container.append(title);
 
-    this.beats = canvas(container, 'beats', 'Beats: music (top; downbeats thick) against the dance\'s motion beats (bottom)');
+    this.beats = canvas(container, 'beats', 'Beats: music (top; downbeats thick; the line: its tempo in BPM) against the dance\'s motion beats (bottom)');
     this.speed = canvas(container, 'speed', 'Mean joint speed over time (m/s), music beats behind');
     this.music = report.music_beat_times ?? analysis?.beat_times ?? [];
     this.downbeats = analysis?.downbeat_times ?? [];
+    // The music's tempo through the song (two points when it is steady; absent in analyses
+    // stored before it existed).
+    this.tempoCurve = report.music_tempo_curve ?? analysis?.tempo_curve ?? [];
     const kinematic = report.kinematic_beat_times ?? {};
     this.motionBeats = kinematic.bailando ?? Object.values(kinematic)[0] ?? [];
     this.speeds = speeds(motion);
@@ -179,6 +182,35 @@ export class ReportView {
     for (const t of this.music) tick(t, 16 * ratio, h / 2 - 2 * ratio, 'rgba(230,140,30,0.9)', 1.5);
     for (const t of this.downbeats) tick(t, 16 * ratio, h / 2 - 2 * ratio, 'rgba(200,30,40,0.95)', 3);
     for (const t of this.motionBeats) tick(t, h / 2 + 2 * ratio, h - 16 * ratio, 'rgba(43,108,176,0.95)', 2);
+    this.drawTempo(c, g, ratio);
+  }
+
+  // The tempo curve over the music's ticks: a thin line (higher is faster, scaled to the song's
+  // own range), and its BPM written where it starts and wherever it moves by 3 % or more.
+  drawTempo(c, g, ratio) {
+    const curve = this.tempoCurve;
+    if (curve.length === 0) return;
+    const bpms = curve.map((p) => p.bpm);
+    const lo = Math.min(...bpms) * 0.95, hi = Math.max(...bpms) * 1.05;
+    const top = 16 * ratio, bottom = c.height / 2 - 2 * ratio;
+    const y = (bpm) => bottom - ((bpm - lo) / (hi - lo)) * (bottom - top);
+    g.strokeStyle = 'rgba(60,60,60,0.8)';
+    g.lineWidth = 1.25 * ratio;
+    g.beginPath();
+    curve.forEach((p, i) => {
+      const x = this.x(c, p.time_s);
+      if (i === 0) g.moveTo(x, y(p.bpm));
+      else g.lineTo(x, y(p.bpm));
+    });
+    g.stroke();
+    g.fillStyle = '#333';
+    g.font = `${10 * ratio}px sans-serif`;
+    let shown = null;
+    for (const p of curve) {
+      if (shown !== null && Math.abs(p.bpm / shown - 1) < 0.03) continue;
+      g.fillText(`${p.bpm.toFixed(0)} BPM`, this.x(c, p.time_s) + 3 * ratio, Math.max(top + 10 * ratio, y(p.bpm) - 3 * ratio));
+      shown = p.bpm;
+    }
   }
 
   drawSpeed(c) {

@@ -393,8 +393,18 @@ export interface components {
         Analysis: {
             beat_times: number[];
             downbeat_times: number[];
-            /** Format: double */
+            /**
+             * Format: double
+             * @description librosa's global tempo for a steady song; for a song whose tempo changes, the median of
+             *     `tempo_curve`.
+             */
             tempo_bpm: number;
+            /**
+             * @description The music's tempo through the song: two points for a steady song, a point every 2 s or
+             *     so where the tempo moves (`src/audio/tempo_curve.rs`). Empty in analyses stored before
+             *     it existed and for songs without beats.
+             */
+            tempo_curve?: components["schemas"]["TempoPoint"][];
         };
         /**
          * @description The container/codec a song was decoded as, found by decoding, never by extension.
@@ -1002,6 +1012,16 @@ export interface components {
             /** @description The classifier's probabilities per style, in [`DanceStyle::ALL`] order, when it ran. */
             probabilities?: number[];
             style: components["schemas"]["DanceStyle"];
+        };
+        /**
+         * @description One point of an analysis' `tempo_curve`: the tempo (BPM) at `time_s` (s), running linearly to
+         *     the next point.
+         */
+        TempoPoint: {
+            /** Format: double */
+            bpm: number;
+            /** Format: double */
+            time_s: number;
         };
         /**
          * @description The length unit a file's rest pose was read in.
