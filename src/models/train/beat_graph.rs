@@ -125,6 +125,106 @@ fn cut(
     Ok((Cut { rows, units, music }, analysis))
 }
 
+/// The ankles' mean speed about the body over a unit (m/frame): where in its beats a dancer steps.
+fn ankle_activity(lib: &Library, u: &Unit) -> f64 {
+    const ANKLES: [usize; 2] = [9, 18];
+    let x = lib.dance(u.dance);
+    let (a, b) = (
+        u.start.floor() as usize,
+        (u.end.ceil() as usize).min(x.nrows() - 1),
+    );
+    let mut sum = 0.0;
+    for f in a + 1..=b {
+        for j in ANKLES {
+            sum += (0..3)
+                .map(|k| f64::from(x[[f, 3 * j + k]] - x[[f - 1, 3 * j + k]]).powi(2))
+                .sum::<f64>()
+                .sqrt();
+        }
+    }
+    sum / (b - a).max(1) as f64
+}
+
+/// Puts every dance's bar positions in step with the other dances of its style, by the motion:
+/// the positions come from each training song's tracked downbeats, and where the tracker put one
+/// song's downbeat a beat early the dancer's steps fall on the other beats of the bar. Joining
+/// such dancers by bar position flips the step pattern at each join (a composed cha-cha then
+/// stepped at 0.53–0.58 of the beat rate, not 1/2). Each dance's profile of ankle activity over
+/// the bar is rolled to agree best with its style's mean profile (three rounds, starting from the
+/// style's longest dance).
+fn align_steps(lib: &mut Library) {
+    let dances = lib.dance_first.len() - 1;
+    let mut profiles: Vec<Vec<f64>> = vec![Vec::new(); dances];
+    for d in 0..dances {
+        let of: Vec<&Unit> = lib.units.iter().filter(|u| u.dance == d).collect();
+        let Some(meter) = of.first().map(|u| u.meter) else {
+            continue;
+        };
+        let mut p = vec![0.0; meter];
+        let mut n = vec![0usize; meter];
+        for u in &of {
+            p[u.phase % meter] += ankle_activity(lib, u);
+            n[u.phase % meter] += 1;
+        }
+        let mean = p.iter().sum::<f64>() / of.len().max(1) as f64;
+        profiles[d] = (0..meter)
+            .map(|k| p[k] / n[k].max(1) as f64 / mean.max(1e-9) - 1.0)
+            .collect();
+    }
+    let mut shift = vec![0usize; dances];
+    for style in DanceStyle::ALL {
+        let members: Vec<usize> = (0..dances)
+            .filter(|&d| lib.units.iter().any(|u| u.dance == d && u.style == style))
+            .filter(|&d| !profiles[d].is_empty())
+            .collect();
+        let Some(&longest) = members
+            .iter()
+            .max_by_key(|&&d| lib.dance_first[d + 1] - lib.dance_first[d])
+        else {
+            continue;
+        };
+        let meter = profiles[longest].len();
+        let rolled = |d: usize, s: usize| -> Vec<f64> {
+            (0..meter).map(|k| profiles[d][(k + s) % meter]).collect()
+        };
+        let mut reference = profiles[longest].clone();
+        for _ in 0..3 {
+            for &d in &members {
+                if profiles[d].len() != meter {
+                    continue;
+                }
+                shift[d] = (0..meter)
+                    .max_by(|&a, &b| {
+                        let dot = |s: usize| -> f64 {
+                            rolled(d, s)
+                                .iter()
+                                .zip(&reference)
+                                .map(|(x, y)| x * y)
+                                .sum()
+                        };
+                        dot(a).total_cmp(&dot(b))
+                    })
+                    .unwrap_or(0);
+            }
+            reference = (0..meter)
+                .map(|k| {
+                    members.iter().map(|&d| rolled(d, shift[d])[k]).sum::<f64>()
+                        / members.len() as f64
+                })
+                .collect();
+        }
+        tracing::info!(
+            style = style.name(),
+            ?reference,
+            "bar profile of ankle activity"
+        );
+    }
+    for u in &mut lib.units {
+        // Rolling a profile by s reads position k from k + s: the unit at k + s becomes k.
+        u.phase = (u.phase + u.meter - shift[u.dance] % u.meter) % u.meter;
+    }
+}
+
 /// Share of `others` whose cost exceeds the true unit's (ties count half).
 fn auc(
     matcher: &Match,
@@ -237,6 +337,7 @@ pub fn train(o: &Options) -> Result<ModelFile, TrainError> {
         motion: Array2::zeros((0, 0)),
         graph: Vec::new(),
     };
+    align_steps(&mut lib);
     lib.motion = motion_descriptors(
         lib.units
             .iter()
