@@ -370,6 +370,7 @@ mod tests {
             "dancenet",
             "keypose-transformer",
             "tsmt",
+            "beat-graph",
         ] {
             if !only.is_empty() && !only.split(',').any(|m| m == id) {
                 continue;

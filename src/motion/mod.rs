@@ -87,7 +87,8 @@ impl Default for MotionStages {
     }
 }
 
-/// The motion stages after any model: [`beat_align::align_served`] (the timing, planned on the
+/// The motion stages after any model: [`beat_align::tempo_follow`] where the song's tempo
+/// changes, then [`beat_align::align_served`] (the timing, planned on the
 /// network's rhythm and on the planted one, the key poses' frames mapped to themselves), with
 /// [`finish`] applied to the warped motion, so the feet are planted on the motion that is
 /// served. `beat_times_s` are the song's beats on the dance's clock. Jobs, `choreo generate`
@@ -109,6 +110,29 @@ pub fn after_model(
         let mut done = finish(motion, stages.plant_feet);
         keep_seed(&mut done, seed.view());
         return (done, None);
+    }
+    // A song whose tempo changes: the dance's pace first follows it (a network hears one pace).
+    let before = motion.positions.clone();
+    let motion = beat_align::tempo_follow::follow_tempo(
+        motion,
+        beat_times_s,
+        !key_poses.is_empty() || seed_frames > 0,
+    );
+    if motion.positions != before {
+        // One grid fraction and a mean slope of 1 over the dance cannot hold a pace that changes:
+        // aligned after the warp, dancenet's and tsmt's steps sped up 0.6–2.4× for the music's
+        // 1.56× (without it, 1.5–1.75×).
+        let mut done = finish(motion, stages.plant_feet);
+        keep_seed(&mut done, seed.view());
+        let skipped = beat_align::BeatAlignSummary {
+            applied: false,
+            skipped: Some(
+                "the song's tempo changes: the dance's pace follows it instead (tempo_follow)"
+                    .into(),
+            ),
+            ..Default::default()
+        };
+        return (done, Some(skipped));
     }
     let mut fixed: Vec<f64> = key_poses.iter().map(|k| k.time_s).collect();
     fixed.extend((0..=seed_frames.min(motion.num_frames())).map(|f| f as f64 / motion.fps));

@@ -49,6 +49,7 @@ use super::Motion;
 
 mod plan;
 mod rhythm;
+pub mod tempo_follow;
 
 use plan::{plan_from, BeatClock};
 use rhythm::{ankle_speed, step_rate, CHECK_ZERO_PAD};
