@@ -32,6 +32,12 @@ pub const MUSIC_FACTOR: f64 = FAST / SLOW;
 pub const CLEAR_S: f64 = 3.0;
 /// A dance follows the change when its step-rate ratio lies within this share of the music's.
 pub const FOLLOW_TOLERANCE: f64 = 0.1;
+/// The short windows (s) whose step rate tells when a dance's pace has settled after the
+/// change: four cycles of a 1 Hz step, the least a spectral peak resolves to a few per cent.
+pub const SETTLE_WINDOW_S: f64 = 4.0;
+/// Seconds between the short windows' starts, and how far after the change they are looked at.
+pub const SETTLE_HOP_S: f64 = 0.5;
+pub const SETTLE_HORIZON_S: f64 = 10.0;
 
 /// When the music speeds up in the joined song (s).
 pub fn change_s() -> f64 {
@@ -60,6 +66,11 @@ pub struct TempoChangeDance {
     /// where a side has no measurable step rate).
     pub ratio: Option<f64>,
     pub ratio_own: Option<f64>,
+    /// Seconds after the change from which every short window of the served dance steps nearer
+    /// its new pace than its old ([`settle_s`]); none where it does not follow the change or
+    /// does not settle within [`SETTLE_HORIZON_S`].
+    #[serde(default)]
+    pub settle_s: Option<f64>,
 }
 
 /// One model on the joined songs.
@@ -244,13 +255,42 @@ fn step_hz(m: &Motion, beats: &[f64], from_s: f64, to_s: f64) -> Option<f64> {
     tempo_lock(part, m.fps, &shifted).map(|l| l.step_hz)
 }
 
-/// After over before the change, [`CLEAR_S`] kept clear of it.
+/// The ankles' step rate of `m` after over before the change, [`CLEAR_S`] kept clear of it;
+/// `beats` are the joined song's.
 fn step_ratio(m: &Motion, beats: &[f64]) -> Option<f64> {
     let change = change_s();
     let end = m.duration_s();
     let before = step_hz(m, beats, 0.0, change - CLEAR_S)?;
     let after = step_hz(m, beats, change + CLEAR_S, end)?;
     Some(after / before)
+}
+
+/// When the pace of `m` settles after the change: the first start `s` (every [`SETTLE_HOP_S`]
+/// up to [`SETTLE_HORIZON_S`]) from which every short window `[change + s', change + s' + 4 s]`
+/// steps nearer (as a ratio) to the dance's rate over `[change + CLEAR_S, end]` than to its rate
+/// over `[0, change − CLEAR_S]`. Short windows are noisy (a peak may jump to a harmonic), so a
+/// window is held against the old pace rather than a tolerance; the windows start at the change,
+/// so no frame before it is measured. `None` where the dance does not follow the change (its two
+/// paces are within [`FOLLOW_TOLERANCE`] of the music's factor apart) or has not settled by the
+/// horizon.
+fn settle_s(m: &Motion, beats: &[f64]) -> Option<f64> {
+    let change = change_s();
+    let before = step_hz(m, beats, 0.0, change - CLEAR_S)?;
+    let after = step_hz(m, beats, change + CLEAR_S, m.duration_s())?;
+    if ((after / before) / MUSIC_FACTOR - 1.0).abs() > FOLLOW_TOLERANCE {
+        return None;
+    }
+    let starts = (SETTLE_HORIZON_S / SETTLE_HOP_S).round() as usize;
+    let settled: Vec<bool> = (0..=starts)
+        .map(|k| {
+            let from = change + k as f64 * SETTLE_HOP_S;
+            step_hz(m, beats, from, from + SETTLE_WINDOW_S)
+                .is_some_and(|hz| (hz / after).ln().abs() < (hz / before).ln().abs())
+        })
+        .collect();
+    (0..=starts)
+        .find(|&k| settled[k..].iter().all(|&ok| ok))
+        .map(|k| k as f64 * SETTLE_HOP_S)
 }
 
 /// `model` on every joined song with the eval's seeds.
@@ -287,6 +327,7 @@ pub fn row(
                 seed,
                 ratio: step_ratio(&served, beats),
                 ratio_own,
+                settle_s: settle_s(&served, beats),
             });
         }
     }
@@ -318,7 +359,7 @@ pub fn markdown(section: &TempoChange) -> String {
             s.original_bpm * FAST
         );
     }
-    out += "\n| Model | step-rate ratio after/before, served (per dance) | within 10 % of 1.5625 | network's own | within 10 % |\n|---|---|---|---|---|\n";
+    out += "\n| Model | step-rate ratio after/before, served (per dance) | within 10 % of 1.5625 | network's own | within 10 % | served pace settled after (s), – where it does not follow |\n|---|---|---|---|---|---|\n";
     let list = |v: Vec<Option<f64>>| {
         v.iter()
             .map(|r| r.map_or("–".to_string(), |r| format!("{r:.2}")))
@@ -326,15 +367,21 @@ pub fn markdown(section: &TempoChange) -> String {
             .join(", ")
     };
     for r in &section.rows {
+        let settles: Vec<String> = r
+            .dances
+            .iter()
+            .map(|d| d.settle_s.map_or("–".to_string(), |s| format!("{s:.1}")))
+            .collect();
         out += &format!(
-            "| {} | {} | {}/{} | {} | {}/{} |\n",
+            "| {} | {} | {}/{} | {} | {}/{} | {} |\n",
             r.model,
             list(r.dances.iter().map(|d| d.ratio).collect()),
             r.followed,
             r.dances.len(),
             list(r.dances.iter().map(|d| d.ratio_own).collect()),
             r.followed_own,
-            r.dances.len()
+            r.dances.len(),
+            settles.join(", ")
         );
     }
     out
