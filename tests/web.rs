@@ -446,7 +446,8 @@ async fn the_typescript_client_uploads_waits_and_downloads_from_a_real_server() 
 /// `<choreo-player>` on a page of someone else's: Playwright loads `web/sample/player.html`
 /// (its server address and ids replaced, an api-key attribute with a real API key added) in
 /// Chromium from another origin, the element from `/assets/choreo-player.js` of a real server;
-/// the dance plays within one motion frame of the song.
+/// the dance plays within one motion frame of the song; after a seek the camera is on the dancer
+/// of a dance that travels 3.6 m; a dance that cannot be loaded is reported inside the element.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() {
     if !ready(
@@ -474,8 +475,47 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
     app.token = Some(key.clone());
     let song = app.upload_ok(&helpers::short_song()).await;
     let song_id = song["id"].as_str().expect("song id").to_string();
-    let job_id = app
+    let first = app
         .dance(&serde_json::json!({"song_id": song_id, "model": "dance-revolution", "seed": 2}))
+        .await;
+    // A dance that travels: its first 4.8 s are the first dance's, carried 0.75 m/s along x
+    // (3.6 m in all) as a seed motion that beat-graph keeps as given, so the camera must follow.
+    let motion: serde_json::Value = app
+        .get(&format!("/v1/jobs/{first}/motion.json"))
+        .await
+        .json()
+        .await
+        .expect("motion.json");
+    let travelling: Vec<serde_json::Value> = motion["positions"]
+        .as_array()
+        .expect("positions")
+        .iter()
+        .take(TRAVEL_FRAMES)
+        .enumerate()
+        .map(|(f, frame)| {
+            let dx = TRAVEL_M_S * f as f64 / 25.0;
+            let joints: Vec<serde_json::Value> = frame
+                .as_array()
+                .expect("a frame")
+                .iter()
+                .map(|j| {
+                    let p: Vec<f64> = j
+                        .as_array()
+                        .expect("a joint")
+                        .iter()
+                        .map(|v| v.as_f64().expect("a number"))
+                        .collect();
+                    serde_json::json!([p[0] + dx, p[1], p[2]])
+                })
+                .collect();
+            serde_json::Value::Array(joints)
+        })
+        .collect();
+    let job_id = app
+        .dance(&serde_json::json!({
+            "song_id": song_id, "model": "beat-graph", "seed": 2,
+            "seed_motion": {"fps": 25.0, "positions": travelling},
+        }))
         .await;
     let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-player");
     let env = [
@@ -513,5 +553,20 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
         shot.starts_with(b"\x89PNG") && shot.len() > 10_000,
         "a real screenshot"
     );
+    let travelled = summary["follow"]["travelled_m"]
+        .as_f64()
+        .expect("travelled_m");
+    let off_centre = summary["follow"]["worst_off_centre"]
+        .as_f64()
+        .expect("worst_off_centre");
+    assert!(travelled > 3.0, "the dance travelled {travelled} m: {summary}");
+    assert!(
+        off_centre < 0.5,
+        "after each seek the body centre is drawn within half the view of its middle: {summary}"
+    );
     app.stop().await;
 }
+
+/// How long, and how fast along x, the player test's seed motion travels.
+const TRAVEL_FRAMES: usize = 120;
+const TRAVEL_M_S: f64 = 0.75;

@@ -3,7 +3,8 @@
 // server address and ids replaced by the test's, the page served by a small server of this
 // script on another origin (http://127.0.0.1:PAGE_PORT, which the choreo server's cors_origins
 // lists), with the api-key attribute when TOKEN is set. Checks that the element loads, plays, and keeps the dance within one motion
-// frame of the song.
+// frame of the song; that its camera is on the dancer after seeks across a dance that travels;
+// and that a dance it cannot load is reported inside it.
 //
 //   API_URL=… JOB_ID=… SONG_ID=… PAGE_PORT=… [TOKEN=…] OUT_DIR=dir node tests/web/player.mjs
 //
@@ -91,10 +92,52 @@ try {
   check(before && after && Math.hypot(...before.map((v, i) => v - after[i])) > 1e-4, `seeking moved the dancer: ${before} → ${after}`);
   // The page's own clock line reads the element's contract.
   await page.waitForFunction(() => /dance 0\.20 s/.test(document.getElementById('clock').textContent), null, { timeout: 5_000 });
+  // The camera follows the dancer: after each seek, wherever the dance has travelled, the body
+  // centre is drawn near the middle of the view (NDC 0 is the middle, ±1 the edges).
+  const follow = { worst_off_centre: 0, travelled_m: 0, seeks: [] };
+  let start = null;
+  for (const t of [0.1, 2.4, 4.7, 0.1, 4.7]) {
+    await page.evaluate((s) => document.getElementById('player').seek(s), t);
+    await page.waitForFunction((s) => Math.abs(document.getElementById('player').animationTime - s) < 1e-3, t, { timeout: 5_000 });
+    const at = await page.evaluate(() => {
+      const p = document.getElementById('player');
+      return { ndc: p.onScreen('body_centre'), world: p.joint('body_centre') };
+    });
+    check(at.ndc && at.world, `the body centre is drawn: ${JSON.stringify(at)}`);
+    start ??= at.world;
+    follow.travelled_m = Math.max(follow.travelled_m, Math.hypot(at.world[0] - start[0], at.world[2] - start[2]));
+    follow.worst_off_centre = Math.max(follow.worst_off_centre, Math.abs(at.ndc[0]), Math.abs(at.ndc[1]));
+    follow.seeks.push({ t, ndc: at.ndc.map((v) => +v.toFixed(3)), x: +at.world[0].toFixed(2) });
+  }
+  summary.follow = follow;
+  log('follow', JSON.stringify(follow));
   const shot = join(OUT, 'choreo-player.png');
   await page.screenshot({ path: shot });
   summary.screenshot = shot;
   check(errors.length === 0, `no errors on the page: ${errors}`);
+
+  // A dance that cannot be loaded says so inside the element and fires choreo-error: a missing
+  // job (404 with its problem's detail), and a server that does not answer (the hint names CORS).
+  summary.errors = await page.evaluate(async (api) => {
+    const shown = async (src) => {
+      const p = document.createElement('choreo-player');
+      p.setAttribute('src', src);
+      const fired = new Promise((resolve) => p.addEventListener('choreo-error', (e) => resolve(String(e.detail?.message ?? e.detail)), { once: true }));
+      document.body.appendChild(p);
+      const message = await fired;
+      const error = p.error;
+      p.remove();
+      return { message, error };
+    };
+    return [
+      await shown(`${api}/v1/jobs/00000000-0000-0000-0000-000000000000/motion.glb`),
+      await shown('http://127.0.0.1:9/motion.glb'),
+    ];
+  }, API);
+  log('errors', JSON.stringify(summary.errors));
+  check(/HTTP 40[14]/.test(summary.errors[0].error ?? ''), `a missing dance is shown as an HTTP error: ${JSON.stringify(summary.errors[0])}`);
+  check(/cors_origins/.test(summary.errors[1].error ?? '') && summary.errors[1].message === summary.errors[1].error,
+    `an unreachable server is shown with the CORS hint: ${JSON.stringify(summary.errors[1])}`);
 } finally {
   await browser.close();
   pages.close();

@@ -9,7 +9,10 @@
 // Attributes: src (a job's motion.glb), audio (its song), api-key (sent as
 // `Authorization: Bearer <key>` with both; the song is then fetched and played from a blob URL,
 // since an <audio> element cannot send headers), view ('figure' or 'sticks'), nocontrols.
-// Events: `choreo-load` (detail: {duration}) once both are loaded, `choreo-error` (detail: the Error).
+// Events: `choreo-load` (detail: {duration}) once both are loaded, `choreo-error` (detail: the Error)
+// when either fails or the song cannot be played; the element then says what went wrong inside
+// itself (part="error"), with a hint where the browser hides the cause (a refused cross-origin
+// request reads only as a failed fetch).
 import { Stage } from './player.js';
 
 const STYLE = `
@@ -18,6 +21,9 @@ const STYLE = `
 .wrap { display: flex; flex-direction: column; width: 100%; height: 100%; }
 .stage { flex: 1; min-height: 0; }
 .stage canvas { display: block; }
+.error { position: absolute; inset: 12px 12px auto 12px; padding: 8px 10px; border-radius: 4px;
+  background: #fff4f0; color: #8a1f0a; border: 1px solid #e0b4a8; font: 13px/1.4 system-ui, sans-serif; }
+.error[hidden] { display: none; }
 audio { width: 100%; display: block; }
 :host([nocontrols]) audio { display: none; }
 `;
@@ -36,14 +42,21 @@ export class ChoreoPlayer extends HTMLElement {
   #blobUrl = null;
   #loading = 0; // counts loads, so an older one that ends late does not overwrite a newer one
   #ready = null;
+  #error;
 
   constructor() {
     super();
     const root = this.attachShadow({ mode: 'open' });
-    root.innerHTML = `<style>${STYLE}</style><div class="wrap"><div class="stage" part="stage"></div><audio part="audio" controls preload="auto"></audio></div>`;
+    root.innerHTML = `<style>${STYLE}</style><div class="wrap"><div class="stage" part="stage"></div><audio part="audio" controls preload="auto"></audio></div><div class="error" part="error" role="alert" hidden></div>`;
     this.#container = root.querySelector('.stage');
     this.#audio = root.querySelector('audio');
+    this.#error = root.querySelector('.error');
     this.#audio.addEventListener('seeked', () => { this.#dirty = true; });
+    this.#audio.addEventListener('error', () => {
+      const code = this.#audio.error?.code;
+      // A failed load of the dance already said why; this is the song's own failure.
+      if (this.#error.hidden) this.#fail(new Error(`the song could not be played (media error ${code ?? '?'}): ${this.getAttribute('audio')}`));
+    });
     this.#ready = Promise.resolve();
   }
 
@@ -87,8 +100,22 @@ export class ChoreoPlayer extends HTMLElement {
     return key ? { Authorization: `Bearer ${key}` } : {};
   }
 
+  /** Shows `error` inside the element and fires `choreo-error`. */
+  #fail(error) {
+    this.#error.textContent = String(error.message ?? error);
+    this.#error.hidden = false;
+    this.dispatchEvent(new CustomEvent('choreo-error', { detail: error }));
+  }
+
   async #fetch(url) {
-    const response = await fetch(url, { headers: this.#headers() });
+    let response;
+    try {
+      response = await fetch(url, { headers: this.#headers() });
+    } catch (cause) {
+      // The browser tells a page no more than "failed to fetch" for a server that is down and
+      // for one that does not allow this page's origin (CORS): name both.
+      throw new Error(`could not load ${url}: the server did not answer, or it does not allow requests from ${location.origin} (add that origin to the server's cors_origins)`, { cause });
+    }
     if (!response.ok) {
       let detail = '';
       try { detail = (await response.json()).detail ?? ''; } catch { /* not problem+json */ }
@@ -99,6 +126,7 @@ export class ChoreoPlayer extends HTMLElement {
 
   #load() {
     const load = ++this.#loading;
+    this.#error.hidden = true;
     const src = this.getAttribute('src');
     const audio = this.getAttribute('audio');
     this.#ready = (async () => {
@@ -121,7 +149,7 @@ export class ChoreoPlayer extends HTMLElement {
       this.#dirty = true;
       this.dispatchEvent(new CustomEvent('choreo-load', { detail: { duration: this.duration } }));
     })().catch((error) => {
-      if (load === this.#loading) this.dispatchEvent(new CustomEvent('choreo-error', { detail: error }));
+      if (load === this.#loading) this.#fail(error);
       throw error;
     });
     this.#ready.catch(() => {}); // reported by the event; `loaded` rejects for whoever awaits it
@@ -144,6 +172,11 @@ export class ChoreoPlayer extends HTMLElement {
   get audio() { return this.#audio; }
   /** A joint's world position (metres), as drawn. */
   joint(name) { return this.#stage?.joint(name) ?? null; }
+  /** Where a joint is drawn in the view ([x, y], −1…1 inside it), or null: the camera follows the
+   * dancer, so the body centre stays near [0, 0] wherever the dance travels. */
+  onScreen(name) { return this.#stage?.onScreen(name) ?? null; }
+  /** What the element shows as its error now, or null. */
+  get error() { return this.#error.hidden ? null : this.#error.textContent; }
   play() { return this.#audio.play(); }
   pause() { this.#audio.pause(); }
   seek(t) {

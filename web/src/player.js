@@ -12,6 +12,11 @@ import { GLTFLoader } from 'three/examples/jsm/loaders/GLTFLoader.js';
 import { OrbitControls } from 'three/examples/jsm/controls/OrbitControls.js';
 
 const UP = new Vector3(0, 1, 0);
+// How closely the camera follows the dancer across the floor: it closes 63 % of the gap in this
+// many seconds of the dance (a critically smooth chase, not a jolt on every step), and jumps to
+// the dancer when the time moves by more than FOLLOW_JUMP_S at once (a seek).
+const FOLLOW_S = 0.25;
+const FOLLOW_JUMP_S = 0.5;
 const LIMB = new CylinderGeometry(1, 1, 1, 12);
 const BALL = new SphereGeometry(1, 16, 12);
 const MATERIALS = {
@@ -87,6 +92,7 @@ export class Stage {
     this.figures = [];
     this.action = null;
     this.duration = 0;
+    this.followedAt = null;
     this.render();
   }
 
@@ -170,11 +176,16 @@ export class Stage {
         part.at.getWorldPosition(part.mesh.position);
       }
     }
-    // The camera follows the dancer across the floor, keeping the angle the user gave it.
+    // The camera follows the dancer across the floor, keeping the angle the user gave it: by the
+    // dance's time, so a seek lands on the dancer wherever they travelled (a dancenet dance
+    // reaches 5.6 m from its start) and a slow display frame rate does not lose them.
     const centre = this.centre.getWorldPosition(a);
     this.shadow.position.x = centre.x;
     this.shadow.position.z = centre.z;
-    const shift = new Vector3(centre.x - this.controls.target.x, 0, centre.z - this.controls.target.z).multiplyScalar(0.15);
+    const moved = this.followedAt === null ? Infinity : Math.abs(this.action.time - this.followedAt);
+    const gain = moved > FOLLOW_JUMP_S ? 1 : 1 - Math.exp(-moved / FOLLOW_S);
+    this.followedAt = this.action.time;
+    const shift = new Vector3(centre.x - this.controls.target.x, 0, centre.z - this.controls.target.z).multiplyScalar(gain);
     this.controls.target.add(shift);
     this.camera.position.add(shift);
     this.controls.update();
@@ -231,6 +242,15 @@ export class Stage {
   joint(name) {
     const bone = this.bones?.[name];
     return bone ? bone.getWorldPosition(new Vector3()).toArray() : null;
+  }
+
+  /** Where a joint is drawn now, in normalised device coordinates ([x, y], −1…1 across and up
+   * the view; outside that range it is off screen), or null without that joint. */
+  onScreen(name) {
+    const p = this.joint(name);
+    if (!p) return null;
+    const v = new Vector3(...p).project(this.camera);
+    return [v.x, v.y];
   }
 
   render() {
