@@ -47,7 +47,8 @@ impl Default for GenerateSong {
     fn default() -> Self {
         Self {
             song: PathBuf::new(),
-            model: "dance-revolution".into(),
+            // The server's default, first in `GET /v1/models` and on the page.
+            model: crate::models::MODELS[0].id.into(),
             out: PathBuf::new(),
             seed: 0,
             key_poses: None,

@@ -154,14 +154,29 @@ async function run(context) {
 
   // 1. The page, its API on another origin, and no API key yet: the API says 401 and the page says so.
   await page.goto(`${PAGE}/?api=${encodeURIComponent(API)}`);
-  await page.waitForFunction(() => /API key/i.test(document.getElementById('api-status').textContent), null, { timeout: 20_000 });
+  await page.waitForFunction(() => /^Key required/.test(document.getElementById('api-status').textContent), null, { timeout: 20_000 });
+  // A wrong key reads otherwise than a missing one.
+  await page.fill('#api-key', 'not-a-key');
+  await page.click('#api-connect');
+  await page.waitForFunction(() => /^Key not accepted/.test(document.getElementById('api-status').textContent), null, { timeout: 20_000 });
   check(consoleErrors.every((e) => e.includes('401')), `before the key, only 401s: ${consoleErrors}`);
   consoleErrors.length = 0;
   await page.fill('#api-key', TOKEN);
   await page.click('#api-connect');
   await page.waitForFunction(() => document.getElementById('api-status').textContent.startsWith('connected'), null, { timeout: 20_000 });
 
-  // 2. Upload with the file input, then drop the same file: the same song (the API dedups).
+  // Before any dance the key-pose panel stays out of the way.
+  check(await page.$eval('#keys-box', (e) => e.hidden), 'no key-pose panel before a dance exists');
+
+  // 2. A file that is not a song: the page says so and is not left "uploading".
+  await page.setInputFiles('#song-file', { name: 'notasong.txt', mimeType: 'text/plain', buffer: Buffer.from('these are words, not music\n') });
+  await page.waitForFunction(() => document.getElementById('song-info').dataset.failed === 'true', null, { timeout: 20_000 });
+  const failedLine = await page.$eval('#song-info', (e) => e.textContent);
+  check(/notasong\.txt was not uploaded: /.test(failedLine) && !/Uploading/.test(failedLine), `a failed upload is said: ${failedLine}`);
+  summary.failed_upload = failedLine;
+  consoleErrors.length = 0; // the refused upload's 4xx, expected
+
+  // Upload with the file input, then drop the same file: the same song (the API dedups).
   await page.setInputFiles('#song-file', SONG);
   await page.waitForFunction(() => document.getElementById('song-info').dataset.analysed === 'true', null, { timeout: 60_000 });
   const songId = await page.$eval('#song-info', (e) => e.dataset.songId);

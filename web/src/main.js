@@ -44,8 +44,12 @@ function toast(message) {
   clearTimeout(toastTimer);
   toastTimer = setTimeout(() => { el.hidden = true; }, 8000);
 }
+// The server answers 401 both without a key and with one it does not know: the page knows which
+// it sent, and says which.
 const describe = (e) => (e instanceof ApiError && e.status === 401
-  ? 'The API wants an API key: enter it above and press Connect.'
+  ? ($('api-key').value.trim()
+    ? 'Key not accepted: the server knows no API key with this secret. Check it, or ask for a new one (choreo keys create).'
+    : 'Key required: the API wants an API key. Enter it above and press Connect.')
   : e?.message || String(e));
 /** Runs an async UI action; failures become a message on the page, never an uncaught error. */
 const guard = (fn) => async (...args) => {
@@ -125,7 +129,16 @@ function showSong(song) {
 const uploadSong = guard(async (file) => {
   if (!file) return;
   $('song-info').textContent = `Uploading ${file.name}…`;
-  const song = await api.upload(file);
+  let song;
+  try {
+    song = await api.upload(file);
+  } catch (e) {
+    // The song shown before stays chosen; the line says what happened to this one.
+    $('song-info').textContent = `${file.name} was not uploaded: ${describe(e)}`;
+    $('song-info').dataset.failed = 'true';
+    throw e;
+  }
+  delete $('song-info').dataset.failed;
   state.keys = [];
   renderKeys();
   showSong(song);
@@ -155,8 +168,9 @@ function fillModels() {
   const select = $('model');
   const previous = select.value;
   select.replaceChildren(...state.models.map((m) => new Option(m.id, m.id)));
-  // The key-pose model first when there is one: key poses are what this page is for.
-  const preferred = state.models.find((m) => m.id === previous) ?? state.models.find((m) => m.capabilities.key_poses) ?? state.models[0];
+  // The server's first model is its default (the one whose served dances score closest to real
+  // ones), as in the README and `choreo generate`.
+  const preferred = state.models.find((m) => m.id === previous) ?? state.models[0];
   if (preferred) select.value = preferred.id;
   modelChanged();
 }
@@ -499,6 +513,7 @@ const openJob = guard(async (id, slot = 'a') => {
   }
   const stage = stages[slot];
   await stage.load(glb);
+  $('keys-box').hidden = false; // a dance exists: its frames can be key poses
   const title = `${job.model} · seed ${job.seed} · ${job.id.slice(0, 8)}…`;
   if (slot === 'a') {
     const media = await songAudio(song.id);
@@ -671,6 +686,8 @@ async function refreshJobs() {
   const page = await api.jobs({ limit: 50 });
   state.jobs = page.items.filter((j) => j.kind === 'generate');
   const done = state.jobs.filter((j) => j.status === 'succeeded');
+  // Key poses come after a first dance: before one exists the panel would crowd out the song.
+  if (done.length > 0) $('keys-box').hidden = false;
   const label = (j) => `${j.model} · seed ${j.seed} · ${j.id.slice(0, 8)}`;
   const keep = (select, first) => {
     const value = select.value;
