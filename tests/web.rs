@@ -559,7 +559,10 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
     let off_centre = summary["follow"]["worst_off_centre"]
         .as_f64()
         .expect("worst_off_centre");
-    assert!(travelled > 3.0, "the dance travelled {travelled} m: {summary}");
+    assert!(
+        travelled > 3.0,
+        "the dance travelled {travelled} m: {summary}"
+    );
     assert!(
         off_centre < 0.5,
         "after each seek the body centre is drawn within half the view of its middle: {summary}"
