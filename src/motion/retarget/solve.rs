@@ -42,8 +42,14 @@ use crate::motion::rig::{fk_frame, RigMotion};
 
 /// Half-width (frames) of the window over which a lowering of the hips is spread.
 pub const DROP_WINDOW: usize = 4;
+/// Half-width (frames) of the window over which the hips' shift onto the supporting feet is
+/// averaged: a quarter of a second either side, so a change of supporting foot glides.
+pub const HIP_SHIFT_WINDOW: usize = 6;
 /// A leg is never stretched past this share of its length (a straight knee has no bend plane).
 const MAX_REACH: f64 = 0.999;
+/// How far forward (m) the IK leans the knee's bend direction: what decides it for a knee bent
+/// less than this off the hip–ankle line.
+const KNEE_FORWARD_M: f64 = 0.02;
 
 /// World positions and rotations of every joint of one frame.
 type WorldPose = (Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>);
@@ -560,37 +566,79 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
         worlds.push(w);
     }
 
-    // 4: ankle goals, the hips lowered where a goal is out of reach, then two-bone IK.
+    // 4: ankle goals, the hips moved so that the feet on the floor reach it with the dance's own
+    // knee angles, lowered further only where a goal is still out of reach, then two-bone IK.
     // A foot near the floor goes to its floor goal (the ankle over choreo's, at the target's own
     // flat-foot height plus choreo's lift, scaled); a lifted one to its reach goal (choreo's
     // hip-to-ankle vector at its leg's own ratio, from the target's hip), which keeps the knee's
     // angle; in between, a blend by the lowest foot point's height.
-    let goals: Vec<[Vector3<f64>; 2]> = choreo_frames
-        .iter()
-        .zip(&worlds)
-        .zip(&roots)
-        .map(|(((pos, _), w), root)| {
-            let p = fk_world(&target.rig, &prepared.order, root, w);
-            let mut out = [Vector3::zeros(); 2];
-            for (k, (thigh, _, _, ankle)) in LEGS.iter().enumerate() {
-                let side = if k == 0 { "left" } else { "right" };
-                let a = to_target(&pos[choreo[*ankle]]);
-                let floor_goal =
-                    Vector3::new(a.x, target_ankle_h + a.y - scale * choreo_ankle_h[k], a.z);
-                let hip = pos[choreo[format!("{side}_hip").as_str()]];
-                let reach_goal =
-                    p[prepared.bones[thigh]] + side_scale[k] * (pos[choreo[*ankle]] - hip);
-                let low = [format!("{side}_heel"), format!("{side}_toe")]
-                    .iter()
-                    .filter_map(|n| choreo.get(n.as_str()))
-                    .map(|&j| pos[j].y - choreo_floor)
-                    .fold(f64::INFINITY, f64::min);
-                let support = crate::motion::feet::SUPPORT_HEIGHT_M;
-                let on_floor = ((2.0 * support - low) / support).clamp(0.0, 1.0);
-                out[k] = floor_goal * on_floor + reach_goal * (1.0 - on_floor);
-            }
-            out
+    let parts = |t: usize, root: &Vector3<f64>| -> [(Vector3<f64>, Vector3<f64>, f64); 2] {
+        let (pos, _) = &choreo_frames[t];
+        let p = fk_world(&target.rig, &prepared.order, root, &worlds[t]);
+        let mut out = [(Vector3::zeros(), Vector3::zeros(), 0.0); 2];
+        for (k, (thigh, _, _, ankle)) in LEGS.iter().enumerate() {
+            let side = if k == 0 { "left" } else { "right" };
+            let a = to_target(&pos[choreo[*ankle]]);
+            let floor_goal =
+                Vector3::new(a.x, target_ankle_h + a.y - scale * choreo_ankle_h[k], a.z);
+            let hip = pos[choreo[format!("{side}_hip").as_str()]];
+            let reach_goal = p[prepared.bones[thigh]] + side_scale[k] * (pos[choreo[*ankle]] - hip);
+            let low = [format!("{side}_heel"), format!("{side}_toe")]
+                .iter()
+                .filter_map(|n| choreo.get(n.as_str()))
+                .map(|&j| pos[j].y - choreo_floor)
+                .fold(f64::INFINITY, f64::min);
+            let support = crate::motion::feet::SUPPORT_HEIGHT_M;
+            let on_floor = ((2.0 * support - low) / support).clamp(0.0, 1.0);
+            out[k] = (floor_goal, reach_goal, on_floor);
+        }
+        out
+    };
+    // The hips where choreo's are (scaled) leave a foot on the floor some centimetres from where
+    // the leg reaches at the dance's knee angle (another hip width and height, other ankle
+    // markers): 6-7 cm on a dancenet dance onto Mixamo, which the IK took up by bending the knees
+    // (11-12° off motion.json's, median). The root moves instead, by the supporting feet's gap,
+    // weighted by how firmly each stands and smoothed over ±HIP_SHIFT_WINDOW frames.
+    let gaps: Vec<(Vector3<f64>, f64)> = (0..t_len)
+        .map(|t| {
+            let pr = parts(t, &roots[t]);
+            let w: f64 = pr.iter().map(|(_, _, on)| on).sum();
+            let gap = pr
+                .iter()
+                .map(|(floor, reach, on)| (floor - reach) * *on)
+                .sum::<Vector3<f64>>();
+            (gap, w)
         })
+        .collect();
+    let overall = {
+        let (g, w) = gaps
+            .iter()
+            .fold((Vector3::zeros(), 0.0), |(g, w), (gi, wi)| (g + gi, w + wi));
+        if w > 0.0 {
+            g / w
+        } else {
+            Vector3::zeros()
+        }
+    };
+    let shifts: Vec<Vector3<f64>> = (0..t_len)
+        .map(|t| {
+            let lo = t.saturating_sub(HIP_SHIFT_WINDOW);
+            let hi = (t + HIP_SHIFT_WINDOW + 1).min(t_len);
+            let (g, w) = gaps[lo..hi]
+                .iter()
+                .fold((Vector3::zeros(), 0.0), |(g, w), (gi, wi)| (g + gi, w + wi));
+            if w > 0.5 {
+                g / w
+            } else {
+                overall
+            }
+        })
+        .collect();
+    for (root, shift) in roots.iter_mut().zip(&shifts) {
+        *root += shift;
+    }
+    let goals: Vec<[Vector3<f64>; 2]> = (0..t_len)
+        .map(|t| parts(t, &roots[t]).map(|(floor, reach, on)| floor * on + reach * (1.0 - on)))
         .collect();
     let mut drop = vec![0.0f64; t_len];
     for t in 0..t_len {
@@ -780,18 +828,24 @@ fn two_bone_ik(
         .norm()
         .clamp((a - b).abs() + 1e-6, MAX_REACH * (a + b));
     let u = to_goal / to_goal.norm();
-    // The bend direction: where the knee is now, off the hip–goal line; else the thigh's forward.
+    // The bend direction: where the knee is now, off the hip–goal line, leaning forward by
+    // KNEE_FORWARD_M: a knee bent a few centimetres keeps its own direction, and a nearly
+    // straight one (whose offset turns with every millimetre of marker noise: a 64° turn of the
+    // knee in one frame once the hips stand where the dance's knee angle reaches the floor)
+    // bends forward, as knees do.
     let off = (knee - hip) - u * u.dot(&(knee - hip));
-    let v = if off.norm() > 1e-3 {
-        off.normalize()
+    let fwd = w[jt] * Vector3::z();
+    let fwd = fwd - u * u.dot(&fwd);
+    let fwd = if fwd.norm() > 1e-6 {
+        fwd.normalize()
     } else {
-        let fwd = w[jt] * Vector3::z();
-        let o = fwd - u * u.dot(&fwd);
-        if o.norm() < 1e-6 {
-            return;
-        }
-        o.normalize()
+        Vector3::zeros()
     };
+    let lean = off + fwd * KNEE_FORWARD_M;
+    if lean.norm() < 1e-6 {
+        return;
+    }
+    let v = lean.normalize();
     let cos_a = ((a * a + d * d - b * b) / (2.0 * a * d)).clamp(-1.0, 1.0);
     let new_knee = hip + a * (cos_a * u + (1.0 - cos_a * cos_a).sqrt() * v);
     let new_ankle = hip + u * d;
