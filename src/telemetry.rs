@@ -121,15 +121,62 @@ impl tracing_subscriber::fmt::MakeWriter<'_> for Stderr {
     }
 }
 
-/// Starts the global tracing subscriber; a second call (tests) is a no-op.
+/// Third-party log targets the default filter silences. symphonia logs at ERROR what it then
+/// returns as an error (`probe reach EOF` for a file that is not audio); choreo reports that
+/// error itself (a 415, a failed job, the command line's message), so its line is a duplicate,
+/// at the wrong level, in a colour and format of its own. `RUST_LOG` still turns it back on
+/// (`RUST_LOG=info,symphonia=debug`).
+pub const QUIET_LIBRARIES: &str = "symphonia=off";
+
+/// The filter used when `RUST_LOG` is unset: `level`, with [`QUIET_LIBRARIES`] unless `level`
+/// names one of them itself.
+pub fn default_filter(level: &str) -> String {
+    let mut filter = level.trim().to_string();
+    for directive in QUIET_LIBRARIES.split(',') {
+        let target = directive.split('=').next().unwrap_or(directive);
+        if !filter.contains(target) {
+            if !filter.is_empty() {
+                filter.push(',');
+            }
+            filter.push_str(directive);
+        }
+    }
+    filter
+}
+
+/// Whether log lines are coloured: only on a terminal (a file, a pipe or a log collector gets
+/// plain text, not escape codes), and never with `NO_COLOR` set to anything but the empty
+/// string (no-color.org).
+pub fn colour(is_terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
+    is_terminal && no_color.is_none_or(|v| v.is_empty())
+}
+
+/// The log format of the commands that load no configuration (`generate`, `train`):
+/// `CHOREO_LOG_FORMAT`, read as the service reads it; anything but `json` is pretty.
+pub fn env_log_format() -> LogFormat {
+    match std::env::var("CHOREO_LOG_FORMAT") {
+        Ok(v) if v.trim().eq_ignore_ascii_case("json") => LogFormat::Json,
+        _ => LogFormat::Pretty,
+    }
+}
+
+/// Starts the global tracing subscriber; a second call (tests) is a no-op. `default_level` is
+/// the filter when `RUST_LOG` is unset (see [`default_filter`]).
 pub fn init_tracing(format: LogFormat, default_level: &str) {
-    let filter =
-        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_level));
+    use std::io::IsTerminal as _;
+    let filter = EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| EnvFilter::new(default_filter(default_level)));
+    let ansi = format == LogFormat::Pretty
+        && colour(
+            std::io::stderr().is_terminal(),
+            std::env::var_os("NO_COLOR").as_deref(),
+        );
     // log_internal_errors(false): tracing-subscriber would otherwise report a failed write with
     // eprintln!, which panics when stderr is closed.
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(Stderr)
+        .with_ansi(ansi)
         .log_internal_errors(false);
     let _ = match format {
         LogFormat::Pretty => builder.try_init(),
@@ -270,4 +317,25 @@ pub fn doctor(config: &crate::config::Config) -> Vec<(&'static str, String)> {
             .to_string(),
         ),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::ffi::OsStr;
+
+    #[test]
+    fn colour_only_on_a_terminal_without_no_color() {
+        assert!(colour(true, None));
+        assert!(colour(true, Some(OsStr::new(""))));
+        assert!(!colour(true, Some(OsStr::new("1"))));
+        assert!(!colour(false, None));
+    }
+
+    #[test]
+    fn the_default_filter_silences_symphonia_unless_asked_for() {
+        assert_eq!(default_filter("info"), "info,symphonia=off");
+        assert_eq!(default_filter(""), "symphonia=off");
+        assert_eq!(default_filter("warn,symphonia=debug"), "warn,symphonia=debug");
+    }
 }

@@ -95,7 +95,7 @@ pub fn generate(cmd: &GenerateCmd) -> anyhow::Result<()> {
     }
     let args = &cmd.song;
     // Warnings (and RUST_LOG's choice) from the models reach the terminal.
-    choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "warn");
+    choreo::telemetry::init_tracing(choreo::telemetry::env_log_format(), "warn");
     let mut bar: Option<indicatif::ProgressBar> = None;
     let mut on_progress = |stage: choreo::stage::Stage, done: f64| {
         let bar = bar.get_or_insert_with(progress_bar);

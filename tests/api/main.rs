@@ -20,6 +20,7 @@ mod hostile_motion;
 mod jobs;
 mod keypose;
 mod limits;
+mod logs;
 mod models;
 #[path = "../common/motion_files.rs"]
 mod motion_files;
