@@ -243,9 +243,46 @@ fn loaded_libtorch() -> String {
         .unwrap_or_else(|| "not mapped (or /proc unavailable)".into())
 }
 
-/// What `choreo doctor` prints: libtorch, threads, data dir, models. Runs a tensor op to prove
-/// libtorch loads.
-pub fn doctor(config: &crate::config::Config) -> Vec<(&'static str, String)> {
+/// The API keys `choreo doctor` found in the configured database.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum KeysSeen {
+    /// The SQLite file does not exist yet (so no key does either).
+    NoDatabase,
+    Counted { active: usize, revoked: usize },
+    /// The database could not be opened or read; why.
+    Unreadable(String),
+}
+
+/// Whether `/v1` needs credentials, and which, by the rules of `api::auth`: any key ever made
+/// (revoked ones count) closes the service; an `auth_token` does too, and keeps working beside
+/// keys as the open tenant.
+pub fn auth_line(token: bool, keys: &KeysSeen) -> String {
+    let (active, revoked) = match keys {
+        KeysSeen::Counted { active, revoked } => (*active, *revoked),
+        KeysSeen::NoDatabase => (0, 0),
+        KeysSeen::Unreadable(why) => {
+            let token = if token {
+                "on: the auth_token is required on /v1"
+            } else {
+                "no auth_token"
+            };
+            return format!("{token}; API keys unknown (the database: {why})");
+        }
+    };
+    let counted = format!("API keys: {active} active, {revoked} revoked");
+    match (active + revoked > 0, token) {
+        (true, true) => {
+            format!("on: an API key or the auth_token required on /v1 ({counted})")
+        }
+        (true, false) => format!("on: an API key required on /v1 ({counted})"),
+        (false, true) => "on: the auth_token required on /v1 (no API keys)".into(),
+        (false, false) => "off: the service is open (no API keys, no auth_token)".into(),
+    }
+}
+
+/// What `choreo doctor` prints: libtorch, threads, data dir, models, auth. Runs a tensor op to
+/// prove libtorch loads.
+pub fn doctor(config: &crate::config::Config, keys: &KeysSeen) -> Vec<(&'static str, String)> {
     let sum = tch::Tensor::from_slice(&[1.0f32, 2.0, 3.0])
         .sum(tch::Kind::Float)
         .double_value(&[]);
@@ -307,15 +344,7 @@ pub fn doctor(config: &crate::config::Config) -> Vec<(&'static str, String)> {
         ("data dir", data_dir),
         ("models dir", config.models_dir.display().to_string()),
         ("models found", models),
-        (
-            "auth",
-            if config.auth_token.is_some() {
-                "bearer token required on /v1"
-            } else {
-                "off"
-            }
-            .to_string(),
-        ),
+        ("auth", auth_line(config.auth_token.is_some(), keys)),
     ]
 }
 
@@ -330,6 +359,27 @@ mod tests {
         assert!(colour(true, Some(OsStr::new(""))));
         assert!(!colour(true, Some(OsStr::new("1"))));
         assert!(!colour(false, None));
+    }
+
+    #[test]
+    fn auth_is_on_once_a_key_or_a_token_exists() {
+        let none = KeysSeen::Counted {
+            active: 0,
+            revoked: 0,
+        };
+        assert!(auth_line(false, &none).starts_with("off:"));
+        assert!(auth_line(false, &KeysSeen::NoDatabase).starts_with("off:"));
+        assert!(auth_line(true, &none).starts_with("on: the auth_token"));
+        // A revoked key still closes the service (revoking the last key does not open it).
+        let revoked = KeysSeen::Counted {
+            active: 0,
+            revoked: 1,
+        };
+        assert_eq!(
+            auth_line(false, &revoked),
+            "on: an API key required on /v1 (API keys: 0 active, 1 revoked)"
+        );
+        assert!(auth_line(true, &KeysSeen::Unreadable("x".into())).contains("unknown"));
     }
 
     #[test]

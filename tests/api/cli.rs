@@ -1,7 +1,9 @@
-//! The `choreo` binary as a newcomer meets it: `generate`'s help shows its defaults, and its
-//! errors name the file and the models folder (and the nearest model id) without a library's
-//! log lines.
-use crate::helpers::short_song;
+//! The `choreo` binary as a newcomer meets it: `generate`'s help shows its defaults, its errors
+//! name the file and the models folder (and the nearest model id) without a library's log lines,
+//! `keys create` warns when it closes an open service, and `doctor` reports the keys.
+use crate::helpers::{short_song, spawn_app};
+use reqwest::StatusCode;
+use serde_json::Value;
 use std::path::Path;
 use std::process::{Command, Output};
 
@@ -120,4 +122,68 @@ fn generate_s_errors_name_the_file_the_folder_and_the_nearest_model() {
     assert!(stderr.contains("not audio"), "{stderr}");
     assert!(!stderr.contains("symphonia"), "a library's log line: {stderr}");
     assert!(!stderr.contains('\u{1b}'), "colour codes on a pipe: {stderr:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_first_key_warns_that_it_closes_the_open_service_and_doctor_counts_keys() {
+    let app = spawn_app().await;
+    let data = app.data_dir.path().to_path_buf();
+    let no_models = data.join("no-models");
+    let doctor_auth = || {
+        let out = choreo(
+            &["doctor", "--models-dir", no_models.to_str().expect("utf-8")],
+            Some(&data),
+        );
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let stdout = text(&out.stdout);
+        stdout
+            .lines()
+            .find_map(|l| l.strip_prefix("auth "))
+            .unwrap_or_else(|| panic!("no auth line: {stdout}"))
+            .trim()
+            .to_string()
+    };
+    assert_eq!(
+        doctor_auth(),
+        "off: the service is open (no API keys, no auth_token)"
+    );
+    let song = app.upload_ok(&short_song()).await;
+    let song_path = format!("/v1/songs/{}", song["id"].as_str().expect("id"));
+
+    let create = |args: &[&str]| {
+        let mut all = vec!["keys", "create"];
+        all.extend_from_slice(args);
+        let out = choreo(&all, Some(&data));
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let made: Value = serde_json::from_slice(&out.stdout).expect("JSON on stdout");
+        (made, text(&out.stderr))
+    };
+    let (_, warned) = create(&["--name", "first"]);
+    assert!(
+        warned.contains("warning: this service was open"),
+        "{warned}"
+    );
+    assert!(warned.contains("--admin"), "says how to reach the open tenant's rows: {warned}");
+    let (admin, second) = create(&["--name", "ops", "--admin"]);
+    assert_eq!(second, "", "only the first key closes the service");
+
+    // What the warning says: anonymous requests are refused, an operator's key reads the song
+    // made without a key.
+    tokio::time::sleep(choreo::api::tenancy::KEY_CACHE + std::time::Duration::from_millis(200))
+        .await;
+    assert_eq!(app.get(&song_path).await.status(), StatusCode::UNAUTHORIZED);
+    let read = app
+        .client
+        .get(app.url(&song_path))
+        .bearer_auth(admin["secret"].as_str().expect("secret"))
+        .send()
+        .await
+        .expect("GET");
+    assert_eq!(read.status(), StatusCode::OK);
+
+    assert_eq!(
+        doctor_auth(),
+        "on: an API key required on /v1 (API keys: 2 active, 0 revoked)"
+    );
+    app.stop().await;
 }
