@@ -23,7 +23,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
     paths(
         super::songs::upload,
         super::songs::get,
-        super::songs::audio,
+        super::song_audio::audio,
         super::songs::delete,
         super::rigs::upload,
         super::rigs::list,

@@ -1,4 +1,5 @@
-//! `POST /v1/songs`, `GET /v1/songs/{id}`, `GET /v1/songs/{id}/audio` and `DELETE /v1/songs/{id}`.
+//! `POST /v1/songs`, `GET /v1/songs/{id}` and `DELETE /v1/songs/{id}`; the song's audio is
+//! served by [`super::song_audio`].
 //!
 //! An upload streams to a temp file inside the data dir while its size is checked and its
 //! sha256 computed; it is decoded with symphonia (the format comes from decoding, never the
@@ -435,7 +436,7 @@ async fn forget(state: &AppState, artifact: Artifact<'_>) {
 }
 
 /// Records a use of the song, which restarts its retention; a failure only logs.
-async fn record_use(state: &AppState, id: SongId) {
+pub(super) async fn record_use(state: &AppState, id: SongId) {
     if let Err(e) = state.store.touch_song(id).await {
         tracing::warn!(song_id = %id, error = %e, "could not record a use of the song");
     }
@@ -514,85 +515,6 @@ pub async fn delete(
     }
     tracing::info!(song_id = %id, jobs = removed.jobs.len(), "song deleted");
     Ok(StatusCode::NO_CONTENT)
-}
-
-/// The MIME type an uploaded song is served with, from the format its decode found.
-fn audio_mime(format: AudioFormat) -> &'static str {
-    match format {
-        AudioFormat::Mp3 => "audio/mpeg",
-        AudioFormat::Wav => "audio/wav",
-        AudioFormat::Flac => "audio/flac",
-        AudioFormat::Ogg => "audio/ogg",
-        AudioFormat::M4a => "audio/mp4",
-    }
-}
-
-/// The bytes of an uploaded song.
-// For the OpenAPI document only: a bare `Vec<u8>` would read there as an array of integers.
-#[derive(utoipa::ToSchema)]
-#[schema(value_type = String, format = Binary)]
-pub struct AudioBytes(pub Vec<u8>);
-
-/// The song's audio, byte for byte as it was uploaded.
-///
-/// For clients that play the song beside its dance (the page at `/` does): the content type
-/// follows the format found by decoding (`format` on the song).
-#[utoipa::path(
-    get,
-    path = "/v1/songs/{id}/audio",
-    operation_id = "getSongAudio",
-    tag = "songs",
-    params(("id" = String, Path, description = "Song id")),
-    responses(
-        (status = 200, description = "The uploaded file", content(
-            (inline(AudioBytes) = "audio/mpeg"),
-            (inline(AudioBytes) = "audio/wav"),
-            (inline(AudioBytes) = "audio/flac"),
-            (inline(AudioBytes) = "audio/ogg"),
-            (inline(AudioBytes) = "audio/mp4"),
-        )),
-        (status = 404, description = "No such song", body = Problem, content_type = "application/problem+json"),
-    ),
-    security(("bearer" = []))
-)]
-pub async fn audio(
-    State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<String>,
-) -> Result<axum::response::Response, ApiError> {
-    use axum::response::IntoResponse;
-    let id = SongId::from_str(&id)
-        .map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
-    let song = state.store.song(caller.scope(), id).await?;
-    // Through the artifact store: with a bucket, another API host may have taken the upload; it
-    // is cached in this host's data dir, then streamed from there.
-    let path = state
-        .artifacts
-        .fetch(Artifact::Song(song.id, song.format))
-        .await
-        .map_err(|e| ApiError::artifact(&format!("fetching song {}", song.id), &e))?;
-    let file = tokio::fs::File::open(&path)
-        .await
-        .map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?;
-    record_use(&state, song.id).await;
-    let len = file
-        .metadata()
-        .await
-        .map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?
-        .len();
-    // Streamed with backpressure: a song may be up to max_upload_bytes.
-    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::with_capacity(
-        file,
-        crate::artifacts::STREAM_CHUNK_BYTES,
-    ));
-    let headers = [
-        (
-            header::CONTENT_TYPE,
-            HeaderValue::from_static(audio_mime(song.format)),
-        ),
-        (header::CONTENT_LENGTH, HeaderValue::from(len)),
-    ];
-    Ok((headers, body).into_response())
 }
 
 #[cfg(test)]

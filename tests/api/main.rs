@@ -30,6 +30,7 @@ mod openapi;
 mod postgres;
 mod preview;
 mod quotas;
+mod ranges;
 mod resilience;
 mod retarget;
 mod rig_lifecycle;
