@@ -121,7 +121,7 @@ impl StartError {
 /// All routes, with auth on `/v1`, CORS, request ids and tracing.
 pub fn router(state: AppState) -> Router {
     let v1 = Router::new()
-        .route("/songs", axum::routing::post(songs::upload))
+        .route("/songs", get(songs::list).post(songs::upload))
         .route("/songs/{id}", get(songs::get).delete(songs::delete))
         .route("/songs/{id}/audio", get(song_audio::audio))
         .route("/rigs", get(rigs::list).post(rigs::upload))

@@ -1,5 +1,5 @@
-//! `POST /v1/songs`, `GET /v1/songs/{id}` and `DELETE /v1/songs/{id}`; the song's audio is
-//! served by [`super::song_audio`].
+//! `POST /v1/songs`, `GET /v1/songs`, `GET /v1/songs/{id}` and `DELETE /v1/songs/{id}`; the
+//! song's audio is served by [`super::song_audio`].
 //!
 //! An upload streams to a temp file inside the data dir while its size is checked and its
 //! sha256 computed; it is decoded with symphonia (the format comes from decoding, never the
@@ -7,17 +7,19 @@
 //! that records the song.
 use super::auth::Caller;
 use super::multipart::{self, Form};
+use super::extract::ApiQuery;
+use super::paging::PageRequest;
 use super::problem::{ApiError, Problem};
 use super::AppState;
 use crate::artifacts::Artifact;
 use crate::audio::{self, Analysis, AudioError, AudioFormat, Budget, DecodeOptions, Keep};
-use crate::queue::{JobKind, NewJob, Song, SongId, Status};
+use crate::queue::{JobKind, NewJob, Song, SongFilter, SongId, Status};
 use axum::extract::{Path, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::Json;
 use axum::RequestExt;
 use chrono::{DateTime, Utc};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::str::FromStr;
 use std::time::Duration;
@@ -50,6 +52,27 @@ pub struct SongView {
     pub analysis_error: Option<String>,
     /// Tempo, beats and downbeats (seconds), once the analyze job has succeeded.
     pub analysis: Option<Analysis>,
+}
+
+/// A page of songs.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct SongPage {
+    pub items: Vec<SongView>,
+    /// Pass as `cursor` for the next page; absent on the last page.
+    pub next_cursor: Option<String>,
+}
+
+/// The page of `GET /v1/songs`.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct SongListQuery {
+    /// 1..=100, default 20.
+    #[param(minimum = 1, maximum = 100, default = 20)]
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page (a song id).
+    #[param(format = Uuid)]
+    pub cursor: Option<String>,
 }
 
 /// The multipart form of an upload: one field, `file` (any other is refused with 400).
@@ -475,6 +498,39 @@ pub async fn get(
         .map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
     let song = state.store.song(caller.scope(), id).await?;
     Ok(Json(view(&state, song).await?))
+}
+
+/// The caller's songs, newest first, a page at a time, each as `GET /v1/songs/{id}` shows it.
+#[utoipa::path(
+    get,
+    path = "/v1/songs",
+    operation_id = "listSongs",
+    tag = "songs",
+    params(SongListQuery),
+    responses(
+        (status = 200, description = "A page of songs", body = SongPage),
+        (status = 400, description = "An unknown or malformed query parameter", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A limit outside 1..=100, or a cursor that is not a next_cursor", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn list(
+    State(state): State<AppState>,
+    caller: Caller,
+    ApiQuery(query): ApiQuery<SongListQuery>,
+) -> Result<Json<SongPage>, ApiError> {
+    let page = PageRequest::<SongId>::parse(query.limit, query.cursor.as_deref())?;
+    let filter = SongFilter {
+        before: page.before,
+        limit: page.fetch(),
+    };
+    let songs = state.store.songs(caller.scope(), filter).await?;
+    let (songs, next_cursor) = page.page(songs, |s| s.id.to_string());
+    let mut items = Vec::with_capacity(songs.len());
+    for song in songs {
+        items.push(view(&state, song).await?);
+    }
+    Ok(Json(SongPage { items, next_cursor }))
 }
 
 /// Delete a song, its analysis, and every job made from it with its results.
