@@ -43,7 +43,9 @@ fn run() -> anyhow::Result<()> {
         ),
         Command::Analyze { path } => analyze(path),
         Command::Doctor(args) => {
-            for (name, value) in choreo::telemetry::doctor(&load(args)?) {
+            let config = load(args)?;
+            let keys = cli::keys::seen(&config);
+            for (name, value) in choreo::telemetry::doctor(&config, &keys) {
                 println!("{name:<34} {value}");
             }
             Ok(())

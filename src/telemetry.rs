@@ -121,15 +121,62 @@ impl tracing_subscriber::fmt::MakeWriter<'_> for Stderr {
     }
 }
 
-/// Starts the global tracing subscriber; a second call (tests) is a no-op.
+/// Third-party log targets the default filter silences. symphonia logs at ERROR what it then
+/// returns as an error (`probe reach EOF` for a file that is not audio); choreo reports that
+/// error itself (a 415, a failed job, the command line's message), so its line is a duplicate,
+/// at the wrong level, in a colour and format of its own. `RUST_LOG` still turns it back on
+/// (`RUST_LOG=info,symphonia=debug`).
+pub const QUIET_LIBRARIES: &str = "symphonia=off";
+
+/// The filter used when `RUST_LOG` is unset: `level`, with [`QUIET_LIBRARIES`] unless `level`
+/// names one of them itself.
+pub fn default_filter(level: &str) -> String {
+    let mut filter = level.trim().to_string();
+    for directive in QUIET_LIBRARIES.split(',') {
+        let target = directive.split('=').next().unwrap_or(directive);
+        if !filter.contains(target) {
+            if !filter.is_empty() {
+                filter.push(',');
+            }
+            filter.push_str(directive);
+        }
+    }
+    filter
+}
+
+/// Whether log lines are coloured: only on a terminal (a file, a pipe or a log collector gets
+/// plain text, not escape codes), and never with `NO_COLOR` set to anything but the empty
+/// string (no-color.org).
+pub fn colour(is_terminal: bool, no_color: Option<&std::ffi::OsStr>) -> bool {
+    is_terminal && no_color.is_none_or(|v| v.is_empty())
+}
+
+/// The log format of the commands that load no configuration (`generate`, `train`):
+/// `CHOREO_LOG_FORMAT`, read as the service reads it; anything but `json` is pretty.
+pub fn env_log_format() -> LogFormat {
+    match std::env::var("CHOREO_LOG_FORMAT") {
+        Ok(v) if v.trim().eq_ignore_ascii_case("json") => LogFormat::Json,
+        _ => LogFormat::Pretty,
+    }
+}
+
+/// Starts the global tracing subscriber; a second call (tests) is a no-op. `default_level` is
+/// the filter when `RUST_LOG` is unset (see [`default_filter`]).
 pub fn init_tracing(format: LogFormat, default_level: &str) {
-    let filter =
-        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new(default_level));
+    use std::io::IsTerminal as _;
+    let filter = EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| EnvFilter::new(default_filter(default_level)));
+    let ansi = format == LogFormat::Pretty
+        && colour(
+            std::io::stderr().is_terminal(),
+            std::env::var_os("NO_COLOR").as_deref(),
+        );
     // log_internal_errors(false): tracing-subscriber would otherwise report a failed write with
     // eprintln!, which panics when stderr is closed.
     let builder = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(Stderr)
+        .with_ansi(ansi)
         .log_internal_errors(false);
     let _ = match format {
         LogFormat::Pretty => builder.try_init(),
@@ -196,9 +243,46 @@ fn loaded_libtorch() -> String {
         .unwrap_or_else(|| "not mapped (or /proc unavailable)".into())
 }
 
-/// What `choreo doctor` prints: libtorch, threads, data dir, models. Runs a tensor op to prove
-/// libtorch loads.
-pub fn doctor(config: &crate::config::Config) -> Vec<(&'static str, String)> {
+/// The API keys `choreo doctor` found in the configured database.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum KeysSeen {
+    /// The SQLite file does not exist yet (so no key does either).
+    NoDatabase,
+    Counted { active: usize, revoked: usize },
+    /// The database could not be opened or read; why.
+    Unreadable(String),
+}
+
+/// Whether `/v1` needs credentials, and which, by the rules of `api::auth`: any key ever made
+/// (revoked ones count) closes the service; an `auth_token` does too, and keeps working beside
+/// keys as the open tenant.
+pub fn auth_line(token: bool, keys: &KeysSeen) -> String {
+    let (active, revoked) = match keys {
+        KeysSeen::Counted { active, revoked } => (*active, *revoked),
+        KeysSeen::NoDatabase => (0, 0),
+        KeysSeen::Unreadable(why) => {
+            let token = if token {
+                "on: the auth_token is required on /v1"
+            } else {
+                "no auth_token"
+            };
+            return format!("{token}; API keys unknown (the database: {why})");
+        }
+    };
+    let counted = format!("API keys: {active} active, {revoked} revoked");
+    match (active + revoked > 0, token) {
+        (true, true) => {
+            format!("on: an API key or the auth_token required on /v1 ({counted})")
+        }
+        (true, false) => format!("on: an API key required on /v1 ({counted})"),
+        (false, true) => "on: the auth_token required on /v1 (no API keys)".into(),
+        (false, false) => "off: the service is open (no API keys, no auth_token)".into(),
+    }
+}
+
+/// What `choreo doctor` prints: libtorch, threads, data dir, models, auth. Runs a tensor op to
+/// prove libtorch loads.
+pub fn doctor(config: &crate::config::Config, keys: &KeysSeen) -> Vec<(&'static str, String)> {
     let sum = tch::Tensor::from_slice(&[1.0f32, 2.0, 3.0])
         .sum(tch::Kind::Float)
         .double_value(&[]);
@@ -260,14 +344,48 @@ pub fn doctor(config: &crate::config::Config) -> Vec<(&'static str, String)> {
         ("data dir", data_dir),
         ("models dir", config.models_dir.display().to_string()),
         ("models found", models),
-        (
-            "auth",
-            if config.auth_token.is_some() {
-                "bearer token required on /v1"
-            } else {
-                "off"
-            }
-            .to_string(),
-        ),
+        ("auth", auth_line(config.auth_token.is_some(), keys)),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::ffi::OsStr;
+
+    #[test]
+    fn colour_only_on_a_terminal_without_no_color() {
+        assert!(colour(true, None));
+        assert!(colour(true, Some(OsStr::new(""))));
+        assert!(!colour(true, Some(OsStr::new("1"))));
+        assert!(!colour(false, None));
+    }
+
+    #[test]
+    fn auth_is_on_once_a_key_or_a_token_exists() {
+        let none = KeysSeen::Counted {
+            active: 0,
+            revoked: 0,
+        };
+        assert!(auth_line(false, &none).starts_with("off:"));
+        assert!(auth_line(false, &KeysSeen::NoDatabase).starts_with("off:"));
+        assert!(auth_line(true, &none).starts_with("on: the auth_token"));
+        // A revoked key still closes the service (revoking the last key does not open it).
+        let revoked = KeysSeen::Counted {
+            active: 0,
+            revoked: 1,
+        };
+        assert_eq!(
+            auth_line(false, &revoked),
+            "on: an API key required on /v1 (API keys: 0 active, 1 revoked)"
+        );
+        assert!(auth_line(true, &KeysSeen::Unreadable("x".into())).contains("unknown"));
+    }
+
+    #[test]
+    fn the_default_filter_silences_symphonia_unless_asked_for() {
+        assert_eq!(default_filter("info"), "info,symphonia=off");
+        assert_eq!(default_filter(""), "symphonia=off");
+        assert_eq!(default_filter("warn,symphonia=debug"), "warn,symphonia=debug");
+    }
 }

@@ -12,8 +12,8 @@ use crate::motion::export::{MotionJson, JSON_FILE};
 use crate::motion::retarget::{self, Format, RetargetError, TargetSkeleton};
 use crate::queue::{Job, JobKind, Scope, Status};
 use axum::extract::{Path, State};
-use axum::http::{header, HeaderValue};
-use axum::response::{IntoResponse, Response};
+use axum::http::{header, HeaderMap, HeaderValue};
+use axum::response::Response;
 use futures::TryStreamExt as _;
 use serde::Deserialize;
 
@@ -134,18 +134,24 @@ fn retarget_error(id: crate::queue::JobId, e: RetargetError) -> ApiError {
     }
 }
 
-/// The response for rendered bytes: its type, and a file name naming the rig.
-fn respond(bytes: Vec<u8>, content_type: &'static str, filename: &str) -> Response {
+/// The response for rendered bytes: its type, a file name naming the rig, and the part of it
+/// the request's `Range` asks for.
+fn respond(
+    request: &HeaderMap,
+    bytes: Vec<u8>,
+    content_type: &'static str,
+    filename: &str,
+) -> Result<Response, ApiError> {
     let disposition = HeaderValue::from_str(&format!("attachment; filename=\"{filename}\""))
         .unwrap_or_else(|_| HeaderValue::from_static("attachment"));
-    (
+    super::ranges::bytes(
+        request,
+        bytes,
         [
             (header::CONTENT_TYPE, HeaderValue::from_static(content_type)),
             (header::CONTENT_DISPOSITION, disposition),
         ],
-        bytes,
     )
-        .into_response()
 }
 
 /// `motion.bvh` or `motion.glb` on the rig asked for.
@@ -155,6 +161,7 @@ async fn on_rig(
     id: String,
     rig: Option<String>,
     format: Format,
+    request: HeaderMap,
 ) -> Result<Response, ApiError> {
     let (file, content_type, ext) = match format {
         Format::Glb => ("motion.glb", "model/gltf-binary", "glb"),
@@ -163,11 +170,11 @@ async fn on_rig(
     let rig = rig.unwrap_or_else(|| "choreo".into());
     let job = finished_job(&state, caller, &id).await?;
     let Some(target) = resolve_rig(&state, &job, &rig).await? else {
-        return super::jobs::result(state, caller, Path((id, file.to_string()))).await;
+        return super::jobs::result(state, caller, Path((id, file.to_string())), request).await;
     };
     let bytes = render(&state, &job, target, format).await?;
     // The rig is a built-in name or an id here: safe in a header.
-    Ok(respond(bytes, content_type, &format!("motion.{rig}.{ext}")))
+    respond(&request, bytes, content_type, &format!("motion.{rig}.{ext}"))
 }
 
 /// A succeeded generate job's dance as BVH, on choreo's rig or another.
@@ -180,12 +187,14 @@ async fn on_rig(
     path = "/v1/jobs/{id}/motion.bvh",
     operation_id = "getJobMotionBvh",
     tag = "jobs",
-    params(("id" = String, Path, description = "Job id"), RigQuery),
+    params(("id" = String, Path, description = "Job id"), RigQuery, ("Range" = Option<String>, Header, description = "One byte range; without it, the whole file")),
     responses(
         (status = 200, description = "BVH text, metres, y up", content_type = "text/plain"),
+        (status = 206, description = "The bytes the Range asked for; `Content-Range` says which"),
         (status = 400, description = "An unknown query parameter", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job, or no such rig (`rig-not-found`)", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The job has not succeeded (yet); the body gives its status", body = Problem, content_type = "application/problem+json"),
+        (status = 416, description = "The Range selects no byte of the file (`range-not-satisfiable`)", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "The rig lacks a bone a dance needs", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
@@ -195,8 +204,9 @@ pub async fn motion_bvh(
     caller: Caller,
     Path(id): Path<String>,
     ApiQuery(q): ApiQuery<RigQuery>,
+    request: HeaderMap,
 ) -> Result<Response, ApiError> {
-    on_rig(state, caller, id, q.rig, Format::Bvh).await
+    on_rig(state, caller, id, q.rig, Format::Bvh, request).await
 }
 
 /// A succeeded generate job's dance as glTF binary, on choreo's rig or another.
@@ -207,12 +217,14 @@ pub async fn motion_bvh(
     path = "/v1/jobs/{id}/motion.glb",
     operation_id = "getJobMotionGlb",
     tag = "jobs",
-    params(("id" = String, Path, description = "Job id"), RigQuery),
+    params(("id" = String, Path, description = "Job id"), RigQuery, ("Range" = Option<String>, Header, description = "One byte range; without it, the whole file")),
     responses(
         (status = 200, description = "glTF 2.0 binary", content_type = "model/gltf-binary"),
+        (status = 206, description = "The bytes the Range asked for; `Content-Range` says which"),
         (status = 400, description = "An unknown query parameter", body = Problem, content_type = "application/problem+json"),
         (status = 404, description = "No such job, or no such rig (`rig-not-found`)", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The job has not succeeded (yet); the body gives its status", body = Problem, content_type = "application/problem+json"),
+        (status = 416, description = "The Range selects no byte of the file (`range-not-satisfiable`)", body = Problem, content_type = "application/problem+json"),
         (status = 422, description = "The rig lacks a bone a dance needs", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
@@ -222,8 +234,9 @@ pub async fn motion_glb(
     caller: Caller,
     Path(id): Path<String>,
     ApiQuery(q): ApiQuery<RigQuery>,
+    request: HeaderMap,
 ) -> Result<Response, ApiError> {
-    on_rig(state, caller, id, q.rig, Format::Glb).await
+    on_rig(state, caller, id, q.rig, Format::Glb, request).await
 }
 
 /// A succeeded generate job's dance as a VRM Animation (`.vrma`) for any VRM 1.0 avatar.
@@ -236,11 +249,13 @@ pub async fn motion_glb(
     path = "/v1/jobs/{id}/motion.vrma",
     operation_id = "getJobMotionVrma",
     tag = "jobs",
-    params(("id" = String, Path, description = "Job id")),
+    params(("id" = String, Path, description = "Job id"), ("Range" = Option<String>, Header, description = "One byte range; without it, the whole file")),
     responses(
         (status = 200, description = "VRM Animation (glTF 2.0 binary)", content_type = "model/gltf-binary"),
+        (status = 206, description = "The bytes the Range asked for; `Content-Range` says which"),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The job has not succeeded (yet); the body gives its status", body = Problem, content_type = "application/problem+json"),
+        (status = 416, description = "The Range selects no byte of the file (`range-not-satisfiable`)", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
@@ -248,10 +263,11 @@ pub async fn motion_vrma(
     State(state): State<AppState>,
     caller: Caller,
     Path(id): Path<String>,
+    request: HeaderMap,
 ) -> Result<Response, ApiError> {
     let job = finished_job(&state, caller, &id).await?;
     let bytes = render(&state, &job, retarget::vrm(), Format::Vrma).await?;
-    Ok(respond(bytes, "model/gltf-binary", "motion.vrma"))
+    respond(&request, bytes, "model/gltf-binary", "motion.vrma")
 }
 
 /// A succeeded generate job's dance as SMPL parameters, AMASS-style (`numpy.load`).
@@ -264,11 +280,13 @@ pub async fn motion_vrma(
     path = "/v1/jobs/{id}/motion.smpl.npz",
     operation_id = "getJobMotionSmpl",
     tag = "jobs",
-    params(("id" = String, Path, description = "Job id")),
+    params(("id" = String, Path, description = "Job id"), ("Range" = Option<String>, Header, description = "One byte range; without it, the whole file")),
     responses(
         (status = 200, description = "numpy .npz (zip of .npy arrays)", content_type = "application/octet-stream"),
+        (status = 206, description = "The bytes the Range asked for; `Content-Range` says which"),
         (status = 404, description = "No such job", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The job has not succeeded (yet); the body gives its status", body = Problem, content_type = "application/problem+json"),
+        (status = 416, description = "The Range selects no byte of the file (`range-not-satisfiable`)", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
@@ -276,12 +294,14 @@ pub async fn motion_smpl(
     State(state): State<AppState>,
     caller: Caller,
     Path(id): Path<String>,
+    request: HeaderMap,
 ) -> Result<Response, ApiError> {
     let job = finished_job(&state, caller, &id).await?;
     let bytes = render(&state, &job, retarget::smpl(), Format::SmplNpz).await?;
-    Ok(respond(
+    respond(
+        &request,
         bytes,
         "application/octet-stream",
         "motion.smpl.npz",
-    ))
+    )
 }

@@ -607,11 +607,14 @@ fn content_type(file: &str) -> &'static str {
     params(
         ("id" = String, Path, description = "Job id"),
         ("file" = String, Path, description = "motion.bvh, motion.json, motion.glb, report.json or preview.png"),
+        ("Range" = Option<String>, Header, description = "One byte range, e.g. `bytes=0-1023` or `bytes=-500`; without it, or with several, the whole file"),
     ),
     responses(
         (status = 200, description = "The file"),
+        (status = 206, description = "The bytes the Range asked for; `Content-Range` says which"),
         (status = 404, description = "No such job or file", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The job has not succeeded (yet); the body gives its status", body = Problem, content_type = "application/problem+json"),
+        (status = 416, description = "The Range selects no byte of the file (`range-not-satisfiable`)", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
@@ -619,6 +622,7 @@ pub async fn result(
     State(state): State<AppState>,
     caller: Caller,
     Path((id, file)): Path<(String, String)>,
+    request: HeaderMap,
 ) -> Result<Response, ApiError> {
     let Some(name) = RESULT_FILES.iter().find(|f| **f == file) else {
         return Err(ApiError::ResultNotFound(format!(
@@ -649,16 +653,20 @@ pub async fn result(
         .stream(crate::artifacts::Artifact::Result(job.id, name))
         .await
         .map_err(|e| ApiError::artifact(&format!("reading {name} of job {}", job.id), &e))?;
+    let span = super::ranges::Span::of(&request, file.len)?;
     record_use(&state, job.id).await;
     // Streamed with backpressure: a client that stops reading holds one chunk, not the file.
-    let headers = [
-        (
-            header::CONTENT_TYPE,
-            HeaderValue::from_static(content_type(name)),
-        ),
-        (header::CONTENT_LENGTH, HeaderValue::from(file.len)),
-    ];
-    Ok((headers, Body::from_stream(file.body)).into_response())
+    let body = match &span {
+        super::ranges::Span::Whole => Body::from_stream(file.body),
+        super::ranges::Span::Part(r) => {
+            Body::from_stream(super::ranges::slice(file.body, r.clone()))
+        }
+    };
+    let headers = [(
+        header::CONTENT_TYPE,
+        HeaderValue::from_static(content_type(name)),
+    )];
+    Ok(super::ranges::respond(&span, file.len, body, headers))
 }
 
 /// The bytes of a PNG image.
@@ -678,11 +686,16 @@ pub struct Png(pub Vec<u8>);
     path = "/v1/jobs/{id}/preview.png",
     operation_id = "getJobPreview",
     tag = "jobs",
-    params(("id" = String, Path, description = "Job id")),
+    params(
+        ("id" = String, Path, description = "Job id"),
+        ("Range" = Option<String>, Header, description = "One byte range; without it, the whole file"),
+    ),
     responses(
         (status = 200, description = "The contact sheet", content_type = "image/png", body = inline(Png)),
+        (status = 206, description = "The bytes the Range asked for", content_type = "image/png", body = inline(Png)),
         (status = 404, description = "No such job, or a job from before previews", body = Problem, content_type = "application/problem+json"),
         (status = 409, description = "The job has not succeeded (yet); the body gives its status", body = Problem, content_type = "application/problem+json"),
+        (status = 416, description = "The Range selects no byte of the file (`range-not-satisfiable`)", body = Problem, content_type = "application/problem+json"),
     ),
     security(("bearer" = []))
 )]
@@ -690,11 +703,13 @@ pub async fn preview(
     state: State<AppState>,
     caller: Caller,
     Path(id): Path<String>,
+    request: HeaderMap,
 ) -> Result<Response, ApiError> {
     result(
         state,
         caller,
         Path((id, crate::report::preview::PREVIEW_FILE.to_string())),
+        request,
     )
     .await
 }

@@ -39,7 +39,9 @@ pub mod multipart;
 pub mod openapi;
 pub mod paging;
 pub mod problem;
+pub mod ranges;
 pub mod rigs;
+pub mod song_audio;
 pub mod songs;
 pub mod system;
 pub mod tenancy;
@@ -119,9 +121,9 @@ impl StartError {
 /// All routes, with auth on `/v1`, CORS, request ids and tracing.
 pub fn router(state: AppState) -> Router {
     let v1 = Router::new()
-        .route("/songs", axum::routing::post(songs::upload))
+        .route("/songs", get(songs::list).post(songs::upload))
         .route("/songs/{id}", get(songs::get).delete(songs::delete))
-        .route("/songs/{id}/audio", get(songs::audio))
+        .route("/songs/{id}/audio", get(song_audio::audio))
         .route("/rigs", get(rigs::list).post(rigs::upload))
         .route("/rigs/{id}", get(rigs::get).delete(rigs::delete))
         .route(

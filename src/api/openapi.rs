@@ -22,8 +22,9 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
     info(title = "choreo", description = "Upload a song, get a dance: BVH, JSON and glb motion plus a quality report."),
     paths(
         super::songs::upload,
+        super::songs::list,
         super::songs::get,
-        super::songs::audio,
+        super::song_audio::audio,
         super::songs::delete,
         super::rigs::upload,
         super::rigs::list,
@@ -47,7 +48,7 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
     ),
     modifiers(&BearerAuth),
     tags(
-        (name = "songs", description = "Upload songs; read their analysis; delete them"),
+        (name = "songs", description = "Upload songs; list them; read their analysis and audio; delete them"),
         (name = "rigs", description = "Your own skeletons (BVH or glb) to take dances onto: upload, list, delete"),
         (name = "jobs", description = "Dances: submit, follow, cancel, download, delete"),
         (name = "models", description = "The models this server has"),

@@ -1,7 +1,7 @@
-//! The page contract every list endpoint keeps (`GET /v1/jobs`, `GET /v1/rigs`): newest first,
-//! `limit` 1..=[`MAX_LIMIT`] (default [`DEFAULT_LIMIT`]), and `next_cursor`, the last item's id,
-//! sent back as `cursor` for the page after it; absent on the last page. Written once so the
-//! lists cannot drift apart.
+//! The page contract every list endpoint keeps (`GET /v1/jobs`, `GET /v1/rigs`, `GET /v1/songs`):
+//! newest first, `limit` 1..=[`MAX_LIMIT`] (default [`DEFAULT_LIMIT`]), and `next_cursor`, the
+//! last item's id, sent back as `cursor` for the page after it; absent on the last page. Written
+//! once so the lists cannot drift apart.
 use super::problem::ApiError;
 use std::str::FromStr;
 

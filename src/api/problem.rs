@@ -134,6 +134,8 @@ pub enum ApiError {
     WebhookUrlRefused(String),
     #[error("this server has no webhook_secret (CHOREO_WEBHOOK_SECRET) to sign webhooks with; submit without webhook_url, or ask its operator to set one")]
     WebhooksNotConfigured,
+    #[error("the Range {range:?} asks for no byte of this {len}-byte file; ask for bytes within 0-{last}, or send no Range for the whole file", last = .len.saturating_sub(1))]
+    RangeNotSatisfiable { range: String, len: u64 },
 }
 
 impl ApiError {
@@ -185,6 +187,7 @@ impl ApiError {
             ApiError::RigTimedOut { .. } => "rig-timed-out",
             ApiError::WebhookUrlRefused(_) => "webhook-url-refused",
             ApiError::WebhooksNotConfigured => "webhooks-not-configured",
+            ApiError::RangeNotSatisfiable { .. } => "range-not-satisfiable",
         }
     }
 
@@ -244,6 +247,7 @@ impl ApiError {
             ApiError::RigTimedOut { .. } => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::WebhookUrlRefused(_) => StatusCode::UNPROCESSABLE_ENTITY,
             ApiError::WebhooksNotConfigured => StatusCode::UNPROCESSABLE_ENTITY,
+            ApiError::RangeNotSatisfiable { .. } => StatusCode::RANGE_NOT_SATISFIABLE,
         }
     }
 
@@ -445,6 +449,12 @@ impl IntoResponse for ApiError {
                 headers.insert(header::CONNECTION, HeaderValue::from_static("close"));
             }
             _ => {}
+        }
+        if let ApiError::RangeNotSatisfiable { len, .. } = &self {
+            // RFC 9110 §15.5.17: the current length, so the client can ask again within it.
+            if let Ok(value) = HeaderValue::from_str(&format!("bytes */{len}")) {
+                response.headers_mut().insert(header::CONTENT_RANGE, value);
+            }
         }
         if matches!(self, ApiError::Unauthorized) {
             response

@@ -1,4 +1,5 @@
-//! `POST /v1/songs`, `GET /v1/songs/{id}`, `GET /v1/songs/{id}/audio` and `DELETE /v1/songs/{id}`.
+//! `POST /v1/songs`, `GET /v1/songs`, `GET /v1/songs/{id}` and `DELETE /v1/songs/{id}`; the
+//! song's audio is served by [`super::song_audio`].
 //!
 //! An upload streams to a temp file inside the data dir while its size is checked and its
 //! sha256 computed; it is decoded with symphonia (the format comes from decoding, never the
@@ -6,17 +7,19 @@
 //! that records the song.
 use super::auth::Caller;
 use super::multipart::{self, Form};
+use super::extract::ApiQuery;
+use super::paging::PageRequest;
 use super::problem::{ApiError, Problem};
 use super::AppState;
 use crate::artifacts::Artifact;
 use crate::audio::{self, Analysis, AudioError, AudioFormat, Budget, DecodeOptions, Keep};
-use crate::queue::{JobKind, NewJob, Song, SongId, Status};
+use crate::queue::{JobKind, NewJob, Song, SongFilter, SongId, Status};
 use axum::extract::{Path, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::Json;
 use axum::RequestExt;
 use chrono::{DateTime, Utc};
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::str::FromStr;
 use std::time::Duration;
@@ -49,6 +52,27 @@ pub struct SongView {
     pub analysis_error: Option<String>,
     /// Tempo, beats and downbeats (seconds), once the analyze job has succeeded.
     pub analysis: Option<Analysis>,
+}
+
+/// A page of songs.
+#[derive(Debug, Serialize, utoipa::ToSchema)]
+pub struct SongPage {
+    pub items: Vec<SongView>,
+    /// Pass as `cursor` for the next page; absent on the last page.
+    pub next_cursor: Option<String>,
+}
+
+/// The page of `GET /v1/songs`.
+#[derive(Debug, Deserialize, utoipa::IntoParams)]
+#[serde(deny_unknown_fields)]
+#[into_params(parameter_in = Query)]
+pub struct SongListQuery {
+    /// 1..=100, default 20.
+    #[param(minimum = 1, maximum = 100, default = 20)]
+    pub limit: Option<u32>,
+    /// `next_cursor` of the previous page (a song id).
+    #[param(format = Uuid)]
+    pub cursor: Option<String>,
 }
 
 /// The multipart form of an upload: one field, `file` (any other is refused with 400).
@@ -435,7 +459,7 @@ async fn forget(state: &AppState, artifact: Artifact<'_>) {
 }
 
 /// Records a use of the song, which restarts its retention; a failure only logs.
-async fn record_use(state: &AppState, id: SongId) {
+pub(super) async fn record_use(state: &AppState, id: SongId) {
     if let Err(e) = state.store.touch_song(id).await {
         tracing::warn!(song_id = %id, error = %e, "could not record a use of the song");
     }
@@ -476,6 +500,39 @@ pub async fn get(
     Ok(Json(view(&state, song).await?))
 }
 
+/// The caller's songs, newest first, a page at a time, each as `GET /v1/songs/{id}` shows it.
+#[utoipa::path(
+    get,
+    path = "/v1/songs",
+    operation_id = "listSongs",
+    tag = "songs",
+    params(SongListQuery),
+    responses(
+        (status = 200, description = "A page of songs", body = SongPage),
+        (status = 400, description = "An unknown or malformed query parameter", body = Problem, content_type = "application/problem+json"),
+        (status = 422, description = "A limit outside 1..=100, or a cursor that is not a next_cursor", body = Problem, content_type = "application/problem+json"),
+    ),
+    security(("bearer" = []))
+)]
+pub async fn list(
+    State(state): State<AppState>,
+    caller: Caller,
+    ApiQuery(query): ApiQuery<SongListQuery>,
+) -> Result<Json<SongPage>, ApiError> {
+    let page = PageRequest::<SongId>::parse(query.limit, query.cursor.as_deref())?;
+    let filter = SongFilter {
+        before: page.before,
+        limit: page.fetch(),
+    };
+    let songs = state.store.songs(caller.scope(), filter).await?;
+    let (songs, next_cursor) = page.page(songs, |s| s.id.to_string());
+    let mut items = Vec::with_capacity(songs.len());
+    for song in songs {
+        items.push(view(&state, song).await?);
+    }
+    Ok(Json(SongPage { items, next_cursor }))
+}
+
 /// Delete a song, its analysis, and every job made from it with its results.
 ///
 /// Jobs of the song that are queued are dropped, and running ones stop at their next progress
@@ -514,85 +571,6 @@ pub async fn delete(
     }
     tracing::info!(song_id = %id, jobs = removed.jobs.len(), "song deleted");
     Ok(StatusCode::NO_CONTENT)
-}
-
-/// The MIME type an uploaded song is served with, from the format its decode found.
-fn audio_mime(format: AudioFormat) -> &'static str {
-    match format {
-        AudioFormat::Mp3 => "audio/mpeg",
-        AudioFormat::Wav => "audio/wav",
-        AudioFormat::Flac => "audio/flac",
-        AudioFormat::Ogg => "audio/ogg",
-        AudioFormat::M4a => "audio/mp4",
-    }
-}
-
-/// The bytes of an uploaded song.
-// For the OpenAPI document only: a bare `Vec<u8>` would read there as an array of integers.
-#[derive(utoipa::ToSchema)]
-#[schema(value_type = String, format = Binary)]
-pub struct AudioBytes(pub Vec<u8>);
-
-/// The song's audio, byte for byte as it was uploaded.
-///
-/// For clients that play the song beside its dance (the page at `/` does): the content type
-/// follows the format found by decoding (`format` on the song).
-#[utoipa::path(
-    get,
-    path = "/v1/songs/{id}/audio",
-    operation_id = "getSongAudio",
-    tag = "songs",
-    params(("id" = String, Path, description = "Song id")),
-    responses(
-        (status = 200, description = "The uploaded file", content(
-            (inline(AudioBytes) = "audio/mpeg"),
-            (inline(AudioBytes) = "audio/wav"),
-            (inline(AudioBytes) = "audio/flac"),
-            (inline(AudioBytes) = "audio/ogg"),
-            (inline(AudioBytes) = "audio/mp4"),
-        )),
-        (status = 404, description = "No such song", body = Problem, content_type = "application/problem+json"),
-    ),
-    security(("bearer" = []))
-)]
-pub async fn audio(
-    State(state): State<AppState>,
-    caller: Caller,
-    Path(id): Path<String>,
-) -> Result<axum::response::Response, ApiError> {
-    use axum::response::IntoResponse;
-    let id = SongId::from_str(&id)
-        .map_err(|_| ApiError::SongNotFound(format!("{id:?} (not a song id)")))?;
-    let song = state.store.song(caller.scope(), id).await?;
-    // Through the artifact store: with a bucket, another API host may have taken the upload; it
-    // is cached in this host's data dir, then streamed from there.
-    let path = state
-        .artifacts
-        .fetch(Artifact::Song(song.id, song.format))
-        .await
-        .map_err(|e| ApiError::artifact(&format!("fetching song {}", song.id), &e))?;
-    let file = tokio::fs::File::open(&path)
-        .await
-        .map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?;
-    record_use(&state, song.id).await;
-    let len = file
-        .metadata()
-        .await
-        .map_err(|e| ApiError::storage(&format!("opening song {}", song.id), &e))?
-        .len();
-    // Streamed with backpressure: a song may be up to max_upload_bytes.
-    let body = axum::body::Body::from_stream(tokio_util::io::ReaderStream::with_capacity(
-        file,
-        crate::artifacts::STREAM_CHUNK_BYTES,
-    ));
-    let headers = [
-        (
-            header::CONTENT_TYPE,
-            HeaderValue::from_static(audio_mime(song.format)),
-        ),
-        (header::CONTENT_LENGTH, HeaderValue::from(len)),
-    ];
-    Ok((headers, body).into_response())
 }
 
 #[cfg(test)]

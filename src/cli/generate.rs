@@ -95,15 +95,19 @@ pub fn generate(cmd: &GenerateCmd) -> anyhow::Result<()> {
     }
     let args = &cmd.song;
     // Warnings (and RUST_LOG's choice) from the models reach the terminal.
-    choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "warn");
+    choreo::telemetry::init_tracing(choreo::telemetry::env_log_format(), "warn");
     let mut bar: Option<indicatif::ProgressBar> = None;
     let mut on_progress = |stage: choreo::stage::Stage, done: f64| {
         let bar = bar.get_or_insert_with(progress_bar);
         bar.set_message(stage.as_str());
         bar.set_position((done * 1000.0) as u64);
     };
-    let g =
-        standalone::generate(&args.clone().into(), &mut on_progress).context("choreo generate")?;
+    // The library's audio errors do not name the file (the service's never show its paths):
+    // here the path is the user's own, so a file that cannot be read is named.
+    std::fs::File::open(&args.song)
+        .with_context(|| format!("cannot read the song {}", args.song.display()))?;
+    let g = standalone::generate(&args.clone().into(), &mut on_progress)
+        .with_context(|| format!("choreo generate {}", args.song.display()))?;
     if let Some(bar) = &bar {
         bar.finish_with_message("done");
     }

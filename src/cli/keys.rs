@@ -3,6 +3,7 @@
 use anyhow::Context;
 use choreo::config::{self as limits, in_range, Config};
 use choreo::queue::{ApiKey, KeyId, KeyLimits, NewKey, Store};
+use choreo::telemetry::KeysSeen;
 use clap::{Args, Subcommand};
 use serde_json::json;
 use std::sync::Arc;
@@ -101,6 +102,42 @@ fn shown(key: &ApiKey) -> serde_json::Value {
     })
 }
 
+/// What `choreo keys create` prints on stderr when its key is the first on a service that had
+/// neither keys nor an `auth_token`.
+pub const CLOSED_WARNING: &str = "warning: this service was open (no API key, no auth_token); \
+from now on every /v1 request needs a key (Authorization: Bearer <secret>), within a second on a \
+running server. The songs, jobs and rigs made without a key stay, in the open tenant: an \
+operator's key (`choreo keys create --name ops --admin`) reads them, and on a server with \
+auth_token set (CHOREO_AUTH_TOKEN) that token still acts as the open tenant.";
+
+/// The API keys in the configured database, for `choreo doctor`; never creates the database.
+pub fn seen(config: &Config) -> KeysSeen {
+    let database = match config.database() {
+        Ok(database) => database,
+        Err(e) => return KeysSeen::Unreadable(e.to_string()),
+    };
+    if let choreo::config::Database::Sqlite(path) = &database {
+        if !path.exists() {
+            return KeysSeen::NoDatabase;
+        }
+    }
+    let counted = super::runtime().and_then(|runtime| {
+        runtime.block_on(async {
+            let store: Arc<dyn Store> =
+                choreo::queue::open(&database, Duration::from_secs_f64(config.db_timeout_s))
+                    .await
+                    .context("opening the database")?;
+            let keys = store.keys().await.context("reading the keys")?;
+            let revoked = keys.iter().filter(|k| k.revoked_at.is_some()).count();
+            Ok(KeysSeen::Counted {
+                active: keys.len() - revoked,
+                revoked,
+            })
+        })
+    });
+    counted.unwrap_or_else(|e| KeysSeen::Unreadable(format!("{e:#}")))
+}
+
 /// Runs one `choreo keys` command against the configured database.
 pub fn run(args: &KeysArgs, config: Config) -> anyhow::Result<()> {
     super::runtime()?.block_on(async {
@@ -131,8 +168,16 @@ pub fn run(args: &KeysArgs, config: Config) -> anyhow::Result<()> {
                 }
                 .validate()
                 .context("checking the key's limits (--rate-limit-rps, --max-queued-jobs, --storage-quota-bytes)")?;
+                // The first key closes a service that was open (api::auth): say so, and how
+                // the rows made without a key stay reachable, rather than let anonymous
+                // clients find out from a 401.
+                let was_open = config.auth_token.is_none()
+                    && !store.any_key().await.context("reading the keys")?;
                 let (key, secret) = NewKey::mint(&create.name, create.admin, limits);
                 let key = store.add_key(key).await.context("storing the key")?;
+                if was_open {
+                    eprintln!("{CLOSED_WARNING}");
+                }
                 json!({"id": key.id, "name": key.name, "secret": secret})
             }
             KeysCommand::List => {

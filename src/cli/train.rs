@@ -42,7 +42,7 @@ impl From<TrainArgs> for Training {
 
 /// Trains (or evaluates) and prints what it wrote.
 pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
-    choreo::telemetry::init_tracing(choreo::config::LogFormat::default(), "info");
+    choreo::telemetry::init_tracing(choreo::telemetry::env_log_format(), "info");
     println!(
         "{}",
         Training::from(args.clone()).run().context("choreo train")?

@@ -541,6 +541,14 @@ pub trait JobStore: Send + Sync {
     fn touch_job(&self, id: JobId) -> StoreFuture<'_, ()>;
 }
 
+/// A page of the song list: newest first.
+#[derive(Clone, Copy, Debug)]
+pub struct SongFilter {
+    /// Return songs older than this one (the cursor).
+    pub before: Option<SongId>,
+    pub limit: u32,
+}
+
 /// The song catalogue.
 pub trait SongStore: Send + Sync {
     /// Stores a new song with its analyze job in one transaction; when the same tenant has a
@@ -559,6 +567,8 @@ pub trait SongStore: Send + Sync {
     ) -> StoreFuture<'_, (Song, bool)>;
     /// One song.
     fn song(&self, scope: Scope, id: SongId) -> StoreFuture<'_, Song>;
+    /// The songs in scope, newest first, older than `filter.before` when set.
+    fn songs(&self, scope: Scope, filter: SongFilter) -> StoreFuture<'_, Vec<Song>>;
     /// The tenant's song with these bytes, if it uploaded them before.
     fn song_by_sha256<'a>(
         &'a self,

@@ -42,6 +42,15 @@ pub enum WorkerError {
     Model(ModelError),
     #[error("model {} is not available on this server", .0.0)]
     ModelUnavailable(ModelId),
+    /// The command line's form of [`WorkerError::ModelUnavailable`]: the folder is the user's
+    /// own, so naming it and what it holds is what helps (the service never names its paths).
+    #[error("{}", standalone::not_in_folder(.model, .dir, .found))]
+    ModelNotInFolder {
+        model: ModelId,
+        dir: std::path::PathBuf,
+        /// The ids of the models the folder holds.
+        found: Vec<String>,
+    },
     #[error("invalid job options: {0}")]
     InvalidOptions(String),
     #[error("writing results: {0}")]
@@ -95,6 +104,7 @@ impl WorkerError {
             // model does not take before a job exists); the finer `ModelError::code` is logged.
             WorkerError::Model(_) => "model-failed",
             WorkerError::ModelUnavailable(_) => "model-unavailable",
+            WorkerError::ModelNotInFolder { .. } => "model-unavailable",
             WorkerError::InvalidOptions(_) => "invalid-job-options",
             WorkerError::Io(_) => "result-io",
             WorkerError::Export(_) => "export-failed",
@@ -113,6 +123,7 @@ impl WorkerError {
             WorkerError::Audio(e) => !e.is_client_error(),
             WorkerError::Model(_) => false,
             WorkerError::ModelUnavailable(_) => false,
+            WorkerError::ModelNotInFolder { .. } => false,
             WorkerError::InvalidOptions(_) => false,
             WorkerError::Io(_) => true,
             WorkerError::Export(_) => false,

@@ -106,6 +106,43 @@ impl Progress for StageClock<'_> {
     }
 }
 
+/// The message of [`WorkerError::ModelNotInFolder`]: the models found, the folder searched,
+/// and the nearest id when the one asked for looks like a misspelling of it.
+pub(crate) fn not_in_folder(model: &ModelId, dir: &std::path::Path, found: &[String]) -> String {
+    let asked = &model.0;
+    let mut message = if found.is_empty() {
+        format!(
+            "model {asked} is not available: {} holds no trained model (train one with \
+             `choreo train`, or point --models-dir at a folder that holds one)",
+            dir.display()
+        )
+    } else {
+        format!(
+            "model {asked} is not available in {}, which holds {}",
+            dir.display(),
+            found.join(", ")
+        )
+    };
+    if let Some(near) = nearest(asked, found) {
+        message.push_str(&format!("; did you mean {near}?"));
+    } else if crate::models::MODELS.iter().any(|m| m.id == asked) {
+        message.push_str(&format!(
+            "; {asked} is a model choreo knows, but its folder there has no weights"
+        ));
+    }
+    message
+}
+
+/// The id in `ids` nearest `asked` by edit distance, when within a third of its length (two
+/// letters swapped or one dropped, not a different name).
+pub fn nearest<'a>(asked: &str, ids: &'a [String]) -> Option<&'a str> {
+    ids.iter()
+        .map(|id| (strsim::levenshtein(asked, id), id))
+        .filter(|(d, _)| *d > 0 && *d <= (asked.len() / 3).max(2))
+        .min_by_key(|(d, _)| *d)
+        .map(|(_, id)| id.as_str())
+}
+
 /// Runs model → analysis → beat-align + feet → export → report on a decoded song (named `song` in
 /// the preview's title) into `out`, timing every stage.
 pub fn generate_decoded(
@@ -180,6 +217,15 @@ pub fn generate(
             .unwrap_or(1),
     );
     let registry = Registry::load(&args.models_dir)?;
+    // Checked before the song is decoded, so a misspelt --model fails at once.
+    let model = ModelId(args.model.clone());
+    if registry.get(&model).is_none() {
+        return Err(WorkerError::ModelNotInFolder {
+            model,
+            dir: args.models_dir.clone(),
+            found: registry.list().into_iter().map(|m| m.id.0).collect(),
+        });
+    }
     let key_inputs: Vec<crate::motion::input::KeyPoseInput> = match &args.key_poses {
         Some(p) => serde_json::from_str(&std::fs::read_to_string(p)?)
             .map_err(|e| WorkerError::InvalidOptions(format!("{}: {e}", p.display())))?,
@@ -234,7 +280,7 @@ pub fn generate(
     };
     let mut g = generate_decoded(
         &registry,
-        &ModelId(args.model.clone()),
+        &model,
         song,
         &request,
         stages,
@@ -438,4 +484,35 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
         table += &ratios;
     }
     Ok(table)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_misspelt_model_names_the_folder_what_it_holds_and_the_nearest_id() {
+        let found = vec!["beat-graph".to_string(), "dance-revolution".to_string()];
+        let message = WorkerError::ModelNotInFolder {
+            model: ModelId("dance-revolutoin".into()),
+            dir: "models".into(),
+            found: found.clone(),
+        }
+        .to_string();
+        assert_eq!(
+            message,
+            "model dance-revolutoin is not available in models, which holds beat-graph, \
+             dance-revolution; did you mean dance-revolution?"
+        );
+        assert_eq!(nearest("tsmt", &found), None);
+        assert_eq!(nearest("beatgraph", &found), Some("beat-graph"));
+        let empty = WorkerError::ModelNotInFolder {
+            model: ModelId("tsmt".into()),
+            dir: "/nowhere".into(),
+            found: Vec::new(),
+        }
+        .to_string();
+        assert!(empty.contains("/nowhere holds no trained model"), "{empty}");
+        assert!(empty.ends_with("but its folder there has no weights"), "{empty}");
+    }
 }

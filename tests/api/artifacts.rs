@@ -240,6 +240,19 @@ async fn api_and_worker_on_separate_disks_share_songs_and_results_through_a_buck
             on_worker.as_slice(),
             "{file} served from the bucket is the file the worker wrote"
         );
+        // A part of it, cut from the bucket's stream.
+        let part = client
+            .get(format!("{base}/v1/jobs/{job_id}/{file}"))
+            .header("range", "bytes=100-199")
+            .send()
+            .await
+            .expect("GET part");
+        assert_eq!(part.status(), StatusCode::PARTIAL_CONTENT, "{file}");
+        assert_eq!(
+            part.bytes().await.expect("part").as_ref(),
+            &on_worker[100..200],
+            "{file}: bytes 100-199 from the bucket"
+        );
         let key = object_store::path::Path::from(format!("{PREFIX}/jobs/{job_id}/{file}"));
         let stored = bucket
             .get(&key)
@@ -274,6 +287,18 @@ async fn api_and_worker_on_separate_disks_share_songs_and_results_through_a_buck
         audio.bytes().await.expect("body").as_ref(),
         bytes.as_slice(),
         "the second API host serves the upload's bytes"
+    );
+    let tail = client
+        .get(format!("{second}/v1/songs/{song_id}/audio"))
+        .header("range", "bytes=-50")
+        .send()
+        .await
+        .expect("GET audio's tail");
+    assert_eq!(tail.status(), StatusCode::PARTIAL_CONTENT);
+    assert_eq!(
+        tail.bytes().await.expect("tail").as_ref(),
+        &bytes[bytes.len() - 50..],
+        "the last 50 bytes of the upload"
     );
     let second_files = files_under(second_dir.path());
     assert!(

@@ -2,6 +2,7 @@
 //! One module per endpoint or concern; `helpers::spawn_app()` starts the service.
 mod artifacts;
 mod bad_input;
+mod cli;
 #[path = "../common/models.rs"]
 mod common_models;
 mod concurrency;
@@ -20,6 +21,7 @@ mod hostile_motion;
 mod jobs;
 mod keypose;
 mod limits;
+mod logs;
 mod models;
 #[path = "../common/motion_files.rs"]
 mod motion_files;
@@ -28,6 +30,7 @@ mod openapi;
 mod postgres;
 mod preview;
 mod quotas;
+mod ranges;
 mod resilience;
 mod retarget;
 mod rig_lifecycle;

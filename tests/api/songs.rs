@@ -1,4 +1,4 @@
-//! `POST /v1/songs`, `GET /v1/songs/{id}` and `GET /v1/songs/{id}/audio`.
+//! `POST /v1/songs`, `GET /v1/songs`, `GET /v1/songs/{id}` and `GET /v1/songs/{id}/audio`.
 use crate::helpers::{expect_problem, fixture, short_song, spawn_app};
 use reqwest::StatusCode;
 use serde_json::Value;
@@ -173,4 +173,91 @@ async fn a_song_is_served_back_byte_for_byte_with_its_format_s_type() {
     )
     .await;
     app.stop().await;
+}
+
+/// `GET /v1/songs`: the caller's songs, newest first, a page at a time; another key's songs are
+/// not listed, and its cursor is refused as any id that is not a `next_cursor`.
+async fn the_song_list_pages_newest_first_with_the_caller_s_songs_only(db: crate::tenants::Db) {
+    use choreo::queue::KeyLimits;
+    let app = crate::tenants::spawn(db, |_| {}).await;
+    let mine = app.key("mine", KeyLimits::default()).await;
+    let theirs = app.key("theirs", KeyLimits::default()).await;
+    let mut uploaded = Vec::new();
+    for path in [short_song(), fixture("wav"), fixture("flac")] {
+        let response = app.upload(&mine, &path).await;
+        assert_eq!(response.status(), StatusCode::CREATED);
+        let song: Value = response.json().await.expect("song");
+        uploaded.push(song["id"].as_str().expect("id").to_string());
+    }
+    let other: Value = app
+        .upload(&theirs, &short_song())
+        .await
+        .json()
+        .await
+        .expect("song");
+    let newest_first: Vec<String> = uploaded.iter().rev().cloned().collect();
+
+    let first: Value = app
+        .get("/v1/songs?limit=2", &mine)
+        .await
+        .json()
+        .await
+        .expect("page");
+    let ids = |page: &Value| -> Vec<String> {
+        page["items"]
+            .as_array()
+            .expect("items")
+            .iter()
+            .map(|s| s["id"].as_str().expect("id").to_string())
+            .collect()
+    };
+    assert_eq!(ids(&first), newest_first[..2], "{first}");
+    // Each item is the song as GET /v1/songs/{id} shows it.
+    assert_eq!(first["items"][0]["format"], "flac", "{first}");
+    assert!(first["items"][0]["analysis_status"].is_string(), "{first}");
+    let cursor = first["next_cursor"].as_str().expect("a next page");
+    let second: Value = app
+        .get(&format!("/v1/songs?limit=2&cursor={cursor}"), &mine)
+        .await
+        .json()
+        .await
+        .expect("page");
+    assert_eq!(ids(&second), newest_first[2..], "{second}");
+    assert!(second.get("next_cursor").is_none_or(Value::is_null), "{second}");
+
+    let theirs_page: Value = app
+        .get("/v1/songs", &theirs)
+        .await
+        .json()
+        .await
+        .expect("page");
+    assert_eq!(ids(&theirs_page), [other["id"].as_str().expect("id")]);
+    for (query, field) in [("limit=0", "limit"), ("cursor=nope", "cursor")] {
+        let body = expect_problem(
+            app.get(&format!("/v1/songs?{query}"), &mine).await,
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid-field",
+        )
+        .await;
+        assert_eq!(body["field"], field, "{body}");
+    }
+    expect_problem(
+        app.get("/v1/songs?page=2", &mine).await,
+        StatusCode::BAD_REQUEST,
+        "invalid-query",
+    )
+    .await;
+    app.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_song_list_on_sqlite() {
+    the_song_list_pages_newest_first_with_the_caller_s_songs_only(crate::tenants::Db::Sqlite)
+        .await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_song_list_on_postgres() {
+    the_song_list_pages_newest_first_with_the_caller_s_songs_only(crate::tenants::Db::Postgres)
+        .await
 }

@@ -6,6 +6,7 @@ export { jobEvents, type EventStreamOptions, type Job, type JobEvent, type Progr
 export type { components, paths } from './schema.js';
 type Schemas = components['schemas'];
 export type Song = Schemas['SongView'];
+export type SongPage = Schemas['SongPage'];
 export type CreateJob = Schemas['CreateJob'];
 export type JobPage = Schemas['JobPage'];
 export type ModelInfo = Schemas['ModelInfo'];
@@ -47,6 +48,8 @@ export declare class Choreo {
     fetch(path: string, init?: RequestInit): Promise<Response>;
     models(): Promise<ModelInfo[]>;
     song(id: string): Promise<Song>;
+    /** GET /v1/songs: this key's songs, newest first; pass a page's `next_cursor` as `cursor` for the next. */
+    listSongs(query?: NonNullable<paths['/v1/songs']['get']['parameters']['query']>): Promise<SongPage>;
     job(id: string): Promise<Job>;
     jobs(query?: NonNullable<paths['/v1/jobs']['get']['parameters']['query']>): Promise<JobPage>;
     /** DELETE /v1/jobs/{id}: cancels a queued or running job. */

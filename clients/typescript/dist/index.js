@@ -747,6 +747,10 @@ var Choreo = class {
   song(id) {
     return data(this.api.GET("/v1/songs/{id}", { params: { path: { id } } }));
   }
+  /** GET /v1/songs: this key's songs, newest first; pass a page's `next_cursor` as `cursor` for the next. */
+  listSongs(query = { limit: 50 }) {
+    return data(this.api.GET("/v1/songs", { params: { query } }));
+  }
   job(id) {
     return data(this.api.GET("/v1/jobs/{id}", { params: { path: { id } } }));
   }

@@ -20,6 +20,7 @@ export type { components, paths } from './schema.js';
 
 type Schemas = components['schemas'];
 export type Song = Schemas['SongView'];
+export type SongPage = Schemas['SongPage'];
 export type CreateJob = Schemas['CreateJob'];
 export type JobPage = Schemas['JobPage'];
 export type ModelInfo = Schemas['ModelInfo'];
@@ -114,6 +115,11 @@ export class Choreo {
 
   song(id: string): Promise<Song> {
     return data(this.api.GET('/v1/songs/{id}', { params: { path: { id } } }));
+  }
+
+  /** GET /v1/songs: this key's songs, newest first; pass a page's `next_cursor` as `cursor` for the next. */
+  listSongs(query: NonNullable<paths['/v1/songs']['get']['parameters']['query']> = { limit: 50 }): Promise<SongPage> {
+    return data(this.api.GET('/v1/songs', { params: { query } }));
   }
 
   job(id: string): Promise<Job> {

@@ -326,7 +326,8 @@ export interface paths {
             path?: never;
             cookie?: never;
         };
-        get?: never;
+        /** The caller's songs, newest first, a page at a time, each as `GET /v1/songs/{id}` shows it. */
+        get: operations["listSongs"];
         put?: never;
         /**
          * Upload a song.
@@ -374,7 +375,8 @@ export interface paths {
         /**
          * The song's audio, byte for byte as it was uploaded.
          * @description For clients that play the song beside its dance (the page at `/` does): the content type
-         *     follows the format found by decoding (`format` on the song).
+         *     follows the format found by decoding (`format` on the song). A `Range` of one byte range is
+         *     answered `206` with those bytes, so a player can seek.
          */
         get: operations["getSongAudio"];
         put?: never;
@@ -969,6 +971,12 @@ export interface components {
          * @description A song's id: a UUID v7; the stored file is named by it, never by the upload's name.
          */
         SongId: string;
+        /** @description A page of songs. */
+        SongPage: {
+            items: components["schemas"]["SongView"][];
+            /** @description Pass as `cursor` for the next page; absent on the last page. */
+            next_cursor?: string | null;
+        };
         /** @description A song and, once its analyze job is done, its analysis. */
         SongView: {
             analysis?: null | components["schemas"]["Analysis"];
@@ -1484,7 +1492,10 @@ export interface operations {
                  */
                 rig?: string;
             };
-            header?: never;
+            header?: {
+                /** @description One byte range; without it, the whole file */
+                Range?: string | null;
+            };
             path: {
                 /** @description Job id */
                 id: string;
@@ -1501,6 +1512,13 @@ export interface operations {
                 content: {
                     "text/plain": unknown;
                 };
+            };
+            /** @description The bytes the Range asked for; `Content-Range` says which */
+            206: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
             };
             /** @description An unknown query parameter */
             400: {
@@ -1531,6 +1549,15 @@ export interface operations {
             };
             /** @description The job has not succeeded (yet); the body gives its status */
             409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The Range selects no byte of the file (`range-not-satisfiable`) */
+            416: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -1571,7 +1598,10 @@ export interface operations {
                  */
                 rig?: string;
             };
-            header?: never;
+            header?: {
+                /** @description One byte range; without it, the whole file */
+                Range?: string | null;
+            };
             path: {
                 /** @description Job id */
                 id: string;
@@ -1588,6 +1618,13 @@ export interface operations {
                 content: {
                     "model/gltf-binary": unknown;
                 };
+            };
+            /** @description The bytes the Range asked for; `Content-Range` says which */
+            206: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
             };
             /** @description An unknown query parameter */
             400: {
@@ -1625,6 +1662,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
+            /** @description The Range selects no byte of the file (`range-not-satisfiable`) */
+            416: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
             /** @description The rig lacks a bone a dance needs */
             422: {
                 headers: {
@@ -1650,7 +1696,10 @@ export interface operations {
     getJobMotionSmpl: {
         parameters: {
             query?: never;
-            header?: never;
+            header?: {
+                /** @description One byte range; without it, the whole file */
+                Range?: string | null;
+            };
             path: {
                 /** @description Job id */
                 id: string;
@@ -1667,6 +1716,13 @@ export interface operations {
                 content: {
                     "application/octet-stream": unknown;
                 };
+            };
+            /** @description The bytes the Range asked for; `Content-Range` says which */
+            206: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
             };
             /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
@@ -1688,6 +1744,15 @@ export interface operations {
             };
             /** @description The job has not succeeded (yet); the body gives its status */
             409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The Range selects no byte of the file (`range-not-satisfiable`) */
+            416: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -1711,7 +1776,10 @@ export interface operations {
     getJobMotionVrma: {
         parameters: {
             query?: never;
-            header?: never;
+            header?: {
+                /** @description One byte range; without it, the whole file */
+                Range?: string | null;
+            };
             path: {
                 /** @description Job id */
                 id: string;
@@ -1728,6 +1796,13 @@ export interface operations {
                 content: {
                     "model/gltf-binary": unknown;
                 };
+            };
+            /** @description The bytes the Range asked for; `Content-Range` says which */
+            206: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
             };
             /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
             401: {
@@ -1756,6 +1831,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
+            /** @description The Range selects no byte of the file (`range-not-satisfiable`) */
+            416: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
             /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
             429: {
                 headers: {
@@ -1772,7 +1856,10 @@ export interface operations {
     getJobPreview: {
         parameters: {
             query?: never;
-            header?: never;
+            header?: {
+                /** @description One byte range; without it, the whole file */
+                Range?: string | null;
+            };
             path: {
                 /** @description Job id */
                 id: string;
@@ -1783,6 +1870,15 @@ export interface operations {
         responses: {
             /** @description The contact sheet */
             200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "image/png": string;
+                };
+            };
+            /** @description The bytes the Range asked for */
+            206: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -1817,6 +1913,15 @@ export interface operations {
                     "application/problem+json": components["schemas"]["Problem"];
                 };
             };
+            /** @description The Range selects no byte of the file (`range-not-satisfiable`) */
+            416: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
             /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
             429: {
                 headers: {
@@ -1833,7 +1938,10 @@ export interface operations {
     getJobFile: {
         parameters: {
             query?: never;
-            header?: never;
+            header?: {
+                /** @description One byte range, e.g. `bytes=0-1023` or `bytes=-500`; without it, or with several, the whole file */
+                Range?: string | null;
+            };
             path: {
                 /** @description Job id */
                 id: string;
@@ -1846,6 +1954,13 @@ export interface operations {
         responses: {
             /** @description The file */
             200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content?: never;
+            };
+            /** @description The bytes the Range asked for; `Content-Range` says which */
+            206: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -1871,6 +1986,15 @@ export interface operations {
             };
             /** @description The job has not succeeded (yet); the body gives its status */
             409: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The Range selects no byte of the file (`range-not-satisfiable`) */
+            416: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -2220,6 +2344,69 @@ export interface operations {
             };
         };
     };
+    listSongs: {
+        parameters: {
+            query?: {
+                /** @description 1..=100, default 20. */
+                limit?: number;
+                /** @description `next_cursor` of the previous page (a song id). */
+                cursor?: string;
+            };
+            header?: never;
+            path?: never;
+            cookie?: never;
+        };
+        requestBody?: never;
+        responses: {
+            /** @description A page of songs */
+            200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/json": components["schemas"]["SongPage"];
+                };
+            };
+            /** @description An unknown or malformed query parameter */
+            400: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The server has API keys or an auth_token, and the request sent no valid one as `Authorization: Bearer <secret>` (an unknown or revoked key, or a wrong token) */
+            401: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description A limit outside 1..=100, or a cursor that is not a next_cursor */
+            422: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The key made more requests per second than its rate_limit_rps (code rate-limited) */
+            429: {
+                headers: {
+                    /** @description Seconds to wait before trying again */
+                    "Retry-After"?: number;
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+        };
+    };
     uploadSong: {
         parameters: {
             query?: never;
@@ -2459,7 +2646,10 @@ export interface operations {
     getSongAudio: {
         parameters: {
             query?: never;
-            header?: never;
+            header?: {
+                /** @description One byte range, e.g. `bytes=0-1023` or `bytes=-500` (the last 500 bytes); without it, or with several, the whole file */
+                Range?: string | null;
+            };
             path: {
                 /** @description Song id */
                 id: string;
@@ -2470,6 +2660,19 @@ export interface operations {
         responses: {
             /** @description The uploaded file */
             200: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "audio/flac": string;
+                    "audio/mp4": string;
+                    "audio/mpeg": string;
+                    "audio/ogg": string;
+                    "audio/wav": string;
+                };
+            };
+            /** @description The bytes the Range asked for; `Content-Range` says which */
+            206: {
                 headers: {
                     [name: string]: unknown;
                 };
@@ -2492,6 +2695,15 @@ export interface operations {
             };
             /** @description No such song */
             404: {
+                headers: {
+                    [name: string]: unknown;
+                };
+                content: {
+                    "application/problem+json": components["schemas"]["Problem"];
+                };
+            };
+            /** @description The Range selects no byte of the file (`range-not-satisfiable`); `Content-Range: bytes *\/<length>` */
+            416: {
                 headers: {
                     [name: string]: unknown;
                 };

@@ -3,8 +3,8 @@
 use super::quota::Adds;
 use super::{corrupt, format_name, now_ms, Dialect, SqlStore, JOB_COLUMNS, SONG_COLUMNS};
 use crate::queue::{
-    Job, KeyLimits, NewJob, QueueError, Removed, Scope, Song, SongId, SongStore, StoreFuture,
-    TenantId,
+    Job, KeyLimits, NewJob, QueueError, Removed, Scope, Song, SongFilter, SongId, SongStore,
+    StoreFuture, TenantId,
 };
 use chrono::{DateTime, Utc};
 use sqlx::{ColumnIndex, Decode, Encode, Executor, IntoArguments, Type};
@@ -111,6 +111,23 @@ where
                 Some(row) => Self::song_from_row(&row),
                 None => Err(QueueError::SongNotFound(id)),
             }
+        })
+    }
+
+    fn songs(&self, scope: Scope, filter: SongFilter) -> StoreFuture<'_, Vec<Song>> {
+        Box::pin(async move {
+            // Ids are UUID v7, so their order is the upload order in both stores.
+            let sql = format!(
+                "SELECT {SONG_COLUMNS} FROM songs WHERE ($1 IS NULL OR id < $1) \
+                 AND ($2 IS NULL OR tenant_id = $2) ORDER BY id DESC LIMIT $3"
+            );
+            let rows = sqlx::query(&sql)
+                .bind(filter.before.map(|id| D::id(id.0)))
+                .bind(D::scope_id(scope))
+                .bind(i64::from(filter.limit))
+                .fetch_all(&self.pool)
+                .await?;
+            rows.iter().map(Self::song_from_row).collect()
         })
     }
 
