@@ -150,7 +150,7 @@ pub fn generate_decoded(
         generated.beat_time,
         generated.opening,
         analysis,
-        request.audio.duration_s,
+        request.audio.duration_s(),
         request.key_poses,
         request.seed_motion,
         stages,
