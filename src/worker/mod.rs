@@ -669,10 +669,20 @@ pub fn context(
     data: DataDir,
     config: &crate::config::Config,
 ) -> Context {
+    let mut pipeline = Pipeline::new(registry, data, config);
+    // Called on the runtime the workers run on (the server's start); the songs' caches are
+    // stored through it.
+    if let Ok(runtime) = tokio::runtime::Handle::try_current() {
+        pipeline = pipeline.with_song_caches(pipeline::SongCaches {
+            artifacts: artifacts.clone(),
+            store: store.clone(),
+            runtime,
+        });
+    }
     Context {
         store,
         artifacts,
-        executor: Arc::new(Pipeline::new(registry, data, config)),
+        executor: Arc::new(pipeline),
         policy: LeasePolicy {
             lease: Duration::from_secs_f64(config.lease_s),
             backoff: Duration::from_secs_f64(config.retry_backoff_s),
