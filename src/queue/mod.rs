@@ -583,8 +583,9 @@ pub trait SongStore: Send + Sync {
     fn touch_song(&self, id: SongId) -> StoreFuture<'_, ()>;
     /// Adds `bytes` a job stored in the song's cache (`crate::song_cache`) to the song's size in
     /// its tenant's storage. Not held to a quota: the cache saves the tenant's later jobs the
-    /// work, and goes with the song. A deleted song adds nothing.
-    fn add_song_cache_bytes(&self, id: SongId, bytes: u64) -> StoreFuture<'_, ()>;
+    /// work, and goes with the song. `false` when the song is gone (deleted while the job ran):
+    /// then nothing is added, and what the job stored is the caller's to remove.
+    fn add_song_cache_bytes(&self, id: SongId, bytes: u64) -> StoreFuture<'_, bool>;
     /// Removes, as [`SongStore::delete_song`], [`JobStore::delete_job`] and
     /// [`RigStore::delete_rig`] do, up to `limit` finished generate jobs, up to `limit` songs and
     /// up to `limit` rigs last used before `cutoff`, in one transaction. A song is removed only

@@ -164,6 +164,22 @@ impl Pipeline {
             .map(|decoded| decoded.audio)
         };
         let song_audio = SongCache::new(files, &decode, "generate", Some(self.audio_timeout));
+        let outcome = self.dance(job, song, options, model.as_ref(), &song_audio, progress);
+        // What the job stored is the song's, whether or not the job went on to succeed.
+        self.count_cached(song, song_audio.stored_bytes());
+        outcome
+    }
+
+    /// A generate job's work on its song: analyse → model → motion stages → export + report.
+    fn dance(
+        &self,
+        job: &Job,
+        song: &Song,
+        options: &GenerateOptions,
+        model: &dyn crate::models::DanceModel,
+        song_audio: &SongCache<'_>,
+        progress: &mut dyn Progress,
+    ) -> Result<Outcome, WorkerError> {
         if !song_audio.is_analysed() {
             self.budgeted(progress, Stage::DecodeAudio, 0.0, |budget| {
                 song_audio.decode_within(budget)
@@ -180,7 +196,7 @@ impl Pipeline {
         progress.report(Stage::Features, MODEL_START)?;
         let generated = {
             let request = GenerateRequest {
-                audio: &song_audio,
+                audio: song_audio,
                 seed: options.seed,
                 key_poses: &options.key_poses,
                 seed_motion: seed_motion.as_ref(),
@@ -233,21 +249,27 @@ impl Pipeline {
             &caption,
             &mut |_| {},
         )?;
-        self.count_cached(song, song_audio.stored_bytes());
         Ok(Outcome::Files(files))
     }
 
-    /// Adds what a job stored in its song's cache to the song's size in its tenant's storage. A
-    /// failure only under-counts (the job's dance is made), so it is logged, not raised.
+    /// Adds what a job stored in its song's cache to the song's size in its tenant's storage, or
+    /// removes the cache when the song was deleted while the job ran. A failure only
+    /// under-counts, so it is logged, not raised.
     fn count_cached(&self, song: &Song, bytes: u64) {
         let Some(caches) = self.song_caches.as_ref().filter(|_| bytes > 0) else {
             return;
         };
-        if let Err(e) = caches
-            .runtime
-            .block_on(caches.store.add_song_cache_bytes(song.id, bytes))
-        {
-            tracing::warn!(error = %e, bytes, "could not count the song cache's new bytes in the tenant's storage");
+        let runtime = &caches.runtime;
+        match runtime.block_on(caches.store.add_song_cache_bytes(song.id, bytes)) {
+            Ok(true) => {}
+            Ok(false) => {
+                if let Err(e) = runtime.block_on(caches.artifacts.remove_song_cache(song.id)) {
+                    tracing::warn!(error = %e, "the song was deleted while the job ran; its cache is left to the sweep");
+                }
+            }
+            Err(e) => {
+                tracing::warn!(error = %e, bytes, "could not count the song cache's new bytes in the tenant's storage")
+            }
         }
     }
 }
@@ -267,7 +289,8 @@ impl Execute for Pipeline {
 }
 
 /// Maps a model's own 0..1 into a slice of the job's progress, and times each stage the model
-/// reports (the timer of one stage is dropped, and recorded, when the next begins).
+/// reports (the timer of one stage is dropped, and recorded, when the next begins), but
+/// `features`: the song's cache times that itself, when it computes them rather than reads them.
 struct Scaled<'a> {
     inner: &'a mut dyn Progress,
     from: f32,
@@ -279,7 +302,9 @@ impl Progress for Scaled<'_> {
     fn report(&mut self, stage: Stage, fraction: f32) -> Result<(), Cancelled> {
         if self.timer.as_ref().is_none_or(|(s, _)| *s != stage) {
             self.timer = None;
-            self.timer = Some((stage, StageTimer::start("generate", stage)));
+            if stage != Stage::Features {
+                self.timer = Some((stage, StageTimer::start("generate", stage)));
+            }
         }
         let fraction = if fraction.is_finite() {
             fraction.clamp(0.0, 1.0)
