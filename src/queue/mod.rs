@@ -341,6 +341,10 @@ pub struct JobFiles {
     /// The style danced (models that dance one): asked for, or predicted from the song.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub style: Option<crate::models::StyleChoice>,
+    /// Bytes the job added to its song's cache (`crate::song_cache`), for the worker to count
+    /// in the tenant's storage after the job's results; not stored.
+    #[serde(skip)]
+    pub song_cache_bytes: u64,
 }
 
 /// What a job produced when it succeeded.

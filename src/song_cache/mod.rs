@@ -30,7 +30,7 @@ use std::time::Duration;
 pub mod codec;
 pub mod stored;
 
-pub use stored::StoredFiles;
+pub use stored::{count_stored, StoredFiles};
 
 /// The cache's version, in every file name. Bump it when the decode a job does
 /// ([`GENERATE_MAX_SR`], `audio::decode`), the analysis (`audio::analyze`) or any feature set

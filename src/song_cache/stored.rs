@@ -2,7 +2,7 @@
 //! waits on the store's future on the runtime the worker runs on.
 use super::{CacheFiles, SongCacheError};
 use crate::artifacts::{Artifact, ArtifactError, ArtifactStore};
-use crate::queue::{DataDir, SongId};
+use crate::queue::{DataDir, SongId, Store};
 use std::sync::Arc;
 
 /// One song's cache files in `artifacts`, through the local data dir (the store, or a bucket's
@@ -50,5 +50,30 @@ impl CacheFiles for StoredFiles {
                 file: file.to_string(),
                 source,
             })
+    }
+}
+
+/// Adds the `bytes` a job stored in its song's cache to the song's size in its tenant's storage,
+/// or removes the cache when the song was deleted while the job ran. A failure only under-counts
+/// (or leaves the cache to the sweep), so it is logged, not raised.
+pub async fn count_stored(
+    store: &dyn Store,
+    artifacts: &dyn ArtifactStore,
+    song: SongId,
+    bytes: u64,
+) {
+    if bytes == 0 {
+        return;
+    }
+    match store.add_song_cache_bytes(song, bytes).await {
+        Ok(true) => {}
+        Ok(false) => {
+            if let Err(e) = artifacts.remove_song_cache(song).await {
+                tracing::warn!(error = %e, "the song was deleted while the job ran; its cache is left to the sweep");
+            }
+        }
+        Err(e) => {
+            tracing::warn!(error = %e, bytes, "could not count the song cache's new bytes in the tenant's storage")
+        }
     }
 }

@@ -454,9 +454,19 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
     // Results are published before the job is marked succeeded, so a succeeded job's files
     // are there for every API process to serve.
     let result = match result {
-        Ok(Outcome::Files(files)) => publish(ctx, job.id, &files)
-            .await
-            .map(|()| Outcome::Files(files)),
+        Ok(Outcome::Files(files)) => {
+            let published = publish(ctx, job.id, &files).await;
+            // The song's cache is the song's whatever became of the results; counted after
+            // them (`Pipeline::generate`).
+            crate::song_cache::count_stored(
+                ctx.store.as_ref(),
+                ctx.artifacts.as_ref(),
+                job.kind.song_id(),
+                files.song_cache_bytes,
+            )
+            .await;
+            published.map(|()| Outcome::Files(files))
+        }
         other => other,
     };
     done.cancel();

@@ -165,9 +165,27 @@ impl Pipeline {
         };
         let song_audio = SongCache::new(files, &decode, "generate", Some(self.audio_timeout));
         let outcome = self.dance(job, song, options, model.as_ref(), &song_audio, progress);
-        // What the job stored is the song's, whether or not the job went on to succeed.
-        self.count_cached(song, song_audio.stored_bytes());
-        outcome
+        // What the job stored is the song's whatever became of the job. A job with results has
+        // the worker count it after them, so the job that filled the cache is held to the
+        // storage quota as it stood before.
+        let stored = song_audio.stored_bytes();
+        match outcome {
+            Ok(Outcome::Files(mut files)) => {
+                files.song_cache_bytes = stored;
+                Ok(Outcome::Files(files))
+            }
+            other => {
+                if let Some(c) = &self.song_caches {
+                    c.runtime.block_on(song_cache::count_stored(
+                        c.store.as_ref(),
+                        c.artifacts.as_ref(),
+                        song.id,
+                        stored,
+                    ));
+                }
+                other
+            }
+        }
     }
 
     /// A generate job's work on its song: analyse → model → motion stages → export + report.
@@ -250,27 +268,6 @@ impl Pipeline {
             &mut |_| {},
         )?;
         Ok(Outcome::Files(files))
-    }
-
-    /// Adds what a job stored in its song's cache to the song's size in its tenant's storage, or
-    /// removes the cache when the song was deleted while the job ran. A failure only
-    /// under-counts, so it is logged, not raised.
-    fn count_cached(&self, song: &Song, bytes: u64) {
-        let Some(caches) = self.song_caches.as_ref().filter(|_| bytes > 0) else {
-            return;
-        };
-        let runtime = &caches.runtime;
-        match runtime.block_on(caches.store.add_song_cache_bytes(song.id, bytes)) {
-            Ok(true) => {}
-            Ok(false) => {
-                if let Err(e) = runtime.block_on(caches.artifacts.remove_song_cache(song.id)) {
-                    tracing::warn!(error = %e, "the song was deleted while the job ran; its cache is left to the sweep");
-                }
-            }
-            Err(e) => {
-                tracing::warn!(error = %e, bytes, "could not count the song cache's new bytes in the tenant's storage")
-            }
-        }
     }
 }
 
@@ -484,6 +481,7 @@ pub fn render(
         .map(String::from)
         .to_vec(),
         style: caption.style.clone(),
+        song_cache_bytes: 0,
     })
 }
 
