@@ -10,7 +10,9 @@
 //!    processes. A worker claims one in a single atomic `UPDATE … RETURNING` (`FOR UPDATE SKIP
 //!    LOCKED` in PostgreSQL), holds a lease and heartbeats; expired leases are requeued.
 //! 3. **decode → features** (`audio`): symphonia decodes, rubato resamples, and the feature
-//!    sets each paper used are computed to match librosa.
+//!    sets each paper used are computed to match librosa. A generate job computes the song's
+//!    beats and each feature set once per song: `song_cache` stores them with the song, and the
+//!    song's later jobs read them instead of decoding it again.
 //! 4. **model** (`models`): one file per paper; libtorch runs on the worker's blocking thread.
 //! 5. **motion** (`motion`): the model's poses become a rigid skeleton with rotations.
 //! 6. **export + report** (`motion` exporters, `metrics`, `report`): BVH, JSON, glb, the
@@ -39,6 +41,7 @@ pub mod models;
 pub mod motion;
 pub mod queue;
 pub mod report;
+pub mod song_cache;
 pub mod stage;
 pub mod telemetry;
 pub mod webhooks;

@@ -407,6 +407,7 @@ async fn complete_stores_the_outcome_once(db: TestDb) {
     let written = JobFiles {
         files: vec!["motion.bvh".into(), "report.json".into()],
         style: Some(style),
+        ..JobFiles::default()
     };
     assert!(store
         .complete(files.id, "w", Outcome::Files(written.clone()))

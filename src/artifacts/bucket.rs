@@ -5,7 +5,7 @@
 //! files and logs. `s3_endpoint` points at any S3-compatible server (MinIO, moto, Ceph, R2).
 use super::{Artifact, ArtifactError, ArtifactFuture, ArtifactStore, ArtifactStream};
 use crate::queue::files::write_atomic;
-use crate::queue::{DataDir, JobId};
+use crate::queue::{DataDir, JobId, SongId};
 use bytes::Bytes;
 use futures::{StreamExt, TryStreamExt};
 use object_store::aws::AmazonS3Builder;
@@ -151,28 +151,42 @@ impl ArtifactStore for BucketArtifacts {
     fn remove_results(&self, job: JobId) -> ArtifactFuture<'_, ()> {
         Box::pin(async move {
             // Listed rather than named: whatever a worker published under the job goes.
-            let dir = Artifact::Result(job, "");
-            let key = dir.key();
-            let prefix = self.location(&dir);
-            let objects: Vec<_> = self
-                .bucket
-                .list(Some(&prefix))
-                .map_ok(|meta| meta.location)
-                .try_collect()
-                .await
-                .map_err(|e| Self::bucket_error(&dir, e))?;
-            for location in objects {
-                match self.bucket.delete(&location).await {
-                    Ok(()) | Err(object_store::Error::NotFound { .. }) => {}
-                    Err(source) => {
-                        return Err(ArtifactError::Bucket {
-                            key: key.clone(),
-                            source,
-                        })
-                    }
-                }
-            }
+            self.remove_listed(&Artifact::Result(job, "")).await?;
             super::remove_job_dir(&self.cache, job).await
         })
+    }
+
+    fn remove_song_cache(&self, song: SongId) -> ArtifactFuture<'_, ()> {
+        Box::pin(async move {
+            // Listed: every version's files go, those of versions this build does not know too.
+            self.remove_listed(&Artifact::SongCache(song, "")).await?;
+            super::remove_song_cache_dir(&self.cache, song).await
+        })
+    }
+}
+
+impl BucketArtifacts {
+    /// Deletes every object under `dir`'s key (an artifact with an empty file name).
+    async fn remove_listed(&self, dir: &Artifact<'_>) -> Result<(), ArtifactError> {
+        let prefix = self.location(dir);
+        let objects: Vec<_> = self
+            .bucket
+            .list(Some(&prefix))
+            .map_ok(|meta| meta.location)
+            .try_collect()
+            .await
+            .map_err(|e| Self::bucket_error(dir, e))?;
+        for location in objects {
+            match self.bucket.delete(&location).await {
+                Ok(()) | Err(object_store::Error::NotFound { .. }) => {}
+                Err(source) => {
+                    return Err(ArtifactError::Bucket {
+                        key: dir.key(),
+                        source,
+                    })
+                }
+            }
+        }
+        Ok(())
     }
 }

@@ -2,7 +2,7 @@
 use super::{
     Artifact, ArtifactError, ArtifactFuture, ArtifactStore, ArtifactStream, STREAM_CHUNK_BYTES,
 };
-use crate::queue::{DataDir, JobId};
+use crate::queue::{DataDir, JobId, SongId};
 use futures::StreamExt;
 use std::path::PathBuf;
 
@@ -74,5 +74,9 @@ impl ArtifactStore for LocalArtifacts {
 
     fn remove_results(&self, job: JobId) -> ArtifactFuture<'_, ()> {
         Box::pin(super::remove_job_dir(&self.data, job))
+    }
+
+    fn remove_song_cache(&self, song: SongId) -> ArtifactFuture<'_, ()> {
+        Box::pin(super::remove_song_cache_dir(&self.data, song))
     }
 }

@@ -11,7 +11,8 @@
 //!   the data dir is each host's cache. A PUT is atomic (an object appears whole or not at all),
 //!   and a fetched artifact is written to the cache through a temp file and a rename.
 //!
-//! Artifacts never change once written (names come from ids), so a cached copy is never stale.
+//! Artifacts never change once written (names come from ids, and a song cache's file names carry
+//! the cache's version and what it holds), so a cached copy is never stale.
 use crate::audio::AudioFormat;
 use crate::motion::retarget::uploaded::RigFormat;
 use crate::queue::{DataDir, JobId, RigId, SongId};
@@ -77,6 +78,9 @@ pub enum Artifact<'a> {
     Rig(RigId, RigFormat),
     /// One result file of a generate job (a name from `queue::files::RESULT_FILES`).
     Result(JobId, &'a str),
+    /// One file of a song's cache of its decoded features and beats (a name from
+    /// `crate::song_cache`, never user input).
+    SongCache(SongId, &'a str),
 }
 
 impl Artifact<'_> {
@@ -89,6 +93,7 @@ impl Artifact<'_> {
             }
             Artifact::Rig(id, format) => format!("rigs/{id}.{}", format.extension()),
             Artifact::Result(id, file) => format!("jobs/{id}/{file}"),
+            Artifact::SongCache(id, file) => format!("{SONG_CACHE_DIR}/{id}/{file}"),
         }
     }
 
@@ -98,8 +103,18 @@ impl Artifact<'_> {
             Artifact::Song(id, format) => data.song_path(*id, *format),
             Artifact::Rig(id, format) => data.rig_path(*id, *format),
             Artifact::Result(id, file) => data.job_dir(*id).join(file),
+            Artifact::SongCache(id, file) => song_cache_dir(data, *id).join(file),
         }
     }
+}
+
+/// The folder of the song caches, in the data dir and in a bucket: beside `songs/`, not in it, so
+/// the sweep of `songs/` never meets a cache (a cache is removed with its song's row).
+pub const SONG_CACHE_DIR: &str = "song-cache";
+
+/// The local folder of one song's cache.
+pub fn song_cache_dir(data: &DataDir, song: SongId) -> PathBuf {
+    data.root().join(SONG_CACHE_DIR).join(song.to_string())
 }
 
 /// A future returned by an artifact store.
@@ -129,6 +144,9 @@ pub trait ArtifactStore: Send + Sync {
     /// Removes every result of a job, whatever their names (a deleted or expired job), and its
     /// local dir. Nothing there is not an error.
     fn remove_results(&self, job: JobId) -> ArtifactFuture<'_, ()>;
+    /// Removes every file of a song's cache, whatever its version, and its local dir (a deleted
+    /// or expired song). Nothing there is not an error.
+    fn remove_song_cache(&self, song: SongId) -> ArtifactFuture<'_, ()>;
 }
 
 /// Removes the local dir of a job's results; a missing one is fine.
@@ -136,6 +154,17 @@ async fn remove_job_dir(data: &DataDir, job: JobId) -> Result<(), ArtifactError>
     match tokio::fs::remove_dir_all(data.job_dir(job)).await {
         Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(ArtifactError::Io {
             key: format!("jobs/{job}/"),
+            source: e,
+        }),
+        _ => Ok(()),
+    }
+}
+
+/// Removes the local dir of a song's cache; a missing one is fine.
+async fn remove_song_cache_dir(data: &DataDir, song: SongId) -> Result<(), ArtifactError> {
+    match tokio::fs::remove_dir_all(song_cache_dir(data, song)).await {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(ArtifactError::Io {
+            key: format!("{SONG_CACHE_DIR}/{song}/"),
             source: e,
         }),
         _ => Ok(()),
@@ -209,6 +238,10 @@ mod tests {
         assert_eq!(
             Artifact::Result(job, "motion.bvh").key(),
             format!("jobs/{job}/motion.bvh")
+        );
+        assert_eq!(
+            Artifact::SongCache(song, "analysis-v1.bin").key(),
+            format!("song-cache/{song}/analysis-v1.bin")
         );
         assert_eq!(Location::parse(None).expect("default"), Location::Local);
         assert_eq!(

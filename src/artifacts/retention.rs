@@ -34,7 +34,8 @@ pub const BATCH: u32 = 200;
 /// The audit reason of an expiry.
 pub const EXPIRED: &str = "expired: unused for longer than retention_days";
 
-/// Removes the files of removed rows: each song's and each rig's file and each job's results.
+/// Removes the files of removed rows: each song's file and cache, each rig's file and each job's
+/// results.
 /// Every file is tried; the first failure is returned (what it left has no row, so the sweep
 /// takes it later).
 pub async fn remove_files(
@@ -44,6 +45,10 @@ pub async fn remove_files(
     let mut first = None;
     for song in &removed.songs {
         if let Err(e) = artifacts.remove(Artifact::Song(song.id, song.format)).await {
+            first.get_or_insert(e);
+        }
+        // What the song's jobs computed of it (its features and beats) goes with it.
+        if let Err(e) = artifacts.remove_song_cache(song.id).await {
             first.get_or_insert(e);
         }
     }

@@ -2,13 +2,14 @@
 //!
 //! A process killed mid-write leaves files no row names: a result's `.partial-*` temp file in a
 //! job dir, a song or rig renamed into `songs/` or `rigs/` whose row was never committed, a job
-//! dir of a job that does not exist. A deletion whose file removal failed leaves the same, and so
+//! dir of a job that does not exist, a song's cache (`song-cache/<id>/`) stored by a job while
+//! its song was deleted. A deletion whose file removal failed leaves the same, and so
 //! does another host's deletion of a song, rig or result this host has a cached copy of (with a bucket, the data
 //! dir is each host's cache: `artifacts::retention`). Nothing reads them, but they fill the disk.
 //! The sweep removes those older than the grace period (`sweep_grace_s`), so it never races a
 //! write in progress in another process sharing the data dir. It runs in the background, once
 //! after the store opens and then every half grace period (at least every second, at most hourly).
-use crate::queue::{DataDir, JobId, QueueError, Scope, Store};
+use crate::queue::{DataDir, JobId, QueueError, Scope, SongId, Store};
 use std::future::Future;
 use std::path::Path;
 use std::str::FromStr;
@@ -24,6 +25,8 @@ pub struct Swept {
     pub songs: usize,
     pub rigs: usize,
     pub job_dirs: usize,
+    /// Song caches of songs that are gone (a job stored one while its song was deleted).
+    pub song_caches: usize,
 }
 
 /// How long between two sweeps for a grace period of `grace`.
@@ -123,6 +126,33 @@ pub async fn sweep(
         rigs,
         ..Swept::default()
     };
+    for entry in std::fs::read_dir(data.root().join(super::SONG_CACHE_DIR))
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
+        let dir = entry.path();
+        let Some(id) = dir
+            .file_name()
+            .and_then(|s| s.to_str())
+            .and_then(|s| SongId::from_str(s).ok())
+        else {
+            continue;
+        };
+        // A file stored in it refreshes the dir's time: a cache being written is never swept.
+        if !older_than(&dir, grace) {
+            continue;
+        }
+        match store.song(Scope::All, id).await {
+            Err(QueueError::SongNotFound(_)) => {
+                if std::fs::remove_dir_all(&dir).is_ok() {
+                    swept.song_caches += 1;
+                }
+            }
+            Err(e) => return Err(e),
+            Ok(_) => {}
+        }
+    }
     for entry in std::fs::read_dir(data.root().join("jobs"))
         .into_iter()
         .flatten()

@@ -64,6 +64,55 @@ pub const TSMT_DIM: usize = 27;
 /// The beat one-hot's column in TSMT's features (after MFCC 13 and its Δ).
 pub const TSMT_BEAT: usize = 26;
 
+/// The feature layouts the models use, by name: what a song's feature cache is keyed by
+/// (`crate::song_cache`). A change to a layout's columns or recipe must bump
+/// `song_cache::VERSION`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum FeatureSet {
+    /// [`dance_revolution_at`], 438-d.
+    DanceRevolution,
+    /// [`dance_revolution_clock_at`], 443-d.
+    DanceRevolutionClock,
+    /// [`dancenet`], 15-d.
+    DanceNet,
+    /// [`keypose`], 15-d.
+    Keypose,
+    /// [`tsmt`], 27-d.
+    Tsmt,
+}
+
+impl FeatureSet {
+    /// Stable kebab-case name, with the set's width (part of a cache key).
+    pub const fn name(self) -> &'static str {
+        match self {
+            FeatureSet::DanceRevolution => "dance-revolution-438",
+            FeatureSet::DanceRevolutionClock => "dance-revolution-clock-443",
+            FeatureSet::DanceNet => "dancenet-15",
+            FeatureSet::Keypose => "keypose-15",
+            FeatureSet::Tsmt => "tsmt-27",
+        }
+    }
+
+    /// The set of `audio`, row i at time `start_s + i / fps`, `n_frames` rows.
+    pub fn compute(
+        self,
+        audio: &DecodedAudio,
+        fps: f64,
+        start_s: f64,
+        n_frames: usize,
+    ) -> Result<Array2<f32>, AudioError> {
+        match self {
+            FeatureSet::DanceRevolution => dance_revolution_at(audio, fps, start_s, n_frames),
+            FeatureSet::DanceRevolutionClock => {
+                dance_revolution_clock_at(audio, fps, start_s, n_frames)
+            }
+            FeatureSet::DanceNet => dancenet(audio, fps, start_s, n_frames),
+            FeatureSet::Keypose => keypose(audio, fps, start_s, n_frames),
+            FeatureSet::Tsmt => tsmt(audio, fps, start_s, n_frames),
+        }
+    }
+}
+
 /// The sample grid of a feature set: `sr = fps · hop`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameGrid {

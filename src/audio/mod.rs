@@ -65,6 +65,44 @@ pub struct DecodedAudio {
     pub samples: Vec<f32>,
 }
 
+/// A song as a model hears it: its length, a feature set, its beats. A decoded song computes
+/// each when asked; a job's song (`crate::song_cache::SongCache`) computes each once per song,
+/// stores it with the song, and decodes only when something it needs is not stored yet.
+pub trait SongAudio: Sync {
+    /// The song's length (s).
+    fn duration_s(&self) -> f64;
+    /// `set` at `fps`, row i at time `start_s + i / fps`, `n_frames` rows.
+    fn features(
+        &self,
+        set: features::FeatureSet,
+        fps: f64,
+        start_s: f64,
+        n_frames: usize,
+    ) -> Result<ndarray::Array2<f32>, AudioError>;
+    /// Tempo, beats and downbeats ([`analyze`]).
+    fn analysis(&self) -> Result<Analysis, AudioError>;
+}
+
+impl SongAudio for DecodedAudio {
+    fn duration_s(&self) -> f64 {
+        self.duration_s
+    }
+
+    fn features(
+        &self,
+        set: features::FeatureSet,
+        fps: f64,
+        start_s: f64,
+        n_frames: usize,
+    ) -> Result<ndarray::Array2<f32>, AudioError> {
+        set.compute(self, fps, start_s, n_frames)
+    }
+
+    fn analysis(&self) -> Result<Analysis, AudioError> {
+        analyze(self)
+    }
+}
+
 /// What `choreo analyze` prints and `GET /v1/songs/{id}` returns.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
 pub struct Analysis {

@@ -168,7 +168,7 @@ impl BeatTime {
             Some(_) => Self::plan(
                 config,
                 &req.analysis_or_analyze()?.beat_times,
-                req.audio.duration_s,
+                req.audio.duration_s(),
                 song_frames,
             ),
             None => Self::seconds(song_frames),

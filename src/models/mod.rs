@@ -3,7 +3,7 @@
 //! CONTRACT (lead owns this folder): the worker builds a [`GenerateRequest`], calls
 //! [`DanceModel::generate`] on a blocking thread, and gets a [`Motion`] back. Models report
 //! progress through [`Progress`], which also carries cancellation.
-use crate::audio::{Analysis, DecodedAudio};
+use crate::audio::{Analysis, SongAudio};
 use crate::motion::{KeyPose, Motion};
 use crate::stage::Stage;
 use serde::{Deserialize, Serialize};
@@ -203,7 +203,8 @@ pub struct ModelInfo {
 
 /// Everything a model needs for one dance.
 pub struct GenerateRequest<'a> {
-    pub audio: &'a DecodedAudio,
+    /// The song: a decoded one, or a job's, whose features and beats are computed once per song.
+    pub audio: &'a dyn SongAudio,
     /// Seeds every random draw, so the same seed gives the same dance.
     pub seed: u64,
     pub key_poses: &'a [KeyPose],
@@ -227,12 +228,12 @@ impl<'a> GenerateRequest<'a> {
     ) -> Result<std::borrow::Cow<'a, Analysis>, crate::audio::AudioError> {
         match self.analysis {
             Some(a) => Ok(std::borrow::Cow::Borrowed(a)),
-            None => crate::audio::analyze(self.audio).map(std::borrow::Cow::Owned),
+            None => self.audio.analysis().map(std::borrow::Cow::Owned),
         }
     }
 
     /// A request with only the song and the seed: no key poses, no seed motion, model defaults.
-    pub fn plain(audio: &'a DecodedAudio, seed: u64) -> Self {
+    pub fn plain(audio: &'a dyn SongAudio, seed: u64) -> Self {
         Self {
             audio,
             seed,
@@ -470,7 +471,7 @@ mod tests {
 
     #[test]
     fn inputs_a_model_does_not_take_are_refused_by_name() {
-        let audio = DecodedAudio {
+        let audio = crate::audio::DecodedAudio {
             format: crate::audio::AudioFormat::Wav,
             sample_rate: 22_050,
             channels: 1,

@@ -341,6 +341,10 @@ pub struct JobFiles {
     /// The style danced (models that dance one): asked for, or predicted from the song.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub style: Option<crate::models::StyleChoice>,
+    /// Bytes the job added to its song's cache (`crate::song_cache`), for the worker to count
+    /// in the tenant's storage after the job's results; not stored.
+    #[serde(skip)]
+    pub song_cache_bytes: u64,
 }
 
 /// What a job produced when it succeeded.
@@ -591,6 +595,11 @@ pub trait SongStore: Send + Sync {
     /// Records a use of the song (an upload of the same bytes, a download of its audio), which
     /// restarts its retention.
     fn touch_song(&self, id: SongId) -> StoreFuture<'_, ()>;
+    /// Adds `bytes` a job stored in the song's cache (`crate::song_cache`) to the song's size in
+    /// its tenant's storage. Not held to a quota: the cache saves the tenant's later jobs the
+    /// work, and goes with the song. `false` when the song is gone (deleted while the job ran):
+    /// then nothing is added, and what the job stored is the caller's to remove.
+    fn add_song_cache_bytes(&self, id: SongId, bytes: u64) -> StoreFuture<'_, bool>;
     /// Removes, as [`SongStore::delete_song`], [`JobStore::delete_job`] and
     /// [`RigStore::delete_rig`] do, up to `limit` finished generate jobs, up to `limit` songs and
     /// up to `limit` rigs last used before `cutoff`, in one transaction. A song is removed only

@@ -465,9 +465,19 @@ async fn run_job(ctx: &Context, owner: &str, job: Job, shutdown: &CancellationTo
     // Results are published before the job is marked succeeded, so a succeeded job's files
     // are there for every API process to serve.
     let result = match result {
-        Ok(Outcome::Files(files)) => publish(ctx, job.id, &files)
-            .await
-            .map(|()| Outcome::Files(files)),
+        Ok(Outcome::Files(files)) => {
+            let published = publish(ctx, job.id, &files).await;
+            // The song's cache is the song's whatever became of the results; counted after
+            // them (`Pipeline::generate`).
+            crate::song_cache::count_stored(
+                ctx.store.as_ref(),
+                ctx.artifacts.as_ref(),
+                job.kind.song_id(),
+                files.song_cache_bytes,
+            )
+            .await;
+            published.map(|()| Outcome::Files(files))
+        }
         other => other,
     };
     done.cancel();
@@ -680,10 +690,20 @@ pub fn context(
     data: DataDir,
     config: &crate::config::Config,
 ) -> Context {
+    let mut pipeline = Pipeline::new(registry, data, config);
+    // Called on the runtime the workers run on (the server's start); the songs' caches are
+    // stored through it.
+    if let Ok(runtime) = tokio::runtime::Handle::try_current() {
+        pipeline = pipeline.with_song_caches(pipeline::SongCaches {
+            artifacts: artifacts.clone(),
+            store: store.clone(),
+            runtime,
+        });
+    }
     Context {
         store,
         artifacts,
-        executor: Arc::new(Pipeline::new(registry, data, config)),
+        executor: Arc::new(pipeline),
         policy: LeasePolicy {
             lease: Duration::from_secs_f64(config.lease_s),
             backoff: Duration::from_secs_f64(config.retry_backoff_s),

@@ -1,12 +1,20 @@
 //! The work of each job kind: decode → analyse, or decode → model → export + report.
+//!
+//! A generate job hears its song through the song's cache ([`crate::song_cache`]): the song is
+//! decoded, analysed and turned into the model's features only when its earlier jobs have not
+//! stored them.
 use super::{Execute, WorkerError};
-use crate::audio::{self, Analysis, AudioError, Budget, DecodeOptions, DecodedAudio, Keep};
+use crate::artifacts::ArtifactStore;
+use crate::audio::{
+    self, Analysis, AudioError, Budget, DecodeOptions, DecodedAudio, Keep, SongAudio,
+};
 use crate::config::Config;
 use crate::models::{Cancelled, GenerateRequest, Progress, Registry};
 use crate::motion::{KeyPose, Motion, MotionStages};
 use crate::queue::{DataDir, GenerateOptions, Job, JobFiles, JobKind, Outcome, SeedMotion, Song};
 use crate::report::preview::{self, Caption};
 use crate::report::BeatAlignReport;
+use crate::song_cache::{self, CacheFiles, MemoryFiles, SongCache, StoredFiles};
 use crate::stage::Stage;
 use crate::telemetry::StageTimer;
 use std::cell::RefCell;
@@ -19,10 +27,6 @@ const MODEL_START: f32 = 0.1;
 /// Share of a generate job's progress done when the model finishes; the rest is export.
 const MODEL_END: f32 = 0.85;
 
-/// Highest rate a generate job keeps the song at: the models' feature grids resample to at
-/// most 22 050 Hz, so more only costs memory (a 15-minute song at 384 kHz would be 1.4 GB).
-const GENERATE_MAX_SR: u32 = 48_000;
-
 /// The service's [`Execute`]: real decoding, analysis, models and exporters.
 pub struct Pipeline {
     registry: Arc<Registry>,
@@ -31,6 +35,18 @@ pub struct Pipeline {
     max_duration_s: f64,
     /// Wall-clock budget of one decode and of one analysis.
     audio_timeout: Duration,
+    /// Where songs' caches are stored; without it each job computes everything itself.
+    song_caches: Option<SongCaches>,
+}
+
+/// What a pipeline stores songs' caches with.
+#[derive(Clone)]
+pub struct SongCaches {
+    pub artifacts: Arc<dyn ArtifactStore>,
+    /// The bytes a job adds to a song's cache are counted here, in the song's tenant's storage.
+    pub store: Arc<dyn crate::queue::Store>,
+    /// The worker's runtime, which a job's thread waits on for the stores.
+    pub runtime: tokio::runtime::Handle,
 }
 
 impl Pipeline {
@@ -41,6 +57,15 @@ impl Pipeline {
             data,
             max_duration_s: config.max_duration_s,
             audio_timeout: Duration::from_secs_f64(config.audio_timeout_s),
+            song_caches: None,
+        }
+    }
+
+    /// The same pipeline, keeping each song's decoded features and beats in `caches`.
+    pub fn with_song_caches(self, caches: SongCaches) -> Self {
+        Self {
+            song_caches: Some(caches),
+            ..self
         }
     }
 
@@ -114,22 +139,82 @@ impl Pipeline {
             .get(&options.model)
             .ok_or_else(|| WorkerError::ModelUnavailable(options.model.clone()))?;
         progress.report(Stage::DecodeAudio, 0.0)?;
-        let decoded = self.decode("generate", song, Keep::AtMost(GENERATE_MAX_SR), progress)?;
+        let memory = MemoryFiles::default();
+        let stored = self.song_caches.as_ref().map(|c| StoredFiles {
+            artifacts: c.artifacts.clone(),
+            data: self.data.clone(),
+            song: song.id,
+            runtime: c.runtime.clone(),
+        });
+        let files: &dyn CacheFiles = match &stored {
+            Some(stored) => stored,
+            None => &memory,
+        };
+        let path = self.data.song_path(song.id, song.format);
+        let max_duration_s = self.max_duration_s;
+        let decode = |budget: &Budget| {
+            audio::decode_file(
+                &path,
+                &DecodeOptions {
+                    keep: Keep::AtMost(song_cache::GENERATE_MAX_SR),
+                    max_duration_s,
+                    budget,
+                },
+            )
+            .map(|decoded| decoded.audio)
+        };
+        let song_audio = SongCache::new(files, &decode, "generate", Some(self.audio_timeout));
+        let outcome = self.dance(job, song, options, model.as_ref(), &song_audio, progress);
+        // What the job stored is the song's whatever became of the job. A job with results has
+        // the worker count it after them, so the job that filled the cache is held to the
+        // storage quota as it stood before.
+        let stored = song_audio.stored_bytes();
+        match outcome {
+            Ok(Outcome::Files(mut files)) => {
+                files.song_cache_bytes = stored;
+                Ok(Outcome::Files(files))
+            }
+            other => {
+                if let Some(c) = &self.song_caches {
+                    c.runtime.block_on(song_cache::count_stored(
+                        c.store.as_ref(),
+                        c.artifacts.as_ref(),
+                        song.id,
+                        stored,
+                    ));
+                }
+                other
+            }
+        }
+    }
+
+    /// A generate job's work on its song: analyse → model → motion stages → export + report.
+    fn dance(
+        &self,
+        job: &Job,
+        song: &Song,
+        options: &GenerateOptions,
+        model: &dyn crate::models::DanceModel,
+        song_audio: &SongCache<'_>,
+        progress: &mut dyn Progress,
+    ) -> Result<Outcome, WorkerError> {
+        if !song_audio.is_analysed() {
+            self.budgeted(progress, Stage::DecodeAudio, 0.0, |budget| {
+                song_audio.decode_within(budget)
+            })?;
+        }
         let seed_motion = options.seed_motion.as_ref().map(seed_motion).transpose()?;
         // The song's beats, once, within the job's budget: a model that listens to them
         // (keypose-transformer's scaffold), the beat-align stage and the report all use these.
         progress.report(Stage::Analyze, MODEL_START)?;
-        let analysis = {
-            let _timer = StageTimer::start("generate", Stage::Analyze);
-            self.budgeted(progress, Stage::Analyze, MODEL_START, |budget| {
-                audio::analyze_within(&decoded, budget)
-            })?
-        };
+        let analysis = self.budgeted(progress, Stage::Analyze, MODEL_START, |budget| {
+            song_audio.analyze_within(budget)
+        })?;
         // The model's first stage is its features; each stage it reports is timed as it goes.
         progress.report(Stage::Features, MODEL_START)?;
         let generated = {
             let request = GenerateRequest {
-                audio: &decoded,
+                audio: song_audio,
                 seed: options.seed,
                 key_poses: &options.key_poses,
                 seed_motion: seed_motion.as_ref(),
@@ -160,7 +245,7 @@ impl Pipeline {
                 generated.beat_time,
                 generated.opening,
                 analysis,
-                decoded.duration_s,
+                song_audio.duration_s(),
                 &options.key_poses,
                 seed_motion.as_ref(),
                 stages,
@@ -201,7 +286,8 @@ impl Execute for Pipeline {
 }
 
 /// Maps a model's own 0..1 into a slice of the job's progress, and times each stage the model
-/// reports (the timer of one stage is dropped, and recorded, when the next begins).
+/// reports (the timer of one stage is dropped, and recorded, when the next begins), but
+/// `features`: the song's cache times that itself, when it computes them rather than reads them.
 struct Scaled<'a> {
     inner: &'a mut dyn Progress,
     from: f32,
@@ -213,7 +299,9 @@ impl Progress for Scaled<'_> {
     fn report(&mut self, stage: Stage, fraction: f32) -> Result<(), Cancelled> {
         if self.timer.as_ref().is_none_or(|(s, _)| *s != stage) {
             self.timer = None;
-            self.timer = Some((stage, StageTimer::start("generate", stage)));
+            if stage != Stage::Features {
+                self.timer = Some((stage, StageTimer::start("generate", stage)));
+            }
         }
         let fraction = if fraction.is_finite() {
             fraction.clamp(0.0, 1.0)
@@ -393,6 +481,7 @@ pub fn render(
         .map(String::from)
         .to_vec(),
         style: caption.style.clone(),
+        song_cache_bytes: 0,
     })
 }
 

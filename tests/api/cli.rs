@@ -38,7 +38,7 @@ fn generate_s_help_shows_the_defaults() {
             .unwrap_or_else(|| panic!("no {flag} in\n{help}"))
             .to_string()
     };
-    assert!(line("--model <MODEL>").ends_with("[default: dance-revolution]"), "{help}");
+    assert!(line("--model <MODEL>").ends_with("[default: beat-graph]"), "{help}");
     assert!(line("--models-dir").ends_with("[default: models]"), "{help}");
     assert!(line("--seed").ends_with("[default: 0]"), "{help}");
     let usage = help.lines().find(|l| l.starts_with("Usage:")).expect("usage");

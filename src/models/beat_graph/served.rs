@@ -491,9 +491,11 @@ impl DanceModel for Served {
     ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let fps = self.file.fps;
-        let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
+        let n = crate::motion::validate::song_frames(req.audio.duration_s(), fps);
         progress.report(Stage::Features, 0.0)?;
-        let music = crate::audio::features::keypose(req.audio, fps, 0.0, n)?;
+        let music = req
+            .audio
+            .features(crate::audio::features::FeatureSet::Keypose, fps, 0.0, n)?;
         let analysis = req.analysis_or_analyze()?;
         progress.report(Stage::Features, 1.0)?;
         let choice = match req.style {

@@ -271,15 +271,16 @@ impl Served {
     /// Music features of a whole song on the network's clock, normalised, as `[1, n, F]`.
     fn music(
         &self,
-        audio: &crate::audio::DecodedAudio,
+        audio: &dyn crate::audio::SongAudio,
         clock: &beat_time::BeatTime,
     ) -> Result<Tensor, ModelError> {
-        let features = if self.file.config.beat_clock {
-            crate::audio::features::dance_revolution_clock_at
+        use crate::audio::features::FeatureSet;
+        let set = if self.file.config.beat_clock {
+            FeatureSet::DanceRevolutionClock
         } else {
-            crate::audio::features::dance_revolution_at
+            FeatureSet::DanceRevolution
         };
-        let feats = features(audio, self.file.fps, 0.0, clock.song_frames)?;
+        let feats = audio.features(set, self.file.fps, 0.0, clock.song_frames)?;
         let layout = MusicLayout::dance_revolution(self.file.config.beat_clock);
         let feats = clock.music(feats.view(), &layout);
         Ok(to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0))
@@ -303,7 +304,7 @@ impl DanceModel for Served {
     ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let fps = self.file.fps;
-        let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
+        let n = crate::motion::validate::song_frames(req.audio.duration_s(), fps);
         progress.report(Stage::Features, 0.0)?;
         let clock = beat_time::BeatTime::for_request(self.file.extra.beat_time, req, n)?;
         let music = self.music(req.audio, &clock)?;

@@ -162,7 +162,12 @@ impl Served {
             ..self.file.extra.sampling
         };
         progress.report(Stage::Features, 0.0)?;
-        let song = crate::audio::features::dancenet(req.audio, fps, 0.0, clock.song_frames)?;
+        let song = req.audio.features(
+            crate::audio::features::FeatureSet::DanceNet,
+            fps,
+            0.0,
+            clock.song_frames,
+        )?;
         progress.report(Stage::Features, 1.0)?;
         // The style is the song's as it sounds; the network hears it on its own clock.
         let style = self.style_of(req, &song)?;
@@ -406,7 +411,7 @@ impl DanceModel for Served {
         progress: &mut dyn Progress,
     ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
-        let n = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
+        let n = crate::motion::validate::song_frames(req.audio.duration_s(), self.file.fps);
         let clock = beat_time::BeatTime::for_request(self.file.extra.beat_time, req, n)?;
         let g = self.generate_features(req, &clock, progress)?;
         let motion = rotations::decode(&self.rig, g.features.view(), g.start, self.file.fps)?;

@@ -272,10 +272,12 @@ impl DanceModel for Served {
     ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
         let fps = self.file.fps;
-        let n = crate::motion::validate::song_frames(req.audio.duration_s, fps);
+        let n = crate::motion::validate::song_frames(req.audio.duration_s(), fps);
         let keys = local_keys(req.key_poses, n, fps)?;
         progress.report(Stage::Features, 0.0)?;
-        let feats = crate::audio::features::keypose(req.audio, fps, 0.0, n)?;
+        let feats = req
+            .audio
+            .features(crate::audio::features::FeatureSet::Keypose, fps, 0.0, n)?;
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?);
         // Only a bank with its clips' beats listens to the song; the analysis is skipped without.
         let cues = if self.bank.as_ref().is_some_and(|b| b.meta().is_some()) {

@@ -228,7 +228,12 @@ impl Served {
                 .unwrap_or(self.file.extra.sampling.top_k),
         };
         progress.report(Stage::Features, 0.0)?;
-        let song = crate::audio::features::tsmt(req.audio, fps, 0.0, clock.song_frames)?;
+        let song = req.audio.features(
+            crate::audio::features::FeatureSet::Tsmt,
+            fps,
+            0.0,
+            clock.song_frames,
+        )?;
         let feats = clock.music(song.view(), &MusicLayout::tsmt());
         let music = to_tensor(&self.file.music_norm.normalize(&feats)?).unsqueeze(0);
         // The step clock's phase on every network frame (`models::step_clock`): the song's beats
@@ -547,7 +552,8 @@ impl DanceModel for Served {
         progress: &mut dyn Progress,
     ) -> Result<Generated, ModelError> {
         self.refuse_unsupported(req)?;
-        let song_frames = crate::motion::validate::song_frames(req.audio.duration_s, self.file.fps);
+        let song_frames =
+            crate::motion::validate::song_frames(req.audio.duration_s(), self.file.fps);
         let clock = beat_time::BeatTime::for_request(self.file.extra.beat_time, req, song_frames)?;
         let n = clock.net_frames;
         let mut g = self.generate_features(req, &clock, progress)?;

@@ -12,11 +12,11 @@ use crate::queue::keys::{KeyLimits, Usage};
 use crate::queue::{QueueError, TenantId};
 use sqlx::{ColumnIndex, Decode, Encode, Executor, IntoArguments, Row, Type};
 
-/// What a tenant holds now: its jobs queued or running, and the bytes of its songs, rigs and
-/// results. (PostgreSQL's SUM of a BIGINT is NUMERIC: cast back, in both.)
+/// What a tenant holds now: its jobs queued or running, and the bytes of its songs (with their
+/// caches), rigs and results. (PostgreSQL's SUM of a BIGINT is NUMERIC: cast back, in both.)
 pub const USAGE_SQL: &str = "SELECT \
    (SELECT COUNT(*) FROM jobs WHERE tenant_id = $1 AND status IN ('queued', 'running')) AS queued_jobs, \
-   CAST((SELECT COALESCE(SUM(size_bytes), 0) FROM songs WHERE tenant_id = $1) \
+   CAST((SELECT COALESCE(SUM(size_bytes + cache_bytes), 0) FROM songs WHERE tenant_id = $1) \
       + (SELECT COALESCE(SUM(size_bytes), 0) FROM rigs WHERE tenant_id = $1) \
       + (SELECT COALESCE(SUM(result_bytes), 0) FROM jobs WHERE tenant_id = $1) AS BIGINT) AS stored_bytes";
 

@@ -173,6 +173,22 @@ where
         Box::pin(self.record_use("songs", id.0))
     }
 
+    fn add_song_cache_bytes(&self, id: SongId, bytes: u64) -> StoreFuture<'_, bool> {
+        Box::pin(async move {
+            let bytes = i64::try_from(bytes).map_err(|e| corrupt("song cache bytes", e))?;
+            let mut tx = self.begin().await?;
+            let row = sqlx::query(
+                "UPDATE songs SET cache_bytes = cache_bytes + $1 WHERE id = $2 RETURNING cache_bytes",
+            )
+            .bind(bytes)
+            .bind(D::id(id.0))
+            .fetch_optional(&mut *tx)
+            .await?;
+            Self::commit(tx).await?;
+            Ok(row.is_some())
+        })
+    }
+
     fn expire<'a>(
         &'a self,
         cutoff: DateTime<Utc>,
