@@ -248,7 +248,10 @@ fn loaded_libtorch() -> String {
 pub enum KeysSeen {
     /// The SQLite file does not exist yet (so no key does either).
     NoDatabase,
-    Counted { active: usize, revoked: usize },
+    Counted {
+        active: usize,
+        revoked: usize,
+    },
     /// The database could not be opened or read; why.
     Unreadable(String),
 }
@@ -386,6 +389,9 @@ mod tests {
     fn the_default_filter_silences_symphonia_unless_asked_for() {
         assert_eq!(default_filter("info"), "info,symphonia=off");
         assert_eq!(default_filter(""), "symphonia=off");
-        assert_eq!(default_filter("warn,symphonia=debug"), "warn,symphonia=debug");
+        assert_eq!(
+            default_filter("warn,symphonia=debug"),
+            "warn,symphonia=debug"
+        );
     }
 }

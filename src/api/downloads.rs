@@ -174,7 +174,12 @@ async fn on_rig(
     };
     let bytes = render(&state, &job, target, format).await?;
     // The rig is a built-in name or an id here: safe in a header.
-    respond(&request, bytes, content_type, &format!("motion.{rig}.{ext}"))
+    respond(
+        &request,
+        bytes,
+        content_type,
+        &format!("motion.{rig}.{ext}"),
+    )
 }
 
 /// A succeeded generate job's dance as BVH, on choreo's rig or another.

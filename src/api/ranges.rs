@@ -32,10 +32,7 @@ impl Span {
         if request.contains_key(header::IF_RANGE) {
             return Ok(Span::Whole);
         }
-        let Some(value) = request
-            .get(header::RANGE)
-            .and_then(|v| v.to_str().ok())
-        else {
+        let Some(value) = request.get(header::RANGE).and_then(|v| v.to_str().ok()) else {
             return Ok(Span::Whole);
         };
         let Ok(parsed) = http_range_header::parse_range_header(value) else {

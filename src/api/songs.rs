@@ -6,8 +6,8 @@
 //! name), renamed into place under its id, and an analyze job is queued in the same transaction
 //! that records the song.
 use super::auth::Caller;
-use super::multipart::{self, Form};
 use super::extract::ApiQuery;
+use super::multipart::{self, Form};
 use super::paging::PageRequest;
 use super::problem::{ApiError, Problem};
 use super::AppState;

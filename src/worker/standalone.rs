@@ -572,6 +572,9 @@ mod tests {
         }
         .to_string();
         assert!(empty.contains("/nowhere holds no trained model"), "{empty}");
-        assert!(empty.ends_with("but its folder there has no weights"), "{empty}");
+        assert!(
+            empty.ends_with("but its folder there has no weights"),
+            "{empty}"
+        );
     }
 }

@@ -38,11 +38,23 @@ fn generate_s_help_shows_the_defaults() {
             .unwrap_or_else(|| panic!("no {flag} in\n{help}"))
             .to_string()
     };
-    assert!(line("--model <MODEL>").ends_with("[default: beat-graph]"), "{help}");
-    assert!(line("--models-dir").ends_with("[default: models]"), "{help}");
+    assert!(
+        line("--model <MODEL>").ends_with("[default: beat-graph]"),
+        "{help}"
+    );
+    assert!(
+        line("--models-dir").ends_with("[default: models]"),
+        "{help}"
+    );
     assert!(line("--seed").ends_with("[default: 0]"), "{help}");
-    let usage = help.lines().find(|l| l.starts_with("Usage:")).expect("usage");
-    assert!(!usage.contains("--model"), "--model is not required: {usage}");
+    let usage = help
+        .lines()
+        .find(|l| l.starts_with("Usage:"))
+        .expect("usage");
+    assert!(
+        !usage.contains("--model"),
+        "--model is not required: {usage}"
+    );
 }
 
 #[test]
@@ -78,7 +90,10 @@ fn generate_s_errors_name_the_file_the_folder_and_the_nearest_model() {
     for id in crate::common_models::SERVED {
         assert!(stderr.contains(id), "{id} not named: {stderr}");
     }
-    assert!(stderr.contains("did you mean dance-revolution?"), "{stderr}");
+    assert!(
+        stderr.contains("did you mean dance-revolution?"),
+        "{stderr}"
+    );
 
     let missing = scratch.path().join("no-such-song.ogg");
     let gone = choreo(
@@ -120,8 +135,14 @@ fn generate_s_errors_name_the_file_the_folder_and_the_nearest_model() {
         "{stderr}"
     );
     assert!(stderr.contains("not audio"), "{stderr}");
-    assert!(!stderr.contains("symphonia"), "a library's log line: {stderr}");
-    assert!(!stderr.contains('\u{1b}'), "colour codes on a pipe: {stderr:?}");
+    assert!(
+        !stderr.contains("symphonia"),
+        "a library's log line: {stderr}"
+    );
+    assert!(
+        !stderr.contains('\u{1b}'),
+        "colour codes on a pipe: {stderr:?}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -163,7 +184,10 @@ async fn the_first_key_warns_that_it_closes_the_open_service_and_doctor_counts_k
         warned.contains("warning: this service was open"),
         "{warned}"
     );
-    assert!(warned.contains("--admin"), "says how to reach the open tenant's rows: {warned}");
+    assert!(
+        warned.contains("--admin"),
+        "says how to reach the open tenant's rows: {warned}"
+    );
     let (admin, second) = create(&["--name", "ops", "--admin"]);
     assert_eq!(second, "", "only the first key closes the service");
 

@@ -15,7 +15,14 @@ async fn log_of_a_short_run(data: &Path, env: &[(&str, &str)]) -> String {
     let log = data.join("serve.log");
     let mut command = tokio::process::Command::new(env!("CARGO_BIN_EXE_choreo"));
     command
-        .args(["serve", "--bind", "127.0.0.1:0", "--workers", "1", "--data-dir"])
+        .args([
+            "serve",
+            "--bind",
+            "127.0.0.1:0",
+            "--workers",
+            "1",
+            "--data-dir",
+        ])
         .arg(data)
         .arg("--models-dir")
         .arg(data.join("no-models"))
@@ -57,8 +64,14 @@ async fn a_log_written_to_a_file_is_plain_text() {
     let data = tempfile::tempdir().expect("tempdir");
     let log = log_of_a_short_run(data.path(), &[]).await;
     assert!(log.contains("listening"), "{log}");
-    assert!(!log.contains('\u{1b}'), "colour codes in a log file:\n{log:?}");
-    assert!(!log.contains("symphonia"), "a library's line in the log:\n{log}");
+    assert!(
+        !log.contains('\u{1b}'),
+        "colour codes in a log file:\n{log:?}"
+    );
+    assert!(
+        !log.contains("symphonia"),
+        "a library's line in the log:\n{log}"
+    );
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -70,12 +83,15 @@ async fn choreo_log_format_json_writes_one_json_object_a_line() {
         .filter(|l| !l.trim().is_empty())
         .map(|l| serde_json::from_str(l).unwrap_or_else(|e| panic!("{e}: {l:?}")))
         .collect();
+    assert!(lines.iter().any(|l| l["message"] == "listening"), "{log}");
+    for line in &lines {
+        assert!(
+            line["level"].is_string() && line["timestamp"].is_string(),
+            "{line}"
+        );
+    }
     assert!(
-        lines.iter().any(|l| l["message"] == "listening"),
+        !log.contains('\u{1b}') && !log.contains("symphonia"),
         "{log}"
     );
-    for line in &lines {
-        assert!(line["level"].is_string() && line["timestamp"].is_string(), "{line}");
-    }
-    assert!(!log.contains('\u{1b}') && !log.contains("symphonia"), "{log}");
 }

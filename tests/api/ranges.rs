@@ -2,7 +2,9 @@
 //! request each answer one byte range with `206` and exactly those bytes, a range past the end
 //! with `416`, and say `Accept-Ranges: bytes`.
 use crate::helpers::{expect_problem, short_song, spawn_app, spawn_app_with, TestApp};
-use reqwest::header::{ACCEPT_RANGES, CONTENT_LENGTH, CONTENT_RANGE, CONTENT_TYPE, IF_RANGE, RANGE};
+use reqwest::header::{
+    ACCEPT_RANGES, CONTENT_LENGTH, CONTENT_RANGE, CONTENT_TYPE, IF_RANGE, RANGE,
+};
 use reqwest::StatusCode;
 use serde_json::json;
 
@@ -28,7 +30,11 @@ fn header(response: &reqwest::Response, name: reqwest::header::HeaderName) -> Op
 async fn ranges_of(app: &TestApp, path: &str) -> String {
     let full = get(app, path, &[]).await;
     assert_eq!(full.status(), StatusCode::OK, "{path}");
-    assert_eq!(header(&full, ACCEPT_RANGES).as_deref(), Some("bytes"), "{path}");
+    assert_eq!(
+        header(&full, ACCEPT_RANGES).as_deref(),
+        Some("bytes"),
+        "{path}"
+    );
     let content_type = header(&full, CONTENT_TYPE).expect("content type");
     let whole = full.bytes().await.expect("body").to_vec();
     let len = whole.len();
@@ -53,16 +59,33 @@ async fn ranges_of(app: &TestApp, path: &str) -> String {
             "{path} {range}"
         );
         assert_eq!(header(&part, ACCEPT_RANGES).as_deref(), Some("bytes"));
-        assert_eq!(header(&part, CONTENT_TYPE).as_deref(), Some(content_type.as_str()));
+        assert_eq!(
+            header(&part, CONTENT_TYPE).as_deref(),
+            Some(content_type.as_str())
+        );
         let bytes = part.bytes().await.expect("part");
-        assert!(bytes[..] == whole[first..=last], "{path} {range}: other bytes");
+        assert!(
+            bytes[..] == whole[first..=last],
+            "{path} {range}: other bytes"
+        );
     }
 
     let past = get(app, path, &[(RANGE.as_str(), &format!("bytes={len}-"))]).await;
-    assert_eq!(header(&past, CONTENT_RANGE), Some(format!("bytes */{len}")), "{path}");
-    let body = expect_problem(past, StatusCode::RANGE_NOT_SATISFIABLE, "range-not-satisfiable").await;
+    assert_eq!(
+        header(&past, CONTENT_RANGE),
+        Some(format!("bytes */{len}")),
+        "{path}"
+    );
+    let body = expect_problem(
+        past,
+        StatusCode::RANGE_NOT_SATISFIABLE,
+        "range-not-satisfiable",
+    )
+    .await;
     assert!(
-        body["detail"].as_str().is_some_and(|d| d.contains(&format!("0-{}", len - 1))),
+        body["detail"]
+            .as_str()
+            .is_some_and(|d| d.contains(&format!("0-{}", len - 1))),
         "{body}"
     );
 
@@ -74,7 +97,10 @@ async fn ranges_of(app: &TestApp, path: &str) -> String {
     ] {
         let response = get(app, path, &headers).await;
         assert_eq!(response.status(), StatusCode::OK, "{path} {headers:?}");
-        assert!(response.bytes().await.expect("body")[..] == whole[..], "{path} {headers:?}");
+        assert!(
+            response.bytes().await.expect("body")[..] == whole[..],
+            "{path} {headers:?}"
+        );
     }
     content_type
 }

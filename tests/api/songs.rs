@@ -223,7 +223,10 @@ async fn the_song_list_pages_newest_first_with_the_caller_s_songs_only(db: crate
         .await
         .expect("page");
     assert_eq!(ids(&second), newest_first[2..], "{second}");
-    assert!(second.get("next_cursor").is_none_or(Value::is_null), "{second}");
+    assert!(
+        second.get("next_cursor").is_none_or(Value::is_null),
+        "{second}"
+    );
 
     let theirs_page: Value = app
         .get("/v1/songs", &theirs)
@@ -252,8 +255,7 @@ async fn the_song_list_pages_newest_first_with_the_caller_s_songs_only(db: crate
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_song_list_on_sqlite() {
-    the_song_list_pages_newest_first_with_the_caller_s_songs_only(crate::tenants::Db::Sqlite)
-        .await
+    the_song_list_pages_newest_first_with_the_caller_s_songs_only(crate::tenants::Db::Sqlite).await
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
