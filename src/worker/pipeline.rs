@@ -285,6 +285,19 @@ impl Execute for Pipeline {
     }
 }
 
+/// The slice of the model's share of a job's progress each stage a model reports fills: a
+/// model reports each stage's own 0..1, so mapping every stage onto the whole share left a job
+/// at its end (85 %) from the last feature row through the whole frame loop. The frame loop,
+/// most of a model's time, gets most of the share.
+fn model_slice(stage: Stage) -> (f32, f32) {
+    match stage {
+        Stage::Features => (0.0, 0.1),
+        Stage::Encode => (0.1, 0.25),
+        Stage::Generate => (0.25, 1.0),
+        _ => (0.0, 1.0),
+    }
+}
+
 /// Maps a model's own 0..1 into a slice of the job's progress, and times each stage the model
 /// reports (the timer of one stage is dropped, and recorded, when the next begins), but
 /// `features`: the song's cache times that itself, when it computes them rather than reads them.
@@ -308,8 +321,11 @@ impl Progress for Scaled<'_> {
         } else {
             0.0
         };
-        self.inner
-            .report(stage, self.from + (self.to - self.from) * fraction)
+        let (lo, hi) = model_slice(stage);
+        self.inner.report(
+            stage,
+            self.from + (self.to - self.from) * (lo + (hi - lo) * fraction),
+        )
     }
 }
 
@@ -512,6 +528,49 @@ mod tests {
             b.extend_from_slice(&(v as i16).to_le_bytes());
         }
         b
+    }
+
+    /// What a job's progress reads as a model reports its stages.
+    #[derive(Default)]
+    struct Record(Vec<(Stage, f32)>);
+
+    impl Progress for Record {
+        fn report(&mut self, stage: Stage, fraction: f32) -> Result<(), Cancelled> {
+            self.0.push((stage, fraction));
+            Ok(())
+        }
+    }
+
+    /// Features, then the encoder, then the frame loop: the job's progress rises through each,
+    /// the frame loop taking most of the model's share, and never goes back.
+    #[test]
+    fn progress_rises_through_each_stage_a_model_reports() {
+        let mut record = Record::default();
+        let mut scaled = Scaled {
+            inner: &mut record,
+            from: MODEL_START,
+            to: MODEL_END,
+            timer: None,
+        };
+        for (stage, fraction) in [
+            (Stage::Features, 0.0),
+            (Stage::Features, 1.0),
+            (Stage::Encode, 1.0),
+            (Stage::Generate, 0.0),
+            (Stage::Generate, 0.5),
+            (Stage::Generate, 1.0),
+        ] {
+            scaled.report(stage, fraction).expect("not cancelled");
+        }
+        let p: Vec<f32> = record.0.iter().map(|(_, p)| *p).collect();
+        assert!(p.windows(2).all(|w| w[0] <= w[1]), "{p:?}");
+        assert!((p[0] - MODEL_START).abs() < 1e-6 && (p[5] - MODEL_END).abs() < 1e-6);
+        // Half the frame loop is past half the model's share, and the loop spans most of it.
+        assert!(
+            p[4] > MODEL_START + 0.5 * (MODEL_END - MODEL_START),
+            "{p:?}"
+        );
+        assert!(p[5] - p[3] > 0.7 * (MODEL_END - MODEL_START), "{p:?}");
     }
 
     /// Stops at its `stop_after`-th checkpoint.
