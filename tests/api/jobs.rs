@@ -28,9 +28,12 @@ async fn an_analyze_job_goes_from_queued_to_succeeded() {
     assert_eq!(done["progress"], 1.0);
     assert_eq!(done["attempts"], 1);
     assert!(done["error"].is_null());
-    let created = done["created_at"].as_str().expect("created_at");
-    let started = done["started_at"].as_str().expect("started_at");
-    let finished = done["finished_at"].as_str().expect("finished_at");
+    // As instants, not strings: RFC 3339 drops a zero fraction ("…:03Z" is before "…:03.001Z").
+    let at = |field: &str| {
+        chrono::DateTime::parse_from_rfc3339(done[field].as_str().expect(field))
+            .unwrap_or_else(|e| panic!("{field}: {e}"))
+    };
+    let (created, started, finished) = (at("created_at"), at("started_at"), at("finished_at"));
     assert!(created <= started && started <= finished, "{done}");
 
     // Analyze jobs write no files: their result is on the song.
