@@ -255,28 +255,30 @@ fn step_hz(m: &Motion, beats: &[f64], from_s: f64, to_s: f64) -> Option<f64> {
     tempo_lock(part, m.fps, &shifted).map(|l| l.step_hz)
 }
 
-/// The ankles' step rate of `m` after over before the change, [`CLEAR_S`] kept clear of it;
-/// `beats` are the joined song's.
-fn step_ratio(m: &Motion, beats: &[f64]) -> Option<f64> {
+/// The ankles' step rates (Hz) of `m` before and after the change, [`CLEAR_S`] kept clear of
+/// it; `beats` are the joined song's.
+fn paces(m: &Motion, beats: &[f64]) -> Option<(f64, f64)> {
     let change = change_s();
-    let end = m.duration_s();
     let before = step_hz(m, beats, 0.0, change - CLEAR_S)?;
-    let after = step_hz(m, beats, change + CLEAR_S, end)?;
-    Some(after / before)
+    let after = step_hz(m, beats, change + CLEAR_S, m.duration_s())?;
+    Some((before, after))
+}
+
+/// The step rate after over before the change ([`paces`]).
+fn step_ratio(m: &Motion, beats: &[f64]) -> Option<f64> {
+    paces(m, beats).map(|(before, after)| after / before)
 }
 
 /// When the pace of `m` settles after the change: the first start `s` (every [`SETTLE_HOP_S`]
 /// up to [`SETTLE_HORIZON_S`]) from which every short window `[change + s', change + s' + 4 s]`
-/// steps nearer (as a ratio) to the dance's rate over `[change + CLEAR_S, end]` than to its rate
-/// over `[0, change − CLEAR_S]`. Short windows are noisy (a peak may jump to a harmonic), so a
+/// steps nearer (as a ratio) to the dance's pace after the change than to its pace before
+/// (`paces`, from [`paces`]). Short windows are noisy (a peak may jump to a harmonic), so a
 /// window is held against the old pace rather than a tolerance; the windows start at the change,
 /// so no frame before it is measured. `None` where the dance does not follow the change (its two
 /// paces are within [`FOLLOW_TOLERANCE`] of the music's factor apart) or has not settled by the
 /// horizon.
-fn settle_s(m: &Motion, beats: &[f64]) -> Option<f64> {
+fn settle_s(m: &Motion, beats: &[f64], (before, after): (f64, f64)) -> Option<f64> {
     let change = change_s();
-    let before = step_hz(m, beats, 0.0, change - CLEAR_S)?;
-    let after = step_hz(m, beats, change + CLEAR_S, m.duration_s())?;
     if ((after / before) / MUSIC_FACTOR - 1.0).abs() > FOLLOW_TOLERANCE {
         return None;
     }
@@ -322,12 +324,13 @@ pub fn row(
                 song: s.name.clone(),
                 source,
             })?;
+            let served_paces = paces(&served, beats);
             dances.push(TempoChangeDance {
                 song: s.name.clone(),
                 seed,
-                ratio: step_ratio(&served, beats),
+                ratio: served_paces.map(|(before, after)| after / before),
                 ratio_own,
-                settle_s: settle_s(&served, beats),
+                settle_s: served_paces.and_then(|p| settle_s(&served, beats, p)),
             });
         }
     }

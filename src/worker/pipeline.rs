@@ -93,19 +93,27 @@ impl Pipeline {
         progress: &mut dyn Progress,
     ) -> Result<DecodedAudio, WorkerError> {
         let _timer = StageTimer::start(kind, Stage::DecodeAudio);
-        let path = self.data.song_path(song.id, song.format);
-        let max_duration_s = self.max_duration_s;
-        let decoded = self.budgeted(progress, Stage::DecodeAudio, 0.0, |budget| {
-            audio::decode_file(
-                &path,
-                &DecodeOptions {
-                    keep,
-                    max_duration_s,
-                    budget,
-                },
-            )
-        })?;
-        Ok(decoded.audio)
+        Ok(self.budgeted(progress, Stage::DecodeAudio, 0.0, |budget| {
+            self.decode_within(song, keep, budget)
+        })?)
+    }
+
+    /// The stored song decoded at `keep`, within `budget` and the song length limit.
+    fn decode_within(
+        &self,
+        song: &Song,
+        keep: Keep,
+        budget: &Budget,
+    ) -> Result<DecodedAudio, AudioError> {
+        audio::decode_file(
+            &self.data.song_path(song.id, song.format),
+            &DecodeOptions {
+                keep,
+                max_duration_s: self.max_duration_s,
+                budget,
+            },
+        )
+        .map(|decoded| decoded.audio)
     }
 
     #[tracing::instrument(skip_all, fields(job_id = %job.id))]
@@ -150,18 +158,8 @@ impl Pipeline {
             Some(stored) => stored,
             None => &memory,
         };
-        let path = self.data.song_path(song.id, song.format);
-        let max_duration_s = self.max_duration_s;
         let decode = |budget: &Budget| {
-            audio::decode_file(
-                &path,
-                &DecodeOptions {
-                    keep: Keep::AtMost(song_cache::GENERATE_MAX_SR),
-                    max_duration_s,
-                    budget,
-                },
-            )
-            .map(|decoded| decoded.audio)
+            self.decode_within(song, Keep::AtMost(song_cache::GENERATE_MAX_SR), budget)
         };
         let song_audio = SongCache::new(files, &decode, "generate", Some(self.audio_timeout));
         let outcome = self.dance(job, song, options, model.as_ref(), &song_audio, progress);

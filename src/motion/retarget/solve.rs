@@ -599,9 +599,11 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     // markers): 6-7 cm on a dancenet dance onto Mixamo, which the IK took up by bending the knees
     // (11-12° off motion.json's, median). The root moves instead, by the supporting feet's gap,
     // weighted by how firmly each stands and smoothed over ±HIP_SHIFT_WINDOW frames.
-    let gaps: Vec<(Vector3<f64>, f64)> = (0..t_len)
-        .map(|t| {
-            let pr = parts(t, &roots[t]);
+    let legs: Vec<[(Vector3<f64>, Vector3<f64>, f64); 2]> =
+        (0..t_len).map(|t| parts(t, &roots[t])).collect();
+    let gaps: Vec<(Vector3<f64>, f64)> = legs
+        .iter()
+        .map(|pr| {
             let w: f64 = pr.iter().map(|(_, _, on)| on).sum();
             let gap = pr
                 .iter()
@@ -637,8 +639,11 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     for (root, shift) in roots.iter_mut().zip(&shifts) {
         *root += shift;
     }
-    let goals: Vec<[Vector3<f64>; 2]> = (0..t_len)
-        .map(|t| parts(t, &roots[t]).map(|(floor, reach, on)| floor * on + reach * (1.0 - on)))
+    // The whole body moved with the root: each reach goal (from the hip) by the same shift.
+    let goals: Vec<[Vector3<f64>; 2]> = legs
+        .iter()
+        .zip(&shifts)
+        .map(|(pr, shift)| pr.map(|(floor, reach, on)| floor * on + (reach + shift) * (1.0 - on)))
         .collect();
     let mut drop = vec![0.0f64; t_len];
     for t in 0..t_len {
