@@ -303,23 +303,29 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, EvalEr
 /// A model's motion as a user downloads it: its steps moved onto the song's beats and its feet
 /// planted (the motion stages every job runs, [`crate::motion::after_model`]), then fitted to the
 /// export's rigid skeleton with the key poses as anchors (what motion.json holds). `beats` are
-/// the song's on the dance's clock. Also what the beat-align stage did.
+/// the song's on the dance's clock; `composed`: the model composed the dance on those beats (no
+/// tempo warp, [`crate::motion::MotionStages::tempo_follow`]). Also what the beat-align stage did.
 pub(super) fn as_served(
     raw: Motion,
+    composed: bool,
     keys: &[KeyPose],
     beats: &[f64],
 ) -> Result<(Motion, BeatAlignSummary), MotionError> {
-    as_served_measured(raw, keys, beats).map(|(m, summary, _)| (m, summary))
+    as_served_measured(raw, composed, keys, beats).map(|(m, summary, _)| (m, summary))
 }
 
 /// As [`as_served`], with the rotation flips of the exported rig (what motion.bvh carries).
 pub(super) fn as_served_measured(
     raw: Motion,
+    composed: bool,
     keys: &[KeyPose],
     beats: &[f64],
 ) -> Result<(Motion, BeatAlignSummary, RotationFlips), MotionError> {
-    let (finished, summary) =
-        crate::motion::after_model(raw, beats, keys, 0, crate::motion::MotionStages::default());
+    let stages = crate::motion::MotionStages {
+        tempo_follow: !composed,
+        ..Default::default()
+    };
+    let (finished, summary) = crate::motion::after_model(raw, beats, keys, 0, stages);
     let served = crate::motion::serve(&finished, keys, true, 0)?;
     Ok((
         served.motion,

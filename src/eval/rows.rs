@@ -168,22 +168,26 @@ fn dance_songs(
                 key_poses: &keys,
                 ..GenerateRequest::plain(&s.audio, seed)
             };
-            let raw = model
-                .generate(&req, &mut Quiet)
-                .map_err(|source| EvalError::Generate {
-                    model: id.into(),
-                    song: s.name.clone(),
-                    source,
-                })?
-                .motion;
+            let generated =
+                model
+                    .generate(&req, &mut Quiet)
+                    .map_err(|source| EvalError::Generate {
+                        model: id.into(),
+                        song: s.name.clone(),
+                        source,
+                    })?;
+            let composed = generated.composition.is_some();
+            let raw = generated.motion;
             // The motion stage every job runs (feet planted), and the network's motion as it came.
             // Served: planted and exported through the rigid skeleton, as motion.json holds it.
             // Served: beat-aligned, planted and exported through the rigid skeleton.
-            let (served, aligned, flips) = as_served_measured(raw.clone(), &keys, &s.beats)
-                .map_err(|source| EvalError::Export {
-                    model: id.into(),
-                    song: s.name.clone(),
-                    source,
+            let (served, aligned, flips) =
+                as_served_measured(raw.clone(), composed, &keys, &s.beats).map_err(|source| {
+                    EvalError::Export {
+                        model: id.into(),
+                        song: s.name.clone(),
+                        source,
+                    }
                 })?;
             let finished = [served, crate::motion::finish(raw, false)];
             let mut scored = [

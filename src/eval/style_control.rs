@@ -109,20 +109,23 @@ pub fn style_control(
                 style: Some(style),
                 ..GenerateRequest::plain(s.audio, seed)
             };
-            let raw = model
-                .generate(&req, progress)
-                .map_err(|source| EvalError::Generate {
-                    model: format!("{id} ({})", style.name()),
-                    song: s.name.to_string(),
-                    source,
-                })?
-                .motion;
-            let (m, _) =
-                super::as_served(raw, &[], s.beats).map_err(|source| EvalError::Export {
+            let generated =
+                model
+                    .generate(&req, progress)
+                    .map_err(|source| EvalError::Generate {
+                        model: format!("{id} ({})", style.name()),
+                        song: s.name.to_string(),
+                        source,
+                    })?;
+            let composed = generated.composition.is_some();
+            let raw = generated.motion;
+            let (m, _) = super::as_served(raw, composed, &[], s.beats).map_err(|source| {
+                EvalError::Export {
                     model: id.into(),
                     song: s.name.to_string(),
                     source,
-                })?;
+                }
+            })?;
             let sc = score_dance(&m, s.beats, &[], reference)?;
             passing += usize::from(sc.scores.verdict.pass);
             speed += sc.scores.physical.mean_speed_m_s;

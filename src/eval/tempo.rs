@@ -309,7 +309,7 @@ pub(super) fn tempo_row(
             ));
             let mut per_seed = Vec::new();
             for seed in args.seed..args.seed + args.seeds.max(1) {
-                let raw = model
+                let generated = model
                     .generate(
                         &GenerateRequest::plain(&song.audio, seed),
                         &mut super::rows::Quiet,
@@ -318,15 +318,17 @@ pub(super) fn tempo_row(
                         model: id.into(),
                         song: song.name.clone(),
                         source,
-                    })?
-                    .motion;
+                    })?;
+                let composed = generated.composition.is_some();
+                let raw = generated.motion;
                 let own = tempo_lock(raw.positions.view(), raw.fps, &song.beats);
-                let (served, _) =
-                    as_served(raw, &[], &song.beats).map_err(|source| EvalError::Export {
+                let (served, _) = as_served(raw, composed, &[], &song.beats).map_err(|source| {
+                    EvalError::Export {
                         model: id.into(),
                         song: song.name.clone(),
                         source,
-                    })?;
+                    }
+                })?;
                 let as_served = Musicality::of(&served, &song.beats);
                 let lock = as_served.tempo_lock;
                 let lines = ServedLines::of(&as_served, &served, reference);

@@ -307,7 +307,7 @@ pub fn row(
     for s in songs {
         let beats = &s.analysis.beat_times;
         for seed in first_seed..first_seed + seeds.max(1) {
-            let raw = model
+            let generated = model
                 .generate(
                     &GenerateRequest::plain(&s.audio, seed),
                     &mut super::rows::Quiet,
@@ -316,14 +316,16 @@ pub fn row(
                     model: id.into(),
                     song: s.name.clone(),
                     source,
-                })?
-                .motion;
+                })?;
+            let composed = generated.composition.is_some();
+            let raw = generated.motion;
             let ratio_own = step_ratio(&raw, beats);
-            let (served, _) = as_served(raw, &[], beats).map_err(|source| EvalError::Export {
-                model: id.into(),
-                song: s.name.clone(),
-                source,
-            })?;
+            let (served, _) =
+                as_served(raw, composed, &[], beats).map_err(|source| EvalError::Export {
+                    model: id.into(),
+                    song: s.name.clone(),
+                    source,
+                })?;
             let served_paces = paces(&served, beats);
             dances.push(TempoChangeDance {
                 song: s.name.clone(),

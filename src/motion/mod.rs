@@ -76,6 +76,10 @@ pub struct MotionStages {
     pub beat_align: bool,
     /// [`finish`]: the dance kept on the floor and its feet planted.
     pub plant_feet: bool,
+    /// [`beat_align::tempo_follow`] where the song's tempo changes. Off for a dance composed on
+    /// the song's own beats (beat-graph): its pace follows the tempo already, and a second warp
+    /// would speed it up twice.
+    pub tempo_follow: bool,
 }
 
 impl Default for MotionStages {
@@ -83,6 +87,7 @@ impl Default for MotionStages {
         Self {
             beat_align: true,
             plant_feet: true,
+            tempo_follow: true,
         }
     }
 }
@@ -116,20 +121,25 @@ pub fn after_model(
     let motion = beat_align::tempo_follow::follow_tempo(
         motion,
         beat_times_s,
-        !key_poses.is_empty() || seed_frames > 0,
+        !stages.tempo_follow || !key_poses.is_empty() || seed_frames > 0,
     );
-    if motion.positions != before {
+    let warped = motion.positions != before;
+    let composed_on_changing_beats = !stages.tempo_follow
+        && beat_align::tempo_follow::tempo_changes(beat_times_s, motion.num_frames(), motion.fps);
+    if warped || composed_on_changing_beats {
         // One grid fraction and a mean slope of 1 over the dance cannot hold a pace that changes:
         // aligned after the warp, dancenet's and tsmt's steps sped up 0.6–2.4× for the music's
-        // 1.56× (without it, 1.5–1.75×).
+        // 1.56× (without it, 1.5–1.75×), and a beat-graph dance's 1.6× became 2.0–2.7×.
         let mut done = finish(motion, stages.plant_feet);
         keep_seed(&mut done, seed.view());
+        let why = if warped {
+            "the song's tempo changes: the dance's pace follows it instead (tempo_follow)"
+        } else {
+            "the song's tempo changes: the dance was composed on its beats"
+        };
         let skipped = beat_align::BeatAlignSummary {
             applied: false,
-            skipped: Some(
-                "the song's tempo changes: the dance's pace follows it instead (tempo_follow)"
-                    .into(),
-            ),
+            skipped: Some(why.into()),
             ..Default::default()
         };
         return (done, Some(skipped));

@@ -237,6 +237,7 @@ impl Pipeline {
             let stages = MotionStages {
                 beat_align: true,
                 plant_feet: options.plant_feet,
+                tempo_follow: generated.composition.is_none(),
             };
             after_model(
                 generated.motion,

@@ -183,6 +183,11 @@ pub fn generate_decoded(
     let analysis = analysis.into_owned();
     clock.report(Stage::BeatAlign, 0.0)?;
     let composition = generated.composition.clone();
+    // A composed dance is on the song's beats already (MotionStages::tempo_follow).
+    let stages = MotionStages {
+        tempo_follow: stages.tempo_follow && composition.is_none(),
+        ..stages
+    };
     let mut finished = super::pipeline::after_model(
         generated.motion,
         generated.beat_time,
@@ -277,6 +282,7 @@ pub fn generate(
     let stages = MotionStages {
         beat_align: !args.no_beat_align,
         plant_feet: !args.no_plant_feet,
+        tempo_follow: true,
     };
     let mut g = generate_decoded(
         &registry,

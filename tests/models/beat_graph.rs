@@ -295,3 +295,70 @@ fn a_style_is_danced_and_the_one_tango_is_recombined() {
         assert!(c.longest_copy_s <= 12.0, "{style:?}: {c:?}");
     }
 }
+
+/// A song that speeds up from a rumba's tempo (95 BPM) to 148 BPM: the guessed style changes at
+/// the change to the style whose tempo fits and whose steps a beat are the rumba's (a cha-cha,
+/// not the one tango, whose dancer steps 0.38 a beat), so the steps speed up with the beats. A
+/// steady song, or a style asked for, is one section.
+#[test]
+fn a_song_that_speeds_up_changes_to_a_style_of_the_same_steps_a_beat() {
+    use choreo::audio::{Analysis, TempoPoint};
+    use choreo::models::{DanceStyle, StyleChoice};
+    let s = served();
+    let beats = |from: f64, to: f64, step: f64| {
+        let mut v = Vec::new();
+        let mut t = from;
+        while t < to {
+            v.push(t);
+            t += step;
+        }
+        v
+    };
+    let mut beat_times = beats(0.0, 56.0, 60.0 / 95.0);
+    beat_times.extend(beats(56.0, 90.0, 60.0 / 148.0));
+    let downbeat_times: Vec<f64> = beat_times.iter().copied().step_by(4).collect();
+    let mut tempo_curve: Vec<TempoPoint> = (0..28)
+        .map(|k| TempoPoint {
+            time_s: 2.0 * k as f64,
+            bpm: 95.0,
+        })
+        .collect();
+    tempo_curve.extend((28..45).map(|k| TempoPoint {
+        time_s: 2.0 * k as f64,
+        bpm: 148.0,
+    }));
+    let changing = Analysis {
+        tempo_bpm: 120.0,
+        beat_times,
+        downbeat_times,
+        tempo_curve: tempo_curve.clone(),
+    };
+    let guess = |a: &Analysis| s.predict_style(60.0 / 95.0, beat_graph::served::meter_of(a));
+    let sections = s.sections(&changing, &guess(&changing), 90.0);
+    let styles: Vec<(f64, DanceStyle)> = sections.iter().map(|x| (x.from_s, x.style)).collect();
+    assert_eq!(
+        styles,
+        vec![(0.0, DanceStyle::Rumba), (56.0, DanceStyle::ChaCha)],
+        "{sections:?}"
+    );
+    let asked = StyleChoice {
+        style: DanceStyle::Rumba,
+        predicted: false,
+        probabilities: Vec::new(),
+    };
+    assert_eq!(s.sections(&changing, &asked, 90.0).len(), 1);
+    let steady = Analysis {
+        tempo_curve: vec![
+            TempoPoint {
+                time_s: 0.0,
+                bpm: 95.0,
+            },
+            TempoPoint {
+                time_s: 90.0,
+                bpm: 95.0,
+            },
+        ],
+        ..changing.clone()
+    };
+    assert_eq!(s.sections(&steady, &guess(&steady), 90.0).len(), 1);
+}

@@ -18,6 +18,9 @@ use crate::motion::NUM_JOINTS;
 /// [`super::Config::style_weight`] (the train split's one tango gives ~250; a path over so few
 /// would come back to the same steps every few bars).
 pub const MIN_STYLE_UNITS: usize = 600;
+/// Steps a beat of a dance whose step rate cannot be measured: the ballroom's two steps a bar
+/// of four.
+pub const DEFAULT_PACE: f64 = 0.5;
 /// How far (seconds) a boundary's velocity weighs in [`Library::transition`]: a joint moving
 /// 1 m/s apart counts as 0.1 m of pose apart.
 const VELOCITY_S: f32 = 0.1;
@@ -81,6 +84,31 @@ impl Library {
         let j = (i + 1).min(last);
         let w = (at - i as f64) as f32;
         &x.row(i) * (1.0 - w) + &x.row(j) * w
+    }
+
+    /// Steps each training dancer takes a beat of their song: the ankles' step rate over the
+    /// beat rate of the dance's units ([`crate::metrics::musicality::tempo_lock`]); ~1/2 for the
+    /// train split's rumbas and cha-chas, ~1/3 for its waltzes, 0.3–0.4 for a few dancers whose
+    /// song was analysed at another beat level. A path that keeps one pace steps in proportion to
+    /// the song's beats, so its steps follow the music's tempo wherever it changes.
+    /// [`DEFAULT_PACE`] where a dance has no measurable step rate.
+    pub fn dance_paces(&self, fps: f64) -> Vec<f64> {
+        (0..self.dance_first.len().saturating_sub(1))
+            .map(|d| {
+                let beats: Vec<f64> = self
+                    .units
+                    .iter()
+                    .filter(|u| u.dance == d)
+                    .map(|u| u.start / fps)
+                    .collect();
+                crate::motion::repr::from_features(self.dance(d), Default::default(), fps)
+                    .ok()
+                    .and_then(|(m, _)| {
+                        crate::metrics::musicality::tempo_lock(m.positions.view(), fps, &beats)
+                    })
+                    .map_or(DEFAULT_PACE, |l| l.ratio)
+            })
+            .collect()
     }
 
     /// Pose, root height and pose velocity (per second × [`VELOCITY_S`]) at a unit's start or end.

@@ -40,8 +40,9 @@ pub struct Problem<'a> {
     /// The motion descriptors the music predicts, one row per slot.
     pub predicted: &'a Array2<f32>,
     pub matcher: &'a Match,
-    /// Per unit: `None` when it may not be used (another style), else its style cost.
-    pub allowed: &'a [Option<f64>],
+    /// Per slot, per unit: `None` when the unit may not be used there (another style), else its
+    /// style cost. A slot's row is its section's: a song whose tempo changes may change style.
+    pub allowed: &'a [&'a [Option<f64>]],
     pub keys: &'a [SlotKey],
     /// The pose the dance starts from (a seed motion's last frame), and where in the first slot.
     pub start: Option<(&'a [f32], f64)>,
@@ -119,7 +120,7 @@ pub fn search(lib: &Library, config: &Config, p: &Problem<'_>) -> Option<Path> {
             let best = prev.iter().map(|n| n.cost).fold(f64::INFINITY, f64::min);
             let parent = prev.iter().position(|n| n.cost == best).unwrap_or(0);
             next = (0..n_units)
-                .filter(|&v| p.allowed[v].is_some())
+                .filter(|&v| p.allowed[i][v].is_some())
                 .map(|v| Node {
                     unit: v,
                     run: 0,
@@ -241,7 +242,7 @@ fn unit_cost(
     v: usize,
     strict: bool,
 ) -> Option<f64> {
-    let style = p.allowed[v]?;
+    let style = p.allowed[i][v]?;
     let unit = &lib.units[v];
     let slot = p.slots[i];
     let stretch = (slot.t1 - slot.t0) * p.fps / unit.frames();

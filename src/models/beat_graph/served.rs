@@ -7,7 +7,7 @@ use ndarray::Array2;
 use serde::{Deserialize, Serialize};
 
 use super::body::{bone_lengths, rebone};
-use super::library::{style_counts, Library, MIN_STYLE_UNITS};
+use super::library::{style_counts, Library, DEFAULT_PACE, MIN_STYLE_UNITS};
 use super::rhythm::{music_descriptors, Match};
 use super::search::{search, Problem, Slot, SlotKey};
 use super::{compose, Config};
@@ -28,6 +28,8 @@ pub const ID: &str = "beat-graph";
 /// How sharply the style guess prefers the style whose tempo and bar fit the song (the softmax
 /// temperature over [`style_distance`]).
 const STYLE_SHARPNESS: f64 = 0.15;
+/// The shortest stretch of a song danced in a style of its own (s): eight bars of a cha-cha.
+const MIN_SECTION_S: f64 = 16.0;
 
 /// A style as the train split dances it: its bar, its median beat, how many units it has.
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -78,6 +80,8 @@ pub struct ModelFile {
 pub struct Served {
     file: ModelFile,
     lib: Library,
+    /// Per style, the median steps a beat of its units.
+    style_pace: [f64; 4],
 }
 
 /// What a composition was made of, for the report.
@@ -96,6 +100,42 @@ pub struct Composition {
     #[serde(skip)]
     #[schema(ignore)]
     pub joins_s: Vec<f64>,
+    /// Where the style changes with the song's tempo (a song that speeds up from a rumba's
+    /// tempo to a cha-cha's): each section's start and style. Empty when the whole dance is one
+    /// style.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub sections: Vec<StyleSection>,
+}
+
+/// A stretch of the song danced in one style, from `from_s` to the next section's start.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize, utoipa::ToSchema)]
+pub struct StyleSection {
+    pub from_s: f64,
+    pub style: DanceStyle,
+}
+
+/// The style danced at `t`.
+fn style_at(sections: &[StyleSection], t: f64) -> DanceStyle {
+    sections
+        .iter()
+        .rev()
+        .find(|s| s.from_s <= t)
+        .or(sections.first())
+        .map_or(DanceStyle::Rumba, |s| s.style)
+}
+
+/// The style danced longest over `[0, duration]`.
+fn main_style(sections: &[StyleSection], duration: f64) -> DanceStyle {
+    let mut time = [0.0f64; 4];
+    for (k, s) in sections.iter().enumerate() {
+        let end = sections.get(k + 1).map_or(duration, |n| n.from_s);
+        time[s.style.index()] += (end.min(duration) - s.from_s.max(0.0)).max(0.0);
+    }
+    let best = (0..4).max_by(|&a, &b| time[a].total_cmp(&time[b]));
+    match (sections.len(), best) {
+        (1, _) | (_, None) => style_at(sections, 0.0),
+        (_, Some(b)) => DanceStyle::ALL[b],
+    }
 }
 
 impl Served {
@@ -108,7 +148,22 @@ impl Served {
             )));
         }
         let lib = Library::load(&dir.join(WEIGHTS_FILE))?;
-        Ok(Self { file, lib })
+        let per_dance = lib.dance_paces(file.fps);
+        let style_pace = DanceStyle::ALL.map(|st| {
+            let mut v: Vec<f64> = lib
+                .units
+                .iter()
+                .filter(|u| u.style == st)
+                .map(|u| per_dance[u.dance])
+                .collect();
+            v.sort_by(f64::total_cmp);
+            v.get(v.len() / 2).copied().unwrap_or(DEFAULT_PACE)
+        });
+        Ok(Self {
+            file,
+            lib,
+            style_pace,
+        })
     }
 
     /// The model's description file.
@@ -145,6 +200,84 @@ impl Served {
             predicted: true,
             probabilities,
         }
+    }
+
+    /// The styles the song is danced in: the chosen one throughout, unless the style was guessed
+    /// and the song's tempo moves so far that another style's tempo fits a part of it better
+    /// (dancers change dance when a DJ mix goes from a rumba's tempo to a cha-cha's, and only a
+    /// style whose own beat is near the song's can follow it within the units' stretch range).
+    /// Sections shorter than [`MIN_SECTION_S`] go to their neighbour.
+    pub fn sections(
+        &self,
+        analysis: &Analysis,
+        choice: &StyleChoice,
+        duration: f64,
+    ) -> Vec<StyleSection> {
+        let whole = vec![StyleSection {
+            from_s: 0.0,
+            style: choice.style,
+        }];
+        let curve = &analysis.tempo_curve;
+        let moves = curve
+            .windows(2)
+            .any(|w| (w[1].bpm / w[0].bpm).ln().abs() > 0.01);
+        if !choice.predicted || !moves {
+            return whole;
+        }
+        let meter = meter_of(analysis);
+        let mut out: Vec<StyleSection> = Vec::new();
+        let mut pace: Option<f64> = None;
+        for p in curve.iter().filter(|p| p.bpm > 0.0 && p.time_s < duration) {
+            // After the first, a section keeps the dance's steps a beat where a style of that
+            // pace fits the tempo (a rumba's two steps a bar go on as a cha-cha's, not as a
+            // tango's), so its steps speed up with the beats.
+            let style = match pace {
+                None => self.predict_style(60.0 / p.bpm, meter).style,
+                Some(pace) => self.predict_style_at_pace(60.0 / p.bpm, meter, pace),
+            };
+            pace.get_or_insert(self.style_pace[style.index()]);
+            if out.last().is_none_or(|s| s.style != style) {
+                out.push(StyleSection {
+                    from_s: p.time_s,
+                    style,
+                });
+            }
+        }
+        // Short sections (a tempo curve passing another style's tempo on its way) join the
+        // section before them; the first section starts the song.
+        let mut merged: Vec<StyleSection> = Vec::new();
+        for (k, s) in out.iter().enumerate() {
+            let end = out.get(k + 1).map_or(duration, |n| n.from_s);
+            if end - s.from_s < MIN_SECTION_S && !merged.is_empty() {
+                continue;
+            }
+            if merged.last().is_some_and(|m| m.style == s.style) {
+                continue;
+            }
+            merged.push(*s);
+        }
+        match merged.first_mut() {
+            Some(first) => {
+                first.from_s = 0.0;
+                merged
+            }
+            None => whole,
+        }
+    }
+
+    /// The style whose tempo fits a beat of `beat_s` best, each style's distance
+    /// ([`style_distance`]) raised by how far its steps a beat are from `pace` (as a log ratio).
+    fn predict_style_at_pace(&self, beat_s: f64, meter: usize, pace: f64) -> DanceStyle {
+        self.file
+            .styles
+            .iter()
+            .filter(|p| p.units > 0)
+            .map(|p| {
+                let off = (self.style_pace[p.style.index()] / pace).ln().abs();
+                (p.style, style_distance(p, beat_s, meter) + off)
+            })
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or(DanceStyle::Rumba, |(st, _)| st)
     }
 
     /// Per unit: whether it may dance `style`, and at what cost: the style's, plus the seed's
@@ -185,13 +318,14 @@ impl Served {
         req: &GenerateRequest<'_>,
         analysis: &Analysis,
         music: ndarray::ArrayView2<'_, f32>,
-        style: DanceStyle,
+        sections: &[StyleSection],
         progress: &mut dyn Progress,
     ) -> Result<(crate::motion::Motion, Composition), ModelError> {
         let fps = self.file.fps;
         let n = music.nrows();
         let duration = n as f64 / fps;
         let keys = local_keys(req.key_poses, n, fps)?;
+        let style = main_style(sections, duration);
         let (beat_s, unit_meter) = self
             .file
             .styles
@@ -239,7 +373,21 @@ impl Served {
                 }
             })
             .collect();
-        let allowed = self.allowed(style, req.seed);
+        // One row of allowed units per style danced, and each slot pointing at its section's.
+        let rows: Vec<(DanceStyle, Vec<Option<f64>>)> = DanceStyle::ALL
+            .iter()
+            .filter(|st| sections.iter().any(|s| s.style == **st))
+            .map(|&st| (st, self.allowed(st, req.seed)))
+            .collect();
+        let allowed: Vec<&[Option<f64>]> = slots[first..]
+            .iter()
+            .map(|slot| {
+                let st = style_at(sections, 0.5 * (slot.t0 + slot.t1));
+                rows.iter()
+                    .find(|(s, _)| *s == st)
+                    .map_or(&rows[0].1[..], |(_, r)| &r[..])
+            })
+            .collect();
         let mut config = self.file.config.clone();
         config.gumbel_scale *= req.temperature.unwrap_or(1.0).max(0.0);
         let problem = Problem {
@@ -314,6 +462,11 @@ impl Served {
                 dances_used: dances.len(),
                 longest_copy_s,
                 joins_s,
+                sections: if sections.len() > 1 {
+                    sections.to_vec()
+                } else {
+                    Vec::new()
+                },
             },
         ))
     }
@@ -509,8 +662,9 @@ impl DanceModel for Served {
                 self.predict_style(beat, meter_of(&analysis))
             }
         };
+        let sections = self.sections(&analysis, &choice, n as f64 / fps);
         let (motion, composition) =
-            self.compose(req, &analysis, music.view(), choice.style, progress)?;
+            self.compose(req, &analysis, music.view(), &sections, progress)?;
         tracing::debug!(
             ?composition,
             style = choice.style.name(),

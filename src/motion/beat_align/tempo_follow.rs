@@ -81,6 +81,17 @@ fn longest_run(period: &[f64], keep: impl Fn(f64) -> bool) -> (usize, usize) {
     best
 }
 
+/// Whether the local beat (per frame) moves by [`CHANGE_RATIO`] between its p10 and p90.
+fn changes(period: &[f64]) -> bool {
+    percentile(period, 0.9) / percentile(period, 0.1) >= CHANGE_RATIO
+}
+
+/// Whether the song's tempo changes over a dance of `frames` at `fps` (what [`follow_tempo`]
+/// warps for).
+pub fn tempo_changes(beat_times_s: &[f64], frames: usize, fps: f64) -> bool {
+    local_beat(beat_times_s, frames, fps).is_some_and(|p| changes(&p))
+}
+
 /// The step rate (Hz) of frames `range` of `motion`.
 fn steps_hz(motion: &Motion, (a, b): (usize, usize)) -> Option<f64> {
     let p = motion.positions.slice(ndarray::s![a..b, .., ..]);
@@ -100,7 +111,7 @@ pub fn follow_tempo(motion: Motion, beat_times_s: &[f64], fixed: bool) -> Motion
         return motion;
     };
     let (p10, p90) = (percentile(&period, 0.1), percentile(&period, 0.9));
-    if p90 / p10 < CHANGE_RATIO {
+    if !changes(&period) {
         return motion;
     }
     let median = percentile(&period, 0.5);
