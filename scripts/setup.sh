@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what choreo needs, and only what is missing, so running it again is a no-op:
 #   - Debian packages to build (a C++ compiler for torch-sys) and to make the torch venv;
-#   - the Rust toolchain (rustup) when cargo is absent;
+#   - the Rust toolchain (rustup) when cargo is absent, and its rustfmt and clippy components;
 #   - libtorch: the PyPI torch wheel in .torchenv, with .torchenv/libtorch -> its torch/ folder
 #     (.cargo/config.toml points LIBTORCH there; build.rs gives the binary an rpath to it).
 # With --test it also installs what the test suite uses: ffmpeg and sox (fixtures in other
@@ -76,6 +76,19 @@ if ! python3 -c 'import venv, ensurepip' >/dev/null 2>&1; then apt_install pytho
 if ! command -v cargo >/dev/null 2>&1 && [[ ! -x "$HOME/.cargo/bin/cargo" ]]; then
   log "installing the Rust toolchain with rustup"
   curl --proto '=https' --tlsv1.2 -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal
+fi
+export PATH="$HOME/.cargo/bin:$PATH"
+# rustfmt and clippy, which `make test` runs before the suite (rust-toolchain.toml lists them
+# too); the minimal profile above has neither. Only when missing, so a toolchain that has both
+# needs no network here.
+if ! cargo fmt --version >/dev/null 2>&1 || ! cargo clippy --version >/dev/null 2>&1; then
+  if command -v rustup >/dev/null 2>&1; then
+    log "adding the rustfmt and clippy components"
+    rustup component add rustfmt clippy
+  else
+    log "cargo fmt or cargo clippy is missing and there is no rustup to add them: install rustfmt and clippy"
+    exit 1
+  fi
 fi
 
 # libtorch from the PyPI torch wheel. Checked by the installed dist-info, not by importing

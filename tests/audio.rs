@@ -570,7 +570,7 @@ fn click_track(
             break;
         }
         beats.push(t);
-        let accent = k % meter == 0;
+        let accent = k.is_multiple_of(meter);
         if accent {
             downs.push(t);
         }

@@ -263,11 +263,11 @@ fn formats_disagree_m(m: &rig::RigMotion) -> (f64, f64) {
     let (names, gw) = glb_world_positions(&export::glb_bytes(m).expect("glb"));
     assert_eq!(gw.len(), t_len);
     let mut worst_glb = 0.0f64;
-    for t in 0..t_len {
+    for (frame, json_frame) in gw.iter().zip(&json.positions) {
         for (j, name) in json.joint_names.iter().enumerate() {
             let k = names.iter().position(|n| n == name).expect("joint in glb");
-            for c in 0..3 {
-                worst_glb = worst_glb.max((gw[t][k][c] - f64::from(json.positions[t][j][c])).abs());
+            for (got, &want) in frame[k].iter().zip(&json_frame[j]) {
+                worst_glb = worst_glb.max((got - f64::from(want)).abs());
             }
         }
     }

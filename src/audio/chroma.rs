@@ -442,7 +442,7 @@ pub fn cqt_magnitude(
             }
         }
         responses.push(resp);
-        if my_hop % 2 == 0 && i + 1 < n_octaves {
+        if my_hop.is_multiple_of(2) && i + 1 < n_octaves {
             my_hop /= 2;
             my_sr /= 2.0;
             my_y = halver.halve(&my_y);

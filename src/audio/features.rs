@@ -61,6 +61,8 @@ pub const DANCENET_BEAT: usize = 1;
 pub const KEYPOSE_DIM: usize = 15;
 /// Width of the TSMT set.
 pub const TSMT_DIM: usize = 27;
+/// TSMT's ΔMFCC columns (after MFCC 13).
+pub const TSMT_DMFCC: Range<usize> = 13..26;
 /// The beat one-hot's column in TSMT's features (after MFCC 13 and its Δ).
 pub const TSMT_BEAT: usize = 26;
 
@@ -398,7 +400,7 @@ pub fn tsmt(
     let beats = beats_from_mel_db(&mel, &g);
     let mut out = Array2::<f32>::zeros((n_frames, TSMT_DIM));
     put(&mut out, 0..13, &mfcc, &p.rows);
-    put(&mut out, 13..26, &delta(&mfcc, 9), &p.rows);
+    put(&mut out, TSMT_DMFCC, &delta(&mfcc, 9), &p.rows);
     put_col(
         out.column_mut(TSMT_BEAT),
         &one_hot(&beats, mel.nrows()),

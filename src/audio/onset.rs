@@ -142,11 +142,11 @@ pub fn hpss_signal(y: &[f32], n_fft: usize, hop: usize) -> (Vec<f32>, Vec<f32>) 
         usize,
         (Vec<rustfft::num_complex::Complex32>, Vec<f32>),
     >| {
-        if !cache.contains_key(&t) {
+        cache.entry(t).or_insert_with(|| {
             let spec = stft.frame(y, t).to_vec();
             let mag = spec.iter().map(|c| dsp::magnitude(*c)).collect();
-            cache.insert(t, (spec, mag));
-        }
+            (spec, mag)
+        });
     };
     let ext = |j: isize| reflect(j, t_n);
     for j in -(half as isize)..=half as isize {

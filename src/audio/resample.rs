@@ -11,14 +11,15 @@ const RESAMPLE_CHUNK: usize = 4096;
 /// rubato's FFT resampler otherwise.
 pub(super) enum StreamResampler {
     Poly(PolyResampler),
-    Rubato(RubatoResampler),
+    /// Boxed: rubato's FFT state is several times the polyphase one's size.
+    Rubato(Box<RubatoResampler>),
 }
 
 impl StreamResampler {
     pub(super) fn new(sr_in: u32, sr_out: u32) -> Result<Self, AudioError> {
         match PolyResampler::new(sr_in, sr_out) {
             Some(p) => Ok(Self::Poly(p)),
-            None => Ok(Self::Rubato(RubatoResampler::new(sr_in, sr_out)?)),
+            None => Ok(Self::Rubato(Box::new(RubatoResampler::new(sr_in, sr_out)?))),
         }
     }
 

@@ -65,7 +65,7 @@ pub fn kinetic_features(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
             let mut m = 0usize;
             for off in -KINETIC_SLIDING_WINDOW..=KINETIC_SLIDING_WINDOW {
                 let f = i + off;
-                if f - 1 >= 0 && f < t as isize {
+                if f >= 1 && f < t as isize {
                     let d = sub(
                         at(&positions, f as usize, k),
                         at(&positions, f as usize - 1, k),
@@ -75,7 +75,7 @@ pub fn kinetic_features(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
                     }
                     n += 1;
                 }
-                if f - 1 >= 0 && f + 1 < t as isize {
+                if f >= 1 && f + 1 < t as isize {
                     let v2 = sub(
                         at(&positions, f as usize + 1, k),
                         at(&positions, f as usize, k),

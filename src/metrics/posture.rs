@@ -28,7 +28,7 @@ pub fn posture_variety_m(positions: ArrayView3<'_, f32>, fps: f64) -> Option<f64
     // turn with the arms, and a frame that followed them would take part of the arms' posture out.
     let [right_hip, left_hip] = HIPS;
     let w = (POSTURE_WINDOW_S * fps).round() as usize;
-    let n = if w == 0 { 0 } else { positions.shape()[0] / w };
+    let n = positions.shape()[0].checked_div(w).unwrap_or(0);
     if n <= POSTURE_GAP_WINDOWS || positions.shape()[1] <= left_hip {
         return None;
     }

@@ -138,10 +138,11 @@ impl MultiHeadAttention {
             .view([b, n, 3, h, dh])
             .permute([2, 0, 3, 1, 4]);
         let (q, k, v) = (qkv.get(0), qkv.get(1), qkv.get(2));
-        let mut scores = q.matmul(&k.transpose(-1, -2)) / (dh as f64).sqrt(); // [b, h, n, n]
-        if let Some(m) = mask {
-            scores = scores + m;
-        }
+        let scores = q.matmul(&k.transpose(-1, -2)) / (dh as f64).sqrt(); // [b, h, n, n]
+        let scores = match mask {
+            Some(m) => scores + m,
+            None => scores,
+        };
         scores
             .softmax(-1, Kind::Float)
             .matmul(&v)
@@ -170,11 +171,13 @@ impl MultiHeadAttention {
             Some(c) => Tensor::cat(&[c.shallow_clone(), v], 2),
             None => v,
         };
-        let mut scores = q.matmul(&k.transpose(-1, -2)) / (dh as f64).sqrt(); // [b, h, m, past + m]
-        if m > 1 {
-            let full = causal_mask(past + m, x.device()).narrow(0, past, m);
-            scores = scores + full;
-        }
+        let scores = q.matmul(&k.transpose(-1, -2)) / (dh as f64).sqrt(); // [b, h, m, past + m]
+                                                                          // One new step may attend to every cached one and itself: no mask to add.
+        let scores = if m > 1 {
+            scores + causal_mask(past + m, x.device()).narrow(0, past, m)
+        } else {
+            scores
+        };
         let y = scores
             .softmax(-1, Kind::Float)
             .matmul(&v)

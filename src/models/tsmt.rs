@@ -450,11 +450,12 @@ impl Tsmt {
     ) -> Tensor {
         let n = input.size()[1] - 1;
         let emb = input.narrow(1, 0, n).apply(&self.bin_embed); // [b, n, coords, e_bin]
-        let mut x = self.pose.merge(&emb, start);
+        let x = self.pose.merge(&emb, start);
         let step = self.clock.as_ref().zip(clock);
-        if let Some((k, c)) = step {
-            x = x + c.narrow(1, 0, n).apply(&k.pose);
-        }
+        let x = match step {
+            Some((k, c)) => x + c.narrow(1, 0, n).apply(&k.pose),
+            None => x,
+        };
         let x = x.dropout(self.config.dropout, train);
         let mask = super::layers::causal_mask(n, input.device());
         let z_x = self.pose.stack.forward(&x, Some(&mask), train); // [b, n, d_x]
@@ -550,10 +551,11 @@ impl Tsmt {
         caches: &mut [KvCache],
     ) -> Tensor {
         let emb = tokens.view([1, 1, -1]).apply(&self.bin_embed); // [1, 1, coords, e_bin]
-        let mut x = self.pose.merge(&emb, pos);
-        if let Some((k, c)) = self.clock.as_ref().zip(clock) {
-            x = x + c.view([1, 1, -1]).apply(&k.pose);
-        }
+        let x = self.pose.merge(&emb, pos);
+        let x = match self.clock.as_ref().zip(clock) {
+            Some((k, c)) => x + c.view([1, 1, -1]).apply(&k.pose),
+            None => x,
+        };
         let z = self.pose.stack.forward_cached(&x, caches);
         for c in caches.iter_mut() {
             c.keep_last(self.config.window - 1);

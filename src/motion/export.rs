@@ -210,7 +210,7 @@ pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
                    count: usize,
                    min_max: Option<(serde_json::Value, serde_json::Value)>|
      -> gj::Index<gj::Accessor> {
-        while bin.len() % 4 != 0 {
+        while !bin.len().is_multiple_of(4) {
             bin.push(0);
         }
         let offset = bin.len();
@@ -406,7 +406,7 @@ pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
     });
     // A figure for viewers to show: the skin's mannequin, made from the rig.
     super::mannequin::attach(&mut root, &mut bin, &m.rig, skin, scene)?;
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     root.push(gj::Buffer {

@@ -395,12 +395,12 @@ mod tests {
             joints: Some(to_f64(&json.positions[f])),
             bvh: None,
         };
-        let keys =
-            key_poses(&[input.clone()], 30, MOTION_FPS).expect("a motion.json frame is a key pose");
+        let keys = key_poses(std::slice::from_ref(&input), 30, MOTION_FPS)
+            .expect("a motion.json frame is a key pose");
         let centre = json.positions[f][0];
         for j in 0..NUM_JOINTS {
-            for c in 0..3 {
-                let want = f64::from(json.positions[f][j + 1][c]) - f64::from(centre[c]);
+            for (c, &centre_c) in centre.iter().enumerate() {
+                let want = f64::from(json.positions[f][j + 1][c]) - f64::from(centre_c);
                 assert!((keys[0].joints[j][c] - want).abs() < 1e-6, "joint {j}");
             }
         }

@@ -146,7 +146,7 @@ pub fn encode(rig: &Rig, positions: ArrayView3<'_, f32>, fps: f64) -> Result<Enc
     }
     let rigid = solve(rig, positions, root.view(), fps)?;
     let t_len = rigid.num_frames();
-    let frames: Vec<(Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>)> = (0..t_len)
+    let frames: Vec<_> = (0..t_len)
         .map(|t| fk_frame(rig, &rigid.root_translation[t], &rigid.rotations[t]))
         .collect();
     let mut rigid_positions = Array3::<f32>::zeros((t_len, NUM_JOINTS, 3));

@@ -93,9 +93,9 @@ impl Pipeline {
         progress: &mut dyn Progress,
     ) -> Result<DecodedAudio, WorkerError> {
         let _timer = StageTimer::start(kind, Stage::DecodeAudio);
-        Ok(self.budgeted(progress, Stage::DecodeAudio, 0.0, |budget| {
+        self.budgeted(progress, Stage::DecodeAudio, 0.0, |budget| {
             self.decode_within(song, keep, budget)
-        })?)
+        })
     }
 
     /// The stored song decoded at `keep`, within `budget` and the song length limit.

@@ -51,7 +51,7 @@ async fn fifty_concurrent_uploads_while_polling() {
             while !done.load(Ordering::Relaxed) {
                 tick.tick().await;
                 n += 1;
-                let path = if n % 2 == 0 {
+                let path = if n.is_multiple_of(2) {
                     "/v1/jobs?limit=20"
                 } else {
                     "/healthz"

@@ -101,9 +101,7 @@ async fn a_one_kilobyte_bvh_is_refused_everywhere_and_the_server_lives() {
     let rig = upload_rig(&client, &serve.url, "nan.bvh", nan.into_bytes()).await;
     let problem = expect_problem(rig, StatusCode::UNPROCESSABLE_ENTITY, "motion-not-finite").await;
     assert_eq!(problem["field"], "file", "{problem}");
-    let seed = format!(
-        "HIERARCHY\nROOT body_centre\n{{\nOFFSET 0 inf 0\nCHANNELS 3 Zrotation Yrotation Xrotation\n}}\nMOTION\nFrames: 1\nFrame Time: 0.04\n0 0 0\n"
-    );
+    let seed = "HIERARCHY\nROOT body_centre\n{\nOFFSET 0 inf 0\nCHANNELS 3 Zrotation Yrotation Xrotation\n}\nMOTION\nFrames: 1\nFrame Time: 0.04\n0 0 0\n";
     let response = client
         .post(format!("{}/v1/jobs", serve.url))
         .json(

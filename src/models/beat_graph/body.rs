@@ -8,8 +8,8 @@ use crate::motion::NUM_JOINTS;
 fn outward() -> Vec<usize> {
     let mut order: Vec<usize> = Vec::with_capacity(NUM_JOINTS);
     while order.len() < NUM_JOINTS {
-        for j in 0..NUM_JOINTS {
-            let ready = PARENTS[j].is_none_or(|p| order.contains(&p));
+        for (j, parent) in PARENTS.iter().enumerate() {
+            let ready = parent.is_none_or(|p| order.contains(&p));
             if ready && !order.contains(&j) {
                 order.push(j);
             }

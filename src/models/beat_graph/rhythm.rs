@@ -120,7 +120,7 @@ pub fn motion_descriptor(rows: ArrayView2<'_, f32>, fps: f64) -> [f32; MOTION_DI
         turn += f64::from(r[YAW_VEL]).abs();
     }
     let per_s = fps / (t - 1) as f64;
-    debug_assert!(POSE_DIM == 3 * NUM_JOINTS);
+    const { assert!(POSE_DIM == 3 * NUM_JOINTS) };
     [
         (body * per_s + 0.05).ln() as f32,
         (wrist * per_s + 0.05).ln() as f32,
@@ -171,12 +171,13 @@ impl Match {
         let mut a = vec![vec![0.0; p]; p];
         let mut b = vec![vec![0.0; dy]; p];
         for i in 0..music.nrows() {
-            for r in 0..p {
-                for c in 0..p {
-                    a[r][c] += x(i, r) * x(i, c);
+            for (r, (a_row, b_row)) in a.iter_mut().zip(b.iter_mut()).enumerate() {
+                let x_r = x(i, r);
+                for (c, v) in a_row.iter_mut().enumerate() {
+                    *v += x_r * x(i, c);
                 }
-                for c in 0..dy {
-                    b[r][c] += x(i, r) * f64::from(motion[[i, c]]);
+                for (c, v) in b_row.iter_mut().enumerate() {
+                    *v += x_r * f64::from(motion[[i, c]]);
                 }
             }
         }
@@ -257,23 +258,19 @@ fn solve(mut a: Vec<Vec<f64>>, mut b: Vec<Vec<f64>>) -> Vec<Vec<f64>> {
         } else {
             a[col][col]
         };
-        for c in 0..p {
-            a[col][c] /= d;
-        }
-        for v in b[col].iter_mut() {
+        for v in a[col].iter_mut().chain(b[col].iter_mut()) {
             *v /= d;
         }
-        for r in 0..p {
-            if r != col {
-                let f = a[r][col];
-                if f != 0.0 {
-                    for c in 0..p {
-                        a[r][c] -= f * a[col][c];
-                    }
-                    let bc = b[col].clone();
-                    for (v, w) in b[r].iter_mut().zip(bc) {
-                        *v -= f * w;
-                    }
+        // The pivot row is copied so that every other row can be borrowed mutably against it.
+        let (a_col, b_col) = (a[col].clone(), b[col].clone());
+        for (r, (a_row, b_row)) in a.iter_mut().zip(b.iter_mut()).enumerate() {
+            let f = a_row[col];
+            if r != col && f != 0.0 {
+                for (v, w) in a_row.iter_mut().zip(&a_col) {
+                    *v -= f * w;
+                }
+                for (v, w) in b_row.iter_mut().zip(&b_col) {
+                    *v -= f * w;
                 }
             }
         }

@@ -166,7 +166,7 @@ fn expand(
     let prev = &layers[i - 1];
     let mut next: Vec<Node> = Vec::with_capacity(prev.len() * (config.graph_degree + 1));
     for (b, node) in prev.iter().enumerate() {
-        let history = history(&layers, i - 1, b, config.repetition_beats);
+        let history = history(layers, i - 1, b, config.repetition_beats);
         let unit = &lib.units[node.unit];
         let natural = unit
             .next

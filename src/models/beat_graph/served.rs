@@ -142,7 +142,7 @@ impl Served {
     /// Loads `dir/model.json` and the library in `dir/weights.safetensors`.
     pub fn load(dir: &Path) -> Result<Self, ModelError> {
         let file: ModelFile = folder::read(dir, ID)?;
-        if !file.matcher.is_well_formed() || !(file.fps > 0.0) {
+        if !file.matcher.is_well_formed() || file.fps.is_nan() || file.fps <= 0.0 {
             return Err(ModelError::BadModelFile(format!(
                 "{ID}/model.json: the music match or the frame rate is malformed"
             )));

@@ -58,7 +58,7 @@ impl MusicLayout {
     pub fn tsmt() -> Self {
         Self {
             one_hot: vec![crate::audio::features::TSMT_BEAT],
-            rates: vec![13..26],
+            rates: vec![crate::audio::features::TSMT_DMFCC],
             ..Default::default()
         }
     }
@@ -304,9 +304,10 @@ mod tests {
             m[[k, 0]] = 1.0;
         }
         m.column_mut(1).assign(&Array1::linspace(0.0, 99.0, 100));
+        const RATE_COLUMNS: Range<usize> = 2..3;
         let layout = MusicLayout {
             one_hot: vec![0],
-            rates: vec![2..3],
+            rates: vec![RATE_COLUMNS],
             ..Default::default()
         };
         m.column_mut(2).fill(1.0);

@@ -155,7 +155,7 @@ fn ankle_activity(lib: &Library, u: &Unit) -> f64 {
 fn align_steps(lib: &mut Library) {
     let dances = lib.dance_first.len() - 1;
     let mut profiles: Vec<Vec<f64>> = vec![Vec::new(); dances];
-    for d in 0..dances {
+    for (d, profile) in profiles.iter_mut().enumerate() {
         let of: Vec<&Unit> = lib.units.iter().filter(|u| u.dance == d).collect();
         let Some(meter) = of.first().map(|u| u.meter) else {
             continue;
@@ -167,7 +167,7 @@ fn align_steps(lib: &mut Library) {
             n[u.phase % meter] += 1;
         }
         let mean = p.iter().sum::<f64>() / of.len().max(1) as f64;
-        profiles[d] = (0..meter)
+        *profile = (0..meter)
             .map(|k| p[k] / n[k].max(1) as f64 / mean.max(1e-9) - 1.0)
             .collect();
     }
@@ -359,7 +359,7 @@ pub fn train(o: &Options) -> Result<ModelFile, TrainError> {
             c.units.iter().map(|u| (c.rows.view(), u.start, u.end)),
             fps,
         ));
-        test_dance.extend(std::iter::repeat(d).take(c.units.len()));
+        test_dance.extend(std::iter::repeat_n(d, c.units.len()));
         test_music.push(c.music);
     }
     let test_music = stack(&test_music, MUSIC_DIM);

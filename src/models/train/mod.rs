@@ -364,7 +364,10 @@ impl Trainer {
             append_log(&self.out.join(self.files.log), &line)?;
             self.logs.push(line);
             let out_of_time = self.deadline.expired();
-            if (epoch + 1 - epochs.start) % save_every.max(1) == 0 || epoch == last || out_of_time {
+            if (epoch + 1 - epochs.start).is_multiple_of(save_every.max(1))
+                || epoch == last
+                || out_of_time
+            {
                 self.save(&file(self))?;
             }
             if out_of_time {

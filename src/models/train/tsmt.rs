@@ -504,9 +504,13 @@ pub fn train(opts: &Options) -> Result<Vec<EpochLog>, TrainError> {
                 let mut loss = model.loss_on_frames(&fused, &target, &Tensor::from_slice(&idx));
                 if let (Some(k), true) = (&clock, opts.lock_weight > 0.0) {
                     let capped = !opts.lock_uncapped;
-                    let l = lock::term(
-                        &model, &fused, &input, own.as_ref(), &target, k, &bins, skip as i64, capped,
-                    );
+                    let batch = lock::Batch {
+                        input: &input,
+                        own: own.as_ref(),
+                        target: &target,
+                        clock: k,
+                    };
+                    let l = lock::term(&model, &fused, &batch, &bins, skip as i64, capped);
                     if let Some(l) = l {
                         loss += l.loss * opts.lock_weight;
                         lock_danced += l.danced;

@@ -258,11 +258,11 @@ impl Bvh {
         let mut rotations = Vec::with_capacity(self.num_frames);
         for t in 0..self.num_frames {
             let (trans, rots) = self.local_pose(t);
-            for j in 1..self.names.len() {
-                if (trans[j] - self.offsets[j]).norm() > 0.0 {
+            let joints = trans.iter().zip(&self.offsets).zip(&self.names);
+            for ((at, offset), name) in joints.skip(1) {
+                if (at - offset).norm() > 0.0 {
                     return Err(MotionError::Invalid(format!(
-                        "joint {} has position channels; only the root may",
-                        self.names[j]
+                        "joint {name} has position channels; only the root may"
                     )));
                 }
             }

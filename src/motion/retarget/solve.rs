@@ -599,8 +599,7 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     // markers): 6-7 cm on a dancenet dance onto Mixamo, which the IK took up by bending the knees
     // (11-12° off motion.json's, median). The root moves instead, by the supporting feet's gap,
     // weighted by how firmly each stands and smoothed over ±HIP_SHIFT_WINDOW frames.
-    let legs: Vec<[(Vector3<f64>, Vector3<f64>, f64); 2]> =
-        (0..t_len).map(|t| parts(t, &roots[t])).collect();
+    let legs: Vec<_> = (0..t_len).map(|t| parts(t, &roots[t])).collect();
     let gaps: Vec<(Vector3<f64>, f64)> = legs
         .iter()
         .map(|pr| {

@@ -310,8 +310,9 @@ fn least_squares_keeps_the_root_track_and_turns_smoothly() {
     let m = solve_least_squares(&rig, pos.view(), root.view(), 25.0).expect("solve");
     let err = joint_errors(m.joint_positions().view(), pos.view()).fold(0.0f32, |a, &b| a.max(b));
     assert!(err < 1e-3, "max error {err} m");
-    for t in 0..t_len {
-        let off = (m.root_translation[t] - roots[t]).norm();
+    assert_eq!(m.root_translation.len(), t_len);
+    for (t, (got, want)) in m.root_translation.iter().zip(&roots).enumerate() {
+        let off = (got - want).norm();
         assert!(off < 1e-3, "frame {t}: the root is {off} m off its track");
     }
     // The root and its children (spine, pelvis); further down, the twist of a limb its

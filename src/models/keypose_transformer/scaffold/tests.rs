@@ -18,7 +18,7 @@ fn same_seed_same_scaffold_and_other_seeds_differ() {
     let others: Vec<_> = (2..6)
         .map(|s| b.scaffold(s, 200, 5, 10, &[]).seed)
         .collect();
-    assert!(others.iter().any(|o| o != &a.seed));
+    assert!(others.iter().any(|o| *o != a.seed));
     // Poses every 10 frames after the seed, following the clip's own timing.
     let frames: Vec<usize> = a.poses.iter().map(|p| p.0).collect();
     assert_eq!(frames, (14..200).step_by(10).collect::<Vec<_>>());

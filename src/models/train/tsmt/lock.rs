@@ -134,26 +134,39 @@ pub(super) fn clocked(clock: &Tensor) -> Option<Tensor> {
     (keep.size()[0] > 0).then_some(keep)
 }
 
+/// One training batch as the pass read it.
+pub(super) struct Batch<'a> {
+    /// The tokens the pass read `[b, n + 1, coords]`.
+    pub input: &'a Tensor,
+    /// `[b, n + 1]`: the frames of `input` that are the network's own draws (the rest are the
+    /// dance, noised).
+    pub own: Option<&'a Tensor>,
+    /// The dance's tokens `[b, n + 1, coords]`.
+    pub target: &'a Tensor,
+    /// The windows' clocks `[b, n + 1, WIDTH]`.
+    pub clock: &'a Tensor,
+}
+
 /// The term of one batch: `fused` the training pass's fused vectors (`Tsmt::fused`) of frames
-/// 1..=n, `input` the tokens it read `[b, n + 1, coords]`, `own` `[b, n + 1]` the frames of
-/// `input` that are the network's own draws (the rest are the dance, noised), `target` the
-/// dance's tokens and `clock` `[b, n + 1, WIDTH]` the windows' clocks. Each frame's speed is
-/// from the frame before it as the network would have it without the noise (its own draw, or
-/// the dance) to the expected next frame. Only frames `skip + 1..=n` are scored (after a warped
-/// history, `train::tsmt::warp`). `capped`: the loss is the shortfall against the real
-/// continuation's score, else the score's negative (`--lock-uncapped`). Windows without two
-/// beats are left out; `None` when none is left.
+/// 1..=n of `batch`. Each frame's speed is from the frame before it as the network would have
+/// it without the noise (its own draw, or the dance) to the expected next frame. Only frames
+/// `skip + 1..=n` are scored (after a warped history, `train::tsmt::warp`). `capped`: the loss
+/// is the shortfall against the real continuation's score, else the score's negative
+/// (`--lock-uncapped`). Windows without two beats are left out; `None` when none is left.
 pub(super) fn term(
     model: &Tsmt,
     fused: &Tensor,
-    input: &Tensor,
-    own: Option<&Tensor>,
-    target: &Tensor,
-    clock: &Tensor,
+    batch: &Batch<'_>,
     bins: &Bins,
     skip: i64,
     capped: bool,
 ) -> Option<Lock> {
+    let Batch {
+        input,
+        own,
+        target,
+        clock,
+    } = *batch;
     let n = target.size()[1] - 1;
     let (idx, centres) = toe_centres(bins);
     let values = |tokens: &Tensor| values_of(tokens, &idx, &centres);
@@ -237,13 +250,13 @@ mod tests {
         let phase: Vec<f64> = (0..n)
             .map(|t| f64::from(clock[[t, 0]]).atan2(f64::from(clock[[t, 1]])))
             .collect();
-        for t in 0..n {
+        for (t, &got) in phase.iter().enumerate() {
             let count = ((m - n + t) as f64 - 2.0) / beat;
             let want =
                 (std::f64::consts::TAU * count / 3.0 - 1.1).rem_euclid(std::f64::consts::TAU);
-            let d = (phase[t].rem_euclid(std::f64::consts::TAU) - want).abs();
+            let d = (got.rem_euclid(std::f64::consts::TAU) - want).abs();
             let d = d.min(std::f64::consts::TAU - d);
-            assert!(d < 0.1, "frame {t}: phase {} against {want}", phase[t]);
+            assert!(d < 0.1, "frame {t}: phase {got} against {want}");
         }
         let silent = Array2::<f32>::zeros((m, crate::audio::features::TSMT_DIM));
         assert!(window_clock(poses.view(), silent.view(), n)
