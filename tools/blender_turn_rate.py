@@ -8,7 +8,7 @@ the scaffold's clips', real waltzes 56–70°/s) were read this way from `choreo
 """
 import sys, json, math
 import os
-sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests", "blender"))
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import blender_compat  # noqa: F401  (patches Debian's importers)
 from blender_compat import keyframe_frames
 import bpy

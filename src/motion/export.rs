@@ -184,10 +184,27 @@ pub fn bvh_string(m: &RigMotion) -> Result<String, MotionError> {
     super::bvh::write_bvh(m)
 }
 
-/// The binary glTF 2.0 (.glb) of a prepared motion: one node per joint in the rig's hierarchy, a
-/// skin over them (so tools treat it as a skeleton), and one animation with the root's
-/// translation and every joint's rotation, linear, one key per frame.
+/// The skin's name in choreo's own glb (what Blender names its armature).
+pub const CHOREO_ARMATURE: &str = "choreo_skeleton";
+
+/// The binary glTF 2.0 (.glb) of a prepared motion on choreo's rig: [`glb_bytes_named`] with
+/// [`CHOREO_ARMATURE`].
 pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
+    glb_bytes_named(m, CHOREO_ARMATURE)
+}
+
+/// The binary glTF 2.0 (.glb) of a prepared motion: one node per joint in the rig's hierarchy, a
+/// skin called `armature` over them (so tools treat it as a skeleton; Blender's importer names
+/// the armature after it), and one animation with the root's translation and every joint's
+/// rotation, linear, one key per frame at `t / fps` seconds.
+///
+/// glTF has no frame rate: times are seconds, and Blender's importer puts each key on frame
+/// `time × the scene's fps`, so the dance lasts its seconds at any scene rate but keys land
+/// between frames unless the scene runs at the dance's rate. The frame rate goes where a tool
+/// can read it before importing: `extras.fps` on the scene (Blender copies a scene's extras
+/// into its custom properties) and on the animation (with `extras.frames`).
+/// `tools/blender_import.py` sets the scene's rate from it.
+pub fn glb_bytes_named(m: &RigMotion, armature: &str) -> Result<Vec<u8>, MotionError> {
     let t_len = m.num_frames();
     let n = m.rig.names.len();
     if t_len == 0 {
@@ -324,7 +341,7 @@ pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
         extras: Default::default(),
         inverse_bind_matrices: Some(ibm_acc),
         joints: (0..n).map(|j| gj::Index::new(j as u32)).collect(),
-        name: Some("choreo_skeleton".into()),
+        name: Some(armature.to_string()),
         skeleton: Some(gj::Index::new(root_joint as u32)),
     });
 
@@ -417,9 +434,13 @@ pub fn glb_bytes(m: &RigMotion) -> Result<Vec<u8>, MotionError> {
         extras: Default::default(),
     });
 
-    let mut json = root
-        .to_vec()
-        .map_err(|e| MotionError::Export(format!("glTF JSON: {e}")))?;
+    let mut doc =
+        serde_json::to_value(&root).map_err(|e| MotionError::Export(format!("glTF JSON: {e}")))?;
+    // gltf-json's `extras` need a serde_json feature the rest of the build does without.
+    doc["scenes"][0]["extras"] = serde_json::json!({ "fps": m.fps });
+    doc["animations"][0]["extras"] = serde_json::json!({ "fps": m.fps, "frames": t_len });
+    let mut json =
+        serde_json::to_vec(&doc).map_err(|e| MotionError::Export(format!("glTF JSON: {e}")))?;
     while json.len() % 4 != 0 {
         json.push(b' ');
     }

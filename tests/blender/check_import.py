@@ -17,7 +17,7 @@ import traceback
 import bpy
 import mathutils
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools"))
 from blender_compat import builtin_open, keyframe_frames  # noqa: E402 (after the path)
 
 

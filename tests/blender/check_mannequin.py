@@ -18,7 +18,7 @@ import traceback
 
 import bpy
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools"))
 from blender_compat import keyframe_frames  # noqa: E402 (after the path)
 
 

@@ -8,7 +8,7 @@ FRAMES is a comma-separated list of frame indices (0-based, the dance's frames).
 holds, for each of "bvh" and "glb": the armatures' bone names, the frame count (from the
 action's keyframes), and per asked frame the head of every pose bone in choreo's axes (y up:
 Blender's (x, y, z) is choreo's (x, -z, y)). The caller compares angles between bones with
-motion.json's. Importer quirks of Debian's Blender 3.4.1 are patched by blender_compat.py.
+motion.json's. Importer quirks of Debian's Blender 3.4.1 are patched by tools/blender_compat.py.
 """
 import json
 import os
@@ -17,7 +17,7 @@ import traceback
 
 import bpy
 
-sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "tools"))
 from blender_compat import builtin_open, keyframe_frames  # noqa: E402 (after the path)
 
 
@@ -30,6 +30,7 @@ def dump(importer, frames_wanted):
     res = {"status": sorted(status), "armatures": len(arms)}
     if not arms:
         return res
+    res["armature_names"] = [a.name for a in arms]
     res["bones"] = [b.name for a in arms for b in a.data.bones]
     keys = keyframe_frames(new)
     res["frames"] = len(keys)

@@ -23,6 +23,7 @@ fn skeleton() -> TargetSkeleton {
             ],
         },
         humanoid: vec![Some(HumanBone::Hips), Some(HumanBone::Spine), None],
+        armature: "Avatar".into(),
     }
 }
 

@@ -201,10 +201,10 @@ pub fn joints() -> Vec<BodyJoint> {
     out
 }
 
-/// The reference body as a target skeleton, each joint named by `name` (the target's own
-/// naming of the joint's key). Offsets are in the parent's frame with identity rest rotations
+/// The reference body as a target skeleton called `armature`, each joint named by `name` (the
+/// target's own naming of the joint's key). Offsets are in the parent's frame with identity rest rotations
 /// (the T-pose); the root's offset is zero, its rest position carried by the root translation.
-pub fn skeleton(name: impl Fn(&BodyJoint) -> String) -> super::TargetSkeleton {
+pub fn skeleton(armature: &str, name: impl Fn(&BodyJoint) -> String) -> super::TargetSkeleton {
     let joints = joints();
     let offsets = joints
         .iter()
@@ -220,5 +220,6 @@ pub fn skeleton(name: impl Fn(&BodyJoint) -> String) -> super::TargetSkeleton {
             offsets,
         },
         humanoid: joints.iter().map(|j| j.bone).collect(),
+        armature: armature.to_string(),
     }
 }

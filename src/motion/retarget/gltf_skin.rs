@@ -32,10 +32,12 @@ pub struct Document {
     pub skins: Vec<Skin>,
 }
 
-/// A skin: the nodes that are its joints.
+/// A skin: the nodes that are its joints, and its name.
 #[derive(Deserialize)]
 pub struct Skin {
     pub joints: Vec<u32>,
+    #[serde(default)]
+    pub name: Option<String>,
 }
 
 /// A node's local transform as stored.
@@ -301,7 +303,16 @@ pub(super) fn read_gltf(json: &[u8]) -> Result<Raw, RigFileError> {
         .enumerate()
         .map(|(new, &old)| (old, new))
         .collect();
+    // The armature as Blender's importer names it: the node the root joint hangs from, else the
+    // skin.
+    let armature = (0..joints.len())
+        .find(|&k| parents[k].is_none())
+        .and_then(|k| parent_of(joints[k]))
+        .and_then(|node| nodes.name(node).map(str::to_string))
+        .or_else(|| skin.name.clone())
+        .filter(|n| !n.trim().is_empty());
     Ok(Raw {
+        armature,
         names: order.iter().map(|&j| names[j].clone()).collect(),
         parents: order
             .iter()

@@ -44,7 +44,9 @@ fn name(joint: &BodyJoint) -> &'static str {
     }
 }
 
-/// The `mixamo` target: 25 joints named `mixamorig:*`, T-pose, metres.
+/// The `mixamo` target: 25 joints named `mixamorig:*`, T-pose, metres, in an armature called
+/// `Armature` as Mixamo's own downloads have it (scripts written for Mixamo characters look
+/// for it).
 pub fn mixamo() -> TargetSkeleton {
-    body::skeleton(|j| format!("{PREFIX}{}", name(j)))
+    body::skeleton(super::DEFAULT_ARMATURE, |j| format!("{PREFIX}{}", name(j)))
 }

@@ -154,7 +154,13 @@ pub struct TargetSkeleton {
     /// For each joint of `rig`, the humanoid bone it is; `None` for joints the dance does not
     /// drive (they keep their rest rotation).
     pub humanoid: Vec<Option<HumanBone>>,
+    /// What the skeleton is called in the files: the glb's skin, which Blender's importer names
+    /// the armature after (Mixamo's own downloads import as `Armature`).
+    pub armature: String,
 }
+
+/// The armature name of a skeleton whose file gave it none: Blender's and Mixamo's default.
+pub const DEFAULT_ARMATURE: &str = "Armature";
 
 /// The built-in targets' names (`choreo`, the dance's own rig, is no target: nothing to solve).
 pub const BUILTINS: [&str; 3] = ["mixamo", "vrm", "smpl"];
@@ -197,7 +203,8 @@ pub fn render(
         Format::Bvh => super::bvh::write_bvh(&retarget(src, target)?)
             .map(String::into_bytes)
             .map_err(export),
-        Format::Glb => super::export::glb_bytes(&retarget(src, target)?).map_err(export),
+        Format::Glb => super::export::glb_bytes_named(&retarget(src, target)?, &target.armature)
+            .map_err(export),
         Format::Vrma => {
             let target = vrm();
             vrma_bytes(&retarget(src, &target)?, &target)

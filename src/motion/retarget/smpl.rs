@@ -155,7 +155,11 @@ const BONES: [Option<HumanBone>; 24] = [
 /// Betas written (AMASS's count).
 pub const NUM_BETAS: usize = 16;
 
-/// The `smpl` target: SMPL's 24 joints, approximate T-pose rest, metres.
+/// The name of the [`smpl`] target's armature.
+pub const ARMATURE: &str = "SMPL";
+
+/// The `smpl` target: SMPL's 24 joints, approximate T-pose rest, metres, in an armature called
+/// [`ARMATURE`].
 pub fn smpl() -> TargetSkeleton {
     let p = |j: usize| Vector3::from(REST[j]);
     let offsets = (0..24)
@@ -168,6 +172,7 @@ pub fn smpl() -> TargetSkeleton {
             offsets,
         },
         humanoid: BONES.to_vec(),
+        armature: ARMATURE.to_string(),
     }
 }
 

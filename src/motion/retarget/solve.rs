@@ -13,9 +13,11 @@
 //!    this frame. So every mapped bone points where choreo's points, and its twist about itself is
 //!    choreo's own (continuous wherever choreo's fit is: this solver adds no twist of its own).
 //! 2. **What choreo does not have** follows its parent (local rotation = rest): the clavicles,
-//!    hands and toes, and every joint with no humanoid bone. The spine bones (spine, chest, upper
-//!    chest) turn as one, the torso (choreo has one spine joint); the neck takes half the head's
-//!    turn from the torso.
+//!    hands and toes, and every joint with no humanoid bone. The torso's twist from the hips
+//!    (choreo has one spine joint) is spread evenly over the spine bones the target has (spine,
+//!    chest, upper chest), its bend on the first, the last ending where the torso is; the head faces within
+//!    [`HEAD_TURN_KEPT_DEG`] of the torso (the capture's head markers swap); the neck takes half
+//!    the head's turn from the torso.
 //! 3. **Scale.** The target's hips go where choreo's hips go, scaled by the ratio of leg lengths
 //!    (thigh + shin), the floor (choreo's, the 1st percentile of its lowest foot point) on y = 0.
 //! 4. **Foot IK.** A foot near the floor (choreo's lowest point of it within
@@ -40,6 +42,11 @@ use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
 use super::{HumanBone, RetargetError, TargetSkeleton};
 use crate::motion::rig::{fk_frame, RigMotion};
 
+/// How far (degrees) the head's twist from the torso is kept as the markers give it; beyond, it
+/// is turned back towards the torso ([`face_with_torso`]). 60°: 90 % of frames of the dances
+/// whose head markers do not swap lie within 33-60°.
+pub const HEAD_TURN_KEPT_DEG: f64 = 60.0;
+
 /// Half-width (frames) of the window over which a lowering of the hips is spread.
 pub const DROP_WINDOW: usize = 4;
 /// Half-width (frames) of the window over which the hips' shift onto the supporting feet is
@@ -55,7 +62,7 @@ const KNEE_FORWARD_M: f64 = 0.02;
 type WorldPose = (Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>);
 
 /// Choreo joints the solver reads, by name (motion.json's `joint_names`).
-const CHOREO_JOINTS: [&str; 19] = [
+const CHOREO_JOINTS: [&str; 21] = [
     "pelvis",
     "spine",
     "neck",
@@ -63,9 +70,11 @@ const CHOREO_JOINTS: [&str; 19] = [
     "head_right",
     "left_shoulder",
     "left_elbow",
+    "left_forearm",
     "left_wrist",
     "right_shoulder",
     "right_elbow",
+    "right_forearm",
     "right_wrist",
     "left_hip",
     "left_knee",
@@ -137,8 +146,15 @@ fn aim(b: HumanBone) -> Option<Aim> {
             &[B::LeftUpperArm],
             &[B::LeftLowerArm],
         ),
+        // The lower arms take choreo's forearm joint's rotation, not the elbow's: choreo's elbow
+        // joint hangs the forearm marker and the hand-direction point off one rotation, and where
+        // the two disagree it spins up to 55° a frame while its forearm joint turns back (the
+        // forearm's world rotation 9-23° a frame where the elbow's turned 45-55°, a
+        // dance-revolution dance). Driven by the elbow, a target's lower arm turned 61-66° in a
+        // frame on 1.7 % of that dance's steps; by the forearm, on 3 of its 1145 steps (63° at
+        // most), where the forearm's own turn is at choreo's 55° limit.
         B::LeftLowerArm => a(
-            "left_elbow",
+            "left_forearm",
             &["left_elbow"],
             &["left_wrist"],
             &[B::LeftLowerArm],
@@ -152,7 +168,7 @@ fn aim(b: HumanBone) -> Option<Aim> {
             &[B::RightLowerArm],
         ),
         B::RightLowerArm => a(
-            "right_elbow",
+            "right_forearm",
             &["right_elbow"],
             &["right_wrist"],
             &[B::RightLowerArm],
@@ -747,17 +763,24 @@ fn world_rotations(
             None => inherited(&w),
         };
     }
-    // The spine bones turn as one (choreo has one spine joint); the neck halfway to the head.
     use HumanBone as B;
-    let torso = p.bones.get(&B::Spine).map(|&j| w[j]);
-    if let Some(torso) = torso {
-        for b in [B::Chest, B::UpperChest] {
-            if let Some(&j) = p.bones.get(&b) {
-                w[j] = torso;
-            }
+    let spine: Vec<usize> = [B::Spine, B::Chest, B::UpperChest]
+        .iter()
+        .filter_map(|b| p.bones.get(b).copied())
+        .collect();
+    if let (Some(&hips), Some(&first)) = (p.bones.get(&B::Hips), spine.first()) {
+        let torso = w[first];
+        if let Some(a) = &p.aims[first] {
+            spread_torso(&mut w, hips, &spine, torso, &a.rest_dir);
         }
-        if let (Some(&neck), Some(&head)) = (p.bones.get(&B::Neck), p.bones.get(&B::Head)) {
-            w[neck] = torso.slerp(&w[head], 0.5);
+        if let Some(&head) = p.bones.get(&B::Head) {
+            if let Some(a) = &p.aims[head] {
+                face_with_torso(&mut w[head], &torso, &a.rest_dir);
+            }
+            // The neck halfway from the torso to the head.
+            if let Some(&neck) = p.bones.get(&B::Neck) {
+                w[neck] = torso.slerp(&w[head], 0.5);
+            }
         }
     }
     // Joints that follow their parent take its final rotation (the spine and neck moved above).
@@ -767,6 +790,82 @@ fn world_rotations(
         }
     }
     w
+}
+
+/// Spreads the torso's turn from the hips over the target's spine bones (`spine`, hips first):
+/// its twist about the spine (`axis`, the spine's rest direction from its first bone to the upper
+/// arms) in equal shares, its bend on the first bone, so the last one (the chest the arms and
+/// neck hang from) ends where the torso is. Choreo has one spine joint; on a rig with three,
+/// putting its whole turn on the first bone left the other two at rest (SMPL's spine2 and spine3
+/// always 0). The bend stays on the first bone: spread too, it curved the back and moved the
+/// shoulders off the line choreo's spine points along (the hips' angle against the torso
+/// 3-4° → 7-11° off motion.json's, median, on beat-graph and keypose-transformer dances).
+fn spread_torso(
+    w: &mut [UnitQuaternion<f64>],
+    hips: usize,
+    spine: &[usize],
+    torso: UnitQuaternion<f64>,
+    axis: &Vector3<f64>,
+) {
+    let turn = w[hips].inverse() * torso;
+    let Some(axis) = nalgebra::Unit::try_new(*axis, 1e-9) else {
+        return;
+    };
+    // Swing-twist about the spine's own axis (the hips' frame is the rest frame at rest).
+    let q = turn.quaternion();
+    let twist = 2.0 * q.imag().dot(&axis).atan2(q.w);
+    let twist = twist - std::f64::consts::TAU * (twist / std::f64::consts::TAU).round();
+    let k = spine.len() as f64;
+    let share = UnitQuaternion::from_axis_angle(&axis, twist / k);
+    let swing = turn * UnitQuaternion::from_axis_angle(&axis, -twist);
+    let mut world = w[hips] * swing;
+    for &j in spine {
+        world *= share;
+        w[j] = world;
+    }
+    if let Some(&last) = spine.last() {
+        // Exactly the torso (the shares compose to the twist up to rounding).
+        w[last] = torso;
+    }
+}
+
+/// The head's twist about its own bone (`rest_dir`, the bone's rest direction), measured from
+/// the torso, read as the line the two head markers make: taken modulo half a turn, kept as it is
+/// up to [`HEAD_TURN_KEPT_DEG`] either way, and brought back to facing the torso beyond that.
+///
+/// The capture's two head markers swap labels: on each of the 30 waltzes 10-47 % of frames have
+/// them reversed against the shoulders (more than 90° apart about the vertical; on the other 13
+/// dances 0-0.1 %, 90 % of frames within 33-60°), and the models trained on them do it too.
+/// Choreo's rig follows the markers, turning its head round at most 25° a frame; on a target the
+/// head then faced backwards and the neck, halfway between, swung through 180° in one frame
+/// where the twist crossed half a turn (the 0.8 % of frame steps past 60° on a beat-graph dance).
+/// The markers' midpoint, and so the bone's direction, is the same either way round; only which
+/// way the face points is not. Modulo half a turn the face is always forward, but jumps where the
+/// line stands across the shoulders (±90°), as the choreo head turns through it; the tent beyond
+/// `HEAD_TURN_KEPT_DEG` meets itself there (0° from either side), so the head's facing follows the
+/// markers' line continuously, at most twice as fast as it turns.
+fn face_with_torso(
+    head: &mut UnitQuaternion<f64>,
+    torso: &UnitQuaternion<f64>,
+    rest_dir: &Vector3<f64>,
+) {
+    use std::f64::consts::{FRAC_PI_2, PI};
+    let Some(axis) = nalgebra::Unit::try_new(*rest_dir, 1e-9) else {
+        return;
+    };
+    let rel = torso.inverse() * *head;
+    // Swing-twist: the twist's angle about the bone's own (local) axis.
+    let q = rel.quaternion();
+    let twist = 2.0 * q.imag().dot(&axis).atan2(q.w);
+    // The marker line's angle, modulo half a turn, in (-90°, 90°].
+    let line = twist - PI * (twist / PI).round();
+    let kept = HEAD_TURN_KEPT_DEG.to_radians();
+    let facing = if line.abs() <= kept {
+        line
+    } else {
+        line.signum() * kept * (FRAC_PI_2 - line.abs()) / (FRAC_PI_2 - kept)
+    };
+    *head *= UnitQuaternion::from_axis_angle(&axis, facing - twist);
 }
 
 /// The world rotation a joint with rest local rotation has: its parent's (identity at the root).

@@ -8,9 +8,14 @@ use crate::motion::rig::{fk_frame, RigMotion};
 
 /// The first 20 s of DANCE_R_9 on choreo's rig, or `None` (loudly) without the dataset.
 fn dance() -> Option<RigMotion> {
+    dance_named("DANCE_R_9")
+}
+
+/// The first 20 s of a dataset dance on choreo's rig, or `None` (loudly) without the dataset.
+fn dance_named(id: &str) -> Option<RigMotion> {
     match Dataset::open(std::path::Path::new(DEFAULT_ROOT)) {
         Ok(ds) => {
-            let d = ds.load("DANCE_R_9").expect("DANCE_R_9");
+            let d = ds.load(id).expect(id);
             let n = 500.min(d.motion.num_frames());
             let motion = crate::motion::Motion {
                 fps: d.motion.fps,
@@ -286,4 +291,115 @@ fn every_target_bends_the_knees_as_the_dance_does() {
             );
         }
     }
+}
+
+/// No joint of any target turns more than 60° between two frames, on a rumba and on the waltz
+/// whose head markers are swapped most often (DANCE_W_10, 47 % of its frames): a turn that fast
+/// is a flip of the solve, not the dance (choreo's own rig turns at most 55° on these).
+#[test]
+fn no_joint_of_any_target_turns_past_60_degrees_in_one_frame() {
+    for id in ["DANCE_R_9", "DANCE_W_10"] {
+        let Some(src) = dance_named(id) else { return };
+        let own = crate::metrics::rotation_flips::RotationFlips::of(&src);
+        eprintln!("{id}: choreo's rig turns at most {:.1}°", own.max_step_deg);
+        for (label, target) in targets() {
+            let out = retarget(&src, &target).unwrap_or_else(|e| panic!("{label}: {e}"));
+            let flips = crate::metrics::rotation_flips::RotationFlips::of(&out);
+            eprintln!(
+                "{id} onto {label}: largest one-frame turn {:.1}° ({:?})",
+                flips.max_step_deg, flips.worst_joint
+            );
+            assert!(
+                flips.max_step_deg <= crate::metrics::rotation_flips::FLIP_DEG,
+                "{id} onto {label}: {flips:?}"
+            );
+        }
+    }
+}
+
+/// The head faces the way the chest does, give or take what a neck turns, on every target,
+/// though the waltz's head markers are reversed on 47 % of its frames.
+#[test]
+fn the_head_faces_within_a_neck_turn_of_the_chest() {
+    let Some(src) = dance_named("DANCE_W_10") else {
+        return;
+    };
+    for (label, target) in targets() {
+        let out = retarget(&src, &target).unwrap_or_else(|e| panic!("{label}: {e}"));
+        let tj = |b: HumanBone| target.humanoid.iter().position(|h| *h == Some(b));
+        let (Some(chest), Some(head)) = (
+            tj(HumanBone::UpperChest).or(tj(HumanBone::Spine)),
+            tj(HumanBone::Head),
+        ) else {
+            panic!("{label}: no chest or head");
+        };
+        let mut worst = 0.0f64;
+        for t in 0..out.num_frames() {
+            let w = fk_frame(&out.rig, &out.root_translation[t], &out.rotations[t]).1;
+            // The rest pose faces +z on every target here: compare where each faces, about the
+            // vertical.
+            let flat = |v: Vector3<f64>| Vector3::new(v.x, 0.0, v.z);
+            worst = worst.max(angle(
+                flat(w[chest] * Vector3::z()),
+                flat(w[head] * Vector3::z()),
+            ));
+        }
+        eprintln!("{label}: the head faces at most {worst:.1}° from the chest");
+        assert!(worst < 100.0, "{label}: the head faces {worst:.1}° away");
+    }
+}
+
+/// SMPL's three spine joints each carry a third of the torso's twist from the pelvis (choreo has
+/// one spine joint), spine1 the bend as well, and together the turn a single spine joint would
+/// carry: the chest, and the arms on it, end where they did.
+#[test]
+fn smpls_spine_joints_share_the_torsos_turn() {
+    let Some(src) = dance() else { return };
+    let target = smpl();
+    let out = retarget(&src, &target).expect("smpl");
+    let at = |n: &str| target.rig.names.iter().position(|x| x == n).unwrap();
+    let (s1, s2, s3) = (at("spine1"), at("spine2"), at("spine3"));
+    // The same rig with spine2 and spine3 unmapped: they follow spine1, which turns alone.
+    let mut one = smpl();
+    one.humanoid[s2] = None;
+    one.humanoid[s3] = None;
+    let whole = retarget(&src, &one).expect("smpl, one spine joint");
+    let mut turns = [Vec::new(), Vec::new(), Vec::new()];
+    let (mut worst_compose, mut worst_arms) = (0.0f64, 0.0f64);
+    let arms = [at("left_shoulder"), at("right_shoulder")];
+    for t in 0..out.num_frames() {
+        let r = &out.rotations[t];
+        for (k, j) in [s1, s2, s3].into_iter().enumerate() {
+            turns[k].push(r[j].angle().to_degrees());
+        }
+        let composed = r[s1] * r[s2] * r[s3];
+        worst_compose = worst_compose.max(composed.angle_to(&whole.rotations[t][s1]).to_degrees());
+        assert!(whole.rotations[t][s2].angle() < 1e-9 && whole.rotations[t][s3].angle() < 1e-9);
+        // The upper arms' joints, from spine1, where the one-joint spine put them.
+        let p = fk_frame(&out.rig, &out.root_translation[t], r).0;
+        let q = fk_frame(&whole.rig, &whole.root_translation[t], &whole.rotations[t]).0;
+        for j in arms {
+            worst_arms = worst_arms.max(((p[j] - p[s1]) - (q[j] - q[s1])).norm());
+        }
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let medians: Vec<f64> = turns.iter_mut().map(median).collect();
+    eprintln!(
+        "smpl: spine1/2/3 turn {:.1}°/{:.1}°/{:.1}° (median); composed within {worst_compose:.2e}° of one joint's turn; upper arms within {:.1} mm",
+        medians[0], medians[1], medians[2], worst_arms * 1000.0
+    );
+    for m in &medians {
+        assert!(*m > 1.0, "a spine joint carries no share: {medians:?}");
+    }
+    assert!(
+        (medians[1] - medians[2]).abs() < 1e-6,
+        "unequal shares: {medians:?}"
+    );
+    assert!(worst_compose < 1e-6, "composed torso {worst_compose}° off");
+    // SMPL's spine joints lean a little off the twist's axis (spine1 to the upper arms): 1 cm
+    // at most on this dance.
+    assert!(worst_arms < 0.015, "the upper arms moved {worst_arms} m");
 }

@@ -175,6 +175,8 @@ pub(super) struct Raw {
     pub(super) names: Vec<String>,
     pub(super) parents: Vec<Option<usize>>,
     pub(super) rest: Vec<Vector3<f64>>,
+    /// The name of the node the skeleton hangs from (a glb's armature), if the file has one.
+    pub(super) armature: Option<String>,
 }
 
 /// A file read into a target skeleton.
@@ -194,6 +196,13 @@ pub struct SkeletonJson {
     /// Rest offsets in the parent's frame, metres.
     pub offsets: Vec<[f64; 3]>,
     pub humanoid: Vec<Option<HumanBone>>,
+    /// The armature's name; rigs stored before it was kept read as [`super::DEFAULT_ARMATURE`].
+    #[serde(default = "default_armature")]
+    pub armature: String,
+}
+
+fn default_armature() -> String {
+    super::DEFAULT_ARMATURE.to_string()
 }
 
 impl From<&TargetSkeleton> for SkeletonJson {
@@ -208,6 +217,7 @@ impl From<&TargetSkeleton> for SkeletonJson {
                 .collect(),
             offsets: s.rig.offsets.iter().map(|o| [o.x, o.y, o.z]).collect(),
             humanoid: s.humanoid.clone(),
+            armature: s.armature.clone(),
         }
     }
 }
@@ -244,6 +254,7 @@ impl TryFrom<SkeletonJson> for TargetSkeleton {
                     .collect(),
             },
             humanoid: s.humanoid,
+            armature: s.armature,
         })
     }
 }
@@ -271,6 +282,7 @@ pub fn read(
         names,
         parents,
         rest,
+        armature,
     } = raw;
     if names.len() > MAX_JOINTS {
         return Err(RigFileError::TooManyJoints {
@@ -348,6 +360,8 @@ pub fn read(
                 offsets,
             },
             humanoid,
+            // A glb's own armature name; a BVH has none (Blender names its import after the file).
+            armature: armature.unwrap_or_else(default_armature),
         },
     })
 }
@@ -374,6 +388,7 @@ fn read_bvh(text: &str) -> Result<Raw, RigFileError> {
         names: bvh.names,
         parents: bvh.parents,
         rest,
+        armature: None,
     })
 }
 
@@ -397,6 +412,7 @@ mod tests {
         assert_eq!(s.humanoid[at("spine_01")], Some(HumanBone::Spine));
         assert_eq!(s.humanoid[at("spine_03")], Some(HumanBone::UpperChest));
         assert_eq!(s.humanoid[at("ball_r")], Some(HumanBone::RightToes));
+        assert_eq!(s.armature, super::super::DEFAULT_ARMATURE);
         // Round trip through the stored form.
         let back = TargetSkeleton::try_from(SkeletonJson::from(s)).expect("stored form");
         assert_eq!(&back, s);
@@ -465,7 +481,7 @@ mod tests {
         };
         let mut nodes = vec![
             // 0: the armature, 0.01 scale and a quarter turn about y.
-            r#"{"name":"Armature","rotation":[0,0.70710677,0,0.70710677],"scale":[0.01,0.01,0.01],"children":[1]}"#.to_string(),
+            r#"{"name":"Avatar","rotation":[0,0.70710677,0,0.70710677],"scale":[0.01,0.01,0.01],"children":[1]}"#.to_string(),
             m("mixamorig:Hips", [0.0, 100.0, 0.0], &[2, 5, 8]),
             m("mixamorig:LeftUpLeg", [10.0, -5.0, 0.0], &[3]),
             m("mixamorig:LeftLeg", [0.0, -45.0, 0.0], &[4]),
@@ -502,6 +518,8 @@ mod tests {
         let got = read(&glb, &BTreeMap::new()).expect("read glb");
         assert_eq!((got.format, got.units), (RigFormat::Glb, Units::M));
         let s = &got.skeleton;
+        // The node the skeleton hangs from names the armature, as in Blender.
+        assert_eq!(s.armature, "Avatar");
         let at = |name: &str| s.rig.names.iter().position(|n| n == name).expect(name);
         // The quarter turn about y takes +x to −z: the left thigh's 10 cm along x is 0.1 m along −z.
         let thigh = s.rig.offsets[at("mixamorig:LeftUpLeg")];

@@ -41,9 +41,10 @@ fn name(joint: &BodyJoint) -> String {
     }
 }
 
-/// The `vrm` target: VRM 1.0 humanoid bones, T-pose, metres.
+/// The `vrm` target: VRM 1.0 humanoid bones, T-pose, metres, in an armature called `Armature`
+/// (what the VRM add-on for Blender calls an imported avatar's).
 pub fn vrm() -> TargetSkeleton {
-    body::skeleton(name)
+    body::skeleton(super::DEFAULT_ARMATURE, name)
 }
 
 /// The `.vrma` bytes of a motion retargeted onto a T-pose target (normally [`vrm`]); joints with

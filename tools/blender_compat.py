@@ -1,8 +1,9 @@
-"""What every Blender check here shares: the patches Debian's Blender 3.4.1 importers need, and
-the frame count read from an action's keyframes. Importing this module applies the patches.
+"""What every Blender script of choreo's shares (tools/blender_import.py, the checks in
+tests/blender/): the patches Debian's Blender 3.4.1 importers need, and the frames read from an
+action's keyframes. Importing this module applies the patches.
 
-The check scripts put their own folder on sys.path first (Blender runs a --python script without
-it), then `from blender_compat import ...`.
+A script puts this folder on sys.path first (Blender runs a --python script without its own
+folder there), then `from blender_compat import ...`.
 """
 import builtins
 
