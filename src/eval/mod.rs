@@ -300,6 +300,26 @@ pub fn write_reference(data: &Path, out: &Path) -> Result<ReferenceStats, EvalEr
     Ok(stats)
 }
 
+/// `model`'s (called `id`) dance of `req` on the song called `song`, and whether the model
+/// composed it on the song's beats (what [`as_served`] needs to know).
+pub(super) fn generate(
+    model: &dyn crate::models::DanceModel,
+    id: &str,
+    song: &str,
+    req: &crate::models::GenerateRequest<'_>,
+    progress: &mut dyn crate::models::Progress,
+) -> Result<(Motion, bool), EvalError> {
+    let generated = model
+        .generate(req, progress)
+        .map_err(|source| EvalError::Generate {
+            model: id.into(),
+            song: song.into(),
+            source,
+        })?;
+    let composed = generated.composition.is_some();
+    Ok((generated.motion, composed))
+}
+
 /// A model's motion as a user downloads it: its steps moved onto the song's beats and its feet
 /// planted (the motion stages every job runs, [`crate::motion::after_model`]), then fitted to the
 /// export's rigid skeleton with the key poses as anchors (what motion.json holds). `beats` are

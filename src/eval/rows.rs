@@ -168,16 +168,7 @@ fn dance_songs(
                 key_poses: &keys,
                 ..GenerateRequest::plain(&s.audio, seed)
             };
-            let generated =
-                model
-                    .generate(&req, &mut Quiet)
-                    .map_err(|source| EvalError::Generate {
-                        model: id.into(),
-                        song: s.name.clone(),
-                        source,
-                    })?;
-            let composed = generated.composition.is_some();
-            let raw = generated.motion;
+            let (raw, composed) = super::generate(model, id, &s.name, &req, &mut Quiet)?;
             // The motion stage every job runs (feet planted), and the network's motion as it came.
             // Served: planted and exported through the rigid skeleton, as motion.json holds it.
             // Served: beat-aligned, planted and exported through the rigid skeleton.

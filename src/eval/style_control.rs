@@ -109,16 +109,8 @@ pub fn style_control(
                 style: Some(style),
                 ..GenerateRequest::plain(s.audio, seed)
             };
-            let generated =
-                model
-                    .generate(&req, progress)
-                    .map_err(|source| EvalError::Generate {
-                        model: format!("{id} ({})", style.name()),
-                        song: s.name.to_string(),
-                        source,
-                    })?;
-            let composed = generated.composition.is_some();
-            let raw = generated.motion;
+            let asked_id = format!("{id} ({})", style.name());
+            let (raw, composed) = super::generate(model, &asked_id, s.name, &req, progress)?;
             let (m, _) = super::as_served(raw, composed, &[], s.beats).map_err(|source| {
                 EvalError::Export {
                     model: id.into(),

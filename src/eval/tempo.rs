@@ -309,18 +309,9 @@ pub(super) fn tempo_row(
             ));
             let mut per_seed = Vec::new();
             for seed in args.seed..args.seed + args.seeds.max(1) {
-                let generated = model
-                    .generate(
-                        &GenerateRequest::plain(&song.audio, seed),
-                        &mut super::rows::Quiet,
-                    )
-                    .map_err(|source| EvalError::Generate {
-                        model: id.into(),
-                        song: song.name.clone(),
-                        source,
-                    })?;
-                let composed = generated.composition.is_some();
-                let raw = generated.motion;
+                let req = GenerateRequest::plain(&song.audio, seed);
+                let (raw, composed) =
+                    super::generate(model, id, &song.name, &req, &mut super::rows::Quiet)?;
                 let own = tempo_lock(raw.positions.view(), raw.fps, &song.beats);
                 let (served, _) = as_served(raw, composed, &[], &song.beats).map_err(|source| {
                     EvalError::Export {

@@ -307,18 +307,9 @@ pub fn row(
     for s in songs {
         let beats = &s.analysis.beat_times;
         for seed in first_seed..first_seed + seeds.max(1) {
-            let generated = model
-                .generate(
-                    &GenerateRequest::plain(&s.audio, seed),
-                    &mut super::rows::Quiet,
-                )
-                .map_err(|source| EvalError::Generate {
-                    model: id.into(),
-                    song: s.name.clone(),
-                    source,
-                })?;
-            let composed = generated.composition.is_some();
-            let raw = generated.motion;
+            let req = GenerateRequest::plain(&s.audio, seed);
+            let (raw, composed) =
+                super::generate(model, id, &s.name, &req, &mut super::rows::Quiet)?;
             let ratio_own = step_ratio(&raw, beats);
             let (served, _) =
                 as_served(raw, composed, &[], beats).map_err(|source| EvalError::Export {
