@@ -4,12 +4,14 @@
 //! one factor, and dancenet and tsmt step at their own steady rate (their step rate after ÷ before
 //! a 1.5625× speed-up was 0.99–1.06). The beat-align stage keeps one grid fraction and a mean
 //! slope of 1 over the dance, so it cannot add the change either. This stage does, before it:
-//! where the song's beats say the tempo changes, the dance is time-warped so that its pace is
-//! proportional to the local tempo (output frame `f` shows source time `∫ r`, `r = p̄ / p(f)`,
-//! `p` the local beat length, scaled so the dance's last frame stays its last), in place of beat
-//! alignment ([`crate::motion::after_model`] skips it after this warp). It leaves alone a steady song (p90 ÷ p10 of the
-//! local beat under [`CHANGE_RATIO`]), a dance with key poses or a seed motion (their frames are
-//! fixed), and a dance whose own steps already follow the change within 10 % (a composed one).
+//! where the song's beats say the tempo changes, the dance is time-warped so that its pace
+//! follows the local tempo (output frame `f` shows source time `∫ r`, `r = (p̄ / p(f))^α`, `p`
+//! the local beat length, scaled so the dance's last frame stays its last), in place of beat
+//! alignment ([`crate::motion::after_model`] skips it after this warp). `α` is 1 for a dance at
+//! one pace, and the share of the change a dance's own steps lack where they change already
+//! (the key-pose transformer's own ratio was 1.24–1.95). It leaves alone a steady song (p90 ÷ p10
+//! of the local beat under [`CHANGE_RATIO`]), a dance with key poses or a seed motion (their
+//! frames are fixed), and a dance whose own steps already follow the change within 10 %.
 use super::rhythm::{ankle_speed, step_rate, CHECK_ZERO_PAD};
 use super::{resample, Motion};
 
@@ -18,6 +20,10 @@ use super::{resample, Motion};
 pub const CHANGE_RATIO: f64 = 1.2;
 /// Beats either side whose intervals' median is the local beat.
 const HALF_WINDOW: usize = 4;
+/// The least share of the music's change the warp adds: below 0 it slows the fast part of a
+/// dance whose own steps sped up more than the music; a measured step rate that jumped to a
+/// harmonic would ask for far more, so the share is bounded.
+const MIN_ALPHA: f64 = -1.0;
 /// Shortest stretch (s) of one pace whose step rate is measured.
 const MIN_STRETCH_S: f64 = 8.0;
 
@@ -115,25 +121,34 @@ pub fn follow_tempo(motion: Motion, beat_times_s: &[f64], fixed: bool) -> Motion
         return motion;
     }
     let median = percentile(&period, 0.5);
-    let slow = longest_run(&period, |p| p > median * 1.05);
-    let fast = longest_run(&period, |p| p < median / 1.05);
+    // Split between the two paces at their geometric middle: a song of two equal halves has its
+    // median on one of them, which would leave that side no run to measure.
+    let middle = (p10 * p90).sqrt();
+    let slow = longest_run(&period, |p| p > middle);
+    let fast = longest_run(&period, |p| p < middle);
     let long = |(a, b): (usize, usize)| (b - a) as f64 / fps >= MIN_STRETCH_S;
+    // How much of the music's change the warp adds: all of it to a dance at one pace; to a dance
+    // whose own steps already change by `own`, the part it lacks (music^alpha × own = music).
+    let mut alpha = 1.0;
     if long(slow) && long(fast) {
         let mean = |(a, b): (usize, usize)| period[a..b].iter().sum::<f64>() / (b - a) as f64;
         let music = mean(slow) / mean(fast);
         if let (Some(s), Some(f)) = (steps_hz(&motion, slow), steps_hz(&motion, fast)) {
-            if ((f / s) / music).ln().abs() < 1.1f64.ln() {
+            let own = f / s;
+            if (own / music).ln().abs() < 1.1f64.ln() {
                 return motion;
             }
+            alpha = (1.0 - own.ln() / music.ln()).clamp(MIN_ALPHA, 1.0);
         }
     }
-    let mean_rate = period.iter().map(|p| median / p).sum::<f64>() / frames as f64;
+    let rate: Vec<f64> = period.iter().map(|p| (median / p).powf(alpha)).collect();
+    let mean_rate = rate.iter().sum::<f64>() / frames as f64;
     let scale = (frames - 1) as f64 / (frames as f64 * mean_rate).max(1e-9);
     let mut source = Vec::with_capacity(frames);
     let mut s = 0.0;
-    for p in &period {
+    for r in &rate {
         source.push(s);
-        s += median / p * scale;
+        s += r * scale;
     }
     tracing::debug!(
         p10,
@@ -184,5 +199,32 @@ mod tests {
         // Key poses keep their frames: nothing moves.
         let fixed = follow_tempo(motion.clone(), &changing, true);
         assert_eq!(fixed.positions, motion.positions);
+    }
+
+    /// A walk whose own pace already speeds up 1.25× at the change (a network that hears part
+    /// of it): the warp adds only what it lacks, so it steps 1.5625× as often after, not 1.95×.
+    #[test]
+    fn a_pace_that_changes_partly_gets_the_rest() {
+        let fps = 25.0;
+        let frames = 1500;
+        let change_frame = 750;
+        let mut positions = ndarray::Array3::<f32>::zeros((frames, crate::motion::NUM_JOINTS, 3));
+        let mut phase_at = 0.0f64;
+        for f in 0..frames {
+            let hz = if f < change_frame { 1.0 } else { 1.25 };
+            phase_at += std::f64::consts::TAU * hz / fps;
+            let phase = phase_at.sin() as f32;
+            for j in 0..crate::motion::NUM_JOINTS {
+                positions[[f, j, 0]] = 0.2 * phase;
+                positions[[f, j, 1]] = 0.1 * phase.abs();
+            }
+        }
+        let motion = Motion { fps, positions };
+        let warped = follow_tempo(motion, &beats(60.0, 30.0, 0.625, 0.4), false);
+        let (a, b) = (
+            steps_hz(&warped, (50, 700)).unwrap(),
+            steps_hz(&warped, (800, 1450)).unwrap(),
+        );
+        assert!(((b / a) / 1.5625 - 1.0).abs() < 0.1, "{a} → {b} Hz");
     }
 }
