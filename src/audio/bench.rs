@@ -1,5 +1,7 @@
-//! `choreo bench audio`: decode + DanceRevolution features per song, against librosa doing
-//! the same work (tools/librosa_reference.py, one thread, as a subprocess) in the same run.
+//! `choreo bench audio`: decode + DanceRevolution features per song, and decode + beat analysis
+//! (`audio::analyze`: beats, downbeats, tempo curve), against librosa doing the same work
+//! (tools/librosa_reference.py, one thread, as a subprocess: its features, and `load` at 22 050 Hz
+//! + `beat.beat_track`) in the same run.
 //!
 //! Peak memory is the growth of this process's resident set while one song is processed:
 //! the kernel's high-water mark (`VmHWM`) is reset before each song through
@@ -56,6 +58,10 @@ pub struct BenchRow {
     pub rust_peak_mb: Option<f64>,
     pub librosa_total_s: Option<f64>,
     pub speedup: Option<f64>,
+    /// Decode + beat analysis, choreo and librosa, and librosa's time over choreo's.
+    pub rust_beats_s: f64,
+    pub librosa_beats_s: Option<f64>,
+    pub beats_speedup: Option<f64>,
 }
 
 fn read_status_kb(field: &str) -> Option<f64> {
@@ -174,6 +180,9 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<BenchRow>, AudioError> {
             _ => None,
         };
         drop(x);
+        let t3 = Instant::now();
+        super::analyze(&decode_path(song)?)?;
+        let beats_s = t3.elapsed().as_secs_f64();
         let name = song
             .file_name()
             .map(|s| s.to_string_lossy().into_owned())
@@ -187,6 +196,9 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<BenchRow>, AudioError> {
             rust_peak_mb: peak,
             librosa_total_s: None,
             speedup: None,
+            rust_beats_s: beats_s,
+            librosa_beats_s: None,
+            beats_speedup: None,
         });
     }
 
@@ -225,6 +237,10 @@ pub fn run(opts: &BenchOptions) -> Result<Vec<BenchRow>, AudioError> {
             if let Some(t) = v["total_s"].as_f64() {
                 row.librosa_total_s = Some(t);
                 row.speedup = Some(t / row.rust_total_s.max(1e-9));
+            }
+            if let Some(t) = v["beats_s"].as_f64() {
+                row.librosa_beats_s = Some(t);
+                row.beats_speedup = Some(t / row.rust_beats_s.max(1e-9));
             }
         }
     }

@@ -129,4 +129,30 @@ fn print_table(rows: &[BenchRow], fps: f64) {
             ls / rs
         );
     }
+    println!();
+    println!("decode + beats (choreo: audio::analyze, with downbeats and the tempo curve; librosa: load at 22050 Hz + beat.beat_track), one thread each");
+    println!(
+        "| {:<28} | {:>9} | {:>10} | {:>7} |",
+        "song", "choreo s", "librosa s", "speedup"
+    );
+    println!("|{:-<30}|{:-<11}|{:-<12}|{:-<9}|", "", "", "", "");
+    for r in rows {
+        println!(
+            "| {:<28} | {:>9.3} | {:>10} | {:>7} |",
+            r.song,
+            r.rust_beats_s,
+            f(r.librosa_beats_s, 3),
+            f(r.beats_speedup, 1)
+        );
+    }
+    let (rb, lb): (f64, f64) = rows
+        .iter()
+        .filter_map(|r| r.librosa_beats_s.map(|l| (r.rust_beats_s, l)))
+        .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+    if lb > 0.0 {
+        println!(
+            "total: choreo {rb:.2} s, librosa {lb:.2} s, speedup {:.1}x",
+            lb / rb
+        );
+    }
 }
