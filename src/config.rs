@@ -630,15 +630,6 @@ impl Config {
         }
     }
 
-    /// The limits of a tenant whose key sets none of its own.
-    pub fn default_limits(&self) -> crate::queue::KeyLimits {
-        crate::queue::KeyLimits {
-            rate_limit_rps: self.rate_limit_rps,
-            max_queued_jobs: self.max_queued_jobs,
-            storage_quota_bytes: self.storage_quota_bytes,
-        }
-    }
-
     /// How long songs and results are kept after their last use; none without `retention_days`.
     pub fn retention(&self) -> Option<std::time::Duration> {
         let days = self.retention_days?;
