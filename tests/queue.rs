@@ -1,10 +1,14 @@
 //! The job store's contract, run against both stores: a SQLite file and a real PostgreSQL
 //! server started for each test (`common/postgres.rs`). Each contract is a function of the store;
 //! `contract!` makes one test per store from it, so both stores answer every case the same way.
+#[path = "queue/deletion.rs"]
+mod deletion;
 #[path = "common/postgres.rs"]
 mod postgres;
 #[path = "queue/rigs.rs"]
 mod rigs;
+#[path = "queue/tenants.rs"]
+mod tenants;
 
 use choreo::audio::AudioFormat;
 use choreo::queue::{
@@ -20,9 +24,11 @@ use std::time::Duration;
 use tokio::sync::Notify;
 use tokio_util::sync::CancellationToken;
 
+use deletion::deletion_and_expiry_leave_only_an_audit_line;
 use rigs::{
     rigs_keep_their_skeleton_and_mapping, rigs_list_by_tenant_delete_once_and_expire_unused,
 };
+use tenants::{claims_are_fair_between_tenants, tenants_see_only_their_own_rows};
 
 /// A store under test and what keeps it alive (its temp dir or its server).
 struct TestDb {
@@ -597,301 +603,6 @@ async fn concurrent_claims_take_each_job_once(db: TestDb) {
     }
 }
 
-/// Two tenants share nothing they can see: the same bytes are two songs, an idempotency key is
-/// each one's own, and every scoped read, listing and cancel of the other's id is "not found".
-async fn tenants_see_only_their_own_rows(db: TestDb) {
-    let store = db.store.as_ref();
-    let (a, b) = (TenantId::new(), TenantId::new());
-    let song_of = |tenant| Song {
-        tenant,
-        ..song("shared-bytes")
-    };
-    let job_of = |tenant, song| NewJob {
-        tenant,
-        ..analyze(song, 1)
-    };
-    let first = song_of(a);
-    let (song_a, created_a) = store
-        .add_song(first.clone(), job_of(a, first.id))
-        .await
-        .expect("a's song");
-    let second = song_of(b);
-    let (song_b, created_b) = store
-        .add_song(second.clone(), job_of(b, second.id))
-        .await
-        .expect("b's song");
-    assert!(
-        created_a && created_b,
-        "the same bytes from two tenants are two songs"
-    );
-    assert_ne!(song_a.id, song_b.id);
-    assert_eq!((song_a.tenant, song_b.tenant), (a, b));
-    assert_eq!(
-        store
-            .song_by_sha256(a, "shared-bytes")
-            .await
-            .expect("by sha")
-            .map(|s| s.id),
-        Some(song_a.id)
-    );
-    assert_eq!(
-        store
-            .song_by_sha256(TenantId::OPEN, "shared-bytes")
-            .await
-            .expect("by sha")
-            .map(|s| s.id),
-        None
-    );
-    assert!(matches!(
-        store.song(Scope::Tenant(b), song_a.id).await,
-        Err(QueueError::SongNotFound(_))
-    ));
-    assert_eq!(
-        store
-            .song(Scope::Tenant(a), song_a.id)
-            .await
-            .expect("own song")
-            .id,
-        song_a.id
-    );
-
-    // A job on another tenant's song is refused as if the song did not exist.
-    assert!(matches!(
-        store.register(job_of(b, song_a.id)).await,
-        Err(QueueError::SongNotFound(_))
-    ));
-    let keyed = |tenant, song| NewJob {
-        idempotency: Some(Idempotency {
-            key: "same-key".into(),
-            request_hash: "h".into(),
-        }),
-        ..job_of(tenant, song)
-    };
-    let job_a = store.register(keyed(a, song_a.id)).await.expect("a's job");
-    let job_b = store.register(keyed(b, song_b.id)).await.expect("b's job");
-    assert!(
-        matches!(job_b, Registered::Created(_)),
-        "an idempotency key is one tenant's"
-    );
-    let (job_a, job_b) = (job_a.job().clone(), job_b.job().clone());
-    assert_eq!((job_a.tenant, job_b.tenant), (a, b));
-
-    assert!(matches!(
-        store.job(Scope::Tenant(b), job_a.id).await,
-        Err(QueueError::JobNotFound(_))
-    ));
-    assert!(matches!(
-        store.cancel(Scope::Tenant(b), job_a.id).await,
-        Err(QueueError::JobNotFound(_))
-    ));
-    assert_eq!(
-        store
-            .job(Scope::Tenant(a), job_a.id)
-            .await
-            .expect("own job")
-            .status,
-        Status::Queued
-    );
-    let listed = |scope| async move {
-        let jobs = store
-            .jobs(
-                scope,
-                JobFilter {
-                    limit: 100,
-                    ..JobFilter::default()
-                },
-            )
-            .await
-            .expect("list");
-        jobs.iter().map(|j| j.id).collect::<HashSet<_>>()
-    };
-    let (of_a, of_b, all) = (
-        listed(Scope::Tenant(a)).await,
-        listed(Scope::Tenant(b)).await,
-        listed(Scope::All).await,
-    );
-    assert!(of_a.contains(&job_a.id) && !of_a.contains(&job_b.id));
-    assert!(of_b.contains(&job_b.id) && !of_b.contains(&job_a.id));
-    assert!(all.contains(&job_a.id) && all.contains(&job_b.id));
-    assert!(of_a.iter().chain(&of_b).all(|id| all.contains(id)) && of_a.is_disjoint(&of_b));
-}
-
-/// A generate job of `song` (dance-revolution, seed 0).
-fn dance(song: SongId) -> NewJob {
-    NewJob {
-        kind: JobKind::Generate(choreo::queue::GenerateOptions {
-            song_id: song,
-            model: choreo::models::ModelId("dance-revolution".into()),
-            seed: 0,
-            key_poses: Vec::new(),
-            seed_motion: None,
-            plant_feet: true,
-            style: None,
-            temperature: None,
-            top_k: None,
-            webhook_url: None,
-        }),
-        ..analyze(song, 1)
-    }
-}
-
-/// Deletion and retention (`queue/sql/delete.rs`): a song goes with every job made from it, a
-/// running one included (its worker's heartbeat and outcome then match no row); a finished job
-/// goes on its own, an unfinished one never; expiry takes finished dances unused since the
-/// cutoff, then songs none of whose jobs is unfinished or used since; each removed job leaves a
-/// `deleted` line in `job_events`, and another tenant removes nothing.
-async fn deletion_and_expiry_leave_only_an_audit_line(db: TestDb) {
-    let store = db.store.as_ref();
-    let p = policy(60_000, 0);
-    let stranger = Scope::Tenant(TenantId::new());
-    let owner = Scope::Tenant(TenantId::OPEN);
-    let deleted = |from: &str| Some((Some(from.to_string()), "deleted".to_string()));
-
-    // A song whose analyze job is running.
-    let first = with_song(store).await;
-    let running = store.claim("w", p).await.expect("claim").expect("a job");
-    assert_eq!(running.kind.song_id(), first);
-    assert!(matches!(
-        store.delete_song(stranger, first, "no").await,
-        Err(QueueError::SongNotFound(_))
-    ));
-    let removed = store
-        .delete_song(owner, first, "deleted with its song")
-        .await
-        .expect("delete song");
-    assert_eq!(
-        removed.songs.iter().map(|s| s.id).collect::<Vec<_>>(),
-        vec![first]
-    );
-    assert_eq!(
-        removed.jobs.iter().map(|j| j.id).collect::<Vec<_>>(),
-        vec![running.id]
-    );
-    assert_eq!(
-        store
-            .heartbeat(running.id, "w", "analyze", 0.5, p)
-            .await
-            .expect("beat"),
-        Beat::Lost
-    );
-    assert!(!store
-        .complete(running.id, "w", Outcome::Files(JobFiles::default()))
-        .await
-        .expect("complete"));
-    assert!(matches!(
-        store.song(Scope::All, first).await,
-        Err(QueueError::SongNotFound(_))
-    ));
-    assert!(matches!(
-        store.job(Scope::All, running.id).await,
-        Err(QueueError::JobNotFound(_))
-    ));
-    assert_eq!(
-        db.events(running.id).await.last().cloned(),
-        deleted("running")
-    );
-
-    // A job alone: not while queued, and only by its tenant once finished.
-    let second = with_song(store).await;
-    let queued = store.analyze_job(second).await.expect("read").expect("job");
-    assert!(matches!(
-        store.delete_job(owner, queued.id, "no").await,
-        Err(QueueError::JobNotFound(_))
-    ));
-    store
-        .job(Scope::All, queued.id)
-        .await
-        .expect("a queued job stays");
-    store.cancel(owner, queued.id).await.expect("cancel");
-    assert!(matches!(
-        store.delete_job(stranger, queued.id, "no").await,
-        Err(QueueError::JobNotFound(_))
-    ));
-    let gone = store
-        .delete_job(owner, queued.id, "deleted by its owner")
-        .await
-        .expect("delete job");
-    assert_eq!(gone.status, Status::Cancelled);
-    assert_eq!(
-        db.events(queued.id).await.last().cloned(),
-        deleted("cancelled")
-    );
-    store
-        .song(Scope::All, second)
-        .await
-        .expect("its song stays");
-
-    // Expiry: nothing is older than an hour ago; a dance waiting keeps its song.
-    let job = store
-        .register(dance(second))
-        .await
-        .expect("register")
-        .job()
-        .id;
-    let later = Utc::now() + chrono::Duration::hours(1);
-    assert!(store
-        .expire(Utc::now() - chrono::Duration::hours(1), 100, "expired")
-        .await
-        .expect("expire")
-        .is_empty());
-    assert!(store
-        .expire(later, 100, "expired")
-        .await
-        .expect("expire")
-        .is_empty());
-    let claimed = store
-        .claim("w", p)
-        .await
-        .expect("claim")
-        .expect("the dance");
-    assert_eq!(claimed.id, job);
-    assert!(store
-        .complete(job, "w", Outcome::Files(JobFiles::default()))
-        .await
-        .expect("complete"));
-    // A use after the cutoff keeps the dance, and the dance keeps its song.
-    let cutoff = Utc::now();
-    tokio::time::sleep(Duration::from_millis(20)).await;
-    store.touch_job(job).await.expect("touch");
-    assert!(store
-        .expire(cutoff, 100, "expired")
-        .await
-        .expect("expire")
-        .is_empty());
-    let expired = store.expire(later, 100, "expired").await.expect("expire");
-    assert_eq!(
-        expired.songs.iter().map(|s| s.id).collect::<Vec<_>>(),
-        vec![second]
-    );
-    assert_eq!(
-        expired.jobs.iter().map(|j| j.id).collect::<Vec<_>>(),
-        vec![job]
-    );
-    assert_eq!(db.events(job).await.last().cloned(), deleted("succeeded"));
-    assert!(matches!(
-        store.song(Scope::All, second).await,
-        Err(QueueError::SongNotFound(_))
-    ));
-    // A song's own use (an upload of the same bytes, its audio) keeps it past an earlier cutoff.
-    let third = with_song(store).await;
-    let analysis = store.analyze_job(third).await.expect("read").expect("job");
-    store.cancel(owner, analysis.id).await.expect("cancel");
-    let cutoff = Utc::now() + chrono::Duration::milliseconds(5);
-    tokio::time::sleep(Duration::from_millis(20)).await;
-    store.touch_song(third).await.expect("touch");
-    assert!(store
-        .expire(cutoff, 100, "expired")
-        .await
-        .expect("expire")
-        .is_empty());
-    let expired = store.expire(later, 100, "expired").await.expect("expire");
-    assert_eq!(expired.songs.len(), 1);
-    assert_eq!(
-        expired.jobs.iter().map(|j| j.id).collect::<Vec<_>>(),
-        vec![analysis.id]
-    );
-}
-
 macro_rules! contract {
     ($($name:ident),* $(,)?) => {
         mod sqlite {
@@ -911,67 +622,6 @@ macro_rules! contract {
             )*
         }
     };
-}
-
-/// One tenant's many jobs, even at a higher priority, do not keep another tenant's job waiting:
-/// the tenant with the fewest jobs running goes first, then the one served least recently;
-/// priority orders each tenant's own jobs.
-async fn claims_are_fair_between_tenants(db: TestDb) {
-    let store = db.store.as_ref();
-    let p = policy(30_000, 0);
-    let (a, b) = (TenantId::new(), TenantId::new());
-    let song_of = |tenant, sha: &str| Song {
-        tenant,
-        ..song(sha)
-    };
-    let job_of = |tenant, song, priority| NewJob {
-        tenant,
-        priority,
-        ..analyze(song, 1)
-    };
-    let sa = song_of(a, "a-bytes");
-    store
-        .add_song(sa.clone(), job_of(a, sa.id, 0))
-        .await
-        .expect("a's song");
-    for _ in 0..20 {
-        store
-            .register(job_of(a, sa.id, 100))
-            .await
-            .expect("a's urgent job");
-    }
-    let sb = song_of(b, "b-bytes");
-    store
-        .add_song(sb.clone(), job_of(b, sb.id, 0))
-        .await
-        .expect("b's song");
-
-    // Neither has run anything: priority decides, among equals.
-    let first = store.claim("w", p).await.expect("claim").expect("a job");
-    assert_eq!((first.tenant, first.priority), (a, 100));
-    assert!(store
-        .complete(first.id, "w", Outcome::Files(JobFiles::default()))
-        .await
-        .expect("complete"));
-    // Nobody runs anything: b was never served, a just was, so b's job goes before a's
-    // nineteen urgent ones.
-    let second = store.claim("w", p).await.expect("claim").expect("a job");
-    assert_eq!(
-        second.tenant, b,
-        "b's only job is not starved by a's twenty"
-    );
-    // b has one running and a none: a goes next, its highest priority first.
-    store
-        .register(job_of(b, sb.id, 0))
-        .await
-        .expect("b's second job");
-    // Times are kept in milliseconds: let a's next start be later than b's.
-    tokio::time::sleep(Duration::from_millis(5)).await;
-    let third = store.claim("w", p).await.expect("claim").expect("a job");
-    assert_eq!((third.tenant, third.priority), (a, 100));
-    // One running each; a was served last, so b's second job comes before a's others.
-    let fourth = store.claim("w", p).await.expect("claim").expect("a job");
-    assert_eq!(fourth.tenant, b);
 }
 
 contract!(

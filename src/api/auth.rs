@@ -83,7 +83,7 @@ fn bearer_token(value: &str) -> Option<&str> {
 
 /// Who sent `given` (the `Bearer` credentials, if any); `None` when nobody may.
 async fn identify(state: &AppState, given: Option<&str>) -> Result<Option<Caller>, ApiError> {
-    let defaults = state.config.default_limits();
+    let defaults = KeyLimits::defaults(&state.config);
     let open = Caller {
         limits: defaults,
         ..Caller::OPEN

@@ -28,7 +28,6 @@
 //! acceleration median 3.3 m/s², p99.9 ≈ 56 (max 112, capture glitches); mean joint speed per
 //! dance 0.63–1.80 m/s.
 use crate::motion::feet::lowest_foot;
-use ndarray::ArrayView3;
 
 use super::kinematics::{mean_speed, percentile};
 use crate::motion::hang;
@@ -48,25 +47,9 @@ pub const PENETRATION_M: f64 = -0.05;
 /// The span around a key pose searched for its largest pop (seconds either side).
 pub const KEY_POP_SPAN_S: f64 = 0.5;
 
-/// The plausibility thresholds, each with why.
-pub mod thresholds {
-    /// The lowest foot's median (m): real 0.16; a body standing on the floor keeps it near.
-    pub const FOOT_MEDIAN_M: (f64, f64) = (-0.05, 0.35);
-    /// The lowest foot's p5 (m): real 0.01; the floor is touched.
-    pub const FOOT_P5_M: (f64, f64) = (-0.15, 0.15);
-    /// Mean joint acceleration p99.9 (m/s²): real 56, its glitch-free max 1.5× that.
-    pub const POP_P999_M_S2: f64 = 84.0;
-    /// Largest mean joint acceleration within ±0.5 s of any key pose (m/s²).
-    pub const KEY_POP_M_S2: f64 = 84.0;
-    /// Mean joint speed (m/s): the slowest real dance moves at 0.63.
-    pub const MIN_SPEED_M_S: f64 = 0.5;
-    /// The longest hang (s, [`crate::motion::hang`]): real dances at most 0.72, about 1.4× that.
-    pub const HANG_S: f64 = 1.0;
-    /// Two seeds' dances differ by at least this root-relative distance (m).
-    pub const MIN_SEED_DISTANCE_M: f64 = 0.05;
-    /// Every key pose is hit within this (cm, centroid-aligned mean joint error).
-    pub const KEY_POSE_CM: f64 = 3.0;
-}
+/// The plausibility thresholds, each with why (kept with the motion, where the served stages
+/// read them too).
+pub use crate::motion::limits as thresholds;
 
 /// p5, median and p95 of a per-frame series.
 #[derive(
@@ -157,32 +140,8 @@ pub struct PhysicalSeries {
     pub hang_s: f64,
 }
 
-/// Per-frame mean joint acceleration `mean_j |p[t+1] − 2p[t] + p[t−1]|·fps²` for `t = 1..T−1`
-/// (m/s²); index `i` is frame `i + 1`.
-pub fn joint_acceleration(positions: ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
-    let (t, j, _) = positions.dim();
-    if t < 3 || j == 0 {
-        return Vec::new();
-    }
-    (1..t - 1)
-        .map(|f| {
-            let s: f64 = (0..j)
-                .map(|k| {
-                    (0..3)
-                        .map(|c| {
-                            let a = f64::from(positions[[f + 1, k, c]])
-                                - 2.0 * f64::from(positions[[f, k, c]])
-                                + f64::from(positions[[f - 1, k, c]]);
-                            a * a
-                        })
-                        .sum::<f64>()
-                        .sqrt()
-                })
-                .sum();
-            s / j as f64 * fps * fps
-        })
-        .collect()
-}
+// Measured beside the motion, where the served stages read it without the metrics.
+pub use crate::motion::skeleton::joint_acceleration;
 
 /// For each key pose, the largest of `acceleration` (from [`joint_acceleration`]) within
 /// ±[`KEY_POP_SPAN_S`] of its frame; key poses outside the dance are left out.

@@ -6,7 +6,7 @@
 //! move their step rate (dance-revolution's card, runs 1–3). Beat time removes tempo from what a
 //! network must learn instead: the song is heard at one reference tempo — its feature frames
 //! resampled in time, which is what a tempo change does to onset, chroma and MFCC frames
-//! ([`crate::models::train::augment::stretch_music`]) — the network makes its motion on that
+//! ([`crate::models::stretch::stretch_music`]) — the network makes its motion on that
 //! clock, and the motion is played back at the song's own tempo. A step the network makes every
 //! k of its frames is then the same fraction of a beat on any song, so the network's own motion
 //! follows the tempo. Training on dances re-timed the same way (`choreo train … --beat-time
@@ -19,7 +19,7 @@
 use ndarray::{Array2, ArrayView2};
 use serde::{Deserialize, Serialize};
 
-use super::train::augment::{stretch_music, MusicLayout};
+use super::stretch::{stretch_music, MusicLayout};
 use super::ModelError;
 use crate::motion::input::lerp_frames;
 use crate::motion::Motion;

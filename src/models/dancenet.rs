@@ -28,7 +28,6 @@ use serde::{Deserialize, Serialize};
 use tch::nn::{self, RNN};
 use tch::{Device, Kind, Tensor};
 
-mod free_run;
 mod sampling;
 pub mod served;
 pub mod style;
@@ -261,18 +260,19 @@ impl ContextEncoder {
     }
 }
 
-/// One gated layer of the decoder (§3.3).
+/// One gated layer of the decoder (§3.3). What a frame-by-frame pass needs is open to
+/// `crate::models`: the trainer's free run (`train::dancenet::free_run`) steps it.
 #[derive(Debug)]
-struct GatedLayer {
-    dilation: i64,
+pub(in crate::models) struct GatedLayer {
+    pub(in crate::models) dilation: i64,
     /// `W_f`, `W_g` stacked: `[2C, C, 2]`.
-    conv: nn::Conv1D,
+    pub(in crate::models) conv: nn::Conv1D,
     /// `V_f`, `V_g` of the music code (1×1).
     cond: nn::Conv1D,
     /// `V_f`, `V_g` of the style one-hot (1×1, no bias).
     style: nn::Conv1D,
-    res: nn::Conv1D,
-    skip: nn::Conv1D,
+    pub(in crate::models) res: nn::Conv1D,
+    pub(in crate::models) skip: nn::Conv1D,
 }
 
 impl GatedLayer {
@@ -310,7 +310,7 @@ impl GatedLayer {
 
     /// The conditioning of every frame: `V c + V_s s + b` `[b, 2C, n]` (the dilated
     /// convolution's bias folded in).
-    fn conditioning(&self, code: &Tensor, style: &Tensor) -> Tensor {
+    pub(in crate::models) fn conditioning(&self, code: &Tensor, style: &Tensor) -> Tensor {
         let bias = self.conv.bs.as_ref().map(|b| b.view([1, -1, 1]));
         let c = code.apply(&self.cond) + style.apply(&self.style);
         match bias {
@@ -320,7 +320,7 @@ impl GatedLayer {
     }
 
     /// Causal pass over `[b, C, n]` with conditioning `[b, 2C, n]`: `(residual out, skip)`.
-    fn forward(&self, h: &Tensor, cond: &Tensor) -> (Tensor, Tensor) {
+    pub(in crate::models) fn forward(&self, h: &Tensor, cond: &Tensor) -> (Tensor, Tensor) {
         let padded = h.constant_pad_nd([self.dilation, 0]);
         let z = padded.conv1d(&self.conv.ws, None::<&Tensor>, [1], [0], [self.dilation], 1) + cond;
         let zs = z.chunk(2, 1);
@@ -333,10 +333,10 @@ impl GatedLayer {
 /// frame's conditioning → mixture and contact parameters of the next frame.
 #[derive(Debug)]
 pub struct Decoder {
-    input: nn::Conv1D,
-    layers: Vec<GatedLayer>,
-    head: nn::Conv1D,
-    out: nn::Conv1D,
+    pub(in crate::models) input: nn::Conv1D,
+    pub(in crate::models) layers: Vec<GatedLayer>,
+    pub(in crate::models) head: nn::Conv1D,
+    pub(in crate::models) out: nn::Conv1D,
 }
 
 impl Decoder {
@@ -402,7 +402,7 @@ impl DanceNet {
     }
 
     /// Splits the decoder's raw output `[.., out_dim]` relative to the current frames `[.., D]`.
-    fn mixture(&self, raw: &Tensor, current: &Tensor) -> Mixture {
+    pub(in crate::models) fn mixture(&self, raw: &Tensor, current: &Tensor) -> Mixture {
         let (k, d) = (self.config.mixtures, self.config.pose_dim);
         let mut lead = raw.size();
         lead.pop();

@@ -19,6 +19,7 @@ pub mod layers;
 pub mod motion_style;
 pub mod opening_check;
 pub mod step_clock;
+pub mod stretch;
 pub mod train;
 pub mod tsmt;
 

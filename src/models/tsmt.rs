@@ -39,7 +39,6 @@ use super::layers::{sinusoid, Dims, KvCache, Stack};
 use super::ModelError;
 use crate::motion::repr::{self, FEATURE_DIM};
 
-mod free_run;
 mod opening;
 pub mod sampling;
 pub mod served;
@@ -293,7 +292,7 @@ impl AudioStream {
 #[derive(Debug)]
 pub struct PoseStream {
     merge: nn::Linear,
-    stack: Stack,
+    pub(in crate::models) stack: Stack,
     d_x: i64,
 }
 
@@ -316,25 +315,26 @@ impl PoseStream {
     }
 
     /// Embedded frames `[b, n, coords, e_bin]` → merged `[b, n, d_x]` with positions from `start`.
-    fn merge(&self, emb: &Tensor, start: i64) -> Tensor {
+    pub(in crate::models) fn merge(&self, emb: &Tensor, start: i64) -> Tensor {
         let (b, n, c, e) = emb.size4().expect("embedded poses are [b, n, coords, e]");
         emb.reshape([b, n, c * e]).apply(&self.merge)
             + sinusoid(start, n, self.d_x, emb.device()).unsqueeze(0)
     }
 }
 
-/// The whole model.
+/// The whole model. Its parts are open to `crate::models` so the trainer's free run
+/// (`train::tsmt::free_run`) can step the network frame by frame with the tape kept.
 #[derive(Debug)]
 pub struct Tsmt {
     pub config: Config,
     /// The bin embedding shared by every coordinate `[n_bins, e_bin]`.
-    bin_embed: nn::Embedding,
+    pub(in crate::models) bin_embed: nn::Embedding,
     pub pose: PoseStream,
     pub audio: AudioStream,
     /// `W^X`, factorised: `z^X` → `[coords, e_out]`.
-    w_x: nn::Linear,
+    pub(in crate::models) w_x: nn::Linear,
     /// `W^A`, factorised: `z^A` → `[coords, e_out]`.
-    w_a: nn::Linear,
+    pub(in crate::models) w_a: nn::Linear,
     /// The shared non-linear read-out `e_out → head_hidden` (GELU), when `head_hidden > 0`.
     head: Option<nn::Linear>,
     /// The shared output bin vectors `[n_bins, head_hidden or e_out]`.
@@ -342,7 +342,7 @@ pub struct Tsmt {
     /// Per-coordinate logit bias `[coords, n_bins]`.
     bias: Tensor,
     /// The step clock's two maps, when [`Config::step_clock`].
-    clock: Option<StepClockIn>,
+    pub(in crate::models) clock: Option<StepClockIn>,
 }
 
 /// Where the step clock enters TSMT: each input frame's clock is added to the pose stream's
@@ -353,8 +353,8 @@ pub struct Tsmt {
 /// attention would smear a phase that must be exact per frame.
 #[derive(Debug)]
 pub struct StepClockIn {
-    pose: nn::Linear,
-    fusion: nn::Linear,
+    pub(in crate::models) pose: nn::Linear,
+    pub(in crate::models) fusion: nn::Linear,
 }
 
 impl StepClockIn {
@@ -420,7 +420,7 @@ impl Tsmt {
     }
 
     /// Per-coordinate logits `[.., coords, n_bins]` from the fused vectors `[.., coords * e_out]`.
-    fn logits(&self, fused: &Tensor) -> Tensor {
+    pub(in crate::models) fn logits(&self, fused: &Tensor) -> Tensor {
         let mut shape = fused.size();
         let last = shape.pop().unwrap_or(0);
         shape.extend([self.config.coords, last / self.config.coords]);

@@ -7,7 +7,7 @@
 //! before the fit peaks at 45 m/s² (mean joint acceleration), the fitted skeleton at 112, on
 //! enough frames that its p99.9 is 88 where the verdict allows 84 (real dances: 56).
 //!
-//! [`calm`] reads what the metric reads (`metrics::physical::joint_acceleration` of the served
+//! [`calm`] reads what the metric reads ([`super::skeleton::joint_acceleration`] of the served
 //! joints). On every frame over [`BURST_M_S2`] (the verdict's line for a pop), and within
 //! [`REACH_S`] either side, it blends the dance towards a copy smoothed over time (a Gaussian of
 //! σ [`SIGMA_FRAMES`]); the blend fades out over the same reach, so it adds no corner of its own.
@@ -31,15 +31,15 @@ use nalgebra::{Quaternion, UnitQuaternion, Vector3};
 
 use super::export::served_motion;
 use super::rig::RigMotion;
+use super::skeleton::joint_acceleration;
 use super::smoothstep;
-use crate::metrics::physical::joint_acceleration;
 
 /// A frame is a burst above this mean joint acceleration (m/s²): the verdict's line for a pop,
 /// 1.5 × the real dances' p99.9 (56) and their largest outside capture glitches. Only pops are
 /// touched: calming from 56 up smoothed tsmt's DANCE_C_8 seed 2 (p99.9 77, a pass) on enough
 /// frames to move its step peak off the beat grid (1/6 → 0.30 of the beat rate); from 84 it
 /// stays locked.
-pub const BURST_M_S2: f64 = crate::metrics::physical::thresholds::POP_P999_M_S2;
+pub const BURST_M_S2: f64 = super::limits::POP_P999_M_S2;
 /// How far (seconds) either side of a burst frame the dance is fully blended, and again over
 /// how many seconds the blend fades out.
 pub const REACH_S: f64 = 0.12;

@@ -21,7 +21,7 @@
 //!
 //! Over the 43 real dances (`real_dances_lift_and_hang`): the lift is at most 0.14 m, and stays
 //! above 0.10 m for at most 0.72 s (DANCE_C_7); the verdict allows a hang of
-//! [`crate::metrics::physical::thresholds::HANG_S`].
+//! [`super::limits::HANG_S`].
 use ndarray::ArrayView3;
 
 use super::feet::{lift, lowest_foot};

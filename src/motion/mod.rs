@@ -27,6 +27,7 @@ pub mod hold;
 pub mod input;
 pub mod input_error;
 pub mod knees;
+pub mod limits;
 pub mod mannequin;
 pub mod repr;
 pub mod retarget;

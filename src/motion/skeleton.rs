@@ -188,6 +188,34 @@ pub fn average_speed(positions: ndarray::ArrayView3<'_, f32>, fps: f64) -> f64 {
     speeds.iter().sum::<f64>() / speeds.len().max(1) as f64
 }
 
+/// Per-frame mean joint acceleration `mean_j |p[t+1] − 2p[t] + p[t−1]|·fps²` for `t = 1..T−1`
+/// (m/s²); index `i` is frame `i + 1`: the pops the verdict grades
+/// ([`crate::metrics::physical`]) and the bursts a served stage calms ([`super::bursts`]).
+pub fn joint_acceleration(positions: ndarray::ArrayView3<'_, f32>, fps: f64) -> Vec<f64> {
+    let (t, j, _) = positions.dim();
+    if t < 3 || j == 0 {
+        return Vec::new();
+    }
+    (1..t - 1)
+        .map(|f| {
+            let s: f64 = (0..j)
+                .map(|k| {
+                    (0..3)
+                        .map(|c| {
+                            let a = f64::from(positions[[f + 1, k, c]])
+                                - 2.0 * f64::from(positions[[f, k, c]])
+                                + f64::from(positions[[f - 1, k, c]]);
+                            a * a
+                        })
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .sum();
+            s / j as f64 * fps * fps
+        })
+        .collect()
+}
+
 /// The body centre of every frame of `[T, J, 3]` positions, `[T, 3]`.
 pub fn body_centre_track(positions: ndarray::ArrayView3<'_, f32>) -> ndarray::Array2<f32> {
     let mut out = ndarray::Array2::zeros((positions.shape()[0], 3));

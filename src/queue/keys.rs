@@ -30,6 +30,16 @@ pub struct KeyLimits {
 }
 
 impl KeyLimits {
+    /// The limits of a tenant whose key sets none of its own: the config's. Read here, not in
+    /// the config, so the config stays below the store that reads it.
+    pub fn defaults(config: &crate::config::Config) -> Self {
+        Self {
+            rate_limit_rps: config.rate_limit_rps,
+            max_queued_jobs: config.max_queued_jobs,
+            storage_quota_bytes: config.storage_quota_bytes,
+        }
+    }
+
     /// Each limit of `self`, or `default`'s where `self` has none.
     pub fn or(self, default: KeyLimits) -> KeyLimits {
         KeyLimits {

@@ -34,6 +34,7 @@ pub mod postgres;
 pub mod rigs;
 pub mod sql;
 pub mod sqlite;
+pub mod view;
 
 pub use events::EventStore;
 pub use files::DataDir;

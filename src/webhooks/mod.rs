@@ -18,11 +18,11 @@
 //! duplicates), `webhook-timestamp` (Unix seconds of this attempt), `webhook-signature`
 //! (`v1,<base64 HMAC-SHA256 of "{id}.{timestamp}.{body}">`, see [`sign`]).
 //!
-//! This module sits above the API on the data flow's one exception: the body it sends is the
-//! API's own view of the job ([`crate::api::jobs::JobView`]), by contract.
-use crate::api::jobs::JobView;
+//! The body is the API's own view of the job ([`crate::queue::view::JobView`], which the API
+//! returns too).
 use crate::config::Config;
 use crate::queue::events::{WebhookAttempt, WebhookDue, WebhookNext};
+use crate::queue::view::JobView;
 use crate::queue::{QueueError, Scope, Store};
 use chrono::Utc;
 use std::sync::Arc;

@@ -10,7 +10,7 @@ use crate::models::beat_time;
 use crate::models::folder;
 use crate::models::layers::LstmState;
 use crate::models::opening_check::{OpeningCheck, OpeningChosen};
-use crate::models::train::augment::MusicLayout;
+use crate::models::stretch::MusicLayout;
 use crate::models::{
     to_array, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
     InstancePool, ModelError, ModelId, ModelInfo, Progress,

@@ -13,7 +13,7 @@ use super::style::ServedStyle;
 use super::{DanceNet, ModelFile, Sampling, ID};
 use crate::models::beat_time;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
-use crate::models::train::augment::MusicLayout;
+use crate::models::stretch::MusicLayout;
 use crate::models::{
     smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
     InstancePool, ModelError, ModelId, ModelInfo, Progress, StyleChoice,

@@ -163,7 +163,7 @@ pub fn jump_frames(x: ArrayView2<'_, f32>, threshold_m_s2: f64, fps: f64) -> Vec
         x[[t, 3 * j + c]] + if c == 1 { x[[t, repr::ROOT_Y]] } else { 0.0 }
     });
     // `joint_acceleration`'s value i is frame i + 1's.
-    let acceleration = crate::metrics::physical::joint_acceleration(joints.view(), fps);
+    let acceleration = crate::motion::skeleton::joint_acceleration(joints.view(), fps);
     acceleration
         .iter()
         .enumerate()

@@ -4,7 +4,7 @@ use tch::{Device, Kind, Tensor};
 
 use rand::SeedableRng;
 
-use super::augment::{Augment, MusicLayout};
+use super::augment::Augment;
 use super::{
     batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Tempo, TrainError,
     Trainer, Windows,
@@ -12,6 +12,7 @@ use super::{
 use crate::models::dance_revolution::{
     curriculum_q, figures, Config, Curriculum, DanceRevolution, ModelFile, Serving, ID,
 };
+use crate::models::stretch::MusicLayout;
 
 /// Options of one training run; the defaults reproduce the committed weights' schedule (the
 /// card gives the runs).

@@ -8,7 +8,7 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use tch::{Device, Kind, Tensor};
 
-use super::augment::{stretch_music, stretch_rotation_rows, Augment, MusicLayout};
+use super::augment::Augment;
 use super::{
     batch_tensor, window_starts, CommonOptions, EpochLog, EpochResult, Sequence, TrainError,
     Trainer,
@@ -16,12 +16,14 @@ use super::{
 use crate::metrics::physical::seed_distance_m;
 use crate::models::dancenet::{Config, DanceNet, ModelFile, Sampling, Schedule, Serving, ID};
 use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
+use crate::models::stretch::{stretch_music, stretch_rotation_rows, MusicLayout};
 use crate::models::to_tensor;
 use crate::models::DanceStyle;
 use crate::motion::dataset::{Dance, Dataset, NormStats};
 use crate::motion::rig::Rig;
 use crate::motion::rotations;
 
+mod free_run;
 mod lock;
 mod phase;
 

@@ -7,19 +7,21 @@ use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use tch::{Device, Tensor};
 
-use super::augment::{Augment, MusicLayout};
+use super::augment::Augment;
 use super::{
     batch_tensor, window_starts, CommonOptions, Data, EpochLog, EpochResult, Sequence, Tempo,
     TrainError,
 };
 use super::{Trainer, Windows};
 use crate::models::folder::{SeedClips, SEED_CLIPS_FILE};
+use crate::models::stretch::MusicLayout;
 use crate::models::tsmt::{
     Bins, Config, ModelFile, Sampling, Schedule, Serving, StallGuard, Tsmt, ID, MAX_POSITION,
 };
 use crate::motion::repr;
 
 mod free;
+mod free_run;
 mod lock;
 mod self_condition;
 mod warp;

@@ -4,6 +4,7 @@ use tch::Tensor;
 
 use super::{augment, normalize_all, Data, TrainError};
 use crate::models::beat_time::{self, BeatTime, BeatTimeConfig};
+use crate::models::stretch;
 
 impl Data {
     /// The beat-time reference of the train split: the median of its songs' folded tempi
@@ -24,14 +25,14 @@ impl Data {
     /// each song's tempo folded by octaves, the music's frames resampled as `layout` says, the
     /// motion with them) and normalises with the statistics already fitted, so a network
     /// continued from served weights reads its inputs on the same scale. Returns the reference.
-    pub fn retime(&mut self, layout: &augment::MusicLayout) -> Result<BeatTimeConfig, TrainError> {
+    pub fn retime(&mut self, layout: &stretch::MusicLayout) -> Result<BeatTimeConfig, TrainError> {
         let config = self.reference_tempo()?;
         for s in self.train_raw.iter_mut().chain(self.test_raw.iter_mut()) {
             let Some(hz) = s.beat_hz else { continue };
             let f = beat_time::folded_factor(config.bpm, hz);
             let len = BeatTime::with_factor(f, s.poses.nrows()).net_frames;
-            s.music = augment::stretch_music(s.music.view(), 0, len, f, layout);
-            s.poses = augment::stretch_poses(s.poses.view(), 0, len, f);
+            s.music = stretch::stretch_music(s.music.view(), 0, len, f, layout);
+            s.poses = stretch::stretch_poses(s.poses.view(), 0, len, f);
             // The dance now beats at the reference tempo.
             s.beat_hz = Some(hz * f);
         }
@@ -49,7 +50,7 @@ impl Data {
 /// normalised with the split's statistics.
 pub struct Windows<'a> {
     data: &'a Data,
-    layout: augment::MusicLayout,
+    layout: stretch::MusicLayout,
     augment: augment::Augment,
     partner: Vec<usize>,
     /// Each train dance re-timed to this reference tempo before the drawn factor
@@ -58,7 +59,7 @@ pub struct Windows<'a> {
 }
 
 impl<'a> Windows<'a> {
-    pub fn new(data: &'a Data, layout: augment::MusicLayout, augment: augment::Augment) -> Self {
+    pub fn new(data: &'a Data, layout: stretch::MusicLayout, augment: augment::Augment) -> Self {
         Self {
             data,
             layout,
@@ -104,8 +105,8 @@ impl<'a> Windows<'a> {
         let seq = &self.data.train_raw[i];
         let (f, mirror) = self.augment.draw(rng);
         let f = f * self.dance_factor(i);
-        let m = augment::stretch_music(seq.music.view(), f0, len, f, &self.layout);
-        let mut p = augment::stretch_poses(seq.poses.view(), f0, len, f);
+        let m = stretch::stretch_music(seq.music.view(), f0, len, f, &self.layout);
+        let mut p = stretch::stretch_poses(seq.poses.view(), f0, len, f);
         if mirror {
             if p.ncols() != crate::motion::repr::FEATURE_DIM {
                 return Err(TrainError::InvalidOption(format!(

@@ -16,7 +16,7 @@ use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
 use crate::models::beat_time;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
 use crate::models::step_clock;
-use crate::models::train::augment::MusicLayout;
+use crate::models::stretch::MusicLayout;
 use crate::models::{
     smooth_columns, to_tensor, Cancelled, Capabilities, DanceModel, GenerateRequest, Generated,
     InstancePool, ModelError, ModelId, ModelInfo, Progress,
@@ -190,7 +190,7 @@ impl Served {
             .map(|(c, rate)| {
                 let clip = clips.clips.slice(s![c, .., ..]);
                 let len = ((clip.nrows() - 1) as f64 / rate).floor() as usize + 1;
-                crate::models::train::augment::stretch_poses(clip, 0, len, rate)
+                crate::models::stretch::stretch_poses(clip, 0, len, rate)
             })
             .collect())
     }

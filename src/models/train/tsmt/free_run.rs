@@ -11,8 +11,8 @@
 //! network's own history drifts, as served, and only the clock can bring it back.
 use tch::{Kind, Tensor};
 
-use super::{Sampling, Tsmt};
 use crate::models::layers::KvCache;
+use crate::models::tsmt::{Sampling, Tsmt};
 
 impl Tsmt {
     /// Draws `frames` frames after the context `prefix` `[b, m, coords]` (int64, `m` ≤ the

@@ -5,11 +5,11 @@
 //! It serves both of the trainer's free-running terms (`--spectral-weight`, `--lock-weight`).
 //! The first free run re-ran the whole dilated stack over its receptive field for every frame
 //! (6.5 s a batch for 137 frames); here each gated layer runs on one frame
-//! against queues of its past inputs, as served ([`super::sampling`]), so a frame costs one
+//! against queues of its past inputs, as served (`dancenet::sampling`), so a frame costs one
 //! pass of ten 1×1 layers and windows of ten seconds are affordable.
 use tch::{Kind, Tensor};
 
-use super::DanceNet;
+use crate::models::dancenet::DanceNet;
 
 impl DanceNet {
     /// Continues `real` `[b, n, D + contacts]` (normalised) after its first `context` frames:
@@ -123,8 +123,8 @@ impl DanceNet {
 
 #[cfg(test)]
 mod tests {
-    use super::super::Config;
     use super::*;
+    use crate::models::dancenet::Config;
     use tch::nn::{self, OptimizerConfig};
     use tch::Device;
 
