@@ -232,17 +232,16 @@ impl Pipeline {
             )?
         };
         progress.report(Stage::BeatAlign, MODEL_END)?;
-        let mut finished = {
+        let style = generated.style.clone();
+        let finished = {
             let _timer = StageTimer::start("generate", Stage::BeatAlign);
             let stages = MotionStages {
                 beat_align: true,
                 plant_feet: options.plant_feet,
-                tempo_follow: generated.composition.is_none(),
+                tempo_follow: true,
             };
             after_model(
-                generated.motion,
-                generated.beat_time,
-                generated.opening,
+                generated,
                 analysis,
                 song_audio.duration_s(),
                 &options.key_poses,
@@ -250,14 +249,13 @@ impl Pipeline {
                 stages,
             )
         };
-        finished.composition = generated.composition;
         progress.report(Stage::Export, MODEL_END)?;
         let _timer = StageTimer::start("generate", Stage::Export);
         let caption = Caption {
             model: options.model.0.clone(),
             seed: options.seed,
             song: Some(song.filename.clone()),
-            style: generated.style,
+            style,
         };
         let files = render(
             &self.data.job_dir(job.id),
@@ -384,19 +382,28 @@ pub struct Finished {
 /// planted), with the network's own tempo lock measured before them for the report. Jobs and
 /// `choreo generate` both call it, so both serve the same dance.
 /// `seed_motion`: the request's, whose frames open the dance and are kept as they are;
-/// `beat_time` (the clock the model ran on) and `opening` (what its opening check chose) are
-/// carried to the report.
-#[allow(clippy::too_many_arguments)]
+/// `generated`'s clock (`beat_time`), opening check and composition are carried to the report. A
+/// composed dance is on the song's beats already, so it is not warped to a changing tempo
+/// ([`MotionStages::tempo_follow`]).
 pub fn after_model(
-    model_motion: Motion,
-    beat_time: Option<crate::models::beat_time::BeatTimeUsed>,
-    opening: Option<crate::models::opening_check::OpeningChosen>,
+    generated: crate::models::Generated,
     analysis: Analysis,
     song_duration_s: f64,
     key_poses: &[KeyPose],
     seed_motion: Option<&Motion>,
     stages: MotionStages,
 ) -> Finished {
+    let crate::models::Generated {
+        motion: model_motion,
+        beat_time,
+        opening,
+        composition,
+        style: _,
+    } = generated;
+    let stages = MotionStages {
+        tempo_follow: stages.tempo_follow && composition.is_none(),
+        ..stages
+    };
     let tempo_lock_before = crate::metrics::musicality::tempo_lock(
         model_motion.positions.view(),
         model_motion.fps,
@@ -423,7 +430,7 @@ pub fn after_model(
         plant_feet: stages.plant_feet,
         beat_time,
         opening,
-        composition: None,
+        composition,
         seed_frames,
     }
 }

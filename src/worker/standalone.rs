@@ -178,27 +178,18 @@ pub fn generate_decoded(
         model: id,
         seed: request.seed,
         song,
-        style: generated.style,
+        style: generated.style.clone(),
     };
     let analysis = analysis.into_owned();
     clock.report(Stage::BeatAlign, 0.0)?;
-    let composition = generated.composition.clone();
-    // A composed dance is on the song's beats already (MotionStages::tempo_follow).
-    let stages = MotionStages {
-        tempo_follow: stages.tempo_follow && composition.is_none(),
-        ..stages
-    };
-    let mut finished = super::pipeline::after_model(
-        generated.motion,
-        generated.beat_time,
-        generated.opening,
+    let finished = super::pipeline::after_model(
+        generated,
         analysis,
         request.audio.duration_s(),
         request.key_poses,
         request.seed_motion,
         stages,
     );
-    finished.composition = composition;
     let files =
         super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| {
             clock.enter(stage)
