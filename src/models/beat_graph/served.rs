@@ -662,7 +662,14 @@ impl DanceModel for Served {
                 self.predict_style(beat, meter_of(&analysis))
             }
         };
-        let sections = self.sections(&analysis, &choice, n as f64 / fps);
+        let duration = n as f64 / fps;
+        let sections = self.sections(&analysis, &choice, duration);
+        // The style reported is the one danced longest, not the guess from the median beat that
+        // no section may have kept.
+        let choice = StyleChoice {
+            style: main_style(&sections, duration),
+            ..choice
+        };
         let (motion, composition) =
             self.compose(req, &analysis, music.view(), &sections, progress)?;
         tracing::debug!(
