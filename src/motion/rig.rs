@@ -78,6 +78,9 @@ mod continuity;
 mod least_squares;
 mod root;
 
+/// The retarget solver splits its torso and head turns the same way.
+pub(crate) use continuity::twist_angle;
+
 /// Joints in the rig: the body centre, the 23 dataset joints, and the branch joints.
 pub const RIG_JOINTS: usize = NUM_JOINTS + 1 + VIRTUAL.len();
 /// Name of the rig's root joint.

@@ -40,7 +40,7 @@ use std::collections::HashMap;
 use nalgebra::{UnitQuaternion, Vector3};
 
 use super::{HumanBone, RetargetError, TargetSkeleton};
-use crate::motion::rig::{fk_frame, RigMotion};
+use crate::motion::rig::{fk_frame, twist_angle, RigMotion};
 
 mod bones;
 mod kinematics;
@@ -589,8 +589,7 @@ fn spread_torso(
         return;
     };
     // Swing-twist about the spine's own axis (the hips' frame is the rest frame at rest).
-    let q = turn.quaternion();
-    let twist = 2.0 * q.imag().dot(&axis).atan2(q.w);
+    let twist = twist_angle(&turn, &axis);
     let twist = twist - std::f64::consts::TAU * (twist / std::f64::consts::TAU).round();
     let k = spine.len() as f64;
     let share = UnitQuaternion::from_axis_angle(&axis, twist / k);
@@ -632,8 +631,7 @@ fn face_with_torso(
     };
     let rel = torso.inverse() * *head;
     // Swing-twist: the twist's angle about the bone's own (local) axis.
-    let q = rel.quaternion();
-    let twist = 2.0 * q.imag().dot(&axis).atan2(q.w);
+    let twist = twist_angle(&rel, &axis);
     // The marker line's angle, modulo half a turn, in (-90°, 90°].
     let line = twist - PI * (twist / PI).round();
     let kept = HEAD_TURN_KEPT_DEG.to_radians();
