@@ -87,15 +87,20 @@ fn longest_run(period: &[f64], keep: impl Fn(f64) -> bool) -> (usize, usize) {
     best
 }
 
-/// Whether the local beat (per frame) moves by [`CHANGE_RATIO`] between its p10 and p90.
-fn changes(period: &[f64]) -> bool {
-    percentile(period, 0.9) / percentile(period, 0.1) >= CHANGE_RATIO
+/// The local beat's (per frame) 10th and 90th percentiles.
+fn spread(period: &[f64]) -> (f64, f64) {
+    (percentile(period, 0.1), percentile(period, 0.9))
+}
+
+/// Whether a local beat spread from `p10` to `p90` is a tempo change ([`CHANGE_RATIO`]).
+fn changes((p10, p90): (f64, f64)) -> bool {
+    p90 / p10 >= CHANGE_RATIO
 }
 
 /// Whether the song's tempo changes over a dance of `frames` at `fps` (what [`follow_tempo`]
 /// warps for).
 pub fn tempo_changes(beat_times_s: &[f64], frames: usize, fps: f64) -> bool {
-    local_beat(beat_times_s, frames, fps).is_some_and(|p| changes(&p))
+    local_beat(beat_times_s, frames, fps).is_some_and(|p| changes(spread(&p)))
 }
 
 /// The step rate (Hz) of frames `range` of `motion`.
@@ -116,8 +121,8 @@ pub fn follow_tempo(motion: Motion, beat_times_s: &[f64], fixed: bool) -> Motion
     let Some(period) = local_beat(beat_times_s, frames, fps) else {
         return motion;
     };
-    let (p10, p90) = (percentile(&period, 0.1), percentile(&period, 0.9));
-    if !changes(&period) {
+    let (p10, p90) = spread(&period);
+    if !changes((p10, p90)) {
         return motion;
     }
     let median = percentile(&period, 0.5);
