@@ -1,6 +1,6 @@
 """Imports a choreo dance into Blender at the dance's own frame rate and saves it as a .blend.
 
-    blender --background --python tools/blender_import.py -- DANCE.bvh|DANCE.glb [OUT.blend]
+    blender --background --python tools/blender_import.py -- DANCE.bvh|DANCE.glb [OUT.blend] [--armature NAME]
 
 Any of choreo's BVH and glb files (motion.bvh, motion.glb, and either on another rig:
 `motion.bvh?rig=mixamo`, `motion.glb?rig=<uploaded id>`). OUT.blend defaults to the dance's
@@ -11,9 +11,11 @@ path with `.blend`. What it does:
 - sets the scene to the dance's frame rate before importing: a BVH's `Frame Time`, a glb's
   `extras.fps` (glTF itself has none, and Blender's glTF importer puts each key on frame
   `seconds × the scene's fps`, 24 in a new scene, so without this the keys fall between frames);
-- imports (BVH: metres, y up, as choreo writes it; glb: as is, the armature named as the file
-  names it, e.g. `Armature` for Mixamo), sets the scene's frame range to the action's keys, and
-  saves.
+- imports (BVH: metres, y up, as choreo writes it; glb: as is), names the armature for the rig
+  (a glb names it itself, e.g. `Armature` for Mixamo; a BVH names none and Blender would call it
+  after the file, so it gets the name the same dance's glb has: `Armature` for Mixamo, VRM and an
+  uploaded rig, `SMPL`, `choreo_skeleton`; `--armature NAME` to choose), sets the scene's frame
+  range to the action's keys, and saves.
 
 It prints one line `choreo-import: {...}` (JSON: the armature, its bone count, fps, keyframes,
 seconds, the saved file) for scripts to read.
@@ -48,6 +50,18 @@ def glb_fps(path):
     return None
 
 
+def bvh_armature_name(armature):
+    """What choreo's glb of the same dance calls this BVH's armature, told by its bones (a BVH
+    has no name for it): SMPL's joints, choreo's own, else `Armature` (Mixamo, VRM and uploaded
+    rigs, as Mixamo's own downloads import)."""
+    bones = {b.name for b in armature.data.bones}
+    if {"pelvis", "spine3", "left_collar"} <= bones:
+        return "SMPL"
+    if {"head_right", "head_left", "right_forearm"} <= bones:
+        return "choreo_skeleton"
+    return "Armature"
+
+
 def set_scene_fps(scene, fps):
     """The scene's rate as Blender's BVH importer sets it: a whole fps and a base for the rest."""
     scene.render.fps = max(1, int(round(fps)))
@@ -56,8 +70,15 @@ def set_scene_fps(scene, fps):
 
 def main():
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    name = None
+    if "--armature" in argv:
+        i = argv.index("--armature")
+        if i + 1 >= len(argv):
+            sys.exit("--armature needs a name")
+        name = argv[i + 1]
+        del argv[i:i + 2]
     if not argv or not argv[0].lower().endswith((".bvh", ".glb")):
-        sys.exit("usage: blender --background --python tools/blender_import.py -- DANCE.bvh|DANCE.glb [OUT.blend]")
+        sys.exit("usage: blender --background --python tools/blender_import.py -- DANCE.bvh|DANCE.glb [OUT.blend] [--armature NAME]")
     path = os.path.abspath(argv[0])
     out = os.path.abspath(argv[1]) if len(argv) > 1 else os.path.splitext(path)[0] + ".blend"
 
@@ -79,6 +100,12 @@ def main():
             use_fps_scale=False, frame_start=1)
     new = [ob for ob in bpy.data.objects if ob not in before]
     armatures = [ob for ob in new if ob.type == "ARMATURE"]
+    for ob in armatures[:1]:
+        if name is None and path.lower().endswith(".bvh"):
+            name = bvh_armature_name(ob)
+        if name is not None:
+            ob.name = name
+            ob.data.name = name
     keys = keyframe_frames(new)
     if keys:
         # The action's own range (a glb's keys start at frame 0; the scene's did not follow).
