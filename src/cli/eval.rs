@@ -63,6 +63,11 @@ pub struct EvalArgs {
     /// No tempo section.
     #[arg(long)]
     pub no_tempo: bool,
+    /// With --split train: only the train dances of fold K/N (each style's dances, in split
+    /// order, go to fold i mod N; the lone tango never), the ones a model built with
+    /// `choreo train … --hold-out K/N` left out. Settings are chosen there, not on the test split.
+    #[arg(long, value_parser = |s: &str| choreo::motion::dataset::Fold::parse(s).map_err(|e| e.to_string()))]
+    pub hold_out: Option<choreo::motion::dataset::Fold>,
     /// Recompute the reference statistics from the train split, write them to
     /// src/metrics/reference_train.json (or --reference-out) and exit.
     #[arg(long)]
@@ -93,6 +98,7 @@ impl EvalArgs {
             } else {
                 self.tempi.clone()
             },
+            hold_out: self.hold_out,
         }
     }
 }

@@ -535,5 +535,11 @@ args_into! {
         /// Edges kept per unit in the motion graph.
         #[arg(long, default_value_t = train::beat_graph::Options::default().graph_degree)]
         graph_degree: usize,
+        /// Leave fold `K/N` of the train dances out of the library (each style's dances, in
+        /// split order, go to fold i mod N; the lone tango never), to choose settings with
+        /// `choreo eval --split train --hold-out K/N` instead of on the test split. Write it with
+        /// `--out` elsewhere, never over the committed folder.
+        #[arg(long)]
+        hold_out: Option<String>,
     }
 }

@@ -49,7 +49,7 @@ use crate::metrics::MetricsError;
 use crate::models::motion_style::{MotionStyle, StyleError};
 use crate::models::{ModelError, ModelId, Registry};
 use crate::motion::beat_align::BeatAlignSummary;
-use crate::motion::dataset::{Dance, Dataset};
+use crate::motion::dataset::{Dance, Dataset, Fold};
 use crate::motion::{KeyPose, Motion, MotionError};
 use crate::report::preview::PreviewError;
 use rows::{crop, model_rows, row, Quiet};
@@ -99,6 +99,10 @@ pub struct EvalOptions {
     /// Tempo factors every extra song is also danced at (with sox; [`tempo`]); empty: no tempo
     /// section.
     pub tempi: Vec<f64>,
+    /// With the train split: only the dances of this fold, the ones a model built with the same
+    /// `--hold-out` left out, so that settings are chosen on dances it has not seen and the test
+    /// split stays held out.
+    pub hold_out: Option<Fold>,
 }
 
 impl Default for EvalOptions {
@@ -117,6 +121,7 @@ impl Default for EvalOptions {
             previews: None,
             mismatch_per_song: 1,
             tempi: tempo::TEMPI.to_vec(),
+            hold_out: None,
         }
     }
 }
@@ -137,6 +142,8 @@ pub enum EvalError {
     Dataset(#[from] MotionError),
     #[error("unknown split {0:?} (test or train)")]
     UnknownSplit(String),
+    #[error("--hold-out {0} leaves out train dances: it needs --split train")]
+    HoldOutNeedsTrain(Fold),
     #[error("audio: {0}")]
     Audio(#[from] AudioError),
     #[error("loading models: {0}")]
@@ -178,6 +185,7 @@ impl EvalError {
             EvalError::Metrics(e) => e.code(),
             EvalError::Dataset(e) => e.code(),
             EvalError::UnknownSplit(_) => "eval-unknown-split",
+            EvalError::HoldOutNeedsTrain(_) => "eval-hold-out-needs-train",
             EvalError::Audio(e) => e.code(),
             EvalError::Models(_) => "eval-models-unavailable",
             EvalError::UnknownModel { .. } => "eval-unknown-model",
@@ -359,10 +367,18 @@ pub(super) fn as_served_measured(
 pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
     let reference = ReferenceStats::builtin()?;
     let ds = Dataset::open(&args.data)?;
-    let ids: Vec<String> = match args.split.as_str() {
-        "test" => ds.test_ids().to_vec(),
-        "train" => ds.train_ids().to_vec(),
-        other => return Err(EvalError::UnknownSplit(other.to_string())),
+    let ids: Vec<String> = match (args.split.as_str(), args.hold_out) {
+        ("test", None) => ds.test_ids().to_vec(),
+        ("test", Some(fold)) => return Err(EvalError::HoldOutNeedsTrain(fold)),
+        ("train", None) => ds.train_ids().to_vec(),
+        ("train", Some(fold)) => ds
+            .train_ids()
+            .iter()
+            .zip(fold.holds_ids(ds.train_ids()))
+            .filter(|(_, held)| *held)
+            .map(|(id, _)| id.clone())
+            .collect(),
+        (other, _) => return Err(EvalError::UnknownSplit(other.to_string())),
     };
     let eval_dances = ds.load_all(&ids)?;
     let songs: Vec<Song> = eval_dances
@@ -553,7 +569,10 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
         }
     }
     Ok(EvalResult {
-        split: args.split.clone(),
+        split: match args.hold_out {
+            Some(fold) => format!("{} (fold {fold} held out)", args.split),
+            None => args.split.clone(),
+        },
         seed: args.seed,
         rows,
         extra_songs: extra_names,

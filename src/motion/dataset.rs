@@ -87,6 +87,72 @@ impl FromStr for Style {
     }
 }
 
+/// Fold `k` of `n` (`k` in `1..=n`) of a leave-dances-out check on the train split: each
+/// style's dances, in split order, go to fold i mod n, and a style with one train dance (the
+/// tango) is never left out, so what is trained on keeps every style.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Fold {
+    pub k: usize,
+    pub n: usize,
+}
+
+/// A `--hold-out` that is not `K/N` with 1 ≤ K ≤ N, N ≥ 2.
+#[derive(Debug, thiserror::Error)]
+#[error("--hold-out {0:?}: expected K/N with 1 ≤ K ≤ N, N ≥ 2")]
+pub struct FoldError(pub String);
+
+impl Fold {
+    /// Parses `K/N`.
+    pub fn parse(s: &str) -> Result<Self, FoldError> {
+        let bad = || FoldError(s.to_string());
+        let (k, n) = s.split_once('/').ok_or_else(bad)?;
+        let (k, n): (usize, usize) = (
+            k.trim().parse().map_err(|_| bad())?,
+            n.trim().parse().map_err(|_| bad())?,
+        );
+        if n < 2 || k == 0 || k > n {
+            return Err(bad());
+        }
+        Ok(Self { k, n })
+    }
+
+    /// Whether each dance (in split order, given by its style's class index) is held out.
+    pub fn holds(&self, styles: &[usize]) -> Vec<bool> {
+        let mut total = [0usize; Style::ALL.len()];
+        for &s in styles {
+            total[s] += 1;
+        }
+        let mut seen = [0usize; Style::ALL.len()];
+        styles
+            .iter()
+            .map(|&s| {
+                seen[s] += 1;
+                total[s] > 1 && (seen[s] - 1) % self.n == self.k - 1
+            })
+            .collect()
+    }
+
+    /// Whether each dance id (in split order) is held out; an id of no style never is.
+    pub fn holds_ids(&self, ids: &[String]) -> Vec<bool> {
+        let styles: Vec<Option<usize>> = ids
+            .iter()
+            .map(|id| Style::from_dance_id(id).map(Style::index))
+            .collect();
+        let known: Vec<usize> = styles.iter().flatten().copied().collect();
+        let mut held = self.holds(&known).into_iter();
+        styles
+            .iter()
+            .map(|s| s.is_some() && held.next().unwrap_or(false))
+            .collect()
+    }
+}
+
+impl fmt::Display for Fold {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}/{}", self.k, self.n)
+    }
+}
+
 /// The fixed train/test split of `split.json`.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct Split {

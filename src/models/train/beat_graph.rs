@@ -16,7 +16,7 @@ use crate::models::beat_graph::served::{
 use crate::models::beat_graph::Config;
 use crate::models::folder::{MODEL_FILE, WEIGHTS_FILE};
 use crate::models::DanceStyle;
-use crate::motion::dataset::Dataset;
+use crate::motion::dataset::{Dataset, Fold};
 use crate::motion::{MOTION_FPS, NUM_JOINTS};
 
 /// The build's options.
@@ -27,6 +27,10 @@ pub struct Options {
     pub ridge: f64,
     /// Edges per unit in the graph ([`Config::graph_degree`]).
     pub graph_degree: usize,
+    /// Leave fold `K/N` of the train dances out of the library ([`Fold`]), so that settings can
+    /// be chosen on dances the library lacks (`choreo eval --split train --hold-out K/N`)
+    /// rather than on the test split.
+    pub hold_out: Option<String>,
 }
 
 impl Default for Options {
@@ -35,6 +39,7 @@ impl Default for Options {
             common: CommonOptions::default(),
             ridge: 0.05,
             graph_degree: Config::default().graph_degree,
+            hold_out: None,
         }
     }
 }
@@ -295,9 +300,20 @@ pub fn train(o: &Options) -> Result<ModelFile, TrainError> {
     let started = Instant::now();
     let fps = MOTION_FPS;
     let ds = Dataset::open(&o.common.data)?;
+    let fold = o.hold_out.as_deref().map(Fold::parse).transpose()?;
+    let train_ids: Vec<String> = match fold {
+        Some(f) => ds
+            .train_ids()
+            .iter()
+            .zip(f.holds_ids(ds.train_ids()))
+            .filter(|(_, held)| !held)
+            .map(|(id, _)| id.clone())
+            .collect(),
+        None => ds.train_ids().to_vec(),
+    };
     // One skeleton for every unit: each bone at the median of the train dances' own medians.
     let mut per_dance = Vec::new();
-    for id in ds.train_ids() {
+    for id in &train_ids {
         let d = ds.load(id)?;
         per_dance.push(bone_lengths(d.motion.positions.view(), d.center.view()));
     }
@@ -309,7 +325,7 @@ pub fn train(o: &Options) -> Result<ModelFile, TrainError> {
         })
         .collect();
     let mut cuts = Vec::new();
-    for (d, id) in ds.train_ids().iter().enumerate() {
+    for (d, id) in train_ids.iter().enumerate() {
         cuts.push(cut(&ds, id, d, Some(&lengths))?.0);
     }
     let mut units = Vec::new();
@@ -404,12 +420,15 @@ pub fn train(o: &Options) -> Result<ModelFile, TrainError> {
         matcher,
         styles,
         library: LibraryRecord {
-            dances: ds.train_ids().to_vec(),
+            dances: train_ids.clone(),
             units: lib.units.len(),
             frames: lib.frames.nrows(),
             made_by: format!(
-                "choreo train beat-graph --ridge {} --graph-degree {}: every train dance cut at its song's beats (audio::analyze), units of {:.2}–{:.2} s",
-                o.ridge, o.graph_degree, BEAT_RANGE_S.0, BEAT_RANGE_S.1
+                "choreo train beat-graph --ridge {} --graph-degree {}{}: every train dance cut at its song's beats (audio::analyze), units of {:.2}–{:.2} s",
+                o.ridge,
+                o.graph_degree,
+                fold.map(|f| format!(" --hold-out {f}")).unwrap_or_default(),
+                BEAT_RANGE_S.0, BEAT_RANGE_S.1
             ),
             seconds: started.elapsed().as_secs_f64(),
         },

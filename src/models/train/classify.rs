@@ -100,55 +100,7 @@ pub struct Additions {
     pub no_style_per_batch: usize,
 }
 
-/// Fold `k` of `n` (`k` in `1..=n`) of a leave-dances-out check.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Fold {
-    pub k: usize,
-    pub n: usize,
-}
-
-impl Fold {
-    /// Parses `K/N`.
-    pub fn parse(s: &str) -> Result<Self, TrainError> {
-        let bad = || {
-            TrainError::InvalidOption(format!(
-                "--hold-out {s:?}: expected K/N with 1 ≤ K ≤ N, N ≥ 2"
-            ))
-        };
-        let (k, n) = s.split_once('/').ok_or_else(bad)?;
-        let (k, n): (usize, usize) = (
-            k.trim().parse().map_err(|_| bad())?,
-            n.trim().parse().map_err(|_| bad())?,
-        );
-        if n < 2 || k == 0 || k > n {
-            return Err(bad());
-        }
-        Ok(Self { k, n })
-    }
-
-    /// Whether each dance (in split order) is held out.
-    pub fn holds(&self, dances: &[Labelled]) -> Vec<bool> {
-        let mut seen = [0usize; STYLES];
-        let total = dances.iter().fold([0usize; STYLES], |mut t, d| {
-            t[d.style.index()] += 1;
-            t
-        });
-        dances
-            .iter()
-            .map(|d| {
-                let i = d.style.index();
-                seen[i] += 1;
-                total[i] > 1 && (seen[i] - 1) % self.n == self.k - 1
-            })
-            .collect()
-    }
-}
-
-impl std::fmt::Display for Fold {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}/{}", self.k, self.n)
-    }
-}
+pub use crate::motion::dataset::Fold;
 
 /// The dances a run learns from, leaves out and is tested on, normalised with statistics of
 /// the dances it learns from.
@@ -171,7 +123,14 @@ impl Splits {
         tied: &[Range<usize>],
     ) -> Result<Self, TrainError> {
         let holds = fold
-            .map(|f| f.holds(&train_raw))
+            .map(|f| {
+                f.holds(
+                    &train_raw
+                        .iter()
+                        .map(|d| d.style.index())
+                        .collect::<Vec<_>>(),
+                )
+            })
             .unwrap_or_else(|| vec![false; train_raw.len()]);
         let (mut train, mut held_out) = (Vec::new(), Vec::new());
         for (d, h) in train_raw.into_iter().zip(holds) {
@@ -536,8 +495,9 @@ mod tests {
                 )
             })
             .collect();
-        let f1 = Fold::parse("1/2").unwrap().holds(&d);
-        let f2 = Fold::parse("2/2").unwrap().holds(&d);
+        let styles: Vec<usize> = d.iter().map(|d| d.style.index()).collect();
+        let f1 = Fold::parse("1/2").unwrap().holds(&styles);
+        let f2 = Fold::parse("2/2").unwrap().holds(&styles);
         assert_eq!(f1, vec![true, false, true, true, false, false, false]);
         assert_eq!(f2, vec![false, true, false, false, true, false, true]);
         for bad in ["0/2", "3/2", "1/1", "x", "1/"] {

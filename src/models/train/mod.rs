@@ -38,6 +38,12 @@ pub enum TrainError {
     InvalidOption(String),
 }
 
+impl From<crate::motion::dataset::FoldError> for TrainError {
+    fn from(e: crate::motion::dataset::FoldError) -> Self {
+        TrainError::InvalidOption(e.to_string())
+    }
+}
+
 impl TrainError {
     /// Stable kebab-case name of the failure.
     pub fn code(&self) -> &'static str {
