@@ -481,6 +481,34 @@ impl NormStats {
 mod tests {
     use super::*;
 
+    /// Dance ids are held out by their style's turn; an id of no style and a lone style never.
+    #[test]
+    fn a_fold_of_dance_ids_follows_each_style_and_keeps_the_lone_tango() {
+        let ids: Vec<String> = [
+            "DANCE_W_1",
+            "DANCE_C_1",
+            "DANCE_W_2",
+            "DANCE_T_1",
+            "x",
+            "DANCE_C_2",
+        ]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+        let one = Fold::parse("1/2").unwrap();
+        let two = Fold::parse("2/2").unwrap();
+        assert_eq!(
+            one.holds_ids(&ids),
+            [true, true, false, false, false, false]
+        );
+        assert_eq!(
+            two.holds_ids(&ids),
+            [false, false, true, false, false, true]
+        );
+        assert_eq!(one.to_string(), "1/2");
+        assert!(Fold::parse("2/1").is_err());
+    }
+
     #[test]
     fn style_comes_from_the_folder_letter() {
         assert_eq!(Style::from_dance_id("DANCE_W_3"), Some(Style::Waltz));

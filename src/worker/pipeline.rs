@@ -26,6 +26,9 @@ use std::time::Duration;
 const MODEL_START: f32 = 0.1;
 /// Share of a generate job's progress done when the model finishes; the rest is export.
 const MODEL_END: f32 = 0.85;
+/// Where the report and the preview begin: the rigid fit and the BVH, JSON and glb before it
+/// take about as long as they do on a 3-minute song.
+const REPORT_START: f32 = 0.93;
 
 /// The service's [`Execute`]: real decoding, analysis, models and exporters.
 pub struct Pipeline {
@@ -262,7 +265,14 @@ impl Pipeline {
             &finished,
             &options.key_poses,
             &caption,
-            &mut |_| {},
+            &mut |stage| {
+                let at = if stage == Stage::Report {
+                    REPORT_START
+                } else {
+                    MODEL_END
+                };
+                progress.report(stage, at)
+            },
         )?;
         Ok(Outcome::Files(files))
     }
@@ -440,17 +450,17 @@ pub const REPORT_FILE: &str = "report.json";
 
 /// The last two stages of a dance, shared by jobs and the CLI: export (BVH, JSON, glb) and the
 /// report (report.json and the contact sheet preview.png, titled by `caption`), each file written
-/// atomically into `dir`. `on_stage` hears each stage as it starts.
+/// atomically into `dir`. `on_stage` hears each stage as it starts, and may cancel it.
 pub fn render(
     dir: &Path,
     finished: &Finished,
     key_poses: &[KeyPose],
     caption: &Caption,
-    on_stage: &mut dyn FnMut(Stage),
+    on_stage: &mut dyn FnMut(Stage) -> Result<(), Cancelled>,
 ) -> Result<JobFiles, WorkerError> {
     use crate::motion::export::{write_all_rig, write_atomic, BVH_FILE, GLB_FILE, JSON_FILE};
     std::fs::create_dir_all(dir)?;
-    on_stage(Stage::Export);
+    on_stage(Stage::Export)?;
     let model_motion = &finished.motion;
     let served = crate::motion::serve(
         model_motion,
@@ -461,7 +471,7 @@ pub fn render(
     write_all_rig(&served.rig, dir)?;
     // The report and the preview judge what the user downloads: the rigid skeleton's motion.
     let motion = &served.motion;
-    on_stage(Stage::Report);
+    on_stage(Stage::Report)?;
     let reference = crate::metrics::reference::ReferenceStats::builtin()?;
     let mut report = crate::report::build(motion, &finished.analysis, key_poses, &reference)?;
     report.model_key_pose_error_cm = crate::metrics::kinematics::key_pose_error_cm(

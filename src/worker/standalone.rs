@@ -192,7 +192,8 @@ pub fn generate_decoded(
     );
     let files =
         super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| {
-            clock.enter(stage)
+            clock.enter(stage);
+            Ok(())
         })?;
     Ok(Generated {
         motion: finished.motion,

@@ -169,14 +169,15 @@ fn assert_whole_history(events: &[Sse], job: &Value) -> Vec<String> {
 
 /// The stages a dance-revolution job on the short song walks through, as the worker reports
 /// them, which its events must show each of. (Its frame loop reports `generate` every 250 frames,
-/// and the 5.3 s song has 132; the worker's render reports `export` through the report.)
-const DANCE_REVOLUTION_STAGES: [&str; 6] = [
+/// and the 5.3 s song has 132; the worker's render reports `export`, then `report`.)
+const DANCE_REVOLUTION_STAGES: [&str; 7] = [
     "decode-audio",
     "analyze",
     "features",
     "encode",
     "beat-align",
     "export",
+    "report",
 ];
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
