@@ -591,3 +591,35 @@ fn tsmt_dances_a_short_song_at_the_verdicts_speed() {
     let speed = mean_speed(&served);
     assert!(speed >= 0.5, "seed 5: {speed:.3} m/s downloaded");
 }
+
+/// Each committed `models/<id>/eval.json` is an evaluation of what is served: the files of its
+/// folder and the serving revision it records are today's. When this fails, make the evaluation
+/// again with the command its card gives.
+#[test]
+fn committed_evaluations_are_of_what_is_served() {
+    use choreo::eval::made_from::MadeFrom;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&root).expect("models/") {
+        let dir = entry.expect("entry").path();
+        let eval = dir.join("eval.json");
+        if !eval.is_file() {
+            continue;
+        }
+        let id = dir.file_name().unwrap().to_string_lossy().into_owned();
+        let text = std::fs::read_to_string(&eval).expect("eval.json");
+        let value: serde_json::Value = serde_json::from_str(&text).expect("eval.json parses");
+        let recorded: Vec<MadeFrom> =
+            serde_json::from_value(value["made_from"].clone()).unwrap_or_default();
+        let recorded = recorded.into_iter().find(|m| m.model == id);
+        let now = MadeFrom::of(&id, &dir).expect("model folder");
+        assert_eq!(
+            recorded.as_ref(),
+            Some(&now),
+            "models/{id}/eval.json was not made from what is served now; make it again: \
+             OMP_NUM_THREADS=1 choreo eval {id} --seed 1 --seeds 2 --json models/{id}/eval.json"
+        );
+        checked += 1;
+    }
+    assert!(checked >= 5, "{checked} committed evaluations");
+}

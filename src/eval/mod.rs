@@ -28,6 +28,7 @@
 //!
 //! Music beats come from [`crate::audio::analyze`] on the whole song and are moved onto the
 //! dance's clock (motion frame 0 = song time `start_position / 25`).
+pub mod made_from;
 mod rows;
 mod songs;
 pub mod style_control;
@@ -277,6 +278,9 @@ pub struct EvalResult {
     /// danced them (with the tempo section: off with it).
     #[serde(default)]
     pub tempo_change: tempo_change::TempoChange,
+    /// What each evaluated model was served from ([`made_from`]).
+    #[serde(default)]
+    pub made_from: Vec<made_from::MadeFrom>,
 }
 
 /// Recomputes the reference statistics from the train split and writes them.
@@ -449,6 +453,7 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
     let mut extra_names = Vec::new();
     let (mut style_control, mut real_styles, mut tempo_rows) = (Vec::new(), None, Vec::new());
     let mut tempo_change_section = tempo_change::TempoChange::default();
+    let mut made = Vec::new();
     if !args.real_only {
         let registry = Registry::load(&args.models_dir).map_err(EvalError::Models)?;
         let mut folders: Vec<PathBuf> = Vec::new();
@@ -501,6 +506,11 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
             None
         };
         for id in &ids {
+            let dir = args.models_dir.join(id);
+            made.push(
+                made_from::MadeFrom::of(id, &dir)
+                    .map_err(|source| EvalError::Io { path: dir, source })?,
+            );
             let model =
                 registry
                     .get(&ModelId(id.clone()))
@@ -581,5 +591,6 @@ pub fn evaluate(args: &EvalOptions) -> Result<EvalResult, EvalError> {
         real_styles,
         tempo: tempo_rows,
         tempo_change: tempo_change_section,
+        made_from: made,
     })
 }
