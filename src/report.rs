@@ -11,6 +11,7 @@ use crate::metrics::MetricsError;
 use crate::motion::{KeyPose, Motion};
 
 pub mod preview;
+pub mod serving;
 
 /// Version of the report schema; bumped when a field changes meaning.
 pub const REPORT_VERSION: u32 = 1;
@@ -72,6 +73,11 @@ pub struct Report {
     /// the networks.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub composition: Option<crate::models::beat_graph::Composition>,
+    /// What each serving stage after the model did to the dance, in the order they ran
+    /// ([`serving`]): whether and how much it moved it, what it counted, and the dance's
+    /// authenticity and coherence before and after it. Empty in reports written before it existed.
+    #[serde(default)]
+    pub serving: Vec<serving::StageTrace>,
 }
 
 /// The beat-align stage in report.json: its summary, and the tempo lock of the motion as the
@@ -112,6 +118,7 @@ pub fn build(
         beat_time: None,
         opening_check: None,
         composition: None,
+        serving: Vec::new(),
     })
 }
 

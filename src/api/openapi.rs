@@ -46,6 +46,11 @@ pub const SPEC_PATH: &str = "openapi/openapi.json";
         super::system::readyz,
         super::system::metrics,
     ),
+    // report.json's `serving` list (its own file, not a route's body, so named here).
+    components(schemas(
+        crate::report::serving::StageTrace,
+        crate::motion::trace::ServingStage,
+    )),
     modifiers(&BearerAuth),
     tags(
         (name = "songs", description = "Upload songs; list them; read their analysis and audio; delete them"),

@@ -16,6 +16,8 @@ use std::path::PathBuf;
 
 use ndarray::Array3;
 
+use trace::{traced, ServingStage, StageCounts, StageObserver, Unobserved};
+
 pub mod beat_align;
 pub mod bursts;
 pub mod bvh;
@@ -34,6 +36,7 @@ pub mod retarget;
 pub mod rig;
 pub mod rotations;
 pub mod skeleton;
+pub mod trace;
 pub mod validate;
 
 /// Frame rate of the dance-with-melody data.
@@ -60,11 +63,38 @@ pub fn smoothstep(lo: f64, hi: f64, x: f64) -> f64 {
 /// hop), the feet planted ([`feet::plant_feet`]) and backward knees turned forward
 /// ([`knees::bend_forward`]), unless the caller asked for the model's motion as it came. Jobs,
 /// `choreo generate` and `choreo eval` all go through it.
-pub fn finish(mut motion: Motion, plant_feet: bool) -> Motion {
+pub fn finish(motion: Motion, plant_feet: bool) -> Motion {
+    finish_observed(motion, plant_feet, &mut Unobserved)
+}
+
+/// [`finish`], telling `observer` what each of its steps did ([`feet::keep_on_floor`] told as its
+/// two steps, [`feet::ground`] then [`feet::land_hangs`]).
+pub fn finish_observed(
+    mut motion: Motion,
+    plant_feet: bool,
+    observer: &mut dyn StageObserver,
+) -> Motion {
     if plant_feet {
-        knees::bend_forward(motion.positions.view_mut());
-        feet::keep_on_floor(motion.positions.view_mut(), motion.fps);
-        feet::plant_feet(motion.positions.view_mut(), motion.fps);
+        traced(&mut motion, ServingStage::KneesForward, observer, |m| {
+            StageCounts {
+                knee_frames_turned: Some(knees::bend_forward(m.positions.view_mut())),
+                ..StageCounts::default()
+            }
+        });
+        traced(&mut motion, ServingStage::Ground, observer, |m| {
+            feet::ground(m.positions.view_mut(), m.fps);
+            StageCounts::default()
+        });
+        traced(&mut motion, ServingStage::LandHangs, observer, |m| {
+            feet::land_hangs(m.positions.view_mut(), m.fps);
+            StageCounts::default()
+        });
+        traced(&mut motion, ServingStage::PlantFeet, observer, |m| {
+            StageCounts {
+                frame_steps_planted: Some(feet::plant_feet(m.positions.view_mut(), m.fps)),
+                ..StageCounts::default()
+            }
+        });
     }
     motion
 }
@@ -100,7 +130,8 @@ impl Default for MotionStages {
 /// served. `beat_times_s` are the song's beats on the dance's clock. Jobs, `choreo generate`
 /// and `choreo eval` all go through it. `seed_frames`: the frames of the seed motion the request
 /// brought (0 without), which open the dance as they are: every frame of that span is fixed, so
-/// the warp is the identity there, and they are put back after the stages ([`keep_seed`]). The summary is `None` when alignment was not asked for.
+/// the warp is the identity there, and they are put back after the stages ([`put_back_seed`]).
+/// The summary is `None` when alignment was not asked for.
 pub fn after_model(
     motion: Motion,
     beat_times_s: &[f64],
@@ -108,31 +139,59 @@ pub fn after_model(
     seed_frames: usize,
     stages: MotionStages,
 ) -> (Motion, Option<beat_align::BeatAlignSummary>) {
+    after_model_observed(
+        motion,
+        beat_times_s,
+        key_poses,
+        seed_frames,
+        stages,
+        &mut Unobserved,
+    )
+}
+
+/// [`after_model`], telling `observer` what each stage that ran did to the dance served
+/// ([`trace`]). The warp and the [`finish`] after it are told apart: of the candidates beat
+/// alignment judges, the one served is finished once more, observed (the same work on the same
+/// motion, so the same dance; its cost is one [`finish`], 1–6 ms on a 133-s song).
+pub fn after_model_observed(
+    motion: Motion,
+    beat_times_s: &[f64],
+    key_poses: &[KeyPose],
+    seed_frames: usize,
+    stages: MotionStages,
+    observer: &mut dyn StageObserver,
+) -> (Motion, Option<beat_align::BeatAlignSummary>) {
     let seed = motion
         .positions
         .slice(ndarray::s![..seed_frames.min(motion.num_frames()), .., ..])
         .to_owned();
     if !stages.beat_align {
-        let mut done = finish(motion, stages.plant_feet);
-        keep_seed(&mut done, seed.view());
+        let mut done = finish_observed(motion, stages.plant_feet, observer);
+        keep_seed(&mut done, seed.view(), observer);
         return (done, None);
     }
     // A song whose tempo changes: the dance's pace first follows it (a network hears one pace).
-    let before = motion.positions.clone();
-    let motion = beat_align::tempo_follow::follow_tempo(
-        motion,
-        beat_times_s,
-        !stages.tempo_follow || !key_poses.is_empty() || seed_frames > 0,
-    );
-    let warped = motion.positions != before;
+    let came = motion.clone();
+    let pace_fixed = !stages.tempo_follow || !key_poses.is_empty() || seed_frames > 0;
+    let motion = beat_align::tempo_follow::follow_tempo(motion, beat_times_s, pace_fixed);
+    if !pace_fixed {
+        observer.stage(
+            ServingStage::TempoFollow,
+            &came,
+            &motion,
+            StageCounts::default(),
+        );
+    }
+    let warped = motion.positions != came.positions;
+    drop(came);
     let composed_on_changing_beats = !stages.tempo_follow
         && beat_align::tempo_follow::tempo_changes(beat_times_s, motion.num_frames(), motion.fps);
     if warped || composed_on_changing_beats {
         // One grid fraction and a mean slope of 1 over the dance cannot hold a pace that changes:
         // aligned after the warp, dancenet's and tsmt's steps sped up 0.6–2.4× for the music's
         // 1.56× (without it, 1.5–1.75×), and a beat-graph dance's 1.6× became 2.0–2.7×.
-        let mut done = finish(motion, stages.plant_feet);
-        keep_seed(&mut done, seed.view());
+        let mut done = finish_observed(motion, stages.plant_feet, observer);
+        keep_seed(&mut done, seed.view(), observer);
         let why = if warped {
             "the song's tempo changes: the dance's pace follows it instead (tempo_follow)"
         } else {
@@ -153,15 +212,43 @@ pub fn after_model(
     // the caller's [`serve`] does after this.
     let judge = |m: &Motion| {
         let mut m = m.clone();
-        keep_seed(&mut m, seed.view());
+        keep_seed(&mut m, seed.view(), &mut Unobserved);
         serve(&m, key_poses, stages.plant_feet, seed_frames)
             .ok()
             .map(|s| s.motion)
     };
-    let (mut aligned, summary) =
-        beat_align::align_served(motion, beat_times_s, &fixed, plant, Some(judge));
-    keep_seed(&mut aligned, seed.view());
-    (aligned, Some(summary))
+    let came = observer.observes().then(|| motion.clone());
+    let aligned = beat_align::align_served_parts(motion, beat_times_s, &fixed, plant, Some(judge));
+    if let Some(came) = came {
+        let counts = StageCounts {
+            frames_retimed: Some(aligned.frames_retimed),
+            ..StageCounts::default()
+        };
+        observer.stage(ServingStage::BeatAlign, &came, &aligned.warped, counts);
+        let refinished = finish_observed(aligned.warped, stages.plant_feet, observer);
+        debug_assert!(
+            refinished.positions == aligned.served.positions,
+            "finish is a function of its motion"
+        );
+    }
+    let mut aligned_motion = aligned.served;
+    keep_seed(&mut aligned_motion, seed.view(), observer);
+    (aligned_motion, Some(aligned.summary))
+}
+
+/// [`put_back_seed`] as a stage: told to `observer` only where there is a seed to put back.
+fn keep_seed(
+    motion: &mut Motion,
+    seed: ndarray::ArrayView3<'_, f32>,
+    observer: &mut dyn StageObserver,
+) {
+    if seed.dim().0.min(motion.num_frames()) == 0 {
+        return;
+    }
+    traced(motion, ServingStage::KeepSeed, observer, |m| {
+        put_back_seed(m, seed);
+        StageCounts::default()
+    });
 }
 
 /// Puts the request's seed motion (`seed`, the dance's first frames as the model returned them)
@@ -171,7 +258,7 @@ pub fn after_model(
 /// fading out over the planting's own spread (3 × [`feet::PLANT_BLEND_S`], 0.12 s), so nothing
 /// jumps where the seed ends: that spread reached into the last seed frames and moved them up to
 /// 6.5 cm.
-fn keep_seed(motion: &mut Motion, seed: ndarray::ArrayView3<'_, f32>) {
+fn put_back_seed(motion: &mut Motion, seed: ndarray::ArrayView3<'_, f32>) {
     let n = seed.dim().0.min(motion.num_frames());
     if n == 0 {
         return;
@@ -212,18 +299,63 @@ pub fn serve(
     ground: bool,
     seed_frames: usize,
 ) -> Result<Served, MotionError> {
+    serve_observed(finished, key_poses, ground, seed_frames, &mut Unobserved)
+}
+
+/// [`serve`], telling `observer` what the fit and each step on the fitted skeleton did to the
+/// motion it draws (what motion.json holds).
+pub fn serve_observed(
+    finished: &Motion,
+    key_poses: &[KeyPose],
+    ground: bool,
+    seed_frames: usize,
+    observer: &mut dyn StageObserver,
+) -> Result<Served, MotionError> {
     let anchors: Vec<usize> = key_poses
         .iter()
         .map(|k| (k.time_s * finished.fps).round() as usize)
         .collect();
     let mut rig = export::prepare_seeded(finished, &anchors, seed_frames)?;
+    // The motion the skeleton draws after each step, drawn only where someone listens.
+    let mut drawn = observer.observes().then(|| export::served_motion(&rig));
+    if let Some(fitted) = &drawn {
+        observer.stage(
+            ServingStage::RigidFit,
+            finished,
+            fitted,
+            StageCounts::default(),
+        );
+    }
     if ground {
         let fixed: Vec<usize> = anchors.iter().copied().chain(0..seed_frames).collect();
-        bursts::calm(&mut rig, &fixed);
+        let calmed = bursts::calm(&mut rig, &fixed);
+        let counts = StageCounts {
+            frames_calmed: Some(calmed),
+            ..StageCounts::default()
+        };
+        rig_stage(&rig, ServingStage::CalmBursts, counts, &mut drawn, observer);
         ground_rig(&mut rig);
+        let counts = StageCounts::default();
+        rig_stage(&rig, ServingStage::GroundRig, counts, &mut drawn, observer);
     }
     let motion = export::served_motion(&rig);
     Ok(Served { rig, motion })
+}
+
+/// Tells `observer` what a step on the fitted skeleton did: `drawn` is what the skeleton drew
+/// before it, and becomes what it draws now.
+fn rig_stage(
+    rig: &rig::RigMotion,
+    stage: ServingStage,
+    counts: StageCounts,
+    drawn: &mut Option<Motion>,
+    observer: &mut dyn StageObserver,
+) {
+    if let Some(before) = drawn.take() {
+        let after = export::served_motion(rig);
+        observer.stage(stage, &before, &after, counts);
+        *drawn = Some(after);
+    }
 }
 
 /// Keeps the fitted skeleton on the floor as [`feet::keep_on_floor`] keeps joint positions,

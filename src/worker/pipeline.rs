@@ -250,7 +250,7 @@ impl Pipeline {
                 &options.key_poses,
                 seed_motion.as_ref(),
                 stages,
-            )
+            )?
         };
         progress.report(Stage::Export, MODEL_END)?;
         let _timer = StageTimer::start("generate", Stage::Export);
@@ -386,6 +386,8 @@ pub struct Finished {
     /// Frames the request's seed motion opens the dance on (0 without): the export fits its
     /// skeleton on them ([`crate::motion::serve`]).
     pub seed_frames: usize,
+    /// What each stage after the model did, in order; the export's stages follow in the report.
+    pub serving: Vec<crate::report::serving::StageTrace>,
 }
 
 /// The motion stages after a model ([`crate::motion::after_model`]: beat alignment, then the feet
@@ -402,7 +404,7 @@ pub fn after_model(
     key_poses: &[KeyPose],
     seed_motion: Option<&Motion>,
     stages: MotionStages,
-) -> Finished {
+) -> Result<Finished, WorkerError> {
     let crate::models::Generated {
         motion: model_motion,
         beat_time,
@@ -422,14 +424,17 @@ pub fn after_model(
     // The seed motion is on the dance's clock: its frames are the dance's first.
     let seed_frames =
         seed_motion.map_or(0, |m| (m.duration_s() * model_motion.fps).round() as usize);
-    let (motion, summary) = crate::motion::after_model(
+    let reference = crate::metrics::reference::ReferenceStats::builtin()?;
+    let mut recorder = crate::report::serving::Recorder::new(reference.angle_limits);
+    let (motion, summary) = crate::motion::after_model_observed(
         model_motion,
         &analysis.beat_times,
         key_poses,
         seed_frames,
         stages,
+        &mut recorder,
     );
-    Finished {
+    Ok(Finished {
         motion,
         analysis,
         song_duration_s,
@@ -442,7 +447,8 @@ pub fn after_model(
         opening,
         composition,
         seed_frames,
-    }
+        serving: recorder.into_stages(),
+    })
 }
 
 /// File name of a generate job's report.
@@ -462,17 +468,19 @@ pub fn render(
     std::fs::create_dir_all(dir)?;
     on_stage(Stage::Export)?;
     let model_motion = &finished.motion;
-    let served = crate::motion::serve(
+    let reference = crate::metrics::reference::ReferenceStats::builtin()?;
+    let mut recorder = crate::report::serving::Recorder::new(reference.angle_limits.clone());
+    let served = crate::motion::serve_observed(
         model_motion,
         key_poses,
         finished.plant_feet,
         finished.seed_frames,
+        &mut recorder,
     )?;
     write_all_rig(&served.rig, dir)?;
     // The report and the preview judge what the user downloads: the rigid skeleton's motion.
     let motion = &served.motion;
     on_stage(Stage::Report)?;
-    let reference = crate::metrics::reference::ReferenceStats::builtin()?;
     let mut report = crate::report::build(motion, &finished.analysis, key_poses, &reference)?;
     report.model_key_pose_error_cm = crate::metrics::kinematics::key_pose_error_cm(
         model_motion.positions.view(),
@@ -484,6 +492,8 @@ pub fn render(
     report.beat_time = finished.beat_time;
     report.opening_check = finished.opening.clone();
     report.composition = finished.composition.clone();
+    report.serving = finished.serving.clone();
+    report.serving.extend(recorder.into_stages());
     report.scores.rotation_flips = Some(crate::metrics::rotation_flips::RotationFlips::of(
         &served.rig,
     ));

@@ -189,7 +189,7 @@ pub fn generate_decoded(
         request.key_poses,
         request.seed_motion,
         stages,
-    );
+    )?;
     let files =
         super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| {
             clock.enter(stage);

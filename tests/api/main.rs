@@ -38,6 +38,7 @@ mod rigs;
 mod roundtrip;
 mod scale;
 mod schemathesis;
+mod serving;
 mod song_cache;
 mod songs;
 mod tenants;

@@ -52,6 +52,53 @@ function leaves(obj, prefix = '') {
   return Object.entries(obj).flatMap(([k, v]) => leaves(v, prefix ? `${prefix}.${k}` : k));
 }
 
+// What a stage counted of its own work, by its report.json name.
+const COUNTS = [
+  ['frames_retimed', 'frames re-timed'],
+  ['knee_frames_turned', 'knee-frames turned'],
+  ['frame_steps_planted', 'frame steps planted'],
+  ['frames_calmed', 'frames calmed'],
+];
+
+/** A share as a percentage with one decimal. */
+const pct = (v) => `${(100 * v).toFixed(1)} %`;
+
+/**
+ * report.json's `serving` list as a table: what each stage after the model did, in order, and
+ * the dance's authenticity and coherence after it (a fall marked, so a stage that makes the dance
+ * less real stands out).
+ */
+function servingTable(stages) {
+  const table = document.createElement('table');
+  table.className = 'serving';
+  const head = table.createTHead().insertRow();
+  for (const label of ['stage', 'frames moved', 'largest move', 'counted', 'authenticity', 'coherence']) {
+    const th = document.createElement('th');
+    th.textContent = label;
+    head.append(th);
+  }
+  const body = table.createTBody();
+  for (const s of stages) {
+    const tr = body.insertRow();
+    tr.dataset.stage = s.stage;
+    tr.insertCell().textContent = s.stage;
+    tr.insertCell().textContent = s.changed ? String(s.frames_changed) : '–';
+    tr.insertCell().textContent = s.changed ? `${(100 * s.largest_move_m).toFixed(1)} cm` : '–';
+    tr.insertCell().textContent = COUNTS.filter(([k]) => s[k] != null).map(([k, label]) => `${s[k]} ${label}`).join(', ');
+    for (const measure of ['authenticity', 'coherence']) {
+      const cell = tr.insertCell();
+      const before = s.before[measure], after = s.after[measure];
+      cell.textContent = before === after ? pct(after) : `${pct(before)} → ${pct(after)}`;
+      if (after < before) cell.className = 'fell';
+    }
+  }
+  const details = document.createElement('details');
+  const summary = document.createElement('summary');
+  summary.textContent = `Serving stages (${stages.length})`;
+  details.append(summary, table);
+  return details;
+}
+
 export class ReportView {
   /** job: JobView; report: report.json; motion: motion.json; analysis: the song's analysis (or null). */
   constructor(container, { api, job, report, motion, analysis }) {
@@ -128,6 +175,7 @@ export class ReportView {
     summary.textContent = `Scores (${rows.length})`;
     details.append(summary, table);
     container.append(details);
+    if (report.serving?.length) container.append(servingTable(report.serving));
 
     new ResizeObserver(() => this.draw()).observe(this.speed);
     this.draw();

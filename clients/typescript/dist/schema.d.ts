@@ -735,6 +735,19 @@ export interface components {
             id: components["schemas"]["ModelId"];
             paper: string;
         };
+        /** @description Authenticity and coherence of one dance. */
+        Plausibility: {
+            /**
+             * Format: double
+             * @description Share of frames with every joint angle within the real 0.5–99.5 % limits.
+             */
+            authenticity: number;
+            /**
+             * Format: double
+             * @description Share of frame steps with every joint angular velocity within the real limits.
+             */
+            coherence: number;
+        };
         /** @description An RFC 9457 problem body. */
         Problem: {
             /** @description The models this server has, for an unknown model. */
@@ -967,6 +980,12 @@ export interface components {
             positions?: number[][][] | null;
         };
         /**
+         * @description A stage every served dance may go through after its model, in the order they run. Serialised
+         *     as a stable snake_case name: report.json readers and the page key on it.
+         * @enum {string}
+         */
+        ServingStage: "tempo_follow" | "beat_align" | "knees_forward" | "ground" | "land_hangs" | "plant_feet" | "keep_seed" | "rigid_fit" | "calm_bursts" | "ground_rig";
+        /**
          * Format: uuid
          * @description A song's id: a UUID v7; the stored file is named by it, never by the upload's name.
          */
@@ -1008,6 +1027,37 @@ export interface components {
          * @enum {string}
          */
         Stage: "claimed" | "decode-audio" | "analyze" | "features" | "encode" | "generate" | "beat-align" | "export" | "report" | "done";
+        /**
+         * @description What a stage counts of its own work, where it counts something; each is absent for the other
+         *     stages.
+         */
+        StageCounts: {
+            /** @description `plant_feet`: frame steps on which a foot bore the body and was held still. */
+            frame_steps_planted?: number | null;
+            /** @description `calm_bursts`: frames whose pops were calmed. */
+            frames_calmed?: number | null;
+            /** @description `beat_align`: frames the warp shows from another moment of the network's dance. */
+            frames_retimed?: number | null;
+            /** @description `knees_forward`: knee-frames turned forward (two knees a frame). */
+            knee_frames_turned?: number | null;
+        };
+        /** @description One serving stage that ran, as report.json states it. */
+        StageTrace: components["schemas"]["StageCounts"] & {
+            /** @description Authenticity and coherence of the dance the stage left. */
+            after: components["schemas"]["Plausibility"];
+            /** @description Authenticity and coherence of the dance the stage was given. */
+            before: components["schemas"]["Plausibility"];
+            /** @description Whether any joint of any frame moved at all. */
+            changed: boolean;
+            /** @description Frames on which some joint moved (every frame from where the stage changed the length). */
+            frames_changed: number;
+            /**
+             * Format: double
+             * @description The largest distance (m) one joint moved on one frame.
+             */
+            largest_move_m: number;
+            stage: components["schemas"]["ServingStage"];
+        };
         /**
          * @description Where a job is in its life.
          * @enum {string}

@@ -244,11 +244,40 @@ pub fn align_served(
     finish: Option<impl Fn(Motion) -> Motion>,
     judge: Option<impl Fn(&Motion) -> Option<Motion>>,
 ) -> (Motion, BeatAlignSummary) {
+    let aligned = align_served_parts(motion, beat_times_s, fixed_times_s, finish, judge);
+    (aligned.served, aligned.summary)
+}
+
+/// What [`align_served`] chose, with the chosen dance before `finish`, so a caller can tell
+/// what the warp and the stage after it each did.
+pub struct Aligned {
+    /// The dance served: `warped`, finished.
+    pub served: Motion,
+    pub summary: BeatAlignSummary,
+    /// The network's motion under the chosen warp (as it came where none was chosen).
+    pub warped: Motion,
+    /// Frames `warped` shows from another moment of the network's motion (its source frame
+    /// more than [`RETIMED_FRAMES`] of a frame from its own).
+    pub frames_retimed: usize,
+}
+
+/// How far (frames) a served frame's source may lie from its own and the frame still count as
+/// shown at its own time: a float's rounding, not a warp.
+pub const RETIMED_FRAMES: f64 = 1e-3;
+
+/// [`align_served`], with the chosen dance before `finish` ([`Aligned`]).
+pub fn align_served_parts(
+    motion: Motion,
+    beat_times_s: &[f64],
+    fixed_times_s: &[f64],
+    finish: Option<impl Fn(Motion) -> Motion>,
+    judge: Option<impl Fn(&Motion) -> Option<Motion>>,
+) -> Aligned {
     let planted = finish.as_ref().map(|f| f(motion.clone()));
     let mut views = vec![(RhythmFrom::Network, &motion)];
     views.extend(planted.as_ref().map(|p| (RhythmFrom::Planted, p)));
-    // (served motion, summary, cost)
-    let mut candidates: Vec<(Motion, BeatAlignSummary, f64)> = Vec::new();
+    // (served motion, summary, cost, the warp's source frames: none for the dance as it came)
+    let mut candidates: Vec<Candidate> = Vec::new();
     let mut skipped = None;
     for (from, view) in views {
         let warps = match plan_from(&motion, view, beat_times_s, fixed_times_s) {
@@ -267,7 +296,7 @@ pub fn align_served(
             let mut summary = warp.summary;
             summary.rhythm_from = from;
             summary.steps_on_beat = steps_on_beat(&served, beat_times_s);
-            candidates.push((served, summary, cost));
+            candidates.push((served, summary, cost, Some(warp.source_frames)));
         }
     }
     let from = if planted.is_some() {
@@ -275,7 +304,7 @@ pub fn align_served(
     } else {
         RhythmFrom::Network
     };
-    let as_it_came = planted.unwrap_or(motion);
+    let as_it_came = planted.unwrap_or_else(|| motion.clone());
     let came_hold_s = longest_hold_s(as_it_came.positions.view(), as_it_came.fps);
     let why_unwarped = if candidates.is_empty() {
         skipped.unwrap_or("nothing to align")
@@ -283,11 +312,16 @@ pub fn align_served(
         "it steps on the beat as it came, and no warp of it does"
     };
     match unwarped(&as_it_came, beat_times_s, from, why_unwarped) {
-        Some(kept) => candidates.push((as_it_came, kept, f64::INFINITY)),
+        Some(kept) => candidates.push((as_it_came, kept, f64::INFINITY, None)),
         None if candidates.is_empty() => {
             let mut summary = BeatAlignSummary::skipped(why_unwarped);
             summary.rhythm_from = from;
-            return (as_it_came, summary);
+            return Aligned {
+                served: as_it_came,
+                summary,
+                warped: motion,
+                frames_retimed: 0,
+            };
         }
         None => {}
     }
@@ -298,9 +332,29 @@ pub fn align_served(
             .then(a.2.total_cmp(&b.2))
     });
     let chosen = choose(&mut candidates, beat_times_s, judge.as_ref(), came_hold_s);
-    let (served, summary, _) = candidates.swap_remove(chosen);
-    (served, summary)
+    let (served, summary, _, source_frames) = candidates.swap_remove(chosen);
+    let (warped, frames_retimed) = match source_frames {
+        Some(frames) => {
+            let retimed = frames
+                .iter()
+                .enumerate()
+                .filter(|&(f, &s)| (s - f as f64).abs() > RETIMED_FRAMES)
+                .count();
+            (resample(&motion, &frames), retimed)
+        }
+        None => (motion, 0),
+    };
+    Aligned {
+        served,
+        summary,
+        warped,
+        frames_retimed,
+    }
 }
+
+/// A dance [`align_served`] may serve: finished, what its warp did, its cost, and the warp's
+/// source frames (none for the dance as it came).
+type Candidate = (Motion, BeatAlignSummary, f64, Option<Vec<f64>>);
 
 /// Which of the sorted `candidates` [`align_served`] serves: of the first [`MAX_JUDGED`] that
 /// step on the beat, the first whose served dance (`judge`'s; the candidate itself without one)
@@ -313,14 +367,14 @@ pub fn align_served(
 /// dance steps on the beat; else the first. Each judged candidate's `steps_on_beat` is set to
 /// what its served dance does.
 fn choose(
-    candidates: &mut [(Motion, BeatAlignSummary, f64)],
+    candidates: &mut [Candidate],
     beat_times_s: &[f64],
     judge: Option<&impl Fn(&Motion) -> Option<Motion>>,
     came_hold_s: f64,
 ) -> usize {
     // The first on the beat, passed over for a hold, and its hang.
     let mut on_beat: Option<(usize, f64)> = None;
-    for (i, (candidate, summary, _)) in candidates.iter_mut().take(MAX_JUDGED).enumerate() {
+    for (i, (candidate, summary, _, _)) in candidates.iter_mut().take(MAX_JUDGED).enumerate() {
         if !summary.steps_on_beat {
             break;
         }

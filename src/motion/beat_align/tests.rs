@@ -322,13 +322,12 @@ fn a_warp_that_lengthens_a_hold_is_passed_over() {
     let candidate = |m: Motion, on_beat: bool| {
         let mut s = BeatAlignSummary::skipped("test");
         s.steps_on_beat = on_beat;
-        (m, s, 0.0)
+        (m, s, 0.0, None)
     };
     let no_judge = None::<&fn(&Motion) -> Option<Motion>>;
     let holds_6 = || walking(30.0, 10.0..16.0, 0.0..0.0);
     let lively = || walking(30.0, 0.0..0.0, 0.0..0.0);
-    let chosen =
-        |mut c: Vec<(Motion, BeatAlignSummary, f64)>, came| choose(&mut c, &[], no_judge, came);
+    let chosen = |mut c: Vec<Candidate>, came| choose(&mut c, &[], no_judge, came);
     // A 6-s hold first, then `second` (on the beat or not).
     let after_a_hold = |second: Motion, on_beat, came| {
         chosen(
