@@ -1,7 +1,10 @@
-//! Streaming resampling for the decode: a soxr_hq-like polyphase FIR for small-fraction ratios,
-//! rubato's FFT resampler otherwise.
+//! Streaming resampling for the decode: a soxr_hq-like polyphase FIR for small-fraction ratios
+//! (run by FFT convolution when the ratio is 1/M, [`super::decimate`]), rubato's FFT resampler
+//! otherwise.
 use rubato::{FftFixedIn, Resampler};
 
+use super::decimate::FftDecimator;
+use super::dsp::dot;
 use super::AudioError;
 
 /// Input chunk (frames) fed to rubato; small so the resampler's buffers stay tiny.
@@ -11,6 +14,8 @@ const RESAMPLE_CHUNK: usize = 4096;
 /// rubato's FFT resampler otherwise.
 pub(super) enum StreamResampler {
     Poly(PolyResampler),
+    /// The polyphase filter of a 1/M ratio, by FFT convolution; boxed for its FFT buffers.
+    Decimate(Box<FftDecimator>),
     /// Boxed: rubato's FFT state is several times the polyphase one's size.
     Rubato(Box<RubatoResampler>),
 }
@@ -18,6 +23,7 @@ pub(super) enum StreamResampler {
 impl StreamResampler {
     pub(super) fn new(sr_in: u32, sr_out: u32) -> Result<Self, AudioError> {
         match PolyResampler::new(sr_in, sr_out) {
+            Some(p) if p.l == 1 => Ok(Self::Decimate(Box::new(p.into_decimator()))),
             Some(p) => Ok(Self::Poly(p)),
             None => Ok(Self::Rubato(Box::new(RubatoResampler::new(sr_in, sr_out)?))),
         }
@@ -29,6 +35,10 @@ impl StreamResampler {
                 p.push(x, out);
                 Ok(())
             }
+            Self::Decimate(d) => {
+                d.push(x, out);
+                Ok(())
+            }
             Self::Rubato(r) => r.push(x, out),
         }
     }
@@ -37,6 +47,10 @@ impl StreamResampler {
         match self {
             Self::Poly(p) => {
                 p.finish(out);
+                Ok(())
+            }
+            Self::Decimate(d) => {
+                d.finish(out);
                 Ok(())
             }
             Self::Rubato(r) => r.finish(out),
@@ -128,6 +142,12 @@ impl PolyResampler {
         2 * self.r + 1
     }
 
+    /// The same filter as an FFT decimator (a 1/M ratio has one branch, stored reversed).
+    fn into_decimator(self) -> FftDecimator {
+        let filter: Vec<f32> = self.branches[..self.taps()].iter().rev().copied().collect();
+        FftDecimator::new(&filter, self.r, self.m)
+    }
+
     /// Output sample n needs input `base - R ..= base + R` with base = ⌊n M / L⌋.
     fn produce(&mut self, out: &mut Vec<f32>, available_end: i64, limit: u64) {
         let taps = self.taps();
@@ -190,23 +210,6 @@ impl PolyResampler {
             }
         }
     }
-}
-
-/// Dot product with eight accumulators so it vectorises.
-fn dot(a: &[f32], b: &[f32]) -> f32 {
-    let mut acc = [0.0f32; 8];
-    let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    for (x, y) in ca.zip(cb) {
-        for k in 0..8 {
-            acc[k] += x[k] * y[k];
-        }
-    }
-    let mut s: f32 = acc.iter().sum();
-    for (x, y) in ra.iter().zip(rb) {
-        s += x * y;
-    }
-    s
 }
 
 fn gcd(mut a: u64, mut b: u64) -> u64 {
