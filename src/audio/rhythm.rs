@@ -121,9 +121,15 @@ pub fn tempo(onset: &[f32], sr: u32, hop: usize) -> f64 {
 pub fn tempo_of_tempogram(tg: &Array2<f32>, sr: u32, hop: usize) -> f64 {
     let win = tg.ncols();
     let n = tg.nrows().max(1) as f64;
-    let mean: Vec<f64> = (0..win)
-        .map(|l| tg.column(l).iter().map(|&v| v as f64).sum::<f64>() / n)
-        .collect();
+    // Summed row by row (each lag's sum in the same order as column by column), so the
+    // tempogram is read in memory order.
+    let mut mean = vec![0.0f64; win];
+    for row in tg.rows() {
+        for (m, &v) in mean.iter_mut().zip(row) {
+            *m += v as f64;
+        }
+    }
+    mean.iter_mut().for_each(|m| *m /= n);
     let bpms = tempo_frequencies(win, hop, sr);
     let max_idx = bpms.iter().position(|&b| b < 320.0).unwrap_or(0);
     let mut best = (f64::NEG_INFINITY, 0usize);
