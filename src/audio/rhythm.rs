@@ -94,14 +94,14 @@ pub fn tempogram(onset: &[f32], win_length: usize) -> Array2<f32> {
 fn fast_len(min: usize) -> usize {
     let smooth = |mut n: usize| {
         for p in [2, 3, 5] {
-            while n % p == 0 {
+            while n.is_multiple_of(p) {
                 n /= p;
             }
         }
         n == 1
     };
     (min.max(2)..)
-        .find(|&n| n % 2 == 0 && smooth(n))
+        .find(|&n| n.is_multiple_of(2) && smooth(n))
         .unwrap_or(2 * min)
 }
 
