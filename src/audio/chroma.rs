@@ -262,11 +262,7 @@ impl Halver {
             let lo = c.saturating_sub(m);
             let hi = (c + m + 1).min(n);
             let t0 = lo + m - c;
-            *y = self.taps[t0..t0 + (hi - lo)]
-                .iter()
-                .zip(&x[lo..hi])
-                .map(|(a, b)| a * b)
-                .sum();
+            *y = dsp::dot(&self.taps[t0..t0 + (hi - lo)], &x[lo..hi]);
         }
         out
     }

@@ -15,6 +15,7 @@ pub mod bench;
 pub mod budget;
 pub mod chroma;
 pub mod clock;
+mod decimate;
 pub mod decode;
 pub mod dsp;
 pub mod features;

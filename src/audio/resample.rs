@@ -1,7 +1,9 @@
-//! Streaming resampling for the decode: a soxr_hq-like polyphase FIR for small-fraction ratios,
-//! rubato's FFT resampler otherwise.
+//! Streaming resampling for the decode: a soxr_hq-like polyphase FIR for small-fraction ratios
+//! (run by FFT convolution when the ratio is 1/M, [`super::decimate`]), rubato's FFT resampler
+//! otherwise.
 use rubato::{FftFixedIn, Resampler};
 
+use super::decimate::FftDecimator;
 use super::AudioError;
 
 /// Input chunk (frames) fed to rubato; small so the resampler's buffers stay tiny.
@@ -11,6 +13,8 @@ const RESAMPLE_CHUNK: usize = 4096;
 /// rubato's FFT resampler otherwise.
 pub(super) enum StreamResampler {
     Poly(PolyResampler),
+    /// The polyphase filter of a 1/M ratio, by FFT convolution; boxed for its FFT buffers.
+    Decimate(Box<FftDecimator>),
     /// Boxed: rubato's FFT state is several times the polyphase one's size.
     Rubato(Box<RubatoResampler>),
 }
@@ -18,6 +22,7 @@ pub(super) enum StreamResampler {
 impl StreamResampler {
     pub(super) fn new(sr_in: u32, sr_out: u32) -> Result<Self, AudioError> {
         match PolyResampler::new(sr_in, sr_out) {
+            Some(p) if p.l == 1 => Ok(Self::Decimate(Box::new(p.into_decimator()))),
             Some(p) => Ok(Self::Poly(p)),
             None => Ok(Self::Rubato(Box::new(RubatoResampler::new(sr_in, sr_out)?))),
         }
@@ -29,6 +34,10 @@ impl StreamResampler {
                 p.push(x, out);
                 Ok(())
             }
+            Self::Decimate(d) => {
+                d.push(x, out);
+                Ok(())
+            }
             Self::Rubato(r) => r.push(x, out),
         }
     }
@@ -37,6 +46,10 @@ impl StreamResampler {
         match self {
             Self::Poly(p) => {
                 p.finish(out);
+                Ok(())
+            }
+            Self::Decimate(d) => {
+                d.finish(out);
                 Ok(())
             }
             Self::Rubato(r) => r.finish(out),
@@ -128,6 +141,12 @@ impl PolyResampler {
         2 * self.r + 1
     }
 
+    /// The same filter as an FFT decimator (a 1/M ratio has one branch, stored reversed).
+    fn into_decimator(self) -> FftDecimator {
+        let filter: Vec<f32> = self.branches[..self.taps()].iter().rev().copied().collect();
+        FftDecimator::new(&filter, self.r, self.m)
+    }
+
     /// Output sample n needs input `base - R ..= base + R` with base = ⌊n M / L⌋.
     fn produce(&mut self, out: &mut Vec<f32>, available_end: i64, limit: u64) {
         let taps = self.taps();
@@ -192,7 +211,9 @@ impl PolyResampler {
     }
 }
 
-/// Dot product with eight accumulators so it vectorises.
+/// Dot product with eight accumulators so it vectorises. Kept at eight (not
+/// [`super::dsp::dot`]'s 32): the feature sets' beat trackers run on these samples, and a
+/// different summation order moved one TSMT/DanceNet beat of vibe_ace by a frame.
 fn dot(a: &[f32], b: &[f32]) -> f32 {
     let mut acc = [0.0f32; 8];
     let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
