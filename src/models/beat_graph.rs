@@ -92,7 +92,7 @@ impl Default for Config {
             repetition_weight: 4.0,
             key_weight: 20.0,
             gumbel_scale: 0.35,
-            dance_preference: 2.0,
+            dance_preference: 4.0,
             blend_halflife_s: 0.12,
         }
     }
