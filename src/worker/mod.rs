@@ -27,6 +27,7 @@ use tracing::Instrument;
 mod error;
 pub mod pipeline;
 pub mod process;
+pub mod serve;
 pub mod standalone;
 
 pub use error::WorkerError;

@@ -182,7 +182,7 @@ pub fn generate_decoded(
     };
     let analysis = analysis.into_owned();
     clock.report(Stage::BeatAlign, 0.0)?;
-    let finished = super::pipeline::after_model(
+    let finished = super::serve::after_model(
         generated,
         analysis,
         request.audio.duration_s(),
@@ -190,11 +190,10 @@ pub fn generate_decoded(
         request.seed_motion,
         stages,
     )?;
-    let files =
-        super::pipeline::render(out, &finished, request.key_poses, &caption, &mut |stage| {
-            clock.enter(stage);
-            Ok(())
-        })?;
+    let files = super::serve::render(out, &finished, request.key_poses, &caption, &mut |stage| {
+        clock.enter(stage);
+        Ok(())
+    })?;
     Ok(Generated {
         motion: finished.motion,
         files: files.files.iter().map(|f| out.join(f)).collect(),
