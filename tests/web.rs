@@ -570,6 +570,63 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
     app.stop().await;
 }
 
+/// `<choreo-player>` without an api-key on an open service: the <audio> reads the song's URL
+/// itself, so seeking in the song works only where the server answers Range requests; the
+/// element seeks to 3 s and plays on from there (player.mjs checks it), in time with the dance.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_player_element_seeks_the_song_without_a_key_in_chromium() {
+    if !ready(
+        "the keyless player element test",
+        &Needs {
+            node_modules: &["tests/web/node_modules/playwright-core"],
+            browser_and_songs: true,
+        },
+    ) {
+        return;
+    }
+    let page_port = std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port();
+    let app = spawn_app_with(|c| {
+        c.models_dir = models_dir();
+        c.cors_origins = vec![format!("http://127.0.0.1:{page_port}")];
+    })
+    .await;
+    let song = app.upload_ok(&helpers::short_song()).await;
+    let song_id = song["id"].as_str().expect("song id").to_string();
+    let job_id = app
+        .dance(&serde_json::json!({"song_id": song_id, "model": "dance-revolution", "seed": 2}))
+        .await;
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-player-keyless");
+    let env = [
+        ("API_URL", format!("http://{}", app.addr)),
+        ("JOB_ID", job_id),
+        ("SONG_ID", song_id),
+        ("PAGE_PORT", page_port.to_string()),
+        ("OUT_DIR", out.display().to_string()),
+        ("CHROMIUM", chromium().display().to_string()),
+    ];
+    let summary = run_node(
+        &root().join("tests/web/player.mjs"),
+        &root().join("tests/web"),
+        &env,
+        Duration::from_secs(180),
+    )
+    .await;
+    assert_eq!(summary["audio_seek"]["keyed"], false, "{summary}");
+    let heard = summary["audio_seek"]["heard"].as_f64().expect("heard");
+    assert!(
+        (2.95..4.0).contains(&heard),
+        "the song played on from 3 s: {summary}"
+    );
+    let worst = summary["sync"]["worst_diff_s"]
+        .as_f64()
+        .expect("worst_diff_s");
+    assert!(worst <= 1.0 / 25.0, "in time with the dance: {summary}");
+    app.stop().await;
+}
+
 /// How long, and how fast along x, the player test's seed motion travels.
 const TRAVEL_FRAMES: usize = 120;
 const TRAVEL_M_S: f64 = 0.75;

@@ -4,7 +4,8 @@
 // script on another origin (http://127.0.0.1:PAGE_PORT, which the choreo server's cors_origins
 // lists), with the api-key attribute when TOKEN is set. Checks that the element loads, plays, and keeps the dance within one motion
 // frame of the song; that its camera is on the dancer after seeks across a dance that travels;
-// and that a dance it cannot load is reported inside it.
+// that the song itself seeks (with a key or without one); and that a dance it cannot load is
+// reported inside it.
 //
 //   API_URL=… JOB_ID=… SONG_ID=… PAGE_PORT=… [TOKEN=…] OUT_DIR=dir node tests/web/player.mjs
 //
@@ -111,6 +112,22 @@ try {
   }
   summary.follow = follow;
   log('follow', JSON.stringify(follow));
+
+  // The song seeks too and plays on from there: with a key it is a blob; without, the <audio>
+  // reads the server's URL, which must answer Range requests for Chromium to seek in it (a
+  // song it cannot seek plays again from 0).
+  await page.evaluate(() => document.getElementById('player').seek(3.0));
+  await page.evaluate(() => document.getElementById('player').play());
+  await page.waitForTimeout(400);
+  const heard = await page.evaluate(() => {
+    const p = document.getElementById('player');
+    const t = p.audioTime;
+    p.pause();
+    return t;
+  });
+  summary.audio_seek = { to: 3.0, heard: +heard.toFixed(3), keyed: Boolean(TOKEN) };
+  log('audio seek', JSON.stringify(summary.audio_seek));
+  check(heard >= 2.95 && heard < 4.0, `the song plays on from 3.0 s, not from its start: ${heard}`);
   const shot = join(OUT, 'choreo-player.png');
   await page.screenshot({ path: shot });
   summary.screenshot = shot;
