@@ -251,3 +251,34 @@ fn anchors_are_githubs() {
         ["docs/api.md#keys", "#x"]
     );
 }
+
+/// Every model card's evaluation table is made from its committed `eval.json`, as
+/// `choreo eval --card-table models/<id>/eval.json` writes it.
+#[test]
+fn model_cards_show_their_committed_evaluation() {
+    let mut checked = 0;
+    for entry in std::fs::read_dir(root().join("models"))
+        .expect("models")
+        .flatten()
+    {
+        let dir = entry.path();
+        let (card, eval) = (dir.join("README.md"), dir.join("eval.json"));
+        if !card.is_file() || !eval.is_file() {
+            continue;
+        }
+        let result: choreo::eval::EvalResult =
+            serde_json::from_str(&std::fs::read_to_string(&eval).expect("eval.json"))
+                .unwrap_or_else(|e| panic!("{}: {e}", eval.display()));
+        let table = choreo::eval::tables::card_table(&result);
+        let text = std::fs::read_to_string(&card).expect("card");
+        assert!(
+            text.contains(&table),
+            "{} does not show its eval.json's table; paste the output of \
+             `choreo eval --card-table {}`:\n{table}",
+            card.display(),
+            eval.display()
+        );
+        checked += 1;
+    }
+    assert!(checked >= 5, "{checked} cards with an evaluation");
+}

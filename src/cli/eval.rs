@@ -72,6 +72,10 @@ pub struct EvalArgs {
     /// src/metrics/reference_train.json (or --reference-out) and exit.
     #[arg(long)]
     pub write_reference: bool,
+    /// Print the table a model card shows from this evaluation JSON (a committed
+    /// `models/<id>/eval.json`) and exit.
+    #[arg(long, value_name = "EVAL_JSON")]
+    pub card_table: Option<PathBuf>,
     /// Output path for --write-reference.
     #[arg(long, default_value = eval::REFERENCE_PATH)]
     pub reference_out: PathBuf,
@@ -105,6 +109,14 @@ impl EvalArgs {
 
 /// `choreo eval`: writes the reference, or evaluates, prints the tables and writes the JSON.
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
+    if let Some(path) = &args.card_table {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("choreo eval: reading {}", path.display()))?;
+        let result: eval::EvalResult = serde_json::from_str(&text)
+            .with_context(|| format!("choreo eval: {} is not an evaluation", path.display()))?;
+        print!("{}", eval::tables::card_table(&result));
+        return Ok(());
+    }
     if args.write_reference {
         let s = eval::write_reference(&args.data, &args.reference_out).context("choreo eval")?;
         println!(

@@ -308,3 +308,29 @@ pub fn markdown(result: &EvalResult) -> String {
     }
     out
 }
+
+/// The table each model card shows, made from its committed `eval.json` (tests/docs.rs checks
+/// that every card holds it as written here): each test-split row's authenticity and coherence
+/// (TSMT's joint-angle measures), skate ratio, div_k, and FID_k over 5-s windows and whole
+/// dances. `choreo eval --card-table models/<id>/eval.json` prints it.
+pub fn card_table(result: &EvalResult) -> String {
+    let mut t = String::from(
+        "| row | dances | authenticity | coherence | skate | div_k | FID_k window / dance |\n\
+         |---|---|---|---|---|---|---|\n",
+    );
+    for r in &result.rows {
+        let s = &r.scores;
+        t += &format!(
+            "| {} | {} | {} | {} | {} | {} | {:.1} / {:.1} |\n",
+            r.name,
+            s.dances,
+            f(s.mean.plausibility.authenticity),
+            f(s.mean.plausibility.coherence),
+            f(s.mean.foot_skating.skate_ratio),
+            f2(s.div_k),
+            s.fid_k_window,
+            s.fid_k_dance
+        );
+    }
+    t
+}
