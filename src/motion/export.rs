@@ -16,7 +16,7 @@ use nalgebra::{UnitQuaternion, Vector3};
 use ndarray::ArrayView2;
 use serde::{Deserialize, Serialize};
 
-use super::rig::{fit_and_solve_seeded, RigMotion};
+use super::rig::{fit_and_solve_seeded, Aim, RigMotion};
 use super::skeleton::body_centre_track;
 use super::{Motion, MotionError};
 
@@ -81,7 +81,8 @@ pub fn prepare_seeded(
     seed_frames: usize,
 ) -> Result<RigMotion, MotionError> {
     let root = body_centre_track(motion.positions.view());
-    prepare_root_anchored(motion, root.view(), anchors, seed_frames)
+    // A served dance's angles are what it is judged by, its bone lengths the network's whim.
+    prepare_root_anchored(motion, root.view(), anchors, seed_frames, Aim::DanceBones)
 }
 
 /// Fits the rigid skeleton of a motion around a known root track `[T, 3]` (carried exactly).
@@ -89,7 +90,7 @@ pub fn prepare_with_root(
     motion: &Motion,
     root: ArrayView2<'_, f32>,
 ) -> Result<RigMotion, MotionError> {
-    prepare_root_anchored(motion, root, &[], 0)
+    prepare_root_anchored(motion, root, &[], 0, Aim::FittedEnds)
 }
 
 fn prepare_root_anchored(
@@ -97,6 +98,7 @@ fn prepare_root_anchored(
     root: ArrayView2<'_, f32>,
     anchors: &[usize],
     seed_frames: usize,
+    aim: Aim,
 ) -> Result<RigMotion, MotionError> {
     if motion.num_frames() == 0 {
         return Err(MotionError::Shape("motion has no frames".into()));
@@ -110,6 +112,7 @@ fn prepare_root_anchored(
         motion.fps,
         anchors,
         seed_frames,
+        aim,
     )?;
     make_continuous(&mut m);
     Ok(m)

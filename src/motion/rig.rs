@@ -30,7 +30,10 @@
 //!
 //! Since every bone points exactly at its child's target and bone lengths are fixed at their
 //! medians, the only error left against the data is the rigid fit of marker-based bone lengths,
-//! which vary by 1–3 cm; and no position depends on a twist. The twist is what a skinned mesh
+//! which vary by 1–3 cm; and no position depends on a twist. That is [`Aim::FittedEnds`], for
+//! captured dances. A served dance is aimed along its own bones instead ([`Aim::DanceBones`]:
+//! `P` is the joint's target, the left elbow aims at its forearm alone), which keeps every angle
+//! between bones that a network drew with bones of changing length (`rig/chain.rs` says why). The twist is what a skinned mesh
 //! follows, so it is chosen to be continuous over time (`rig/continuity.rs`): the one that brings
 //! the grandchildren and great-grandchildren closest to their targets (each weighted by its
 //! distance from the bone axis: the bend of the elbow for the upper arm, the hand-direction point
@@ -426,7 +429,7 @@ fn wahba(rest: &[Vector3<f64>], target: &[Vector3<f64>]) -> Option<UnitQuaternio
     q.coords.iter().all(|c| c.is_finite()).then_some(q)
 }
 
-pub use chain::solve;
+pub use chain::{solve, solve_aimed, Aim};
 pub use least_squares::{fit_and_solve, fit_and_solve_seeded, fit_frame, solve_least_squares};
 
 /// Local rotations in the continuous 6-D representation (Zhou et al. 2019): the first two

@@ -3,7 +3,7 @@
 use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
 use ndarray::{ArrayView2, ArrayView3, Axis};
 
-use super::chain::solve;
+use super::chain::{solve, solve_aimed, Aim};
 use super::continuity::{limit_turn, max_turn};
 use super::{fk_frame, rig_index, targets, Rig, RigMotion};
 use crate::motion::{skeleton, MotionError, NUM_JOINTS};
@@ -22,17 +22,19 @@ pub fn fit_and_solve(
     fps: f64,
     anchors: &[usize],
 ) -> Result<RigMotion, MotionError> {
-    fit_and_solve_seeded(positions, root, fps, anchors, 0)
+    fit_and_solve_seeded(positions, root, fps, anchors, 0, Aim::FittedEnds)
 }
 
 /// [`fit_and_solve`] for a dance whose first `skeleton_frames` frames are a request's seed
-/// motion: without anchors the skeleton is fitted on those frames alone (below).
+/// motion: without anchors the skeleton is fitted on those frames alone (below), and each bone
+/// aimed as `aim` says (with anchors the least squares place the joints, the key poses first).
 pub fn fit_and_solve_seeded(
     positions: ArrayView3<'_, f32>,
     root: ArrayView2<'_, f32>,
     fps: f64,
     anchors: &[usize],
     skeleton_frames: usize,
+    aim: Aim,
 ) -> Result<RigMotion, MotionError> {
     let mut keep: Vec<usize> = anchors
         .iter()
@@ -55,7 +57,7 @@ pub fn fit_and_solve_seeded(
         } else {
             Rig::fit(positions, root)?
         };
-        return solve(&rig, positions, root, fps);
+        return solve_aimed(&rig, positions, root, fps, aim);
     }
     let (key_positions, key_root) = (
         positions.select(Axis(0), &keep),
