@@ -3,24 +3,13 @@
 use std::path::Path;
 
 use choreo::metrics::rotation_flips::RotationFlips;
-use choreo::motion::dataset::{Dataset, DEFAULT_ROOT};
 use choreo::motion::rig::{self, joint_errors};
 use choreo::motion::skeleton::JOINT_NAMES;
 use choreo::motion::NUM_JOINTS;
 
-/// The real dataset; panics under CI when it is missing, otherwise says loudly that it skips.
-fn dataset() -> Option<Dataset> {
-    match Dataset::open(Path::new(DEFAULT_ROOT)) {
-        Ok(d) => Some(d),
-        Err(e) => {
-            if std::env::var("CI").as_deref() == Ok("true") {
-                panic!("CI=true but the dataset is missing: {e}");
-            }
-            eprintln!("SKIPPED: {e}");
-            None
-        }
-    }
-}
+#[path = "common/dataset.rs"]
+mod common_dataset;
+use common_dataset::dataset;
 
 fn percentile(v: &mut [f32], p: f64) -> f32 {
     v.sort_by(|a, b| a.total_cmp(b));

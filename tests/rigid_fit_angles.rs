@@ -4,26 +4,14 @@
 //! frame to frame, as networks draw them (dance-revolution's upper arm measures 8–47 cm over one
 //! song; fixed at its median, the elbow moved 7 cm and the 13-cm elbow → forearm bone that swung
 //! to reach its target from there took the authenticity from 0.74 to 0.32).
-use std::path::Path;
 
 use choreo::metrics::plausibility::{plausibility, Plausibility};
 use choreo::metrics::reference::ReferenceStats;
-use choreo::motion::dataset::{Dataset, DEFAULT_ROOT};
 use choreo::motion::Motion;
 
-/// The real dataset; panics under CI when it is missing, otherwise says loudly that it skips.
-fn dataset() -> Option<Dataset> {
-    match Dataset::open(Path::new(DEFAULT_ROOT)) {
-        Ok(d) => Some(d),
-        Err(e) => {
-            if std::env::var("CI").as_deref() == Ok("true") {
-                panic!("CI=true but the dataset is missing: {e}");
-            }
-            eprintln!("SKIPPED: {e}");
-            None
-        }
-    }
-}
+#[path = "common/dataset.rs"]
+mod common_dataset;
+use common_dataset::dataset;
 
 /// Upper arms (shoulder → elbow) and everything below them, per side.
 const ARMS: [(usize, usize, &[usize]); 2] = [(3, 4, &[4, 5, 6, 22]), (12, 13, &[13, 14, 15, 21])];

@@ -461,10 +461,7 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
     }
     // The sample page's own origin: a free port for player.mjs's page server, listed for CORS.
     // (A made-up host would not do: Chromium keeps pages on public origins from loopback servers.)
-    let page_port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port();
+    let page_port = free_port();
     let mut app = spawn_app_with(|c| {
         c.models_dir = models_dir();
         c.cors_origins = vec![format!("http://127.0.0.1:{page_port}")];
@@ -517,23 +514,7 @@ async fn the_player_element_plays_a_dance_in_sync_on_another_page_in_chromium() 
             "seed_motion": {"fps": 25.0, "positions": travelling},
         }))
         .await;
-    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-player");
-    let env = [
-        ("API_URL", format!("http://{}", app.addr)),
-        ("JOB_ID", job_id),
-        ("SONG_ID", song_id),
-        ("TOKEN", key),
-        ("PAGE_PORT", page_port.to_string()),
-        ("OUT_DIR", out.display().to_string()),
-        ("CHROMIUM", chromium().display().to_string()),
-    ];
-    let summary = run_node(
-        &root().join("tests/web/player.mjs"),
-        &root().join("tests/web"),
-        &env,
-        Duration::from_secs(180),
-    )
-    .await;
+    let summary = run_player(&app, &job_id, &song_id, Some(&key), page_port, "web-player").await;
     let worst = summary["sync"]["worst_diff_s"]
         .as_f64()
         .expect("worst_diff_s");
@@ -584,10 +565,7 @@ async fn the_player_element_seeks_the_song_without_a_key_in_chromium() {
     ) {
         return;
     }
-    let page_port = std::net::TcpListener::bind("127.0.0.1:0")
-        .and_then(|l| l.local_addr())
-        .expect("a free port")
-        .port();
+    let page_port = free_port();
     let app = spawn_app_with(|c| {
         c.models_dir = models_dir();
         c.cors_origins = vec![format!("http://127.0.0.1:{page_port}")];
@@ -598,20 +576,13 @@ async fn the_player_element_seeks_the_song_without_a_key_in_chromium() {
     let job_id = app
         .dance(&serde_json::json!({"song_id": song_id, "model": "dance-revolution", "seed": 2}))
         .await;
-    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join("web-player-keyless");
-    let env = [
-        ("API_URL", format!("http://{}", app.addr)),
-        ("JOB_ID", job_id),
-        ("SONG_ID", song_id),
-        ("PAGE_PORT", page_port.to_string()),
-        ("OUT_DIR", out.display().to_string()),
-        ("CHROMIUM", chromium().display().to_string()),
-    ];
-    let summary = run_node(
-        &root().join("tests/web/player.mjs"),
-        &root().join("tests/web"),
-        &env,
-        Duration::from_secs(180),
+    let summary = run_player(
+        &app,
+        &job_id,
+        &song_id,
+        None,
+        page_port,
+        "web-player-keyless",
     )
     .await;
     assert_eq!(summary["audio_seek"]["keyed"], false, "{summary}");
@@ -625,6 +596,46 @@ async fn the_player_element_seeks_the_song_without_a_key_in_chromium() {
         .expect("worst_diff_s");
     assert!(worst <= 1.0 / 25.0, "in time with the dance: {summary}");
     app.stop().await;
+}
+
+/// A free port on the loopback (for player.mjs's page server, listed for CORS).
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .and_then(|l| l.local_addr())
+        .expect("a free port")
+        .port()
+}
+
+/// tests/web/player.mjs on `job_id`'s dance of `song_id`, its page served on `page_port`, with
+/// `token` as the element's api-key (none: the element reads the server's URLs itself); its
+/// screenshot goes under `out` in the test target's folder. Returns its summary.
+async fn run_player(
+    app: &TestApp,
+    job_id: &str,
+    song_id: &str,
+    token: Option<&str>,
+    page_port: u16,
+    out: &str,
+) -> serde_json::Value {
+    let out = Path::new(env!("CARGO_TARGET_TMPDIR")).join(out);
+    let mut env = vec![
+        ("API_URL", format!("http://{}", app.addr)),
+        ("JOB_ID", job_id.to_string()),
+        ("SONG_ID", song_id.to_string()),
+        ("PAGE_PORT", page_port.to_string()),
+        ("OUT_DIR", out.display().to_string()),
+        ("CHROMIUM", chromium().display().to_string()),
+    ];
+    if let Some(token) = token {
+        env.push(("TOKEN", token.to_string()));
+    }
+    run_node(
+        &root().join("tests/web/player.mjs"),
+        &root().join("tests/web"),
+        &env,
+        Duration::from_secs(180),
+    )
+    .await
 }
 
 /// How long, and how fast along x, the player test's seed motion travels.
