@@ -138,8 +138,13 @@ export class ChoreoPlayer extends HTMLElement {
       if (load !== this.#loading) return;
       if (this.#blobUrl) URL.revokeObjectURL(this.#blobUrl);
       this.#blobUrl = song instanceof Blob ? URL.createObjectURL(song) : null;
+      const metadata = song ? this.#songMetadata() : null;
       if (song) this.#audio.src = this.#blobUrl ?? song;
       else this.#audio.removeAttribute('src');
+      // The song counts as loaded once the browser knows its length: a keyless song is streamed
+      // by the <audio> itself, and seeking or playing before then would start it from 0.
+      await metadata;
+      if (load !== this.#loading) return;
       if (glb) {
         await this.#stage.load(glb);
         this.#stage.setView(this.getAttribute('view') || 'figure');
@@ -149,10 +154,25 @@ export class ChoreoPlayer extends HTMLElement {
       this.#dirty = true;
       this.dispatchEvent(new CustomEvent('choreo-load', { detail: { duration: this.duration } }));
     })().catch((error) => {
-      if (load === this.#loading) this.#fail(error);
+      // A song the <audio> could not play has already said so (its error listener).
+      if (load === this.#loading && this.#error.hidden) this.#fail(error);
       throw error;
     });
     this.#ready.catch(() => {}); // reported by the event; `loaded` rejects for whoever awaits it
+  }
+
+  /** Resolves when the <audio> has read the new song's metadata; rejects on a media error. */
+  #songMetadata() {
+    return new Promise((resolve, reject) => {
+      const done = () => { this.#audio.removeEventListener('loadedmetadata', ok); this.#audio.removeEventListener('error', bad); };
+      const ok = () => { done(); resolve(); };
+      const bad = () => {
+        done();
+        reject(new Error(`the song could not be played (media error ${this.#audio.error?.code ?? '?'}): ${this.getAttribute('audio')}`));
+      };
+      this.#audio.addEventListener('loadedmetadata', ok);
+      this.#audio.addEventListener('error', bad);
+    });
   }
 
   /** Resolves when the dance and the song named now are loaded; rejects when either failed. */
