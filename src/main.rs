@@ -61,6 +61,9 @@ fn run() -> anyhow::Result<()> {
         Command::Bench {
             what: BenchCommand::Audio(args),
         } => cli::bench::audio(args),
+        Command::Bench {
+            what: BenchCommand::Jobs(args),
+        } => cli::bench::jobs(args, load(&args.service)?),
         Command::Eval(args) => cli::eval::run(args),
         Command::Export(args) => cli::export::run(args),
         Command::Retarget(args) => cli::retarget::run(args),

@@ -1,10 +1,12 @@
 //! `choreo bench http`: throughput and latency of `GET /v1/jobs/{id}` on loopback while the
-//! workers are busy.
+//! workers are busy; `choreo bench jobs` ([`jobs`]): dances a minute with 1 and 2 workers.
 //!
 //! It starts the real service on port 0 with a temporary data dir, uploads a song over HTTP,
 //! queues analyze jobs for it until every worker has work, and then drives keep-alive HTTP/1.1
 //! connections for a fixed time. The client is a few lines over a `TcpStream`, so the figures
 //! measure the server, not a client library.
+pub mod jobs;
+
 use super::Server;
 use crate::config::Config;
 use crate::queue::{JobId, JobKind, NewJob, SongId, Status};
@@ -131,6 +133,36 @@ impl Conn {
     }
 }
 
+/// Uploads a song as multipart form data over `conn`; returns its id.
+async fn upload(conn: &mut Conn, bytes: &[u8]) -> Result<String, BenchError> {
+    let boundary = "choreo-bench-boundary";
+    let mut body = format!(
+        "--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"bench\"\r\n\
+         Content-Type: application/octet-stream\r\n\r\n"
+    )
+    .into_bytes();
+    body.extend_from_slice(bytes);
+    body.extend_from_slice(format!("\r\n--{boundary}--\r\n").as_bytes());
+    let head = format!(
+        "POST /v1/songs HTTP/1.1\r\nHost: bench\r\nContent-Type: multipart/form-data; boundary={boundary}\r\n\
+         Content-Length: {}\r\n\r\n",
+        body.len()
+    );
+    let (status, response) = conn.request(head.as_bytes(), &body).await?;
+    if status != 201 {
+        return Err(BenchError::Protocol(format!(
+            "upload answered {status}: {}",
+            String::from_utf8_lossy(&response)
+        )));
+    }
+    let song: serde_json::Value =
+        serde_json::from_slice(&response).map_err(|e| BenchError::Protocol(e.to_string()))?;
+    song["id"]
+        .as_str()
+        .map(str::to_string)
+        .ok_or_else(|| BenchError::Protocol("upload response has no id".into()))
+}
+
 fn percentile(sorted: &[Duration], q: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
@@ -159,33 +191,11 @@ pub async fn run(bench: HttpBench) -> Result<HttpReport, BenchError> {
 
     // Upload the song over HTTP, as a client would.
     let bytes = tokio::fs::read(&bench.song).await?;
-    let boundary = "choreo-bench-boundary";
-    let mut body = format!(
-        "--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; filename=\"bench\"\r\n\
-         Content-Type: application/octet-stream\r\n\r\n"
-    )
-    .into_bytes();
-    body.extend_from_slice(&bytes);
-    body.extend_from_slice(format!("\r\n--{boundary}--\r\n").as_bytes());
-    let head = format!(
-        "POST /v1/songs HTTP/1.1\r\nHost: bench\r\nContent-Type: multipart/form-data; boundary={boundary}\r\n\
-         Content-Length: {}\r\n\r\n",
-        body.len()
-    );
     let mut conn = Conn::open(addr).await?;
-    let (status, response) = conn.request(head.as_bytes(), &body).await?;
-    if status != 201 {
-        return Err(BenchError::Protocol(format!(
-            "upload answered {status}: {}",
-            String::from_utf8_lossy(&response)
-        )));
-    }
-    let song: serde_json::Value =
-        serde_json::from_slice(&response).map_err(|e| BenchError::Protocol(e.to_string()))?;
-    let song_id: SongId = song["id"]
-        .as_str()
-        .and_then(|s| s.parse().ok())
-        .ok_or_else(|| BenchError::Protocol("upload response has no id".into()))?;
+    let song_id: SongId = upload(&mut conn, &bytes)
+        .await?
+        .parse()
+        .map_err(|_| BenchError::Protocol("upload response's id is not a song id".into()))?;
 
     // Keep every worker busy: the analyze jobs queued here are real work on the real song.
     let mut target: Option<JobId> = None;

@@ -86,8 +86,8 @@ fn is_song(p: &Path) -> bool {
     )
 }
 
-/// Writes mono 16-bit PCM WAV.
-fn write_wav_mono(path: &Path, sr: u32, y: &[f32]) -> Result<(), AudioError> {
+/// Writes mono 16-bit PCM WAV (the benches' joined songs).
+pub fn write_wav_mono(path: &Path, sr: u32, y: &[f32]) -> Result<(), AudioError> {
     use std::io::Write;
     let data_len = (y.len() * 2) as u32;
     let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);

@@ -1,4 +1,4 @@
-//! `choreo bench audio` and `choreo bench http`: their arguments and what they print.
+//! `choreo bench audio`, `http` and `jobs`: their arguments and what they print.
 use std::path::PathBuf;
 
 use anyhow::Context;
@@ -155,4 +155,102 @@ fn print_table(rows: &[BenchRow], fps: f64) {
             lb / rb
         );
     }
+}
+
+/// `choreo bench jobs` flags.
+#[derive(clap::Args)]
+pub struct JobsBenchArgs {
+    /// The song every job dances; by default a 3-minute song made by joining --join.
+    #[arg(long)]
+    song: Option<PathBuf>,
+    /// Songs joined (and cut to 3 minutes) when no --song is given.
+    #[arg(long, num_args = 1.., default_values = [
+        "../shared/audio/vibe_ace.ogg",
+        "../shared/audio/sugar_plum_fairy.ogg",
+        "../shared/audio/lets_go_fishin.ogg",
+    ])]
+    join: Vec<PathBuf>,
+    /// The model every job asks for.
+    #[arg(long, default_value = "beat-graph")]
+    model: String,
+    /// Jobs queued at once on the one song (seeds 1..=N).
+    #[arg(long, default_value_t = 10)]
+    jobs: usize,
+    /// Worker counts to measure, each on a fresh service.
+    #[arg(long, num_args = 1.., default_values_t = [1, 2])]
+    workers: Vec<usize>,
+    #[command(flatten)]
+    pub service: ServiceArgs,
+}
+
+/// `choreo bench jobs`: prints a Markdown table, then the rows as JSON.
+pub fn jobs(args: &JobsBenchArgs, config: Config) -> anyhow::Result<()> {
+    choreo::telemetry::init_tracing(config.log_format, "warn");
+    anyhow::ensure!(
+        (1..=1000).contains(&args.jobs),
+        "--jobs must be within 1..=1000"
+    );
+    anyhow::ensure!(
+        !args.workers.is_empty() && args.workers.iter().all(|w| (1..=256).contains(w)),
+        "--workers must list counts within 1..=256"
+    );
+    let dir = tempfile::tempdir()?;
+    let song = match &args.song {
+        Some(p) => p.clone(),
+        None => joined_song(&args.join, 180.0, &dir.path().join("joined.wav"))?,
+    };
+    let seconds = choreo::audio::decode_path(&song)
+        .with_context(|| format!("decoding {}", song.display()))?
+        .duration_s;
+    let bench = choreo::api::bench::jobs::JobsBench {
+        song,
+        model: args.model.clone(),
+        jobs: args.jobs,
+        workers: args.workers.clone(),
+        config,
+    };
+    let rows = super::runtime()?
+        .block_on(choreo::api::bench::jobs::run(bench))
+        .context("running the jobs bench")?;
+    println!(
+        "{} dances of one {seconds:.0}-s song by {}, queued at once (seeds 1–{}), through the HTTP API",
+        args.jobs, args.model, args.jobs
+    );
+    println!(
+        "| workers | jobs | seconds | jobs/min | jobs/min per worker | × the first row | ideal × |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for r in &rows {
+        println!(
+            "| {} | {} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} |",
+            r.workers,
+            r.succeeded,
+            r.seconds,
+            r.jobs_per_min,
+            r.jobs_per_min_per_worker,
+            r.speedup,
+            r.ideal_speedup
+        );
+    }
+    println!("{}", serde_json::to_string(&rows)?);
+    Ok(())
+}
+
+/// `songs` decoded, joined (those at the first one's rate, mixed to mono) and cut to `seconds`,
+/// written as WAV to `out`.
+fn joined_song(songs: &[PathBuf], seconds: f64, out: &std::path::Path) -> anyhow::Result<PathBuf> {
+    let mut samples = Vec::new();
+    let mut rate = None;
+    for p in songs {
+        let a =
+            choreo::audio::decode_path(p).with_context(|| format!("decoding {}", p.display()))?;
+        let sr = *rate.get_or_insert(a.sample_rate);
+        if a.sample_rate == sr {
+            samples.extend_from_slice(&a.samples);
+        }
+    }
+    let sr = rate.context("--join names no song")?;
+    samples.truncate((seconds * f64::from(sr)) as usize);
+    choreo::audio::bench::write_wav_mono(out, sr, &samples)?;
+    Ok(out.to_path_buf())
 }

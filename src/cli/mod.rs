@@ -94,6 +94,8 @@ pub enum BenchCommand {
     Http(bench::HttpBenchArgs),
     /// Decode + DanceRevolution features per song vs librosa (one thread each), peak memory.
     Audio(bench::AudioBenchArgs),
+    /// Dances a minute through the service with 1 and 2 workers: many seeds of one song.
+    Jobs(bench::JobsBenchArgs),
 }
 
 /// Flags that override the config file and `CHOREO_*` environment.

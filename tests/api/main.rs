@@ -2,6 +2,7 @@
 //! One module per endpoint or concern; `helpers::spawn_app()` starts the service.
 mod artifacts;
 mod bad_input;
+mod bench;
 mod cli;
 #[path = "../common/models.rs"]
 mod common_models;
