@@ -31,6 +31,9 @@
 //!    ±[`DROP_WINDOW`] frames); then a two-bone IK turns thigh and shin in the plane of the knee
 //!    (the shortest arcs, so the twist stays), the foot keeping its world rotation. Hands and
 //!    head are not solved for: they follow their chains.
+//! 5. **Lower arms.** A lower arm turns no faster than choreo's joints do (55° a frame at 25 fps):
+//!    it is one joint where choreo has two, so its twist is held back where their composed turn
+//!    is faster, and catches up over the next frames ([`limit_lower_arms`]).
 //!
 //! Rotations carry over through the two rest poses, as animation retargeting usually does; bone
 //! directions come from choreo's positions (so a rest pose that differs, an average dancing pose
@@ -40,7 +43,7 @@ use std::collections::HashMap;
 use nalgebra::{UnitQuaternion, Vector3};
 
 use super::{HumanBone, RetargetError, TargetSkeleton};
-use crate::motion::rig::{fk_frame, twist_angle, RigMotion};
+use crate::motion::rig::{fk_frame, max_turn, twist_angle, RigMotion};
 
 mod bones;
 mod kinematics;
@@ -48,8 +51,8 @@ mod kinematics;
 pub use bones::REQUIRED;
 use bones::{aim, Aim, CHOREO_JOINTS, LEGS};
 use kinematics::{
-    arc, fk_world, frame, locals, make_continuous, mean, mean_rotation, spread_max, two_bone_ik,
-    MAX_REACH,
+    arc, fk_world, frame, limit_bone_turn, locals, make_continuous, mean, mean_rotation,
+    spread_max, two_bone_ik, MAX_REACH,
 };
 
 /// How far (degrees) the head's twist from the torso is kept as the markers give it; beyond, it
@@ -471,6 +474,8 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
         }
         rotations.push(locals(&target.rig, w));
     }
+    // 5: the lower arms turn no faster than choreo's joints.
+    limit_lower_arms(&prepared, &mut rotations, src.fps);
     make_continuous(&mut rotations);
     Ok(RigMotion {
         rig: target.rig.clone(),
@@ -478,6 +483,34 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
         root_translation: roots,
         rotations,
     })
+}
+
+/// The lower arms' local rotations kept within [`max_turn`] of the previous frame's: by their
+/// twist about the bone where that suffices, else by lagging the bone itself
+/// ([`limit_bone_turn`]).
+///
+/// A target's lower arm is one joint where choreo has two (elbow and forearm, each turning at
+/// most 55° a frame, [`max_turn`]), so it takes their composed turn: 70-73° in one frame on a
+/// dancenet dance (most of it the forearm's twist), up to 87° on captured dances (DANCE_R_9,
+/// DANCE_C_2: 0.1-0.2 % of steps). The twist is free (no position depends on it), so it is held
+/// back and catches up over the next frames; the bone's direction alone turned past 55° on one
+/// step of that dancenet dance (the data's own jumps on the captures), where the bone follows a
+/// frame late.
+fn limit_lower_arms(p: &Prepared, rotations: &mut [Vec<UnitQuaternion<f64>>], fps: f64) {
+    let max = max_turn(fps);
+    for b in [HumanBone::LeftLowerArm, HumanBone::RightLowerArm] {
+        let Some(&j) = p.bones.get(&b) else { continue };
+        let Some(axis) = p.aims[j]
+            .as_ref()
+            .and_then(|a| nalgebra::Unit::try_new(a.rest_dir, 1e-9))
+        else {
+            continue;
+        };
+        for t in 1..rotations.len() {
+            let prev = rotations[t - 1][j];
+            rotations[t][j] = limit_bone_turn(&prev, &rotations[t][j], &axis, max);
+        }
+    }
 }
 
 /// The target's rest direction of bone `j` for its aim: the target's point sets when it has

@@ -403,3 +403,69 @@ fn smpls_spine_joints_share_the_torsos_turn() {
     // at most on this dance.
     assert!(worst_arms < 0.015, "the upper arms moved {worst_arms} m");
 }
+
+/// A target's lower arm is one joint where choreo has two (elbow and forearm): a forearm that
+/// twists 80° in one frame while each of choreo's joints turns at most 55° (the two composed
+/// reach 70-73° on a dancenet dance, 87° on a captured rumba) turns the lower arm no more than
+/// choreo's joints turn, the bone still pointing where choreo's does; the twist catches up.
+#[test]
+fn a_lower_arm_twists_no_faster_than_choreos_joints() {
+    let Some(mut src) = dance() else { return };
+    let ci = |n: &str| src.rig.names.iter().position(|x| x == n).unwrap();
+    let (forearm, wrist) = (ci("left_forearm"), ci("left_wrist"));
+    let axis = nalgebra::Unit::new_normalize(src.rig.offsets[wrist]);
+    let jump = 100;
+    for frame in &mut src.rotations[jump..] {
+        frame[forearm] *= UnitQuaternion::from_axis_angle(&axis, 80f64.to_radians());
+    }
+    let choreo = |t: usize| fk_frame(&src.rig, &src.root_translation[t], &src.rotations[t]).0;
+    for (label, target) in targets() {
+        let out = retarget(&src, &target).unwrap_or_else(|e| panic!("{label}: {e}"));
+        let tj = |b: HumanBone| target.humanoid.iter().position(|h| *h == Some(b)).unwrap();
+        let (lower, hand) = (tj(HumanBone::LeftLowerArm), tj(HumanBone::LeftHand));
+        let turn = |t: usize| {
+            out.rotations[t][lower]
+                .angle_to(&out.rotations[t + 1][lower])
+                .to_degrees()
+        };
+        let worst = (0..out.num_frames() - 1).map(turn).fold(0.0, f64::max);
+        let mut off = 0.0f64;
+        for t in jump - 1..jump + 5 {
+            let (c, p) = (
+                choreo(t),
+                fk_frame(&out.rig, &out.root_translation[t], &out.rotations[t]).0,
+            );
+            off = off.max(angle(
+                c[ci("left_wrist")] - c[ci("left_elbow")],
+                p[hand] - p[lower],
+            ));
+        }
+        eprintln!(
+            "{label}: lower arm turns {:.1}° at the jump, {worst:.1}° at most; {off:.4}° off the dance's",
+            turn(jump - 1)
+        );
+        assert!(
+            worst <= 55.0 + 1e-6,
+            "{label}: the lower arm turns {worst:.1}°"
+        );
+        assert!(off < 0.01, "{label}: the lower arm points {off}° off");
+        // Caught up a few frames later: the twist is choreo's again.
+        let settled = out.rotations[jump + 10][lower].angle_to(
+            &retarget(
+                &RigMotion {
+                    rotations: src.rotations[jump..].to_vec(),
+                    root_translation: src.root_translation[jump..].to_vec(),
+                    ..src.clone()
+                },
+                &target,
+            )
+            .unwrap()
+            .rotations[10][lower],
+        );
+        assert!(
+            settled.to_degrees() < 1.0,
+            "{label}: the twist is {:.1}° behind",
+            settled.to_degrees()
+        );
+    }
+}
