@@ -40,7 +40,7 @@
 //! against a T-pose, costs nothing), and the feet are solved afterwards.
 use std::collections::HashMap;
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use super::{HumanBone, RetargetError, TargetSkeleton};
 use crate::motion::rig::{fk_frame, max_turn, twist_angle, RigMotion};
@@ -68,6 +68,18 @@ pub const HIP_SHIFT_WINDOW: usize = 6;
 
 /// World positions and rotations of every joint of one frame.
 type WorldPose = (Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>);
+
+/// One leg's goals in one frame: its floor goal, its reach goal, how firmly the foot stands
+/// (1 on the floor, 0 lifted) and the target's hip joint, all before the hips move.
+type LegGoals = (Vector3<f64>, Vector3<f64>, f64, Vector3<f64>);
+
+/// How much a supporting foot's gap across its leg counts against its gap along it, when the hips
+/// move to close the gaps. Along the leg a gap bends or stretches the knee (a nearly straight
+/// knee 10-20° per centimetre); across, it only leans the leg. Counted alike, as they were, the
+/// two feet's gaps across (3 cm either way sideways on a dancenet dance onto Mixamo: another hip
+/// width) pulled the hips off what the legs' lengths asked for, the right knee 6.3° off
+/// motion.json's (median); at this weight 3.5°, the hips up to 3 cm from where they went.
+pub const ACROSS_LEG_WEIGHT: f64 = 0.03;
 
 /// The target's joints by humanoid bone, checked: every bone once, the required ones present.
 fn bone_index(target: &TargetSkeleton) -> Result<HashMap<HumanBone, usize>, RetargetError> {
@@ -368,10 +380,11 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     // flat-foot height plus choreo's lift, scaled); a lifted one to its reach goal (choreo's
     // hip-to-ankle vector at its leg's own ratio, from the target's hip), which keeps the knee's
     // angle; in between, a blend by the lowest foot point's height.
-    let parts = |t: usize, root: &Vector3<f64>| -> [(Vector3<f64>, Vector3<f64>, f64); 2] {
+    // Per leg: the floor goal, the reach goal, how firmly the foot stands, the target's hip.
+    let parts = |t: usize, root: &Vector3<f64>| -> [LegGoals; 2] {
         let (pos, _) = &choreo_frames[t];
         let p = fk_world(&target.rig, &prepared.order, root, &worlds[t]);
-        let mut out = [(Vector3::zeros(), Vector3::zeros(), 0.0); 2];
+        let mut out = [(Vector3::zeros(), Vector3::zeros(), 0.0, Vector3::zeros()); 2];
         for (k, (thigh, _, _, ankle)) in LEGS.iter().enumerate() {
             let side = if k == 0 { "left" } else { "right" };
             let a = to_target(&pos[choreo[*ankle]]);
@@ -386,7 +399,7 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
                 .fold(f64::INFINITY, f64::min);
             let support = crate::motion::feet::SUPPORT_HEIGHT_M;
             let on_floor = ((2.0 * support - low) / support).clamp(0.0, 1.0);
-            out[k] = (floor_goal, reach_goal, on_floor);
+            out[k] = (floor_goal, reach_goal, on_floor, p[prepared.bones[thigh]]);
         }
         out
     };
@@ -394,40 +407,33 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     // the leg reaches at the dance's knee angle (another hip width and height, other ankle
     // markers): 6-7 cm on a dancenet dance onto Mixamo, which the IK took up by bending the knees
     // (11-12° off motion.json's, median). The root moves instead, by the supporting feet's gap,
-    // weighted by how firmly each stands and smoothed over ±HIP_SHIFT_WINDOW frames.
+    // weighted by how firmly each stands and smoothed over ±HIP_SHIFT_WINDOW frames: the shift
+    // that best closes every supporting foot's gap, its part along the leg first ([`leg_gap`]).
     let legs: Vec<_> = (0..t_len).map(|t| parts(t, &roots[t])).collect();
-    let gaps: Vec<(Vector3<f64>, f64)> = legs
+    let gaps: Vec<GapSum> = legs
         .iter()
         .map(|pr| {
-            let w: f64 = pr.iter().map(|(_, _, on)| on).sum();
-            let gap = pr
-                .iter()
-                .map(|(floor, reach, on)| (floor - reach) * *on)
-                .sum::<Vector3<f64>>();
-            (gap, w)
+            pr.iter()
+                .fold(GapSum::default(), |sum, (floor, reach, on, hip)| {
+                    sum.add(&leg_gap(floor, reach, hip), *on)
+                })
         })
         .collect();
-    let overall = {
-        let (g, w) = gaps
-            .iter()
-            .fold((Vector3::zeros(), 0.0), |(g, w), (gi, wi)| (g + gi, w + wi));
-        if w > 0.0 {
-            g / w
-        } else {
-            Vector3::zeros()
-        }
-    };
+    let overall = gaps
+        .iter()
+        .fold(GapSum::default(), |a, g| a.merge(g))
+        .shift()
+        .unwrap_or_else(Vector3::zeros);
     let shifts: Vec<Vector3<f64>> = (0..t_len)
         .map(|t| {
             let lo = t.saturating_sub(HIP_SHIFT_WINDOW);
             let hi = (t + HIP_SHIFT_WINDOW + 1).min(t_len);
-            let (g, w) = gaps[lo..hi]
+            let sum = gaps[lo..hi]
                 .iter()
-                .fold((Vector3::zeros(), 0.0), |(g, w), (gi, wi)| (g + gi, w + wi));
-            if w > 0.5 {
-                g / w
-            } else {
-                overall
+                .fold(GapSum::default(), |a, g| a.merge(g));
+            match sum.shift() {
+                Some(s) if sum.weight > 0.5 => s,
+                _ => overall,
             }
         })
         .collect();
@@ -438,7 +444,9 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     let goals: Vec<[Vector3<f64>; 2]> = legs
         .iter()
         .zip(&shifts)
-        .map(|(pr, shift)| pr.map(|(floor, reach, on)| floor * on + (reach + shift) * (1.0 - on)))
+        .map(|(pr, shift)| {
+            pr.map(|(floor, reach, on, _)| floor * on + (reach + shift) * (1.0 - on))
+        })
         .collect();
     let mut drop = vec![0.0f64; t_len];
     for t in 0..t_len {
@@ -483,6 +491,72 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
         root_translation: roots,
         rotations,
     })
+}
+
+/// One supporting foot's ask of the hips' shift `s`, as the normal equations of
+/// `|uᵀs − c|² + ACROSS_LEG_WEIGHT · |P(s − (floor − reach))|²`: `u` the direction from the
+/// target's `hip` to the floor goal, `c` how much nearer the hip must come along it for the leg
+/// to reach with the dance's knee angle (the reach goal's distance), `P` the projection across
+/// the leg. The shift then keeps each knee's angle where the feet allow, and otherwise goes by the
+/// floor goal's offset from the reach goal, as a plain mean did.
+fn leg_gap(floor: &Vector3<f64>, reach: &Vector3<f64>, hip: &Vector3<f64>) -> GapSum {
+    let gap = floor - reach;
+    let Some(u) = (floor - hip).try_normalize(1e-9) else {
+        return GapSum {
+            normal: Matrix3::identity(),
+            rhs: gap,
+            weight: 1.0,
+        };
+    };
+    let c = (floor - hip).norm() - (reach - hip).norm();
+    let along = u * u.transpose();
+    let across = Matrix3::identity() - along;
+    GapSum {
+        normal: along + across * ACROSS_LEG_WEIGHT,
+        rhs: u * c + across * gap * ACROSS_LEG_WEIGHT,
+        weight: 1.0,
+    }
+}
+
+/// Supporting feet's asks of the hips' shift, summed (weighted by how firmly each stands): the
+/// normal equations of one least-squares shift.
+#[derive(Clone, Copy)]
+struct GapSum {
+    normal: Matrix3<f64>,
+    rhs: Vector3<f64>,
+    weight: f64,
+}
+
+impl Default for GapSum {
+    fn default() -> Self {
+        GapSum {
+            normal: Matrix3::zeros(),
+            rhs: Vector3::zeros(),
+            weight: 0.0,
+        }
+    }
+}
+
+impl GapSum {
+    fn add(self, g: &GapSum, w: f64) -> GapSum {
+        GapSum {
+            normal: self.normal + g.normal * w,
+            rhs: self.rhs + g.rhs * w,
+            weight: self.weight + g.weight * w,
+        }
+    }
+
+    fn merge(self, g: &GapSum) -> GapSum {
+        self.add(g, 1.0)
+    }
+
+    /// The shift, where any foot stands.
+    fn shift(&self) -> Option<Vector3<f64>> {
+        if self.weight <= 0.0 {
+            return None;
+        }
+        self.normal.try_inverse().map(|m| m * self.rhs)
+    }
 }
 
 /// The lower arms' local rotations kept within [`max_turn`] of the previous frame's: by their

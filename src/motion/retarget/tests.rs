@@ -242,11 +242,11 @@ fn the_files_carry_what_their_readers_expect() {
 }
 
 /// The legs do what the dance's legs do: on every target, each knee's angle (hip–knee–ankle)
-/// stays near the dance's at the median frame, the feet planted by moving the hips rather than
-/// by bending the knees. On this capture the right knee is bent 5-16° more than the dance's at
-/// the target's equal legs (median 7.1° onto Mixamo, the left 2.9°; 7.4° and 3.6° before the
-/// hips moved); on served dances both knees are within 2° (a dancenet dance onto Mixamo 1.6°
-/// and 1.4°, onto SMPL 2.0° and 1.9°; 6.8-12.1° before).
+/// stays within 6° of the dance's at the median frame, the feet planted by moving the hips
+/// rather than by bending the knees, the hips moved first along the supporting legs
+/// (`ACROSS_LEG_WEIGHT`). On this capture, whose legs differ in length where a target's do not,
+/// the knees are 2.9° and 3.5° off onto Mixamo (median; 2.9° and 7.1° with the supporting feet's
+/// gaps averaged alike along and across the legs, 3.6° and 7.4° before the hips moved).
 #[test]
 fn every_target_bends_the_knees_as_the_dance_does() {
     let Some(src) = dance() else { return };
@@ -286,7 +286,7 @@ fn every_target_bends_the_knees_as_the_dance_does() {
             let median = off[off.len() / 2];
             eprintln!("{label}: {side} knee {median:.1}° off the dance's (median)");
             assert!(
-                median <= 8.0,
+                median <= 6.0,
                 "{label}: {side} knee {median:.1}° off (median)"
             );
         }
