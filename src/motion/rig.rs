@@ -81,8 +81,9 @@ mod continuity;
 mod least_squares;
 mod root;
 
-/// The retarget solver splits its torso and head turns the same way.
-pub(crate) use continuity::twist_angle;
+/// The retarget solver splits its torso and head turns the same way, and turns a target's joints
+/// no faster than choreo's.
+pub(crate) use continuity::{limit_turn, max_turn, twist_angle};
 
 /// Joints in the rig: the body centre, the 23 dataset joints, and the branch joints.
 pub const RIG_JOINTS: usize = NUM_JOINTS + 1 + VIRTUAL.len();

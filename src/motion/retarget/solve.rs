@@ -31,16 +31,19 @@
 //!    ±[`DROP_WINDOW`] frames); then a two-bone IK turns thigh and shin in the plane of the knee
 //!    (the shortest arcs, so the twist stays), the foot keeping its world rotation. Hands and
 //!    head are not solved for: they follow their chains.
+//! 5. **Lower arms.** A lower arm turns no faster than choreo's joints do (55° a frame at 25 fps):
+//!    it is one joint where choreo has two, so its twist is held back where their composed turn
+//!    is faster, and catches up over the next frames ([`limit_lower_arms`]).
 //!
 //! Rotations carry over through the two rest poses, as animation retargeting usually does; bone
 //! directions come from choreo's positions (so a rest pose that differs, an average dancing pose
 //! against a T-pose, costs nothing), and the feet are solved afterwards.
 use std::collections::HashMap;
 
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
 use super::{HumanBone, RetargetError, TargetSkeleton};
-use crate::motion::rig::{fk_frame, twist_angle, RigMotion};
+use crate::motion::rig::{fk_frame, max_turn, twist_angle, RigMotion};
 
 mod bones;
 mod kinematics;
@@ -48,8 +51,8 @@ mod kinematics;
 pub use bones::REQUIRED;
 use bones::{aim, Aim, CHOREO_JOINTS, LEGS};
 use kinematics::{
-    arc, fk_world, frame, locals, make_continuous, mean, mean_rotation, spread_max, two_bone_ik,
-    MAX_REACH,
+    arc, fk_world, frame, limit_bone_turn, locals, make_continuous, mean, mean_rotation,
+    spread_max, two_bone_ik, MAX_REACH,
 };
 
 /// How far (degrees) the head's twist from the torso is kept as the markers give it; beyond, it
@@ -65,6 +68,18 @@ pub const HIP_SHIFT_WINDOW: usize = 6;
 
 /// World positions and rotations of every joint of one frame.
 type WorldPose = (Vec<Vector3<f64>>, Vec<UnitQuaternion<f64>>);
+
+/// One leg's goals in one frame: its floor goal, its reach goal, how firmly the foot stands
+/// (1 on the floor, 0 lifted) and the target's hip joint, all before the hips move.
+type LegGoals = (Vector3<f64>, Vector3<f64>, f64, Vector3<f64>);
+
+/// How much a supporting foot's gap across its leg counts against its gap along it, when the hips
+/// move to close the gaps. Along the leg a gap bends or stretches the knee (a nearly straight
+/// knee 10-20° per centimetre); across, it only leans the leg. Counted alike, as they were, the
+/// two feet's gaps across (3 cm either way sideways on a dancenet dance onto Mixamo: another hip
+/// width) pulled the hips off what the legs' lengths asked for, the right knee 6.3° off
+/// motion.json's (median); at this weight 3.5°, the hips up to 3 cm from where they went.
+pub const ACROSS_LEG_WEIGHT: f64 = 0.03;
 
 /// The target's joints by humanoid bone, checked: every bone once, the required ones present.
 fn bone_index(target: &TargetSkeleton) -> Result<HashMap<HumanBone, usize>, RetargetError> {
@@ -365,10 +380,11 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     // flat-foot height plus choreo's lift, scaled); a lifted one to its reach goal (choreo's
     // hip-to-ankle vector at its leg's own ratio, from the target's hip), which keeps the knee's
     // angle; in between, a blend by the lowest foot point's height.
-    let parts = |t: usize, root: &Vector3<f64>| -> [(Vector3<f64>, Vector3<f64>, f64); 2] {
+    // Per leg: the floor goal, the reach goal, how firmly the foot stands, the target's hip.
+    let parts = |t: usize, root: &Vector3<f64>| -> [LegGoals; 2] {
         let (pos, _) = &choreo_frames[t];
         let p = fk_world(&target.rig, &prepared.order, root, &worlds[t]);
-        let mut out = [(Vector3::zeros(), Vector3::zeros(), 0.0); 2];
+        let mut out = [(Vector3::zeros(), Vector3::zeros(), 0.0, Vector3::zeros()); 2];
         for (k, (thigh, _, _, ankle)) in LEGS.iter().enumerate() {
             let side = if k == 0 { "left" } else { "right" };
             let a = to_target(&pos[choreo[*ankle]]);
@@ -383,7 +399,7 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
                 .fold(f64::INFINITY, f64::min);
             let support = crate::motion::feet::SUPPORT_HEIGHT_M;
             let on_floor = ((2.0 * support - low) / support).clamp(0.0, 1.0);
-            out[k] = (floor_goal, reach_goal, on_floor);
+            out[k] = (floor_goal, reach_goal, on_floor, p[prepared.bones[thigh]]);
         }
         out
     };
@@ -391,40 +407,33 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     // the leg reaches at the dance's knee angle (another hip width and height, other ankle
     // markers): 6-7 cm on a dancenet dance onto Mixamo, which the IK took up by bending the knees
     // (11-12° off motion.json's, median). The root moves instead, by the supporting feet's gap,
-    // weighted by how firmly each stands and smoothed over ±HIP_SHIFT_WINDOW frames.
+    // weighted by how firmly each stands and smoothed over ±HIP_SHIFT_WINDOW frames: the shift
+    // that best closes every supporting foot's gap, its part along the leg first ([`leg_gap`]).
     let legs: Vec<_> = (0..t_len).map(|t| parts(t, &roots[t])).collect();
-    let gaps: Vec<(Vector3<f64>, f64)> = legs
+    let gaps: Vec<GapSum> = legs
         .iter()
         .map(|pr| {
-            let w: f64 = pr.iter().map(|(_, _, on)| on).sum();
-            let gap = pr
-                .iter()
-                .map(|(floor, reach, on)| (floor - reach) * *on)
-                .sum::<Vector3<f64>>();
-            (gap, w)
+            pr.iter()
+                .fold(GapSum::default(), |sum, (floor, reach, on, hip)| {
+                    sum.add(&leg_gap(floor, reach, hip), *on)
+                })
         })
         .collect();
-    let overall = {
-        let (g, w) = gaps
-            .iter()
-            .fold((Vector3::zeros(), 0.0), |(g, w), (gi, wi)| (g + gi, w + wi));
-        if w > 0.0 {
-            g / w
-        } else {
-            Vector3::zeros()
-        }
-    };
+    let overall = gaps
+        .iter()
+        .fold(GapSum::default(), |a, g| a.merge(g))
+        .shift()
+        .unwrap_or_else(Vector3::zeros);
     let shifts: Vec<Vector3<f64>> = (0..t_len)
         .map(|t| {
             let lo = t.saturating_sub(HIP_SHIFT_WINDOW);
             let hi = (t + HIP_SHIFT_WINDOW + 1).min(t_len);
-            let (g, w) = gaps[lo..hi]
+            let sum = gaps[lo..hi]
                 .iter()
-                .fold((Vector3::zeros(), 0.0), |(g, w), (gi, wi)| (g + gi, w + wi));
-            if w > 0.5 {
-                g / w
-            } else {
-                overall
+                .fold(GapSum::default(), |a, g| a.merge(g));
+            match sum.shift() {
+                Some(s) if sum.weight > 0.5 => s,
+                _ => overall,
             }
         })
         .collect();
@@ -435,7 +444,9 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
     let goals: Vec<[Vector3<f64>; 2]> = legs
         .iter()
         .zip(&shifts)
-        .map(|(pr, shift)| pr.map(|(floor, reach, on)| floor * on + (reach + shift) * (1.0 - on)))
+        .map(|(pr, shift)| {
+            pr.map(|(floor, reach, on, _)| floor * on + (reach + shift) * (1.0 - on))
+        })
         .collect();
     let mut drop = vec![0.0f64; t_len];
     for t in 0..t_len {
@@ -471,6 +482,8 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
         }
         rotations.push(locals(&target.rig, w));
     }
+    // 5: the lower arms turn no faster than choreo's joints.
+    limit_lower_arms(&prepared, &mut rotations, src.fps);
     make_continuous(&mut rotations);
     Ok(RigMotion {
         rig: target.rig.clone(),
@@ -478,6 +491,100 @@ pub fn retarget(src: &RigMotion, target: &TargetSkeleton) -> Result<RigMotion, R
         root_translation: roots,
         rotations,
     })
+}
+
+/// One supporting foot's ask of the hips' shift `s`, as the normal equations of
+/// `|uᵀs − c|² + ACROSS_LEG_WEIGHT · |P(s − (floor − reach))|²`: `u` the direction from the
+/// target's `hip` to the floor goal, `c` how much nearer the hip must come along it for the leg
+/// to reach with the dance's knee angle (the reach goal's distance), `P` the projection across
+/// the leg. The shift then keeps each knee's angle where the feet allow, and otherwise goes by the
+/// floor goal's offset from the reach goal, as a plain mean did.
+fn leg_gap(floor: &Vector3<f64>, reach: &Vector3<f64>, hip: &Vector3<f64>) -> GapSum {
+    let gap = floor - reach;
+    let Some(u) = (floor - hip).try_normalize(1e-9) else {
+        return GapSum {
+            normal: Matrix3::identity(),
+            rhs: gap,
+            weight: 1.0,
+        };
+    };
+    let c = (floor - hip).norm() - (reach - hip).norm();
+    let along = u * u.transpose();
+    let across = Matrix3::identity() - along;
+    GapSum {
+        normal: along + across * ACROSS_LEG_WEIGHT,
+        rhs: u * c + across * gap * ACROSS_LEG_WEIGHT,
+        weight: 1.0,
+    }
+}
+
+/// Supporting feet's asks of the hips' shift, summed (weighted by how firmly each stands): the
+/// normal equations of one least-squares shift.
+#[derive(Clone, Copy)]
+struct GapSum {
+    normal: Matrix3<f64>,
+    rhs: Vector3<f64>,
+    weight: f64,
+}
+
+impl Default for GapSum {
+    fn default() -> Self {
+        GapSum {
+            normal: Matrix3::zeros(),
+            rhs: Vector3::zeros(),
+            weight: 0.0,
+        }
+    }
+}
+
+impl GapSum {
+    fn add(self, g: &GapSum, w: f64) -> GapSum {
+        GapSum {
+            normal: self.normal + g.normal * w,
+            rhs: self.rhs + g.rhs * w,
+            weight: self.weight + g.weight * w,
+        }
+    }
+
+    fn merge(self, g: &GapSum) -> GapSum {
+        self.add(g, 1.0)
+    }
+
+    /// The shift, where any foot stands.
+    fn shift(&self) -> Option<Vector3<f64>> {
+        if self.weight <= 0.0 {
+            return None;
+        }
+        self.normal.try_inverse().map(|m| m * self.rhs)
+    }
+}
+
+/// The lower arms' local rotations kept within [`max_turn`] of the previous frame's: by their
+/// twist about the bone where that suffices, else by lagging the bone itself
+/// ([`limit_bone_turn`]).
+///
+/// A target's lower arm is one joint where choreo has two (elbow and forearm, each turning at
+/// most 55° a frame, [`max_turn`]), so it takes their composed turn: 70-73° in one frame on a
+/// dancenet dance (most of it the forearm's twist), up to 87° on captured dances (DANCE_R_9,
+/// DANCE_C_2: 0.1-0.2 % of steps). The twist is free (no position depends on it), so it is held
+/// back and catches up over the next frames; the bone's direction alone turned past 55° on one
+/// step of that dancenet dance (the data's own jumps on the captures), where the bone follows a
+/// frame late.
+fn limit_lower_arms(p: &Prepared, rotations: &mut [Vec<UnitQuaternion<f64>>], fps: f64) {
+    let max = max_turn(fps);
+    for b in [HumanBone::LeftLowerArm, HumanBone::RightLowerArm] {
+        let Some(&j) = p.bones.get(&b) else { continue };
+        let Some(axis) = p.aims[j]
+            .as_ref()
+            .and_then(|a| nalgebra::Unit::try_new(a.rest_dir, 1e-9))
+        else {
+            continue;
+        };
+        for t in 1..rotations.len() {
+            let prev = rotations[t - 1][j];
+            rotations[t][j] = limit_bone_turn(&prev, &rotations[t][j], &axis, max);
+        }
+    }
 }
 
 /// The target's rest direction of bone `j` for its aim: the target's point sets when it has

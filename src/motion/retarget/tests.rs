@@ -242,11 +242,11 @@ fn the_files_carry_what_their_readers_expect() {
 }
 
 /// The legs do what the dance's legs do: on every target, each knee's angle (hip–knee–ankle)
-/// stays near the dance's at the median frame, the feet planted by moving the hips rather than
-/// by bending the knees. On this capture the right knee is bent 5-16° more than the dance's at
-/// the target's equal legs (median 7.1° onto Mixamo, the left 2.9°; 7.4° and 3.6° before the
-/// hips moved); on served dances both knees are within 2° (a dancenet dance onto Mixamo 1.6°
-/// and 1.4°, onto SMPL 2.0° and 1.9°; 6.8-12.1° before).
+/// stays within 6° of the dance's at the median frame, the feet planted by moving the hips
+/// rather than by bending the knees, the hips moved first along the supporting legs
+/// (`ACROSS_LEG_WEIGHT`). On this capture, whose legs differ in length where a target's do not,
+/// the knees are 2.9° and 3.5° off onto Mixamo (median; 2.9° and 7.1° with the supporting feet's
+/// gaps averaged alike along and across the legs, 3.6° and 7.4° before the hips moved).
 #[test]
 fn every_target_bends_the_knees_as_the_dance_does() {
     let Some(src) = dance() else { return };
@@ -286,7 +286,7 @@ fn every_target_bends_the_knees_as_the_dance_does() {
             let median = off[off.len() / 2];
             eprintln!("{label}: {side} knee {median:.1}° off the dance's (median)");
             assert!(
-                median <= 8.0,
+                median <= 6.0,
                 "{label}: {side} knee {median:.1}° off (median)"
             );
         }
@@ -402,4 +402,70 @@ fn smpls_spine_joints_share_the_torsos_turn() {
     // SMPL's spine joints lean a little off the twist's axis (spine1 to the upper arms): 1 cm
     // at most on this dance.
     assert!(worst_arms < 0.015, "the upper arms moved {worst_arms} m");
+}
+
+/// A target's lower arm is one joint where choreo has two (elbow and forearm): a forearm that
+/// twists 80° in one frame while each of choreo's joints turns at most 55° (the two composed
+/// reach 70-73° on a dancenet dance, 87° on a captured rumba) turns the lower arm no more than
+/// choreo's joints turn, the bone still pointing where choreo's does; the twist catches up.
+#[test]
+fn a_lower_arm_twists_no_faster_than_choreos_joints() {
+    let Some(mut src) = dance() else { return };
+    let ci = |n: &str| src.rig.names.iter().position(|x| x == n).unwrap();
+    let (forearm, wrist) = (ci("left_forearm"), ci("left_wrist"));
+    let axis = nalgebra::Unit::new_normalize(src.rig.offsets[wrist]);
+    let jump = 100;
+    for frame in &mut src.rotations[jump..] {
+        frame[forearm] *= UnitQuaternion::from_axis_angle(&axis, 80f64.to_radians());
+    }
+    let choreo = |t: usize| fk_frame(&src.rig, &src.root_translation[t], &src.rotations[t]).0;
+    for (label, target) in targets() {
+        let out = retarget(&src, &target).unwrap_or_else(|e| panic!("{label}: {e}"));
+        let tj = |b: HumanBone| target.humanoid.iter().position(|h| *h == Some(b)).unwrap();
+        let (lower, hand) = (tj(HumanBone::LeftLowerArm), tj(HumanBone::LeftHand));
+        let turn = |t: usize| {
+            out.rotations[t][lower]
+                .angle_to(&out.rotations[t + 1][lower])
+                .to_degrees()
+        };
+        let worst = (0..out.num_frames() - 1).map(turn).fold(0.0, f64::max);
+        let mut off = 0.0f64;
+        for t in jump - 1..jump + 5 {
+            let (c, p) = (
+                choreo(t),
+                fk_frame(&out.rig, &out.root_translation[t], &out.rotations[t]).0,
+            );
+            off = off.max(angle(
+                c[ci("left_wrist")] - c[ci("left_elbow")],
+                p[hand] - p[lower],
+            ));
+        }
+        eprintln!(
+            "{label}: lower arm turns {:.1}° at the jump, {worst:.1}° at most; {off:.4}° off the dance's",
+            turn(jump - 1)
+        );
+        assert!(
+            worst <= 55.0 + 1e-6,
+            "{label}: the lower arm turns {worst:.1}°"
+        );
+        assert!(off < 0.01, "{label}: the lower arm points {off}° off");
+        // Caught up a few frames later: the twist is choreo's again.
+        let settled = out.rotations[jump + 10][lower].angle_to(
+            &retarget(
+                &RigMotion {
+                    rotations: src.rotations[jump..].to_vec(),
+                    root_translation: src.root_translation[jump..].to_vec(),
+                    ..src.clone()
+                },
+                &target,
+            )
+            .unwrap()
+            .rotations[10][lower],
+        );
+        assert!(
+            settled.to_degrees() < 1.0,
+            "{label}: the twist is {:.1}° behind",
+            settled.to_degrees()
+        );
+    }
 }

@@ -1,7 +1,9 @@
 //! The solver's geometry: rest frames, shortest arcs, means of points and rotations, forward
 //! kinematics from world rotations, the two-bone IK of the legs (step 4 of the solver's doc),
 //! and the smoothing of the hips' drop.
-use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, Rotation3, Unit, UnitQuaternion, Vector3};
+
+use crate::motion::rig::limit_turn;
 
 /// A leg is never stretched past this share of its length (a straight knee has no bend plane).
 pub(super) const MAX_REACH: f64 = 0.999;
@@ -158,6 +160,43 @@ pub(super) fn mean_rotation(qs: impl Iterator<Item = UnitQuaternion<f64>>) -> Un
     UnitQuaternion::from_quaternion(nalgebra::Quaternion::from(sum))
 }
 
+/// `q` twisted about `axis` (its own bone, in its own frame) by the angle nearest none that
+/// keeps it within `max` radians of `prev`: the bone points where `q` points, and its twist
+/// catches up with `q`'s as fast as the turn allows. Where no twist does (the bone's direction
+/// alone turns further than `max`), the twist that turns least, turned `max` from `prev` towards
+/// it along the shortest way.
+///
+/// With `D = prev⁻¹·q = (c, v)` and a twist of `2h` about the axis `n`, the turn's half-angle has
+/// cosine `|c·cos h − (v·n)·sin h| = A·|cos(h + α)|` (`A = |(c, v·n)|`, `α = atan2(v·n, c)`): within
+/// `max` where `h + α` lies within `acos(cos(max/2) / A)` of a multiple of π.
+pub(super) fn limit_bone_turn(
+    prev: &UnitQuaternion<f64>,
+    q: &UnitQuaternion<f64>,
+    axis: &Unit<Vector3<f64>>,
+    max: f64,
+) -> UnitQuaternion<f64> {
+    use std::f64::consts::PI;
+    let d = prev.inverse() * q;
+    let (c, s) = (d.w, d.imag().dot(axis));
+    let (a, alpha) = (c.hypot(s), s.atan2(c));
+    let twisted = |h: f64| q * UnitQuaternion::from_axis_angle(axis, 2.0 * h);
+    let k = (0.5 * max).cos();
+    if a < k {
+        return limit_turn(*prev, twisted(-alpha), max);
+    }
+    let beta = (k / a).min(1.0).acos();
+    // The allowed half-twists are intervals about −α + mπ; the one nearest none wins (|α| ≤ π,
+    // so m in −2..=2 covers every interval that can hold it).
+    let h = (-2..=2)
+        .map(|m| {
+            let centre = -alpha + f64::from(m) * PI;
+            0.0f64.clamp(centre - beta, centre + beta)
+        })
+        .min_by(|x, y| x.abs().total_cmp(&y.abs()))
+        .unwrap_or(0.0);
+    twisted(h)
+}
+
 /// Flips quaternion signs so each joint's track never jumps hemispheres.
 pub(super) fn make_continuous(rotations: &mut [Vec<UnitQuaternion<f64>>]) {
     for t in 1..rotations.len() {
@@ -167,5 +206,39 @@ pub(super) fn make_continuous(rotations: &mut [Vec<UnitQuaternion<f64>>]) {
                 *c = UnitQuaternion::new_unchecked(-c.into_inner());
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The bone keeps its direction and the turn stays within the limit, by the least twist
+    /// away from the asked rotation; a turn already within it is left alone.
+    #[test]
+    fn a_bone_turn_is_limited_by_its_twist_first() {
+        let axis = Unit::new_normalize(Vector3::new(0.2, -1.0, 0.1));
+        let max = 55f64.to_radians();
+        let prev = UnitQuaternion::from_euler_angles(0.3, -0.2, 0.5);
+        let swing =
+            |deg: f64| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), f64::to_radians(deg));
+        let twist = |deg: f64| UnitQuaternion::from_axis_angle(&axis, f64::to_radians(deg));
+        for (swing_deg, twist_deg) in [(10.0, 80.0), (40.0, -75.0), (20.0, 179.0), (5.0, 30.0)] {
+            let q = prev * swing(swing_deg) * twist(twist_deg);
+            let got = limit_bone_turn(&prev, &q, &axis, max);
+            let (dir_q, dir_got) = (q * axis.into_inner(), got * axis.into_inner());
+            assert!((dir_q - dir_got).norm() < 1e-9, "{swing_deg}/{twist_deg}");
+            let turn = prev.angle_to(&got);
+            if prev.angle_to(&q) <= max {
+                assert!(got.angle_to(&q) < 1e-9, "{swing_deg}/{twist_deg}: changed");
+            } else {
+                // As close to q as the limit lets it be: exactly at the limit.
+                assert!((turn - max).abs() < 1e-9, "{swing_deg}/{twist_deg}: {turn}");
+            }
+        }
+        // A swing past the limit alone: turned the limit's way towards the least-twist pose.
+        let q = prev * swing(70.0) * twist(90.0);
+        let got = limit_bone_turn(&prev, &q, &axis, max);
+        assert!((prev.angle_to(&got) - max).abs() < 1e-9);
     }
 }
