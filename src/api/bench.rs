@@ -133,6 +133,40 @@ impl Conn {
     }
 }
 
+/// POSTs `body` (of `content_type`) to `path` over `conn`; the response's body when the status is
+/// `expect`, else what the server said.
+async fn post(
+    conn: &mut Conn,
+    path: &str,
+    content_type: &str,
+    body: &[u8],
+    expect: u16,
+) -> Result<Vec<u8>, BenchError> {
+    let head = format!(
+        "POST {path} HTTP/1.1\r\nHost: bench\r\nContent-Type: {content_type}\r\n\
+         Content-Length: {}\r\n\r\n",
+        body.len()
+    );
+    let (status, response) = conn.request(head.as_bytes(), body).await?;
+    if status != expect {
+        return Err(BenchError::Protocol(format!(
+            "POST {path} answered {status}: {}",
+            String::from_utf8_lossy(&response)
+        )));
+    }
+    Ok(response)
+}
+
+/// The string field `name` of a JSON response body.
+fn json_field(body: &[u8], name: &str) -> Result<String, BenchError> {
+    let value: serde_json::Value =
+        serde_json::from_slice(body).map_err(|e| BenchError::Protocol(e.to_string()))?;
+    value[name]
+        .as_str()
+        .map(str::to_string)
+        .ok_or_else(|| BenchError::Protocol(format!("no {name} in {value}")))
+}
+
 /// Uploads a song as multipart form data over `conn`; returns its id.
 async fn upload(conn: &mut Conn, bytes: &[u8]) -> Result<String, BenchError> {
     let boundary = "choreo-bench-boundary";
@@ -143,24 +177,9 @@ async fn upload(conn: &mut Conn, bytes: &[u8]) -> Result<String, BenchError> {
     .into_bytes();
     body.extend_from_slice(bytes);
     body.extend_from_slice(format!("\r\n--{boundary}--\r\n").as_bytes());
-    let head = format!(
-        "POST /v1/songs HTTP/1.1\r\nHost: bench\r\nContent-Type: multipart/form-data; boundary={boundary}\r\n\
-         Content-Length: {}\r\n\r\n",
-        body.len()
-    );
-    let (status, response) = conn.request(head.as_bytes(), &body).await?;
-    if status != 201 {
-        return Err(BenchError::Protocol(format!(
-            "upload answered {status}: {}",
-            String::from_utf8_lossy(&response)
-        )));
-    }
-    let song: serde_json::Value =
-        serde_json::from_slice(&response).map_err(|e| BenchError::Protocol(e.to_string()))?;
-    song["id"]
-        .as_str()
-        .map(str::to_string)
-        .ok_or_else(|| BenchError::Protocol("upload response has no id".into()))
+    let content_type = format!("multipart/form-data; boundary={boundary}");
+    let response = post(conn, "/v1/songs", &content_type, &body, 201).await?;
+    json_field(&response, "id")
 }
 
 fn percentile(sorted: &[Duration], q: f64) -> f64 {

@@ -86,8 +86,8 @@ fn is_song(p: &Path) -> bool {
     )
 }
 
-/// Writes mono 16-bit PCM WAV (the benches' joined songs).
-pub fn write_wav_mono(path: &Path, sr: u32, y: &[f32]) -> Result<(), AudioError> {
+/// Writes mono 16-bit PCM WAV.
+fn write_wav_mono(path: &Path, sr: u32, y: &[f32]) -> Result<(), AudioError> {
     use std::io::Write;
     let data_len = (y.len() * 2) as u32;
     let mut w = std::io::BufWriter::new(std::fs::File::create(path)?);
@@ -110,8 +110,9 @@ pub fn write_wav_mono(path: &Path, sr: u32, y: &[f32]) -> Result<(), AudioError>
     Ok(())
 }
 
-/// Concatenates songs (looping) into a `seconds`-long mono WAV at 44.1 kHz.
-fn make_long_song(songs: &[PathBuf], seconds: f64, out: &Path) -> Result<(), AudioError> {
+/// Concatenates songs (looping) into a `seconds`-long mono WAV at 44.1 kHz (this bench's long
+/// songs, and the 3-minute song of `choreo bench jobs`).
+pub fn make_long_song(songs: &[PathBuf], seconds: f64, out: &Path) -> Result<(), AudioError> {
     let sr = 44_100u32;
     let want = (seconds * sr as f64) as usize;
     let mut parts = Vec::new();

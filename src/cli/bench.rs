@@ -163,7 +163,7 @@ pub struct JobsBenchArgs {
     /// The song every job dances; by default a 3-minute song made by joining --join.
     #[arg(long)]
     song: Option<PathBuf>,
-    /// Songs joined (and cut to 3 minutes) when no --song is given.
+    /// Songs joined (looped and cut to 3 minutes) when no --song is given.
     #[arg(long, num_args = 1.., default_values = [
         "../shared/audio/vibe_ace.ogg",
         "../shared/audio/sugar_plum_fairy.ogg",
@@ -197,7 +197,12 @@ pub fn jobs(args: &JobsBenchArgs, config: Config) -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
     let song = match &args.song {
         Some(p) => p.clone(),
-        None => joined_song(&args.join, 180.0, &dir.path().join("joined.wav"))?,
+        None => {
+            let joined = dir.path().join("joined.wav");
+            choreo::audio::bench::make_long_song(&args.join, 180.0, &joined)
+                .context("joining --join")?;
+            joined
+        }
     };
     let seconds = choreo::audio::decode_path(&song)
         .with_context(|| format!("decoding {}", song.display()))?
@@ -234,23 +239,4 @@ pub fn jobs(args: &JobsBenchArgs, config: Config) -> anyhow::Result<()> {
     }
     println!("{}", serde_json::to_string(&rows)?);
     Ok(())
-}
-
-/// `songs` decoded, joined (those at the first one's rate, mixed to mono) and cut to `seconds`,
-/// written as WAV to `out`.
-fn joined_song(songs: &[PathBuf], seconds: f64, out: &std::path::Path) -> anyhow::Result<PathBuf> {
-    let mut samples = Vec::new();
-    let mut rate = None;
-    for p in songs {
-        let a =
-            choreo::audio::decode_path(p).with_context(|| format!("decoding {}", p.display()))?;
-        let sr = *rate.get_or_insert(a.sample_rate);
-        if a.sample_rate == sr {
-            samples.extend_from_slice(&a.samples);
-        }
-    }
-    let sr = rate.context("--join names no song")?;
-    samples.truncate((seconds * f64::from(sr)) as usize);
-    choreo::audio::bench::write_wav_mono(out, sr, &samples)?;
-    Ok(out.to_path_buf())
 }

@@ -7,7 +7,7 @@
 //! The song's decoded audio, features and beats are computed by the first job that needs them
 //! and read from the song's cache by the others, so many seeds on one song is the case measured.
 //! Each worker count runs on the same song in the same process, so their ratio is the scaling.
-use super::{BenchError, Conn};
+use super::{json_field, post, BenchError, Conn};
 use crate::api::Server;
 use crate::config::Config;
 use std::path::PathBuf;
@@ -47,29 +47,30 @@ pub struct JobsRow {
 pub async fn run(bench: JobsBench) -> Result<Vec<JobsRow>, BenchError> {
     let bytes = tokio::fs::read(&bench.song).await?;
     let mut rows: Vec<JobsRow> = Vec::new();
-    for &workers in &bench.workers {
+    for &asked in &bench.workers {
+        let workers = asked.max(1);
         let data = tempfile::tempdir()?;
         let mut config = bench.config.clone();
         config.data_dir = data.path().to_path_buf();
         config.bind = "127.0.0.1:0".into();
-        config.workers = workers.max(1);
+        config.workers = workers;
         let server = Server::start(config).await?;
-        let result = measure(&server, &bytes, &bench, workers.max(1)).await;
+        let result = measure(&server, &bytes, &bench, workers).await;
         server.stop().await;
         let (seconds, succeeded) = result?;
         let jobs_per_min = bench.jobs as f64 * 60.0 / seconds;
-        let (base_rate, base_workers) = rows.first().map_or((jobs_per_min, workers.max(1)), |r| {
-            (r.jobs_per_min, r.workers)
-        });
+        let (base_rate, base_workers) = rows
+            .first()
+            .map_or((jobs_per_min, workers), |r| (r.jobs_per_min, r.workers));
         rows.push(JobsRow {
-            workers: workers.max(1),
+            workers,
             jobs: bench.jobs,
             succeeded,
             seconds,
             jobs_per_min,
-            jobs_per_min_per_worker: jobs_per_min / workers.max(1) as f64,
+            jobs_per_min_per_worker: jobs_per_min / workers as f64,
             speedup: jobs_per_min / base_rate,
-            ideal_speedup: workers.max(1) as f64 / base_workers as f64,
+            ideal_speedup: workers as f64 / base_workers as f64,
         });
     }
     Ok(rows)
@@ -91,18 +92,7 @@ async fn measure(
         let body = serde_json::json!({"song_id": song_id, "model": bench.model, "seed": seed})
             .to_string()
             .into_bytes();
-        let head = format!(
-            "POST /v1/jobs HTTP/1.1\r\nHost: bench\r\nContent-Type: application/json\r\n\
-             Content-Length: {}\r\n\r\n",
-            body.len()
-        );
-        let (status, response) = conn.request(head.as_bytes(), &body).await?;
-        if status != 202 {
-            return Err(BenchError::Protocol(format!(
-                "POST /v1/jobs answered {status}: {}",
-                String::from_utf8_lossy(&response)
-            )));
-        }
+        let response = post(&mut conn, "/v1/jobs", "application/json", &body, 202).await?;
         ids.push(json_field(&response, "id")?);
     }
     tracing::info!(workers, jobs = ids.len(), "jobs queued");
@@ -134,13 +124,4 @@ async fn measure(
         pending = still;
     }
     Ok((started.elapsed().as_secs_f64(), succeeded))
-}
-
-fn json_field(body: &[u8], name: &str) -> Result<String, BenchError> {
-    let value: serde_json::Value =
-        serde_json::from_slice(body).map_err(|e| BenchError::Protocol(e.to_string()))?;
-    value[name]
-        .as_str()
-        .map(str::to_string)
-        .ok_or_else(|| BenchError::Protocol(format!("no {name} in {value}")))
 }
