@@ -53,9 +53,8 @@ export class ChoreoPlayer extends HTMLElement {
     this.#error = root.querySelector('.error');
     this.#audio.addEventListener('seeked', () => { this.#dirty = true; });
     this.#audio.addEventListener('error', () => {
-      const code = this.#audio.error?.code;
       // A failed load of the dance already said why; this is the song's own failure.
-      if (this.#error.hidden) this.#fail(new Error(`the song could not be played (media error ${code ?? '?'}): ${this.getAttribute('audio')}`));
+      if (this.#error.hidden) this.#fail(this.#songError());
     });
     this.#ready = Promise.resolve();
   }
@@ -168,11 +167,16 @@ export class ChoreoPlayer extends HTMLElement {
       const ok = () => { done(); resolve(); };
       const bad = () => {
         done();
-        reject(new Error(`the song could not be played (media error ${this.#audio.error?.code ?? '?'}): ${this.getAttribute('audio')}`));
+        reject(this.#songError());
       };
       this.#audio.addEventListener('loadedmetadata', ok);
       this.#audio.addEventListener('error', bad);
     });
+  }
+
+  /** What the <audio>'s media error says, with the song it could not play. */
+  #songError() {
+    return new Error(`the song could not be played (media error ${this.#audio.error?.code ?? '?'}): ${this.getAttribute('audio')}`);
   }
 
   /** Resolves when the dance and the song named now are loaded; rejects when either failed. */
