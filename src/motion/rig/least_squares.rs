@@ -65,7 +65,11 @@ pub fn fit_and_solve_seeded(
         root.select(Axis(0), &keep),
     );
     let mut rig = Rig::fit(key_positions.view(), key_root.view())?;
-    rig.fit_lengths(key_positions.view(), key_root.view())?;
+    rig.fit_lengths(
+        key_positions.view(),
+        key_root.view(),
+        aim == Aim::DanceBones,
+    )?;
     match aim {
         Aim::FittedEnds => solve_least_squares(&rig, positions, root, fps),
         Aim::DanceBones => solve_keyed(&rig, positions, root, fps, &keep, aim),
@@ -78,6 +82,10 @@ pub fn fit_and_solve_seeded(
 /// 1.77 after 4, 1.72 after 8, 1.67 after 16 and 1.68 after 32 (measured 2026-11-25).
 const LENGTH_ROUNDS: usize = 16;
 
+/// Rounds of [`Rig::fit_lengths`] after [`LENGTH_ROUNDS`] that fit the lengths for the key frames'
+/// mean joint distance instead of the squared one (as [`fit_key_frame`] poses them).
+const LENGTH_REWEIGHT_ROUNDS: usize = 8;
+
 impl Rig {
     /// Refits the bone lengths (rest directions kept) to the frames `positions` `[K, 23, 3]`
     /// around `root` `[K, 3]` in least squares: each frame is posed by [`fit_frame`] (root
@@ -86,10 +94,17 @@ impl Rig {
     /// each frame's root translation is free), `LENGTH_ROUNDS` times. The spine's offset from
     /// the body centre is kept: with every frame's root free, it and the pelvis's could slide
     /// together without changing any joint.
+    ///
+    /// With `for_distance` (served dances, whose key frames [`fit_key_frame`] poses), then
+    /// [`LENGTH_REWEIGHT_ROUNDS`] more for the mean joint distance. Not for captured dances'
+    /// keys, posed in least squares with every other frame: lengths for the mean distance under
+    /// poses for the squared one left 8 of `tests/motion.rs`' 258 key sets over 3 cm (5 before)
+    /// and added acceleration near a key.
     pub fn fit_lengths(
         &mut self,
         positions: ArrayView3<'_, f32>,
         root: ArrayView2<'_, f32>,
+        for_distance: bool,
     ) -> Result<(), MotionError> {
         let tg = targets(positions, root)?;
         // Unrelated poses, not a motion: no limit on how far a joint turns from one to the next.
@@ -99,13 +114,39 @@ impl Rig {
             .into_iter()
             .zip(chain.rotations)
             .collect();
+        let even = vec![vec![1.0; NUM_JOINTS]; tg.len()];
         for _ in 0..LENGTH_ROUNDS {
             poses = poses
                 .iter()
                 .zip(&tg)
                 .map(|((r, l), t)| fit_frame(self, r, l, t))
                 .collect();
-            self.solve_lengths(&poses, &tg);
+            self.solve_lengths(&poses, &tg, &even);
+        }
+        let reached = || {
+            poses
+                .iter()
+                .zip(&tg)
+                .all(|((r, l), t)| centred_mean_distance(self, r, l, t) < REWEIGHT_FROM_M)
+        };
+        if !for_distance || reached() {
+            return Ok(());
+        }
+        // Then for the mean joint distance, as [`fit_key_frame`] poses the key frames: each
+        // frame's joints reweighted by the inverse of their distance.
+        for _ in 0..LENGTH_REWEIGHT_ROUNDS {
+            let weights: Vec<Vec<f64>> = poses
+                .iter()
+                .zip(&tg)
+                .map(|((r, l), t)| inverse_distance_weights(self, r, l, t))
+                .collect();
+            poses = poses
+                .iter()
+                .zip(&tg)
+                .zip(&weights)
+                .map(|(((r, l), t), w)| fit_frame_weighted(self, r, l, t, ROTATION_PRIOR_M, w))
+                .collect();
+            self.solve_lengths(&poses, &tg, &weights);
         }
         Ok(())
     }
@@ -115,6 +156,7 @@ impl Rig {
         &mut self,
         poses: &[(Vector3<f64>, Vec<UnitQuaternion<f64>>)],
         tg: &[Vec<Vector3<f64>>],
+        weights: &[Vec<f64>],
     ) {
         let spine = rig_index(skeleton::SPINE);
         let bones: Vec<usize> = (0..self.parents.len())
@@ -126,7 +168,7 @@ impl Rig {
         // over the joints.
         let mut ata = DMatrix::<f64>::zeros(bones.len(), bones.len());
         let mut atb = DVector::<f64>::zeros(bones.len());
-        for ((_, local), frame) in poses.iter().zip(tg) {
+        for (((_, local), frame), w) in poses.iter().zip(tg).zip(weights) {
             let (_, world) = fk_frame(self, &Vector3::zeros(), local);
             // rows[c][i]: joint i's coordinate c as lengths · coefficients, rhs[c][i] the rest.
             let mut rows = vec![DMatrix::<f64>::zeros(NUM_JOINTS, bones.len()); 3];
@@ -152,13 +194,23 @@ impl Rig {
                     rhs[c][i] = frame[j][c] - known[c];
                 }
             }
+            // Weighted, the free root centres the residuals on their weighted mean.
+            let total: f64 = w.iter().sum();
             for c in 0..3 {
-                let mean_row = rows[c].row_mean();
-                let mut a = rows[c].clone();
-                for mut r in a.row_iter_mut() {
-                    r -= &mean_row;
+                let mut mean_row = DMatrix::<f64>::zeros(1, bones.len());
+                let mut mean_b = 0.0;
+                for (i, wi) in w.iter().enumerate() {
+                    mean_row += rows[c].row(i) * (wi / total);
+                    mean_b += rhs[c][i] * wi / total;
                 }
-                let b = rhs[c].add_scalar(-rhs[c].mean());
+                let mut a = rows[c].clone();
+                let mut b = rhs[c].add_scalar(-mean_b);
+                for (i, wi) in w.iter().enumerate() {
+                    let mut r = a.row_mut(i);
+                    r -= &mean_row;
+                    r *= wi.sqrt();
+                    b[i] *= wi.sqrt();
+                }
                 ata += a.transpose() * &a;
                 atb += a.transpose() * b;
             }
@@ -315,6 +367,7 @@ pub fn solve_keyed(
                     fit = other;
                 }
             }
+            let fit = fit_key_frame(rig, fit, &tg[k]);
             let turns = chain_local
                 .iter()
                 .zip(&fit.1)
@@ -468,7 +521,101 @@ fn fit_frame_held(
     target: &[Vector3<f64>],
     prior_m: f64,
 ) -> (Vector3<f64>, Vec<UnitQuaternion<f64>>) {
+    fit_frame_weighted(rig, root, local, target, prior_m, &[1.0; NUM_JOINTS])
+}
+
+/// Rounds of [`fit_key_frame`]'s reweighting. On the test split's dances with four of their own
+/// poses as keys, the worst key's mean joint distance fell most in the first rounds.
+const KEY_REWEIGHT_ROUNDS: usize = 8;
+
+/// A key frame fitted for the mean joint distance (what a key's error is, and what a user sees)
+/// rather than the squared one: [`fit_frame`]'s least-squares pose refined by iteratively
+/// reweighted least squares, each joint weighted by the inverse of its distance (Weiszfeld's
+/// step), keeping the pose with the smallest mean distance about the joints' centroid (as
+/// `metrics::kinematics::key_pose_errors_cm` measures it). Squared distances let one joint the
+/// rigid skeleton cannot reach (a captured arm of another length) pull every other joint off its
+/// target; the mean distance leaves it off and lands the rest.
+fn fit_key_frame(
+    rig: &Rig,
+    fit: (Vector3<f64>, Vec<UnitQuaternion<f64>>),
+    target: &[Vector3<f64>],
+) -> (Vector3<f64>, Vec<UnitQuaternion<f64>>) {
+    let centred_mean = |pose: &(Vector3<f64>, Vec<UnitQuaternion<f64>>)| -> f64 {
+        centred_mean_distance(rig, &pose.0, &pose.1, target)
+    };
+    let mut best_error = centred_mean(&fit);
+    if best_error < REWEIGHT_FROM_M {
+        return fit;
+    }
+    let mut best = fit.clone();
+    let mut pose = fit;
+    for _ in 0..KEY_REWEIGHT_ROUNDS {
+        let weights = inverse_distance_weights(rig, &pose.0, &pose.1, target);
+        pose = fit_frame_weighted(rig, &pose.0, &pose.1, target, ROTATION_PRIOR_M, &weights);
+        let error = centred_mean(&pose);
+        if error < best_error {
+            (best, best_error) = (pose.clone(), error);
+        }
+    }
+    best
+}
+
+/// A key frame whose least-squares pose is this close (mean joint distance, m) keeps it, and so
+/// do the bone lengths when every key frame is: the mean-distance pose moves more joints further
+/// from the chain's pose, and that correction, faded over [`KEY_REACH_S`], accelerates the frames
+/// around the key (DANCE_C_8 with four of its own poses as keys: 24.3 → 25.4 m/s² within half a
+/// second of a key, the data's 22.1, keys 1.1–2.2 cm in either case). Keys are promised within
+/// 3 cm ([`crate::motion::limits::KEY_POSE_CM`]).
+const REWEIGHT_FROM_M: f64 = 0.025;
+
+/// The mean distance (m) of the 23 dataset joints of `rig` posed by `root`, `local` from their
+/// targets, each set taken about its centroid (as `metrics::kinematics::key_pose_errors_cm`
+/// measures a key).
+fn centred_mean_distance(
+    rig: &Rig,
+    root: &Vector3<f64>,
+    local: &[UnitQuaternion<f64>],
+    target: &[Vector3<f64>],
+) -> f64 {
+    let pos = fk_frame(rig, root, local).0;
+    let off: Vec<Vector3<f64>> = (0..NUM_JOINTS)
+        .map(rig_index)
+        .map(|j| pos[j] - target[j])
+        .collect();
+    let mean = off.iter().sum::<Vector3<f64>>() / NUM_JOINTS as f64;
+    off.iter().map(|o| (o - mean).norm()).sum::<f64>() / NUM_JOINTS as f64
+}
+
+/// Weiszfeld's weights for a pose of `rig`: each dataset joint's inverse distance from its
+/// target, scaled to a mean of 1. A joint on its target would take all the weight, so none is
+/// counted closer than 1 mm.
+fn inverse_distance_weights(
+    rig: &Rig,
+    root: &Vector3<f64>,
+    local: &[UnitQuaternion<f64>],
+    target: &[Vector3<f64>],
+) -> Vec<f64> {
+    let pos = fk_frame(rig, root, local).0;
+    let inverse: Vec<f64> = (0..NUM_JOINTS)
+        .map(rig_index)
+        .map(|j| 1.0 / (pos[j] - target[j]).norm().max(1e-3))
+        .collect();
+    let mean = inverse.iter().sum::<f64>() / NUM_JOINTS as f64;
+    inverse.iter().map(|w| w / mean).collect()
+}
+
+/// [`fit_frame_held`] with each dataset joint's squared distance weighted by `weights` (in the
+/// dataset's joint order).
+fn fit_frame_weighted(
+    rig: &Rig,
+    root: &Vector3<f64>,
+    local: &[UnitQuaternion<f64>],
+    target: &[Vector3<f64>],
+    prior_m: f64,
+    weights: &[f64],
+) -> (Vector3<f64>, Vec<UnitQuaternion<f64>>) {
     let measured: Vec<usize> = (0..NUM_JOINTS).map(rig_index).collect();
+    let root_w: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
     let movers: Vec<usize> = (0..rig.names.len())
         .filter(|&j| rig.parents[j].is_some() && !rig.children(j).is_empty())
         .collect();
@@ -501,7 +648,11 @@ fn fit_frame_held(
         };
     let cost_of = |root: &Vector3<f64>, local: &[UnitQuaternion<f64>]| {
         let (pos, world) = fk_frame(rig, root, local);
-        let c = squared_distance(&pos, target)
+        let c = measured
+            .iter()
+            .zip(weights)
+            .map(|(&j, w)| w * (pos[j] - target[j]).norm_squared())
+            .sum::<f64>()
             + movers
                 .iter()
                 .map(|&k| (turn(k, local, &world) * prior_m).norm_squared())
@@ -520,16 +671,16 @@ fn fit_frame_held(
         let mut jac = DMatrix::<f64>::zeros(rows, params);
         let mut res = DVector::<f64>::zeros(rows);
         for (i, &j) in measured.iter().enumerate() {
-            let r = pos[j] - target[j];
+            let (r, w) = (pos[j] - target[j], root_w[i]);
             for c in 0..3 {
-                res[3 * i + c] = r[c];
-                jac[(3 * i + c, c)] = 1.0;
+                res[3 * i + c] = w * r[c];
+                jac[(3 * i + c, c)] = w;
             }
             for (m, &k) in movers.iter().enumerate() {
                 if below[m][i] {
                     // ω × d = −[d]× ω
                     jac.view_mut((3 * i, 3 + 3 * m), (3, 3))
-                        .copy_from(&(-(pos[j] - pos[k]).cross_matrix()));
+                        .copy_from(&(-(pos[j] - pos[k]).cross_matrix() * w));
                 }
             }
         }
