@@ -35,7 +35,7 @@ pub use stored::{count_stored, StoredFiles};
 /// The cache's version, in every file name. Bump it when the decode a job does
 /// ([`GENERATE_MAX_SR`], `audio::decode`), the analysis (`audio::analyze`) or any feature set
 /// (`audio::features`) computes anything else, or when [`codec`] changes.
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 
 /// Highest rate a generate job keeps the song at: the models' feature grids resample to at most
 /// 22 050 Hz, so more only costs memory (a 15-minute song at 384 kHz would be 1.4 GB).
