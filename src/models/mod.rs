@@ -13,6 +13,7 @@ pub mod beat_time;
 pub mod clip_choice;
 pub mod dance_revolution;
 pub mod dancenet;
+pub mod encoded;
 pub mod folder;
 pub mod keypose_transformer;
 pub mod layers;

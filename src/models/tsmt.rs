@@ -528,16 +528,29 @@ impl Tsmt {
         &self,
         music: &Tensor,
         clock: Option<&Tensor>,
+        on_chunk: impl FnMut(f32) -> bool,
+    ) -> Option<Tensor> {
+        let z = self.encode_song(music, on_chunk)?;
+        Some(self.logit_vectors_of(&z, clock))
+    }
+
+    /// The audio stream over a whole song `[1, n, music_dim]`: `z^A` `[1, n, d_a]`, in chunks.
+    pub fn encode_song(
+        &self,
+        music: &Tensor,
         mut on_chunk: impl FnMut(f32) -> bool,
     ) -> Option<Tensor> {
-        let z = self
-            .audio
-            .forward_chunked(music, self.config.a_kernel, 0, 1000, &mut on_chunk)?;
+        self.audio
+            .forward_chunked(music, self.config.a_kernel, 0, 1000, &mut on_chunk)
+    }
+
+    /// [`Self::audio_logit_vectors`] from the song's `z^A` ([`Self::encode_song`]).
+    pub fn logit_vectors_of(&self, z: &Tensor, clock: Option<&Tensor>) -> Tensor {
         let v = z.squeeze_dim(0).apply(&self.w_a);
-        Some(match self.clock.as_ref().zip(clock) {
+        match self.clock.as_ref().zip(clock) {
             Some((k, c)) => v + c.apply(&k.fusion),
             None => v,
-        })
+        }
     }
 
     /// One pose-stream step: the frame at position `pos` (tokens `[coords]`, its step clock

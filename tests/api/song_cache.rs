@@ -1,6 +1,7 @@
 //! A song's work done once: three generate jobs with other seeds on one song decode it, analyse
-//! it and compute its features once (counted on `/metrics`), a fourth job with the first one's
-//! seed, served all from the cache, makes byte for byte the same dance, the cache counts in the
+//! it, compute its features and run the model's music encoder once (counted on `/metrics`), a
+//! fourth job with the first one's seed, served all from the caches, makes byte for byte the same
+//! dance, the cache counts in the
 //! tenant's storage, and it goes with the song.
 //!
 //! A `choreo serve` process of its own: the stage metrics are the process's, and other tests in
@@ -56,7 +57,7 @@ async fn generate_stage_counts(client: &reqwest::Client, base: &str) -> Vec<(Str
         .text()
         .await
         .expect("metrics text");
-    ["decode-audio", "analyze", "features"]
+    ["decode-audio", "analyze", "features", "encode"]
         .into_iter()
         .map(|stage| {
             let count = text
@@ -96,7 +97,7 @@ fn dir_bytes(dir: &Path) -> u64 {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn three_seeds_on_one_song_decode_analyse_and_compute_features_once() {
+async fn three_seeds_on_one_song_decode_analyse_compute_features_and_encode_once() {
     let data = tempfile::tempdir().expect("tempdir");
     let mut command = Command::new(env!("CARGO_BIN_EXE_choreo"));
     command
@@ -124,6 +125,7 @@ async fn three_seeds_on_one_song_decode_analyse_and_compute_features_once() {
         ("decode-audio".to_string(), 1),
         ("analyze".to_string(), 1),
         ("features".to_string(), 1),
+        ("encode".to_string(), 1),
     ];
     assert_eq!(generate_stage_counts(&client, &base).await, once);
 

@@ -7,6 +7,7 @@ use tch::Tensor;
 
 use super::{DanceRevolution, Decoding, ModelFile, ID};
 use crate::models::beat_time;
+use crate::models::encoded::EncoderMemo;
 use crate::models::folder;
 use crate::models::layers::LstmState;
 use crate::models::opening_check::{OpeningCheck, OpeningChosen};
@@ -182,6 +183,8 @@ pub(super) fn reach_m(history: &std::collections::VecDeque<Vec<f32>>) -> f32 {
 pub struct Served {
     file: ModelFile,
     pool: InstancePool<DanceRevolution>,
+    /// The song's encoding, kept for the next seeds ([`crate::models::encoded`]).
+    encoded: EncoderMemo,
 }
 
 impl Served {
@@ -202,7 +205,11 @@ impl Served {
                 dir.join("model.json").display()
             )));
         }
-        Ok(Self { file, pool })
+        Ok(Self {
+            file,
+            pool,
+            encoded: EncoderMemo::default(),
+        })
     }
 
     /// The draw a job without a seed motion dances from ([`OpeningCheck`]) and what the check
@@ -322,9 +329,11 @@ impl DanceModel for Served {
         let out = self.pool.with(|model| {
             tch::no_grad(|| -> Result<Tensor, ModelError> {
                 let mut cancelled = false;
-                let z = model.encoder.forward_chunked(&music, 1000, |f| {
-                    cancelled = progress.report(Stage::Encode, f).is_err();
-                    !cancelled
+                let z = self.encoded.get_or_encode(&[&music], || {
+                    model.encoder.forward_chunked(&music, 1000, |f| {
+                        cancelled = progress.report(Stage::Encode, f).is_err();
+                        !cancelled
+                    })
                 });
                 let z = z.ok_or(Cancelled)?;
                 let guard = self

@@ -14,6 +14,7 @@ use super::opening::{
 use super::sampling::Draw;
 use super::{Bins, Config, Sampling, StallGuard, Tsmt, ID};
 use crate::models::beat_time;
+use crate::models::encoded::EncoderMemo;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
 use crate::models::step_clock;
 use crate::models::stretch::MusicLayout;
@@ -132,6 +133,8 @@ pub struct Served {
     file: ModelFile,
     clips: Option<SeedClips>,
     pool: InstancePool<Tsmt>,
+    /// The song's audio stream, kept for the next seeds ([`crate::models::encoded`]).
+    encoded: EncoderMemo,
 }
 
 /// What one generation made: the feature rows (foot clearance as the height) and the root start.
@@ -151,7 +154,12 @@ impl Served {
         } else {
             None
         };
-        Ok(Self { file, clips, pool })
+        Ok(Self {
+            file,
+            clips,
+            pool,
+            encoded: EncoderMemo::default(),
+        })
     }
 
     /// The model's description file.
@@ -296,12 +304,15 @@ impl Served {
             tch::no_grad(|| -> Result<Option<Array2<f32>>, ModelError> {
                 let mut cancelled = false;
                 let song_clock = clock_from(0, 0, n);
-                let Some(vectors) = model.audio_logit_vectors(&music, song_clock.as_ref(), |f| {
-                    cancelled = progress.report(Stage::Encode, f).is_err();
-                    !cancelled
+                let Some(z) = self.encoded.get_or_encode(&[&music], || {
+                    model.encode_song(&music, |f| {
+                        cancelled = progress.report(Stage::Encode, f).is_err();
+                        !cancelled
+                    })
                 }) else {
                     return Ok(None);
                 };
+                let vectors = model.logit_vectors_of(&z, song_clock.as_ref());
                 let rest = vectors.narrow(0, opened as i64, (n - opened) as i64);
                 let total = (n - opened).max(1);
                 let widths: Vec<f32> = (0..repr::POSE_DIM)
