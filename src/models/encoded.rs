@@ -1,7 +1,7 @@
 //! A song's encoder pass kept for its next seeds.
 //!
-//! The music encoders (DanceRevolution's encoder, TSMT's audio stream) read the song's features
-//! and no seed, so a choreographer trying seeds on one song, or a page comparing them, would have
+//! The music encoders (DanceRevolution's encoder, DanceNet's, TSMT's audio stream) read the
+//! song's features and no seed, so a choreographer trying seeds on one song, or a page comparing them, would have
 //! every job encode the same features again: 0.35–0.65 s of a 3-minute dance-revolution job whose
 //! song is read from its cache (`choreo bench generate`). A served model keeps its last encodings
 //! here, each under a hash of everything the encoder read (every input tensor's shape and every

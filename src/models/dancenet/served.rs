@@ -12,6 +12,7 @@ use tch::{Kind, Tensor};
 use super::style::ServedStyle;
 use super::{DanceNet, ModelFile, Sampling, ID};
 use crate::models::beat_time;
+use crate::models::encoded::EncoderMemo;
 use crate::models::folder::{self, SeedClips, SEED_CLIPS_FILE};
 use crate::models::stretch::MusicLayout;
 use crate::models::{
@@ -30,6 +31,8 @@ pub struct Served {
     clips: SeedClips,
     style: Option<ServedStyle>,
     pool: InstancePool<DanceNet>,
+    /// The song's code, kept for the next seeds ([`crate::models::encoded`]).
+    encoded: EncoderMemo,
 }
 
 /// What one generation made, before it becomes joint positions.
@@ -69,6 +72,7 @@ impl Served {
             clips,
             style,
             pool,
+            encoded: EncoderMemo::default(),
         })
     }
 
@@ -197,9 +201,11 @@ impl Served {
         let out = self.pool.with(|model| {
             tch::no_grad(|| -> Result<Option<Array2<f32>>, ModelError> {
                 let mut cancelled = false;
-                let Some(code) = model.encoder.encode_song(&music, |f| {
-                    cancelled = progress.report(Stage::Encode, f).is_err();
-                    !cancelled
+                let Some(code) = self.encoded.get_or_encode(&[&music], || {
+                    model.encoder.encode_song(&music, |f| {
+                        cancelled = progress.report(Stage::Encode, f).is_err();
+                        !cancelled
+                    })
                 }) else {
                     return Ok(None);
                 };
