@@ -78,6 +78,7 @@ use super::{MotionError, NUM_JOINTS};
 
 mod chain;
 mod continuity;
+mod keyed;
 mod least_squares;
 mod root;
 

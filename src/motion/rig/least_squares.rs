@@ -4,7 +4,8 @@ use nalgebra::{DMatrix, DVector, UnitQuaternion, Vector3};
 use ndarray::{ArrayView2, ArrayView3, Axis};
 
 use super::chain::{solve, solve_aimed, Aim};
-use super::continuity::{is_motion, limit_turn, max_turn};
+use super::continuity::{limit_turn, max_turn};
+use super::keyed::solve_keyed;
 use super::{fk_frame, rig_index, targets, Rig, RigMotion};
 use crate::motion::{skeleton, MotionError, NUM_JOINTS};
 
@@ -83,7 +84,7 @@ pub fn fit_and_solve_seeded(
 const LENGTH_ROUNDS: usize = 16;
 
 /// Rounds of [`Rig::fit_lengths`] after [`LENGTH_ROUNDS`] that fit the lengths for the key frames'
-/// mean joint distance instead of the squared one (as [`fit_key_frame`] poses them).
+/// mean joint distance instead of the squared one (as `keyed::fit_key_frame` poses them).
 const LENGTH_REWEIGHT_ROUNDS: usize = 8;
 
 impl Rig {
@@ -95,8 +96,8 @@ impl Rig {
     /// the body centre is kept: with every frame's root free, it and the pelvis's could slide
     /// together without changing any joint.
     ///
-    /// With `for_distance` (served dances, whose key frames [`fit_key_frame`] poses), then
-    /// [`LENGTH_REWEIGHT_ROUNDS`] more for the mean joint distance. Not for captured dances'
+    /// With `for_distance` (served dances, whose key frames `keyed::fit_key_frame` poses), then
+    /// `LENGTH_REWEIGHT_ROUNDS` more for the mean joint distance. Not for captured dances'
     /// keys, posed in least squares with every other frame: lengths for the mean distance under
     /// poses for the squared one left 8 of `tests/motion.rs`' 258 key sets over 3 cm (5 before)
     /// and added acceleration near a key.
@@ -132,7 +133,7 @@ impl Rig {
         if !for_distance || reached() {
             return Ok(());
         }
-        // Then for the mean joint distance, as [`fit_key_frame`] poses the key frames: each
+        // Then for the mean joint distance, as `keyed::fit_key_frame` poses the key frames: each
         // frame's joints reweighted by the inverse of their distance.
         for _ in 0..LENGTH_REWEIGHT_ROUNDS {
             let weights: Vec<Vec<f64>> = poses
@@ -312,152 +313,9 @@ fn fit_within_turn(
     }
 }
 
-/// Seconds either side of a key pose over which [`solve_keyed`] fades its correction out. Longer
-/// bends more frames (1 s: a captured dance with four of its own poses as keys lost 0.03
-/// authenticity, at 0.5 s 0.02); shorter accelerates more (0.25 s: 16.7 m/s² near a key of
-/// DANCE_R_9, whose own is 12.8; at 0.5 s 14.3).
-pub const KEY_REACH_S: f64 = 0.5;
-
-/// Inverse kinematics for a served dance with key poses: every frame aimed along the dance's
-/// bones ([`solve_aimed`] with `aim`), and each key frame posed in least squares ([`fit_frame`],
-/// from whichever chain pose, aimed along the bones or from the fitted ends, fits closer). The key's
-/// correction (each joint's turn from the chain's pose to the fitted one, and the root's move) is
-/// faded out over [`KEY_REACH_S`] either side (a smoothstep), from one key's to the next's where
-/// they are closer.
-///
-/// Why: the least squares land a key pose as closely as one rigid skeleton can (its bone lengths
-/// are the key poses'), but on every other frame they bend the angles between bones to make up
-/// whatever bone lengths the dance drew, which is what a dance is judged real by: served over every
-/// frame, keypose-transformer's dances with 4 key poses lost authenticity 0.914 → 0.600 (test
-/// split), and a real dance with four of its own poses as keys 0.854 → 0.632. Only the key frames
-/// need to land; blending the whole least-squares pose in around them (rather than the key's
-/// correction) still cost arms that change length 0.03 more.
-pub fn solve_keyed(
-    rig: &Rig,
-    positions: ArrayView3<'_, f32>,
-    root: ArrayView2<'_, f32>,
-    fps: f64,
-    keys: &[usize],
-    aim: Aim,
-) -> Result<RigMotion, MotionError> {
-    let tg = targets(positions, root)?;
-    let chain = solve_aimed(rig, positions, root, fps, aim)?;
-    let mut keys: Vec<usize> = keys.iter().copied().filter(|&k| k < tg.len()).collect();
-    keys.sort_unstable();
-    keys.dedup();
-    // Each key's correction: the local turn from the chain's pose to the fitted one, per joint,
-    // and the root's move.
-    let mut ends = None;
-    let corrections: Vec<(Vector3<f64>, Vec<UnitQuaternion<f64>>)> = keys
-        .iter()
-        .map(|&k| {
-            let (chain_root, chain_local) = (&chain.root_translation[k], &chain.rotations[k]);
-            let mut fit = fit_frame(rig, chain_root, chain_local, &tg[k]);
-            if aim != Aim::FittedEnds {
-                // The least squares find a local best; from the fitted ends' pose (where the
-                // least squares on every frame started) it was up to 1 cm closer on some keys.
-                let ends = match &ends {
-                    Some(e) => e,
-                    None => ends.insert(solve(rig, positions, root, fps)?),
-                };
-                let other = fit_frame(rig, &ends.root_translation[k], &ends.rotations[k], &tg[k]);
-                if position_error(rig, &other.0, &other.1, &tg[k])
-                    < position_error(rig, &fit.0, &fit.1, &tg[k])
-                {
-                    fit = other;
-                }
-            }
-            let fit = fit_key_frame(rig, fit, &tg[k]);
-            let turns = chain_local
-                .iter()
-                .zip(&fit.1)
-                .map(|(c, f)| c.inverse() * f)
-                .collect();
-            Ok((fit.0 - chain_root, turns))
-        })
-        .collect::<Result<_, MotionError>>()?;
-    // Unrelated poses (fps no number): only the key frames themselves.
-    let reach = if is_motion(fps) {
-        KEY_REACH_S * fps
-    } else {
-        0.0
-    };
-    let fade = |d: f64, span: f64| -> f64 {
-        if d <= 0.0 {
-            1.0
-        } else if d >= span {
-            0.0
-        } else {
-            let x = 1.0 - d / span;
-            x * x * (3.0 - 2.0 * x)
-        }
-    };
-    let max = max_turn(fps);
-    let mut root_translation = Vec::with_capacity(tg.len());
-    let mut rotations: Vec<Vec<UnitQuaternion<f64>>> = Vec::with_capacity(tg.len());
-    for t in 0..tg.len() {
-        let (chain_root, chain_local) = (chain.root_translation[t], &chain.rotations[t]);
-        // The keys on either side, each faded over the reach or the gap between them, whichever
-        // is shorter, so a key frame carries its own correction and no other.
-        let after = keys.partition_point(|&k| k < t);
-        let before = after.checked_sub(1).filter(|&i| keys[i] <= t);
-        let next = (after < keys.len()).then_some(after);
-        let gap = match (before, next) {
-            (Some(a), Some(b)) => (keys[b] - keys[a]) as f64,
-            _ => f64::INFINITY,
-        };
-        let span = reach.min(gap);
-        let w_before = before.map_or(0.0, |a| fade((t - keys[a]) as f64, span));
-        let w_next = next.map_or(0.0, |b| fade((keys[b] - t) as f64, span));
-        let amount = w_before.max(w_next);
-        if amount <= 0.0 {
-            root_translation.push(chain_root);
-            rotations.push(chain_local.clone());
-            continue;
-        }
-        let towards_next = w_next / (w_before + w_next);
-        let (root_move, turns): (Vector3<f64>, Vec<UnitQuaternion<f64>>) = match (before, next) {
-            (Some(a), Some(b)) if w_before > 0.0 && w_next > 0.0 => {
-                let ((ra, ta), (rb, tb)) = (&corrections[a], &corrections[b]);
-                (
-                    ra + (rb - ra) * towards_next,
-                    ta.iter()
-                        .zip(tb)
-                        .map(|(x, y)| x.slerp(y, towards_next))
-                        .collect(),
-                )
-            }
-            (Some(a), _) if w_before > 0.0 => corrections[a].clone(),
-            (_, Some(b)) => corrections[b].clone(),
-            _ => unreachable!("a key within reach"),
-        };
-        let id = UnitQuaternion::identity();
-        let posed = chain_local
-            .iter()
-            .zip(&turns)
-            .map(|(c, d)| c * id.slerp(d, amount));
-        let posed: Vec<_> = match rotations.last() {
-            Some(prev) => prev
-                .iter()
-                .zip(posed)
-                .map(|(p, b)| limit_turn(*p, b, max))
-                .collect(),
-            None => posed.collect(),
-        };
-        root_translation.push(chain_root + root_move * amount);
-        rotations.push(posed);
-    }
-    Ok(RigMotion {
-        rig: rig.clone(),
-        fps,
-        root_translation,
-        rotations,
-    })
-}
-
 /// Sum of squared distances (m²) of the 23 dataset joints of `rig` posed by `root`, `local` from
 /// their targets `target` (rig-indexed).
-fn position_error(
+pub(super) fn position_error(
     rig: &Rig,
     root: &Vector3<f64>,
     local: &[UnitQuaternion<f64>],
@@ -489,7 +347,7 @@ const FIT_TOLERANCE: f64 = 1e-6;
 /// [`fit_frame`]'s pull towards the rotations it starts from: a joint turned θ radians away
 /// costs as much as a joint `ROTATION_PRIOR_M · θ` metres off its target. It settles what the
 /// targets leave free and is too weak to hold anything else (1 cm per radian).
-const ROTATION_PRIOR_M: f64 = 0.01;
+pub(super) const ROTATION_PRIOR_M: f64 = 0.01;
 
 /// Refits one frame of `rig` in least squares, starting from `root` and `local`: the root
 /// translation and the rotation of every joint with children but the root (whose rotation is
@@ -524,54 +382,18 @@ fn fit_frame_held(
     fit_frame_weighted(rig, root, local, target, prior_m, &[1.0; NUM_JOINTS])
 }
 
-/// Rounds of [`fit_key_frame`]'s reweighting. On the test split's dances with four of their own
-/// poses as keys, the worst key's mean joint distance fell most in the first rounds.
-const KEY_REWEIGHT_ROUNDS: usize = 8;
-
-/// A key frame fitted for the mean joint distance (what a key's error is, and what a user sees)
-/// rather than the squared one: [`fit_frame`]'s least-squares pose refined by iteratively
-/// reweighted least squares, each joint weighted by the inverse of its distance (Weiszfeld's
-/// step), keeping the pose with the smallest mean distance about the joints' centroid (as
-/// `metrics::kinematics::key_pose_errors_cm` measures it). Squared distances let one joint the
-/// rigid skeleton cannot reach (a captured arm of another length) pull every other joint off its
-/// target; the mean distance leaves it off and lands the rest.
-fn fit_key_frame(
-    rig: &Rig,
-    fit: (Vector3<f64>, Vec<UnitQuaternion<f64>>),
-    target: &[Vector3<f64>],
-) -> (Vector3<f64>, Vec<UnitQuaternion<f64>>) {
-    let centred_mean = |pose: &(Vector3<f64>, Vec<UnitQuaternion<f64>>)| -> f64 {
-        centred_mean_distance(rig, &pose.0, &pose.1, target)
-    };
-    let mut best_error = centred_mean(&fit);
-    if best_error < REWEIGHT_FROM_M {
-        return fit;
-    }
-    let mut best = fit.clone();
-    let mut pose = fit;
-    for _ in 0..KEY_REWEIGHT_ROUNDS {
-        let weights = inverse_distance_weights(rig, &pose.0, &pose.1, target);
-        pose = fit_frame_weighted(rig, &pose.0, &pose.1, target, ROTATION_PRIOR_M, &weights);
-        let error = centred_mean(&pose);
-        if error < best_error {
-            (best, best_error) = (pose.clone(), error);
-        }
-    }
-    best
-}
-
 /// A key frame whose least-squares pose is this close (mean joint distance, m) keeps it, and so
 /// do the bone lengths when every key frame is: the mean-distance pose moves more joints further
 /// from the chain's pose, and that correction, faded over [`KEY_REACH_S`], accelerates the frames
 /// around the key (DANCE_C_8 with four of its own poses as keys: 24.3 → 25.4 m/s² within half a
 /// second of a key, the data's 22.1, keys 1.1–2.2 cm in either case). Keys are promised within
 /// 3 cm ([`crate::motion::limits::KEY_POSE_CM`]).
-const REWEIGHT_FROM_M: f64 = 0.025;
+pub(super) const REWEIGHT_FROM_M: f64 = 0.025;
 
 /// The mean distance (m) of the 23 dataset joints of `rig` posed by `root`, `local` from their
 /// targets, each set taken about its centroid (as `metrics::kinematics::key_pose_errors_cm`
 /// measures a key).
-fn centred_mean_distance(
+pub(super) fn centred_mean_distance(
     rig: &Rig,
     root: &Vector3<f64>,
     local: &[UnitQuaternion<f64>],
@@ -589,7 +411,7 @@ fn centred_mean_distance(
 /// Weiszfeld's weights for a pose of `rig`: each dataset joint's inverse distance from its
 /// target, scaled to a mean of 1. A joint on its target would take all the weight, so none is
 /// counted closer than 1 mm.
-fn inverse_distance_weights(
+pub(super) fn inverse_distance_weights(
     rig: &Rig,
     root: &Vector3<f64>,
     local: &[UnitQuaternion<f64>],
@@ -606,7 +428,7 @@ fn inverse_distance_weights(
 
 /// [`fit_frame_held`] with each dataset joint's squared distance weighted by `weights` (in the
 /// dataset's joint order).
-fn fit_frame_weighted(
+pub(super) fn fit_frame_weighted(
     rig: &Rig,
     root: &Vector3<f64>,
     local: &[UnitQuaternion<f64>],
