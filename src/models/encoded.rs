@@ -50,13 +50,9 @@ impl EncoderMemo {
     }
 
     /// How many encodings are kept.
-    pub fn len(&self) -> usize {
+    #[cfg(test)]
+    fn len(&self) -> usize {
         self.lock().len()
-    }
-
-    /// Whether none is kept.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
     }
 
     fn lock(&self) -> std::sync::MutexGuard<'_, VecDeque<(u64, Tensor)>> {
