@@ -74,6 +74,34 @@ fn is_zero(v: &i64) -> bool {
 }
 
 impl Config {
+    /// The decoder's arithmetic per motion frame (a multiply-add counts 2): the LSTM step
+    /// (`lstm_layers` cells, the first reading the last pose), the readout from hidden state and
+    /// latent, and the arm head where there is one. The encoder runs once per song and is not in
+    /// it. `choreo bench generate` sets it against one core's peak.
+    pub fn frame_flops(&self) -> f64 {
+        let (p, h, l, z) = (
+            self.pose_dim as f64,
+            self.hidden as f64,
+            self.lstm_layers as f64,
+            self.d_z as f64,
+        );
+        let lstm = 8.0 * h * (p + (2.0 * l - 1.0) * h);
+        let readout = 2.0 * (h + z) * p;
+        let arm = if self.arm_head > 0 {
+            let a = self.arm_head as f64;
+            let figures = if self.arm_figures {
+                figures::FIGURE_DIM as f64
+            } else {
+                0.0
+            };
+            let n = arm_head::arm_columns().len() as f64;
+            2.0 * (h + z + figures) * a + 2.0 * a * n + 2.0 * n * p
+        } else {
+            0.0
+        };
+        lstm + readout + arm
+    }
+
     /// The configuration the committed weights were trained with: small enough for 2 CPU cores.
     pub fn cpu() -> Self {
         Self {
@@ -411,6 +439,26 @@ mod tests {
         let vs = nn::VarStore::new(Device::Cpu);
         let m = DanceRevolution::new(&vs.root(), Config::tiny(6, 5));
         (vs, m)
+    }
+
+    /// The decoder uses each of its weight matrices once a frame, so its arithmetic is twice
+    /// their entries (biases aside): the formula follows the network it describes.
+    #[test]
+    fn frame_flops_are_twice_the_decoder_weights() {
+        let (vs, _m) = model(1);
+        let weights: usize = vs
+            .variables()
+            .iter()
+            .filter(|(name, t)| name.starts_with("decoder.") && t.dim() >= 2)
+            .map(|(_, t)| t.numel())
+            .sum();
+        let flops = Config::tiny(6, 5).frame_flops();
+        assert!(weights > 0);
+        assert_eq!(
+            flops,
+            2.0 * weights as f64,
+            "{flops} against {weights} weights"
+        );
     }
 
     #[test]

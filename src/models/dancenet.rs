@@ -96,6 +96,26 @@ pub struct Config {
 }
 
 impl Config {
+    /// The decoder's arithmetic per motion frame (a multiply-add counts 2) with each dilated
+    /// layer's past inputs kept (the paper's fast generation), for `branches` decoded side by
+    /// side (2 with music guidance): the input projection once, then per branch each gated layer's
+    /// two taps, skip and residual, and the head over the mixture. The conditioning, computed for
+    /// every frame before the loop, is not in it.
+    pub fn frame_flops(&self, branches: f64) -> f64 {
+        let (d, c, r, s, k) = (
+            self.pose_dim as f64,
+            self.contacts as f64,
+            self.residual as f64,
+            self.skip as f64,
+            self.mixtures as f64,
+        );
+        let layers = self.dilations.len() as f64;
+        let per_branch = layers * (10.0 * r * r + 2.0 * r * s)
+            + 2.0 * s * s
+            + 2.0 * s * (k * (1.0 + 2.0 * d) + c);
+        2.0 * r * (d + c) + branches * per_branch
+    }
+
     /// The configuration the committed weights were trained with (two CPU cores, an hour).
     pub fn cpu(pose_dim: i64) -> Self {
         Self {

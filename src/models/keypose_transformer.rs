@@ -76,6 +76,29 @@ pub struct Config {
 }
 
 impl Config {
+    /// The arithmetic per motion frame (a multiply-add counts 2): every window of `window` frames
+    /// runs the music, motion and cross stacks whole (self-attention over all its tokens), and
+    /// windows advance by `window − seed_len − crossfade` frames ([`generation_windows`]).
+    pub fn frame_flops(&self) -> f64 {
+        let (w, ts, d, ff) = (
+            self.window as f64,
+            self.seed_len as f64,
+            self.d as f64,
+            self.d_ff as f64,
+        );
+        let layer = |n: f64| n * (8.0 * d * d + 4.0 * d * ff) + 4.0 * n * n * d;
+        let window = 2.0 * w * self.music_dim as f64 * d
+            + self.music_layers as f64 * layer(w)
+            + 2.0 * ts * self.pose_dim as f64 * d
+            + self.motion_layers as f64 * layer(ts)
+            + 2.0 * w * self.key_dim as f64 * d
+            + self.cross_layers as f64 * layer(w + ts)
+            + 2.0 * w * d * self.pose_dim as f64;
+        let advance =
+            (self.window - self.seed_len - crossfade_len(self.window, self.seed_len)).max(1);
+        window / advance as f64
+    }
+
     /// The sizes of every transformer stack of the model.
     pub fn dims(&self) -> Dims {
         Dims {

@@ -341,6 +341,13 @@ pub fn smooth_columns(features: &mut ndarray::Array2<f32>, keep: usize, sigma: f
 /// A trained model, ready to dance.
 pub trait DanceModel: Send + Sync {
     fn info(&self) -> ModelInfo;
+
+    /// The network's arithmetic per motion frame in its generate loop (a multiply-add counts 2),
+    /// from its Config; `None` for a model without a network loop. `choreo bench generate` sets
+    /// the loop's speed against one core's peak with it.
+    fn frame_flops(&self) -> Option<f64> {
+        None
+    }
     fn generate(
         &self,
         req: &GenerateRequest<'_>,

@@ -96,6 +96,31 @@ pub struct Config {
 }
 
 impl Config {
+    /// The step's arithmetic per motion frame (a multiply-add counts 2), the keys and values of
+    /// earlier frames kept: the pose bins merged, `x_layers` layers attending over at most
+    /// `window` frames, the pose stream's projection, and the read-out over `n_bins` bins per
+    /// coordinate. The audio stream runs once per song and is not in it.
+    pub fn frame_flops(&self) -> f64 {
+        let (c, b, e_bin, d, l, e_out, h, w) = (
+            self.coords as f64,
+            self.n_bins as f64,
+            self.e_bin as f64,
+            self.d_x as f64,
+            self.x_layers as f64,
+            self.e_out as f64,
+            self.head_hidden as f64,
+            self.window as f64,
+        );
+        let merge = 2.0 * c * e_bin * d;
+        let clock = if self.step_clock { 8.0 * d } else { 0.0 };
+        // Per layer: q, k, v and out projections 8d², the 4d feed-forward 16d², scores and
+        // weighted sum over the window 4·w·d.
+        let layers = l * (24.0 * d * d + 4.0 * w * d);
+        let w_x = 2.0 * d * c * e_out;
+        let read_out = 2.0 * c * e_out * h + 2.0 * c * h * b;
+        merge + clock + layers + w_x + read_out
+    }
+
     /// The configuration the committed weights were trained with (sized for one CPU core).
     pub fn cpu() -> Self {
         Self {

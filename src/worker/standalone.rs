@@ -411,6 +411,8 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
     );
     let out = tempfile::tempdir()?;
     let mut ratios = String::new();
+    // Per model: the frame loop's ms per frame on the 3-minute song.
+    let mut loop_ms: Vec<(ModelId, f64)> = Vec::new();
     for model in &models {
         // (music s, total s, decode s) of the scaling songs.
         let mut scaled: Vec<(f64, f64, f64)> = Vec::new();
@@ -457,6 +459,9 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
             let frames =
                 crate::motion::validate::song_frames(audio.duration_s, crate::motion::MOTION_FPS)
                     as f64;
+            if decode_s > 0.0 && (audio.duration_s - 180.0).abs() < 1.0 {
+                loop_ms.push((model.clone(), 1000.0 * decode_s / frames));
+            }
             let per_frame = if decode_s > 0.0 {
                 format!("{:.2}", 1000.0 * decode_s / frames)
             } else {
@@ -481,11 +486,67 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
         table += "\n";
         table += &ratios;
     }
+    if !loop_ms.is_empty() {
+        table += "\n";
+        table += &flop_bound(&registry, &loop_ms);
+    }
     if let Some((name, audio, decode)) = songs.get(n_timed.saturating_sub(1)) {
         table += "\n";
         table += &bench_song_cache(&registry, &models, name, audio, *decode, out.path())?;
     }
     Ok(table)
+}
+
+/// Each model's frame loop against the arithmetic it does: its FLOPs per frame
+/// ([`crate::models::DanceModel::frame_flops`]), the rate its measured ms per frame makes of them
+/// (the generate stage's time over the song's frames: frames drawn by the serving checks and
+/// thrown away are in the time, so the rate is what a served frame costs), and that rate's share of what one core reaches in libtorch's matrix product on the same
+/// threads (measured here, so the ratio is of this machine at this moment). A loop far below the
+/// peak is spent on per-operation overhead, not arithmetic: the headroom a fused or batched loop
+/// could take.
+fn flop_bound(registry: &Registry, loop_ms: &[(ModelId, f64)]) -> String {
+    let peak = gemm_gflops();
+    let mut table = format!(
+        "| model | loop MFLOP per frame | loop ms per frame (3-min song) | loop GFLOP/s | share of one core's peak ({peak:.1} GFLOP/s, 512² matmul) | FLOP-bound ms per frame |\n|---|---|---|---|---|---|\n"
+    );
+    for (id, ms) in loop_ms {
+        let Some(flops) = registry.get(id).and_then(|m| m.frame_flops()) else {
+            table += &format!("| {} | – | {ms:.3} | – | – | – |\n", id.0);
+            continue;
+        };
+        let rate = flops / (ms / 1000.0) / 1e9;
+        table += &format!(
+            "| {} | {:.2} | {ms:.3} | {rate:.2} | {:.1} % | {:.3} |\n",
+            id.0,
+            flops / 1e6,
+            100.0 * rate / peak,
+            1000.0 * flops / (peak * 1e9),
+        );
+    }
+    table
+}
+
+/// GFLOP/s of a 512 × 512 single-precision matrix product in libtorch on its current threads:
+/// the best of five timed rounds of eight products, after one untimed.
+fn gemm_gflops() -> f64 {
+    const N: i64 = 512;
+    const PRODUCTS: u32 = 8;
+    let opts = (tch::Kind::Float, tch::Device::Cpu);
+    let (a, b) = (
+        tch::Tensor::randn([N, N], opts),
+        tch::Tensor::randn([N, N], opts),
+    );
+    let _ = a.matmul(&b);
+    let best = (0..5)
+        .map(|_| {
+            let t = Instant::now();
+            for _ in 0..PRODUCTS {
+                let _ = a.matmul(&b);
+            }
+            t.elapsed().as_secs_f64()
+        })
+        .fold(f64::INFINITY, f64::min);
+    2.0 * (N as f64).powi(3) * f64::from(PRODUCTS) / best / 1e9
 }
 
 /// A job's seconds on `audio` (decoding it took `decode`) through an empty song cache, then

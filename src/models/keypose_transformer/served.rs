@@ -256,6 +256,10 @@ impl Served {
 }
 
 impl DanceModel for Served {
+    fn frame_flops(&self) -> Option<f64> {
+        Some(self.file.config.frame_flops())
+    }
+
     fn info(&self) -> ModelInfo {
         ModelInfo {
             id: ModelId(ID.into()),

@@ -548,6 +548,10 @@ const JOIN_FRAMES: usize = 25;
 const REJOIN_FRAMES: usize = 2 * JOIN_FRAMES;
 
 impl DanceModel for Served {
+    fn frame_flops(&self) -> Option<f64> {
+        Some(self.file.config.frame_flops())
+    }
+
     fn info(&self) -> ModelInfo {
         ModelInfo {
             id: ModelId(ID.into()),
