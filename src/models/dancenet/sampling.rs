@@ -134,7 +134,39 @@ impl DanceNet {
         let (w_in, b_in) = mat(&self.decoder.input);
         let (w_head, b_head) = mat(&self.decoder.head);
         let (w_out, b_out) = mat(&self.decoder.out);
-        let zeros = Tensor::zeros([c.residual], (Kind::Float, dev));
+        // The branches decoded side by side as the rows of one batch: one call per product for
+        // both, where a call per branch had twice the calls (the loop is bound by calls, not
+        // arithmetic: `choreo bench generate`). Weights transposed once for `x · Wᵀ`.
+        let b = rows.len() as i64;
+        let tr = |w: &Tensor| w.tr().contiguous();
+        let taps: Vec<_> = taps
+            .iter()
+            .map(
+                |(w_past, w_now, (w_res, b_res), (w_skip, b_skip), dilation)| {
+                    (
+                        tr(w_past),
+                        tr(w_now),
+                        (tr(w_res), b_res.shallow_clone()),
+                        (tr(w_skip), b_skip.shallow_clone()),
+                        *dilation,
+                    )
+                },
+            )
+            .collect();
+        // Per layer: the branches' conditioning rows `[B, m − 1 + n, 2C]`, and their kept inputs
+        // `[B, C]`, oldest first.
+        let conds: Vec<Tensor> = (0..taps.len())
+            .map(|l| Tensor::stack(&rows.iter().map(|r| &r[l]).collect::<Vec<_>>(), 0))
+            .collect();
+        let mut queues: Vec<std::collections::VecDeque<Tensor>> = (0..taps.len())
+            .map(|l| {
+                (0..queues[0][l].len())
+                    .map(|i| Tensor::stack(&queues.iter().map(|q| &q[l][i]).collect::<Vec<_>>(), 0))
+                    .collect()
+            })
+            .collect();
+        let (w_head, w_out) = (tr(&w_head), tr(&w_out));
+        let zeros = Tensor::zeros([b, c.residual], (Kind::Float, dev));
         let mut out = Array2::<f32>::zeros((n, width));
         let mut frame: Vec<f32> = prefix.row(m - 1).to_vec();
         if !on_step(0) {
@@ -146,35 +178,34 @@ impl DanceNet {
         for t in 0..n {
             let row = (m - 1 + t) as i64;
             let input = w_in.mv(&Tensor::from_slice(&frame).to_device(dev)) + &b_in;
-            let mut raws = Vec::with_capacity(rows.len());
-            for (conds, queues) in rows.iter().zip(queues.iter_mut()) {
-                let mut h = input.shallow_clone();
-                let mut skip: Option<Tensor> = None;
-                for (((w_past, w_now, (w_res, b_res), (w_skip, b_skip), dilation), cond), q) in
-                    taps.iter().zip(conds).zip(queues.iter_mut())
-                {
-                    let past = if q.len() >= *dilation {
-                        q[q.len() - dilation].shallow_clone()
-                    } else {
-                        zeros.shallow_clone()
-                    };
-                    let z = w_past.mv(&past) + w_now.mv(&h) + cond.get(row);
-                    let zs = z.chunk(2, 0);
-                    let g = zs[0].tanh() * zs[1].sigmoid();
-                    let sk = w_skip.mv(&g) + b_skip;
-                    skip = Some(match skip {
-                        Some(a) => a + sk,
-                        None => sk,
-                    });
-                    q.push_back(h.shallow_clone());
-                    while q.len() > *dilation {
-                        q.pop_front();
-                    }
-                    h = h + w_res.mv(&g) + b_res;
+            let mut h = input.unsqueeze(0).expand([b, c.residual], false);
+            let mut skip: Option<Tensor> = None;
+            for (((w_past, w_now, (w_res, b_res), (w_skip, b_skip), dilation), cond), q) in
+                taps.iter().zip(&conds).zip(queues.iter_mut())
+            {
+                let past = if q.len() >= *dilation {
+                    q[q.len() - dilation].shallow_clone()
+                } else {
+                    zeros.shallow_clone()
+                };
+                let z = past.matmul(w_past) + h.matmul(w_now) + cond.select(1, row);
+                let zs = z.chunk(2, 1);
+                let g = zs[0].tanh() * zs[1].sigmoid();
+                let sk = b_skip.addmm(&g, w_skip);
+                skip = Some(match skip {
+                    Some(a) => a + sk,
+                    None => sk,
+                });
+                q.push_back(h.shallow_clone());
+                while q.len() > *dilation {
+                    q.pop_front();
                 }
-                let raw = w_out.mv(&(w_head.mv(&skip?.relu()) + &b_head).relu()) + &b_out;
-                raws.push(Vec::<f32>::try_from(raw).ok()?);
+                h = h + b_res.addmm(&g, w_res);
             }
+            let hidden = b_head.addmm(&skip?.relu(), &w_head).relu();
+            let all = Vec::<f32>::try_from(b_out.addmm(&hidden, &w_out).flatten(0, -1)).ok()?;
+            let width_out = all.len() / b as usize;
+            let mut raws: Vec<Vec<f32>> = all.chunks(width_out).map(<[f32]>::to_vec).collect();
             let mut raw = raws.swap_remove(0);
             if let Some(average) = raws.first() {
                 // The mixture's weights and means (its first k + k·d outputs) guided; the
