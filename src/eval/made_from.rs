@@ -9,7 +9,7 @@ use sha2::{Digest, Sha256};
 /// The revision of what serving does to a network's output (the fixes inside each model's
 /// `generate` and the shared stages after it). Raise it with any change that alters a served
 /// `motion.json` (`tools/served_identical.sh` tells), and make the committed evaluations again.
-pub const SERVING_REVISION: u32 = 4;
+pub const SERVING_REVISION: u32 = 5;
 
 /// A model folder's files that describe it rather than serve it: its card, its evaluation, its
 /// training logs.
