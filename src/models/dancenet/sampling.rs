@@ -200,7 +200,10 @@ impl DanceNet {
                 while q.len() > *dilation {
                     q.pop_front();
                 }
-                h = h + b_res.addmm(&g, w_res);
+                // A new tensor, not `+=`: `h` is also the queue's entry for this frame (and at
+                // the first layer a broadcast view of the input), so it must not change in place.
+                let next = &h + b_res.addmm(&g, w_res);
+                h = next;
             }
             let hidden = b_head.addmm(&skip?.relu(), &w_head).relu();
             let all = Vec::<f32>::try_from(b_out.addmm(&hidden, &w_out).flatten(0, -1)).ok()?;
