@@ -78,7 +78,7 @@ pub struct Config {
 impl Config {
     /// The arithmetic per motion frame (a multiply-add counts 2): every window of `window` frames
     /// runs the music, motion and cross stacks whole (self-attention over all its tokens), and
-    /// windows advance by `window − seed_len − crossfade` frames ([`generation_windows`]).
+    /// windows advance by `window − seed_len − crossfade` frames ([`window_advance`]).
     pub fn frame_flops(&self) -> f64 {
         let (w, ts, d, ff) = (
             self.window as f64,
@@ -94,9 +94,7 @@ impl Config {
             + 2.0 * w * self.key_dim as f64 * d
             + self.cross_layers as f64 * layer(w + ts)
             + 2.0 * w * d * self.pose_dim as f64;
-        let advance =
-            (self.window - self.seed_len - crossfade_len(self.window, self.seed_len)).max(1);
-        window / advance as f64
+        window / window_advance(self.window, self.seed_len) as f64
     }
 
     /// The sizes of every transformer stack of the model.
@@ -326,12 +324,18 @@ pub fn crossfade_len(w: i64, ts: i64) -> i64 {
     ts.min((w - ts) / 2).max(0)
 }
 
+/// Frames one window of `w` frames seeded with `ts` advances on the one before it:
+/// `w − T′ − crossfade`, at least 1.
+pub fn window_advance(w: i64, ts: i64) -> i64 {
+    (w - ts - crossfade_len(w, ts)).max(1)
+}
+
 /// Start frames of the overlapping windows [`KeyposeTransformer::generate_long`] uses for `total`
-/// frames (at least one window long): windows of `w` frames advance by `w − T′ − crossfade`, so
+/// frames (at least one window long): windows of `w` frames advance by [`window_advance`], so
 /// each is seeded with `T′` final frames and then overlaps the previous window's output by the
 /// crossfade; the last window is aligned to the end.
 pub fn generation_windows(total: i64, w: i64, ts: i64) -> Vec<i64> {
-    let advance = (w - ts - crossfade_len(w, ts)).max(1);
+    let advance = window_advance(w, ts);
     let mut starts = Vec::new();
     let mut s = 0;
     loop {

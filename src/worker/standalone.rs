@@ -459,14 +459,11 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
             let frames =
                 crate::motion::validate::song_frames(audio.duration_s, crate::motion::MOTION_FPS)
                     as f64;
-            if decode_s > 0.0 && (audio.duration_s - 180.0).abs() < 1.0 {
-                loop_ms.push((model.clone(), 1000.0 * decode_s / frames));
+            let ms_per_frame = (decode_s > 0.0).then(|| 1000.0 * decode_s / frames);
+            if let Some(ms) = ms_per_frame.filter(|_| (audio.duration_s - 180.0).abs() < 1.0) {
+                loop_ms.push((model.clone(), ms));
             }
-            let per_frame = if decode_s > 0.0 {
-                format!("{:.2}", 1000.0 * decode_s / frames)
-            } else {
-                "–".into()
-            };
+            let per_frame = ms_per_frame.map_or("–".into(), |ms| format!("{ms:.2}"));
             table += &format!("| {} | {name} | {:.0} | {} | {total:.2} | {per_min:.2} | {per_frame} | {target} |\n", model.0, audio.duration_s, cells.join(" | "));
             if k >= n_timed {
                 scaled.push((audio.duration_s, total, decode_s));
@@ -500,8 +497,9 @@ pub fn bench(args: &BenchOptions) -> Result<String, WorkerError> {
 /// Each model's frame loop against the arithmetic it does: its FLOPs per frame
 /// ([`crate::models::DanceModel::frame_flops`]), the rate its measured ms per frame makes of them
 /// (the generate stage's time over the song's frames: frames drawn by the serving checks and
-/// thrown away are in the time, so the rate is what a served frame costs), and that rate's share of what one core reaches in libtorch's matrix product on the same
-/// threads (measured here, so the ratio is of this machine at this moment). A loop far below the
+/// thrown away are in the time, so the rate is what a served frame costs), and that rate's share
+/// of what one core reaches in libtorch's matrix product on the same threads (measured here, so
+/// the ratio is of this machine at this moment). A loop far below the
 /// peak is spent on per-operation overhead, not arithmetic: the headroom a fused or batched loop
 /// could take.
 fn flop_bound(registry: &Registry, loop_ms: &[(ModelId, f64)]) -> String {

@@ -50,7 +50,7 @@ impl DanceNet {
         // average is amplified.
         let guidance = sampling.music_guidance as f32;
         let mut codes = vec![code_t.shallow_clone()];
-        if guidance != 1.0 {
+        if sampling.branches() == 2 {
             codes.push(match average {
                 Some(a) => a
                     .to_device(dev)
@@ -98,8 +98,11 @@ impl DanceNet {
                 }
             }
         }
-        // Per layer: taps at t − d and t `[2C, C]`, conditioning rows `[m − 1 + n, 2C]`, and the
-        // 1×1 convolutions as matrices.
+        // The branches are decoded side by side as the rows of one batch: one call per product
+        // for both, where a call per branch had twice the calls (the loop is bound by calls, not
+        // arithmetic: `choreo bench generate`). Per layer: taps at t − d and t, and the 1×1
+        // convolutions, as matrices transposed once for `x · Wᵀ` `[C, 2C]`, `[C, C]`, `[C, S]`.
+        let tr = |w: &Tensor| w.tr().contiguous();
         let mat = |conv: &nn::Conv1D| {
             let b = conv
                 .bs
@@ -108,16 +111,20 @@ impl DanceNet {
                 .unwrap_or_else(|| Tensor::zeros([conv.ws.size()[0]], (Kind::Float, dev)));
             (conv.ws.squeeze_dim(-1), b)
         };
+        let mat_t = |conv: &nn::Conv1D| {
+            let (w, b) = mat(conv);
+            (tr(&w), b)
+        };
         let taps: Vec<_> = self
             .decoder
             .layers
             .iter()
             .map(|l| {
                 (
-                    l.conv.ws.select(2, 0),
-                    l.conv.ws.select(2, 1),
-                    mat(&l.res),
-                    mat(&l.skip),
+                    tr(&l.conv.ws.select(2, 0)),
+                    tr(&l.conv.ws.select(2, 1)),
+                    mat_t(&l.res),
+                    mat_t(&l.skip),
                     l.dilation as usize,
                 )
             })
@@ -132,27 +139,9 @@ impl DanceNet {
             })
             .collect();
         let (w_in, b_in) = mat(&self.decoder.input);
-        let (w_head, b_head) = mat(&self.decoder.head);
-        let (w_out, b_out) = mat(&self.decoder.out);
-        // The branches decoded side by side as the rows of one batch: one call per product for
-        // both, where a call per branch had twice the calls (the loop is bound by calls, not
-        // arithmetic: `choreo bench generate`). Weights transposed once for `x · Wᵀ`.
+        let (w_head, b_head) = mat_t(&self.decoder.head);
+        let (w_out, b_out) = mat_t(&self.decoder.out);
         let b = rows.len() as i64;
-        let tr = |w: &Tensor| w.tr().contiguous();
-        let taps: Vec<_> = taps
-            .iter()
-            .map(
-                |(w_past, w_now, (w_res, b_res), (w_skip, b_skip), dilation)| {
-                    (
-                        tr(w_past),
-                        tr(w_now),
-                        (tr(w_res), b_res.shallow_clone()),
-                        (tr(w_skip), b_skip.shallow_clone()),
-                        *dilation,
-                    )
-                },
-            )
-            .collect();
         // Per layer: the branches' conditioning rows `[B, m − 1 + n, 2C]`, and their kept inputs
         // `[B, C]`, oldest first.
         let conds: Vec<Tensor> = (0..taps.len())
@@ -165,7 +154,6 @@ impl DanceNet {
                     .collect()
             })
             .collect();
-        let (w_head, w_out) = (tr(&w_head), tr(&w_out));
         let zeros = Tensor::zeros([b, c.residual], (Kind::Float, dev));
         let mut out = Array2::<f32>::zeros((n, width));
         let mut frame: Vec<f32> = prefix.row(m - 1).to_vec();
@@ -266,6 +254,18 @@ fn no_guidance() -> f64 {
 
 fn is_no_guidance(g: &f64) -> bool {
     *g == 1.0
+}
+
+impl Sampling {
+    /// Branches the decoder runs a frame: the song's, and with music guidance (≠ 1) a second
+    /// hearing the song's average code.
+    pub fn branches(&self) -> usize {
+        if self.music_guidance == 1.0 {
+            1
+        } else {
+            2
+        }
+    }
 }
 
 impl Default for Sampling {

@@ -403,12 +403,7 @@ fn after_context(code: &Tensor, rows: Tensor, tail: usize) -> Tensor {
 
 impl DanceModel for Served {
     fn frame_flops(&self) -> Option<f64> {
-        // Music guidance decodes a second branch, without the song, beside the first.
-        let branches = if self.file.extra.sampling.music_guidance == 1.0 {
-            1.0
-        } else {
-            2.0
-        };
+        let branches = self.file.extra.sampling.branches() as f64;
         Some(self.file.config.frame_flops(branches))
     }
 
